@@ -1,0 +1,217 @@
+"""The ``uiogen`` command line.
+
+    uiogen list [--json]
+    uiogen design NAME [--json] [--out FILE]
+    uiogen generate [NAME ...] [--force] [--out DIR]
+    uiogen build [NAME ...]
+    uiogen check-gains NAME --gains FILE [--json]
+    uiogen demo [--json]
+    uiogen bench [--json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from . import emit, observers, pipeline
+from .designs import linf_uio
+from .errors import UiogenError
+
+
+def _print_json(obj) -> None:
+    print(json.dumps(obj, indent=1, sort_keys=True))
+
+
+def cmd_list(args) -> int:
+    rows = []
+    for name in observers.names():
+        cfg = observers.get(name)
+        rows.append({"name": name, "family": cfg.family, "model": cfg.model,
+                     "parameters": cfg.parameters, "sample_time": cfg.sample_time, "doc": cfg.doc})
+    if args.json:
+        _print_json(rows)
+    else:
+        for r in rows:
+            print(f"{r['name']:28s} {r['family']:10s} model={r['model']} params={r['parameters']} "
+                  f"Ts={r['sample_time']:g}s\n    {r['doc']}")
+    return 0
+
+
+def _design_summary(b: pipeline.ObserverBuild, path: Path) -> dict:
+    sol = b.design.solution
+    return {
+        "observer": b.name, "artifact": str(path),
+        "gamma": b.design.gamma, "gamma_quadratic": b.quadratic.gamma,
+        "vertices": b.poly.n_vertices, "polytope": b.poly.kind,
+        "solve_time_s": sol.solve_time_s, "build_time_s": sol.build_time_s,
+        "total_design_time_s": sum(b.timings.values()),
+        "solver_iterations": sol.iterations,
+        "worst_block": sol.worst.label, "worst_min_eig": sol.worst.min_eig,
+        "worst_relative_margin": sol.worst.relative_margin,
+        "recheck_gamma": b.certificate["gamma"],
+        "discrete_kappa": b.discrete_certificate.kappa,
+        "discrete_contraction_per_step": b.discrete_certificate.contraction,
+        "discrete_spectral_radius_max": b.discrete_certificate.augmented_radius_max,
+        "sample_time": b.config.sample_time,
+        "taylor_error": b.taylor_error,
+    }
+
+
+def cmd_design(args) -> int:
+    b = pipeline.build(observers.get(args.name))
+    path = Path(args.out) if args.out else emit.GENERATED_DIR / b.name / f"{b.name}_design.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(pipeline.artifact(b), indent=1, sort_keys=True) + "\n")
+    s = _design_summary(b, path)
+    if args.json:
+        _print_json(s)
+        return 0
+    print(f"observer {b.name}: {s['polytope']} polytope, {s['vertices']} vertices")
+    print(f"  gamma (PDLF)            {s['gamma']:.6g}   (quadratic: {s['gamma_quadratic']:.6g})")
+    print(f"  re-checked gamma        {s['recheck_gamma']:.6g}   (numpy, no solver)")
+    print(f"  solve / build time      {1e3 * s['solve_time_s']:.1f} ms / {1e3 * s['build_time_s']:.1f} ms "
+          f"({s['solver_iterations']} Clarabel iterations); whole design {s['total_design_time_s']:.2f} s")
+    print(f"  worst LMI margin        {s['worst_min_eig']:.3e} (relative {s['worst_relative_margin']:.3e}) "
+          f"in {s['worst_block']}")
+    print(f"  discrete step Ts={s['sample_time']:g}s  kappa {s['discrete_kappa']:.6f} -> sqrt(V) contracts by "
+          f"{s['discrete_contraction_per_step']:.6f}/step; dense-grid spectral radius "
+          f"{s['discrete_spectral_radius_max']:.6f}")
+    if s["taylor_error"]:
+        te = s["taylor_error"]
+        print(f"  Taylor-reduction error  {te['max_abs_error']:.4g} on A{tuple(te['entry'])} at "
+              f"{b.poly.signal}={te['at']:g} ({100 * te['relative_error_there']:.1f}% of the entry)")
+    print(f"artifact: {path}")
+    return 0
+
+
+def cmd_generate(args) -> int:
+    emit.generate(args.names or None, Path(args.out) if args.out else emit.GENERATED_DIR, force=args.force)
+    return 0
+
+
+def cmd_build(args) -> int:
+    from python_bindings import build
+    return build.main(args.names)
+
+
+def _load_gains(path: Path) -> dict:
+    try:
+        data = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise UiogenError(f"gains file not found: {path}") from None
+    except json.JSONDecodeError as exc:
+        raise UiogenError(f"gains file {path} is not JSON: {exc}") from None
+    return data
+
+
+def check_gains(name: str, gains: dict) -> dict:
+    """Verify externally supplied P_i, X, L_i against the observer's Theorem-1 LMIs."""
+    cfg = observers.get(name)
+    lpv, poly, _ = pipeline.representation(cfg)
+    alpha = float(gains.get("alpha", cfg.design.get("alpha", 5.0)))
+    N = poly.n_vertices
+    missing = [k for k in [*(f"P{i + 1}" for i in range(N)), *(f"L{i + 1}" for i in range(N))] if k not in gains]
+    if missing:
+        raise UiogenError(f"gains lack {', '.join(missing)} (this observer has {N} vertices)")
+    P = [np.array(gains[f"P{i + 1}"], float) for i in range(N)]
+    L = [np.array(gains[f"L{i + 1}"], float) for i in range(N)]
+    X = np.array(gains.get("X", np.zeros_like(P[0])), float)
+    for label, m, shape in [("X", X, P[0].shape)] + [(f"L{i + 1}", l, (lpv.nx, lpv.ny)) for i, l in enumerate(L)]:
+        if m.shape != shape:
+            raise UiogenError(f"{label} has shape {m.shape}, expected {shape}")
+    from .polytope import taylor_reduced_polytope, sector_polytope
+    make = taylor_reduced_polytope if poly.kind == "taylor_reduced" else sector_polytope
+    out = {"observer": name, "alpha": alpha, "results": {}}
+    for mode in ("exact", "at_expansion_point") if poly.kind == "taylor_reduced" else ("exact",):
+        p = make(lpv, mode)
+        res = linf_uio.certify(p, P, X, L, alpha)
+        res["rate_bounds"] = p.rate_bounds.tolist()
+        out["results"][mode] = res
+    M = [np.linalg.solve(P[i] + X, L[i]) for i in range(N)]
+    out["gain_norm_max"] = max(float(np.linalg.norm(m, 2)) for m in M)
+    for key in ("gamma", "gamma_stated"):
+        if key in gains:
+            out[f"{key}_in_file"] = gains[key]
+    return out
+
+
+def cmd_check_gains(args) -> int:
+    res = check_gains(args.name, _load_gains(args.gains))
+    if args.json:
+        _print_json(res)
+        return 0 if all(r["feasible"] for r in res["results"].values()) else 1
+    print(f"Theorem 1 check of {args.gains} on observer {args.name} (alpha = {res['alpha']:g})")
+    for mode, r in res["results"].items():
+        label = {"exact": "sound rate bounds over the whole box",
+                 "at_expansion_point": "rate bounds of the seed's eq. (11)"}[mode]
+        print(f"  [{label}: phi = {r['rate_bounds'][0]}]")
+        for blk in r["blocks"]:
+            if "min_eig" in blk:
+                print(f"    {blk['label']:45s} min eig {blk['min_eig']:.6g}")
+            else:
+                print(f"    {blk['label']:45s} max eig (state block) {blk['max_eig_state_block']:.6g}, "
+                      f"needs nu >= {blk['nu_needed']:.6g}")
+        verdict = "PASS" if r["feasible"] else "FAIL"
+        print(f"    {verdict}: certified gamma = sqrt(mu nu) = sqrt({r['mu']:.6g} * {r['nu']:.6g}) = {r['gamma']:.6g}")
+    print(f"  max ||M_i|| = {res['gain_norm_max']:.4g} 1/s")
+    for key in ("gamma_in_file", "gamma_stated_in_file"):
+        if key in res:
+            print(f"  {key.replace('_in_file', '')} stated in the file: {res[key]}")
+    return 0 if all(r["feasible"] for r in res["results"].values()) else 1
+
+
+def cmd_demo(args) -> int:
+    from . import demo
+    return demo.main(json_output=args.json)
+
+
+def cmd_bench(args) -> int:
+    from . import bench
+    return bench.main(json_output=args.json)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="uiogen", description="Certified unknown-input observers, "
+                                     "from symbolic vehicle equations to embeddable C.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("list", help="list observer configurations")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_list)
+    p = sub.add_parser("design", help="design and certify one observer, write its artifact")
+    p.add_argument("name")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--out", help="artifact path (default generated_c/NAME/NAME_design.json)")
+    p.set_defaults(func=cmd_design)
+    p = sub.add_parser("generate", help="emit C for observers whose inputs changed")
+    p.add_argument("names", nargs="*")
+    p.add_argument("--force", action="store_true", help="regenerate even if the inputs hash is unchanged")
+    p.add_argument("--out", help="output directory (default generated_c/)")
+    p.set_defaults(func=cmd_generate)
+    p = sub.add_parser("build", help="compile the generated C into Python extensions")
+    p.add_argument("names", nargs="*")
+    p.set_defaults(func=cmd_build)
+    p = sub.add_parser("check-gains", help="verify external gains against an observer's LMIs")
+    p.add_argument("name")
+    p.add_argument("--gains", required=True, help="JSON with P1, P2, X, L1, L2 (nested lists)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_check_gains)
+    p = sub.add_parser("demo", help="simulate every observer on its nonlinear model and summarize")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_demo)
+    p = sub.add_parser("bench", help="benchmarks (C step, Python call, design time)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_bench)
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except UiogenError as exc:
+        print(f"uiogen: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Observer design families (LMI conditions of each seed)."""

@@ -1,0 +1,78 @@
+"""Typed errors of the uiogen toolchain.
+
+Every error a user can provoke with a model definition, a parameter file, a
+design setting or a sensor sample is one of these classes, so scripts can catch
+precisely what they expect and the message names the cause.
+"""
+from __future__ import annotations
+
+
+class UiogenError(Exception):
+    """Base class of every uiogen error."""
+
+
+class ModelDefinitionError(UiogenError, ValueError):
+    """A symbolic model definition is malformed (shapes, names, structure)."""
+
+
+class MissingParameterError(ModelDefinitionError):
+    """A parameter used by the equations has no value in the parameter file."""
+
+
+class UnknownParameterError(ModelDefinitionError):
+    """The parameter file sets a name the model does not use (likely a typo)."""
+
+
+class NotAffineError(ModelDefinitionError):
+    """The dynamics are not affine in states/inputs, so no LPV form exists."""
+
+
+class SchedulingBoundsError(ModelDefinitionError):
+    """A scheduling signal lacks bounds, or its bounds/rate bounds are invalid."""
+
+
+class RankConditionError(UiogenError, ValueError):
+    """A rank or detectability condition of the observer family fails."""
+
+
+class NonAffineLMIError(UiogenError, TypeError):
+    """An LMI expression is not affine in the decision variables."""
+
+
+class LMIShapeError(UiogenError, ValueError):
+    """An LMI block is not square or not symmetric."""
+
+
+class SolverError(UiogenError, RuntimeError):
+    """The SDP solver did not return a usable solution."""
+
+
+class InfeasibleLMIError(SolverError):
+    """The LMI problem is (primal) infeasible; the message names the blocks involved."""
+
+
+class InaccurateSolveError(SolverError):
+    """The solver stopped short of its tolerances (almost solved, iteration limit)."""
+
+
+class IllConditionedError(SolverError):
+    """The solution is too ill-conditioned to be trusted or implemented."""
+
+
+class CertificateError(UiogenError, RuntimeError):
+    """A returned solution does not satisfy its LMIs when re-checked with numpy."""
+
+
+class DiscretizationError(UiogenError, RuntimeError):
+    """The discrete-time observer step could not be certified stable."""
+
+
+class UnknownObserverError(UiogenError, KeyError):
+    """No observer configuration is registered under that name."""
+
+    def __str__(self) -> str:  # KeyError quotes its argument; keep the message readable
+        return str(self.args[0]) if self.args else ""
+
+
+class SampleError(UiogenError, ValueError):
+    """An input sample or array passed to an observer has the wrong shape, type or values."""

@@ -1,0 +1,262 @@
+"""Symbolic model definitions and their instantiation with a parameter file.
+
+A model is written once, with sympy, as ``x_dot = f(x, u, d; rho, p)`` and
+``y = h(x; rho, p)`` where ``rho`` are measured scheduling signals and ``p``
+named physical parameters. Numbers live in a TOML parameter file, so a user with
+another car edits that file, not code. :func:`instantiate` checks the definition
+and the file against each other and returns the LPV matrices A(rho), B(rho),
+D(rho), C(rho) as sympy matrices in the scheduling symbols only.
+"""
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping
+
+import sympy as sp
+
+from .errors import (
+    MissingParameterError,
+    ModelDefinitionError,
+    NotAffineError,
+    SchedulingBoundsError,
+    UnknownParameterError,
+)
+
+
+@dataclass(frozen=True)
+class SchedulingSignal:
+    """A measured signal the model depends on non-affinely (e.g. the speed v_x).
+
+    Bounds and rate bounds are read from the parameter file's
+    ``[scheduling.NAME]`` table: ``min``, ``max``, ``rate_min``, ``rate_max``.
+    """
+
+    symbol: sp.Symbol
+    unit: str = ""
+
+
+@dataclass(frozen=True)
+class SchedulingBox:
+    """Numeric range of one scheduling signal and of its time derivative."""
+
+    name: str
+    lower: float
+    upper: float
+    rate_lower: float
+    rate_upper: float
+
+
+@dataclass(frozen=True)
+class ModelDefinition:
+    """A vehicle model written once, symbolically.
+
+    Attributes
+    ----------
+    name : str
+        Identifier of the model.
+    states, known_inputs, unknown_inputs : tuple of sympy.Symbol
+        Named signals; the order is the order of the vectors x, u, d.
+    dynamics : sympy.Matrix
+        Column of time derivatives of ``states``.
+    outputs : tuple of (str, sympy.Expr)
+        Measured outputs, each a named expression of the states.
+    scheduling : tuple of SchedulingSignal
+        Measured signals entering the matrices non-affinely.
+    parameters : tuple of sympy.Symbol
+        Physical parameters; each needs a value in the parameter file.
+    units : mapping of str to str
+        Units of states/inputs/outputs, for reports.
+    """
+
+    name: str
+    states: tuple
+    known_inputs: tuple
+    unknown_inputs: tuple
+    dynamics: sp.Matrix
+    outputs: tuple
+    scheduling: tuple
+    parameters: tuple
+    units: Mapping[str, str] = field(default_factory=dict)
+    doc: str = ""
+
+    def __post_init__(self) -> None:
+        names = [str(s) for s in (*self.states, *self.known_inputs, *self.unknown_inputs,
+                                  *(g.symbol for g in self.scheduling), *self.parameters)]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ModelDefinitionError(f"model {self.name!r}: symbol(s) declared twice: {', '.join(dup)}")
+        if not isinstance(self.dynamics, sp.MatrixBase) or self.dynamics.shape != (len(self.states), 1):
+            shape = getattr(self.dynamics, "shape", None)
+            raise ModelDefinitionError(
+                f"model {self.name!r}: dynamics must be a column of {len(self.states)} expressions "
+                f"(one per state), got shape {shape}")
+        if not self.outputs:
+            raise ModelDefinitionError(f"model {self.name!r}: no measured outputs declared")
+        declared = set(names)
+        for i, expr in enumerate(self.dynamics):
+            stray = {str(s) for s in sp.sympify(expr).free_symbols} - declared
+            if stray:
+                raise ModelDefinitionError(
+                    f"model {self.name!r}: d{self.states[i]}/dt uses undeclared symbol(s) "
+                    f"{', '.join(sorted(stray))}")
+        for out_name, expr in self.outputs:
+            stray = {str(s) for s in sp.sympify(expr).free_symbols} - declared
+            if stray:
+                raise ModelDefinitionError(
+                    f"model {self.name!r}: output {out_name!r} uses undeclared symbol(s) "
+                    f"{', '.join(sorted(stray))}")
+
+    @property
+    def state_names(self) -> tuple:
+        return tuple(str(s) for s in self.states)
+
+    @property
+    def output_names(self) -> tuple:
+        return tuple(n for n, _ in self.outputs)
+
+
+@dataclass(frozen=True)
+class ParameterSet:
+    """Values read from a parameter file."""
+
+    source: str
+    values: Mapping[str, float]
+    scheduling: Mapping[str, SchedulingBox]
+    meta: Mapping[str, str]
+
+
+@dataclass(frozen=True)
+class LPVModel:
+    """A model with its parameters substituted: matrices in the scheduling symbols only."""
+
+    definition: ModelDefinition
+    parameters: ParameterSet
+    A: sp.Matrix
+    B: sp.Matrix
+    D: sp.Matrix
+    C: sp.Matrix
+    scheduling_symbols: tuple
+    boxes: tuple
+
+    @property
+    def nx(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def ny(self) -> int:
+        return self.C.shape[0]
+
+    @property
+    def nu(self) -> int:
+        return self.B.shape[1]
+
+    @property
+    def nd(self) -> int:
+        return self.D.shape[1]
+
+
+def load_parameters(path: str | Path) -> ParameterSet:
+    """Read a TOML parameter file.
+
+    The file has a ``[parameters]`` table of name = number, a ``[scheduling.NAME]``
+    table per scheduling signal with ``min``, ``max``, ``rate_min``, ``rate_max``, and
+    an optional ``[meta]`` table of strings (source, car).
+    """
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ModelDefinitionError(f"parameter file not found: {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ModelDefinitionError(f"parameter file {path} is not valid TOML: {exc}") from None
+    raw = data.get("parameters")
+    if not isinstance(raw, dict):
+        raise ModelDefinitionError(f"parameter file {path} has no [parameters] table")
+    values = {}
+    for key, value in raw.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ModelDefinitionError(f"{path}: parameter {key!r} must be a number, got {value!r}")
+        values[key] = float(value)
+    boxes = {}
+    for key, table in (data.get("scheduling") or {}).items():
+        missing = [k for k in ("min", "max", "rate_min", "rate_max") if k not in table]
+        if missing:
+            raise SchedulingBoundsError(
+                f"{path}: scheduling signal {key!r} lacks {', '.join(missing)}")
+        box = SchedulingBox(key, float(table["min"]), float(table["max"]),
+                            float(table["rate_min"]), float(table["rate_max"]))
+        if not box.lower < box.upper:
+            raise SchedulingBoundsError(f"{path}: scheduling {key!r} needs min < max, got "
+                                        f"[{box.lower}, {box.upper}]")
+        if not box.rate_lower <= box.rate_upper:
+            raise SchedulingBoundsError(f"{path}: scheduling {key!r} needs rate_min <= rate_max")
+        boxes[key] = box
+    meta = {k: str(v) for k, v in (data.get("meta") or {}).items()}
+    return ParameterSet(str(path), values, boxes, meta)
+
+
+def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str) -> sp.Matrix:
+    """Jacobian of ``expr_column`` w.r.t. ``symbols``, checked to be constant in them."""
+    if not symbols:
+        return sp.zeros(expr_column.shape[0], 0)
+    jac = expr_column.jacobian(sp.Matrix(symbols))
+    for (i, j), entry in zip(((i, j) for i in range(jac.shape[0]) for j in range(jac.shape[1])), jac):
+        if entry.free_symbols & set(symbols):
+            raise NotAffineError(
+                f"model {model!r}: row {i} is not affine in {what} (d/d{symbols[j]} = {entry} "
+                f"still depends on {', '.join(sorted(map(str, entry.free_symbols & set(symbols))))})")
+    return jac
+
+
+def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
+    """Substitute a parameter set into a model and extract its LPV matrices.
+
+    Raises
+    ------
+    MissingParameterError, UnknownParameterError, SchedulingBoundsError, NotAffineError
+    """
+    needed = [str(p) for p in model.parameters]
+    missing = [n for n in needed if n not in params.values]
+    if missing:
+        raise MissingParameterError(
+            f"model {model.name!r}: parameter file {params.source} lacks {', '.join(missing)}")
+    unknown = sorted(set(params.values) - set(needed))
+    if unknown:
+        raise UnknownParameterError(
+            f"parameter file {params.source} sets {', '.join(unknown)}, which model "
+            f"{model.name!r} does not use (declared: {', '.join(needed)})")
+    boxes = []
+    for sig in model.scheduling:
+        box = params.scheduling.get(str(sig.symbol))
+        if box is None:
+            raise SchedulingBoundsError(
+                f"model {model.name!r}: scheduling signal {sig.symbol} has no "
+                f"[scheduling.{sig.symbol}] bounds in {params.source}")
+        boxes.append(box)
+    subs = {p: params.values[str(p)] for p in model.parameters}
+    f = sp.Matrix(model.dynamics).subs(subs)
+    h = sp.Matrix([expr for _, expr in model.outputs]).subs(subs)
+    x, u, d = tuple(model.states), tuple(model.known_inputs), tuple(model.unknown_inputs)
+    A = _affine_part(f, x, "the states", model.name)
+    B = _affine_part(f, u, "the known inputs", model.name)
+    D = _affine_part(f, d, "the unknown inputs", model.name)
+    C = _affine_part(h, x, "the states", model.name)
+    rest = sp.simplify(f - A * sp.Matrix(x) - B * sp.Matrix(u) - D * sp.Matrix(d)) if x else f
+    if any(sp.simplify(e) != 0 for e in rest):
+        raise NotAffineError(f"model {model.name!r}: dynamics have a drift term independent of "
+                             f"states and inputs: {list(rest)}")
+    for mat, label in ((B, "B"), (D, "D"), (C, "C")):
+        if any(e.free_symbols & set(x + u + d) for e in mat):
+            raise NotAffineError(f"model {model.name!r}: {label} depends on states or inputs")
+    sched = tuple(sig.symbol for sig in model.scheduling)
+    allowed = set(sched)
+    for mat, label in ((A, "A"), (B, "B"), (D, "D"), (C, "C")):
+        stray = set().union(*(e.free_symbols for e in mat)) - allowed if len(mat) else set()
+        if stray:
+            raise ModelDefinitionError(
+                f"model {model.name!r}: {label} depends on {', '.join(sorted(map(str, stray)))}, "
+                f"which is neither a parameter nor a scheduling signal")
+    return LPVModel(model, params, A, B, D, C, sched, tuple(boxes))

@@ -1,0 +1,323 @@
+"""Sector-nonlinearity (polytopic LPV / Takagi-Sugeno) representations.
+
+From the symbolic LPV matrices of :mod:`codegen.model` this module finds the
+scheduling nonlinearities by itself (every distinct non-constant factor of the
+matrix entries, e.g. 1/v_x and 1/v_x**2), and builds
+
+* the plain sector polytope: one premise per nonlinearity, 2**p vertices,
+  exact: sum_i eta_i A_i == A(rho);
+* the Taylor-reduced form of seed 000 eqs. (6)-(9): the first nonlinearity is
+  normalized to theta in [-1, 1] and the others are replaced by their first-order
+  Taylor expansion in theta at theta = 0; 2 vertices for one signal, with the
+  approximation error reported by :func:`taylor_error`.
+
+Membership functions are products of sector weights; their time-derivative
+bounds phi_kl (seed 000 eq. (14)) come from the scheduling rate bounds, either
+soundly over the whole box (``rate_bounds="exact"``) or, as the seed's eq. (11)
+does, with the parameter map linearized at the expansion point
+(``rate_bounds="at_expansion_point"``).
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import sympy as sp
+
+from .errors import ModelDefinitionError, SchedulingBoundsError
+from .model import LPVModel
+
+
+@dataclass(frozen=True)
+class Premise:
+    """A normalized premise variable theta(rho) with its range."""
+
+    name: str
+    expr: sp.Expr        # theta as a function of the scheduling signal
+    lower: float
+    upper: float
+
+
+@dataclass(frozen=True)
+class Polytope:
+    """Vertex matrices, membership functions and their rate bounds.
+
+    ``A[i]`` etc. are the vertex matrices, ``memberships[i]`` the sympy
+    expression of eta_i in the scheduling signal, ``rate_bounds[i] = (phi_i1,
+    phi_i2)`` bounds of d eta_i / dt and ``rate_vertices`` the consistent
+    corners (summing to zero) used by parameter-dependent Lyapunov designs.
+    """
+
+    kind: str
+    signal: sp.Symbol
+    signal_lower: float
+    signal_upper: float
+    premises: tuple
+    nonlinearities: tuple
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    memberships: tuple
+    rate_bounds: np.ndarray
+    rate_bound_mode: str
+    expansion_point: float | None
+
+    @property
+    def n_vertices(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def rate_vertices(self) -> np.ndarray:
+        """Corners of the box of (eta_1', ..., eta_{N-1}') with eta_N' = -sum (sum of eta' is 0)."""
+        n = self.n_vertices
+        corners = []
+        for pick in itertools.product((0, 1), repeat=n - 1):
+            head = [self.rate_bounds[k, pick[k]] for k in range(n - 1)]
+            corners.append(head + [-sum(head)])
+        return np.array(corners, dtype=float)
+
+    @cached_property
+    def premise_functions(self) -> tuple:
+        """Compiled numpy callables theta_j(rho), built once per polytope."""
+        return tuple(sp.lambdify(self.signal, p.expr, "numpy") for p in self.premises)
+
+    def premise_values(self, rho) -> np.ndarray:
+        """Premise variables theta_j(rho), shape (..., p)."""
+        rho = np.asarray(rho, dtype=float)
+        return np.stack([np.broadcast_to(f(rho), rho.shape) for f in self.premise_functions], axis=-1)
+
+    def eta(self, rho) -> np.ndarray:
+        """Membership values at scheduling value(s) ``rho`` (shape (..., N)), from the sector weights."""
+        return sector_weights_product(self.premise_values(rho), self.premises)
+
+    def A_of(self, rho) -> np.ndarray:
+        return np.einsum("...i,ijk->...jk", self.eta(rho), self.A)
+
+    def to_json(self) -> dict:
+        return {
+            "kind": self.kind,
+            "signal": str(self.signal),
+            "signal_range": [self.signal_lower, self.signal_upper],
+            "nonlinearities": [str(g) for g in self.nonlinearities],
+            "premises": [{"name": p.name, "expr": str(p.expr), "range": [p.lower, p.upper]}
+                         for p in self.premises],
+            "memberships": [str(m) for m in self.memberships],
+            "rate_bounds": self.rate_bounds.tolist(),
+            "rate_bound_mode": self.rate_bound_mode,
+            "expansion_point": self.expansion_point,
+            "A": self.A.tolist(), "B": self.B.tolist(), "C": self.C.tolist(), "D": self.D.tolist(),
+        }
+
+
+def scheduling_nonlinearities(lpv: LPVModel) -> tuple:
+    """Distinct non-constant factors of the entries of A, B, C, D, sorted by complexity.
+
+    Each entry is expanded into a sum of terms ``c * g(rho)``; the ``g`` are the
+    nonlinearities (for seed 000: 1/v_x and 1/v_x**2).
+    """
+    rho = set(lpv.scheduling_symbols)
+    found = {}
+    for mat in (lpv.A, lpv.B, lpv.C, lpv.D):
+        for entry in mat:
+            for term in sp.Add.make_args(sp.expand(entry)):
+                if not term.free_symbols & rho:
+                    continue
+                _, dep = term.as_independent(*rho, as_Add=False)
+                if dep != 1:
+                    found[sp.srepr(dep)] = dep
+    return tuple(sorted(found.values(), key=lambda g: (sp.count_ops(g), sp.default_sort_key(g))))
+
+
+def _affine_decomposition(lpv: LPVModel, nonlinearities: tuple):
+    """Constant matrices M0, M_k with M(rho) = M0 + sum_k g_k(rho) M_k, for A, B, C, D."""
+    zs = sp.symbols(f"z0:{len(nonlinearities)}")
+    sub = dict(zip(nonlinearities, zs))
+    out = {}
+    for label, mat in (("A", lpv.A), ("B", lpv.B), ("C", lpv.C), ("D", lpv.D)):
+        expanded = mat.applyfunc(lambda e: sp.expand(e).xreplace(sub))
+        for e in expanded:
+            if e.free_symbols & set(lpv.scheduling_symbols):
+                raise ModelDefinitionError(f"{label} entry {e} is not affine in the detected "
+                                           f"nonlinearities {nonlinearities}")
+        base = np.array(expanded.subs({z: 0 for z in zs}), dtype=float).reshape(mat.shape)
+        coeffs = [np.array(expanded.diff(z), dtype=float).reshape(mat.shape) for z in zs]
+        out[label] = (base, coeffs)
+    return out
+
+
+def _range_on_interval(expr: sp.Expr, x: sp.Symbol, lo: float, hi: float) -> tuple:
+    """Exact min and max of a smooth rational ``expr`` over [lo, hi] (endpoints + real stationary points)."""
+    candidates = [lo, hi]
+    num, _ = sp.fraction(sp.together(sp.diff(expr, x)))
+    poly = sp.Poly(sp.expand(num), x)
+    if poly.degree() > 0:
+        for root in sp.real_roots(poly):
+            val = float(root)
+            if lo < val < hi:
+                candidates.append(val)
+    f = sp.lambdify(x, expr, "math")
+    values = [float(f(c)) for c in candidates]
+    return min(values), max(values)
+
+
+def _single_signal(lpv: LPVModel):
+    if len(lpv.scheduling_symbols) != 1:
+        raise SchedulingBoundsError(
+            f"model {lpv.definition.name!r}: polytopes are built for exactly one scheduling "
+            f"signal, got {len(lpv.scheduling_symbols)}")
+    return lpv.scheduling_symbols[0], lpv.boxes[0]
+
+
+def _memberships(premises: tuple) -> tuple:
+    """Products of sector weights; vertex i uses bit j of i: 0 = lower, 1 = upper end of premise j."""
+    p = len(premises)
+    etas = []
+    for idx in range(2 ** p):
+        eta = sp.Integer(1)
+        for j, prem in enumerate(premises):
+            bit = (idx >> (p - 1 - j)) & 1
+            width = prem.upper - prem.lower
+            w = (prem.expr - prem.lower) / width if bit else (prem.upper - prem.expr) / width
+            eta = eta * w
+        etas.append(sp.simplify(eta))
+    return tuple(etas)
+
+
+def sector_weights_product(theta, premises, xp=np):
+    """eta_i = prod_j w_j^{bit_j(i)}(theta_j); works on numpy arrays and CasADi SX (``xp``)."""
+    p = len(premises)
+    weights = []
+    for j, prem in enumerate(premises):
+        width = prem.upper - prem.lower
+        t = theta[..., j] if xp is np else theta[j]
+        weights.append(((prem.upper - t) / width, (t - prem.lower) / width))
+    etas = []
+    for idx in range(2 ** p):
+        eta = 1.0
+        for j in range(p):
+            eta = eta * weights[j][(idx >> (p - 1 - j)) & 1]
+        etas.append(eta)
+    return np.stack(etas, axis=-1) if xp is np else etas
+
+
+def _vertex_matrices(decomp, premise_values_at_vertex):
+    mats = {}
+    for label, (base, coeffs) in decomp.items():
+        mats[label] = np.array([base + sum(c * z for c, z in zip(coeffs, zvals))
+                                for zvals in premise_values_at_vertex])
+    return mats
+
+
+def _rate_bounds(memberships, signal, box, mode, expansion_point):
+    bounds = []
+    for eta in memberships:
+        deta = sp.diff(eta, signal)
+        if mode == "exact":
+            lo, hi = _range_on_interval(deta, signal, box.lower, box.upper)
+        elif mode == "at_expansion_point":
+            if expansion_point is None:
+                raise ModelDefinitionError("rate_bounds='at_expansion_point' needs a Taylor-reduced polytope")
+            lo = hi = float(deta.subs(signal, expansion_point))
+        else:
+            raise ModelDefinitionError(f"unknown rate bound mode {mode!r}")
+        prods = [lo * box.rate_lower, lo * box.rate_upper, hi * box.rate_lower, hi * box.rate_upper]
+        bounds.append((min(prods), max(prods)))
+    return np.array(bounds, dtype=float)
+
+
+def sector_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polytope:
+    """Plain sector-nonlinearity polytope: one premise per nonlinearity, 2**p exact vertices."""
+    signal, box = _single_signal(lpv)
+    nonlin = scheduling_nonlinearities(lpv)
+    if not nonlin:
+        raise ModelDefinitionError(f"model {lpv.definition.name!r} does not depend on its scheduling signal")
+    premises = []
+    for k, g in enumerate(nonlin):
+        lo, hi = _range_on_interval(g, signal, box.lower, box.upper)
+        premises.append(Premise(f"z{k}", g, lo, hi))
+    premises = tuple(premises)
+    decomp = _affine_decomposition(lpv, nonlin)
+    p = len(premises)
+    corners = [[(pr.upper if (idx >> (p - 1 - j)) & 1 else pr.lower) for j, pr in enumerate(premises)]
+               for idx in range(2 ** p)]
+    mats = _vertex_matrices(decomp, corners)
+    etas = _memberships(premises)
+    return Polytope("sector", signal, box.lower, box.upper, premises, nonlin, mats["A"], mats["B"],
+                    mats["C"], mats["D"], etas, _rate_bounds(etas, signal, box, rate_bounds, None),
+                    rate_bounds, None)
+
+
+def taylor_reduced_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polytope:
+    """Reduced polytope of seed 000 eqs. (6)-(9).
+
+    The simplest nonlinearity g_0 (1/v_x) is written g_0 = 1/v0 + theta/v1 with
+    theta in [-1, 1]; every other g_k is replaced by its first-order Taylor
+    expansion in theta at theta = 0 (rho = v0). For g_0 = 1/v_x this gives
+    v0 = 2 vmin vmax/(vmin+vmax), v1 = -2 vmin vmax/(vmax-vmin) and
+    1/v_x**2 ~ (1 + 2 v0/v1 theta)/v0**2, as in the paper.
+    """
+    signal, box = _single_signal(lpv)
+    nonlin = scheduling_nonlinearities(lpv)
+    if not nonlin:
+        raise ModelDefinitionError(f"model {lpv.definition.name!r} does not depend on its scheduling signal")
+    g0 = nonlin[0]
+    g_lo, g_hi = _range_on_interval(g0, signal, box.lower, box.upper)
+    center, half = (g_hi + g_lo) / 2, (g_hi - g_lo) / 2
+    # Orient theta to increase with the signal (the seed's v1 < 0 for g0 = 1/v_x), so vertex 1
+    # is the low end of the signal, as in eq. (9): A_1 = A(theta_min) = A(v_min).
+    g_at_lo = float(g0.subs(signal, box.lower))
+    if g_at_lo > center:
+        half = -half
+    theta_expr = (g0 - center) / half
+    theta = sp.Symbol("theta")
+    # rho as a function of theta (g0 must be invertible on the box)
+    sols = [s for s in sp.solve(sp.Eq(g0, center + half * theta), signal)]
+    rho_of_theta = None
+    for s in sols:
+        val = complex(s.subs(theta, 0))
+        if abs(val.imag) < 1e-12 and box.lower <= val.real <= box.upper:
+            rho_of_theta = s
+    if rho_of_theta is None:
+        raise ModelDefinitionError(f"nonlinearity {g0} cannot be inverted on [{box.lower}, {box.upper}]")
+    expansion_point = float(rho_of_theta.subs(theta, 0))
+    decomp = _affine_decomposition(lpv, nonlin)
+    # premise values at theta = -1, +1 for every nonlinearity (first-order Taylor in theta)
+    lines = []
+    for g in nonlin:
+        g_theta = sp.simplify(g.subs(signal, rho_of_theta))
+        value0 = float(g_theta.subs(theta, 0))
+        slope0 = float(sp.diff(g_theta, theta).subs(theta, 0))
+        lines.append((value0, slope0))
+    corners = [[v0 + s0 * t for v0, s0 in lines] for t in (-1.0, 1.0)]
+    mats = _vertex_matrices(decomp, corners)
+    premise = Premise("theta", sp.simplify(theta_expr), -1.0, 1.0)
+    etas = _memberships((premise,))
+    return Polytope("taylor_reduced", signal, box.lower, box.upper, (premise,), nonlin, mats["A"],
+                    mats["B"], mats["C"], mats["D"], etas,
+                    _rate_bounds(etas, signal, box, rate_bounds, expansion_point), rate_bounds,
+                    expansion_point)
+
+
+def exact_matrix_function(lpv: LPVModel, label: str = "A"):
+    """Numeric callable rho -> exact matrix (for error reports and nonlinear simulation)."""
+    mat = {"A": lpv.A, "B": lpv.B, "C": lpv.C, "D": lpv.D}[label]
+    f = sp.lambdify(lpv.scheduling_symbols, mat, "numpy")
+    return lambda rho: np.array(f(rho), dtype=float)
+
+
+def taylor_error(lpv: LPVModel, poly: Polytope, n_grid: int = 2001) -> dict:
+    """Largest entrywise error between the polytope's A and the exact A(rho) on a dense grid."""
+    exact = exact_matrix_function(lpv, "A")
+    grid = np.linspace(poly.signal_lower, poly.signal_upper, n_grid)
+    worst, where, entry = 0.0, float(grid[0]), (0, 0)
+    worst_rel = 0.0
+    for rho in grid:
+        err = np.abs(poly.A_of(rho) - exact(rho))
+        k = np.unravel_index(np.argmax(err), err.shape)
+        if err[k] > worst:
+            worst, where, entry = float(err[k]), float(rho), (int(k[0]), int(k[1]))
+            worst_rel = float(err[k] / max(abs(exact(rho)[k]), 1e-300))
+    return {"max_abs_error": worst, "at": where, "entry": list(entry), "relative_error_there": worst_rel}

@@ -1,0 +1,51 @@
+"""Single-track lateral dynamics with an electric power steering column (seed 000).
+
+Nguyen, Guerra, Sentouh, Zhang, IEEE/ASME T-Mech 24(6), 2019, eqs. (1)-(5):
+linear axle tyres F_yf = 2 C_f alpha_f, F_yr = 2 C_r alpha_r (eq. (3)), small angles,
+beta = v_y / v_x, and the steering column (2) with delta_d = R_s delta.
+States x = [beta, r, delta, delta_dot], known input u = T_a (assistance torque),
+unknown input d = T_d (driver torque), outputs y = [r, delta, delta_dot],
+scheduling signal v_x.
+"""
+import sympy as sp
+
+from codegen.model import ModelDefinition, SchedulingSignal
+
+beta, r, delta, delta_dot = sp.symbols("beta r delta delta_dot")
+T_a, T_d = sp.symbols("T_a T_d")
+v_x = sp.Symbol("v_x", positive=True)
+l_f, l_r, eta_t, R_s, B_s, K_p, M, I_z, I_s, C_f, C_r = sp.symbols(
+    "l_f l_r eta_t R_s B_s K_p M I_z I_s C_f C_r", positive=True)
+
+# Axle slip angles and linear lateral forces, eq. (3), with v_y = beta v_x.
+alpha_f = delta - beta - l_f * r / v_x
+alpha_r = (l_r * r) / v_x - beta
+F_yf = 2 * C_f * alpha_f
+F_yr = 2 * C_r * alpha_r
+
+# Self-aligning torque gains of the column model (2).
+T_s_beta = 2 * K_p * C_f * eta_t / R_s
+T_s_r = 2 * K_p * C_f * eta_t * l_f / (R_s * v_x)
+T_s = T_a + T_d
+
+dynamics = sp.Matrix([
+    (F_yf + F_yr) / (M * v_x) - r,                       # beta_dot (from M(v_y_dot + r v_x) = sum F_y)
+    (l_f * F_yf - l_r * F_yr) / I_z,                     # r_dot
+    delta_dot,
+    # delta_d = R_s delta in (2), divided by R_s:
+    (T_s_beta * beta + T_s_r * r - T_s_beta * delta - B_s * R_s * delta_dot + T_s) / (R_s * I_s),
+])
+
+MODEL = ModelDefinition(
+    name="steering_single_track",
+    states=(beta, r, delta, delta_dot),
+    known_inputs=(T_a,),
+    unknown_inputs=(T_d,),
+    dynamics=dynamics,
+    outputs=(("r", r), ("delta", delta), ("delta_dot", delta_dot)),
+    scheduling=(SchedulingSignal(v_x, "m/s"),),
+    parameters=(l_f, l_r, eta_t, R_s, B_s, K_p, M, I_z, I_s, C_f, C_r),
+    units={"beta": "rad", "r": "rad/s", "delta": "rad", "delta_dot": "rad/s",
+           "T_a": "N m", "T_d": "N m", "v_x": "m/s"},
+    doc=__doc__,
+)

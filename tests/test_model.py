@@ -1,0 +1,119 @@
+"""Model layer: the seed-000 equations come out as eq. (5), and bad definitions fail precisely."""
+import textwrap
+
+import numpy as np
+import pytest
+import sympy as sp
+
+from codegen.errors import (MissingParameterError, ModelDefinitionError, NotAffineError,
+                            SchedulingBoundsError, UnknownParameterError)
+from codegen.model import ModelDefinition, SchedulingSignal, instantiate, load_parameters
+from model_defs import PARAMS_DIR
+from model_defs.steering_single_track import MODEL
+
+TABLE1 = dict(l_f=1.3, l_r=1.6, eta_t=0.13, R_s=16.0, B_s=5.73, K_p=0.5, M=2052.0, I_z=2800.0,
+              I_s=0.05, C_f=57000.0, C_r=59000.0)
+
+
+def paper_A(vx):
+    """Eq. (4)-(5) of seed 000, typed from the paper independently of the symbolic model."""
+    return paper_A_w(1 / vx, 1 / vx ** 2)
+
+
+def paper_A_w(w, w2):
+    """A of eq. (5) as a function of w = 1/v_x and w2 = 1/v_x^2 (independently typed)."""
+    p = TABLE1
+    vx = 1 / w
+    Tsb = 2 * p["K_p"] * p["C_f"] * p["eta_t"] / p["R_s"]
+    Tsr = 2 * p["K_p"] * p["C_f"] * p["eta_t"] * p["l_f"] / (p["R_s"] * vx)
+    a11 = -2 * (p["C_r"] + p["C_f"]) / (p["M"] * vx)
+    a12 = 2 * (p["l_r"] * p["C_r"] - p["l_f"] * p["C_f"]) * w2 / p["M"] - 1
+    a21 = 2 * (p["l_r"] * p["C_r"] - p["l_f"] * p["C_f"]) / p["I_z"]
+    a22 = -2 * (p["l_r"] ** 2 * p["C_r"] + p["l_f"] ** 2 * p["C_f"]) / (p["I_z"] * vx)
+    b1, b2 = 2 * p["C_f"] / (p["M"] * vx), 2 * p["l_f"] * p["C_f"] / p["I_z"]
+    RI = p["R_s"] * p["I_s"]
+    return np.array([[a11, a12, b1, 0], [a21, a22, b2, 0], [0, 0, 0, 1],
+                     [Tsb / RI, Tsr / RI, -Tsb / RI, -p["B_s"] / p["I_s"]]])
+
+
+def test_lpv_matrices_match_paper(lpv):
+    vx = sp.Symbol("v_x", positive=True)
+    A = sp.lambdify(vx, lpv.A, "numpy")
+    for v in np.linspace(5, 35, 13):
+        np.testing.assert_allclose(np.array(A(v), float), paper_A(v), rtol=1e-13, atol=1e-13)
+    RI = TABLE1["R_s"] * TABLE1["I_s"]
+    np.testing.assert_allclose(np.array(lpv.B, float).ravel(), [0, 0, 0, 1 / RI])
+    np.testing.assert_allclose(np.array(lpv.D, float).ravel(), [0, 0, 0, 1 / RI])
+    np.testing.assert_array_equal(np.array(lpv.C, float), [[0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
+    assert lpv.parameters.scheduling["v_x"].lower == 5.0 and lpv.boxes[0].rate_upper == 4.0
+
+
+def _write(tmp_path, body):
+    path = tmp_path / "p.toml"
+    path.write_text(textwrap.dedent(body))
+    return path
+
+
+BASE = """
+[parameters]
+{params}
+[scheduling.v_x]
+min = 5.0
+max = 35.0
+rate_min = -4.0
+rate_max = 4.0
+"""
+
+
+def _params_text(drop=None, extra=""):
+    return "\n".join(f"{k} = {v}" for k, v in TABLE1.items() if k != drop) + "\n" + extra
+
+
+def test_missing_parameter_names_it(tmp_path):
+    path = _write(tmp_path, BASE.format(params=_params_text(drop="C_r")))
+    with pytest.raises(MissingParameterError, match="C_r"):
+        instantiate(MODEL, load_parameters(path))
+
+
+def test_unknown_parameter_is_refused(tmp_path):
+    path = _write(tmp_path, BASE.format(params=_params_text(extra="C_rr = 1.0")))
+    with pytest.raises(UnknownParameterError, match="C_rr"):
+        instantiate(MODEL, load_parameters(path))
+
+
+def test_scheduling_without_bounds(tmp_path):
+    path = _write(tmp_path, "[parameters]\n" + _params_text())
+    with pytest.raises(SchedulingBoundsError, match="v_x"):
+        instantiate(MODEL, load_parameters(path))
+    bad = _write(tmp_path, BASE.format(params=_params_text()).replace("max = 35.0", "max = 1.0"))
+    with pytest.raises(SchedulingBoundsError, match="min < max"):
+        load_parameters(bad)
+    missing_rate = _write(tmp_path, BASE.format(params=_params_text()).replace("rate_max = 4.0", ""))
+    with pytest.raises(SchedulingBoundsError, match="rate_max"):
+        load_parameters(missing_rate)
+
+
+def test_non_numeric_parameter(tmp_path):
+    path = _write(tmp_path, BASE.format(params=_params_text(extra='oops = "x"')))
+    with pytest.raises(ModelDefinitionError, match="oops"):
+        load_parameters(path)
+
+
+def _toy(dynamics, outputs=None, scheduling=True):
+    x1, x2, u, d, v, k = sp.symbols("x1 x2 u d v k")
+    return ModelDefinition("toy", (x1, x2), (u,), (d,), dynamics(x1, x2, u, d, v, k),
+                           outputs or (("x1", x1),), (SchedulingSignal(v),) if scheduling else (), (k,))
+
+
+def test_non_affine_dynamics_rejected(tmp_path):
+    model = _toy(lambda x1, x2, u, d, v, k: sp.Matrix([x2, -k * x1 ** 3 / v + u + d]))
+    path = _write(tmp_path, "[parameters]\nk = 1.0\n[scheduling.v]\nmin=1\nmax=2\nrate_min=-1\nrate_max=1\n")
+    with pytest.raises(NotAffineError, match="not affine in the states"):
+        instantiate(model, load_parameters(path))
+
+
+def test_wrong_shape_and_undeclared_symbols():
+    with pytest.raises(ModelDefinitionError, match="column of 2"):
+        _toy(lambda x1, x2, u, d, v, k: sp.Matrix([x2]))
+    with pytest.raises(ModelDefinitionError, match="undeclared symbol"):
+        _toy(lambda x1, x2, u, d, v, k: sp.Matrix([x2, sp.Symbol("zeta") * x1]))
