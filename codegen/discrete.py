@@ -101,11 +101,97 @@ def step_numpy(data: ObserverData, z, u, y, rho):
     return np.linalg.solve(G, z + data.Ts * (Ba @ u + By @ y)), float(rho_c != rho)
 
 
+def _affine_in_scalar_premise(data: ObserverData):
+    """(Q0, Q1, L0, L1) with Q(th) = Q0 + th Q1, L(th) = L0 + th L1, if the memberships allow it."""
+    poly = data.poly
+    if len(poly.premises) != 1 or poly.n_vertices != 2:
+        return None
+    prem = poly.premises[0]
+    mid, half = 0.5 * (prem.lower + prem.upper), 0.5 * (prem.upper - prem.lower)
+    # eta_1 = (ub - th)/w, eta_2 = (th - lb)/w  =>  V(th) = V(mid) + (th - mid) (V_2 - V_1)/w
+    w = 2 * half
+    Q0 = 0.5 * (data.Q[0] + data.Q[1]) - mid * (data.Q[1] - data.Q[0]) / w
+    L0 = 0.5 * (data.L[0] + data.L[1]) - mid * (data.L[1] - data.L[0]) / w
+    return Q0, (data.Q[1] - data.Q[0]) / w, L0, (data.L[1] - data.L[0]) / w
+
+
+def gain_factorization(data: ObserverData):
+    """M(th) = V diag(1/(1 + th lam)) V' L(th) for Q(th) = Q0 + th Q1 (generalized eigenvectors,
+    V' Q0 V = I). Exact, with four independent divisions instead of a linear solve; None when
+    Q is not affine in one premise."""
+    parts = _affine_in_scalar_premise(data)
+    if parts is None:
+        return None
+    Q0, Q1, L0, L1 = parts
+    lam, V = eigh(0.5 * (Q1 + Q1.T), 0.5 * (Q0 + Q0.T))
+    return lam, V, V.T @ L0, V.T @ L1
+
+
+def _x_system(data: ObserverData, theta: np.ndarray):
+    """Matrix of the eliminated x+ system, G_x(th) (see :func:`step_casadi`)."""
+    Aa, _, By = augmented_matrices(data, theta)
+    nx = data.nx
+    M = -By[:nx]
+    K = (data.Ts / data.Tf) * (data.Dp @ M)
+    return np.eye(nx) - data.Ts * Aa[:nx, :nx] - data.Ts * (data.poly.D[0] @ K @ data.poly.C[0])
+
+
+def lu_without_pivoting_is_safe(data: ObserverData, n_grid: int = 401, min_pivot: float = 1e-3,
+                                max_growth: float = 10.0) -> dict:
+    """Dense-grid check that unpivoted LU of G_x(th) has no small pivots and no element growth."""
+    smallest, growth = np.inf, 0.0
+    for th in np.linspace(data.poly.premises[0].lower, data.poly.premises[0].upper, n_grid) \
+            if len(data.poly.premises) == 1 else []:
+        G = _x_system(data, np.array([th]))
+        U = G.copy()
+        for k in range(G.shape[0]):
+            smallest = min(smallest, abs(U[k, k]) / max(np.abs(G).max(), 1e-300))
+            for i in range(k + 1, G.shape[0]):
+                U[i, k:] -= (U[i, k] / U[k, k]) * U[k, k:]
+        growth = max(growth, np.abs(U).max() / np.abs(G).max())
+    safe = bool(np.isfinite(smallest) and smallest >= min_pivot and growth <= max_growth)
+    return {"safe": safe, "min_relative_pivot": float(smallest), "growth": float(growth)}
+
+
+def _reciprocal(x):
+    """1/x as its own node: CasADi rewrites (1/x)*y into y/x, which would turn one shared
+    reciprocal into one division per use. 0.5*(2/x) is bit-identical to 1/x (power-of-two
+    scaling is exact) and is left alone, so each use costs a multiplication."""
+    return 0.5 * (2.0 / x)
+
+
+def _solve_unpivoted(G, rhs):
+    """Unrolled LU solve without pivoting (used only where :func:`lu_without_pivoting_is_safe`)."""
+    n = G.shape[0]
+    G = [[G[i, j] for j in range(n)] for i in range(n)]
+    b = [rhs[i] for i in range(n)]
+    inv_pivot = [None] * n
+    for k in range(n):
+        inv_pivot[k] = _reciprocal(G[k][k])
+        for i in range(k + 1, n):
+            factor = G[i][k] * inv_pivot[k]
+            for j in range(k + 1, n):
+                G[i][j] = G[i][j] - factor * G[k][j]
+            b[i] = b[i] - factor * b[k]
+    x = [None] * n
+    for i in reversed(range(n)):
+        acc = b[i]
+        for j in range(i + 1, n):
+            acc = acc - G[i][j] * x[j]
+        x[i] = acc * inv_pivot[i]
+    return ca.vertcat(*x)
+
+
 def step_casadi(data: ObserverData, name: str) -> ca.Function:
     """The step as a CasADi Function: (z, u, y, rho) -> (z_next, clamped).
 
     The scheduling signal is clamped to its box for the memberships (the certificate
-    only holds there); ``clamped`` is 1 when that happened.
+    only holds there); ``clamped`` is 1 when that happened. The d-block of
+    I - Ts Aa is the identity, so d is eliminated (Schur complement): the x+ system is
+    nx x nx and far better conditioned than the full one (the 1/Tf row); then
+    d+ = d + (Ts/Tf) Dp M (C x+ - y). Where checks allow, M(th) uses
+    :func:`gain_factorization` and the x+ solve an unpivoted unrolled LU; otherwise
+    CasADi's generic solve.
     """
     poly = data.poly
     nz, nu, ny = data.nz, poly.B.shape[2], poly.C.shape[1]
@@ -116,21 +202,32 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
     rho_c = ca.fmin(ca.fmax(rho, poly.signal_lower), poly.signal_upper)
     clamped = ca.if_else(rho_c == rho, 0, 1)
     theta = premise_of_signal(poly, rho_c, xp=ca)
-    eta = sector_weights_product(theta, poly.premises, xp=ca)
-    A = _blend(eta, [ca.DM(a) for a in poly.A])
-    Q = _blend(eta, [ca.DM(q) for q in data.Q])
-    L = _blend(eta, [ca.DM(l) for l in data.L])
-    M = ca.solve(Q, L)
+    fact = gain_factorization(data)
+    if fact is not None:
+        # two vertices: every blended matrix is affine in the premise; entries that do not
+        # vary become constants in the generated code
+        th = theta[0]
+        lo, hi = poly.premises[0].lower, poly.premises[0].upper
+        slope = (poly.A[1] - poly.A[0]) * (1.0 / (hi - lo))
+        A = ca.DM(poly.A[0] - lo * slope) + th * ca.DM(slope)
+        lam, V, W0, W1 = fact
+        scale = ca.vertcat(*[_reciprocal(1.0 + th * float(l)) for l in lam])
+        W = ca.DM(W0) + th * ca.DM(W1)
+        M = ca.DM(V) @ (ca.repmat(scale, 1, ny) * W)
+    else:
+        eta = sector_weights_product(theta, poly.premises, xp=ca)
+        A = _blend(eta, [ca.DM(a) for a in poly.A])
+        M = ca.solve(_blend(eta, [ca.DM(q) for q in data.Q]), _blend(eta, [ca.DM(l) for l in data.L]))
     C, D, B, Dp = (ca.DM(m) for m in (poly.C[0], poly.D[0], poly.B[0], data.Dp))
     nx, Ts, Tf = data.nx, data.Ts, data.Tf
     x, d = z[:nx], z[nx:]
-    # The d-block of I - Ts Aa is the identity, so d is eliminated (Schur complement): the x+
-    # system is 4x4 and far better conditioned than the 5x5 one (the 1/Tf row), then
-    # d+ = d + (Ts/Tf) Dp M (C x+ - y) explicitly.
     K = (Ts / Tf) * (Dp @ M)
     G_x = ca.DM.eye(nx) - Ts * (A + M @ C) - Ts * (D @ K @ C)
     rhs = x + Ts * (B @ u - M @ y) + Ts * (D @ (d - K @ y))
-    x_next = ca.solve(G_x, rhs)
+    if lu_without_pivoting_is_safe(data)["safe"]:
+        x_next = _solve_unpivoted(G_x, rhs)
+    else:
+        x_next = ca.solve(G_x, rhs)
     d_next = d + K @ (C @ x_next - y)
     z_next = ca.vertcat(x_next, d_next)
     return ca.Function(name, [z, u, y, rho], [z_next, clamped], ["z", "u", "y", "rho"], ["z_next", "clamped"])

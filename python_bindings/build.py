@@ -61,7 +61,9 @@ def build_extension(name: str, extra_flags: list | None = None, ext_dir: Path = 
         _run([compiler(), *STRICT_FLAGS, *extra, "-fPIC", *inc, "-c", str(src), "-o", str(obj)])
         objs.append(obj)
     glue_obj = BUILD_DIR / (glue.stem + suffix + ".o")
+    import numpy
     _run([compiler(), *GLUE_FLAGS, *extra, "-fPIC", *inc, "-I", sysconfig.get_paths()["include"],
+          "-I", numpy.get_include(),
           "-c", str(glue), "-o", str(glue_obj)])
     target = ext_dir / f"_{name}{sysconfig.get_config_var('EXT_SUFFIX')}"
     _run([compiler(), "-shared", *extra, *map(str, objs), str(glue_obj), "-o", str(target), "-lm"])

@@ -12,7 +12,7 @@
 #define LPV_LINF_DRIVER_TORQUE_SZ_ARG 4
 #define LPV_LINF_DRIVER_TORQUE_SZ_RES 2
 #define LPV_LINF_DRIVER_TORQUE_SZ_IW 1
-#define LPV_LINF_DRIVER_TORQUE_SZ_W 51
+#define LPV_LINF_DRIVER_TORQUE_SZ_W 41
 
 void lpv_linf_driver_torque_init(lpv_linf_driver_torque_state *s)
 {
