@@ -105,6 +105,7 @@ class LMIProblem:
     _variables: dict = field(default_factory=dict)
     _constraints: list = field(default_factory=list)
     _objective: ca.SX | None = None
+    _evaluate: ca.Function | None = None
 
     # -- decision variables -------------------------------------------------
     def _fresh(self, name: str, count: int) -> list:
@@ -151,42 +152,74 @@ class LMIProblem:
 
     # -- compilation and solve -----------------------------------------------
     def _compile(self):
+        """Coefficients of every block, stacked in Clarabel's form.
+
+        Affinity is checked structurally (``casadi.which_depends`` of order 2: no entry may
+        depend nonlinearly on a variable); the coefficients are then read by evaluating the
+        vectorized blocks at 0 and at 2**40 e_k (a power of two, so dividing back is exact
+        and the constant part cannot swamp the coefficient). Returns (x, A, b, q, cones,
+        blocks) with blocks = [(constraint, rows in the stacked triangles, rows in the stacked
+        full column-major blocks)].
+        """
         x = ca.vertcat(*self._symbols)
         nvar = x.shape[0]
-        rows_A, b_parts, cones, blocks = [], [], [], []
+        vecs, blocks, cones, margins, tri_rows, full_offset, offset = [], [], [], [], [], 0, 0
+        sym_a, sym_b = [], []
         for con in self._constraints:
             n = con.expr.shape[0]
-            asym = con.expr - con.expr.T
-            asym_f = ca.Function("asym", [x], [ca.jacobian(ca.vec(asym), x), ca.vec(asym)])
-            ja, a0 = asym_f(np.zeros(nvar))
-            if np.abs(np.asarray(ja.full())).max(initial=0) > 0 or np.abs(np.asarray(a0.full())).max(initial=0) > 1e-12 * (1 + np.abs(np.asarray(a0.full())).max(initial=0)):
-                raise LMIShapeError(f"{self.name}: LMI {con.label!r} is not symmetric")
-            tri = ca.vertcat(*[con.expr[i, j] * (1.0 if i == j else SQRT2) for i, j in _triu_pairs(n)])
-            jac = ca.jacobian(tri, x)
-            if ca.depends_on(jac, x):
-                bad = [str(s) for s in self._symbols if ca.depends_on(ca.jacobian(tri, s), x)][:4]
-                raise NonAffineLMIError(
-                    f"{self.name}: LMI {con.label!r} is not affine in the decision variables "
-                    f"(products involving {', '.join(bad)}); fix one factor or use a change of variables")
-            f = ca.Function("coef", [x], [jac, tri])
-            J, c0 = f(np.zeros(nvar))
-            J = sparse.csc_matrix(J.sparse()) if hasattr(J, "sparse") else sparse.csc_matrix(np.asarray(J))
-            c0 = np.asarray(c0.full()).ravel()
-            margin_vec = svec(con.margin * np.eye(n))
-            # s = expr - margin I  = c0 - margin + J x  ->  A = -J, b = c0 - margin
-            rows_A.append(-J)
-            b_parts.append(c0 - margin_vec)
+            vecs.append(ca.vec(con.expr))
+            pairs = _triu_pairs(n)
+            for i, j in pairs:  # column-major vec: entry (i, j) sits at j*n + i
+                tri_rows.append((full_offset + j * n + i, 1.0 if i == j else SQRT2))
+                if i != j:
+                    sym_a.append(full_offset + j * n + i)
+                    sym_b.append(full_offset + i * n + j)
+            blocks.append((con, slice(offset, offset + len(pairs)), slice(full_offset, full_offset + n * n)))
+            margins.append(svec(con.margin * np.eye(n)))
             cones.append(clarabel.PSDTriangleConeT(n))
-            blocks.append((con, f))
-        A = sparse.vstack(rows_A).tocsc() if rows_A else sparse.csc_matrix((0, nvar))
-        b = np.concatenate(b_parts) if b_parts else np.zeros(0)
+            offset += len(pairs)
+            full_offset += n * n
+        V = ca.vertcat(*vecs) if vecs else ca.SX(0, 1)
+        nonlinear = ca.which_depends(V, x, 2, True) if nvar else []
+        if any(nonlinear):
+            for con in self._constraints:
+                dep = ca.which_depends(ca.vec(con.expr), x, 2, False)
+                if any(dep):
+                    bad = [str(self._symbols[k]) for k, d in enumerate(dep) if d][:4]
+                    raise NonAffineLMIError(
+                        f"{self.name}: LMI {con.label!r} is not affine in the decision variables "
+                        f"(products involving {', '.join(bad)}); fix one factor or use a change of variables")
+        f = ca.Function("blocks", [x], [V])
+        probe = 2.0 ** 40
+        vals = np.asarray(f.map(nvar + 1)(np.hstack([np.zeros((nvar, 1)), probe * np.eye(nvar)])).full())
+        c_full = vals[:, 0]
+        J_full = (vals[:, 1:] - c_full[:, None]) / probe
+        if sym_a:
+            mismatch = (np.abs(c_full[sym_a] - c_full[sym_b]) > 1e-12 * (1 + np.abs(c_full[sym_a]))) | \
+                (np.abs(J_full[sym_a] - J_full[sym_b]).max(axis=1) > 1e-12 * (1 + np.abs(J_full[sym_a]).max(axis=1)))
+            if mismatch.any():
+                bad_row = sym_a[int(np.argmax(mismatch))]
+                start = 0
+                for con in self._constraints:
+                    n = con.expr.shape[0]
+                    if start <= bad_row < start + n * n:
+                        raise LMIShapeError(f"{self.name}: LMI {con.label!r} is not symmetric")
+                    start += n * n
+        rows = np.array([r for r, _ in tri_rows], dtype=int)
+        scale = np.array([w for _, w in tri_rows])
+        J = J_full[rows] * scale[:, None]
+        J[np.abs(J) < 1e-300] = 0.0
+        A = -sparse.csc_matrix(J)
+        b = c_full[rows] * scale - (np.concatenate(margins) if margins else 0.0)
+        self._evaluate = f  # the original block expressions, for the independent re-check
         if self._objective is None:
             q = np.zeros(nvar)
         else:
-            gobj = ca.jacobian(self._objective, x)
-            if ca.depends_on(gobj, x):
+            if any(ca.which_depends(self._objective, x, 2, True)):
                 raise NonAffineLMIError(f"{self.name}: objective is not linear in the decision variables")
-            q = np.asarray(ca.Function("g", [x], [gobj])(np.zeros(nvar)).full()).ravel()
+            fo = ca.Function("obj", [x], [self._objective])
+            ov = np.asarray(fo.map(nvar + 1)(np.hstack([np.zeros((nvar, 1)), probe * np.eye(nvar)])).full()).ravel()
+            q = (ov[1:] - ov[0]) / probe
         return x, A, b, q, cones, blocks
 
     def solve(self, tol: float = 1e-9, max_iter: int = 200, max_abs_value: float = 1e9,
@@ -229,22 +262,24 @@ class LMIProblem:
                 f"{self.name}: solution has entries up to {np.abs(xv).max():.3g} (limit "
                 f"{max_abs_value:g}); the problem is nearly unbounded — add or tighten a bound "
                 f"on the gains/Lyapunov matrices")
-        values = {name: np.array(ca.Function("v", [x], [expr])(xv).full(), dtype=float)
-                  for name, expr in self._variables.items()}
+        names = list(self._variables)
+        evaluated = ca.Function("v", [x], [ca.SX(self._variables[k]) for k in names])(xv)
+        evaluated = evaluated if isinstance(evaluated, (list, tuple)) else [evaluated]
+        values = {k: np.array(v.full(), dtype=float) for k, v in zip(names, evaluated)}
         values = {k: (v.item() if v.size == 1 else v) for k, v in values.items()}
-        checks = self.certify_values(xv, blocks)
+        checks = self.certify_values(xv, blocks, self._evaluate)
         return LMISolution(values, float(result.obj_val), status, t2 - t1, t1 - t0,
                            int(result.iterations), checks)
 
     @staticmethod
-    def certify_values(xv: np.ndarray, blocks) -> tuple:
+    def certify_values(xv: np.ndarray, blocks, evaluate: ca.Function) -> tuple:
         """Evaluate every block at ``xv`` and check its eigenvalues with numpy."""
+        full = np.asarray(evaluate(xv).full()).ravel()
         checks = []
-        for con, f in blocks:
-            _, tri = f(xv)
+        for con, _, rows in blocks:
             n = con.expr.shape[0]
-            mat = unsvec(np.asarray(tri.full()).ravel(), n)
-            eig = np.linalg.eigvalsh(mat)
+            mat = full[rows].reshape(n, n, order="F")
+            eig = np.linalg.eigvalsh(0.5 * (mat + mat.T))
             check = BlockCheck(con.label, n, float(eig[0]), float(np.abs(eig).max()))
             checks.append(check)
             if eig[0] < 0.0:
@@ -255,12 +290,7 @@ class LMIProblem:
         return tuple(checks)
 
     def _infeasibility_message(self, status: str, z: np.ndarray, blocks) -> str:
-        weights, offset = [], 0
-        for con, _ in blocks:
-            n = con.expr.shape[0]
-            k = n * (n + 1) // 2
-            weights.append((float(np.abs(z[offset:offset + k]).sum()), con))
-            offset += k
+        weights = [(float(np.abs(z[rows]).sum()), con) for con, rows, _ in blocks]
         total = sum(w for w, _ in weights) or 1.0
         weights.sort(key=lambda t: -t[0])
         top = [f"{con.label!r} ({100 * w / total:.0f}% of the certificate)"

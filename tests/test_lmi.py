@@ -68,4 +68,4 @@ def test_certificate_rejects_a_wrong_solution():
     prob.require_psd("P >= I", P - np.eye(2), 1e-6)
     _, _, _, _, _, blocks = prob._compile()
     with pytest.raises(CertificateError, match="P >= I"):
-        LMIProblem.certify_values(np.array([0.5, 0.0, 2.0]), blocks)
+        LMIProblem.certify_values(np.array([0.5, 0.0, 2.0]), blocks, prob._evaluate)

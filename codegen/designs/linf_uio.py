@@ -71,16 +71,6 @@ def _check_assumptions(poly: Polytope) -> None:
                         f"measure another output or change the model")
 
 
-def _upsilon(Pi, Qi, Li, Aj, Cj, Dj, X, psi, alpha, nu):
-    """Block (22) before He: [[Pi Aj + Li Cj + alpha Pi + Psi/2, Qi Dj], [0, -alpha nu I]]."""
-    nx, nd = Dj.shape
-    top_left = Pi @ Aj + Li @ Cj + alpha * Pi + 0.5 * psi
-    top = ca.horzcat(top_left, Qi @ Dj)
-    bottom = ca.horzcat(ca.SX(nd, nx), -alpha * nu * ca.SX.eye(nd))
-    blk = ca.vertcat(top, bottom)
-    return blk + blk.T
-
-
 def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.ndarray | None = None):
     """LMI problem of Theorem 1 under ``settings``; returns (problem, variables)."""
     _check_assumptions(poly)
@@ -110,17 +100,29 @@ def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.
         prob.require_psd(f"gain bound ||L{i + 1}|| <= {g:g}",
                          ca.vertcat(ca.horzcat(g * np.eye(nx), L[i]), ca.horzcat(L[i].T, g * np.eye(ny))),
                          m, "raise gain_bound (faster observer) or lower alpha")
+    # products shared by many blocks, formed once (expression building dominates otherwise)
+    A = [ca.DM(poly.A[j]) for j in range(N)]
+    PA = [[P[i] @ A[j] for j in range(N)] for i in range(N)]
+    LC = [[L[i] @ ca.DM(poly.C[j]) for j in range(N)] for i in range(N)]
+    QD = [[Q[i] @ ca.DM(poly.D[j]) for j in range(N)] for i in range(N)]
+    XA = [2 * X @ A[j] + 2 * a * X for j in range(N)]
+    nd = poly.D.shape[2]
+    corner = ca.horzcat(ca.SX(nd, nx), -a * nu * ca.SX.eye(nd))
+
+    def upsilon(i, j, rate_term):
+        top_left = PA[i][j] + LC[i][j] + a * P[i] + 0.5 * (rate_term + XA[j])
+        blk = ca.vertcat(ca.horzcat(top_left, QD[i][j]), corner)
+        return blk + blk.T
+
     for v, rates in enumerate(poly.rate_vertices):
+        rate_term = sum(rates[k] * (P[k] + X) for k in range(N))   # the phi_kl terms of Psi, (22)/(25)
         for j in range(N):
-            psi_j = sum(rates[k] * (P[k] + X) for k in range(N)) + 2 * X @ poly.A[j] + 2 * a * X
             for i in range(j + 1):
                 if i == j:
-                    blk = _upsilon(P[i], Q[i], L[i], poly.A[j], poly.C[j], poly.D[j], X, psi_j, a, nu)
+                    blk = upsilon(i, i, rate_term)
                     label = f"(21) Y_{i + 1}{i + 1}, rate vertex {v + 1}"
                 else:
-                    psi_i = sum(rates[k] * (P[k] + X) for k in range(N)) + 2 * X @ poly.A[i] + 2 * a * X
-                    blk = (_upsilon(P[i], Q[i], L[i], poly.A[j], poly.C[j], poly.D[j], X, psi_j, a, nu)
-                           + _upsilon(P[j], Q[j], L[j], poly.A[i], poly.C[i], poly.D[i], X, psi_i, a, nu))
+                    blk = upsilon(i, j, rate_term) + upsilon(j, i, rate_term)
                     label = f"(21) Y_{i + 1}{j + 1}+Y_{j + 1}{i + 1}, rate vertex {v + 1}"
                 prob.require_nsd(label, blk, m, "lower alpha, widen the gain bound, or narrow the "
                                                "scheduling/acceleration box")

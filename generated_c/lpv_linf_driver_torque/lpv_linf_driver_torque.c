@@ -58,8 +58,11 @@ int lpv_linf_driver_torque_step_flat(double *state, const double *input, double 
             if (!isfinite(next[i])) status |= LPV_LINF_DRIVER_TORQUE_NUMERICAL_FAILURE;
         }
         if (clamped != 0.0) status |= LPV_LINF_DRIVER_TORQUE_SCHEDULING_CLAMPED;
-        if (!(status & LPV_LINF_DRIVER_TORQUE_NUMERICAL_FAILURE)) {
-            for (i = 0; i < LPV_LINF_DRIVER_TORQUE_N_STATE; ++i) state[i] = next[i];
+        /* A non-finite result means the state had grown past what doubles hold (e.g. after
+         * absurd but finite inputs such as 1e300): holding it would freeze the observer, so it
+         * restarts from the initial estimate, which the certified step then drives back. */
+        for (i = 0; i < LPV_LINF_DRIVER_TORQUE_N_STATE; ++i) {
+            state[i] = (status & LPV_LINF_DRIVER_TORQUE_NUMERICAL_FAILURE) ? 0.0 : next[i];
         }
     }
     for (i = 0; i < LPV_LINF_DRIVER_TORQUE_N_STATE; ++i) out[i] = state[i];

@@ -32,7 +32,8 @@ extern "C" {
 #define LPV_LINF_DRIVER_TORQUE_SCHEDULING_CLAMPED 1
 /* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
 #define LPV_LINF_DRIVER_TORQUE_NONFINITE_INPUT 2
-/* The step produced a non-finite value (should not happen inside the box): state held. */
+/* The step produced a non-finite value (the state had grown past double range, e.g. after
+ * absurd finite inputs): the state restarts from the initial (zero) estimate. */
 #define LPV_LINF_DRIVER_TORQUE_NUMERICAL_FAILURE 4
 
 typedef struct {
