@@ -183,10 +183,10 @@ def _solve_unpivoted(G, rhs):
 
 
 def step_casadi(data: ObserverData, name: str) -> ca.Function:
-    """The step as a CasADi Function: (z, u, y, rho) -> (z_next, clamped).
+    """The step as a CasADi Function: (z, u, y, rho) -> z_next.
 
     The scheduling signal is clamped to its box for the memberships (the certificate
-    only holds there); ``clamped`` is 1 when that happened. The d-block of
+    only holds there); the C wrapper flags such samples. The d-block of
     I - Ts Aa is the identity, so d is eliminated (Schur complement): the x+ system is
     nx x nx and far better conditioned than the full one (the 1/Tf row); then
     d+ = d + (Ts/Tf) Dp M (C x+ - y). Where checks allow, M(th) uses
@@ -200,7 +200,6 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
     y = ca.SX.sym("y", ny)
     rho = ca.SX.sym("rho")
     rho_c = ca.fmin(ca.fmax(rho, poly.signal_lower), poly.signal_upper)
-    clamped = ca.if_else(rho_c == rho, 0, 1)
     theta = premise_of_signal(poly, rho_c, xp=ca)
     fact = gain_factorization(data)
     if fact is not None:
@@ -230,7 +229,7 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
         x_next = ca.solve(G_x, rhs)
     d_next = d + K @ (C @ x_next - y)
     z_next = ca.vertcat(x_next, d_next)
-    return ca.Function(name, [z, u, y, rho], [z_next, clamped], ["z", "u", "y", "rho"], ["z_next", "clamped"])
+    return ca.Function(name, [z, u, y, rho], [z_next], ["z", "u", "y", "rho"], ["z_next"])
 
 
 @dataclass(frozen=True)
