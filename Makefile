@@ -1,6 +1,7 @@
 # uiogen — every target installs what it needs into .venv/ first.
 #   make demo    main job: design + generate + build + summary (README)
 #   make test    the test suite (CI runs this through .ci/run)
+#   make check   reliability suite (hostile input, sanitizers, static facts, determinism, long runs)
 #   make generate | build | bench | clean
 PYTHON ?= python3
 VENV   := .venv
@@ -9,7 +10,7 @@ STAMP  := $(VENV)/.installed-stamp
 CC     ?= cc
 export CC
 
-.PHONY: all venv generate build demo test bench clean
+.PHONY: all venv generate build demo test check bench clean
 
 all: demo
 
@@ -33,7 +34,11 @@ demo: build
 test: build
 	$(BIN)/python -m pytest -q tests
 
+check: build
+	$(BIN)/python -m pytest -q -m reliability tests
+
 bench: build
+	$(BIN)/python -m pip install --quiet -e '.[bench]'
 	$(BIN)/uiogen bench
 
 clean:

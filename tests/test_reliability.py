@@ -1,0 +1,178 @@
+"""`make check`: every generated observer against hostile input, sanitizers, static facts,
+determinism and long runs. Parametrized over generated_c/, so new observers are covered."""
+import hashlib
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from codegen import harness, observers, pipeline, simulate
+from python_bindings import load
+from python_bindings.build import generated_names
+
+ROOT = Path(__file__).resolve().parent.parent
+NAMES = generated_names()
+SPECIAL = [np.nan, np.inf, -np.inf, 5e-324, -5e-324, 2.2250738585072014e-308, 1e300, -1e300,
+           1.7976931348623157e308, 0.0, -0.0]
+ROWS_PER_EXAMPLE = 10_000
+EXAMPLES = 100          # 10^6 hostile samples per observer
+
+pytestmark = pytest.mark.reliability
+
+
+def hostile_inputs(seed: int, n: int, n_input: int, lo: float, hi: float, p_special: float,
+                   p_outside: float) -> np.ndarray:
+    """Realistic rows mixed with special values and scheduling far outside its box."""
+    rng = np.random.default_rng(seed)
+    rows = rng.standard_normal((n, n_input)) * 0.1
+    rows[:, -1] = rng.uniform(lo, hi, n)
+    outside = rng.random(n) < p_outside
+    rows[outside, -1] = rng.choice([lo - 1e6, hi + 1e6, -1e300, 1e300, lo - 1e-9, hi + 1e-9, 0.0],
+                                   outside.sum())
+    mask = rng.random((n, n_input)) < p_special
+    rows[mask] = rng.choice(SPECIAL, mask.sum())
+    return rows
+
+
+def check_semantics(obs, inputs, outputs, status, lo, hi):
+    bits = obs.status_bits
+    known = bits["SCHEDULING_CLAMPED"] | bits["NONFINITE_INPUT"] | bits["NUMERICAL_FAILURE"]
+    assert np.all(np.isfinite(outputs)), "state became non-finite"
+    assert not np.any(status & ~known), "unknown status bits"
+    finite = np.all(np.isfinite(inputs), axis=1)
+    assert np.array_equal(finite, (status & bits["NONFINITE_INPUT"]) == 0)
+    prev = np.vstack([np.zeros((1, outputs.shape[1])), outputs[:-1]])
+    held = ~finite
+    assert np.array_equal(outputs[held], prev[held]), "state not held on a non-finite input"
+    sched = inputs[:, -1]
+    outside = finite & ((sched < lo) | (sched > hi))
+    assert np.array_equal(outside, (status & bits["SCHEDULING_CLAMPED"]) != 0)
+    failed = (status & bits["NUMERICAL_FAILURE"]) != 0
+    assert np.all(outputs[failed] == 0.0), "state not re-initialized after a numerical failure"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_hostile_inputs(name):
+    obs = load(name)
+    cfg = observers.get(name)
+    box = pipeline.representation(cfg)[1]
+    lo, hi = box.signal_lower, box.signal_upper
+
+    @settings(max_examples=EXAMPLES, deadline=None, derandomize=True,
+              suppress_health_check=[HealthCheck.too_slow])
+    @given(seed=st.integers(0, 2 ** 32 - 1), p_special=st.sampled_from([0.0, 1e-4, 0.01, 0.2, 0.9]),
+           p_outside=st.sampled_from([0.0, 0.01, 0.5, 1.0]))
+    def run(seed, p_special, p_outside):
+        inputs = hostile_inputs(seed, ROWS_PER_EXAMPLE, obs.n_input, lo, hi, p_special, p_outside)
+        outputs, status, state = obs.run(inputs)
+        check_semantics(obs, inputs, outputs, status, lo, hi)
+        assert np.all(np.isfinite(state))
+
+    run()
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_sanitizers_find_nothing(name, tmp_path):
+    exe = harness.build_harness(name, tmp_path, ["-fsanitize=address,undefined", "-fno-sanitize-recover=all",
+                                                 "-fno-omit-frame-pointer"])
+    obs = load(name)
+    box = pipeline.representation(observers.get(name))[1]
+    inputs = np.vstack([hostile_inputs(s, 250_000, obs.n_input, box.signal_lower, box.signal_upper, p, q)
+                        for s, p, q in ((1, 0.0, 0.0), (2, 0.01, 0.1), (3, 0.2, 0.5), (4, 0.9, 1.0))])
+    env = dict(os.environ, ASAN_OPTIONS="detect_leaks=1:abort_on_error=0",
+               UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1")
+    outputs, status, proc = harness.run_stream(exe, inputs, obs.n_output, env=env)
+    assert proc.returncode == 0, proc.stderr.decode()[-2000:]
+    assert b"runtime error" not in proc.stderr and b"Sanitizer" not in proc.stderr
+    ref_out, ref_status, _ = obs.run(inputs)
+    assert np.array_equal(status, ref_status)
+    assert np.array_equal(outputs, ref_out)  # same C, same flags apart from instrumentation
+
+
+def _call_graph(ci_files):
+    edges = {}
+    for f in ci_files:
+        text = f.read_text()
+        for src, dst in re.findall(r'edge: \{ sourcename: "([^"]+)" targetname: "([^"]+)"', text):
+            edges.setdefault(src, set()).add(dst)
+    return edges
+
+
+def _has_cycle(edges):
+    state = {}
+
+    def visit(n):
+        if state.get(n) == 1:
+            return True
+        if state.get(n) == 2:
+            return False
+        state[n] = 1
+        if any(visit(m) for m in edges.get(n, ())):
+            return True
+        state[n] = 2
+        return False
+    return any(visit(n) for n in list(edges))
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_static_facts(name, tmp_path):
+    harness.build_harness(name, tmp_path, ["-fstack-usage", "-fcallgraph-info=su"])
+    observer_objs = [tmp_path / f"{name}_kernel.o", tmp_path / f"{name}.o"]
+    for obj in observer_objs:
+        undefined = subprocess.run(["nm", "-u", str(obj)], capture_output=True, text=True).stdout.split()
+        assert not {"malloc", "calloc", "realloc", "free"} & set(undefined), (obj.name, undefined)
+    usage = {}
+    for su in (tmp_path / f"{name}_kernel.su", tmp_path / f"{name}.su"):
+        for line in su.read_text().splitlines():
+            where, size, kind = line.rsplit("\t", 2)
+            usage[where.rsplit(":", 1)[-1]] = (int(size), kind)
+    assert all(kind == "static" for _, kind in usage.values()), usage
+    step = usage[f"{name}_step_flat"][0] + usage[f"{name}_kernel"][0]
+    print(f"\n{name}: stack of step_flat + kernel = {step} bytes (all frames static)")
+    assert step < 8192
+    edges = _call_graph([tmp_path / f"{name}_kernel.ci", tmp_path / f"{name}.ci"])
+    assert edges and not _has_cycle(edges), "recursion in the generated C"
+
+
+def test_generation_independent_of_hash_seed(tmp_path):
+    trees = []
+    for seed in ("1", "4242"):
+        out = tmp_path / seed
+        env = dict(os.environ, PYTHONHASHSEED=seed)
+        subprocess.run([sys.executable, "-m", "codegen.cli", "generate", "--force", "--out", str(out)],
+                       check=True, capture_output=True, cwd=ROOT, env=env)
+        trees.append({p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()})
+    assert trees[0] == trees[1]
+    committed = {p.relative_to(ROOT / "generated_c"): p.read_bytes()
+                 for p in sorted((ROOT / "generated_c").rglob("*")) if p.is_file()}
+    assert trees[0] == committed
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_long_run(name):
+    """10^7 steps of a realistic trajectory: no flags, no non-finite value, identical twice."""
+    obs = load(name)
+    cfg = observers.get(name)
+    lpv = pipeline.representation(cfg)[0]
+    sim = simulate.simulate_plant(lpv, simulate.SCENARIOS["track_varying_speed"], cfg.sample_time)
+    base = simulate.observer_inputs(lpv, sim, {"r": 1e-3, "delta": 1e-4, "delta_dot": 1e-3}, seed=5)
+    chunk = np.tile(base, (100_000 // len(base) + 1, 1))[:100_000]
+    digests = []
+    for _ in range(2):
+        state = obs.initial_state()
+        h = hashlib.sha256()
+        flagged = 0
+        for _ in range(100):   # 100 x 10^5 = 10^7 steps
+            out, status, state = obs.run(chunk, state)
+            flagged += int(np.count_nonzero(status))
+            assert np.all(np.isfinite(out))
+            h.update(out.tobytes())
+        assert flagged == 0
+        digests.append(h.hexdigest())
+    assert digests[0] == digests[1]
