@@ -210,7 +210,13 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
         slope = (poly.A[1] - poly.A[0]) * (1.0 / (hi - lo))
         A = ca.DM(poly.A[0] - lo * slope) + th * ca.DM(slope)
         lam, V, W0, W1 = fact
-        scale = ca.vertcat(*[_reciprocal(1.0 + th * float(l)) for l in lam])
+        # 1/(1 + lam theta(rho)) as one cancelled rational function of rho: it no longer waits
+        # for theta's own division
+        mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log}, "math"]
+        num_den = [sp.fraction(sp.cancel(1 / (1 + sp.Float(float(l), 17) * poly.premises[0].expr)))
+                   for l in lam]
+        scale = ca.vertcat(*[sp.lambdify(poly.signal, n_, mods)(rho_c) * _reciprocal(
+            sp.lambdify(poly.signal, d_, mods)(rho_c)) for n_, d_ in num_den])
         W = ca.DM(W0) + th * ca.DM(W1)
         M = ca.DM(V) @ (ca.repmat(scale, 1, ny) * W)
     else:
