@@ -5,6 +5,7 @@
     uiogen generate [NAME ...] [--force] [--out DIR]
     uiogen build [NAME ...]
     uiogen check-gains NAME --gains FILE [--json]
+    uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png]
     uiogen demo [--json]
     uiogen bench [--json]
 """
@@ -164,6 +165,23 @@ def cmd_check_gains(args) -> int:
     return 0 if all(r["feasible"] for r in res["results"].values()) else 1
 
 
+def cmd_validate(args) -> int:
+    from . import validate
+    result = validate.run_scenario(args.name, args.scenario, args.plant, duration=args.duration)
+    if args.plot:
+        validate.plot(result, args.plot)
+    if args.json:
+        print(validate.to_json(result))
+        return 0
+    print(f"{args.name}: scenario {args.scenario} on the {args.plant} plant, {result['samples']} samples, "
+          f"max |a_y| {result['max_abs_ay']:.2f} m/s^2, {result['status_flags']} flagged samples; "
+          f"errors after {validate.SETTLE_TIME:g} s (angles in degrees)")
+    print(validate.format_table(result))
+    if args.plot:
+        print(f"plot: {args.plot}")
+    return 0
+
+
 def cmd_demo(args) -> int:
     from . import demo
     return demo.main(json_output=args.json)
@@ -199,6 +217,14 @@ def main(argv=None) -> int:
     p.add_argument("--gains", required=True, help="JSON with P1, P2, X, L1, L2 (nested lists)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_check_gains)
+    p = sub.add_parser("validate", help="errors on an independent plant, beside the KF/EKF baselines")
+    p.add_argument("name")
+    p.add_argument("--scenario", required=True, help="one of codegen.validation.scenarios.names()")
+    p.add_argument("--plant", choices=("nominal", "commonroad"), default="nominal")
+    p.add_argument("--duration", type=float, default=None, help="truncate the scenario [s]")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--plot", help="write estimates vs truth to this PNG")
+    p.set_defaults(func=cmd_validate)
     p = sub.add_parser("demo", help="simulate every observer on its nonlinear model and summarize")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_demo)

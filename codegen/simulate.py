@@ -76,31 +76,65 @@ def plant_rhs(lpv: LPVModel):
     return rhs, nx, nu, nd
 
 
-def simulate_plant(lpv: LPVModel, scenario: Scenario, sample_time: float, substeps: int = 10):
-    """RK4 at sample_time/substeps; returns samples at the observer rate."""
-    rhs, nx, nu, nd = plant_rhs(lpv)
-    n = int(round(scenario.duration / sample_time)) + 1
-    h = sample_time / substeps
-    t_fine = np.arange(n * substeps) * h
-    prof = profiles(scenario, t_fine)
+def _integrate(lpv: LPVModel, n: int, substeps: int, h: float, inputs_at):
+    """RK4 over n samples of substeps fine steps; inputs_at(i) -> (u, d, rho) held over fine step i."""
+    rhs, nx, _, _ = plant_rhs(lpv)
     x = np.zeros(nx)
     xs = np.empty((n, nx))
+    xdot = np.empty((n, nx))
     for k in range(n):
         xs[k] = x
+        xdot[k] = rhs(x, *inputs_at(k * substeps))
         if k == n - 1:
             break
         for j in range(substeps):
-            i = k * substeps + j
-            u, dd, rho = [prof["T_a"][i]], [prof["T_d"][i]], prof["v_x"][i]
-            # inputs held over the fine step (ZOH at 1 kHz)
+            u, dd, rho = inputs_at(k * substeps + j)
             k1 = rhs(x, u, dd, rho)
             k2 = rhs(x + 0.5 * h * k1, u, dd, rho)
             k3 = rhs(x + 0.5 * h * k2, u, dd, rho)
             k4 = rhs(x + h * k3, u, dd, rho)
             x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return xs, xdot
+
+
+def _lateral_acceleration(lpv: LPVModel, xs, xdot, vx):
+    """a_y = v_x (beta_dot + r) when the model has states beta and r (for the baselines)."""
+    names = lpv.definition.state_names
+    if "beta" in names and "r" in names:
+        return vx * (xdot[:, names.index("beta")] + xs[:, names.index("r")])
+    return None
+
+
+def simulate_plant(lpv: LPVModel, scenario: Scenario, sample_time: float, substeps: int = 10):
+    """RK4 at sample_time/substeps on a built-in scenario; returns samples at the observer rate."""
+    n = int(round(scenario.duration / sample_time)) + 1
+    h = sample_time / substeps
+    t_fine = np.arange(n * substeps) * h
+    prof = profiles(scenario, t_fine)
+    # inputs held over the fine step (ZOH at 1 kHz)
+    xs, xdot = _integrate(lpv, n, substeps, h,
+                          lambda i: ([prof["T_a"][i]], [prof["T_d"][i]], prof["v_x"][i]))
     idx = np.arange(n) * substeps
-    return {"t": np.arange(n) * sample_time, "x": xs,
-            **{k: v[idx] for k, v in prof.items()}}
+    out = {"t": np.arange(n) * sample_time, "x": xs, **{k: v[idx] for k, v in prof.items()}}
+    out["a_y"] = _lateral_acceleration(lpv, xs, xdot, out["v_x"])
+    return out
+
+
+def simulate_trajectory(lpv: LPVModel, t: np.ndarray, samples: dict, sample_time: float, substeps: int = 10):
+    """RK4 of the exact model under input profiles given at the observer rate (held per sample).
+
+    ``samples`` maps ``v_x``, ``T_d``, ``T_a`` (or the model's own signal names) to arrays on ``t``.
+    """
+    n = len(t)
+    h = sample_time / substeps
+    d = lpv.definition
+    u = np.column_stack([samples[str(s)] for s in d.known_inputs])
+    dd = np.column_stack([samples[str(s)] for s in d.unknown_inputs])
+    rho = np.asarray(samples[str(d.scheduling[0].symbol)], float)
+    xs, xdot = _integrate(lpv, n, substeps, h, lambda i: (u[i // substeps], dd[i // substeps], rho[i // substeps]))
+    out = {"t": np.asarray(t, float), "x": xs, **{k: np.asarray(v, float) for k, v in samples.items()}}
+    out["a_y"] = _lateral_acceleration(lpv, xs, xdot, rho)
+    return out
 
 
 def observer_inputs(lpv: LPVModel, sim: dict, noise: dict | None = None, seed: int = 0) -> np.ndarray:

@@ -1,0 +1,215 @@
+"""``uiogen validate``: an observer's errors on a plant it was not derived from, beside baselines.
+
+Plants:
+
+* ``nominal``: the observer's own symbolic model integrated exactly (RK4, 1 kHz, no
+  polytope, no Taylor reduction), for scenarios with an open-loop driver torque;
+* ``commonroad``: the CommonRoad 29-state multi-body model with PAC2002 tyres
+  (:mod:`codegen.validation.commonroad_plant`), steered through the seed-000 column whose
+  aligning torque comes from the plant's own front slip; the observer must have been
+  designed for that car (``lpv_linf_driver_torque_bmw320i`` for parameter set 2).
+
+Measurements carry seeded white sensor noise (:data:`SENSOR_NOISE`); the baselines (the
+source repository's linear KF on (beta, r) with (a_y, r), and the Fiala EKF) see the same
+noisy measurements, so every figure is a ratio measured in one run.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+
+from . import observers, pipeline, simulate
+from .errors import ModelDefinitionError, SampleError
+from .validation import metrics, scenarios
+
+SENSOR_NOISE = {"r": np.deg2rad(0.05), "delta": np.deg2rad(0.02), "delta_dot": np.deg2rad(0.2),
+                "a_y": 0.05}
+SETTLE_TIME = 2.0
+
+
+def _stats(truth, est, t, angle: bool) -> dict:
+    mask = t >= SETTLE_TIME
+    s = metrics.error_stats(np.asarray(truth)[mask], np.asarray(est)[mask], degrees=angle)
+    return {"mae": s.e_mean, "max": s.e_max, "std": s.std, "rms": s.rms}
+
+
+def _truncate(scn, duration: float | None):
+    if duration is None or duration >= scn.duration:
+        return scn
+    n = int(round(duration * scn.sample_rate)) + 1
+    cut = {k: getattr(scn, k)[:n] for k in ("t", "v_ref", "a_ref", "T_a", "T_d_open")}
+    if scn.kappa_ref is not None:
+        cut["kappa_ref"] = scn.kappa_ref[:n]
+    return replace(scn, **cut)
+
+
+def _commonroad_vehicle(config) -> int:
+    meta = config.parameter_path.read_text()
+    for k, car in ((1, "vehicle 1"), (2, "vehicle 2"), (3, "vehicle 3")):
+        if f"CommonRoad {car}" in meta or f"parameters_vehicle{k}" in meta:
+            return k
+    raise ModelDefinitionError(
+        f"observer {config.name!r} was designed for {config.parameters}, not for a CommonRoad car; "
+        f"validate on the CommonRoad plant with an observer designed for its parameters, e.g. "
+        f"lpv_linf_driver_torque_bmw320i")
+
+
+def _truth_commonroad(config, scn):
+    from .validation import commonroad_plant
+    gt = commonroad_plant.simulate(scn, commonroad_plant.PlantConfig(vehicle=_commonroad_vehicle(config)))
+    return {"t": gt.t, "v_x": gt.v_x, "beta": gt.beta, "r": gt.r, "delta": gt.delta,
+            "delta_dot": gt.delta_dot, "T_d": gt.T_d, "T_a": gt.T_a, "a_y": gt.a_y, "a_x": gt.a_x,
+            "v_y": gt.v_y}
+
+
+def _truth_nominal(config, scn, lpv):
+    """Exact symbolic model + planar pose kinematics, closed with the scenario's driver model."""
+    d = lpv.definition
+    names = d.state_names
+    if not {"beta", "r", "delta", "delta_dot"} <= set(names):
+        raise ModelDefinitionError(f"the nominal closed-loop plant needs states beta, r, delta, delta_dot; "
+                                   f"model {d.name!r} has {names}")
+    rhs, nx, _, _ = simulate.plant_rhs(lpv)
+    ib, ir, idl, idd = (names.index(k) for k in ("beta", "r", "delta", "delta_dot"))
+    n, sub = scn.t.size, 10
+    h = config.sample_time / sub
+    driver = scn.make_driver()
+    x = np.zeros(nx + 3)             # model states + (X, Y, psi)
+    v0, k0 = float(scn.v_ref[0]), (0.0 if scn.kappa_ref is None else float(scn.kappa_ref[0]))
+    x[ir] = v0 * k0                  # start in steady cornering on a curved path, as the CommonRoad plant
+
+    def f(z, t_d, t_a, vx):
+        dz = np.empty_like(z)
+        dz[:nx] = rhs(z[:nx], [t_a], [t_d], vx)
+        vy = np.tan(z[ib]) * vx
+        dz[nx] = vx * np.cos(z[nx + 2]) - vy * np.sin(z[nx + 2])
+        dz[nx + 1] = vx * np.sin(z[nx + 2]) + vy * np.cos(z[nx + 2])
+        dz[nx + 2] = z[ir]
+        return dz
+
+    out = {k: np.empty(n) for k in ("beta", "r", "delta", "delta_dot", "T_d", "T_a", "v_x", "a_y")}
+    for k in range(n):
+        vx = float(scn.v_ref[k])
+        meas = {"X": x[nx], "Y": x[nx + 1], "psi": x[nx + 2], "v_x": vx, "v_y": np.tan(x[ib]) * vx,
+                "r": x[ir], "delta": x[idl], "delta_dot": x[idd]}
+        t_d, t_a = float(driver(k, meas)), float(scn.T_a[k])
+        dz = f(x, t_d, t_a, vx)
+        for key, idx in (("beta", ib), ("r", ir), ("delta", idl), ("delta_dot", idd)):
+            out[key][k] = x[idx]
+        out["T_d"][k], out["T_a"][k], out["v_x"][k] = t_d, t_a, vx
+        out["a_y"][k] = vx * (dz[ib] + x[ir])
+        if k == n - 1:
+            break
+        for _ in range(sub):
+            k1 = f(x, t_d, t_a, vx)
+            k2 = f(x + 0.5 * h * k1, t_d, t_a, vx)
+            k3 = f(x + 0.5 * h * k2, t_d, t_a, vx)
+            k4 = f(x + h * k3, t_d, t_a, vx)
+            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        if not np.all(np.isfinite(x)):
+            raise SampleError(f"nominal plant diverged at t = {scn.t[k]:.2f} s in scenario {scn.name!r}")
+    out["t"] = np.asarray(scn.t, float)
+    return out
+
+
+def _baselines(config, truth, noisy) -> dict:
+    """The source repository's linear KF and the Fiala EKF, on the same noisy measurements."""
+    from .validation import stanford
+    car = _car(config)
+    run = stanford.StanfordRun(t=truth["t"], vx=truth["v_x"], vy=np.tan(truth["beta"]) * truth["v_x"],
+                               beta_true=truth["beta"], ax=np.zeros_like(truth["t"]), ay=noisy["a_y"],
+                               yaw_rate=noisy["r"], yaw_acc=np.gradient(truth["r"], truth["t"]),
+                               delta=noisy["delta"], delta_fl=noisy["delta"], delta_fr=noisy["delta"],
+                               source="simulation")
+    out = {}
+    for name, res in (("linear_kf", stanford.linear_kf(run, car)),
+                      ("ekf", stanford.ekf(run, car, stanford.EKFConfig(mu=1.0)))):
+        out[name] = {"beta": _stats(truth["beta"], res.beta, truth["t"], True),
+                     "r": _stats(truth["r"], res.r, truth["t"], True)}
+    return out
+
+
+def _car(config):
+    from .model import load_parameters
+    from .validation import stanford
+    v = load_parameters(config.parameter_path).values
+    # axle cornering stiffness of the single-track baselines: two tyres per axle
+    return stanford.VehicleParams(m=v["M"], lf=v["l_f"], lr=v["l_r"], iz=v["I_z"], cf=2 * v["C_f"], cr=2 * v["C_r"])
+
+
+def run_scenario(name: str, scenario: str, plant: str = "nominal", duration: float | None = None,
+                 seed: int = 0) -> dict:
+    """Simulate, run the compiled observer and the baselines, return the tables and signals."""
+    from python_bindings import load
+    config = observers.get(name)
+    lpv = pipeline.representation(config)[0]
+    scn = _truncate(scenarios.make(scenario, sample_rate=1.0 / config.sample_time), duration)
+    if plant == "commonroad":
+        truth = _truth_commonroad(config, scn)
+    elif plant == "nominal":
+        truth = _truth_nominal(config, scn, lpv)
+    else:
+        raise ModelDefinitionError(f"plant must be 'nominal' or 'commonroad', got {plant!r}")
+    rng = np.random.default_rng(seed)
+    noisy = {k: truth[k] + rng.standard_normal(truth[k].shape) * s for k, s in SENSOR_NOISE.items()}
+    obs = load(name)
+    d = lpv.definition
+    columns = []
+    for col in obs.input_names:
+        key = col[2:] if col.startswith("y_") else col
+        if key in noisy:
+            columns.append(noisy[key])
+        elif key in truth:
+            columns.append(truth[key])
+        else:
+            raise SampleError(f"observer {name!r} needs input {col!r}, which plant {plant!r} does not provide")
+    out, status, _ = obs.run(np.column_stack(columns))
+    table = {}
+    for i, sig in enumerate(obs.state_names):
+        if sig in truth:
+            table[sig] = _stats(truth[sig], out[:, i], truth["t"], d.units.get(sig, "").startswith("rad"))
+    return {"observer": table, "baselines": _baselines(config, truth, noisy),
+            "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)),
+            "max_abs_ay": float(np.abs(truth["a_y"]).max()), "plant": plant, "scenario": scenario,
+            "signals": {"t": truth["t"], "truth": truth, "estimate": {s: out[:, i] for i, s in enumerate(obs.state_names)}},
+            "units": dict(d.units)}
+
+
+def plot(result: dict, path: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    sig = result["signals"]
+    names = [n for n in sig["estimate"] if n in sig["truth"]]
+    fig, axes = plt.subplots(len(names), 1, figsize=(9, 2.2 * len(names)), sharex=True)
+    for ax, n in zip(np.atleast_1d(axes), names):
+        scale = 180 / np.pi if result["units"].get(n, "").startswith("rad") else 1.0
+        ax.plot(sig["t"], sig["truth"][n] * scale, "k", lw=1.0, label="truth")
+        ax.plot(sig["t"], sig["estimate"][n] * scale, "r--", lw=1.0, label="observer")
+        ax.set_ylabel(n + (" [deg]" if scale != 1.0 else ""))
+    np.atleast_1d(axes)[0].legend(loc="upper right")
+    np.atleast_1d(axes)[-1].set_xlabel("t [s]")
+    fig.suptitle(f"{result['scenario']} on the {result['plant']} plant")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def format_table(result: dict) -> str:
+    lines = [f"{'signal':14s} {'E_mean':>9s} {'E_max':>9s} {'Std':>9s} {'RMS':>9s}"]
+    units = result["units"]
+    for sig, row in result["observer"].items():
+        u = units.get(sig, "")
+        u = ("deg" + ("/s" if u.endswith("/s") else "")) if u.startswith("rad") else u
+        lines.append(f"{sig + ' [' + u + ']':14s} {row['mae']:9.4f} {row['max']:9.4f} {row['std']:9.4f} {row['rms']:9.4f}")
+    for base, rows in result["baselines"].items():
+        b = rows["beta"]
+        lines.append(f"{'beta [deg] ' + base:14s} {b['mae']:9.4f} {b['max']:9.4f} {b['std']:9.4f} {b['rms']:9.4f}")
+    return "\n".join(lines)
+
+
+def to_json(result: dict) -> str:
+    return json.dumps({k: result[k] for k in ("observer", "baselines", "plant", "scenario", "status_flags",
+                                              "samples", "max_abs_ay")}, indent=1, sort_keys=True)

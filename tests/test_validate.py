@@ -1,0 +1,52 @@
+"""`uiogen validate`: both plants, the baselines in the same run, JSON and plot outputs."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from codegen import validate
+from codegen.errors import ModelDefinitionError
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_nominal_plant_short_run():
+    r = validate.run_scenario("lpv_linf_driver_torque", "zigzag_constant_speed_assist", "nominal", duration=8.0)
+    assert r["status_flags"] == 0 and r["samples"] == 801
+    obs = r["observer"]
+    assert set(obs) == {"beta", "r", "delta", "delta_dot", "T_d"}
+    # exact-model plant at 15 m/s: the observer must track sideslip closely
+    assert obs["beta"]["rms"] < 0.1 and obs["r"]["rms"] < 0.1
+    assert set(r["baselines"]) == {"linear_kf", "ekf"}
+    assert all(np.isfinite(v["beta"]["rms"]) for v in r["baselines"].values())
+
+
+def test_commonroad_requires_a_twin_designed_for_that_car():
+    pytest.importorskip("vehiclemodels")
+    with pytest.raises(ModelDefinitionError, match="lpv_linf_driver_torque_bmw320i"):
+        validate.run_scenario("lpv_linf_driver_torque", "circular_path", "commonroad", duration=1.0)
+
+
+def test_commonroad_cli_json_and_plot(tmp_path):
+    pytest.importorskip("vehiclemodels")
+    png = tmp_path / "v.png"
+    proc = subprocess.run([sys.executable, "-m", "codegen.cli", "validate", "lpv_linf_driver_torque_bmw320i",
+                           "--scenario", "circular_path", "--plant", "commonroad", "--duration", "6",
+                           "--json", "--plot", str(png)], capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads(proc.stdout)
+    assert set(res) >= {"observer", "baselines"}
+    for sig in ("beta", "T_d"):
+        assert set(res["observer"][sig]) >= {"rms", "mae", "max"}
+    assert res["observer"]["beta"]["rms"] < 0.5
+    assert png.stat().st_size > 10_000
+
+
+def test_committed_commonroad_parameters_are_derived_not_typed():
+    pytest.importorskip("vehiclemodels")
+    from codegen.validation import commonroad_plant
+    text = (ROOT / "model_defs" / "params" / "commonroad_bmw320i.toml").read_text()
+    assert text == commonroad_plant.params_toml(2)
