@@ -25,6 +25,11 @@ ROOT = Path(__file__).resolve().parent.parent
 GENERATED_DIR = ROOT / "generated_c"
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 
+# Every emitted file must compile cleanly with these (gcc and clang); never -ffast-math, and
+# no FMA contraction, so results do not depend on the target's FMA support.
+STRICT_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-Wshadow", "-Wconversion",
+                 "-Wdouble-promotion", "-Wvla", "-ffp-contract=off", "-fno-fast-math", "-O2")
+
 _ENV = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)), undefined=jinja2.StrictUndefined,
                           keep_trailing_newline=True, autoescape=False)
 

@@ -13,10 +13,7 @@ from pathlib import Path
 import jinja2
 import numpy as np
 
-from .emit import GENERATED_DIR, TEMPLATES
-
-STRICT_FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-Wshadow", "-Wconversion",
-                "-Wdouble-promotion", "-Wvla", "-ffp-contract=off", "-fno-fast-math", "-O2"]
+from .emit import GENERATED_DIR, STRICT_CFLAGS, TEMPLATES
 
 
 def render(name: str) -> str:
@@ -36,7 +33,7 @@ def build_harness(name: str, out_dir: Path, extra_flags=(), cc: str = "gcc") -> 
     objs = []
     for src in (src_dir / f"{name}_kernel.c", src_dir / f"{name}.c", main):
         obj = out_dir / (src.stem + ".o")
-        cmd = [cc, *STRICT_FLAGS, *extra_flags, "-I", str(src_dir), "-c", str(src), "-o", str(obj)]
+        cmd = [cc, *STRICT_CFLAGS, *extra_flags, "-I", str(src_dir), "-c", str(src), "-o", str(obj)]
         proc = subprocess.run(cmd, capture_output=True, text=True, cwd=out_dir)
         if proc.returncode != 0:
             raise RuntimeError(f"{' '.join(cmd)}\n{proc.stderr}")

@@ -21,7 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from . import observers, pipeline, simulate
-from .errors import ModelDefinitionError, SampleError
+from .errors import ModelDefinitionError
 from .validation import metrics, scenarios
 
 SENSOR_NOISE = {"r": np.deg2rad(0.05), "delta": np.deg2rad(0.02), "delta_dot": np.deg2rad(0.2),
@@ -64,56 +64,6 @@ def _truth_commonroad(config, scn):
             "v_y": gt.v_y}
 
 
-def _truth_nominal(config, scn, lpv):
-    """Exact symbolic model + planar pose kinematics, closed with the scenario's driver model."""
-    d = lpv.definition
-    names = d.state_names
-    if not {"beta", "r", "delta", "delta_dot"} <= set(names):
-        raise ModelDefinitionError(f"the nominal closed-loop plant needs states beta, r, delta, delta_dot; "
-                                   f"model {d.name!r} has {names}")
-    rhs, nx, _, _ = simulate.plant_rhs(lpv)
-    ib, ir, idl, idd = (names.index(k) for k in ("beta", "r", "delta", "delta_dot"))
-    n, sub = scn.t.size, 10
-    h = config.sample_time / sub
-    driver = scn.make_driver()
-    x = np.zeros(nx + 3)             # model states + (X, Y, psi)
-    v0, k0 = float(scn.v_ref[0]), (0.0 if scn.kappa_ref is None else float(scn.kappa_ref[0]))
-    x[ir] = v0 * k0                  # start in steady cornering on a curved path, as the CommonRoad plant
-
-    def f(z, t_d, t_a, vx):
-        dz = np.empty_like(z)
-        dz[:nx] = rhs(z[:nx], [t_a], [t_d], vx)
-        vy = np.tan(z[ib]) * vx
-        dz[nx] = vx * np.cos(z[nx + 2]) - vy * np.sin(z[nx + 2])
-        dz[nx + 1] = vx * np.sin(z[nx + 2]) + vy * np.cos(z[nx + 2])
-        dz[nx + 2] = z[ir]
-        return dz
-
-    out = {k: np.empty(n) for k in ("beta", "r", "delta", "delta_dot", "T_d", "T_a", "v_x", "a_y")}
-    for k in range(n):
-        vx = float(scn.v_ref[k])
-        meas = {"X": x[nx], "Y": x[nx + 1], "psi": x[nx + 2], "v_x": vx, "v_y": np.tan(x[ib]) * vx,
-                "r": x[ir], "delta": x[idl], "delta_dot": x[idd]}
-        t_d, t_a = float(driver(k, meas)), float(scn.T_a[k])
-        dz = f(x, t_d, t_a, vx)
-        for key, idx in (("beta", ib), ("r", ir), ("delta", idl), ("delta_dot", idd)):
-            out[key][k] = x[idx]
-        out["T_d"][k], out["T_a"][k], out["v_x"][k] = t_d, t_a, vx
-        out["a_y"][k] = vx * (dz[ib] + x[ir])
-        if k == n - 1:
-            break
-        for _ in range(sub):
-            k1 = f(x, t_d, t_a, vx)
-            k2 = f(x + 0.5 * h * k1, t_d, t_a, vx)
-            k3 = f(x + 0.5 * h * k2, t_d, t_a, vx)
-            k4 = f(x + h * k3, t_d, t_a, vx)
-            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        if not np.all(np.isfinite(x)):
-            raise SampleError(f"nominal plant diverged at t = {scn.t[k]:.2f} s in scenario {scn.name!r}")
-    out["t"] = np.asarray(scn.t, float)
-    return out
-
-
 def _baselines(config, truth, noisy) -> dict:
     """The source repository's linear KF and the Fiala EKF, on the same noisy measurements."""
     from .validation import stanford
@@ -139,33 +89,29 @@ def _car(config):
     return stanford.VehicleParams(m=v["M"], lf=v["l_f"], lr=v["l_r"], iz=v["I_z"], cf=2 * v["C_f"], cr=2 * v["C_r"])
 
 
+def scenario_for(config, scenario: str, duration: float | None = None):
+    """A library scenario at the observer's sample rate, optionally truncated."""
+    return _truncate(scenarios.make(scenario, sample_rate=1.0 / config.sample_time), duration)
+
+
 def run_scenario(name: str, scenario: str, plant: str = "nominal", duration: float | None = None,
                  seed: int = 0) -> dict:
     """Simulate, run the compiled observer and the baselines, return the tables and signals."""
     from python_bindings import load
     config = observers.get(name)
     lpv = pipeline.representation(config)[0]
-    scn = _truncate(scenarios.make(scenario, sample_rate=1.0 / config.sample_time), duration)
+    scn = scenario_for(config, scenario, duration)
     if plant == "commonroad":
         truth = _truth_commonroad(config, scn)
     elif plant == "nominal":
-        truth = _truth_nominal(config, scn, lpv)
+        truth = simulate.nominal_plant(config, lpv, scn)
     else:
         raise ModelDefinitionError(f"plant must be 'nominal' or 'commonroad', got {plant!r}")
-    rng = np.random.default_rng(seed)
-    noisy = {k: truth[k] + rng.standard_normal(truth[k].shape) * s for k, s in SENSOR_NOISE.items()}
+    noisy = simulate.add_sensor_noise(truth, SENSOR_NOISE, seed)
     obs = load(name)
     d = lpv.definition
-    columns = []
-    for col in obs.input_names:
-        key = col[2:] if col.startswith("y_") else col
-        if key in noisy:
-            columns.append(noisy[key])
-        elif key in truth:
-            columns.append(truth[key])
-        else:
-            raise SampleError(f"observer {name!r} needs input {col!r}, which plant {plant!r} does not provide")
-    out, status, _ = obs.run(np.column_stack(columns))
+    inputs = simulate.observer_input_matrix(obs.input_names, truth, noisy)
+    out, status, _ = obs.run(inputs)
     table = {}
     for i, sig in enumerate(obs.state_names):
         if sig in truth:

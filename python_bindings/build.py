@@ -22,8 +22,9 @@ GENERATED_DIR = ROOT / "generated_c"
 EXT_DIR = HERE / "_ext"
 BUILD_DIR = HERE / "_build"
 
-STRICT_FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-Wshadow", "-Wconversion",
-                "-Wdouble-promotion", "-Wvla", "-ffp-contract=off", "-fno-fast-math", "-O2"]
+from codegen.emit import STRICT_CFLAGS
+
+STRICT_FLAGS = list(STRICT_CFLAGS)
 # Python.h is not -pedantic/-Wconversion clean; the glue gets the same flags minus those two.
 GLUE_FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-ffp-contract=off", "-O2"]
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from codegen import simulate
+from codegen import simulate, validate
 from codegen.errors import SampleError
 
 REL = 1e-12
@@ -38,8 +38,9 @@ def test_random_samples_inside_box(build, compiled):
 
 
 def test_full_trajectory(build, lpv, compiled):
-    sim = simulate.simulate_plant(lpv, simulate.SCENARIOS["track_varying_speed"], build.config.sample_time)
-    inputs = simulate.observer_inputs(lpv, sim, {"r": 1e-3, "delta": 1e-4, "delta_dot": 1e-3})
+    truth = simulate.nominal_plant(build.config, lpv, validate.scenario_for(build.config, "track_varying_speed"))
+    noisy = simulate.add_sensor_noise(truth, validate.SENSOR_NOISE, seed=3)
+    inputs = simulate.observer_input_matrix(compiled.input_names, truth, noisy)
     out, status, final = compiled.run(inputs)
     assert not status.any()
     f = build.step_function()

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from codegen import harness, observers, pipeline, simulate
+from codegen import harness, observers, pipeline, simulate, validate
 from python_bindings import load
 from python_bindings.build import generated_names
 
@@ -160,8 +160,9 @@ def test_long_run(name):
     obs = load(name)
     cfg = observers.get(name)
     lpv = pipeline.representation(cfg)[0]
-    sim = simulate.simulate_plant(lpv, simulate.SCENARIOS["track_varying_speed"], cfg.sample_time)
-    base = simulate.observer_inputs(lpv, sim, {"r": 1e-3, "delta": 1e-4, "delta_dot": 1e-3}, seed=5)
+    truth = simulate.nominal_plant(cfg, lpv, validate.scenario_for(cfg, "track_varying_speed"))
+    base = simulate.observer_input_matrix(obs.input_names, truth,
+                                          simulate.add_sensor_noise(truth, validate.SENSOR_NOISE, seed=5))
     chunk = np.tile(base, (100_000 // len(base) + 1, 1))[:100_000]
     digests = []
     for _ in range(2):
