@@ -39,12 +39,13 @@ class ObserverData:
     L: tuple
     Tf: float
     Ts: float
+    derived: tuple = ()         # (signal symbol, expression in the output symbols y_<name>)
+    output_symbols: tuple = ()
 
     def __post_init__(self):
-        for label, mats in (("B", self.poly.B), ("C", self.poly.C), ("D", self.poly.D)):
-            if np.ptp(mats, axis=0).max(initial=0) > 0:
-                raise ModelDefinitionError(f"{label} depends on the scheduling signal; this observer "
-                                           f"family needs constant {label}")
+        if np.ptp(self.poly.D, axis=0).max(initial=0) > 0:
+            raise ModelDefinitionError("D depends on the scheduling signal; this observer family needs "
+                                       "a constant D (its pseudo-inverse drives the UI filter (47))")
         if not self.Ts > 0 or not self.Tf > 0:
             raise ValueError(f"sample time and filter constant must be positive (Ts={self.Ts}, Tf={self.Tf})")
 
@@ -64,6 +65,30 @@ class ObserverData:
     def Dp(self):
         return np.linalg.pinv(self.poly.D[0])
 
+    @property
+    def raw_signals(self) -> tuple:
+        """Scheduling signals that are observer inputs (the others are derived from y)."""
+        derived = {sym for sym, _ in self.derived}
+        return tuple(sym for sym in self.poly.signals if sym not in derived)
+
+    @property
+    def quadratic(self) -> bool:
+        return all(np.array_equal(q, self.Q[0]) for q in self.Q)
+
+    def signal_values(self, rho_raw, y, xp=np):
+        """All scheduling signals in polytope order: raw ones from the input, derived ones from y."""
+        raw = dict(zip(self.raw_signals, rho_raw))
+        mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "Abs": ca.fabs,
+                 "Min": ca.fmin, "Max": ca.fmax}, "math"] if xp is ca else "numpy"
+        out = []
+        for sym in self.poly.signals:
+            if sym in raw:
+                out.append(raw[sym])
+            else:
+                expr = dict(self.derived)[sym]
+                out.append(sp.lambdify(self.output_symbols, expr, mods)(*[y[k] for k in range(len(self.output_symbols))]))
+        return out
+
 
 def _blend(eta, mats, xp=np):
     total = eta[0] * mats[0]
@@ -73,32 +98,39 @@ def _blend(eta, mats, xp=np):
 
 
 def augmented_matrices(data: ObserverData, theta: np.ndarray):
-    """(Aa, Ba, By) at premise values ``theta`` (numpy)."""
+    """(Aa, Ba, By) at premise values ``theta`` (numpy): z' = Aa z + Ba u + By y, with the
+    correction M (C x + Du u - y) of eq. (15) and the UI filter (47)."""
     eta = sector_weights_product(np.asarray(theta, float), data.poly.premises)
-    A = _blend(eta, data.poly.A)
+    A, B, C, Du = (_blend(eta, m) for m in (data.poly.A, data.poly.B, data.poly.C, data.poly.Du))
     M = np.linalg.solve(_blend(eta, data.Q), _blend(eta, data.L))
-    C, D, B, Dp = data.poly.C[0], data.poly.D[0], data.poly.B[0], data.Dp
+    D, Dp = data.poly.D[0], data.Dp
     Aa = np.block([[A + M @ C, D], [Dp @ M @ C / data.Tf, np.zeros((data.nd, data.nd))]])
-    Ba = np.vstack([B, np.zeros((data.nd, B.shape[1]))])
+    Ba = np.vstack([B + M @ Du, Dp @ M @ Du / data.Tf])
     By = np.vstack([-M, -Dp @ M / data.Tf])
     return Aa, Ba, By
 
 
 def premise_of_signal(poly: Polytope, rho, xp=np):
-    """Premise values theta(rho) for numpy or CasADi ``rho``."""
+    """Premise values theta(rho); ``rho`` is a scalar (one signal) or a list in ``poly.signals`` order."""
+    rho = list(rho) if isinstance(rho, (list, tuple, np.ndarray)) and np.ndim(rho) > 0 else [rho]
     if xp is np:
-        return [f(rho) for f in poly.premise_functions]
+        return [f(*rho) for f in poly.premise_functions]
     mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log}, "math"]
-    return [sp.lambdify(poly.signal, p.expr, mods)(rho) for p in poly.premises]
+    return [sp.lambdify(poly.signals, p.expr, mods)(*rho) for p in poly.premises]
 
 
 def step_numpy(data: ObserverData, z, u, y, rho):
-    """Reference step in numpy (used by tests and the benchmark's numpy peer)."""
-    rho_c = min(max(rho, data.poly.signal_lower), data.poly.signal_upper)
-    theta = np.array(premise_of_signal(data.poly, rho_c), dtype=float)
+    """Reference step in numpy (tests, benchmark peer); ``rho`` holds the raw scheduling inputs.
+
+    Returns (z_next, clamped) with clamped = 1.0 when a scheduling signal (raw or derived)
+    left its box."""
+    values = data.signal_values(np.atleast_1d(np.asarray(rho, float)), np.asarray(y, float))
+    clamped = [min(max(v, lo), hi) for v, lo, hi in zip(values, data.poly.lowers, data.poly.uppers)]
+    theta = np.array(premise_of_signal(data.poly, clamped), dtype=float)
     Aa, Ba, By = augmented_matrices(data, theta)
     G = np.eye(data.nz) - data.Ts * Aa
-    return np.linalg.solve(G, z + data.Ts * (Ba @ u + By @ y)), float(rho_c != rho)
+    flag = float(any(c != v for c, v in zip(clamped, values)))
+    return np.linalg.solve(G, z + data.Ts * (Ba @ u + By @ y)), flag
 
 
 def _affine_in_scalar_premise(data: ObserverData):
@@ -127,22 +159,29 @@ def gain_factorization(data: ObserverData):
     return lam, V, V.T @ L0, V.T @ L1
 
 
+def signal_grid(poly: Polytope, n_single: int = 401, n_multi: int = 41) -> np.ndarray:
+    """Dense grid over the box of all scheduling signals, shape (points, n_signals)."""
+    n = n_single if len(poly.signals) == 1 else n_multi
+    axes = [np.linspace(lo, hi, n) for lo, hi in zip(poly.lowers, poly.uppers)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(axes))
+
+
 def _x_system(data: ObserverData, theta: np.ndarray):
     """Matrix of the eliminated x+ system, G_x(th) (see :func:`step_casadi`)."""
     Aa, _, By = augmented_matrices(data, theta)
     nx = data.nx
     M = -By[:nx]
     K = (data.Ts / data.Tf) * (data.Dp @ M)
-    return np.eye(nx) - data.Ts * Aa[:nx, :nx] - data.Ts * (data.poly.D[0] @ K @ data.poly.C[0])
+    C = _blend(sector_weights_product(np.asarray(theta, float), data.poly.premises), data.poly.C)
+    return np.eye(nx) - data.Ts * Aa[:nx, :nx] - data.Ts * (data.poly.D[0] @ K @ C)
 
 
-def lu_without_pivoting_is_safe(data: ObserverData, n_grid: int = 401, min_pivot: float = 1e-3,
+def lu_without_pivoting_is_safe(data: ObserverData, min_pivot: float = 1e-3,
                                 max_growth: float = 10.0) -> dict:
     """Dense-grid check that unpivoted LU of G_x(th) has no small pivots and no element growth."""
     smallest, growth = np.inf, 0.0
-    for th in np.linspace(data.poly.premises[0].lower, data.poly.premises[0].upper, n_grid) \
-            if len(data.poly.premises) == 1 else []:
-        G = _x_system(data, np.array([th]))
+    for rho in signal_grid(data.poly):
+        G = _x_system(data, np.array(premise_of_signal(data.poly, rho), float))
         U = G.copy()
         for k in range(G.shape[0]):
             smallest = min(smallest, abs(U[k, k]) / max(np.abs(G).max(), 1e-300))
@@ -183,25 +222,29 @@ def _solve_unpivoted(G, rhs):
 
 
 def step_casadi(data: ObserverData, name: str) -> ca.Function:
-    """The step as a CasADi Function: (z, u, y, rho) -> z_next.
+    """The step as a CasADi Function: (z, u, y, rho) -> (z_next, excess).
 
-    The scheduling signal is clamped to its box for the memberships (the certificate
-    only holds there); the C wrapper flags such samples. The d-block of
-    I - Ts Aa is the identity, so d is eliminated (Schur complement): the x+ system is
-    nx x nx and far better conditioned than the full one (the 1/Tf row); then
-    d+ = d + (Ts/Tf) Dp M (C x+ - y). Where checks allow, M(th) uses
-    :func:`gain_factorization` and the x+ solve an unpivoted unrolled LU; otherwise
-    CasADi's generic solve.
+    ``rho`` holds the raw scheduling inputs; derived signals are computed from ``y``. Every
+    signal is clamped to its box for the memberships (the certificate only holds there);
+    ``excess`` = sum of |signal - clamped signal| lets the C wrapper flag such samples. With
+    y~ = y - Du u, the d-block of I - Ts Aa is the identity, so d is eliminated (Schur
+    complement): the x+ system is nx x nx and far better conditioned than the full one (the
+    1/Tf row); then d+ = d + (Ts/Tf) Dp M (C x+ - y~). The gain M(th) is blended directly
+    for a common Lyapunov matrix, factorized (:func:`gain_factorization`) for two vertices,
+    and solved otherwise; the x+ system uses an unpivoted unrolled LU where
+    :func:`lu_without_pivoting_is_safe` allows it.
     """
     poly = data.poly
     nz, nu, ny = data.nz, poly.B.shape[2], poly.C.shape[1]
     z = ca.SX.sym("z", nz)
     u = ca.SX.sym("u", nu)
     y = ca.SX.sym("y", ny)
-    rho = ca.SX.sym("rho")
-    rho_c = ca.fmin(ca.fmax(rho, poly.signal_lower), poly.signal_upper)
-    theta = premise_of_signal(poly, rho_c, xp=ca)
-    fact = gain_factorization(data)
+    rho = ca.SX.sym("rho", len(data.raw_signals))
+    values = data.signal_values([rho[k] for k in range(rho.shape[0])], [y[k] for k in range(ny)], xp=ca)
+    clamped = [ca.fmin(ca.fmax(v, lo), hi) for v, lo, hi in zip(values, poly.lowers, poly.uppers)]
+    excess = sum(ca.fabs(v - c) for v, c in zip(values, clamped))
+    theta = premise_of_signal(poly, clamped, xp=ca)
+    fact = gain_factorization(data) if not data.quadratic else None
     if fact is not None:
         # two vertices: every blended matrix is affine in the premise; entries that do not
         # vary become constants in the generated code
@@ -215,27 +258,36 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
         mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log}, "math"]
         num_den = [sp.fraction(sp.cancel(1 / (1 + sp.Float(float(l), 17) * poly.premises[0].expr)))
                    for l in lam]
-        scale = ca.vertcat(*[sp.lambdify(poly.signal, n_, mods)(rho_c) * _reciprocal(
-            sp.lambdify(poly.signal, d_, mods)(rho_c)) for n_, d_ in num_den])
+        scale = ca.vertcat(*[sp.lambdify(poly.signals, n_, mods)(*clamped) * _reciprocal(
+            sp.lambdify(poly.signals, d_, mods)(*clamped)) for n_, d_ in num_den])
         W = ca.DM(W0) + th * ca.DM(W1)
         M = ca.DM(V) @ (ca.repmat(scale, 1, ny) * W)
+        eta = None
     else:
         eta = sector_weights_product(theta, poly.premises, xp=ca)
         A = _blend(eta, [ca.DM(a) for a in poly.A])
-        M = ca.solve(_blend(eta, [ca.DM(q) for q in data.Q]), _blend(eta, [ca.DM(l) for l in data.L]))
-    C, D, B, Dp = (ca.DM(m) for m in (poly.C[0], poly.D[0], poly.B[0], data.Dp))
+        if data.quadratic:
+            # common Lyapunov matrix: M(th) = sum eta_i P^-1 L_i, no solve at run time
+            M = _blend(eta, [ca.DM(np.linalg.solve(data.Q[0], l)) for l in data.L])
+        else:
+            M = ca.solve(_blend(eta, [ca.DM(q) for q in data.Q]), _blend(eta, [ca.DM(l) for l in data.L]))
+    blend_or_const = (lambda mats: ca.DM(mats[0]) if np.ptp(mats, axis=0).max(initial=0) == 0 or eta is None
+                      else _blend(eta, [ca.DM(m) for m in mats]))
+    B, C, Du = blend_or_const(poly.B), blend_or_const(poly.C), blend_or_const(poly.Du)
+    D, Dp = ca.DM(poly.D[0]), ca.DM(data.Dp)
     nx, Ts, Tf = data.nx, data.Ts, data.Tf
     x, d = z[:nx], z[nx:]
+    y_t = y - Du @ u
     K = (Ts / Tf) * (Dp @ M)
     G_x = ca.DM.eye(nx) - Ts * (A + M @ C) - Ts * (D @ K @ C)
-    rhs = x + Ts * (B @ u - M @ y) + Ts * (D @ (d - K @ y))
+    rhs = x + Ts * (B @ u - M @ y_t) + Ts * (D @ (d - K @ y_t))
     if lu_without_pivoting_is_safe(data)["safe"]:
         x_next = _solve_unpivoted(G_x, rhs)
     else:
         x_next = ca.solve(G_x, rhs)
-    d_next = d + K @ (C @ x_next - y)
+    d_next = d + K @ (C @ x_next - y_t)
     z_next = ca.vertcat(x_next, d_next)
-    return ca.Function(name, [z, u, y, rho], [z_next], ["z", "u", "y", "rho"], ["z_next"])
+    return ca.Function(name, [z, u, y, rho], [z_next, excess], ["z", "u", "y", "rho"], ["z_next", "excess"])
 
 
 @dataclass(frozen=True)
@@ -292,7 +344,7 @@ def certify_step(data: ObserverData, alpha: float, n_grid: int = 2001) -> Discre
             for Qj in data.Q:
                 worst = max(worst, float(eigh(lhs, Qj, eigvals_only=True).max()))
     kappa = 1.0 + 2.0 * alpha * Ts - worst
-    sig = np.linspace(poly.signal_lower, poly.signal_upper, n_grid)
+    sig = signal_grid(poly, n_single=n_grid)
     nx = data.nx
     err_r, aug_r = [], []
     for s in sig:
@@ -300,7 +352,7 @@ def certify_step(data: ObserverData, alpha: float, n_grid: int = 2001) -> Discre
         aug_r.append(float(np.abs(np.linalg.eigvals(np.linalg.inv(np.eye(data.nz) - Ts * Aa))).max()))
         err_r.append(float(np.abs(np.linalg.eigvals(np.linalg.inv(np.eye(nx) - Ts * Aa[:nx, :nx]))).max()))
     k = int(np.argmax(aug_r))
-    cert = DiscreteCertificate(Ts, kappa, worst, max(err_r), aug_r[k], float(sig[k]), n_grid)
+    cert = DiscreteCertificate(Ts, kappa, worst, max(err_r), aug_r[k], float(sig[k][0]), len(sig))
     if kappa <= 1.0:
         raise DiscretizationError(
             f"cannot certify the Ts={Ts:g} s step: kappa = 1 + 2 alpha Ts - {worst:.4g} = {kappa:.6f} <= 1 "
@@ -309,6 +361,6 @@ def certify_step(data: ObserverData, alpha: float, n_grid: int = 2001) -> Discre
     if max(err_r) >= 1.0 or aug_r[k] >= 1.0:
         raise DiscretizationError(
             f"the Ts={Ts:g} s step has spectral radius {max(max(err_r), aug_r[k]):.6f} >= 1 on the "
-            f"dense grid (with the UI filter, at {poly.signal}={sig[k]:.4g}); raise the filter "
+            f"dense grid (with the UI filter, at {poly.signal}={sig[k][0]:.4g}); raise the filter "
             f"constant Tf or lower Ts")
     return cert

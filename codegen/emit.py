@@ -95,7 +95,8 @@ def _signal_docs(b: ObserverBuild) -> tuple:
     state = [{"name": n, "doc": f"estimate of {n} [{units.get(n, '-')}]"} for n in b.state_names]
     inputs = ([{"name": str(s), "doc": f"known input [{units.get(str(s), '-')}]"} for s in d.known_inputs]
               + [{"name": f"y_{n}", "doc": f"measured {n} [{units.get(n, '-')}]"} for n in d.output_names]
-              + [{"name": str(s.symbol), "doc": f"scheduling signal [{s.unit or '-'}]"} for s in d.scheduling])
+              + [{"name": str(s.symbol), "doc": f"scheduling signal [{s.unit or '-'}]"} for s in d.scheduling
+                 if s.derived is None])
     return state, inputs
 
 
@@ -110,8 +111,10 @@ def render(b: ObserverBuild) -> dict:
         "name": b.name, "NAME": b.name.upper(), "guard": f"UIOGEN_{b.name.upper()}_H",
         "doc": b.config.doc, "ts": repr(b.config.sample_time),
         "contraction": f"{b.discrete_certificate.contraction:.6f}",
-        "state": state, "inputs": inputs, "sched": str(b.poly.signal),
-        "sched_min": repr(b.poly.signal_lower), "sched_max": repr(b.poly.signal_upper),
+        "state": state, "inputs": inputs,
+        "scheduling": [{"name": str(sym), "min": repr(lo), "max": repr(hi),
+                        "derived": sym not in b.data.raw_signals}
+                       for sym, lo, hi in zip(b.poly.signals, b.poly.lowers, b.poly.uppers)],
         "offset_u": 0, "offset_y": nu, "offset_rho": nu + ny,
         "sz_arg": max(int(f.sz_arg()), 1), "sz_res": max(int(f.sz_res()), 1),
         "sz_iw": max(int(f.sz_iw()), 1), "sz_w": max(int(f.sz_w()), 1),

@@ -17,10 +17,17 @@ from .emit import GENERATED_DIR, STRICT_CFLAGS, TEMPLATES
 
 
 def render(name: str) -> str:
+    import json
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)),
                              undefined=jinja2.StrictUndefined, keep_trailing_newline=True)
+    art = json.loads((GENERATED_DIR / name / f"{name}_design.json").read_text())
+    # the last input is the last raw scheduling signal: sweep it over its box
+    last = art["signals"]["input"][-1]
+    k = art["polytope"]["signals"].index(last)
+    lo, hi = art["polytope"]["signal_ranges"][k]
     return env.get_template("harness.c.j2").render(
-        name=name, NAME=name.upper(), banner=f"/* Benchmark/check driver of {name} (uiogen). */")
+        name=name, NAME=name.upper(), banner=f"/* Benchmark/check driver of {name} (uiogen). */",
+        first_min=repr(float(lo)), first_max=repr(float(hi)))
 
 
 def build_harness(name: str, out_dir: Path, extra_flags=(), cc: str = "gcc") -> Path:

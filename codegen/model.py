@@ -31,10 +31,13 @@ class SchedulingSignal:
 
     Bounds and rate bounds are read from the parameter file's
     ``[scheduling.NAME]`` table: ``min``, ``max``, ``rate_min``, ``rate_max``.
+    ``derived`` makes the signal a function of measured outputs (symbols ``y_<output>``)
+    and parameters, computed inside the observer step instead of being an input.
     """
 
     symbol: sp.Symbol
     unit: str = ""
+    derived: sp.Expr | None = None
 
 
 @dataclass(frozen=True)
@@ -84,6 +87,14 @@ class ModelDefinition:
     def __post_init__(self) -> None:
         names = [str(s) for s in (*self.states, *self.known_inputs, *self.unknown_inputs,
                                   *(g.symbol for g in self.scheduling), *self.parameters)]
+        allowed_derived = {str(p) for p in self.parameters} | {f"y_{n}" for n, _ in self.outputs}
+        for g in self.scheduling:
+            if g.derived is not None:
+                stray = {str(x) for x in sp.sympify(g.derived).free_symbols} - allowed_derived
+                if stray:
+                    raise ModelDefinitionError(
+                        f"model {self.name!r}: derived scheduling signal {g.symbol} uses {', '.join(sorted(stray))}; "
+                        f"it may only use parameters and measured outputs y_<name>")
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
             raise ModelDefinitionError(f"model {self.name!r}: symbol(s) declared twice: {', '.join(dup)}")
@@ -116,6 +127,11 @@ class ModelDefinition:
     def output_names(self) -> tuple:
         return tuple(n for n, _ in self.outputs)
 
+    @property
+    def output_symbols(self) -> tuple:
+        """Symbols ``y_<output>`` that derived scheduling signals may use."""
+        return tuple(sp.Symbol(f"y_{n}") for n in self.output_names)
+
 
 @dataclass(frozen=True)
 class ParameterSet:
@@ -139,6 +155,8 @@ class LPVModel:
     C: sp.Matrix
     scheduling_symbols: tuple
     boxes: tuple
+    Du: sp.Matrix = None        # output feedthrough of the known inputs: y = C x + Du u
+    derived: tuple = ()         # (symbol, expression in y_<output>) with parameters substituted
 
     @property
     def nx(self) -> int:
@@ -244,19 +262,25 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     B = _affine_part(f, u, "the known inputs", model.name)
     D = _affine_part(f, d, "the unknown inputs", model.name)
     C = _affine_part(h, x, "the states", model.name)
+    Du = _affine_part(h, u, "the known inputs", model.name)
     rest = sp.simplify(f - A * sp.Matrix(x) - B * sp.Matrix(u) - D * sp.Matrix(d)) if x else f
     if any(sp.simplify(e) != 0 for e in rest):
         raise NotAffineError(f"model {model.name!r}: dynamics have a drift term independent of "
                              f"states and inputs: {list(rest)}")
-    for mat, label in ((B, "B"), (D, "D"), (C, "C")):
+    h_rest = sp.simplify(h - C * sp.Matrix(x) - Du * sp.Matrix(u))
+    if any(sp.simplify(e) != 0 for e in h_rest):
+        raise NotAffineError(f"model {model.name!r}: outputs must be C(rho) x + Du(rho) u; left over: "
+                             f"{list(h_rest)} (unknown inputs may not reach the outputs in this family)")
+    for mat, label in ((B, "B"), (D, "D"), (C, "C"), (Du, "Du")):
         if any(e.free_symbols & set(x + u + d) for e in mat):
             raise NotAffineError(f"model {model.name!r}: {label} depends on states or inputs")
     sched = tuple(sig.symbol for sig in model.scheduling)
     allowed = set(sched)
-    for mat, label in ((A, "A"), (B, "B"), (D, "D"), (C, "C")):
+    for mat, label in ((A, "A"), (B, "B"), (D, "D"), (C, "C"), (Du, "Du")):
         stray = set().union(*(e.free_symbols for e in mat)) - allowed if len(mat) else set()
         if stray:
             raise ModelDefinitionError(
                 f"model {model.name!r}: {label} depends on {', '.join(sorted(map(str, stray)))}, "
                 f"which is neither a parameter nor a scheduling signal")
-    return LPVModel(model, params, A, B, D, C, sched, tuple(boxes))
+    derived = tuple((g.symbol, sp.sympify(g.derived).subs(subs)) for g in model.scheduling if g.derived is not None)
+    return LPVModel(model, params, A, B, D, C, sched, tuple(boxes), Du, derived)

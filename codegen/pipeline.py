@@ -49,7 +49,7 @@ class ObserverBuild:
     def input_names(self) -> list:
         d = self.lpv.definition
         return ([str(s) for s in d.known_inputs] + [f"y_{n}" for n in d.output_names]
-                + [str(s.symbol) for s in d.scheduling])
+                + [str(s.symbol) for s in d.scheduling if s.derived is None])
 
 
 def _settings(config: ObserverConfig, lyapunov: str | None = None) -> linf_uio.LinfDesignSettings:
@@ -95,7 +95,8 @@ def build(config: ObserverConfig, tol: float | None = None) -> ObserverBuild:
     t2 = time.perf_counter()
     cert = linf_uio.certify(poly, design.P, design.X, design.L, settings.alpha)
     data = discrete.ObserverData(poly, design.Q, design.L,
-                                 float(config.ui_filter.get("time_constant", 0.005)), config.sample_time)
+                                 float(config.ui_filter.get("time_constant", 0.005)), config.sample_time,
+                                 lpv.derived, lpv.definition.output_symbols)
     dcert = discrete.certify_step(data, settings.alpha)
     t3 = time.perf_counter()
     timings = {"representation_s": t1 - t0, "design_s": t2 - t1,
@@ -124,7 +125,7 @@ def artifact(b: ObserverBuild) -> dict:
         "observer": b.name,
         "config": b.config.to_json(),
         "signals": {"state": b.state_names, "input": b.input_names,
-                    "scheduling": str(b.poly.signal)},
+                    "scheduling": [str(x) for x in b.poly.signals]},
         "polytope": b.poly.to_json(),
         "taylor_error": _sig(b.taylor_error),
         **b.design.gains_json(),

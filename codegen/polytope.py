@@ -51,9 +51,9 @@ class Polytope:
     """
 
     kind: str
-    signal: sp.Symbol
-    signal_lower: float
-    signal_upper: float
+    signals: tuple
+    lowers: tuple
+    uppers: tuple
     premises: tuple
     nonlinearities: tuple
     A: np.ndarray
@@ -64,6 +64,20 @@ class Polytope:
     rate_bounds: np.ndarray
     rate_bound_mode: str
     expansion_point: float | None
+    Du: np.ndarray = None
+
+    # the primary (first) scheduling signal, for the single-signal reports
+    @property
+    def signal(self):
+        return self.signals[0]
+
+    @property
+    def signal_lower(self) -> float:
+        return self.lowers[0]
+
+    @property
+    def signal_upper(self) -> float:
+        return self.uppers[0]
 
     @property
     def n_vertices(self) -> int:
@@ -81,13 +95,16 @@ class Polytope:
 
     @cached_property
     def premise_functions(self) -> tuple:
-        """Compiled numpy callables theta_j(rho), built once per polytope."""
-        return tuple(sp.lambdify(self.signal, p.expr, "numpy") for p in self.premises)
+        """Compiled numpy callables theta_j(*signals), built once per polytope."""
+        return tuple(sp.lambdify(self.signals, p.expr, "numpy") for p in self.premises)
 
     def premise_values(self, rho) -> np.ndarray:
-        """Premise variables theta_j(rho), shape (..., p)."""
+        """Premise variables theta_j(rho), shape (..., p); rho is (...,) for one signal, else (..., n_signals)."""
         rho = np.asarray(rho, dtype=float)
-        return np.stack([np.broadcast_to(f(rho), rho.shape) for f in self.premise_functions], axis=-1)
+        if len(self.signals) == 1 and (rho.ndim == 0 or rho.shape[-1] != 1):
+            rho = rho[..., None]
+        cols = [rho[..., k] for k in range(len(self.signals))]
+        return np.stack([np.broadcast_to(f(*cols), cols[0].shape) for f in self.premise_functions], axis=-1)
 
     def eta(self, rho) -> np.ndarray:
         """Membership values at scheduling value(s) ``rho`` (shape (..., N)), from the sector weights."""
@@ -99,8 +116,8 @@ class Polytope:
     def to_json(self) -> dict:
         return {
             "kind": self.kind,
-            "signal": str(self.signal),
-            "signal_range": [self.signal_lower, self.signal_upper],
+            "signals": [str(x) for x in self.signals],
+            "signal_ranges": [[lo, hi] for lo, hi in zip(self.lowers, self.uppers)],
             "nonlinearities": [str(g) for g in self.nonlinearities],
             "premises": [{"name": p.name, "expr": str(p.expr), "range": [p.lower, p.upper]}
                          for p in self.premises],
@@ -109,6 +126,7 @@ class Polytope:
             "rate_bound_mode": self.rate_bound_mode,
             "expansion_point": self.expansion_point,
             "A": self.A.tolist(), "B": self.B.tolist(), "C": self.C.tolist(), "D": self.D.tolist(),
+            "Du": self.Du.tolist(),
         }
 
 
@@ -120,7 +138,7 @@ def scheduling_nonlinearities(lpv: LPVModel) -> tuple:
     """
     rho = set(lpv.scheduling_symbols)
     found = {}
-    for mat in (lpv.A, lpv.B, lpv.C, lpv.D):
+    for mat in (lpv.A, lpv.B, lpv.C, lpv.D, lpv.Du):
         for entry in mat:
             for term in sp.Add.make_args(sp.expand(entry)):
                 if not term.free_symbols & rho:
@@ -136,7 +154,7 @@ def _affine_decomposition(lpv: LPVModel, nonlinearities: tuple):
     zs = sp.symbols(f"z0:{len(nonlinearities)}")
     sub = dict(zip(nonlinearities, zs))
     out = {}
-    for label, mat in (("A", lpv.A), ("B", lpv.B), ("C", lpv.C), ("D", lpv.D)):
+    for label, mat in (("A", lpv.A), ("B", lpv.B), ("C", lpv.C), ("D", lpv.D), ("Du", lpv.Du)):
         expanded = mat.applyfunc(lambda e: sp.expand(e).xreplace(sub))
         for e in expanded:
             if e.free_symbols & set(lpv.scheduling_symbols):
@@ -160,6 +178,30 @@ def _range_on_interval(expr: sp.Expr, x: sp.Symbol, lo: float, hi: float) -> tup
                 candidates.append(val)
     f = sp.lambdify(x, expr, "math")
     values = [float(f(c)) for c in candidates]
+    return min(values), max(values)
+
+
+def _range_on_box(expr: sp.Expr, lpv: LPVModel) -> tuple:
+    """Exact range of a premise over the scheduling box.
+
+    One signal: endpoints and real stationary points. Several: the expression must be a
+    monomial (product of powers) in the signals, which are positive on the box, so it is
+    monotone in each and its extremes lie at the box corners.
+    """
+    used = [k for k, sym in enumerate(lpv.scheduling_symbols) if sym in expr.free_symbols]
+    if len(used) == 1:
+        k = used[0]
+        return _range_on_interval(expr, lpv.scheduling_symbols[k], lpv.boxes[k].lower, lpv.boxes[k].upper)
+    if any(lpv.boxes[k].lower <= 0 for k in used):
+        raise SchedulingBoundsError(f"premise {expr} mixes signals whose box includes 0; its range is not exact")
+    coeff, factors = expr.as_coeff_Mul()
+    for f in sp.Mul.make_args(factors):
+        base, _ = f.as_base_exp()
+        if base not in lpv.scheduling_symbols:
+            raise SchedulingBoundsError(f"premise {expr} is not a monomial in the scheduling signals; "
+                                        f"its range over the box cannot be bounded exactly")
+    fn = sp.lambdify([lpv.scheduling_symbols[k] for k in used], expr, "math")
+    values = [float(fn(*c)) for c in itertools.product(*[(lpv.boxes[k].lower, lpv.boxes[k].upper) for k in used])]
     return min(values), max(values)
 
 
@@ -212,6 +254,10 @@ def _vertex_matrices(decomp, premise_values_at_vertex):
 
 
 def _rate_bounds(memberships, signal, box, mode, expansion_point):
+    if mode == "none":
+        # no rate information: only valid for designs whose Lyapunov matrix does not depend
+        # on the memberships (the quadratic variant); the PDLF design refuses it
+        return np.zeros((len(memberships), 2))
     bounds = []
     for eta in memberships:
         deta = sp.diff(eta, signal)
@@ -230,13 +276,18 @@ def _rate_bounds(memberships, signal, box, mode, expansion_point):
 
 def sector_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polytope:
     """Plain sector-nonlinearity polytope: one premise per nonlinearity, 2**p exact vertices."""
-    signal, box = _single_signal(lpv)
+    if len(lpv.scheduling_symbols) > 1 and rate_bounds != "none":
+        raise SchedulingBoundsError(
+            f"model {lpv.definition.name!r}: membership rate bounds are derived for one scheduling signal; "
+            f"with {len(lpv.scheduling_symbols)} signals use rate_bounds = \"none\" and the quadratic design")
     nonlin = scheduling_nonlinearities(lpv)
     if not nonlin:
         raise ModelDefinitionError(f"model {lpv.definition.name!r} does not depend on its scheduling signal")
     premises = []
     for k, g in enumerate(nonlin):
-        lo, hi = _range_on_interval(g, signal, box.lower, box.upper)
+        lo, hi = _range_on_box(g, lpv)
+        if not hi > lo:
+            raise SchedulingBoundsError(f"premise {g} is constant on the scheduling box")
         premises.append(Premise(f"z{k}", g, lo, hi))
     premises = tuple(premises)
     decomp = _affine_decomposition(lpv, nonlin)
@@ -245,9 +296,10 @@ def sector_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polytope:
                for idx in range(2 ** p)]
     mats = _vertex_matrices(decomp, corners)
     etas = _memberships(premises)
-    return Polytope("sector", signal, box.lower, box.upper, premises, nonlin, mats["A"], mats["B"],
-                    mats["C"], mats["D"], etas, _rate_bounds(etas, signal, box, rate_bounds, None),
-                    rate_bounds, None)
+    rates = _rate_bounds(etas, lpv.scheduling_symbols[0], lpv.boxes[0], rate_bounds, None)
+    return Polytope("sector", tuple(lpv.scheduling_symbols), tuple(b.lower for b in lpv.boxes),
+                    tuple(b.upper for b in lpv.boxes), premises, nonlin, mats["A"], mats["B"],
+                    mats["C"], mats["D"], etas, rates, rate_bounds, None, mats["Du"])
 
 
 def taylor_reduced_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polytope:
@@ -295,10 +347,10 @@ def taylor_reduced_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polyto
     mats = _vertex_matrices(decomp, corners)
     premise = Premise("theta", sp.simplify(theta_expr), -1.0, 1.0)
     etas = _memberships((premise,))
-    return Polytope("taylor_reduced", signal, box.lower, box.upper, (premise,), nonlin, mats["A"],
+    return Polytope("taylor_reduced", (signal,), (box.lower,), (box.upper,), (premise,), nonlin, mats["A"],
                     mats["B"], mats["C"], mats["D"], etas,
                     _rate_bounds(etas, signal, box, rate_bounds, expansion_point), rate_bounds,
-                    expansion_point)
+                    expansion_point, mats["Du"])
 
 
 def exact_matrix_function(lpv: LPVModel, label: str = "A"):

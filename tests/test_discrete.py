@@ -41,7 +41,8 @@ def test_numpy_and_casadi_steps_agree(build):
         u, y = rng.standard_normal(1), rng.standard_normal(3)
         rho = rng.uniform(0, 45)
         z_np, clamped = discrete.step_numpy(build.data, z, u, y, rho)
-        z_ca = f(z, u, y, rho)
+        z_ca, excess = f(z, u, y, rho)
+        assert (float(excess) > 0) == bool(clamped)
         # two algorithms (5x5 LU in numpy, eliminated 4x4 QR in CasADi): normwise agreement
         z_ca = np.array(z_ca).ravel()
         assert np.abs(z_ca - z_np).max() <= 1e-11 * np.abs(z_np).max()

@@ -12,7 +12,7 @@ def _casadi_batch(build, states, inputs):
     f = build.step_function()
     nu, ny = build.lpv.nu, build.lpv.ny
     fm = f.map(states.shape[0])
-    z = fm(states.T, inputs[:, :nu].T, inputs[:, nu:nu + ny].T, inputs[:, -1:].T)
+    z, _ = fm(states.T, inputs[:, :nu].T, inputs[:, nu:nu + ny].T, inputs[:, -1:].T)
     return np.array(z).T
 
 
@@ -47,7 +47,7 @@ def test_full_trajectory(build, lpv, compiled):
     nu, ny = build.lpv.nu, build.lpv.ny
     acc = f.mapaccum(inputs.shape[0])
     # mapaccum feeds z_next back as z: the CasADi reference of the whole run
-    z_all = acc(np.zeros(compiled.n_state), inputs[:, :nu].T, inputs[:, nu:nu + ny].T, inputs[:, -1:].T)
+    z_all, _ = acc(np.zeros(compiled.n_state), inputs[:, :nu].T, inputs[:, nu:nu + ny].T, inputs[:, -1:].T)
     ref = np.array(z_all).T
     assert _rel_err(out, ref).max() <= 1e-10  # accumulated over 6000 samples
     assert _rel_err(out[:1], ref[:1]).max() <= REL

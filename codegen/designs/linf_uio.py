@@ -74,6 +74,9 @@ def _check_assumptions(poly: Polytope) -> None:
 def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.ndarray | None = None):
     """LMI problem of Theorem 1 under ``settings``; returns (problem, variables)."""
     _check_assumptions(poly)
+    if settings.lyapunov == "pdlf" and poly.rate_bound_mode == "none":
+        raise ValueError("the parameter-dependent design needs membership rate bounds; with "
+                         "rate_bounds = 'none' use lyapunov = 'quadratic'")
     N, nx, ny = poly.n_vertices, poly.A.shape[1], poly.C.shape[1]
     F = np.eye(nx) if performance is None else np.asarray(performance, dtype=float)
     prob = LMIProblem(f"Theorem 1 ({settings.lyapunov})")

@@ -22,13 +22,14 @@ extern "C" {
 #define LPV_LINF_DRIVER_TORQUE_N_INPUT 5
 #define LPV_LINF_DRIVER_TORQUE_N_OUTPUT 5
 #define LPV_LINF_DRIVER_TORQUE_SAMPLE_TIME 0.01
-#define LPV_LINF_DRIVER_TORQUE_SCHEDULING_MIN 5.0
-#define LPV_LINF_DRIVER_TORQUE_SCHEDULING_MAX 35.0
+/* scheduling signal v_x: box [5.0, 35.0] */
+#define LPV_LINF_DRIVER_TORQUE_V_X_MIN 5.0
+#define LPV_LINF_DRIVER_TORQUE_V_X_MAX 35.0
 
 /* Status bits returned by lpv_linf_driver_torque_step (0 = nominal sample). */
 #define LPV_LINF_DRIVER_TORQUE_OK 0
-/* v_x outside [5.0, 35.0]: clamped for the membership
- * functions and the step taken; the stability certificate does not cover this sample. */
+/* A scheduling signal outside its box: clamped for the membership functions and the step
+ * taken; the stability certificate does not cover this sample. */
 #define LPV_LINF_DRIVER_TORQUE_SCHEDULING_CLAMPED 1
 /* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
 #define LPV_LINF_DRIVER_TORQUE_NONFINITE_INPUT 2

@@ -36,7 +36,7 @@ const casadi_int* lpv_linf_driver_torque_kernel_sparsity_out(casadi_int i);
 int lpv_linf_driver_torque_kernel_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int lpv_linf_driver_torque_kernel_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define lpv_linf_driver_torque_kernel_SZ_ARG 4
-#define lpv_linf_driver_torque_kernel_SZ_RES 1
+#define lpv_linf_driver_torque_kernel_SZ_RES 2
 #define lpv_linf_driver_torque_kernel_SZ_IW 0
 #define lpv_linf_driver_torque_kernel_SZ_W 0
 void lpv_linf_driver_torque_kernel_casadi_version(int* major, int* minor, int* patch);

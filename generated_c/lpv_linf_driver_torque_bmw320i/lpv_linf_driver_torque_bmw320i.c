@@ -10,9 +10,9 @@
 /* Fixed work sizes from the kernel's work query at generation time; checked by
  * lpv_linf_driver_torque_bmw320i_check_work(). The arrays live on the stack of each call: no state between calls. */
 #define LPV_LINF_DRIVER_TORQUE_BMW320I_SZ_ARG 4
-#define LPV_LINF_DRIVER_TORQUE_BMW320I_SZ_RES 1
+#define LPV_LINF_DRIVER_TORQUE_BMW320I_SZ_RES 2
 #define LPV_LINF_DRIVER_TORQUE_BMW320I_SZ_IW 1
-#define LPV_LINF_DRIVER_TORQUE_BMW320I_SZ_W 39
+#define LPV_LINF_DRIVER_TORQUE_BMW320I_SZ_W 41
 
 void lpv_linf_driver_torque_bmw320i_init(lpv_linf_driver_torque_bmw320i_state *s)
 {
@@ -39,6 +39,7 @@ int lpv_linf_driver_torque_bmw320i_step_flat(double *state, const double *input,
     casadi_int iw[LPV_LINF_DRIVER_TORQUE_BMW320I_SZ_IW];
     casadi_real w[LPV_LINF_DRIVER_TORQUE_BMW320I_SZ_W];
     double next[LPV_LINF_DRIVER_TORQUE_BMW320I_N_STATE];
+    double excess = 0.0;
     int status = LPV_LINF_DRIVER_TORQUE_BMW320I_OK;
     int i;
 
@@ -51,14 +52,13 @@ int lpv_linf_driver_torque_bmw320i_step_flat(double *state, const double *input,
         arg[2] = input + 1;
         arg[3] = input + 4;
         res[0] = next;
+        res[1] = &excess;
         if (lpv_linf_driver_torque_bmw320i_kernel(arg, res, iw, w, 0) != 0) status |= LPV_LINF_DRIVER_TORQUE_BMW320I_NUMERICAL_FAILURE;
         for (i = 0; i < LPV_LINF_DRIVER_TORQUE_BMW320I_N_STATE; ++i) {
             if (!isfinite(next[i])) status |= LPV_LINF_DRIVER_TORQUE_BMW320I_NUMERICAL_FAILURE;
         }
-        /* the kernel clamps the scheduling signal for the memberships; flag it here */
-        if (input[4] < LPV_LINF_DRIVER_TORQUE_BMW320I_SCHEDULING_MIN || input[4] > LPV_LINF_DRIVER_TORQUE_BMW320I_SCHEDULING_MAX) {
-            status |= LPV_LINF_DRIVER_TORQUE_BMW320I_SCHEDULING_CLAMPED;
-        }
+        /* the kernel clamps the scheduling signals for the memberships and reports by how much */
+        if (excess > 0.0) status |= LPV_LINF_DRIVER_TORQUE_BMW320I_SCHEDULING_CLAMPED;
         /* A non-finite result means the state had grown past what doubles hold (e.g. after
          * absurd but finite inputs such as 1e300): holding it would freeze the observer, so it
          * restarts from the initial estimate, which the certified step then drives back. */
