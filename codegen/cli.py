@@ -6,6 +6,7 @@
     uiogen build [NAME ...]
     uiogen check-gains NAME --gains FILE [--json]
     uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png]
+    uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png]
     uiogen demo [--json]
     uiogen bench [--json]
 """
@@ -167,6 +168,20 @@ def cmd_check_gains(args) -> int:
 
 def cmd_validate(args) -> int:
     from . import validate
+    if args.data:
+        result = validate.run_data(args.name, args.data)
+        if args.plot:
+            validate.plot_data(result, args.plot)
+        if args.json:
+            print(json.dumps({k: result[k] for k in ("observer", "baselines")}, indent=1, sort_keys=True))
+            return 0
+        print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} flagged")
+        print(validate.format_data_table(result))
+        if args.plot:
+            print(f"plot: {args.plot}")
+        return 0
+    if not args.scenario:
+        raise UiogenError("validate needs --scenario S (simulated plant) or --data PATH (logged run)")
     result = validate.run_scenario(args.name, args.scenario, args.plant, duration=args.duration)
     if args.plot:
         validate.plot(result, args.plot)
@@ -219,7 +234,8 @@ def main(argv=None) -> int:
     p.set_defaults(func=cmd_check_gains)
     p = sub.add_parser("validate", help="errors on an independent plant, beside the KF/EKF baselines")
     p.add_argument("name")
-    p.add_argument("--scenario", required=True, help="one of codegen.validation.scenarios.names()")
+    p.add_argument("--scenario", help="one of codegen.validation.scenarios.names()")
+    p.add_argument("--data", help="a logged run in the shared CSV format (plain or .gz); 'stanford' = the shared log")
     p.add_argument("--plant", choices=("nominal", "commonroad"), default="nominal")
     p.add_argument("--duration", type=float, default=None, help="truncate the scenario [s]")
     p.add_argument("--json", action="store_true")

@@ -13,21 +13,26 @@ from . import observers, validate
 from .emit import GENERATED_DIR
 
 DEMO_SCENARIOS = ("track_varying_speed", "takeover_opposing_assist")
+REAL_DATA_OBSERVER = "stanford_sideslip"
+REAL_DATA_PLOT = GENERATED_DIR.parent / "build" / "stanford_sideslip_real_data.png"
 
 
 def main(json_output: bool = False) -> int:
     report = {}
-    for name in observers.names():
+    for name in [n for n in observers.names() if n != REAL_DATA_OBSERVER]:
         art = json.loads((GENERATED_DIR / name / f"{name}_design.json").read_text())
         report[name] = {
             "gamma": art["gamma"], "gamma_quadratic": art["quadratic"]["gamma"],
             "worst_lmi_margin": art["certificate"]["worst_min_eig"],
             "worst_lmi_block": art["certificate"]["worst_block"], "discrete": art["discrete"],
             "scenarios": {s: validate.run_scenario(name, s, "nominal") for s in DEMO_SCENARIOS}}
+    real = validate.run_data(REAL_DATA_OBSERVER, "stanford")
+    REAL_DATA_PLOT.parent.mkdir(exist_ok=True)
+    validate.plot_data(real, str(REAL_DATA_PLOT))
     if json_output:
-        print(json.dumps({n: {**{k: v for k, v in e.items() if k != "scenarios"},
+        print(json.dumps({"real_data": {k: real[k] for k in ("observer", "baselines")}, **{n: {**{k: v for k, v in e.items() if k != "scenarios"},
                               "scenarios": {s: json.loads(validate.to_json(r)) for s, r in e["scenarios"].items()}}
-                          for n, e in report.items()}, indent=1, sort_keys=True))
+                          for n, e in report.items()}}, indent=1, sort_keys=True))
         return 0
     for name, e in report.items():
         d = e["discrete"]
@@ -40,4 +45,8 @@ def main(json_output: bool = False) -> int:
             print(f"   {scen}: nominal plant, sensor noise, compiled C step, {r['samples']} samples, "
                   f"max |a_y| {r['max_abs_ay']:.1f} m/s^2, {r['status_flags']} flagged")
             print("     " + validate.format_table(r).replace("\n", "\n     "))
+    print(f"== real data: {REAL_DATA_OBSERVER} on {real['data']} ({real['samples']} samples at 100 Hz, "
+          f"optical-sensor sideslip truth; {real['status_flags']} flagged)")
+    print("   " + validate.format_data_table(real).replace("\n", "\n   "))
+    print(f"   plot: {REAL_DATA_PLOT}")
     return 0

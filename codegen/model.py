@@ -255,8 +255,9 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
                 f"[scheduling.{sig.symbol}] bounds in {params.source}")
         boxes.append(box)
     subs = {p: params.values[str(p)] for p in model.parameters}
-    f = sp.Matrix(model.dynamics).subs(subs)
-    h = sp.Matrix([expr for _, expr in model.outputs]).subs(subs)
+    # structure is checked exactly, with the parameters still symbolic; numbers come after
+    f = sp.Matrix(model.dynamics)
+    h = sp.Matrix([expr for _, expr in model.outputs])
     x, u, d = tuple(model.states), tuple(model.known_inputs), tuple(model.unknown_inputs)
     A = _affine_part(f, x, "the states", model.name)
     B = _affine_part(f, u, "the known inputs", model.name)
@@ -274,6 +275,7 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     for mat, label in ((B, "B"), (D, "D"), (C, "C"), (Du, "Du")):
         if any(e.free_symbols & set(x + u + d) for e in mat):
             raise NotAffineError(f"model {model.name!r}: {label} depends on states or inputs")
+    A, B, D, C, Du = (m.subs(subs) for m in (A, B, D, C, Du))
     sched = tuple(sig.symbol for sig in model.scheduling)
     allowed = set(sched)
     for mat, label in ((A, "A"), (B, "B"), (D, "D"), (C, "C"), (Du, "Du")):

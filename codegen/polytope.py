@@ -150,18 +150,28 @@ def scheduling_nonlinearities(lpv: LPVModel) -> tuple:
 
 
 def _affine_decomposition(lpv: LPVModel, nonlinearities: tuple):
-    """Constant matrices M0, M_k with M(rho) = M0 + sum_k g_k(rho) M_k, for A, B, C, D."""
-    zs = sp.symbols(f"z0:{len(nonlinearities)}")
-    sub = dict(zip(nonlinearities, zs))
+    """Constant matrices M0, M_k with M(rho) = M0 + sum_k g_k(rho) M_k, for A, B, C, D, Du.
+
+    Each entry is expanded into terms c * g(rho) and every term is assigned to its g (the
+    same split that :func:`scheduling_nonlinearities` uses to find them).
+    """
+    rho = set(lpv.scheduling_symbols)
+    index = {sp.srepr(g): k for k, g in enumerate(nonlinearities)}
     out = {}
     for label, mat in (("A", lpv.A), ("B", lpv.B), ("C", lpv.C), ("D", lpv.D), ("Du", lpv.Du)):
-        expanded = mat.applyfunc(lambda e: sp.expand(e).xreplace(sub))
-        for e in expanded:
-            if e.free_symbols & set(lpv.scheduling_symbols):
-                raise ModelDefinitionError(f"{label} entry {e} is not affine in the detected "
-                                           f"nonlinearities {nonlinearities}")
-        base = np.array(expanded.subs({z: 0 for z in zs}), dtype=float).reshape(mat.shape)
-        coeffs = [np.array(expanded.diff(z), dtype=float).reshape(mat.shape) for z in zs]
+        base = np.zeros(mat.shape)
+        coeffs = [np.zeros(mat.shape) for _ in nonlinearities]
+        for (i, j) in itertools.product(range(mat.shape[0]), range(mat.shape[1])):
+            for term in sp.Add.make_args(sp.expand(mat[i, j])):
+                if not term.free_symbols & rho:
+                    base[i, j] += float(term)
+                    continue
+                c, dep = term.as_independent(*rho, as_Add=False)
+                k = index.get(sp.srepr(dep))
+                if k is None or c.free_symbols:
+                    raise ModelDefinitionError(f"{label}[{i},{j}] term {term} is not affine in the detected "
+                                               f"nonlinearities {nonlinearities}")
+                coeffs[k][i, j] += float(c)
         out[label] = (base, coeffs)
     return out
 

@@ -21,7 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from . import observers, pipeline, simulate
-from .errors import ModelDefinitionError
+from .errors import ModelDefinitionError, SampleError
 from .validation import metrics, scenarios
 
 SENSOR_NOISE = {"r": np.deg2rad(0.05), "delta": np.deg2rad(0.02), "delta_dot": np.deg2rad(0.2),
@@ -159,3 +159,73 @@ def format_table(result: dict) -> str:
 def to_json(result: dict) -> str:
     return json.dumps({k: result[k] for k in ("observer", "baselines", "plant", "scenario", "status_flags",
                                               "samples", "max_abs_ay")}, indent=1, sort_keys=True)
+
+
+DATA_COLUMNS = {"delta": "delta", "y_r": "yaw_rate", "y_a_y": "ay", "v_x": "vx", "y_delta": "delta"}
+
+
+def run_data(name: str, path: str = "stanford") -> dict:
+    """Run the compiled step over a logged run in the shared CSV format, beside the baselines.
+
+    Returns ``{"observer": {SIGNAL: {"rms", "mae", "max", "std"}}, "baselines": {...}}`` with
+    SIGNAL ``beta`` [deg] and ``vy`` [m/s] (v_y = v_x tan(beta)), plus the signals for plots.
+    """
+    from python_bindings import load
+    from .validation import stanford
+    run = stanford.load(path)
+    obs = load(name)
+    missing = [c for c in obs.input_names if c not in DATA_COLUMNS]
+    if missing:
+        raise SampleError(f"observer {name!r} needs {', '.join(missing)}, which the log does not record "
+                          f"(it has delta, r, a_y, v_x); use an observer designed for this data, e.g. "
+                          f"stanford_sideslip")
+    inputs = np.column_stack([getattr(run, DATA_COLUMNS[c]) for c in obs.input_names])
+    out, status, _ = obs.run(inputs)
+    i_beta = obs.state_names.index("beta")
+    beta = out[:, i_beta]
+    t = run.t - run.t[0]
+
+    def table(b):
+        return {"beta": _stats_all(run.beta_true, b, True),
+                "vy": _stats_all(run.vx * np.tan(run.beta_true), run.vx * np.tan(b), False)}
+
+    kf, ekf = stanford.linear_kf(run), stanford.ekf(run)
+    return {"observer": table(beta), "baselines": {"linear_kf": table(kf.beta), "ekf": table(ekf.beta)},
+            "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)), "data": run.source,
+            "signals": {"t": t, "beta_true": run.beta_true, "beta": beta, "linear_kf": kf.beta, "ekf": ekf.beta}}
+
+
+def _stats_all(truth, est, angle: bool) -> dict:
+    s = metrics.error_stats(np.asarray(truth), np.asarray(est), degrees=angle)
+    return {"mae": s.e_mean, "max": s.e_max, "std": s.std, "rms": s.rms}
+
+
+def plot_data(result: dict, path: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    sig = result["signals"]
+    fig, ax = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
+    deg = 180 / np.pi
+    ax[0].plot(sig["t"], sig["beta_true"] * deg, "k", lw=0.8, label="optical sensor (truth)")
+    ax[0].plot(sig["t"], sig["beta"] * deg, "r", lw=0.8, label="observer (C step)")
+    ax[0].plot(sig["t"], sig["linear_kf"] * deg, "b", lw=0.6, alpha=0.6, label="linear KF")
+    ax[0].set_ylabel("beta [deg]")
+    ax[0].legend(loc="upper right", fontsize=8)
+    for key, color in (("beta", "r"), ("linear_kf", "b"), ("ekf", "g")):
+        ax[1].plot(sig["t"], (sig[key] - sig["beta_true"]) * deg, color, lw=0.6, label=key)
+    ax[1].set_ylabel("error [deg]")
+    ax[1].set_xlabel("t [s]")
+    ax[1].legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def format_data_table(result: dict) -> str:
+    rows = [("observer", result["observer"])] + list(result["baselines"].items())
+    lines = [f"{'estimator':12s} {'beta RMSE':>10s} {'beta max':>9s} {'beta MAE':>9s} {'vy RMSE':>9s}   [deg, m/s]"]
+    for name, t in rows:
+        lines.append(f"{name:12s} {t['beta']['rms']:10.4f} {t['beta']['max']:9.4f} {t['beta']['mae']:9.4f} "
+                     f"{t['vy']['rms']:9.4f}")
+    return "\n".join(lines)

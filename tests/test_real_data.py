@@ -1,0 +1,39 @@
+"""Real vehicle data (shared Stanford log): the compiled observer against the optical-sensor truth."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from codegen import validate
+from codegen.errors import SampleError
+from codegen.validation import stanford
+
+ROOT = Path(__file__).resolve().parent.parent
+pytestmark = pytest.mark.skipif(not stanford.STANFORD_PATH.is_file(), reason="shared data missing")
+
+
+def test_stanford_observer_beats_the_linear_kf():
+    r = validate.run_data("stanford_sideslip", "stanford")
+    ours, kf = r["observer"]["beta"]["rms"], r["baselines"]["linear_kf"]["beta"]["rms"]
+    assert r["status_flags"] == 0 and r["samples"] == 27500
+    assert 0.6 < kf < 0.75                    # the source repository's KF, reproduced (~0.68 deg)
+    assert ours <= 0.55                       # issue target, no per-log tuning
+    assert ours <= 0.8 * kf                   # at least 20 % below the KF measured in the same run
+
+
+def test_observer_without_the_logged_signals_is_refused():
+    with pytest.raises(SampleError, match="stanford_sideslip"):
+        validate.run_data("lpv_linf_driver_torque", "stanford")
+
+
+def test_cli_json_format(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "codegen.cli", "validate", "stanford_sideslip", "--data",
+                           "stanford", "--json"], capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads(proc.stdout)
+    assert set(res) == {"observer", "baselines"} and set(res["baselines"]) == {"linear_kf", "ekf"}
+    for table in (res["observer"], *res["baselines"].values()):
+        assert set(table) == {"beta", "vy"}
+        assert {"rms", "mae", "max"} <= set(table["beta"])
