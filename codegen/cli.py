@@ -73,7 +73,8 @@ def cmd_design(args) -> int:
         _print_json(s)
         return 0
     print(f"observer {b.name}: {s['polytope']} polytope, {s['vertices']} vertices")
-    print(f"  gamma (PDLF)            {s['gamma']:.6g}   (quadratic: {s['gamma_quadratic']:.6g})")
+    kind = b.design.settings.lyapunov
+    print(f"  gamma ({kind:9s})      {s['gamma']:.6g}   (quadratic: {s['gamma_quadratic']:.6g})")
     print(f"  re-checked gamma        {s['recheck_gamma']:.6g}   (numpy, no solver)")
     print(f"  solve / build time      {1e3 * s['solve_time_s']:.1f} ms / {1e3 * s['build_time_s']:.1f} ms "
           f"({s['solver_iterations']} Clarabel iterations); whole design {s['total_design_time_s']:.2f} s")

@@ -90,7 +90,9 @@ class Polytope:
         corners = []
         for pick in itertools.product((0, 1), repeat=n - 1):
             head = [self.rate_bounds[k, pick[k]] for k in range(n - 1)]
-            corners.append(head + [-sum(head)])
+            corner = head + [-sum(head)]
+            if corner not in corners:   # degenerate bounds (e.g. rate_bounds="none") repeat corners
+                corners.append(corner)
         return np.array(corners, dtype=float)
 
     @cached_property

@@ -29,8 +29,9 @@ SENSOR_NOISE = {"r": np.deg2rad(0.05), "delta": np.deg2rad(0.02), "delta_dot": n
 SETTLE_TIME = 2.0
 
 
-def _stats(truth, est, t, angle: bool) -> dict:
-    mask = t >= SETTLE_TIME
+def _stats(truth, est, t=None, angle: bool = False) -> dict:
+    """Error statistics, after SETTLE_TIME when sample times ``t`` are given (simulations)."""
+    mask = slice(None) if t is None else np.asarray(t) >= SETTLE_TIME
     s = metrics.error_stats(np.asarray(truth)[mask], np.asarray(est)[mask], degrees=angle)
     return {"mae": s.e_mean, "max": s.e_max, "std": s.std, "rms": s.rms}
 
@@ -76,8 +77,8 @@ def _baselines(config, truth, noisy) -> dict:
     out = {}
     for name, res in (("linear_kf", stanford.linear_kf(run, car)),
                       ("ekf", stanford.ekf(run, car, stanford.EKFConfig(mu=1.0)))):
-        out[name] = {"beta": _stats(truth["beta"], res.beta, truth["t"], True),
-                     "r": _stats(truth["r"], res.r, truth["t"], True)}
+        out[name] = {"beta": _stats(truth["beta"], res.beta, truth["t"], angle=True),
+                     "r": _stats(truth["r"], res.r, truth["t"], angle=True)}
     return out
 
 
@@ -115,7 +116,7 @@ def run_scenario(name: str, scenario: str, plant: str = "nominal", duration: flo
     table = {}
     for i, sig in enumerate(obs.state_names):
         if sig in truth:
-            table[sig] = _stats(truth[sig], out[:, i], truth["t"], d.units.get(sig, "").startswith("rad"))
+            table[sig] = _stats(truth[sig], out[:, i], truth["t"], angle=d.units.get(sig, "").startswith("rad"))
     return {"observer": table, "baselines": _baselines(config, truth, noisy),
             "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)),
             "max_abs_ay": float(np.abs(truth["a_y"]).max()), "plant": plant, "scenario": scenario,
@@ -186,18 +187,13 @@ def run_data(name: str, path: str = "stanford") -> dict:
     t = run.t - run.t[0]
 
     def table(b):
-        return {"beta": _stats_all(run.beta_true, b, True),
-                "vy": _stats_all(run.vx * np.tan(run.beta_true), run.vx * np.tan(b), False)}
+        return {"beta": _stats(run.beta_true, b, angle=True),
+                "vy": _stats(run.vx * np.tan(run.beta_true), run.vx * np.tan(b))}
 
     kf, ekf = stanford.linear_kf(run), stanford.ekf(run)
     return {"observer": table(beta), "baselines": {"linear_kf": table(kf.beta), "ekf": table(ekf.beta)},
             "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)), "data": run.source,
             "signals": {"t": t, "beta_true": run.beta_true, "beta": beta, "linear_kf": kf.beta, "ekf": ekf.beta}}
-
-
-def _stats_all(truth, est, angle: bool) -> dict:
-    s = metrics.error_stats(np.asarray(truth), np.asarray(est), degrees=angle)
-    return {"mae": s.e_mean, "max": s.e_max, "std": s.std, "rms": s.rms}
 
 
 def plot_data(result: dict, path: str) -> None:
