@@ -90,7 +90,7 @@ class ObserverData:
         return out
 
 
-def _blend(eta, mats, xp=np):
+def _blend(eta, mats):
     total = eta[0] * mats[0]
     for e, m in zip(eta[1:], mats[1:]):
         total = total + e * m
@@ -244,6 +244,7 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
     clamped = [ca.fmin(ca.fmax(v, lo), hi) for v, lo, hi in zip(values, poly.lowers, poly.uppers)]
     excess = sum(ca.fabs(v - c) for v, c in zip(values, clamped))
     theta = premise_of_signal(poly, clamped, xp=ca)
+    eta = sector_weights_product(theta, poly.premises, xp=ca)
     fact = gain_factorization(data) if not data.quadratic else None
     if fact is not None:
         # two vertices: every blended matrix is affine in the premise; entries that do not
@@ -262,16 +263,14 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
             sp.lambdify(poly.signals, d_, mods)(*clamped)) for n_, d_ in num_den])
         W = ca.DM(W0) + th * ca.DM(W1)
         M = ca.DM(V) @ (ca.repmat(scale, 1, ny) * W)
-        eta = None
     else:
-        eta = sector_weights_product(theta, poly.premises, xp=ca)
         A = _blend(eta, [ca.DM(a) for a in poly.A])
         if data.quadratic:
             # common Lyapunov matrix: M(th) = sum eta_i P^-1 L_i, no solve at run time
             M = _blend(eta, [ca.DM(np.linalg.solve(data.Q[0], l)) for l in data.L])
         else:
             M = ca.solve(_blend(eta, [ca.DM(q) for q in data.Q]), _blend(eta, [ca.DM(l) for l in data.L]))
-    blend_or_const = (lambda mats: ca.DM(mats[0]) if np.ptp(mats, axis=0).max(initial=0) == 0 or eta is None
+    blend_or_const = (lambda mats: ca.DM(mats[0]) if np.ptp(mats, axis=0).max(initial=0) == 0
                       else _blend(eta, [ca.DM(m) for m in mats]))
     B, C, Du = blend_or_const(poly.B), blend_or_const(poly.C), blend_or_const(poly.Du)
     D, Dp = ca.DM(poly.D[0]), ca.DM(data.Dp)
