@@ -189,7 +189,7 @@ def cmd_validate(args) -> int:
     if args.json:
         print(validate.to_json(result))
         return 0
-    print(f"{args.name}: scenario {args.scenario} on the {args.plant} plant, {result['samples']} samples, "
+    print(f"{args.name}: scenario {args.scenario} on the {args.plant} plant ({result['plant_model']}), {result['samples']} samples, "
           f"max |a_y| {result['max_abs_ay']:.2f} m/s^2, {result['status_flags']} flagged samples; "
           f"errors after {validate.SETTLE_TIME:g} s (angles in degrees)")
     print(validate.format_table(result))
@@ -237,7 +237,8 @@ def main(argv=None) -> int:
     p.add_argument("name")
     p.add_argument("--scenario", help="one of codegen.validation.scenarios.names()")
     p.add_argument("--data", help="a logged run in the shared CSV format (plain or .gz); 'stanford' = the shared log")
-    p.add_argument("--plant", choices=("nominal", "commonroad"), default="nominal")
+    p.add_argument("--plant", choices=("nominal", "model", "commonroad"), default="nominal",
+                   help="nominal: our symbolic truth plant (Pacejka); model: the observer's exact model")
     p.add_argument("--duration", type=float, default=None, help="truncate the scenario [s]")
     p.add_argument("--json", action="store_true")
     p.add_argument("--plot", help="write estimates vs truth to this PNG")

@@ -141,6 +141,7 @@ class ParameterSet:
     values: Mapping[str, float]
     scheduling: Mapping[str, SchedulingBox]
     meta: Mapping[str, str]
+    plant: Mapping[str, float] = field(default_factory=dict)   # truth-plant-only values ([plant])
 
 
 @dataclass(frozen=True)
@@ -213,7 +214,12 @@ def load_parameters(path: str | Path) -> ParameterSet:
             raise SchedulingBoundsError(f"{path}: scheduling {key!r} needs rate_min <= rate_max")
         boxes[key] = box
     meta = {k: str(v) for k, v in (data.get("meta") or {}).items()}
-    return ParameterSet(str(path), values, boxes, meta)
+    plant = {}
+    for key, value in (data.get("plant") or {}).items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ModelDefinitionError(f"{path}: plant parameter {key!r} must be a number, got {value!r}")
+        plant[key] = float(value)
+    return ParameterSet(str(path), values, boxes, meta, plant)
 
 
 def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str) -> sp.Matrix:

@@ -15,10 +15,19 @@ from .errors import ModelDefinitionError, SampleError
 from .model import LPVModel
 
 
-def plant_rhs(lpv: LPVModel):
-    """Numeric x_dot = f(x, u, d, rho) from the symbolic definition (exact, not the polytope)."""
-    d = lpv.definition
-    subs = {p: lpv.parameters.values[str(p)] for p in d.parameters}
+def plant_rhs(lpv: LPVModel, definition=None):
+    """Numeric x_dot = f(x, u, d, rho) from a symbolic definition (exact, not the polytope).
+
+    ``definition`` defaults to the observer's own model; a truth-plant definition (same
+    states and inputs, e.g. Pacejka tyres) takes its extra values from the ``[plant]`` table.
+    """
+    d = definition or lpv.definition
+    values = {**lpv.parameters.values, **lpv.parameters.plant}
+    missing = [str(p) for p in d.parameters if str(p) not in values]
+    if missing:
+        raise ModelDefinitionError(f"plant {d.name!r} needs {', '.join(missing)} in the [plant] table of "
+                                   f"{lpv.parameters.source}")
+    subs = {p: values[str(p)] for p in d.parameters}
     f = sp.Matrix(d.dynamics).subs(subs)
     args = [*d.states, *d.known_inputs, *d.unknown_inputs, *(s.symbol for s in d.scheduling)]
     fn = sp.lambdify(args, f, "numpy")
@@ -29,7 +38,7 @@ def plant_rhs(lpv: LPVModel):
     return rhs, nx, nu, nd
 
 
-def nominal_plant(config, lpv: LPVModel, scn) -> dict:
+def nominal_plant(config, lpv: LPVModel, scn, definition=None) -> dict:
     """The observer's own symbolic model, integrated exactly (RK4 at Ts/10: true 1/v_x terms, no
     polytope, no Taylor reduction) with planar pose kinematics, closed with the scenario's driver.
 
@@ -40,7 +49,8 @@ def nominal_plant(config, lpv: LPVModel, scn) -> dict:
     if not {"beta", "r", "delta", "delta_dot"} <= set(names):
         raise ModelDefinitionError(f"the nominal closed-loop plant needs states beta, r, delta, delta_dot; "
                                    f"model {d.name!r} has {names}")
-    rhs, nx, _, _ = plant_rhs(lpv)
+    rhs, nx, _, _ = plant_rhs(lpv, definition)
+    extra = len(definition.scheduling) - 1 if definition is not None else 0   # e.g. a_x for load transfer
     ib, ir, idl, idd = (names.index(k) for k in ("beta", "r", "delta", "delta_dot"))
     n, sub = scn.t.size, 10
     h = config.sample_time / sub
@@ -49,9 +59,9 @@ def nominal_plant(config, lpv: LPVModel, scn) -> dict:
     v0, k0 = float(scn.v_ref[0]), (0.0 if scn.kappa_ref is None else float(scn.kappa_ref[0]))
     x[ir] = v0 * k0                  # start in steady cornering on a curved path, as the CommonRoad plant
 
-    def f(z, t_d, t_a, vx):
+    def f(z, t_d, t_a, vx, ax):
         dz = np.empty_like(z)
-        dz[:nx] = rhs(z[:nx], [t_a], [t_d], vx)
+        dz[:nx] = rhs(z[:nx], [t_a], [t_d], [vx, ax][:1 + extra])
         vy = np.tan(z[ib]) * vx
         dz[nx] = vx * np.cos(z[nx + 2]) - vy * np.sin(z[nx + 2])
         dz[nx + 1] = vx * np.sin(z[nx + 2]) + vy * np.cos(z[nx + 2])
@@ -60,11 +70,11 @@ def nominal_plant(config, lpv: LPVModel, scn) -> dict:
 
     out = {k: np.empty(n) for k in ("beta", "r", "delta", "delta_dot", "T_d", "T_a", "v_x", "a_y")}
     for k in range(n):
-        vx = float(scn.v_ref[k])
+        vx, ax = float(scn.v_ref[k]), float(scn.a_ref[k])
         meas = {"X": x[nx], "Y": x[nx + 1], "psi": x[nx + 2], "v_x": vx, "v_y": np.tan(x[ib]) * vx,
                 "r": x[ir], "delta": x[idl], "delta_dot": x[idd]}
         t_d, t_a = float(driver(k, meas)), float(scn.T_a[k])
-        dz = f(x, t_d, t_a, vx)
+        dz = f(x, t_d, t_a, vx, ax)
         for key, idx in (("beta", ib), ("r", ir), ("delta", idl), ("delta_dot", idd)):
             out[key][k] = x[idx]
         out["T_d"][k], out["T_a"][k], out["v_x"][k] = t_d, t_a, vx
@@ -72,10 +82,10 @@ def nominal_plant(config, lpv: LPVModel, scn) -> dict:
         if k == n - 1:
             break
         for _ in range(sub):
-            k1 = f(x, t_d, t_a, vx)
-            k2 = f(x + 0.5 * h * k1, t_d, t_a, vx)
-            k3 = f(x + 0.5 * h * k2, t_d, t_a, vx)
-            k4 = f(x + h * k3, t_d, t_a, vx)
+            k1 = f(x, t_d, t_a, vx, ax)
+            k2 = f(x + 0.5 * h * k1, t_d, t_a, vx, ax)
+            k3 = f(x + 0.5 * h * k2, t_d, t_a, vx, ax)
+            k4 = f(x + h * k3, t_d, t_a, vx, ax)
             x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         if not np.all(np.isfinite(x)):
             raise SampleError(f"nominal plant diverged at t = {scn.t[k]:.2f} s in scenario {scn.name!r}")

@@ -2,8 +2,10 @@
 
 Plants:
 
-* ``nominal``: the observer's own symbolic model integrated exactly (RK4, 1 kHz, no
-  polytope, no Taylor reduction), for scenarios with an open-loop driver torque;
+* ``nominal``: our own symbolic truth plant (the model module's ``PLANT``: Pacejka tyres,
+  load transfer, trail-based aligning torque) in closed loop with the scenario's driver;
+  where a model has no truth plant (or its parameter file no ``[plant]`` values), the
+  observer's own model integrated exactly; ``model`` forces the latter (no model mismatch);
 * ``commonroad``: the CommonRoad 29-state multi-body model with PAC2002 tyres
   (:mod:`codegen.validation.commonroad_plant`), steered through the seed-000 column whose
   aligning torque comes from the plant's own front slip; the observer must have been
@@ -90,6 +92,17 @@ def _car(config):
     return stanford.VehicleParams(m=v["M"], lf=v["l_f"], lr=v["l_r"], iz=v["I_z"], cf=2 * v["C_f"], cr=2 * v["C_r"])
 
 
+def truth_plant(config, lpv):
+    """The model module's truth plant (``PLANT``: e.g. Pacejka tyres) when its parameter file has the
+    ``[plant]`` values it needs, else None (the observer's own exact model is integrated)."""
+    import importlib
+    plant = getattr(importlib.import_module(f"model_defs.{config.model}"), "PLANT", None)
+    if plant is None:
+        return None
+    values = {**lpv.parameters.values, **lpv.parameters.plant}
+    return plant if all(str(p) in values for p in plant.parameters) else None
+
+
 def scenario_for(config, scenario: str, duration: float | None = None):
     """A library scenario at the observer's sample rate, optionally truncated."""
     return _truncate(scenarios.make(scenario, sample_rate=1.0 / config.sample_time), duration)
@@ -104,10 +117,13 @@ def run_scenario(name: str, scenario: str, plant: str = "nominal", duration: flo
     scn = scenario_for(config, scenario, duration)
     if plant == "commonroad":
         truth = _truth_commonroad(config, scn)
-    elif plant == "nominal":
-        truth = simulate.nominal_plant(config, lpv, scn)
+        plant_model = "CommonRoad multi-body (vehiclemodels)"
+    elif plant in ("nominal", "model"):
+        definition = truth_plant(config, lpv) if plant == "nominal" else None
+        truth = simulate.nominal_plant(config, lpv, scn, definition)
+        plant_model = definition.name if definition is not None else lpv.definition.name + " (exact model)"
     else:
-        raise ModelDefinitionError(f"plant must be 'nominal' or 'commonroad', got {plant!r}")
+        raise ModelDefinitionError(f"plant must be 'nominal', 'model' or 'commonroad', got {plant!r}")
     noisy = simulate.add_sensor_noise(truth, SENSOR_NOISE, seed)
     obs = load(name)
     d = lpv.definition
@@ -119,7 +135,8 @@ def run_scenario(name: str, scenario: str, plant: str = "nominal", duration: flo
             table[sig] = _stats(truth[sig], out[:, i], truth["t"], angle=d.units.get(sig, "").startswith("rad"))
     return {"observer": table, "baselines": _baselines(config, truth, noisy),
             "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)),
-            "max_abs_ay": float(np.abs(truth["a_y"]).max()), "plant": plant, "scenario": scenario,
+            "max_abs_ay": float(np.abs(truth["a_y"]).max()), "plant": plant, "plant_model": plant_model,
+            "scenario": scenario,
             "signals": {"t": truth["t"], "truth": truth, "estimate": {s: out[:, i] for i, s in enumerate(obs.state_names)}},
             "units": dict(d.units)}
 
@@ -158,8 +175,8 @@ def format_table(result: dict) -> str:
 
 
 def to_json(result: dict) -> str:
-    return json.dumps({k: result[k] for k in ("observer", "baselines", "plant", "scenario", "status_flags",
-                                              "samples", "max_abs_ay")}, indent=1, sort_keys=True)
+    return json.dumps({k: result[k] for k in ("observer", "baselines", "plant", "plant_model", "scenario",
+                                              "status_flags", "samples", "max_abs_ay")}, indent=1, sort_keys=True)
 
 
 DATA_COLUMNS = {"delta": "delta", "y_r": "yaw_rate", "y_a_y": "ay", "v_x": "vx", "y_delta": "delta"}

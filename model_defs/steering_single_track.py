@@ -49,3 +49,45 @@ MODEL = ModelDefinition(
            "T_a": "N m", "T_d": "N m", "v_x": "m/s"},
     doc=__doc__,
 )
+
+
+# --- Truth plant (validation only; the observer is designed from MODEL) ------------------------
+# Same vehicle and column, but Pacejka magic-formula axle forces (seed 004 eq. (2)) with
+# longitudinal load transfer, and an aligning torque from the plant's own front slip with a
+# pneumatic trail that falls linearly to zero at full sliding, instead of the linear eta_t term.
+# Extra values come from the [plant] table of the parameter file.
+mu, h_cg, g, C_pac, E_pac, a_x = sp.symbols("mu h_cg g C_pac E_pac a_x")
+_wheelbase = l_f + l_r
+_Fz_f = M * (g * l_r - h_cg * a_x) / _wheelbase          # axle loads with longitudinal transfer
+_Fz_r = M * (g * l_f + h_cg * a_x) / _wheelbase
+
+
+def _magic(alpha, c_axle, fz):
+    D_ = mu * fz
+    B_ = c_axle / (C_pac * D_)                           # B C D = axle cornering stiffness
+    return D_ * sp.sin(C_pac * sp.atan((1 - E_pac) * B_ * alpha + E_pac * sp.atan(B_ * alpha)))
+
+
+_Fyf_p = _magic(alpha_f, 2 * C_f, _Fz_f)
+_Fyr_p = _magic(alpha_r, 2 * C_r, _Fz_r)
+_alpha_slide = 3 * mu * _Fz_f / (2 * C_f)                 # brush-model full-slide angle (front axle)
+_trail = eta_t * sp.Max(0, 1 - sp.Abs(alpha_f) / _alpha_slide)
+_T_align = -K_p * _trail * _Fyf_p / R_s                  # equals the model's term for small slip
+
+PLANT = ModelDefinition(
+    name="steering_single_track_pacejka_plant",
+    states=(beta, r, delta, delta_dot),
+    known_inputs=(T_a,),
+    unknown_inputs=(T_d,),
+    dynamics=sp.Matrix([
+        (_Fyf_p + _Fyr_p) / (M * v_x) - r,
+        (l_f * _Fyf_p - l_r * _Fyr_p) / I_z,
+        delta_dot,
+        (_T_align - B_s * R_s * delta_dot + T_s) / (R_s * I_s),
+    ]),
+    outputs=(("r", r), ("delta", delta), ("delta_dot", delta_dot)),
+    scheduling=(SchedulingSignal(v_x, "m/s"), SchedulingSignal(a_x, "m/s^2")),
+    parameters=(l_f, l_r, eta_t, R_s, B_s, K_p, M, I_z, I_s, C_f, C_r, mu, h_cg, g, C_pac, E_pac),
+    units=MODEL.units,
+    doc="Truth plant: seed-000 vehicle with Pacejka tyres, load transfer and trail-based aligning torque.",
+)
