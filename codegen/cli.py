@@ -183,7 +183,8 @@ def cmd_validate(args) -> int:
         return 0
     if not args.scenario:
         raise UiogenError("validate needs --scenario S (simulated plant) or --data PATH (logged run)")
-    result = validate.run_scenario(args.name, args.scenario, args.plant, duration=args.duration)
+    result = validate.run_scenario(args.name, args.scenario, args.plant, duration=args.duration,
+                                   progress=validate.progress_bar(f"{args.scenario} on {args.plant}"))
     if args.plot:
         validate.plot(result, args.plot)
     if args.json:

@@ -38,7 +38,7 @@ def plant_rhs(lpv: LPVModel, definition=None):
     return rhs, nx, nu, nd
 
 
-def nominal_plant(config, lpv: LPVModel, scn, definition=None) -> dict:
+def nominal_plant(config, lpv: LPVModel, scn, definition=None, progress=None) -> dict:
     """The observer's own symbolic model, integrated exactly (RK4 at Ts/10: true 1/v_x terms, no
     polytope, no Taylor reduction) with planar pose kinematics, closed with the scenario's driver.
 
@@ -70,6 +70,8 @@ def nominal_plant(config, lpv: LPVModel, scn, definition=None) -> dict:
 
     out = {k: np.empty(n) for k in ("beta", "r", "delta", "delta_dot", "T_d", "T_a", "v_x", "a_y")}
     for k in range(n):
+        if progress is not None and (k % max(n // 50, 1) == 0 or k == n - 1):
+            progress((k + 1) / n)
         vx, ax = float(scn.v_ref[k]), float(scn.a_ref[k])
         meas = {"X": x[nx], "Y": x[nx + 1], "psi": x[nx + 2], "v_x": vx, "v_y": np.tan(x[ib]) * vx,
                 "r": x[ir], "delta": x[idl], "delta_dot": x[idd]}

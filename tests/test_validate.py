@@ -14,8 +14,15 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def test_nominal_plant_short_run():
-    r = validate.run_scenario("lpv_linf_driver_torque", "zigzag_constant_speed_assist", "nominal", duration=8.0)
+    ticks = []
+    r = validate.run_scenario("lpv_linf_driver_torque", "zigzag_constant_speed_assist", "nominal", duration=8.0,
+                              progress=ticks.append)
     assert r["status_flags"] == 0 and r["samples"] == 801
+    assert ticks[-1] == 1.0 and len(ticks) > 10 and ticks == sorted(ticks)
+    assert r["plant_model"] == "steering_single_track_pacejka_plant"
+    # seed 003 eq. (32) figures beside seed 000's
+    assert {"rmse_percent", "nmse_percent"} <= set(r["observer"]["beta"])
+    assert 0 < r["observer"]["beta"]["nmse_percent"] <= 100
     obs = r["observer"]
     assert set(obs) == {"beta", "r", "delta", "delta_dot", "T_d"}
     # exact-model plant at 15 m/s: the observer must track sideslip closely

@@ -295,7 +295,7 @@ def _measure(z):
             "v_y": z[10], "delta_dot": z[29]}
 
 
-def simulate(scenario, cfg: PlantConfig = PlantConfig()) -> GroundTruth:
+def simulate(scenario, cfg: PlantConfig = PlantConfig(), progress=None) -> GroundTruth:
     """Run a scenario on the CommonRoad multi-body plant.
 
     Parameters
@@ -304,6 +304,8 @@ def simulate(scenario, cfg: PlantConfig = PlantConfig()) -> GroundTruth:
         Provides ``t`` (output grid), ``v_ref``, ``a_ref``, ``T_a``, ``make_driver()`` (a fresh
         callable ``(k, meas) -> T_d``) and ``friction(t, X, Y)``; its ``sample_rate`` must equal ``cfg.sample_rate``.
     cfg : PlantConfig, optional
+    progress : callable, optional
+        Called with the fraction done (0-1] about 50 times: a progress bar for long campaigns.
 
     Returns
     -------
@@ -336,6 +338,8 @@ def simulate(scenario, cfg: PlantConfig = PlantConfig()) -> GroundTruth:
         plant.set_mu(float(scenario.friction(0.0, z[0], z[1])))
         driver.preload(-plant.aligning(z)[0] - float(scenario.T_a[0]))
     for k in range(n):
+        if progress is not None and (k % max(n // 50, 1) == 0 or k == n - 1):
+            progress((k + 1) / n)
         tk = scenario.t[k]
         meas = _measure(z)
         plant.set_mu(float(scenario.friction(tk, z[0], z[1])))
