@@ -50,7 +50,12 @@ def nominal_plant(config, lpv: LPVModel, scn, definition=None, progress=None) ->
         raise ModelDefinitionError(f"the nominal closed-loop plant needs states beta, r, delta, delta_dot; "
                                    f"model {d.name!r} has {names}")
     rhs, nx, _, _ = plant_rhs(lpv, definition)
-    extra = len(definition.scheduling) - 1 if definition is not None else 0   # e.g. a_x for load transfer
+    # scheduling signals a plant may use, by name: the speed and its derivative (load transfer)
+    known = ("v_x", "a_x")
+    sched = [str(g.symbol) for g in (definition or lpv.definition).scheduling]
+    unknown = [n for n in sched if n not in known]
+    if unknown:
+        raise ModelDefinitionError(f"the nominal plant provides scheduling signals {known}, not {unknown}")
     ib, ir, idl, idd = (names.index(k) for k in ("beta", "r", "delta", "delta_dot"))
     n, sub = scn.t.size, 10
     h = config.sample_time / sub
@@ -61,7 +66,8 @@ def nominal_plant(config, lpv: LPVModel, scn, definition=None, progress=None) ->
 
     def f(z, t_d, t_a, vx, ax):
         dz = np.empty_like(z)
-        dz[:nx] = rhs(z[:nx], [t_a], [t_d], [vx, ax][:1 + extra])
+        values = {"v_x": vx, "a_x": ax}
+        dz[:nx] = rhs(z[:nx], [t_a], [t_d], [values[n] for n in sched])
         vy = np.tan(z[ib]) * vx
         dz[nx] = vx * np.cos(z[nx + 2]) - vy * np.sin(z[nx + 2])
         dz[nx + 1] = vx * np.sin(z[nx + 2]) + vy * np.cos(z[nx + 2])

@@ -71,14 +71,15 @@ def _truncate(scn, duration: float | None):
 
 
 def _commonroad_vehicle(config) -> int:
-    meta = config.parameter_path.read_text()
-    for k, car in ((1, "vehicle 1"), (2, "vehicle 2"), (3, "vehicle 3")):
-        if f"CommonRoad {car}" in meta or f"parameters_vehicle{k}" in meta:
-            return k
-    raise ModelDefinitionError(
-        f"observer {config.name!r} was designed for {config.parameters}, not for a CommonRoad car; "
-        f"validate on the CommonRoad plant with an observer designed for its parameters, e.g. "
-        f"lpv_linf_driver_torque_bmw320i")
+    """The CommonRoad parameter set an observer was designed for ([meta] commonroad_vehicle)."""
+    from .model import load_parameters
+    vehicle = load_parameters(config.parameter_path).meta.get("commonroad_vehicle")
+    if vehicle not in ("1", "2", "3"):
+        raise ModelDefinitionError(
+            f"observer {config.name!r} was designed for {config.parameters}, not for a CommonRoad car; "
+            f"validate on the CommonRoad plant with an observer designed for its parameters, e.g. "
+            f"lpv_linf_driver_torque_bmw320i")
+    return int(vehicle)
 
 
 def _truth_commonroad(config, scn, progress=None):

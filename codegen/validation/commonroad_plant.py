@@ -216,6 +216,7 @@ def params_toml(vehicle: int = 2, column: ColumnParams = TABLE1_COLUMN) -> str:
 
 [meta]
 source = "commonroad-vehicle-models parameters_vehicle{vehicle} + seed 000 Table I column"
+commonroad_vehicle = "{vehicle}"
 car = "{names[vehicle]} (CommonRoad vehicle {vehicle})"
 
 [parameters]
