@@ -81,12 +81,13 @@ class ObserverData:
         mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "Abs": ca.fabs,
                  "Min": ca.fmin, "Max": ca.fmax}, "math"] if xp is ca else "numpy"
         out = []
+        args = (*self.output_symbols, *self.raw_signals)
+        values = [y[k] for k in range(len(self.output_symbols))] + [raw[sym] for sym in self.raw_signals]
         for sym in self.poly.signals:
             if sym in raw:
                 out.append(raw[sym])
             else:
-                expr = dict(self.derived)[sym]
-                out.append(sp.lambdify(self.output_symbols, expr, mods)(*[y[k] for k in range(len(self.output_symbols))]))
+                out.append(sp.lambdify(args, dict(self.derived)[sym], mods)(*values))
         return out
 
 

@@ -87,14 +87,15 @@ class ModelDefinition:
     def __post_init__(self) -> None:
         names = [str(s) for s in (*self.states, *self.known_inputs, *self.unknown_inputs,
                                   *(g.symbol for g in self.scheduling), *self.parameters)]
-        allowed_derived = {str(p) for p in self.parameters} | {f"y_{n}" for n, _ in self.outputs}
+        allowed_derived = ({str(p) for p in self.parameters} | {f"y_{n}" for n, _ in self.outputs}
+                           | {str(g.symbol) for g in self.scheduling if g.derived is None})
         for g in self.scheduling:
             if g.derived is not None:
                 stray = {str(x) for x in sp.sympify(g.derived).free_symbols} - allowed_derived
                 if stray:
                     raise ModelDefinitionError(
                         f"model {self.name!r}: derived scheduling signal {g.symbol} uses {', '.join(sorted(stray))}; "
-                        f"it may only use parameters and measured outputs y_<name>")
+                        f"it may only use parameters, measured outputs y_<name> and input scheduling signals")
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
             raise ModelDefinitionError(f"model {self.name!r}: symbol(s) declared twice: {', '.join(dup)}")

@@ -87,6 +87,12 @@ class Polytope:
     def rate_vertices(self) -> np.ndarray:
         """Corners of the box of (eta_1', ..., eta_{N-1}') with eta_N' = -sum (sum of eta' is 0)."""
         n = self.n_vertices
+        if not np.any(self.rate_bounds):          # no rate information: the single zero derivative
+            return np.zeros((1, n))
+        if n - 1 > 16:
+            raise SchedulingBoundsError(
+                f"{n} vertices give 2^{n - 1} membership-rate corners; use rate_bounds = \"none\" with the "
+                f"quadratic design, or a reduced polytope")
         corners = []
         for pick in itertools.product((0, 1), repeat=n - 1):
             head = [self.rate_bounds[k, pick[k]] for k in range(n - 1)]
@@ -204,14 +210,17 @@ def _range_on_box(expr: sp.Expr, lpv: LPVModel) -> tuple:
     if len(used) == 1:
         k = used[0]
         return _range_on_interval(expr, lpv.scheduling_symbols[k], lpv.boxes[k].lower, lpv.boxes[k].upper)
-    if any(lpv.boxes[k].lower <= 0 for k in used):
-        raise SchedulingBoundsError(f"premise {expr} mixes signals whose box includes 0; its range is not exact")
     coeff, factors = expr.as_coeff_Mul()
     for f in sp.Mul.make_args(factors):
-        base, _ = f.as_base_exp()
+        base, exp = f.as_base_exp()
         if base not in lpv.scheduling_symbols:
             raise SchedulingBoundsError(f"premise {expr} is not a monomial in the scheduling signals; "
                                         f"its range over the box cannot be bounded exactly")
+        k = lpv.scheduling_symbols.index(base)
+        # monotone in each signal on the box: negative powers need a box away from 0,
+        # nonnegative powers a box that does not change sign
+        if lpv.boxes[k].lower < 0 or (exp < 0 and lpv.boxes[k].lower <= 0):
+            raise SchedulingBoundsError(f"premise {expr}: the box of {base} makes it non-monotone or singular")
     fn = sp.lambdify([lpv.scheduling_symbols[k] for k in used], expr, "math")
     values = [float(fn(*c)) for c in itertools.product(*[(lpv.boxes[k].lower, lpv.boxes[k].upper) for k in used])]
     return min(values), max(values)

@@ -21,7 +21,7 @@ def test_secant_is_the_fiala_force_ratio():
 
 def test_derived_signal_may_only_use_outputs_and_parameters():
     x, u, d, v, k, q = sp.symbols("x u d v k q")
-    with pytest.raises(ModelDefinitionError, match="may only use parameters and measured outputs"):
+    with pytest.raises(ModelDefinitionError, match="may only use parameters, measured outputs"):
         ModelDefinition("bad", (x,), (u,), (d,), sp.Matrix([-k * v * x + u + d]), (("x", x),),
                         (SchedulingSignal(v, derived=q * 2),), (k,))
 
@@ -41,3 +41,14 @@ def test_stanford_polytope_and_step_inputs():
     b = pipeline.build(cfg)
     assert b.input_names == ["delta", "y_r", "y_a_y", "v_x"]      # s is computed inside the step
     assert b.data.quadratic and b.discrete_certificate.kappa > 1
+
+
+def test_rate_vertices_without_rate_information_do_not_enumerate_corners():
+    """rate_bounds = "none": one zero vertex, whatever the vertex count (2^(N-1) corners otherwise)."""
+    import dataclasses
+    poly = pipeline.representation(observers.get("stanford_sideslip"))[1]
+    assert poly.rate_vertices.shape == (1, 8) and not poly.rate_vertices.any()
+    big = dataclasses.replace(poly, A=np.zeros((32, 2, 2)), rate_bounds=np.ones((32, 2)))
+    from codegen.errors import SchedulingBoundsError
+    with pytest.raises(SchedulingBoundsError, match="2\\^31"):
+        big.rate_vertices
