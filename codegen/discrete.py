@@ -20,6 +20,7 @@ step (with the UI filter) is reported beside it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import casadi as ca
 import numpy as np
@@ -61,34 +62,37 @@ class ObserverData:
     def nz(self):
         return self.nx + self.nd
 
-    @property
+    @cached_property
     def Dp(self):
         return np.linalg.pinv(self.poly.D[0])
 
-    @property
+    @cached_property
     def raw_signals(self) -> tuple:
         """Scheduling signals that are observer inputs (the others are derived from y)."""
         derived = {sym for sym, _ in self.derived}
         return tuple(sym for sym in self.poly.signals if sym not in derived)
 
-    @property
+    @cached_property
     def quadratic(self) -> bool:
         return all(np.array_equal(q, self.Q[0]) for q in self.Q)
+
+    def _derived_functions(self, xp):
+        args = (*self.output_symbols, *self.raw_signals)
+        mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "Abs": ca.fabs,
+                 "Min": ca.fmin, "Max": ca.fmax}, "math"] if xp is ca else "numpy"
+        return {sym: sp.lambdify(args, expr, mods) for sym, expr in self.derived}
+
+    @cached_property
+    def _derived_numpy(self) -> dict:
+        """Derived-signal functions compiled once: the numpy step calls them every sample."""
+        return self._derived_functions(np)
 
     def signal_values(self, rho_raw, y, xp=np):
         """All scheduling signals in polytope order: raw ones from the input, derived ones from y."""
         raw = dict(zip(self.raw_signals, rho_raw))
-        mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "Abs": ca.fabs,
-                 "Min": ca.fmin, "Max": ca.fmax}, "math"] if xp is ca else "numpy"
-        out = []
-        args = (*self.output_symbols, *self.raw_signals)
+        funcs = self._derived_numpy if xp is np else self._derived_functions(ca)
         values = [y[k] for k in range(len(self.output_symbols))] + [raw[sym] for sym in self.raw_signals]
-        for sym in self.poly.signals:
-            if sym in raw:
-                out.append(raw[sym])
-            else:
-                out.append(sp.lambdify(args, dict(self.derived)[sym], mods)(*values))
-        return out
+        return [raw[sym] if sym in raw else funcs[sym](*values) for sym in self.poly.signals]
 
 
 def _blend(eta, mats):

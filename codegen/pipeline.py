@@ -6,6 +6,7 @@
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -86,12 +87,10 @@ def build(config: ObserverConfig, tol: float | None = None) -> ObserverBuild:
     t1 = time.perf_counter()
     settings = _settings(config)
     if tol is not None:
-        settings = linf_uio.LinfDesignSettings(settings.alpha, settings.lyapunov, settings.gain_bound,
-                                               settings.margin, tol)
+        settings = dataclasses.replace(settings, tol=tol)
     design = linf_uio.design(poly, settings)
-    quad_settings = linf_uio.LinfDesignSettings(settings.alpha, "quadratic", settings.gain_bound,
-                                                settings.margin, settings.tol)
-    quadratic = design if settings.lyapunov == "quadratic" else linf_uio.design(poly, quad_settings)
+    quadratic = design if settings.lyapunov == "quadratic" else \
+        linf_uio.design(poly, dataclasses.replace(settings, lyapunov="quadratic"))
     t2 = time.perf_counter()
     cert = linf_uio.certify(poly, design.P, design.X, design.L, settings.alpha)
     data = discrete.ObserverData(poly, design.Q, design.L,
