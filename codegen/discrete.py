@@ -204,8 +204,10 @@ def _reciprocal(x):
     return 0.5 * (2.0 / x)
 
 
-def _solve_unpivoted(G, rhs):
-    """Unrolled LU solve without pivoting (used only where :func:`lu_without_pivoting_is_safe`)."""
+def solve_unpivoted(G, rhs):
+    """Unrolled LU solve without pivoting, for matrices where it is known to be safe (checked by
+    :func:`lu_without_pivoting_is_safe`, or with a positive definite symmetric part). ``rhs`` may
+    have several columns."""
     n = G.shape[0]
     G = [[G[i, j] for j in range(n)] for i in range(n)]
     b = [rhs[i] for i in range(n)]
@@ -286,7 +288,7 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
     G_x = ca.DM.eye(nx) - Ts * (A + M @ C) - Ts * (D @ K @ C)
     rhs = x + Ts * (B @ u - M @ y_t) + Ts * (D @ (d - K @ y_t))
     if lu_without_pivoting_is_safe(data)["safe"]:
-        x_next = _solve_unpivoted(G_x, rhs)
+        x_next = solve_unpivoted(G_x, rhs)
     else:
         x_next = ca.solve(G_x, rhs)
     d_next = d + K @ (C @ x_next - y_t)

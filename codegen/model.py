@@ -143,6 +143,7 @@ class ParameterSet:
     scheduling: Mapping[str, SchedulingBox]
     meta: Mapping[str, str]
     plant: Mapping[str, float] = field(default_factory=dict)   # truth-plant-only values ([plant])
+    state_bounds: Mapping[str, tuple] = field(default_factory=dict)   # [state_bounds] NAME = [min, max]
 
 
 @dataclass(frozen=True)
@@ -182,7 +183,9 @@ def load_parameters(path: str | Path) -> ParameterSet:
 
     The file has a ``[parameters]`` table of name = number, a ``[scheduling.NAME]``
     table per scheduling signal with ``min``, ``max``, ``rate_min``, ``rate_max``, and
-    an optional ``[meta]`` table of strings (source, car).
+    an optional ``[meta]`` table of strings (source, car), an optional ``[plant]`` table of
+    truth-plant-only numbers and an optional ``[state_bounds]`` table ``NAME = [min, max]``
+    (the compact state set of designs that bound unmeasured nonlinearities).
     """
     path = Path(path)
     try:
@@ -220,7 +223,16 @@ def load_parameters(path: str | Path) -> ParameterSet:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ModelDefinitionError(f"{path}: plant parameter {key!r} must be a number, got {value!r}")
         plant[key] = float(value)
-    return ParameterSet(str(path), values, boxes, meta, plant)
+    state_bounds = {}
+    for key, value in (data.get("state_bounds") or {}).items():
+        if (not isinstance(value, list) or len(value) != 2
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+            raise SchedulingBoundsError(f"{path}: state bound {key!r} must be [min, max], got {value!r}")
+        lo, hi = float(value[0]), float(value[1])
+        if not lo < hi:
+            raise SchedulingBoundsError(f"{path}: state bound {key!r} needs min < max, got [{lo}, {hi}]")
+        state_bounds[key] = (lo, hi)
+    return ParameterSet(str(path), values, boxes, meta, plant, state_bounds)
 
 
 def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str) -> sp.Matrix:

@@ -138,43 +138,48 @@ class Polytope:
         }
 
 
-def scheduling_nonlinearities(lpv: LPVModel) -> tuple:
-    """Distinct non-constant factors of the entries of A, B, C, D, sorted by complexity.
+def nonlinear_factors(matrices, symbols) -> tuple:
+    """Distinct non-constant factors in ``symbols`` of the matrices' entries, sorted by complexity.
 
-    Each entry is expanded into a sum of terms ``c * g(rho)``; the ``g`` are the
-    nonlinearities (for seed 000: 1/v_x and 1/v_x**2).
+    Each entry is expanded into a sum of terms ``c * g(symbols)``; the ``g`` are returned (for
+    seed 000: 1/v_x and 1/v_x**2; for seed 004: 1/v_x and r).
     """
-    rho = set(lpv.scheduling_symbols)
+    symbols = set(symbols)
     found = {}
-    for mat in (lpv.A, lpv.B, lpv.C, lpv.D, lpv.Du):
+    for mat in matrices:
         for entry in mat:
             for term in sp.Add.make_args(sp.expand(entry)):
-                if not term.free_symbols & rho:
+                if not term.free_symbols & symbols:
                     continue
-                _, dep = term.as_independent(*rho, as_Add=False)
+                _, dep = term.as_independent(*symbols, as_Add=False)
                 if dep != 1:
                     found[sp.srepr(dep)] = dep
     return tuple(sorted(found.values(), key=lambda g: (sp.count_ops(g), sp.default_sort_key(g))))
 
 
-def _affine_decomposition(lpv: LPVModel, nonlinearities: tuple):
-    """Constant matrices M0, M_k with M(rho) = M0 + sum_k g_k(rho) M_k, for A, B, C, D, Du.
+def scheduling_nonlinearities(lpv: LPVModel) -> tuple:
+    """:func:`nonlinear_factors` of A, B, C, D, Du in the scheduling signals."""
+    return nonlinear_factors((lpv.A, lpv.B, lpv.C, lpv.D, lpv.Du), lpv.scheduling_symbols)
+
+
+def affine_decomposition(matrices: dict, symbols, nonlinearities: tuple) -> dict:
+    """{label: (M0, [M_k])} with M(rho) = M0 + sum_k g_k(rho) M_k, constant M0 and M_k.
 
     Each entry is expanded into terms c * g(rho) and every term is assigned to its g (the
-    same split that :func:`scheduling_nonlinearities` uses to find them).
+    same split that :func:`nonlinear_factors` uses to find them).
     """
-    rho = set(lpv.scheduling_symbols)
+    symbols = set(symbols)
     index = {sp.srepr(g): k for k, g in enumerate(nonlinearities)}
     out = {}
-    for label, mat in (("A", lpv.A), ("B", lpv.B), ("C", lpv.C), ("D", lpv.D), ("Du", lpv.Du)):
+    for label, mat in matrices.items():
         base = np.zeros(mat.shape)
         coeffs = [np.zeros(mat.shape) for _ in nonlinearities]
         for (i, j) in itertools.product(range(mat.shape[0]), range(mat.shape[1])):
             for term in sp.Add.make_args(sp.expand(mat[i, j])):
-                if not term.free_symbols & rho:
+                if not term.free_symbols & symbols:
                     base[i, j] += float(term)
                     continue
-                c, dep = term.as_independent(*rho, as_Add=False)
+                c, dep = term.as_independent(*symbols, as_Add=False)
                 k = index.get(sp.srepr(dep))
                 if k is None or c.free_symbols:
                     raise ModelDefinitionError(f"{label}[{i},{j}] term {term} is not affine in the detected "
@@ -182,6 +187,11 @@ def _affine_decomposition(lpv: LPVModel, nonlinearities: tuple):
                 coeffs[k][i, j] += float(c)
         out[label] = (base, coeffs)
     return out
+
+
+def _affine_decomposition(lpv: LPVModel, nonlinearities: tuple):
+    return affine_decomposition({"A": lpv.A, "B": lpv.B, "C": lpv.C, "D": lpv.D, "Du": lpv.Du},
+                                lpv.scheduling_symbols, nonlinearities)
 
 
 def _range_on_interval(expr: sp.Expr, x: sp.Symbol, lo: float, hi: float) -> tuple:
@@ -234,7 +244,7 @@ def _single_signal(lpv: LPVModel):
     return lpv.scheduling_symbols[0], lpv.boxes[0]
 
 
-def _memberships(premises: tuple) -> tuple:
+def memberships(premises: tuple) -> tuple:
     """Products of sector weights; vertex i uses bit j of i: 0 = lower, 1 = upper end of premise j."""
     p = len(premises)
     etas = []
@@ -266,7 +276,7 @@ def sector_weights_product(theta, premises, xp=np):
     return np.stack(etas, axis=-1) if xp is np else etas
 
 
-def _vertex_matrices(decomp, premise_values_at_vertex):
+def vertex_matrices(decomp, premise_values_at_vertex):
     mats = {}
     for label, (base, coeffs) in decomp.items():
         mats[label] = np.array([base + sum(c * z for c, z in zip(coeffs, zvals))
@@ -315,8 +325,8 @@ def sector_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polytope:
     p = len(premises)
     corners = [[(pr.upper if (idx >> (p - 1 - j)) & 1 else pr.lower) for j, pr in enumerate(premises)]
                for idx in range(2 ** p)]
-    mats = _vertex_matrices(decomp, corners)
-    etas = _memberships(premises)
+    mats = vertex_matrices(decomp, corners)
+    etas = memberships(premises)
     rates = _rate_bounds(etas, lpv.scheduling_symbols[0], lpv.boxes[0], rate_bounds, None)
     return Polytope("sector", tuple(lpv.scheduling_symbols), tuple(b.lower for b in lpv.boxes),
                     tuple(b.upper for b in lpv.boxes), premises, nonlin, mats["A"], mats["B"],
@@ -365,9 +375,9 @@ def taylor_reduced_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polyto
         slope0 = float(sp.diff(g_theta, theta).subs(theta, 0))
         lines.append((value0, slope0))
     corners = [[v0 + s0 * t for v0, s0 in lines] for t in (-1.0, 1.0)]
-    mats = _vertex_matrices(decomp, corners)
+    mats = vertex_matrices(decomp, corners)
     premise = Premise("theta", sp.simplify(theta_expr), -1.0, 1.0)
-    etas = _memberships((premise,))
+    etas = memberships((premise,))
     return Polytope("taylor_reduced", (signal,), (box.lower,), (box.upper,), (premise,), nonlin, mats["A"],
                     mats["B"], mats["C"], mats["D"], etas,
                     _rate_bounds(etas, signal, box, rate_bounds, expansion_point), rate_bounds,

@@ -10,6 +10,7 @@ scheduling signal v_x.
 import sympy as sp
 
 from codegen.model import ModelDefinition, SchedulingSignal
+from model_defs.tyres import magic_formula_axle
 
 beta, r, delta, delta_dot = sp.symbols("beta r delta delta_dot")
 T_a, T_d = sp.symbols("T_a T_d")
@@ -62,14 +63,8 @@ _Fz_f = M * (g * l_r - h_cg * a_x) / _wheelbase          # axle loads with longi
 _Fz_r = M * (g * l_f + h_cg * a_x) / _wheelbase
 
 
-def _magic(alpha, c_axle, fz):
-    D_ = mu * fz
-    B_ = c_axle / (C_pac * D_)                           # B C D = axle cornering stiffness
-    return D_ * sp.sin(C_pac * sp.atan((1 - E_pac) * B_ * alpha + E_pac * sp.atan(B_ * alpha)))
-
-
-_Fyf_p = _magic(alpha_f, 2 * C_f, _Fz_f)
-_Fyr_p = _magic(alpha_r, 2 * C_r, _Fz_r)
+_Fyf_p = magic_formula_axle(alpha_f, 2 * C_f, _Fz_f, mu, C_pac, E_pac)
+_Fyr_p = magic_formula_axle(alpha_r, 2 * C_r, _Fz_r, mu, C_pac, E_pac)
 _alpha_slide = 3 * mu * _Fz_f / (2 * C_f)                 # brush-model full-slide angle (front axle)
 _trail = eta_t * sp.Max(0, 1 - sp.Abs(alpha_f) / _alpha_slide)
 _T_align = -K_p * _trail * _Fyf_p / R_s                  # equals the model's term for small slip

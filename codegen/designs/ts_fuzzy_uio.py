@@ -1,0 +1,319 @@
+"""Discrete-time TS fuzzy UIO with unmeasured nonlinear consequents, seed 004 Theorem 1.
+
+Observer (16):  zeta+ = T Phi_hat + L(h)(y - C x_hat),  x_hat = zeta + N y,
+                d_hat_k = (C D)^+ (y_{k+1} - C Phi_hat_k),
+with Phi_hat = A(h) x_hat + f(xi, u) + G(h) phi(x_hat, u) and L(h) = M(h)^-1 L(h) (eq. (28)).
+
+Design (Algorithm 1): the rank conditions (15) are checked, [T N] comes from (30), and the
+LMIs (27) are imposed for every i, j, l and every vertex theta_p of the DMVT set V_phi (Lemma 3
+relaxation). Two choices the seed leaves open, both documented in the README:
+
+* (30) has the free matrix Y; we take Y = 0 (the minimum-norm solution). When the matrix of
+  (29) is square and invertible, as for seed 004, the solution is unique anyway.
+* (27) is a strict feasibility problem, homogeneous in (P_i, M_i, L_i). We normalize P_i >= I,
+  impose every block >= margin I (so the numpy re-check has slack) and minimize sum trace(P_i),
+  which keeps the Lyapunov matrices, and with them the gains, from growing without need.
+  ``decay`` (lambda <= 1) optionally replaces P_j by lambda^2 P_j in the (1,1) block, which
+  certifies V_{k+1} <= lambda^2 V_k instead of V_{k+1} < V_k; 1 is the seed's (27).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..errors import CertificateError, RankConditionError
+from ..discrete import solve_unpivoted
+from ..lmi import LMIProblem, LMISolution, check_blocks
+from ..polytope import sector_weights_product
+from ..ts_fuzzy import TSFuzzyModel
+from .linf_uio import round_significant
+
+
+@dataclass(frozen=True)
+class TSDesignSettings:
+    """Tuning of a seed-004 Theorem-1 design.
+
+    Attributes
+    ----------
+    decay : float
+        lambda in (0, 1]: certified V_{k+1} <= lambda^2 V_k (1 = the seed's strict decrease).
+    margin : float
+        Every LMI block >= margin I.
+    tol : float
+        Clarabel gap/feasibility tolerance.
+    """
+
+    decay: float = 1.0
+    margin: float = 1e-4
+    tol: float = 1e-8
+
+    def __post_init__(self):
+        if not 0 < self.decay <= 1:
+            raise ValueError(f"decay must be in (0, 1], got {self.decay}")
+        if not self.margin >= 0 or not self.tol > 0:
+            raise ValueError("margin must be >= 0 and tol > 0")
+
+
+def decoupling_matrices(ts: TSFuzzyModel, rank_tol: float = 1e-9) -> tuple:
+    """(T, N) of eq. (30) with Y = 0, after the rank conditions (15a)-(15b).
+
+    Raises
+    ------
+    RankConditionError
+        naming the condition that fails and the ranks found.
+    """
+    C, D, nx, nd = ts.C, ts.D, ts.nx, ts.nd
+    r_cd, r_d = np.linalg.matrix_rank(C @ D, tol=rank_tol), np.linalg.matrix_rank(D, tol=rank_tol)
+    if r_cd != r_d:
+        raise RankConditionError(
+            f"rank condition (15a) fails: rank(CD) = {r_cd} != rank(D) = {r_d}; some unknown input does "
+            f"not reach the measured outputs in one step, so (16c) cannot reconstruct it")
+    Xi = np.block([[np.eye(nx), D], [C, np.zeros((C.shape[0], nd))]])
+    r_xi = np.linalg.matrix_rank(Xi, tol=rank_tol)
+    if r_xi != nx + nd:
+        raise RankConditionError(
+            f"rank condition (15b) fails: rank [[I, D], [C, 0]] = {r_xi} < n_x + n_d = {nx + nd}; "
+            f"T D = 0 and T + N C = I have no common solution")
+    TN = np.hstack([np.eye(nx), np.zeros((nx, nd))]) @ np.linalg.pinv(Xi)
+    # entries that are round-off of the pseudo-inverse (|.| < 1e-13 max) are exact zeros
+    TN[np.abs(TN) < 1e-13 * np.abs(TN).max()] = 0.0
+    T, N = TN[:, :nx], TN[:, nx:]
+    residual = max(np.abs(T @ D).max(), np.abs(T + N @ C - np.eye(nx)).max())
+    if residual > 1e-9:
+        raise RankConditionError(f"(17)/(20) residual {residual:.3g} after (30): the decoupling is not exact")
+    return T, N
+
+
+def _blocks(ts: TSFuzzyModel, T, P, M, L, decay, xp):
+    """All blocks of (27a)-(27b) as (label, matrix); numpy arrays or CasADi SX (``xp``)."""
+    N = ts.n_rules
+    wrap = (lambda a: a) if xp is np else ca.DM
+    C, T = wrap(ts.C), wrap(T)
+    cat = np.block if xp is np else ca.blockcat
+
+    def phi(i, j, l, theta):
+        off = M[j] @ (T @ wrap(ts.A_theta(i, theta))) - L[j] @ C
+        return cat([[decay ** 2 * P[j], off.T], [off, M[j] + M[j].T - P[l]]])
+
+    out = []
+    for p, theta in enumerate(ts.theta_vertices):
+        for l in range(N):
+            for i in range(N):
+                out.append((f"(27a) i={i + 1} l={l + 1} theta_{p + 1}", phi(i, i, l, theta)))
+                for j in range(N):
+                    if j != i:
+                        out.append((f"(27b) i={i + 1} j={j + 1} l={l + 1} theta_{p + 1}",
+                                    (2.0 / (N - 1)) * phi(i, i, l, theta) + phi(i, j, l, theta)
+                                    + phi(j, i, l, theta)))
+    return out
+
+
+@dataclass(frozen=True)
+class TSDesign:
+    """Decision matrices of (27), the decoupling matrices and the solver record."""
+
+    settings: TSDesignSettings
+    T: np.ndarray
+    N: np.ndarray
+    P: tuple
+    M: tuple
+    L: tuple
+    solution: LMISolution | None
+
+    def gain_at(self, h) -> np.ndarray:
+        """L(h) = M(h)^-1 L(h) (eq. (28))."""
+        Mh = sum(w * m for w, m in zip(h, self.M))
+        Lh = sum(w * l for w, l in zip(h, self.L))
+        return np.linalg.solve(Mh, Lh)
+
+    def gains_json(self) -> dict:
+        out = {"T": self.T.tolist(), "N": self.N.tolist(), "decay": self.settings.decay}
+        for i, (p, m, l) in enumerate(zip(self.P, self.M, self.L)):
+            out.update({f"P{i + 1}": p.tolist(), f"M{i + 1}": m.tolist(), f"L{i + 1}": l.tolist()})
+        return out
+
+
+def build_problem(ts: TSFuzzyModel, T: np.ndarray, settings: TSDesignSettings):
+    prob = LMIProblem(f"{ts.definition.name}: seed 004 Theorem 1")
+    nx, ny, N = ts.nx, ts.ny, ts.n_rules
+    P = [prob.symmetric(f"P{i + 1}", nx) for i in range(N)]
+    M = [prob.matrix(f"M{i + 1}", nx, nx) for i in range(N)]
+    L = [prob.matrix(f"L{i + 1}", nx, ny) for i in range(N)]
+    for i in range(N):
+        # normalization of the homogeneous (27); the re-check sees P_i itself (slack 1)
+        prob.require_psd(f"P{i + 1} >= I", P[i], margin=1.0)
+    for label, block in _blocks(ts, T, P, M, L, settings.decay, ca):
+        prob.require_psd(label, block, margin=settings.margin,
+                         hint="the DMVT box or the premise ranges may be too wide for this sample time")
+    prob.minimize(sum(ca.trace(p) for p in P))
+    return prob
+
+
+def design(ts: TSFuzzyModel, settings: TSDesignSettings = TSDesignSettings()) -> TSDesign:
+    """Algorithm 1: rank conditions, (30), LMIs (27) on Clarabel, rounded and re-certified."""
+    T, N = decoupling_matrices(ts)
+    prob = build_problem(ts, T, settings)
+    sol = prob.solve(tol=settings.tol)
+    n = ts.n_rules
+    P = tuple(round_significant(0.5 * (sol[f"P{i + 1}"] + sol[f"P{i + 1}"].T)) for i in range(n))
+    M = tuple(round_significant(sol[f"M{i + 1}"]) for i in range(n))
+    L = tuple(round_significant(np.atleast_2d(sol[f"L{i + 1}"]).reshape(ts.nx, ts.ny)) for i in range(n))
+    return TSDesign(settings, T, N, P, M, L, sol)
+
+
+def certify(ts: TSFuzzyModel, d: TSDesign) -> dict:
+    """Independent numpy check of (27) on the emitted (rounded) matrices; no solver involved."""
+    checks = check_blocks({f"P{i + 1} > 0": p for i, p in enumerate(d.P)})
+    checks += check_blocks(dict(_blocks(ts, d.T, d.P, d.M, d.L, d.settings.decay, np)))
+    worst = min(checks, key=lambda c: c.min_eig)
+    if worst.min_eig <= 0:
+        raise CertificateError(f"seed-004 LMI {worst.label!r} fails the numpy re-check on the emitted "
+                               f"matrices: smallest eigenvalue {worst.min_eig:.3e}")
+    return {"blocks": len(checks), "worst_block": worst.label, "worst_min_eig": worst.min_eig,
+            "worst_relative_margin": worst.relative_margin}
+
+
+def lyapunov_decrease(ts: TSFuzzyModel, d: TSDesign, samples: int = 20000, seed: int = 0) -> dict:
+    """Re-check (33) numerically: max over random (h, h+, theta) of V(e+)/V(e).
+
+    h and h+ are drawn both as memberships of random premise values and as random points of
+    the simplex (Lemma 3 covers every h in it); theta uniformly in the Jacobian box S_phi.
+    """
+    rng = np.random.default_rng(seed)
+    N = ts.n_rules
+    box = ts.theta_box
+    worst = 0.0
+    for k in range(samples):
+        if k % 2:
+            h, hp = rng.dirichlet(np.ones(N)), rng.dirichlet(np.ones(N))
+        else:
+            xi = [rng.uniform(p.lower, p.upper, 2) for p in ts.premises]
+            h = np.asarray(sector_weights_product(np.array([x[0] for x in xi]), ts.premises))
+            hp = np.asarray(sector_weights_product(np.array([x[1] for x in xi]), ts.premises))
+        theta = rng.uniform(box[:, :, 0], box[:, :, 1])
+        A = sum(w * ts.A_theta(i, theta) for i, w in enumerate(h))
+        Acl = d.T @ A - d.gain_at(h) @ ts.C
+        Ph = sum(w * p for w, p in zip(h, d.P))
+        Pp = sum(w * p for w, p in zip(hp, d.P))
+        Lc = np.linalg.cholesky(Ph)
+        Li = np.linalg.inv(Lc)
+        S = Li @ Acl.T @ Pp @ Acl @ Li.T
+        worst = max(worst, float(np.linalg.eigvalsh(0.5 * (S + S.T)).max()))
+    if worst >= 1.0:
+        raise CertificateError(f"(33) fails on a sample: V(e+)/V(e) reaches {worst:.6f} >= 1")
+    return {"samples": samples, "max_ratio": worst, "contraction_per_step": float(np.sqrt(worst))}
+
+
+# --- the discrete step (16) ------------------------------------------------------------------------
+#
+# One call consumes y_{k+1} and returns x_hat_{k+1} and d_hat_k: (16c) needs the *next* output, so
+# the unknown-input estimate is one sample behind the state estimate. The step's state is
+# [zeta_k, y_k, primed]; the first call (primed = 0) has no y_k yet and uses y_{k+1} in its place
+# (flagged as warm-up).
+
+def _measured_model(ts: TSFuzzyModel, xp):
+    """f(xi), the premise functions and phi as callables of (measured..., u...) / (x..., u...)."""
+    import sympy as sp
+    mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "atan": ca.atan, "sin": ca.sin,
+             "cos": ca.cos, "Abs": ca.fabs}, "math"] if xp is ca else "numpy"
+    meas_args = (*ts.measured, *ts.definition.known_inputs)
+    state_args = (*ts.definition.states, *ts.definition.known_inputs)
+    f = [sp.lambdify(meas_args, e, mods) for e in ts.f]
+    prem = [sp.lambdify(meas_args, p.expr, mods) for p in ts.premises]
+    phi = [sp.lambdify(state_args, e, mods) for e in ts.phi]
+    return f, prem, phi
+
+
+def step_parts(ts: TSFuzzyModel, d: TSDesign, zeta, y_k, y_next, u, xp=np):
+    """(zeta_next, x_hat_next, d_hat_k, excess) of (16) on numpy arrays or CasADi SX.
+
+    Measured values are clamped to D_x for the model (the certificate only holds there);
+    ``excess`` sums how far they (at k and k+1), and the unmeasured estimates, lie outside D_x.
+    """
+    f_fn, prem_fn, phi_fn = _measured_model(ts, xp)
+    fmin, fmax, fabs = (ca.fmin, ca.fmax, ca.fabs) if xp is ca else (min, max, abs)
+    nx, ny = ts.nx, ts.ny
+    meas = [y_k[k] for k in range(ny)]
+    clamped = [fmin(fmax(v, ts.state_box[s][0]), ts.state_box[s][1]) for v, s in zip(meas, ts.measured)]
+    # both samples are checked: y_{k+1} is flagged when it arrives, not one call later
+    excess = sum(fabs(v - c) for v, c in zip(meas, clamped))
+    for k, s in enumerate(ts.measured):
+        lo, hi = ts.state_box[s]
+        excess = excess + fmax(0.0, fmax(lo - y_next[k], y_next[k] - hi))
+    uu = [u[k] for k in range(len(ts.definition.known_inputs))]
+    xi = [p(*clamped, *uu) for p in prem_fn]
+    h = sector_weights_product(np.array(xi, float), ts.premises) if xp is np else \
+        sector_weights_product(xi, ts.premises, xp=ca)
+    N, T = d.N, d.T
+    if xp is np:
+        x_hat = zeta + N @ y_k
+        A = sum(w * a for w, a in zip(h, ts.A))
+        G = sum(w * g for w, g in zip(h, ts.G))
+        full = dict(zip(ts.measured, clamped))
+        x_for_phi = [full.get(s, x_hat[k]) for k, s in enumerate(ts.definition.states)]
+        phi = np.array([p(*x_for_phi, *uu) for p in phi_fn], dtype=float)
+        f = np.array([fn(*clamped, *uu) for fn in f_fn], dtype=float)
+        Phi = A @ x_hat + f + G @ phi
+        Mh = sum(w * m for w, m in zip(h, d.M))
+        Lh = sum(w * l for w, l in zip(h, d.L))
+        zeta_next = T @ Phi + np.linalg.solve(Mh, Lh @ (y_k - ts.C @ x_hat))
+        d_hat = np.linalg.pinv(ts.C @ ts.D) @ (y_next - ts.C @ Phi)
+        x_next = zeta_next + N @ y_next
+    else:
+        blend = (lambda mats: ca.DM(mats[0]) if np.ptp(mats, axis=0).max(initial=0) == 0
+                 else sum((w * ca.DM(m) for w, m in zip(h[1:], mats[1:])), h[0] * ca.DM(mats[0])))
+        x_hat = zeta + ca.DM(N) @ y_k
+        full = dict(zip(ts.measured, clamped))
+        x_for_phi = [full.get(s, x_hat[k]) for k, s in enumerate(ts.definition.states)]
+        phi = ca.vertcat(*[p(*x_for_phi, *uu) for p in phi_fn]) if phi_fn else ca.SX(0, 1)
+        f = ca.vertcat(*[fn(*clamped, *uu) for fn in f_fn])
+        Phi = blend(ts.A) @ x_hat + f + (blend(ts.G) @ phi if phi_fn else 0)
+        innovation = blend(d.L) @ (y_k - ca.DM(ts.C) @ x_hat)
+        # M(h) + M(h)' > P(h+) > 0 by (27): unpivoted elimination is safe (no zero pivot)
+        zeta_next = ca.DM(T) @ Phi + solve_unpivoted(blend(d.M), innovation)
+        d_hat = ca.DM(np.linalg.pinv(ts.C @ ts.D)) @ (y_next - ca.DM(ts.C) @ Phi)
+        x_next = zeta_next + ca.DM(N) @ y_next
+    for k, s in enumerate(ts.definition.states):
+        if s in ts.unmeasured:
+            lo, hi = ts.state_box[s]
+            excess = excess + fmax(0.0, fmax(lo - x_hat[k], x_hat[k] - hi))
+    return zeta_next, x_next, d_hat, excess
+
+
+def state_layout(ts: TSFuzzyModel) -> list:
+    """Names of the step's state vector: [zeta, y_prev, primed, x_hat, d_hat]; the last
+    n_x + n_d entries are the outputs (kept in the state so a held sample repeats them)."""
+    d = ts.definition
+    return ([f"zeta_{s}" for s in d.states] + [f"y_prev_{n}" for n in d.output_names] + ["primed"]
+            + [str(s) for s in d.states] + [str(s) for s in d.unknown_inputs])
+
+
+def step_casadi(ts: TSFuzzyModel, d: TSDesign, name: str) -> ca.Function:
+    """(z, u, y, rho) -> (z_next, excess, warmup) with z = [zeta; y_prev; primed; x_hat; d_hat]
+    (see :func:`state_layout`); ``rho`` is empty (the premises are measured states)."""
+    nx, ny, nd, nu = ts.nx, ts.ny, ts.nd, len(ts.definition.known_inputs)
+    z = ca.SX.sym("z", nx + ny + 1 + nx + nd)
+    u = ca.SX.sym("u", nu)
+    y = ca.SX.sym("y", ny)
+    rho = ca.SX.sym("rho", 0)
+    primed = z[nx + ny]
+    # primed is exactly 0 or 1 and both outputs are finite (the C wrapper rejects non-finite
+    # inputs), so this blend selects exactly; CasADi's if_else would emit a double-as-bool test
+    # that clang's -Wfloat-conversion rejects
+    y_k = primed * z[nx:nx + ny] + (1.0 - primed) * y
+    zeta_next, x_next, d_hat, excess = step_parts(ts, d, z[:nx], y_k, y, u, xp=ca)
+    z_next = ca.vertcat(zeta_next, y, 1.0, x_next, d_hat)
+    return ca.Function(name, [z, u, y, rho], [z_next, excess, 1.0 - primed],
+                       ["z", "u", "y", "rho"], ["z_next", "excess", "warmup"])
+
+
+def step_numpy(ts: TSFuzzyModel, d: TSDesign, z, u, y):
+    """Reference step in numpy (tests, benchmark peer): returns (z_next, excess, warmup)."""
+    nx, ny = ts.nx, ts.ny
+    z, y = np.asarray(z, float), np.asarray(y, float)
+    primed = z[nx + ny] > 0
+    y_k = z[nx:nx + ny] if primed else y
+    zeta_next, x_next, d_hat, excess = step_parts(ts, d, z[:nx], y_k, y, np.asarray(u, float), xp=np)
+    return np.concatenate([zeta_next, y, [1.0], x_next, d_hat]), float(excess), 0.0 if primed else 1.0
