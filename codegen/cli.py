@@ -63,11 +63,46 @@ def _design_summary(b: pipeline.ObserverBuild, path: Path) -> dict:
     }
 
 
+def _ts_summary(b: pipeline.TSFuzzyBuild, path: Path) -> dict:
+    sol = b.design.solution
+    ts = b.ts
+    return {
+        "observer": b.name, "artifact": str(path), "rules": ts.n_rules,
+        "premises": [f"{p.expr} in [{p.lower:.6g}, {p.upper:.6g}]" for p in ts.premises],
+        "unmeasured_consequents": [str(p) for p in ts.phi],
+        "jacobian_bounds": {f"d({phi})/d{s}": [b_.lower, b_.upper]
+                            for phi, row in zip(ts.phi, ts.jacobian_bounds)
+                            for s, b_ in zip(ts.definition.states, row)},
+        "dmvt_vertices": int(ts.theta_vertices.shape[0]), "lmi_blocks": len(sol.checks),
+        "solve_time_s": sol.solve_time_s, "build_time_s": sol.build_time_s,
+        "total_design_time_s": b.timings["representation_s"] + b.timings["design_s"],
+        "worst_block": b.certificate["worst_block"], "worst_min_eig": b.certificate["worst_min_eig"],
+        "worst_relative_margin": b.certificate["worst_relative_margin"],
+        "lyapunov_decrease_max_ratio": b.decrease["max_ratio"], "sample_time": b.config.sample_time,
+    }
+
+
 def cmd_design(args) -> int:
     b = pipeline.build(observers.get(args.name))
     path = Path(args.out) if args.out else emit.GENERATED_DIR / b.name / f"{b.name}_design.json"
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(pipeline.artifact(b), indent=1, sort_keys=True) + "\n")
+    path.write_text(json.dumps(b.artifact(), indent=1, sort_keys=True) + "\n")
+    if isinstance(b, pipeline.TSFuzzyBuild):
+        s = _ts_summary(b, path)
+        if args.json:
+            _print_json(s)
+            return 0
+        print(f"observer {b.name}: TS fuzzy UIO, {s['rules']} rules, premises {'; '.join(s['premises'])}")
+        print(f"  unmeasured consequents  {', '.join(s['unmeasured_consequents'])}; DMVT vertices {s['dmvt_vertices']}")
+        for k, v in s["jacobian_bounds"].items():
+            print(f"  {k:22s}  [{v[0]:.6g}, {v[1]:.6g}]  (sound, interval arithmetic)")
+        print(f"  LMIs (27)               {s['lmi_blocks']} blocks; worst margin {s['worst_min_eig']:.3e} "
+              f"(relative {s['worst_relative_margin']:.3e}) in {s['worst_block']} (numpy re-check)")
+        print(f"  design time             {s['total_design_time_s']:.2f} s (bounds + LMIs; solve "
+              f"{1e3 * s['solve_time_s']:.0f} ms)")
+        print(f"  (33) on random samples  max V(e+)/V(e) = {s['lyapunov_decrease_max_ratio']:.6f}")
+        print(f"artifact: {path}")
+        return 0
     s = _design_summary(b, path)
     if args.json:
         _print_json(s)
@@ -192,7 +227,8 @@ def cmd_validate(args) -> int:
         return 0
     print(f"{args.name}: scenario {args.scenario} on the {args.plant} plant ({result['plant_model']}), {result['samples']} samples, "
           f"max |a_y| {result['max_abs_ay']:.2f} m/s^2, {result['status_flags']} flagged samples; "
-          f"errors after {validate.SETTLE_TIME:g} s (angles in degrees)")
+          f"errors after {validate.SETTLE_TIME:g} s" + (" (SI units, seed 004 Table II format)"
+                                                          if "seed_table" in result else " (angles in degrees)"))
     print(validate.format_table(result))
     if args.plot:
         print(f"plot: {args.plot}")

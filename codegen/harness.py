@@ -21,10 +21,9 @@ def render(name: str) -> str:
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)),
                              undefined=jinja2.StrictUndefined, keep_trailing_newline=True)
     art = json.loads((GENERATED_DIR / name / f"{name}_design.json").read_text())
-    # the last input is the last raw scheduling signal: sweep it over its box
+    # the last input schedules the step: the benchmark sweeps it over its box
     last = art["signals"]["input"][-1]
-    k = art["polytope"]["signals"].index(last)
-    lo, hi = art["polytope"]["signal_ranges"][k]
+    lo, hi = art["signals"]["input_boxes"][last]
     return env.get_template("harness.c.j2").render(
         name=name, NAME=name.upper(), banner=f"/* Benchmark/check driver of {name} (uiogen). */",
         first_min=repr(float(lo)), first_max=repr(float(hi)))

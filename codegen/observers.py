@@ -17,7 +17,7 @@ from .errors import ModelDefinitionError, UnknownObserverError
 from .model import ModelDefinition
 
 OBSERVERS_DIR = PARAMS_DIR.parent / "observers"
-FAMILIES = ("linf_uio",)
+FAMILIES = ("linf_uio", "ts_fuzzy_uio")
 
 
 @dataclass(frozen=True)
@@ -63,7 +63,8 @@ def _parse(path: Path) -> ObserverConfig:
             data = tomllib.load(fh)
         except tomllib.TOMLDecodeError as exc:
             raise ModelDefinitionError(f"{path}: not valid TOML: {exc}") from None
-    required = ("family", "model", "parameters", "polytope", "sample_time")
+    required = ("family", "model", "parameters", "sample_time") + \
+        (("polytope",) if data.get("family") == "linf_uio" else ())
     missing = [k for k in required if k not in data]
     if missing:
         raise ModelDefinitionError(f"{path}: missing {', '.join(missing)}")
@@ -76,7 +77,7 @@ def _parse(path: Path) -> ObserverConfig:
                 doc += line.lstrip("# ").rstrip() + " "
             else:
                 break
-    return ObserverConfig(path.stem, data["family"], data["model"], data["parameters"], data["polytope"],
+    return ObserverConfig(path.stem, data["family"], data["model"], data["parameters"], data.get("polytope", ""),
                           data.get("rate_bounds", "exact"), float(data["sample_time"]),
                           dict(data.get("design", {})), dict(data.get("ui_filter", {})), doc.strip(), str(path))
 

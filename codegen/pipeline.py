@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from . import discrete, polytope
-from .designs import linf_uio
+from . import discrete, polytope, ts_fuzzy
+from .designs import linf_uio, ts_fuzzy_uio
 from .errors import ModelDefinitionError
 from .model import LPVModel, instantiate, load_parameters
 from .observers import ObserverConfig
@@ -52,6 +52,121 @@ class ObserverBuild:
         return ([str(s) for s in d.known_inputs] + [f"y_{n}" for n in d.output_names]
                 + [str(s.symbol) for s in d.scheduling if s.derived is None])
 
+    @property
+    def output_names(self) -> list:
+        return self.state_names
+
+    @property
+    def nu(self) -> int:
+        return self.lpv.nu
+
+    @property
+    def ny(self) -> int:
+        return self.lpv.ny
+
+    def scheduling_boxes(self) -> list:
+        """(name, min, max, derived) of every scheduling signal, for the C header."""
+        return [(str(sym), lo, hi, sym not in self.data.raw_signals)
+                for sym, lo, hi in zip(self.poly.signals, self.poly.lowers, self.poly.uppers)]
+
+    def emit_notes(self) -> dict:
+        """Family-specific text of the C API."""
+        return {
+            "headline": f"gamma = {self.design.gamma:.6g}",
+            "stability": (f"backward Euler, certified: sqrt(V) contracts by "
+                          f"{self.discrete_certificate.contraction:.6f} per step over the whole scheduling box"),
+            "step_notes": [],
+            "clamp_doc": ("A scheduling signal outside its box: clamped for the membership functions and the "
+                          "step\n * taken; the stability certificate does not cover this sample."),
+            "warmup_doc": "never set by this observer (its step needs no previous sample).",
+            "has_warmup": False,
+        }
+
+    def artifact(self) -> dict:
+        return artifact(self)
+
+
+@dataclass(frozen=True)
+class TSFuzzyBuild:
+    """A seed-004 TS fuzzy UIO: representation, design, certificates (same interface as above)."""
+
+    config: ObserverConfig
+    ts: ts_fuzzy.TSFuzzyModel
+    design: ts_fuzzy_uio.TSDesign
+    certificate: dict
+    decrease: dict
+    timings: dict
+
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    def step_function(self) -> ca.Function:
+        return ts_fuzzy_uio.step_casadi(self.ts, self.design, f"{self.name}_kernel")
+
+    def step_numpy(self, z, u, y):
+        return ts_fuzzy_uio.step_numpy(self.ts, self.design, z, u, y)
+
+    @property
+    def state_names(self) -> list:
+        return ts_fuzzy_uio.state_layout(self.ts)
+
+    @property
+    def output_names(self) -> list:
+        d = self.ts.definition
+        return [str(s) for s in d.states] + [str(s) for s in d.unknown_inputs]
+
+    @property
+    def input_names(self) -> list:
+        d = self.ts.definition
+        return [str(s) for s in d.known_inputs] + [f"y_{n}" for n in d.output_names]
+
+    @property
+    def nu(self) -> int:
+        return len(self.ts.definition.known_inputs)
+
+    @property
+    def ny(self) -> int:
+        return self.ts.ny
+
+    def scheduling_boxes(self) -> list:
+        return [(str(s), *self.ts.state_box[s], True) for s in self.ts.measured]
+
+    def emit_notes(self) -> dict:
+        return {
+            "headline": f"LMIs (27) worst margin {self.certificate['worst_min_eig']:.3g}",
+            "stability": (f"seed-004 Theorem 1: V(e+) < V(e) for all memberships and DMVT parameters; "
+                          f"sampled (33): sqrt(V) contracts by {self.decrease['contraction_per_step']:.6f} per step"),
+            "step_notes": [
+                "Each call takes y_{k+1} and returns x_hat_{k+1} and the unknown-input estimate d_hat_k",
+                "of the PREVIOUS sample ((16c) needs the next output): the unknown inputs lag one sample.",
+                "The state holds [zeta_k, y_k, primed, x_hat, d_hat]; the outputs are its last entries.",
+            ],
+            "clamp_doc": ("A measured premise signal outside the compact set D_x (clamped for the model and the\n"
+                          " * memberships), or an unmeasured estimate outside D_x: the certificate does not cover this sample."),
+            "warmup_doc": ("there is no previous output y_k yet, so y_{k+1} stands in for it\n"
+                           " * and the unknown-input estimate of this sample is not meaningful."),
+            "has_warmup": True,
+        }
+
+    def artifact(self) -> dict:
+        sol = self.design.solution
+        return {
+            "observer": self.name,
+            "config": self.config.to_json(),
+            "signals": {"state": self.state_names, "input": self.input_names, "output": self.output_names,
+                        "scheduling": [str(p.expr) for p in self.ts.premises],
+                        "input_boxes": input_boxes(self)},
+            "ts_model": _sig(self.ts.to_json(), 12),
+            **self.design.gains_json(),
+            "certificate": {
+                "solver_blocks": len(sol.checks), "solver_worst_block": sol.worst.label,
+                "solver_worst_min_eig": _sig(sol.worst.min_eig),
+                "recheck": _sig(self.certificate),
+                "lyapunov_decrease_33": _sig(self.decrease),
+            },
+        }
+
 
 def _settings(config: ObserverConfig, lyapunov: str | None = None) -> linf_uio.LinfDesignSettings:
     d = dict(config.design)
@@ -80,7 +195,35 @@ def representation(config: ObserverConfig):
     return lpv, poly, err
 
 
-def build(config: ObserverConfig, tol: float | None = None) -> ObserverBuild:
+def build_ts_fuzzy(config: ObserverConfig, tol: float | None = None) -> TSFuzzyBuild:
+    """Seed 004: model -> TS form + Jacobian bounds -> rank conditions, (30), LMIs (27) -> certificates."""
+    d = dict(config.design)
+    unknown = set(d) - {"decay", "margin", "tol"}
+    if unknown:
+        raise ModelDefinitionError(f"{config.source}: unknown [design] keys {sorted(unknown)}")
+    settings = ts_fuzzy_uio.TSDesignSettings(decay=float(d.get("decay", 1.0)), margin=float(d.get("margin", 1e-4)),
+                                             tol=float(tol if tol is not None else d.get("tol", 1e-8)))
+    t0 = time.perf_counter()
+    ts = ts_fuzzy.build(config.load_model(), load_parameters(config.parameter_path), config.sample_time)
+    t1 = time.perf_counter()
+    design = ts_fuzzy_uio.design(ts, settings)
+    t2 = time.perf_counter()
+    cert = ts_fuzzy_uio.certify(ts, design)
+    decrease = ts_fuzzy_uio.lyapunov_decrease(ts, design)
+    t3 = time.perf_counter()
+    timings = {"representation_s": t1 - t0, "design_s": t2 - t1, "solve_s": design.solution.solve_time_s,
+               "build_s": design.solution.build_time_s, "certificates_s": t3 - t2}
+    return TSFuzzyBuild(config, ts, design, cert, decrease, timings)
+
+
+def build(config: ObserverConfig, tol: float | None = None):
+    """Run the pipeline of the configuration's family; returns its build."""
+    if config.family == "ts_fuzzy_uio":
+        return build_ts_fuzzy(config, tol)
+    return build_linf(config, tol)
+
+
+def build_linf(config: ObserverConfig, tol: float | None = None) -> ObserverBuild:
     """Run model -> polytope -> LMI design -> certificate -> discrete certificate."""
     t0 = time.perf_counter()
     lpv, poly, err = representation(config)
@@ -104,6 +247,15 @@ def build(config: ObserverConfig, tol: float | None = None) -> ObserverBuild:
     return ObserverBuild(config, lpv, poly, err, design, quadratic, cert, data, dcert, timings)
 
 
+def input_boxes(b) -> dict:
+    """{input name: [min, max]} of the inputs that schedule the step (outside: SCHEDULING_CLAMPED)."""
+    if isinstance(b, TSFuzzyBuild):
+        names = dict(zip(b.ts.measured, b.ts.definition.output_names))
+        return {f"y_{names[s]}": list(b.ts.state_box[s]) for s in b.ts.measured}
+    return {str(sym): [lo, hi] for sym, lo, hi in zip(b.poly.signals, b.poly.lowers, b.poly.uppers)
+            if sym in b.data.raw_signals}
+
+
 def _sig(x, digits=6):
     """Round report figures so the committed artifact does not depend on last-bit noise."""
     if isinstance(x, dict):
@@ -123,8 +275,8 @@ def artifact(b: ObserverBuild) -> dict:
     return {
         "observer": b.name,
         "config": b.config.to_json(),
-        "signals": {"state": b.state_names, "input": b.input_names,
-                    "scheduling": [str(x) for x in b.poly.signals]},
+        "signals": {"state": b.state_names, "input": b.input_names, "output": b.output_names,
+                    "scheduling": [str(x) for x in b.poly.signals], "input_boxes": input_boxes(b)},
         "polytope": b.poly.to_json(),
         "taylor_error": _sig(b.taylor_error),
         **b.design.gains_json(),

@@ -34,6 +34,7 @@ class CompiledObserver:
     state_names: tuple
     input_names: tuple
     sample_time: float
+    output_names: tuple = ()
 
     @property
     def step(self):
@@ -54,7 +55,15 @@ class CompiledObserver:
     @property
     def status_bits(self) -> dict:
         return {k: getattr(self.module, k) for k in
-                ("OK", "SCHEDULING_CLAMPED", "NONFINITE_INPUT", "NUMERICAL_FAILURE")}
+                ("OK", "SCHEDULING_CLAMPED", "NONFINITE_INPUT", "NUMERICAL_FAILURE", "WARMING_UP")}
+
+    def output_index(self, signal: str) -> int:
+        """Column of ``signal`` in the outputs."""
+        try:
+            return self.output_names.index(signal)
+        except ValueError:
+            raise UnknownObserverError(f"{self.name} has no output {signal!r}; outputs: "
+                                       f"{', '.join(self.output_names)}") from None
 
     def initial_state(self) -> np.ndarray:
         return np.zeros(self.n_state)
@@ -85,5 +94,6 @@ def load(name: str) -> CompiledObserver:
     except ModuleNotFoundError:
         raise UnknownObserverError(f"observer {name!r} is generated but not compiled; run `make build`") from None
     art = json.loads(design.read_text())
-    return CompiledObserver(name, module, tuple(art["signals"]["state"]), tuple(art["signals"]["input"]),
-                            float(art["config"]["sample_time"]))
+    signals = art["signals"]
+    return CompiledObserver(name, module, tuple(signals["state"]), tuple(signals["input"]),
+                            float(art["config"]["sample_time"]), tuple(signals.get("output", signals["state"])))

@@ -66,7 +66,7 @@ int lpv_linf_driver_torque_step_flat(double *state, const double *input, double 
             state[i] = (status & LPV_LINF_DRIVER_TORQUE_NUMERICAL_FAILURE) ? 0.0 : next[i];
         }
     }
-    for (i = 0; i < LPV_LINF_DRIVER_TORQUE_N_STATE; ++i) out[i] = state[i];
+    for (i = 0; i < LPV_LINF_DRIVER_TORQUE_N_OUTPUT; ++i) out[i] = state[0 + i];
     return status;
 }
 
@@ -88,14 +88,14 @@ int lpv_linf_driver_torque_step(lpv_linf_driver_torque_state *s, const lpv_linf_
     input[4] = in->v_x;
     status = lpv_linf_driver_torque_step_flat(state, input, flat_out);
     s->beta = state[0];
-    out->beta = flat_out[0];
     s->r = state[1];
-    out->r = flat_out[1];
     s->delta = state[2];
-    out->delta = flat_out[2];
     s->delta_dot = state[3];
-    out->delta_dot = flat_out[3];
     s->T_d = state[4];
+    out->beta = flat_out[0];
+    out->r = flat_out[1];
+    out->delta = flat_out[2];
+    out->delta_dot = flat_out[3];
     out->T_d = flat_out[4];
     return status;
 }

@@ -66,7 +66,7 @@ int lpv_linf_driver_torque_bmw320i_step_flat(double *state, const double *input,
             state[i] = (status & LPV_LINF_DRIVER_TORQUE_BMW320I_NUMERICAL_FAILURE) ? 0.0 : next[i];
         }
     }
-    for (i = 0; i < LPV_LINF_DRIVER_TORQUE_BMW320I_N_STATE; ++i) out[i] = state[i];
+    for (i = 0; i < LPV_LINF_DRIVER_TORQUE_BMW320I_N_OUTPUT; ++i) out[i] = state[0 + i];
     return status;
 }
 
@@ -88,14 +88,14 @@ int lpv_linf_driver_torque_bmw320i_step(lpv_linf_driver_torque_bmw320i_state *s,
     input[4] = in->v_x;
     status = lpv_linf_driver_torque_bmw320i_step_flat(state, input, flat_out);
     s->beta = state[0];
-    out->beta = flat_out[0];
     s->r = state[1];
-    out->r = flat_out[1];
     s->delta = state[2];
-    out->delta = flat_out[2];
     s->delta_dot = state[3];
-    out->delta_dot = flat_out[3];
     s->T_d = state[4];
+    out->beta = flat_out[0];
+    out->r = flat_out[1];
+    out->delta = flat_out[2];
+    out->delta_dot = flat_out[3];
     out->T_d = flat_out[4];
     return status;
 }

@@ -13,8 +13,7 @@ extern "C" {
 
 /* lpv_linf_driver_torque_bmw320i: Seed-000 LPV L-infinity UIO designed for the CommonRoad BMW 320i (parameter set 2) with the Table I steering column: the twin of lpv_linf_driver_torque that is validated on the CommonRoad multi-body plant.
  *
- * Discrete-time step at Ts = 0.01 s (backward Euler, certified: sqrt(V) contracts by
- * 0.961700 per step over the whole scheduling box). One call = one sample.
+ * Discrete-time step at Ts = 0.01 s (backward Euler, certified: sqrt(V) contracts by 0.961700 per step over the whole scheduling box). One call = one sample.
  * Reentrant: all state is in lpv_linf_driver_torque_bmw320i_state; no globals, no malloc.
  */
 
@@ -36,6 +35,8 @@ extern "C" {
 /* The step produced a non-finite value (the state had grown past double range, e.g. after
  * absurd finite inputs): the state restarts from the initial (zero) estimate. */
 #define LPV_LINF_DRIVER_TORQUE_BMW320I_NUMERICAL_FAILURE 4
+/* First sample after init or after a restart: never set by this observer (its step needs no previous sample). */
+#define LPV_LINF_DRIVER_TORQUE_BMW320I_WARMING_UP 8
 
 typedef struct {
     double beta; /* estimate of beta [rad] */
@@ -52,7 +53,6 @@ typedef struct {
     double y_delta_dot; /* measured delta_dot [rad/s] */
     double v_x; /* scheduling signal [m/s] */
 } lpv_linf_driver_torque_bmw320i_input;
-
 /* Estimates after the sample: same fields as the state. */
 typedef lpv_linf_driver_torque_bmw320i_state lpv_linf_driver_torque_bmw320i_output;
 

@@ -64,7 +64,7 @@ int stanford_sideslip_step_flat(double *state, const double *input, double *out)
             state[i] = (status & STANFORD_SIDESLIP_NUMERICAL_FAILURE) ? 0.0 : next[i];
         }
     }
-    for (i = 0; i < STANFORD_SIDESLIP_N_STATE; ++i) out[i] = state[i];
+    for (i = 0; i < STANFORD_SIDESLIP_N_OUTPUT; ++i) out[i] = state[0 + i];
     return status;
 }
 
@@ -83,10 +83,10 @@ int stanford_sideslip_step(stanford_sideslip_state *s, const stanford_sideslip_i
     input[3] = in->v_x;
     status = stanford_sideslip_step_flat(state, input, flat_out);
     s->beta = state[0];
-    out->beta = flat_out[0];
     s->r = state[1];
-    out->r = flat_out[1];
     s->M_z = state[2];
+    out->beta = flat_out[0];
+    out->r = flat_out[1];
     out->M_z = flat_out[2];
     return status;
 }

@@ -13,8 +13,7 @@ extern "C" {
 
 /* stanford_sideslip: Sideslip virtual sensor for the Stanford race car (real data in ../shared/data): seed-000 LPV L-infinity UIO on a single-track model whose axle stiffness is scheduled on the measured tyre utilization |a_y|/(mu g); measured delta, r, v_x, a_y; unknown input: a yaw-moment disturbance.
  *
- * Discrete-time step at Ts = 0.01 s (backward Euler, certified: sqrt(V) contracts by
- * 0.845154 per step over the whole scheduling box). One call = one sample.
+ * Discrete-time step at Ts = 0.01 s (backward Euler, certified: sqrt(V) contracts by 0.845154 per step over the whole scheduling box). One call = one sample.
  * Reentrant: all state is in stanford_sideslip_state; no globals, no malloc.
  */
 
@@ -39,6 +38,8 @@ extern "C" {
 /* The step produced a non-finite value (the state had grown past double range, e.g. after
  * absurd finite inputs): the state restarts from the initial (zero) estimate. */
 #define STANFORD_SIDESLIP_NUMERICAL_FAILURE 4
+/* First sample after init or after a restart: never set by this observer (its step needs no previous sample). */
+#define STANFORD_SIDESLIP_WARMING_UP 8
 
 typedef struct {
     double beta; /* estimate of beta [rad] */
@@ -52,7 +53,6 @@ typedef struct {
     double y_a_y; /* measured a_y [m/s^2] */
     double v_x; /* scheduling signal [m/s] */
 } stanford_sideslip_input;
-
 /* Estimates after the sample: same fields as the state. */
 typedef stanford_sideslip_state stanford_sideslip_output;
 
