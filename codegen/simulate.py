@@ -117,3 +117,102 @@ def observer_input_matrix(input_names, truth: dict, measured: dict) -> np.ndarra
             raise SampleError(f"the plant does not provide the observer input {col!r}")
         columns.append(source[key])
     return np.column_stack(columns)
+
+
+def angle_torque_plant(config, definition, params, scn, progress=None, substeps: int = 10) -> dict:
+    """Closed-loop truth for models driven by steering angle and engine torque (seed 004, eq. (1)).
+
+    ``definition`` is the truth plant (states v_x, v_y, r; unknown inputs T_eng, delta), its values
+    from the parameter file's [parameters] and [plant] tables; a ``mu`` parameter follows the
+    scenario's friction (time-varying grip). A path-following driver sets delta from the scenario's
+    curvature (and circle), a speed controller sets T_eng from v_ref; both are held over each
+    sample (zero-order hold, as a digital controller does), the plant is integrated with RK4
+    substeps. Returns the truth per sample: t, v_x, v_y, r, T_eng, delta, a_y, mu.
+    """
+    names = definition.state_names
+    if set(names) != {"v_x", "v_y", "r"} or {str(s) for s in definition.unknown_inputs} != {"T_eng", "delta"}:
+        raise ModelDefinitionError(f"the angle/torque plant needs states v_x, v_y, r and inputs T_eng, delta; "
+                                   f"{definition.name!r} has {names}")
+    values = {**params.values, **params.plant}
+    free = [p for p in definition.parameters if str(p) == "mu"]
+    missing = [str(p) for p in definition.parameters if str(p) not in values and str(p) != "mu"]
+    if missing:
+        raise ModelDefinitionError(f"plant {definition.name!r} needs {', '.join(missing)} in {params.source}")
+    subs = {p: values[str(p)] for p in definition.parameters if p not in free}
+    fn = sp.lambdify([*definition.states, *definition.unknown_inputs, *free],
+                     sp.Matrix(definition.dynamics).subs(subs), "numpy")
+    order = [str(s) for s in definition.unknown_inputs]
+    iv, iy, ir = (names.index(k) for k in ("v_x", "v_y", "r"))
+    M, I_e, C_x = values["M"], values["I_e"], values["C_x"]
+    g = scn.driver
+    L = g.wheelbase if g is not None else values["l_f"] + values["l_r"]
+
+    def f(z, T, delta, mu):
+        dz = np.empty(6)
+        dd = {"T_eng": T, "delta": delta}
+        dz[:3] = np.asarray(fn(*z[:3], *[dd[k] for k in order], *([mu] if free else [])), float).ravel()
+        vx, vy, psi = z[iv], z[iy], z[5]
+        dz[3] = vx * np.cos(psi) - vy * np.sin(psi)
+        dz[4] = vx * np.sin(psi) + vy * np.cos(psi)
+        dz[5] = z[ir]
+        return dz
+
+    n, Ts = scn.t.size, config.sample_time
+    h = Ts / substeps
+    z = np.zeros(6)
+    z[iv] = float(scn.v_ref[0])
+    kap0 = 0.0 if scn.kappa_ref is None else float(scn.kappa_ref[0])
+    z[ir] = z[iv] * kap0
+    i_r = i_v = 0.0
+    if kap0 != 0.0:
+        # start in steady cornering: v_y and delta with v_y' = r' = 0 on the plant itself
+        from scipy.optimize import fsolve
+        mu0 = scn.friction(0.0, 0.0, 0.0)
+        T0 = C_x * z[iv] ** 2
+
+        def lateral(p):
+            zz = z.copy()
+            zz[iy] = p[0]
+            return f(zz, T0, p[1], mu0)[[iy, ir]]
+        vy0, delta0 = fsolve(lateral, [0.0, L * kap0], xtol=1e-10)
+        z[iy] = vy0
+        i_r = (delta0 - L * kap0) / (g.k_ri if g is not None else 0.3)
+    out = {k: np.empty(n) for k in ("v_x", "v_y", "r", "T_eng", "delta", "a_y", "mu")}
+    for k in range(n):
+        if progress is not None and (k % max(n // 50, 1) == 0 or k == n - 1):
+            progress((k + 1) / n)
+        vx, vy, r = z[iv], z[iy], z[ir]
+        # path following: curvature command with radial correction, then yaw-rate loop
+        kap = 0.0 if scn.kappa_ref is None else float(scn.kappa_ref[k])
+        if scn.circle is not None and g is not None:
+            xc, yc, R = scn.circle
+            dx, dy = z[3] - xc, z[4] - yc
+            dist = np.hypot(dx, dy)
+            e = dist - R                                           # > 0: outside the circle
+            e_dot = (dx * (vx * np.cos(z[5]) - vy * np.sin(z[5])) + dy * (vx * np.sin(z[5]) + vy * np.cos(z[5]))) / dist
+            kap = kap + (g.k_e * e + g.k_edot * e_dot) / max(vx, 1.0) ** 2
+        k_r, k_ri = (g.k_r, g.k_ri) if g is not None else (0.05, 0.3)
+        err_r = vx * kap - r
+        i_r += err_r * Ts
+        delta = L * kap + k_r * err_r * 10.0 + k_ri * i_r
+        # speed: feed-forward of the reference acceleration and drag, PI on the speed error
+        err_v = float(scn.v_ref[k]) - vx
+        i_v += err_v * Ts
+        T = I_e * (float(scn.a_ref[k]) + 2.0 * err_v + 0.5 * i_v - vy * r) + C_x * vx ** 2
+        mu = scn.friction(float(scn.t[k]), z[3], z[4])
+        dz = f(z, T, delta, mu)
+        out["v_x"][k], out["v_y"][k], out["r"][k] = vx, vy, r
+        out["T_eng"][k], out["delta"][k], out["mu"][k] = T, delta, mu
+        out["a_y"][k] = dz[iy] + vx * r
+        if k == n - 1:
+            break
+        for _ in range(substeps):
+            k1 = f(z, T, delta, mu)
+            k2 = f(z + 0.5 * h * k1, T, delta, mu)
+            k3 = f(z + 0.5 * h * k2, T, delta, mu)
+            k4 = f(z + h * k3, T, delta, mu)
+            z = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        if not np.all(np.isfinite(z)):
+            raise SampleError(f"plant diverged at t = {scn.t[k]:.2f} s in scenario {scn.name!r}")
+    out["t"] = np.asarray(scn.t, float)
+    return out

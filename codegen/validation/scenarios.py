@@ -12,7 +12,8 @@ Same name and seed -> bit-identical arrays (numpy ``default_rng(seed)``; no glob
 Library (seed paper and section in each description): ``track_varying_speed``,
 ``takeover_opposing_assist``, ``zigzag_growing_ay``, ``zigzag_constant_speed_assist``
 (seed 000 scenarios 1-4), ``random_trajectory_accel``, ``circular_path``, ``time_varying_grip``
-(seed 004 scenarios 1-3), ``braking_on_bend``.
+(seed 004 scenarios 1-3; ``circular_path_normal`` is scenario 2 within the seed's linear-tyre
+range), ``braking_on_bend``.
 """
 from __future__ import annotations
 
@@ -338,6 +339,19 @@ def _circular_path(seed, rate):
                    circle=(0.0, R, R), driver=DriverGains())
 
 
+def _circular_path_normal(seed, rate):
+    rng = np.random.default_rng(seed)
+    t = _grid(40.0, rate)
+    R = 40.0
+    v = 6.0 + 3.0 * _smoothstep(t, 5.0, 35.0)                # 6 -> 9 m/s (a_y 0.9 -> 2.0)
+    kap = np.full_like(t, 1.0 / R)
+    td = band_limited(t, rng, 0.2)
+    return _finish("circular_path_normal", seed,
+                   "seed 004 Sec. IV-C scenario 2 in the seed's own 'normal driving' range (its linear "
+                   "tyre model (3)): circle of radius 40 m, speed 6 -> 9 m/s (a_y 0.9 -> 2.0 m/s²)", rate, t,
+                   v, np.zeros_like(t), td, kap, circle=(0.0, R, R), driver=DriverGains())
+
+
 def _time_varying_grip(seed, rate):
     rng = np.random.default_rng(seed)
     t = _grid(40.0, rate)
@@ -396,6 +410,7 @@ SCENARIOS: dict[str, tuple[Callable, int]] = {
     "zigzag_constant_speed_assist": (_zigzag_constant_speed_assist, 4),
     "random_trajectory_accel": (_random_trajectory_accel, 5),
     "circular_path": (_circular_path, 6),
+    "circular_path_normal": (_circular_path_normal, 9),
     "time_varying_grip": (_time_varying_grip, 7),
     "braking_on_bend": (_braking_on_bend, 8),
 }
