@@ -230,7 +230,8 @@ def _run(model: KalmanModel, u, y, rho, dt, R, Sigma, x0, P0, heun: bool, symmet
     x0 = _column(x0, 1, nx, "x0")[0]
     # one step, symbolic: z = (x, vec P), inputs (u[k-1], rho[k-1], u[k], rho[k], y[k])
     z = ca.SX.sym("z", nx + nx * nx)
-    u0, r0, u1, r1 = ca.SX.sym("u0", nu), ca.SX.sym("rho0", rho.shape[1]), ca.SX.sym("u1", nu), ca.SX.sym("rho1", rho.shape[1])
+    nr = rho.shape[1]
+    u0, r0, u1, r1 = ca.SX.sym("u0", nu), ca.SX.sym("rho0", nr), ca.SX.sym("u1", nu), ca.SX.sym("rho1", nr)
     yk = ca.SX.sym("y", ny)
     x, P = z[:nx], ca.reshape(z[nx:], nx, nx)
     zero_w = ca.DM.zeros(model.f.size1_in(2), 1)
