@@ -12,8 +12,9 @@ Plants:
   designed for that car (``lpv_linf_driver_torque_bmw320i`` for parameter set 2).
 
 Measurements carry seeded white sensor noise (:data:`SENSOR_NOISE`); the baselines (the
-source repository's linear KF on (beta, r) with (a_y, r), and the Fiala EKF) see the same
-noisy measurements, so every figure is a ratio measured in one run.
+source repository's linear KF on (beta, r) with (a_y, r), and the Fiala EKF, both generated
+from the symbolic models of ``model_defs/baselines.py`` by :mod:`codegen.validation.kalman`)
+see the same noisy measurements, so every figure is a ratio measured in one run.
 """
 from __future__ import annotations
 
@@ -92,7 +93,8 @@ def _truth_commonroad(config, scn, progress=None):
 
 
 def _baselines(config, truth, noisy) -> dict:
-    """The source repository's linear KF and the Fiala EKF, on the same noisy measurements."""
+    """The source repository's linear KF and the Fiala EKF (generated from ``model_defs/baselines.py``
+    with the observer's car: axle stiffness = 2 x tyre stiffness, mu = 1), on the same noisy measurements."""
     from .validation import stanford
     car = _car(config)
     run = stanford.StanfordRun(t=truth["t"], vx=truth["v_x"], vy=np.tan(truth["beta"]) * truth["v_x"],

@@ -1,7 +1,8 @@
 """Vehicle models, written once symbolically, and their parameter files.
 
-Each model module exposes ``MODEL`` (a :class:`codegen.model.ModelDefinition`);
-numeric values live in ``params/*.toml``.
+Each observer model module exposes ``MODEL`` (a :class:`codegen.model.ModelDefinition`);
+numeric values live in ``params/*.toml``. ``baselines.py`` holds the symbolic models the
+Kalman-filter baselines are generated from (:mod:`codegen.validation.kalman`).
 """
 from pathlib import Path
 

@@ -10,15 +10,20 @@ gzip CSV with the same columns, or the shorthand ``"stanford"``.
 
 Baselines
 ---------
+Both are generated from symbolic models (``model_defs/baselines.py``) by the generic builder
+:mod:`codegen.validation.kalman` (sympy -> CasADi, Jacobians by CasADi differentiation); no filter
+matrix is typed in here.
+
 :func:`linear_kf` reproduces ``estimators/matlab_kf/BetaStanfordLinear.m`` + ``LinearKF.m`` of the
 source repository (commit 2a427a76), line by line:
 
-* states x = (β, r), measurements y = (a_y, r), input δ (road-wheel angle), axle stiffnesses
-  C_f = 0.7e5, C_r = 1.2e5 N/rad (F_yf = C_f α_f), m = 982 kg, l_f = 1.33, l_r = 1.07,
-  I_z = m/12 (1.7² + 4.09²);
+* states x = (β, r), measurements y = (a_y, r), input δ (road-wheel angle): the model
+  ``LINEAR_SINGLE_TRACK``, i.e. the observer's single-track equations with linear tyres, with the
+  data README's axle stiffnesses C_f = 0.7e5, C_r = 1.2e5 N/rad (F_yf = C_f α_f), m = 982 kg,
+  l_f = 1.33, l_r = 1.07, I_z = m/12 (1.7² + 4.09²); its Jacobians are the source's
+  A(v_x), B, C(v_x) = [-(C_f+C_r)/m, -(l_f C_f - l_r C_r)/(m v_x); 0, 1], D = [C_f/m; 0];
 * forward-Euler discretization at dt = 0.01 s scheduled on the *previous* sample's v_x:
-  A_d = I + dt A(v_x[k-1]), B_d = dt B(v_x[k-1]); the output matrix uses the current v_x[k]
-  (C = [-(C_f+C_r)/m, -(l_f C_f - l_r C_r)/(m v_x); 0, 1], D = [C_f/m; 0]);
+  A_d = I + dt A(v_x[k-1]), B_d = dt B(v_x[k-1]); the output matrices use the current v_x[k];
 * noise covariances from the data's own high-frequency content: each signal is high-pass filtered
   with an equiripple FIR (MATLAB ``fdesign.highpass('Fst,Fp,Ast,Ap', 0.15, 0.25, 60, 1)``, i.e.
   stop band below 0.15·Nyquist = 7.5 Hz at -60 dB, pass band above 12.5 Hz, 1 dB ripple) and
@@ -27,8 +32,9 @@ source repository (commit 2a427a76), line by line:
 * x_0 = 0, P_0 = diag(1e4, 1e4); predict with δ[k-1], correct with y[k] and δ[k]; the estimate at
   sample 0 is the initial state 0 (MATLAB's zero-filled ``States(:,1)``).
 
-:func:`ekf` is a nonlinear single-track EKF with a Fiala (brush) tyre; see its docstring for every
-physical choice. Neither baseline is tuned on ``beta_true``.
+:func:`ekf` is an EKF on ``FIALA_SINGLE_TRACK``, a nonlinear single-track model with Fiala (brush)
+axle forces; see its docstring and :class:`EKFConfig` for every physical choice. Neither baseline
+is tuned on ``beta_true``.
 """
 from __future__ import annotations
 
@@ -41,13 +47,14 @@ from pathlib import Path
 
 import numpy as np
 
+from model_defs.baselines import FIALA_SINGLE_TRACK, LINEAR_SINGLE_TRACK
+
 from ..errors import ModelDefinitionError, SampleError
-from . import metrics
+from . import kalman, metrics
 
 __all__ = [
     "STANFORD_PATH", "COLUMNS", "DatasetError", "StanfordRun", "load", "VehicleParams",
     "STANFORD_CAR", "highpass_std", "BaselineResult", "linear_kf", "EKFConfig", "ekf",
-    "fiala_axle_force",
 ]
 
 STANFORD_PATH = (Path(__file__).resolve().parents[3] / "shared" / "data" / "stanford_sideslip"
@@ -232,6 +239,10 @@ class VehicleParams:
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ModelDefinitionError(f"vehicle parameter {k} must be finite and > 0, got {v!r}")
 
+    def values(self) -> dict:
+        """Values keyed by the parameter names of the symbolic models (``model_defs/baselines.py``)."""
+        return {"m": self.m, "l_f": self.lf, "l_r": self.lr, "I_z": self.iz, "C_f": self.cf, "C_r": self.cr}
+
 
 STANFORD_CAR = VehicleParams(m=982.0, lf=1.33, lr=1.07, iz=982.0 / 12.0 * (1.7 ** 2 + 4.09 ** 2),
                              cf=0.7e5, cr=1.2e5)
@@ -311,10 +322,17 @@ def _check_run(run: StanfordRun) -> None:
         raise SampleError("the single-track baselines need |v_x| >= 1 m/s on every sample")
 
 
+def _filter_inputs(run: StanfordRun):
+    """Inputs u = delta, measurements y = (a_y, r), scheduling rho = v_x of a run."""
+    return run.delta, np.column_stack([run.ay, run.yaw_rate]), run.vx
+
+
 def linear_kf(run: StanfordRun, car: VehicleParams = STANFORD_CAR) -> BaselineResult:
     """Linear Kalman filter of the source repository (``BetaStanfordLinear.m``), reproduced.
 
-    See the module docstring for the exact model, discretization and noise covariances.
+    Generated from ``model_defs.baselines.LINEAR_SINGLE_TRACK`` (the observer's single-track
+    equations with linear tyres) by :func:`codegen.validation.kalman.linear_kalman_filter`; see the
+    module docstring for the discretization and noise covariances.
 
     Parameters
     ----------
@@ -326,60 +344,18 @@ def linear_kf(run: StanfordRun, car: VehicleParams = STANFORD_CAR) -> BaselineRe
     BaselineResult
     """
     _check_run(run)
-    m, lf, lr, iz, cf, cr = car.m, car.lf, car.lr, car.iz, car.cf, car.cr
-    dt = run.dt
     s_ay, s_r = highpass_std(run.ay), highpass_std(run.yaw_rate)
     s_d = highpass_std(run.delta) * 1000.0
-    q = s_d ** 2
-    R = np.diag([s_ay ** 2, s_r ** 2])
-    x = np.zeros(2)
-    P = np.diag([1e4, 1e4])
-    vx, d, ay, r = run.vx, run.delta, run.ay, run.yaw_rate
-    out = np.zeros((run.n, 2))
-    I2 = np.eye(2)
-    D = np.array([cf / m, 0.0])
-    for i in range(1, run.n):
-        v0 = vx[i - 1]
-        Ad = np.array([[1 - dt * (cf + cr) / (m * v0), -dt * (1 + (lf * cf - lr * cr) / (m * v0 ** 2))],
-                       [-dt * (lf * cf - lr * cr) / iz, 1 - dt * (lf ** 2 * cf + lr ** 2 * cr) / (iz * v0)]])
-        Bd = dt * np.array([cf / (m * v0), lf * cf / iz])
-        Qd = q * np.outer(Bd, Bd)
-        C = np.array([[-(cf + cr) / m, -(lf * cf - lr * cr) / (m * vx[i])], [0.0, 1.0]])
-        xp = Ad @ x + Bd * d[i - 1]
-        Pp = Ad @ P @ Ad.T + Qd
-        S = C @ Pp @ C.T + R
-        K = np.linalg.solve(S.T, (Pp @ C.T).T).T
-        x = xp + K @ (np.array([ay[i], r[i]]) - C @ xp - D * d[i])
-        P = (I2 - K @ C) @ Pp
-        out[i] = x
-    beta, rh = out[:, 0], out[:, 1]
+    model = kalman.kalman_model(LINEAR_SINGLE_TRACK, car.values(), outputs=("a_y", "r"), noisy_inputs=("delta",))
+    u, y, rho = _filter_inputs(run)
+    est = kalman.linear_kalman_filter(model, u, y, rho, run.dt, R=np.diag([s_ay ** 2, s_r ** 2]),
+                                      Sigma=[[s_d ** 2]], x0=np.zeros(2), P0=np.diag([1e4, 1e4]))
+    beta, rh = est.x[:, model.states.index("beta")], est.x[:, model.states.index("r")]
     return BaselineResult(
         beta=beta, r=rh, beta_stats=metrics.error_stats(run.beta_true, beta, degrees=True),
         r_rmse_deg=metrics.rms_error(run.yaw_rate, rh, degrees=True), name="linear_kf",
-        settings={"s_ay": s_ay, "s_r": s_r, "s_delta_x1000": s_d, "dt": dt,
+        settings={"s_ay": s_ay, "s_r": s_r, "s_delta_x1000": s_d, "dt": run.dt, "model": model.name,
                   "discretization": "forward Euler, v_x[k-1]", "P0": 1e4})
-
-
-def fiala_axle_force(alpha, c_alpha: float, mu_fz: float):
-    """Fiala (brush, parabolic pressure) lateral axle force, Pacejka's sign convention F = +C α.
-
-    ``F = C t - C²/(3 μF_z) |t| t + C³/(27 μ²F_z²) t³`` with ``t = tan α`` for
-    ``|t| < 3 μF_z / C`` and ``μF_z sign(α)`` beyond (full sliding); Pacejka, *Tire and Vehicle
-    Dynamics*, 3rd ed., Sec. 3.2 (brush model), as used by Hindiyeh & Gerdes (2014).
-
-    Returns
-    -------
-    (force, dforce_dalpha) : tuple of float or ndarray
-    """
-    t = np.tan(alpha)
-    tsl = 3.0 * mu_fz / c_alpha
-    a = c_alpha
-    b = c_alpha ** 2 / (3.0 * mu_fz)
-    c = c_alpha ** 3 / (27.0 * mu_fz ** 2)
-    lin = np.abs(t) < tsl
-    f = np.where(lin, a * t - b * np.abs(t) * t + c * t ** 3, mu_fz * np.sign(alpha))
-    dfdt = np.where(lin, a - 2 * b * np.abs(t) + 3 * c * t ** 2, 0.0)
-    return f, dfdt * (1.0 + t ** 2)
 
 
 @dataclass(frozen=True)
@@ -429,20 +405,14 @@ class EKFConfig:
 
 def ekf(run: StanfordRun, car: VehicleParams = STANFORD_CAR, cfg: EKFConfig = EKFConfig()
         ) -> BaselineResult:
-    """Extended Kalman filter on a nonlinear single-track model with Fiala tyres.
+    """Extended Kalman filter on the nonlinear single-track model with Fiala tyres.
 
-    Model (states x = (v_y, r), inputs δ and the measured v_x as a scheduling signal)::
-
-        α_f = δ - atan((v_y + l_f r) / v_x),     α_r = -atan((v_y - l_r r) / v_x)
-        F_yf = Fiala(α_f; C_f, μ F_zf),          F_yr = Fiala(α_r; C_r, μ F_zr)
-        F_zf = m g l_r / L,  F_zr = m g l_f / L  (static axle loads)
-        v̇_y = (F_yf cos δ + F_yr)/m - r v_x,    ṙ = (l_f F_yf cos δ - l_r F_yr)/I_z
-        y = (a_y, r),  a_y = (F_yf cos δ + F_yr)/m
-
-    Discretized with one RK2 (Heun) step per sample at the data rate, the Jacobian taken on the
-    Euler part (F = I + dt ∂f/∂x). Process noise: the unmodelled axle forces
-    w_f, w_r ~ N(0, (σ_fy F_z)²) enter v̇_y, ṙ and a_y through their physical input matrix
-    (Q_d = dt² G Σ Gᵀ, plus the corresponding correlation with a_y ignored). β = atan(v_y / v_x).
+    Generated from ``model_defs.baselines.FIALA_SINGLE_TRACK`` (states x = (v_y, r), input
+    delta, the measured v_x as a scheduling signal, measurements (a_y, r)) by
+    :func:`codegen.validation.kalman.extended_kalman_filter`: one Heun step per sample, Jacobians
+    by CasADi differentiation of the symbolic model. Process noise: the unmodelled axle forces
+    w_f, w_r ~ N(0, sigma_fy^2) (fractions of the static axle loads) enter through their physical
+    input matrix G = df/dw (their correlation with a_y is ignored). beta = atan(v_y / v_x).
 
     Parameters
     ----------
@@ -455,75 +425,18 @@ def ekf(run: StanfordRun, car: VehicleParams = STANFORD_CAR, cfg: EKFConfig = EK
     BaselineResult
     """
     _check_run(run)
-    m, lf, lr, iz, cf, cr = car.m, car.lf, car.lr, car.iz, car.cf, car.cr
-    L = lf + lr
-    fzf, fzr = m * cfg.g * lr / L, m * cfg.g * lf / L
-    muf, mur = cfg.mu * fzf, cfg.mu * fzr
-    dt = run.dt
     s_ay = cfg.sigma_ay if cfg.sigma_ay is not None else highpass_std(run.ay)
     s_r = cfg.sigma_r if cfg.sigma_r is not None else highpass_std(run.yaw_rate)
-    R = np.diag([s_ay ** 2, s_r ** 2])
-    Sw = np.diag([(cfg.sigma_fy * fzf) ** 2, (cfg.sigma_fy * fzr) ** 2])
-
-    def forces(x, vx, d):
-        vy, r = x
-        af = d - math.atan2(vy + lf * r, vx)
-        ar = -math.atan2(vy - lr * r, vx)
-        ff, dff = fiala_axle_force(af, cf, muf)
-        fr, dfr = fiala_axle_force(ar, cr, mur)
-        return float(ff), float(dff), float(fr), float(dfr), af, ar
-
-    def f(x, vx, d):
-        ff, _, fr, _, _, _ = forces(x, vx, d)
-        cd = math.cos(d)
-        return np.array([(ff * cd + fr) / m - x[1] * vx, (lf * ff * cd - lr * fr) / iz])
-
-    x = np.zeros(2)
-    P = np.diag(cfg.p0)
-    vx, d, ay, r = run.vx, run.delta, run.ay, run.yaw_rate
-    out = np.zeros((run.n, 2))
-    for i in range(1, run.n):
-        v0, d0 = vx[i - 1], d[i - 1]
-        # Jacobian of f at the prior estimate
-        ff, dff, fr, dfr, _, _ = forces(x, v0, d0)
-        cd = math.cos(d0)
-        vy, rr = x
-        # ∂α_f/∂(v_y, r), ∂α_r/∂(v_y, r)
-        den_f = v0 ** 2 + (vy + lf * rr) ** 2
-        den_r = v0 ** 2 + (vy - lr * rr) ** 2
-        daf = np.array([-v0 / den_f, -lf * v0 / den_f])
-        dar = np.array([-v0 / den_r, lr * v0 / den_r])
-        dFf, dFr = dff * daf, dfr * dar
-        J = np.vstack([(dFf * cd + dFr) / m - np.array([0.0, v0]),
-                       (lf * dFf * cd - lr * dFr) / iz])
-        G = np.array([[cd / m, 1.0 / m], [lf * cd / iz, -lr / iz]])
-        # Heun step with inputs held at sample i-1 except speed/steer at the end of the step
-        k1 = f(x, v0, d0)
-        k2 = f(x + dt * k1, vx[i], d[i])
-        xp = x + 0.5 * dt * (k1 + k2)
-        Fd = np.eye(2) + dt * J
-        Pp = Fd @ P @ Fd.T + dt ** 2 * G @ Sw @ G.T
-        # measurement
-        ff, dff, fr, dfr, _, _ = forces(xp, vx[i], d[i])
-        cd = math.cos(d[i])
-        vy, rr = xp
-        v1 = vx[i]
-        den_f = v1 ** 2 + (vy + lf * rr) ** 2
-        den_r = v1 ** 2 + (vy - lr * rr) ** 2
-        daf = np.array([-v1 / den_f, -lf * v1 / den_f])
-        dar = np.array([-v1 / den_r, lr * v1 / den_r])
-        H = np.vstack([(dff * daf * cd + dfr * dar) / m, [0.0, 1.0]])
-        yhat = np.array([(ff * cd + fr) / m, rr])
-        S = H @ Pp @ H.T + R
-        K = np.linalg.solve(S.T, (Pp @ H.T).T).T
-        x = xp + K @ (np.array([ay[i], r[i]]) - yhat)
-        P = (np.eye(2) - K @ H) @ Pp
-        P = 0.5 * (P + P.T)
-        out[i] = x
-    beta = np.arctan2(out[:, 0], vx)
-    rh = out[:, 1]
+    model = kalman.kalman_model(FIALA_SINGLE_TRACK, {**car.values(), "mu": cfg.mu, "g": cfg.g},
+                                outputs=("a_y", "r"))
+    u, y, rho = _filter_inputs(run)
+    est = kalman.extended_kalman_filter(model, u, y, rho, run.dt, R=np.diag([s_ay ** 2, s_r ** 2]),
+                                        Sigma=cfg.sigma_fy ** 2 * np.eye(len(model.noise)),
+                                        x0=np.zeros(2), P0=np.diag(cfg.p0))
+    vy, rh = est.x[:, model.states.index("v_y")], est.x[:, model.states.index("r")]
+    beta = np.arctan2(vy, run.vx)
     return BaselineResult(
         beta=beta, r=rh, beta_stats=metrics.error_stats(run.beta_true, beta, degrees=True),
         r_rmse_deg=metrics.rms_error(run.yaw_rate, rh, degrees=True), name="ekf_fiala",
-        settings={"mu": cfg.mu, "s_ay": s_ay, "s_r": s_r, "sigma_fy": cfg.sigma_fy, "dt": dt,
-                  "p0": cfg.p0})
+        settings={"mu": cfg.mu, "s_ay": s_ay, "s_r": s_r, "sigma_fy": cfg.sigma_fy, "dt": run.dt,
+                  "p0": cfg.p0, "model": model.name})
