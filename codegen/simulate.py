@@ -119,15 +119,51 @@ def observer_input_matrix(input_names, truth: dict, measured: dict) -> np.ndarra
     return np.column_stack(columns)
 
 
+class AngleDriver:
+    """Path follower commanding the road-wheel angle: curvature of the scenario (with a radial
+    correction on circular paths), a yaw-rate loop with integral action (gains from the
+    scenario's :class:`DriverGains`), and a speed controller for a longitudinal acceleration
+    demand (feed-forward of the reference acceleration, PI on the speed error)."""
+
+    def __init__(self, scn, wheelbase: float, sample_time: float):
+        self.scn, self.g, self.Ts = scn, scn.driver, sample_time
+        self.L = self.g.wheelbase if self.g is not None else wheelbase
+        self.k_r, self.k_ri = (self.g.k_r, self.g.k_ri) if self.g is not None else (0.05, 0.3)
+        self.i_r = self.i_v = 0.0
+
+    def preload(self, delta0: float) -> None:
+        """Start holding ``delta0`` (steady cornering)."""
+        kap0 = 0.0 if self.scn.kappa_ref is None else float(self.scn.kappa_ref[0])
+        self.i_r = (delta0 - self.L * kap0) / self.k_ri
+
+    def __call__(self, k: int, X, Y, psi, vx, vy, r) -> tuple:
+        """(delta command [rad], acceleration demand [m/s^2]) at sample ``k``."""
+        scn, g = self.scn, self.g
+        kap = 0.0 if scn.kappa_ref is None else float(scn.kappa_ref[k])
+        if scn.circle is not None and g is not None:
+            xc, yc, R = scn.circle
+            dx, dy = X - xc, Y - yc
+            dist = np.hypot(dx, dy)
+            e = dist - R                                           # > 0: outside the circle
+            e_dot = (dx * (vx * np.cos(psi) - vy * np.sin(psi)) + dy * (vx * np.sin(psi) + vy * np.cos(psi))) / dist
+            kap = kap + (g.k_e * e + g.k_edot * e_dot) / max(vx, 1.0) ** 2
+        err_r = vx * kap - r
+        self.i_r += err_r * self.Ts
+        delta = self.L * kap + 10.0 * self.k_r * err_r + self.k_ri * self.i_r
+        err_v = float(scn.v_ref[k]) - vx
+        self.i_v += err_v * self.Ts
+        return delta, float(scn.a_ref[k]) + 2.0 * err_v + 0.5 * self.i_v
+
+
 def angle_torque_plant(config, definition, params, scn, progress=None, substeps: int = 10) -> dict:
     """Closed-loop truth for models driven by steering angle and engine torque (seed 004, eq. (1)).
 
     ``definition`` is the truth plant (states v_x, v_y, r; unknown inputs T_eng, delta), its values
     from the parameter file's [parameters] and [plant] tables; a ``mu`` parameter follows the
-    scenario's friction (time-varying grip). A path-following driver sets delta from the scenario's
-    curvature (and circle), a speed controller sets T_eng from v_ref; both are held over each
-    sample (zero-order hold, as a digital controller does), the plant is integrated with RK4
-    substeps. Returns the truth per sample: t, v_x, v_y, r, T_eng, delta, a_y, mu.
+    scenario's friction (time-varying grip). :class:`AngleDriver` sets delta and the acceleration
+    demand, turned into T_eng with the car's own I_e and C_x; both are held over each sample
+    (zero-order hold, as a digital controller does), the plant is integrated with RK4 substeps.
+    Returns the truth per sample: t, v_x, v_y, r, T_eng, delta, a_y, mu.
     """
     names = definition.state_names
     if set(names) != {"v_x", "v_y", "r"} or {str(s) for s in definition.unknown_inputs} != {"T_eng", "delta"}:
@@ -143,9 +179,8 @@ def angle_torque_plant(config, definition, params, scn, progress=None, substeps:
                      sp.Matrix(definition.dynamics).subs(subs), "numpy")
     order = [str(s) for s in definition.unknown_inputs]
     iv, iy, ir = (names.index(k) for k in ("v_x", "v_y", "r"))
-    M, I_e, C_x = values["M"], values["I_e"], values["C_x"]
-    g = scn.driver
-    L = g.wheelbase if g is not None else values["l_f"] + values["l_r"]
+    I_e, C_x = values["I_e"], values["C_x"]
+    driver = AngleDriver(scn, values["l_f"] + values["l_r"], config.sample_time)
 
     def f(z, T, delta, mu):
         dz = np.empty(6)
@@ -163,7 +198,6 @@ def angle_torque_plant(config, definition, params, scn, progress=None, substeps:
     z[iv] = float(scn.v_ref[0])
     kap0 = 0.0 if scn.kappa_ref is None else float(scn.kappa_ref[0])
     z[ir] = z[iv] * kap0
-    i_r = i_v = 0.0
     if kap0 != 0.0:
         # start in steady cornering: v_y and delta with v_y' = r' = 0 on the plant itself
         from scipy.optimize import fsolve
@@ -174,31 +208,16 @@ def angle_torque_plant(config, definition, params, scn, progress=None, substeps:
             zz = z.copy()
             zz[iy] = p[0]
             return f(zz, T0, p[1], mu0)[[iy, ir]]
-        vy0, delta0 = fsolve(lateral, [0.0, L * kap0], xtol=1e-10)
+        vy0, delta0 = fsolve(lateral, [0.0, driver.L * kap0], xtol=1e-10)
         z[iy] = vy0
-        i_r = (delta0 - L * kap0) / (g.k_ri if g is not None else 0.3)
+        driver.preload(delta0)
     out = {k: np.empty(n) for k in ("v_x", "v_y", "r", "T_eng", "delta", "a_y", "mu")}
     for k in range(n):
         if progress is not None and (k % max(n // 50, 1) == 0 or k == n - 1):
             progress((k + 1) / n)
         vx, vy, r = z[iv], z[iy], z[ir]
-        # path following: curvature command with radial correction, then yaw-rate loop
-        kap = 0.0 if scn.kappa_ref is None else float(scn.kappa_ref[k])
-        if scn.circle is not None and g is not None:
-            xc, yc, R = scn.circle
-            dx, dy = z[3] - xc, z[4] - yc
-            dist = np.hypot(dx, dy)
-            e = dist - R                                           # > 0: outside the circle
-            e_dot = (dx * (vx * np.cos(z[5]) - vy * np.sin(z[5])) + dy * (vx * np.sin(z[5]) + vy * np.cos(z[5]))) / dist
-            kap = kap + (g.k_e * e + g.k_edot * e_dot) / max(vx, 1.0) ** 2
-        k_r, k_ri = (g.k_r, g.k_ri) if g is not None else (0.05, 0.3)
-        err_r = vx * kap - r
-        i_r += err_r * Ts
-        delta = L * kap + k_r * err_r * 10.0 + k_ri * i_r
-        # speed: feed-forward of the reference acceleration and drag, PI on the speed error
-        err_v = float(scn.v_ref[k]) - vx
-        i_v += err_v * Ts
-        T = I_e * (float(scn.a_ref[k]) + 2.0 * err_v + 0.5 * i_v - vy * r) + C_x * vx ** 2
+        delta, a_cmd = driver(k, z[3], z[4], z[5], vx, vy, r)
+        T = I_e * (a_cmd - vy * r) + C_x * vx ** 2
         mu = scn.friction(float(scn.t[k]), z[3], z[4])
         dz = f(z, T, delta, mu)
         out["v_x"][k], out["v_y"][k], out["r"][k] = vx, vy, r

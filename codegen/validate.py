@@ -79,7 +79,7 @@ def _commonroad_vehicle(config) -> int:
         raise ModelDefinitionError(
             f"observer {config.name!r} was designed for {config.parameters}, not for a CommonRoad car; "
             f"validate on the CommonRoad plant with an observer designed for its parameters, e.g. "
-            f"lpv_linf_driver_torque_bmw320i")
+            f"lpv_linf_driver_torque_bmw320i or ts_fuzzy_uio_bmw320i")
     return int(vehicle)
 
 
@@ -154,16 +154,23 @@ def run_ts_scenario(config, scenario: str, plant: str = "nominal", duration: flo
     from .model import load_parameters
     params = load_parameters(config.parameter_path)
     model_def = config.load_model()
-    if plant == "nominal":
-        import importlib
-        definition = getattr(importlib.import_module(f"model_defs.{config.model}"), "PLANT", None) or model_def
-    elif plant == "model":
-        definition = model_def
-    else:
-        raise ModelDefinitionError(f"plant must be 'nominal' or 'model' for {config.name!r} (a CommonRoad "
-                                   f"wrapper driven by steering angle and engine torque does not exist yet)")
     scn = scenario_for(config, scenario, duration)
-    truth = simulate.angle_torque_plant(config, definition, params, scn, progress=progress)
+    if plant == "commonroad":
+        from .validation import commonroad_angle
+        truth = commonroad_angle.simulate(scn, _commonroad_vehicle(config), 1.0 / config.sample_time,
+                                          progress=progress)
+        plant_model = "CommonRoad multi-body (vehiclemodels), angle-steered"
+    elif plant in ("nominal", "model"):
+        import importlib
+        definition = getattr(importlib.import_module(f"model_defs.{config.model}"), "PLANT", None)
+        values = {**params.values, **params.plant}
+        if plant == "model" or definition is None or \
+                any(str(p) not in values and str(p) != "mu" for p in definition.parameters):
+            definition = model_def    # no truth plant, or no [plant] values for it: the exact model
+        truth = simulate.angle_torque_plant(config, definition, params, scn, progress=progress)
+        plant_model = definition.name
+    else:
+        raise ModelDefinitionError(f"plant must be 'nominal', 'model' or 'commonroad', got {plant!r}")
     measured = simulate.add_sensor_noise(truth, TS_SENSOR_NOISE, seed) if noise else {}
     obs = load(config.name)
     out, status, _ = obs.run(simulate.observer_input_matrix(obs.input_names, truth, measured))
@@ -179,7 +186,7 @@ def run_ts_scenario(config, scenario: str, plant: str = "nominal", duration: flo
             table[sig] = _stats(truth[sig][keep], est[keep], truth["t"][keep], angle=False)
     return {"observer": table, "baselines": {}, "status_flags": int(np.count_nonzero(status[1:])),
             "samples": int(len(status)), "max_abs_ay": float(np.abs(truth["a_y"]).max()), "plant": plant,
-            "plant_model": definition.name, "scenario": scenario, "noise": noise,
+            "plant_model": plant_model, "scenario": scenario, "noise": noise,
             "seed_table": SEED004_TABLE_II.get(scenario),
             "signals": {"t": truth["t"], "truth": truth, "estimate": estimates}, "units": units}
 
@@ -278,7 +285,8 @@ def to_json(result: dict) -> str:
                                               "status_flags", "samples", "max_abs_ay")}, indent=1, sort_keys=True)
 
 
-DATA_COLUMNS = {"delta": "delta", "y_r": "yaw_rate", "y_a_y": "ay", "v_x": "vx", "y_delta": "delta"}
+DATA_COLUMNS = {"delta": "delta", "y_r": "yaw_rate", "y_a_y": "ay", "v_x": "vx", "y_delta": "delta",
+                "y_v_x": "vx"}
 
 
 def run_data(name: str, path: str = "stanford") -> dict:
@@ -298,8 +306,16 @@ def run_data(name: str, path: str = "stanford") -> dict:
                           f"stanford_sideslip")
     inputs = np.column_stack([getattr(run, DATA_COLUMNS[c]) for c in obs.input_names])
     out, status, _ = obs.run(inputs)
-    i_beta = obs.state_names.index("beta")
-    beta = out[:, i_beta]
+    outputs = obs.output_names
+    extra = {}
+    if "beta" in outputs:
+        beta = out[:, outputs.index("beta")]
+    else:   # observers of v_y (seed 004): beta = atan(v_y / v_x) with the log's v_x
+        beta = np.arctan2(out[:, outputs.index("v_y")], run.vx)
+    if "delta" in outputs and "y_delta" not in obs.input_names and "delta" not in obs.input_names:
+        # delta is an unknown input of the observer (one sample late): the log's measured delta checks it
+        delta_hat = np.concatenate([out[1:, outputs.index("delta")], [np.nan]])
+        extra["delta"] = _stats(run.delta[:-1], delta_hat[:-1], angle=True)
     t = run.t - run.t[0]
 
     def table(b):
@@ -307,7 +323,7 @@ def run_data(name: str, path: str = "stanford") -> dict:
                 "vy": _stats(run.vx * np.tan(run.beta_true), run.vx * np.tan(b))}
 
     kf, ekf = stanford.linear_kf(run), stanford.ekf(run)
-    return {"observer": table(beta), "baselines": {"linear_kf": table(kf.beta), "ekf": table(ekf.beta)},
+    return {"observer": {**table(beta), **extra}, "baselines": {"linear_kf": table(kf.beta), "ekf": table(ekf.beta)},
             "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)), "data": run.source,
             "signals": {"t": t, "beta_true": run.beta_true, "beta": beta, "linear_kf": kf.beta, "ekf": ekf.beta}}
 
@@ -340,4 +356,8 @@ def format_data_table(result: dict) -> str:
     for name, t in rows:
         lines.append(f"{name:12s} {t['beta']['rms']:10.4f} {t['beta']['max']:9.4f} {t['beta']['mae']:9.4f} "
                      f"{t['vy']['rms']:9.4f}")
+    if "delta" in result["observer"]:
+        d = result["observer"]["delta"]
+        lines.append(f"steering angle delta (an unknown input of this observer) vs the log's measured delta: "
+                     f"RMSE {d['rms']:.4f} deg, max {d['max']:.4f} deg, MAE {d['mae']:.4f} deg")
     return "\n".join(lines)

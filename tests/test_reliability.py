@@ -169,11 +169,15 @@ def test_generation_independent_of_hash_seed(tmp_path):
 
 
 def realistic_inputs(name, obs):
-    """The real log for observers that consume its signals, else the nominal closed-loop plant."""
+    """The real log for observers that consume its signals and whose boxes it fits (observers
+    designed for that car), else the nominal closed-loop plant."""
     if all(c in validate.DATA_COLUMNS for c in obs.input_names):
         from codegen.validation import stanford
         run = stanford.load("stanford")
-        return np.column_stack([getattr(run, validate.DATA_COLUMNS[c]) for c in obs.input_names])
+        log = np.column_stack([getattr(run, validate.DATA_COLUMNS[c]) for c in obs.input_names])
+        boxes, _ = scheduling_boxes(name, obs)
+        if all(lo <= log[:, c].min() and log[:, c].max() <= hi for c, (lo, hi) in boxes.items()):
+            return log
     cfg = observers.get(name)
     if cfg.family == "ts_fuzzy_uio":
         res = validate.run_scenario(name, "random_trajectory_accel", "nominal")

@@ -185,3 +185,31 @@ def test_seed004_targets_on_the_pacejka_plant(scenario):
     assert obs["v_y"]["mae"] <= 2 * seed["v_y"][0] and obs["delta"]["mae"] <= 2 * seed["delta"][0]
     assert obs["T_eng"]["mae"] <= 1.0
     assert res["status_flags"] == 0
+
+
+def test_commonroad_parameter_file_is_derived_from_the_package():
+    from codegen.validation import commonroad_angle
+    from pathlib import Path
+    committed = Path(__file__).resolve().parent.parent / "model_defs" / "params" / "commonroad_bmw320i_seed004.toml"
+    assert committed.read_text() == commonroad_angle.seed004_params_toml(2)
+
+
+def test_commonroad_angle_steered_run():
+    """The CommonRoad twin on the independent multi-body plant: runs, tracks, and the torque truth is
+    the plant's own m R_w a_x (regression bounds, figures in the README)."""
+    from codegen import validate
+    res = validate.run_scenario("ts_fuzzy_uio_bmw320i", "circular_path_normal", "commonroad", duration=8.0)
+    obs = res["observer"]
+    assert res["status_flags"] == 0
+    assert obs["v_y"]["mae"] < 0.03 and obs["delta"]["mae"] < 2e-3
+    assert obs["T_eng"]["mae"] < 60.0
+
+
+def test_real_data_with_delta_as_unknown_input():
+    from codegen import validate
+    res = validate.run_data("ts_fuzzy_uio_stanford", "stanford")
+    beta, delta = res["observer"]["beta"], res["observer"]["delta"]
+    kf = res["baselines"]["linear_kf"]["beta"]
+    assert beta["rms"] <= 1.02 * kf["rms"]          # the same linear tyre model as the KF
+    assert delta["rms"] < 1.5                        # degrees; delta is reconstructed, not measured
+    assert res["status_flags"] <= 1                  # the warm-up sample

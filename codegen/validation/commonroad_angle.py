@@ -1,0 +1,127 @@
+"""CommonRoad multi-body plant driven by road-wheel angle and engine torque (seed-004 observers).
+
+The same independent 29-state ``vehicle_dynamics_mb`` with PAC2002 tyres as
+:mod:`codegen.validation.commonroad_plant`, closed differently: seed 004 treats the steering angle
+and the engine torque as the (unknown) inputs, so an automated driver sets them directly:
+
+* steering: :class:`codegen.simulate.AngleDriver` commands δ; a steering servo turns it into the
+  plant's steering-velocity input, δ̇ = k_servo (δ_cmd − δ) (first order, 20 rad/s by default);
+* longitudinal: the driver's acceleration demand is the plant's a_x input, which the package
+  itself converts into engine torque T_E = m R_w a_x (a_x > 0) or brake torque (a_x < 0).
+
+Truth of the seed's "effective engine torque": T_eng = m R_w a_x, the torque the plant applies
+(braking negative); the observer's I_e is m R_w of the same car (:func:`seed004_params_toml`). The
+plant has no aerodynamic drag, so C_x = C_y = 0 in that file. Truth v_y, r, δ are the plant's
+states (body frame, sprung-mass CoG).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import SampleError
+from .commonroad_plant import PlantError, _Plant, PlantConfig, _static_loads, tyre_cornering_stiffness, \
+    vehicle_parameters
+
+SERVO_GAIN = 20.0     # rad/s, steering servo bandwidth
+
+
+def seed004_params_toml(vehicle: int = 2) -> str:
+    """Parameter file of the seed-004 model (1)/(3) for CommonRoad vehicle ``vehicle``.
+
+    Mass, yaw inertia, axle distances from the set; per-tyre cornering stiffness from the PAC2002
+    slope at zero slip and static load; I_e = m R_w (the package's torque conversion); no drag;
+    D_x of seed 004 eq. (5).
+    """
+    p = vehicle_parameters(vehicle)
+    fzf, fzr = _static_loads(p)
+    cf, cr = tyre_cornering_stiffness(p, fzf), tyre_cornering_stiffness(p, fzr)
+    names = {1: "Ford Escort", 2: "BMW 320i", 3: "VW Vanagon"}
+    return f"""# CommonRoad parameter set {vehicle} ({names[vehicle]}) for the seed-004 model, derived by
+# codegen.validation.commonroad_angle.seed004_params_toml. Do not edit by hand (a test regenerates it).
+
+[meta]
+source = "commonroad-vehicle-models parameters_vehicle{vehicle}; D_x of seed 004 eq. (5)"
+commonroad_vehicle = "{vehicle}"
+car = "{names[vehicle]} (CommonRoad vehicle {vehicle})"
+
+[parameters]
+M = {p.m!r}        # kg, vehicle mass
+l_f = {p.a!r}        # m, CoG to front axle
+l_r = {p.b!r}        # m, CoG to rear axle
+I_e = {p.m * p.R_w!r}        # kg m, m R_w: the package converts a_x into torque as m R_w a_x
+I_z = {p.I_z!r}        # kg m^2, yaw inertia (sprung mass, as vehicle_dynamics_mb)
+C_f = {cf!r}        # N/rad per tyre, PAC2002 slope at F_z = {fzf:.1f} N
+C_r = {cr!r}        # N/rad per tyre, PAC2002 slope at F_z = {fzr:.1f} N
+C_x = 0.0        # the multi-body model has no aerodynamic drag
+C_y = 0.0
+
+[state_bounds]
+v_x = [5.0, 30.0]     # m/s, seed 004 eq. (5)
+v_y = [-1.5, 1.5]     # m/s
+r = [-0.55, 0.55]     # rad/s
+"""
+
+
+def simulate(scenario, vehicle: int = 2, sample_rate: float = 100.0, dt_internal: float = 1e-3,
+             progress=None) -> dict:
+    """Run ``scenario`` on the multi-body plant with angle steering; truth per output sample.
+
+    Returns a dict with t, v_x, v_y, r, delta, T_eng, a_y, mu (SI units).
+
+    Raises
+    ------
+    SampleError, PlantError
+    """
+    from vehiclemodels.init_mb import init_mb
+    from ..simulate import AngleDriver
+    if abs(scenario.sample_rate - sample_rate) > 1e-9:
+        raise SampleError(f"scenario sampled at {scenario.sample_rate} Hz, plant outputs at {sample_rate} Hz")
+    plant = _Plant(PlantConfig(vehicle=vehicle, sample_rate=sample_rate, dt_internal=dt_internal))
+    p = plant.p
+    n = scenario.t.size
+    sub = int(round(1.0 / (sample_rate * dt_internal)))
+    h = dt_internal
+    v0 = float(scenario.v_ref[0])
+    k0 = 0.0 if scenario.kappa_ref is None else float(scenario.kappa_ref[0])
+    z = np.array(init_mb([0.0, 0.0, (p.a + p.b) * k0, v0, 0.0, v0 * k0, 0.0], p), dtype=float)
+    driver = AngleDriver(scenario, p.a + p.b, 1.0 / sample_rate)
+    driver.preload(z[2])
+    dmax = min(abs(p.steering.min), abs(p.steering.max))
+    from vehiclemodels.utils.acceleration_constraints import acceleration_constraints
+
+    def rhs(x, rate, a_x):
+        return np.array(plant._f(list(x), [rate, a_x], p))
+
+    out = {k: np.empty(n) for k in ("t", "v_x", "v_y", "r", "delta", "T_eng", "a_y", "mu")}
+    for k in range(n):
+        if progress is not None and (k % max(n // 50, 1) == 0 or k == n - 1):
+            progress((k + 1) / n)
+        plant.set_mu(float(scenario.friction(scenario.t[k], z[0], z[1])))
+        delta_cmd, a_dem = driver(k, z[0], z[1], z[4], z[3], z[10], z[5])
+        a_x = acceleration_constraints(z[3], a_dem, p.longitudinal)   # what the plant applies
+        rate = SERVO_GAIN * (delta_cmd - z[2])
+        dz = rhs(z, rate, a_x)
+        out["t"][k] = scenario.t[k]
+        out["v_x"][k], out["v_y"][k], out["r"][k], out["delta"][k] = z[3], z[10], z[5], z[2]
+        out["T_eng"][k] = p.m * p.R_w * a_x
+        out["a_y"][k] = dz[10] + z[5] * z[3]
+        out["mu"][k] = plant.mu
+        if k == n - 1:
+            break
+        for _ in range(sub):
+            # the servo acts continuously on the held command; the torque demand is held
+            k1 = rhs(z, SERVO_GAIN * (delta_cmd - z[2]), a_x)
+            z2 = z + 0.5 * h * k1
+            k2 = rhs(z2, SERVO_GAIN * (delta_cmd - z2[2]), a_x)
+            z3 = z + 0.5 * h * k2
+            k3 = rhs(z3, SERVO_GAIN * (delta_cmd - z3[2]), a_x)
+            z4 = z + h * k3
+            k4 = rhs(z4, SERVO_GAIN * (delta_cmd - z4[2]), a_x)
+            z = z + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+        if not np.all(np.isfinite(z)):
+            raise PlantError(f"{scenario.name}: non-finite plant state at t = {scenario.t[k]:.3f} s")
+        if abs(z[2]) >= dmax or z[3] < 1.0 or math.isnan(z[3]):
+            raise PlantError(f"{scenario.name}: steering stop or speed below 1 m/s at t = {scenario.t[k]:.3f} s")
+    return out
