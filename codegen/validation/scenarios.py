@@ -326,30 +326,26 @@ def _random_trajectory_accel(seed, rate):
                    "1.5 m/s² after 14 s", rate, t, v, np.zeros_like(t), td, kap, driver=DriverGains())
 
 
-def _circular_path(seed, rate):
+def _circle(name, seed, rate, v0, v1, description, R=40.0):
+    """Left circle of radius R, speed v0 -> v1 between 5 and 35 s, path-following driver."""
     rng = np.random.default_rng(seed)
     t = _grid(40.0, rate)
-    R = 40.0
-    v = 10.0 + 5.0 * _smoothstep(t, 5.0, 35.0)               # 10 -> 15 m/s (a_y 2.5 -> 5.6)
-    kap = np.full_like(t, 1.0 / R)
+    v = v0 + (v1 - v0) * _smoothstep(t, 5.0, 35.0)
     td = band_limited(t, rng, 0.2)
-    return _finish("circular_path", seed,
-                   "seed 004 Sec. IV-C scenario 2: circle of radius 40 m (left), speed 10 -> 15 m/s, "
-                   "path-following driver model", rate, t, v, np.zeros_like(t), td, kap,
+    return _finish(name, seed, description, rate, t, v, np.zeros_like(t), td, np.full_like(t, 1.0 / R),
                    circle=(0.0, R, R), driver=DriverGains())
 
 
+def _circular_path(seed, rate):
+    return _circle("circular_path", seed, rate, 10.0, 15.0,
+                   "seed 004 Sec. IV-C scenario 2: circle of radius 40 m (left), speed 10 -> 15 m/s "
+                   "(a_y 2.5 -> 5.6 m/s²), path-following driver model")
+
+
 def _circular_path_normal(seed, rate):
-    rng = np.random.default_rng(seed)
-    t = _grid(40.0, rate)
-    R = 40.0
-    v = 6.0 + 3.0 * _smoothstep(t, 5.0, 35.0)                # 6 -> 9 m/s (a_y 0.9 -> 2.0)
-    kap = np.full_like(t, 1.0 / R)
-    td = band_limited(t, rng, 0.2)
-    return _finish("circular_path_normal", seed,
+    return _circle("circular_path_normal", seed, rate, 6.0, 9.0,
                    "seed 004 Sec. IV-C scenario 2 in the seed's own 'normal driving' range (its linear "
-                   "tyre model (3)): circle of radius 40 m, speed 6 -> 9 m/s (a_y 0.9 -> 2.0 m/s²)", rate, t,
-                   v, np.zeros_like(t), td, kap, circle=(0.0, R, R), driver=DriverGains())
+                   "tyre model (3)): circle of radius 40 m, speed 6 -> 9 m/s (a_y 0.9 -> 2.0 m/s²)")
 
 
 def _time_varying_grip(seed, rate):
