@@ -279,6 +279,19 @@ def test_compiled_c_agrees_with_numpy_and_casadi(tmp_path, cc, k):
     rel = np.max(np.abs(zc - za), axis=1) / np.maximum(np.max(np.abs(za), axis=1), 1e-300)
     assert rel.max() <= 1e-10
     assert np.max(rel[:10]) <= 1e-12
+    # wild samples: |sigma| from 1e-12 to 1e6 in every step.  Far out (q = tau*rho small) the step's
+    # exp(x) - 1 carries a relative error ~2.2e-16/|x| that the reference's expm1 does not
+    rng = np.random.default_rng(7 + k)
+    wild = rng.choice([-1.0, 1.0], 3000) * 10.0 ** rng.uniform(-12, 6, 3000)
+    zc = D.run_c_driver(exe, s, wild, np.zeros(k + 1))
+    ref = np.array([D.hosmd_step_numpy(s, zc[j], wild[j]) for j in range(wild.size - 1)])
+    rel = np.max(np.abs(zc[1:] - ref), axis=1) / np.maximum(np.max(np.abs(ref), axis=1), 1e-300)
+    K = D._constants(s)
+    q = K.c / np.maximum(np.abs(zc[:-1, 0] - wild[:-1]) ** (1 / (k + 1)), K.q_floor)
+    slowest = -max(np.real(s._roots))
+    assert np.all(np.isfinite(zc))
+    assert np.all(rel <= 1e-12 + (k + 1) * 2.2e-16 / (q * slowest)), (rel / (1e-12 + 2.2e-16 / q)).max()
+    assert np.all(rel[q * slowest > 1e-3] <= 1e-12)
 
 
 def test_c_step_is_heap_free_and_strict_clean(tmp_path):
@@ -297,4 +310,4 @@ def test_sx_step_embeds_in_a_larger_function():
     F = ca.Function("obs", [x, y], [nxt])
     xv = np.array([1.0, 2.0, 0.3, -0.2, 0.1])
     out = np.array(F(xv, 0.7)).ravel()
-    np.testing.assert_array_equal(out[2:], D.hosmd_step_numpy(s, xv[2:], 0.7))
+    np.testing.assert_allclose(out[2:], D.hosmd_step_numpy(s, xv[2:], 0.7), rtol=1e-14)
