@@ -130,6 +130,9 @@ def render(b: ObserverBuild) -> dict:
         "output_offset": len(state) - len(outputs),
         "scheduling": [{"name": n, "min": repr(lo), "max": repr(hi), "derived": derived}
                        for n, lo, hi, derived in b.scheduling_boxes()],
+        "derived_inputs": ([] if isinstance(b, TSFuzzyBuild) else
+                           [{"name": str(sym), "unit": b.lpv.definition.units.get(str(sym), "-")}
+                            for sym, _ in b.lpv.derived_inputs]),
         "offset_u": 0, "offset_y": nu, "offset_rho": nu + ny,
         "sz_arg": max(int(f.sz_arg()), 1), "sz_res": max(int(f.sz_res()), 1),
         "sz_iw": max(int(f.sz_iw()), 1), "sz_w": max(int(f.sz_w()), 1),

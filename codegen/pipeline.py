@@ -238,7 +238,7 @@ def build_linf(config: ObserverConfig, tol: float | None = None) -> ObserverBuil
     cert = linf_uio.certify(poly, design.P, design.X, design.L, settings.alpha)
     data = discrete.ObserverData(poly, design.Q, design.L,
                                  float(config.ui_filter.get("time_constant", 0.005)), config.sample_time,
-                                 lpv.derived, lpv.definition.output_symbols)
+                                 lpv.derived, lpv.definition.output_symbols, lpv.derived_inputs)
     dcert = discrete.certify_step(data, settings.alpha)
     t3 = time.perf_counter()
     timings = {"representation_s": t1 - t0, "design_s": t2 - t1,
@@ -276,7 +276,9 @@ def artifact(b: ObserverBuild) -> dict:
         "observer": b.name,
         "config": b.config.to_json(),
         "signals": {"state": b.state_names, "input": b.input_names, "output": b.output_names,
-                    "scheduling": [str(x) for x in b.poly.signals], "input_boxes": input_boxes(b)},
+                    "scheduling": [str(x) for x in b.poly.signals], "input_boxes": input_boxes(b),
+                    **({"derived_inputs": {str(sym): str(expr) for sym, expr in b.lpv.derived_inputs}}
+                       if b.lpv.derived_inputs else {})},
         "polytope": b.poly.to_json(),
         "taylor_error": _sig(b.taylor_error),
         **b.design.gains_json(),
