@@ -220,6 +220,9 @@ def build(config: ObserverConfig, tol: float | None = None):
     """Run the pipeline of the configuration's family; returns its build."""
     if config.family == "ts_fuzzy_uio":
         return build_ts_fuzzy(config, tol)
+    if config.family == "switched_pi":
+        from .switched_pipeline import build_switched_pi
+        return build_switched_pi(config, tol)
     return build_linf(config, tol)
 
 
@@ -249,6 +252,8 @@ def build_linf(config: ObserverConfig, tol: float | None = None) -> ObserverBuil
 
 def input_boxes(b) -> dict:
     """{input name: [min, max]} of the inputs that schedule the step (outside: SCHEDULING_CLAMPED)."""
+    if hasattr(b, "input_boxes"):
+        return b.input_boxes()
     if isinstance(b, TSFuzzyBuild):
         names = dict(zip(b.ts.measured, b.ts.definition.output_names))
         return {f"y_{names[s]}": list(b.ts.state_box[s]) for s in b.ts.measured}
