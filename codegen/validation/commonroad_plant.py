@@ -150,6 +150,10 @@ class GroundTruth:
         Global position [m] and yaw angle [rad].
     mu : ndarray
         Friction scale applied to the tyres (1 = the tyre's nominal coefficients).
+    roll, roll_rate : ndarray
+        Sprung-mass roll angle x[6] [rad] and rate x[7] [rad/s] of ``vehicle_dynamics_mb``, in the
+        package's sign convention (negative in a left turn: its roll moment from the lateral joint
+        forces is -F_RA (h_s - h_ra)).
     """
 
     t: np.ndarray
@@ -169,6 +173,8 @@ class GroundTruth:
     Y: np.ndarray
     psi: np.ndarray
     mu: np.ndarray
+    roll: np.ndarray
+    roll_rate: np.ndarray
 
 
 def vehicle_parameters(vehicle: int = 2):
@@ -358,6 +364,7 @@ def simulate(scenario, cfg: PlantConfig = PlantConfig(), progress=None) -> Groun
         out["a_y"][k] = dz[10] + z[5] * z[3]
         out["T_d"][k], out["T_a"][k], out["T_al"][k], out["alpha_f"][k] = t_d, t_a, t_al, alf
         out["X"][k], out["Y"][k], out["psi"][k], out["mu"][k] = z[0], z[1], z[4], plant.mu
+        out["roll"][k], out["roll_rate"][k] = z[6], z[7]
         if k == n - 1:
             break
         for _ in range(sub):
