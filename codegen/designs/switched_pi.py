@@ -21,8 +21,8 @@ Choices the seed leaves open (all documented in the README):
   inside |s| < r. Minimizing gamma^2 (a decision variable) then has a finite optimum.
 * Unknown-input convergence. Minimizing gamma alone leaves the integral (unknown-input) pole at
   the origin's doorstep: the proportional part already attenuates omega in beta, so the optimum
-  does not need w_hat to move (we found K_I ~ 1e-3 and a pole at -2e-4 rad/s: a bank estimate
-  that never converges, against S1). The region Re s < -``decay_rate``, P A_cl + (P A_cl)^T +
+  does not need w_hat to move (for the seed's speed rule: |K_I| <= 0.022 and a pole at -1.8e-4 rad/s,
+  a bank estimate that never converges, against S1). The region Re s < -``decay_rate``, P A_cl + (P A_cl)^T +
   2 a P < 0 with the same P, makes every error mode, w_hat's included, decay at least as
   exp(-a t) under any switching.
 * Strictness. Every block is imposed <= -margin I so the numpy re-check of the rounded matrices
