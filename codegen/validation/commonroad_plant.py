@@ -147,12 +147,16 @@ class GroundTruth:
         Aligning torque at the handwheel [N m] (the column's tyre feedback).
     alpha_f : ndarray
         Mean conventional front slip angle [rad].
-    roll, camber_f : ndarray
-        Body roll angle and mean front wheel camber, the package's signs [rad].
+    camber_f : ndarray
+        Mean front wheel camber, the package's signs [rad].
     X, Y, psi : ndarray
         Global position [m] and yaw angle [rad].
     mu : ndarray
         Friction scale applied to the tyres (1 = the tyre's nominal coefficients).
+    roll, roll_rate : ndarray
+        Sprung-mass roll angle x[6] [rad] and rate x[7] [rad/s] of ``vehicle_dynamics_mb``, in the
+        package's sign convention (negative in a left turn: its roll moment from the lateral joint
+        forces is -F_RA (h_s - h_ra)).
     """
 
     t: np.ndarray
@@ -168,12 +172,13 @@ class GroundTruth:
     T_a: np.ndarray
     T_al: np.ndarray
     alpha_f: np.ndarray
-    roll: np.ndarray
     camber_f: np.ndarray
     X: np.ndarray
     Y: np.ndarray
     psi: np.ndarray
     mu: np.ndarray
+    roll: np.ndarray
+    roll_rate: np.ndarray
 
 
 def vehicle_parameters(vehicle: int = 2):
@@ -444,7 +449,7 @@ def simulate(scenario, cfg: PlantConfig = PlantConfig(), progress=None) -> Groun
         out["a_y"][k] = dz[10] + z[5] * z[3]
         out["T_d"][k], out["T_a"][k], out["T_al"][k], out["alpha_f"][k] = t_d, t_a, t_al, alf
         out["X"][k], out["Y"][k], out["psi"][k], out["mu"][k] = z[0], z[1], z[4], plant.mu
-        out["roll"][k], out["camber_f"][k] = z[6], plant.front_camber(z)
+        out["roll"][k], out["roll_rate"][k], out["camber_f"][k] = z[6], z[7], plant.front_camber(z)
         if k == n - 1:
             break
         for _ in range(sub):
