@@ -221,20 +221,29 @@ def _x_system(data: ObserverData, theta: np.ndarray):
     return np.eye(nx) - data.Ts * Aa[:nx, :nx] - data.Ts * (data.poly.D[0] @ K @ C)
 
 
+TAIL = 3   # trailing block solved by its adjugate (see :func:`solve_unpivoted`)
+
+
 def lu_without_pivoting_is_safe(data: ObserverData, min_pivot: float = 1e-3,
-                                max_growth: float = 10.0) -> dict:
-    """Dense-grid check that unpivoted LU of G_x(th) has no small pivots and no element growth."""
-    smallest, growth = np.inf, 0.0
+                                max_growth: float = 10.0, max_condition: float = 1e4) -> dict:
+    """Dense-grid check of the unpivoted solve of G_x(th) (:func:`solve_unpivoted`): the
+    eliminated leading pivots are not small and there is no element growth, and the trailing
+    TAIL x TAIL Schur complement, solved by its adjugate, is well conditioned (1-norm), so the
+    adjugate loses no more than a few digits beyond LU with pivoting."""
+    smallest, growth, cond = np.inf, 0.0, 0.0
     for rho in signal_grid(data.poly):
         G = _x_system(data, np.array(premise_of_signal(data.poly, rho), float))
+        n = G.shape[0]
         U = G.copy()
-        for k in range(G.shape[0]):
+        for k in range(max(n - TAIL, 0)):
             smallest = min(smallest, abs(U[k, k]) / max(np.abs(G).max(), 1e-300))
-            for i in range(k + 1, G.shape[0]):
+            for i in range(k + 1, n):
                 U[i, k:] -= (U[i, k] / U[k, k]) * U[k, k:]
         growth = max(growth, np.abs(U).max() / np.abs(G).max())
-    safe = bool(np.isfinite(smallest) and smallest >= min_pivot and growth <= max_growth)
-    return {"safe": safe, "min_relative_pivot": float(smallest), "growth": float(growth)}
+        cond = max(cond, float(np.linalg.cond(U[max(n - TAIL, 0):, max(n - TAIL, 0):], 1)))
+    safe = bool(smallest >= min_pivot and growth <= max_growth and cond <= max_condition)
+    return {"safe": safe, "min_relative_pivot": float(smallest), "growth": float(growth),
+            "trailing_condition": cond}
 
 
 def _reciprocal(x):
@@ -244,28 +253,82 @@ def _reciprocal(x):
     return 0.5 * (2.0 / x)
 
 
-def solve_unpivoted(G, rhs):
-    """Unrolled LU solve without pivoting, for matrices where it is known to be safe (checked by
-    :func:`lu_without_pivoting_is_safe`, or with a positive definite symmetric part). ``rhs`` may
-    have several columns."""
+def _adjugate(S):
+    """Adjugate of a 1x1, 2x2 or 3x3 matrix given as nested lists (cofactors by 2x2 minors)."""
+    n = len(S)
+    if n == 1:
+        return [[1.0]]
+    if n == 2:
+        return [[S[1][1], -S[0][1]], [-S[1][0], S[0][0]]]
+
+    def minor(r0, r1, c0, c1):
+        return S[r0][c0] * S[r1][c1] - S[r0][c1] * S[r1][c0]
+    return [[minor(1, 2, 1, 2), -minor(0, 2, 1, 2), minor(0, 1, 1, 2)],
+            [-minor(1, 2, 0, 2), minor(0, 2, 0, 2), -minor(0, 1, 0, 2)],
+            [minor(1, 2, 0, 1), -minor(0, 2, 0, 1), minor(0, 1, 0, 1)]]
+
+
+def solve_unpivoted(G, rhs, tail: int = TAIL):
+    """Unrolled solve without pivoting, for matrices where that is known to be safe (checked by
+    :func:`lu_without_pivoting_is_safe`, or with a positive definite symmetric part, ``tail=0``).
+
+    The leading columns are eliminated by LU; the trailing ``tail`` x ``tail`` Schur complement
+    is solved by its adjugate and one reciprocal of its determinant; back substitution gives the
+    leading unknowns. Unlike a full LU, whose pivots form a chain of dependent divisions, the
+    adjugate's cofactors are all computed at once: the step's critical path is much shorter.
+    ``tail=0`` is a plain unpivoted LU.
+    """
     n = G.shape[0]
     G = [[G[i, j] for j in range(n)] for i in range(n)]
     b = [rhs[i] for i in range(n)]
-    inv_pivot = [None] * n
-    for k in range(n):
-        inv_pivot[k] = _reciprocal(G[k][k])
+    lead = max(n - tail, 0)
+    for k in range(lead):
         for i in range(k + 1, n):
-            factor = G[i][k] * inv_pivot[k]
+            factor = G[i][k] / G[k][k]
             for j in range(k + 1, n):
                 G[i][j] = G[i][j] - factor * G[k][j]
             b[i] = b[i] - factor * b[k]
+    m = n - lead
     x = [None] * n
-    for i in reversed(range(n)):
+    if m:
+        S = [row[lead:] for row in G[lead:]]
+        adj = _adjugate(S)
+        inv_det = _reciprocal(_sum_in_order([S[0][k] * adj[k][0] for k in range(m)]))
+        x[lead:] = [_sum_in_order([adj[i][k] * b[lead + k] for k in range(m)]) * inv_det for i in range(m)]
+    for i in reversed(range(lead)):
         acc = b[i]
-        for j in range(i + 1, n):
+        for j in reversed(range(i + 1, n)):
             acc = acc - G[i][j] * x[j]
-        x[i] = acc * inv_pivot[i]
+        x[i] = acc * _reciprocal(G[i][i])
     return ca.vertcat(*x)
+
+
+def _tree_sum(terms):
+    """Sum as a balanced tree (shorter dependency chains than a running sum)."""
+    while len(terms) > 1:
+        terms = [terms[t] + terms[t + 1] if t + 1 < len(terms) else terms[t] for t in range(0, len(terms), 2)]
+    return terms[0]
+
+
+def _sum_in_order(terms):
+    """Running sum in the given order (terms ready last go last)."""
+    total = terms[0]
+    for t in terms[1:]:
+        total = total + t
+    return total
+
+
+def _const_times(a: np.ndarray, b: ca.SX) -> ca.SX:
+    """Constant matrix times symbolic matrix, each entry summed as a balanced tree (shorter
+    dependency chains than CasADi's running sum); zero coefficients are skipped."""
+    rows = []
+    for i in range(a.shape[0]):
+        row = []
+        for j in range(b.shape[1]):
+            terms = [a[i, k] * b[k, j] for k in range(a.shape[1]) if a[i, k] != 0.0]
+            row.append(_tree_sum(terms) if terms else ca.SX(0))
+        rows.append(ca.horzcat(*row))
+    return ca.vertcat(*rows)
 
 
 def step_casadi(data: ObserverData, name: str) -> ca.Function:
@@ -278,7 +341,8 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
     complement): the x+ system is nx x nx and far better conditioned than the full one (the
     1/Tf row); then d+ = d + (Ts/Tf) Dp M (C x+ - y~). The gain M(th) is blended directly
     for a common Lyapunov matrix, factorized (:func:`gain_factorization`) for two vertices,
-    and solved otherwise; the x+ system uses an unpivoted unrolled LU where
+    and solved otherwise; it only enters through N = Ts (I + (Ts/Tf) D Dp) M, formed with the
+    constants folded in. The x+ system is solved by :func:`solve_unpivoted` where
     :func:`lu_without_pivoting_is_safe` allows it.
     """
     poly = data.poly
@@ -293,52 +357,63 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
     theta = premise_of_signal(poly, clamped, xp=ca)
     eta = sector_weights_product(theta, poly.premises, xp=ca)
     fact = gain_factorization(data) if not data.quadratic else None
+    nx, Ts, Tf = data.nx, data.Ts, data.Tf
+    D, Dp = poly.D[0], data.Dp
+    # The gain enters the step only through N = Ts E M (x+ system and right-hand side, with
+    # E = I + (Ts/Tf) D Dp), formed directly with the constant factors folded into its
+    # coefficients, and K = (Ts/Tf) Dp M = Dp N / (Tf + Ts) (the d update; Dp D = I).
+    left_N = Ts * (np.eye(nx) + (Ts / Tf) * D @ Dp)
     if fact is not None:
         # two vertices: every blended matrix is affine in the premise; entries that do not
         # vary become constants in the generated code
         th = theta[0]
         lo, hi = poly.premises[0].lower, poly.premises[0].upper
         slope = (poly.A[1] - poly.A[0]) * (1.0 / (hi - lo))
-        A = ca.DM(poly.A[0] - lo * slope) + th * ca.DM(slope)
+        G_0 = ca.DM(np.eye(nx) - Ts * (poly.A[0] - lo * slope)) + th * ca.DM(-Ts * slope)
         lam, V, W0, W1 = fact
-        # 1/(1 + lam theta(rho)) as one cancelled rational function of rho: it no longer waits
-        # for theta's own division
+        # 1/(1 + lam theta(rho)) as one cancelled rational function of rho, one division each:
+        # it does not wait for theta's own division
         mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log}, "math"]
         num_den = [sp.fraction(sp.cancel(1 / (1 + sp.Float(float(l), 17) * poly.premises[0].expr)))
                    for l in lam]
-        scale = ca.vertcat(*[sp.lambdify(poly.signals, n_, mods)(*clamped) * _reciprocal(
-            sp.lambdify(poly.signals, d_, mods)(*clamped)) for n_, d_ in num_den])
-        W = ca.DM(W0) + th * ca.DM(W1)
-        M = ca.DM(V) @ (ca.repmat(scale, 1, ny) * W)
+        scale = [sp.lambdify(poly.signals, n_, mods)(*clamped) / sp.lambdify(poly.signals, d_, mods)(*clamped)
+                 for n_, d_ in num_den]
+        SW = ca.vertcat(*[scale[k] * (ca.DM(W0[k:k + 1]) + th * ca.DM(W1[k:k + 1])) for k in range(nx)])
+        N = _const_times(left_N @ V, SW)
     else:
-        A = _blend(eta, [ca.DM(a) for a in poly.A])
+        G_0 = ca.DM.eye(nx) - _blend(eta, [ca.DM(Ts * a) for a in poly.A])
         if data.quadratic:
             # common Lyapunov matrix: M(th) = sum eta_i P^-1 L_i, no solve at run time
-            M = _blend(eta, [ca.DM(np.linalg.solve(data.Q[0], l)) for l in data.L])
+            Ms = [np.linalg.solve(data.Q[0], l) for l in data.L]
+            N = _blend(eta, [ca.DM(left_N @ m) for m in Ms])
         else:
             M = ca.solve(_blend(eta, [ca.DM(q) for q in data.Q]), _blend(eta, [ca.DM(l) for l in data.L]))
+            N = _const_times(left_N, M)
     blend_or_const = (lambda mats: ca.DM(mats[0]) if np.ptp(mats, axis=0).max(initial=0) == 0
                       else _blend(eta, [ca.DM(m) for m in mats]))
     B, C, Du = blend_or_const(poly.B), blend_or_const(poly.C), blend_or_const(poly.Du)
-    D, Dp = ca.DM(poly.D[0]), ca.DM(data.Dp)
-    nx, Ts, Tf = data.nx, data.Ts, data.Tf
+    K = _const_times(Dp / (Tf + Ts), N)
     x, d = z[:nx], z[nx:]
     y_t = y - Du @ u
-    Bu = B @ u
+    Bu = (Ts * B) @ u
     if data.nw:
         # derived known inputs: computed here from the measurements, enter like u
         w = ca.vertcat(*data.derived_input_values([rho[k] for k in range(rho.shape[0])],
                                                   [y[k] for k in range(ny)], xp=ca))
         y_t = y_t - blend_or_const(poly.Duw) @ w
-        Bu = Bu + blend_or_const(poly.Bw) @ w
-    K = (Ts / Tf) * (Dp @ M)
-    G_x = ca.DM.eye(nx) - Ts * (A + M @ C) - Ts * (D @ K @ C)
-    rhs = x + Ts * (Bu - M @ y_t) + Ts * (D @ (d - K @ y_t))
+        Bu = Bu + (Ts * blend_or_const(poly.Bw)) @ w
+    G_x = G_0 - N @ C
+    rhs = x + Bu + ca.DM(Ts * D) @ d - N @ y_t
     if lu_without_pivoting_is_safe(data)["safe"]:
         x_next = solve_unpivoted(G_x, rhs)
     else:
         x_next = ca.solve(G_x, rhs)
-    d_next = d + K @ (C @ x_next - y_t)
+    # d+ = d + K (C x+ - y~), summed so that the innovation the back substitution finishes last
+    # (the one reading the lowest-index state) enters last
+    innov = C @ x_next - y_t
+    first_state = [min(np.flatnonzero(np.any(poly.C[:, j] != 0, axis=0)), default=nx) for j in range(ny)]
+    order = sorted(range(ny), key=lambda j: -first_state[j])
+    d_next = ca.vertcat(*[_sum_in_order([d[i]] + [K[i, j] * innov[j] for j in order]) for i in range(data.nd)])
     z_next = ca.vertcat(x_next, d_next)
     return ca.Function(name, [z, u, y, rho], [z_next, excess], ["z", "u", "y", "rho"], ["z_next", "excess"])
 

@@ -1,20 +1,22 @@
 """A small LMI layer compiled straight to Clarabel's PSD triangle cones.
 
-Decision variables are CasADi SX symbols (scalars, matrices, symmetric
-matrices); constraints are affine symmetric matrix expressions built with
-ordinary matrix algebra. Compilation extracts the exact coefficients with
-``casadi.jacobian`` (an expression that still depends on the variables after
-differentiation is not affine and is refused), stacks them in Clarabel's
-``A x + s = b, s in K`` form (upper triangle, column-major, off-diagonals scaled
-by sqrt(2)) and solves. Every solution is re-checked with ``numpy.linalg.eigvalsh``
-on every block, independently of the solver, before it is returned.
+Decision variables (scalars, matrices, symmetric matrices) are :class:`Affine`
+matrices: a constant part and one coefficient matrix per scalar variable, held as
+numpy arrays, so every block is built with ordinary matrix algebra (``@``, ``+``,
+``.T``, :func:`bmat`) at numpy speed and its coefficients are exact by construction
+(no probing, no symbolic differentiation). A product of two expressions that both
+depend on the variables is not affine: it is recorded and refused, with the LMI's
+label, when the problem is compiled. Compilation stacks the coefficients in
+Clarabel's ``A x + s = b, s in K`` form (upper triangle, column-major,
+off-diagonals scaled by sqrt(2)) and solves. Every solution is re-checked with
+``numpy.linalg.eigvalsh`` on every block, independently of the solver, before it is
+returned.
 """
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
 
-import casadi as ca
 import clarabel
 import numpy as np
 from scipy import sparse
@@ -43,12 +45,153 @@ def svec(mat: np.ndarray) -> np.ndarray:
     return np.array([mat[i, j] * (1.0 if i == j else SQRT2) for i, j in _triu_pairs(n)])
 
 
+def _triu_index(n: int):
+    """Row and column indices of :func:`_triu_pairs` and the sqrt(2) scaling, as arrays."""
+    rows, cols = np.triu_indices(n)
+    order = np.lexsort((rows, cols))  # by column, then row
+    rows, cols = rows[order], cols[order]
+    return rows, cols, np.where(rows == cols, 1.0, SQRT2)
+
+
+class Affine:
+    """Matrix ``const + sum_k x_k coef[:, :, k]``, affine in the decision variables ``x``.
+
+    Supports ``+``, ``-``, ``@`` and ``*`` with numpy arrays, numbers and other Affine
+    matrices, ``.T``, slicing and :func:`bmat`. A product of two Affine matrices that both
+    depend on ``x`` is not affine: the result is marked (``nonaffine`` names the variables
+    involved) and refused when the LMI problem is compiled.
+    """
+
+    __array_ufunc__ = None   # numpy defers to our reflected operators (ndarray @ Affine)
+
+    def __init__(self, const, coef=None, names: tuple = (), nonaffine: tuple = ()):
+        self.const = np.atleast_2d(np.asarray(const, dtype=float))
+        self.coef = np.zeros(self.const.shape + (0,)) if coef is None else coef
+        self.names = names            # names of the first coef.shape[2] scalar variables
+        self.nonaffine = nonaffine    # variables of a product that is not affine
+
+    @property
+    def shape(self) -> tuple:
+        return self.const.shape
+
+    @property
+    def T(self) -> "Affine":
+        return Affine(self.const.T, self.coef.transpose(1, 0, 2), self.names, self.nonaffine)
+
+    def __getitem__(self, idx) -> "Affine":
+        idx = idx if isinstance(idx, tuple) else (idx,)
+        const = np.atleast_2d(self.const[idx])
+        return Affine(const, self.coef[idx].reshape(const.shape + (-1,)), self.names, self.nonaffine)
+
+    def is_constant(self) -> bool:
+        return not self.coef.any() and not self.nonaffine
+
+    def value(self, x: np.ndarray) -> np.ndarray:
+        """The matrix at decision variables ``x``."""
+        return self.const + self.coef @ x[:self.coef.shape[2]]
+
+    def __neg__(self) -> "Affine":
+        return Affine(-self.const, -self.coef, self.names, self.nonaffine)
+
+    def __add__(self, other) -> "Affine":
+        a, b = _common(self, other)
+        return Affine(a.const + b.const, a.coef + b.coef, a.names, a.nonaffine + b.nonaffine)
+
+    __radd__ = __add__
+
+    def __sub__(self, other) -> "Affine":
+        return self + (-_as_affine(other))
+
+    def __rsub__(self, other) -> "Affine":
+        return _as_affine(other) + (-self)
+
+    def __mul__(self, other) -> "Affine":
+        if not isinstance(other, Affine) and np.ndim(other) == 0:
+            k = float(other)
+            return Affine(k * self.const, k * self.coef, self.names, self.nonaffine)
+        other = _as_affine(other)
+        for s_, m_ in ((self, other), (other, self)):
+            if s_.shape == (1, 1) and m_.is_constant():     # scalar expression times constant matrix
+                return Affine(s_.const.item() * m_.const, s_.coef.reshape(1, 1, -1) * m_.const[:, :, None],
+                              s_.names, s_.nonaffine)
+        if self.is_constant() or other.is_constant():
+            raise LMIShapeError("elementwise products of matrices are not supported; use @")
+        return _product_marker(self, other, np.broadcast_shapes(self.shape, other.shape))
+
+    __rmul__ = __mul__
+
+    def __matmul__(self, other) -> "Affine":
+        if isinstance(other, Affine):
+            if other.is_constant():
+                return self @ other.const
+            if self.is_constant():
+                return self.const @ other
+            return _product_marker(self, other, (self.shape[0], other.shape[1]))
+        other = np.atleast_2d(np.asarray(other, dtype=float))
+        return Affine(self.const @ other, np.einsum("ijk,jl->ilk", self.coef, other), self.names,
+                      self.nonaffine)
+
+    def __rmatmul__(self, other) -> "Affine":
+        other = np.atleast_2d(np.asarray(other, dtype=float))
+        return Affine(other @ self.const, np.einsum("ij,jlk->ilk", other, self.coef), self.names,
+                      self.nonaffine)
+
+
+def _as_affine(x) -> Affine:
+    return x if isinstance(x, Affine) else Affine(x)
+
+
+def _product_marker(a: Affine, b: Affine, shape) -> Affine:
+    """Stand-in for the product of two variable-dependent matrices: refused at compilation."""
+    used = [e.names[k] for e in (a, b) for k in np.flatnonzero(e.coef.any(axis=(0, 1)))]
+    return Affine(np.zeros(shape), None, (), a.nonaffine + b.nonaffine + (tuple(dict.fromkeys(used)),))
+
+
+def _pad(coef: np.ndarray, k: int) -> np.ndarray:
+    if coef.shape[2] >= k:
+        return coef
+    return np.concatenate([coef, np.zeros(coef.shape[:2] + (k - coef.shape[2],))], axis=2)
+
+
+def _common(a, b) -> tuple:
+    """Both operands as Affine with the same number of variables."""
+    a, b = _as_affine(a), _as_affine(b)
+    if a.const.shape != b.const.shape:
+        if a.shape == (1, 1) and a.is_constant():
+            a = Affine(np.full(b.shape, a.const.item()))
+        elif b.shape == (1, 1) and b.is_constant():
+            b = Affine(np.full(a.shape, b.const.item()))
+        else:
+            raise LMIShapeError(f"cannot add matrices of shapes {a.shape} and {b.shape}")
+    k = max(a.coef.shape[2], b.coef.shape[2])
+    names = a.names if len(a.names) >= len(b.names) else b.names
+    return (Affine(a.const, _pad(a.coef, k), names, a.nonaffine),
+            Affine(b.const, _pad(b.coef, k), names, b.nonaffine))
+
+
+def bmat(rows) -> Affine:
+    """Block matrix from a nested list of Affine matrices, arrays and numbers (like ``np.block``)."""
+    rows = [[_as_affine(b) for b in row] for row in rows]
+    k = max(b.coef.shape[2] for row in rows for b in row)
+    names = max((b.names for row in rows for b in row), key=len)
+    nonaffine = tuple(t for row in rows for b in row for t in b.nonaffine)
+    const = np.block([[b.const for b in row] for row in rows])
+    coef = np.concatenate([np.concatenate([_pad(b.coef, k) for b in row], axis=1) for row in rows], axis=0)
+    return Affine(const, coef, names, nonaffine)
+
+
+def trace(a: Affine) -> Affine:
+    """Trace of a square Affine matrix (a 1x1 Affine)."""
+    a = _as_affine(a)
+    return Affine(np.trace(a.const), np.trace(a.coef).reshape(1, 1, -1), a.names, a.nonaffine)
+
+
 @dataclass
 class Constraint:
     """``expr >= margin * I`` (PSD) for a symmetric affine expression."""
 
     label: str
-    expr: ca.SX
+    expr: Affine
     margin: float
     hint: str
 
@@ -96,131 +239,112 @@ class LMIProblem:
     >>> A = np.array([[-1.0, 2.0], [0.0, -3.0]])
     >>> prob.require_psd("P > 0", P, margin=1e-6)
     >>> prob.require_nsd("A'P + PA < 0", A.T @ P + P @ A, margin=1e-6)
-    >>> prob.minimize(ca.trace(P))
+    >>> prob.minimize(trace(P))
     >>> sol = prob.solve()
     """
 
     name: str
-    _symbols: list = field(default_factory=list)
+    _names: list = field(default_factory=list)
     _variables: dict = field(default_factory=dict)
     _constraints: list = field(default_factory=list)
-    _objective: ca.SX | None = None
-    _evaluate: ca.Function | None = None
+    _objective: Affine | None = None
+    _evaluate: object = None
 
     # -- decision variables -------------------------------------------------
-    def _fresh(self, name: str, count: int) -> list:
-        syms = [ca.SX.sym(f"{name}_{k}") for k in range(count)]
-        self._symbols.extend(syms)
-        return syms
-
-    def _register(self, name: str, expr: ca.SX) -> ca.SX:
+    def _fresh(self, name: str, shape: tuple, slots: np.ndarray, count: int) -> Affine:
+        """Affine matrix whose entry (i, j) is variable ``first + slots[i, j]`` (-1: zero)."""
+        first = len(self._names)
+        self._names.extend(f"{name}_{k}" for k in range(count))
+        coef = np.zeros(shape + (first + count,))
+        i, j = np.nonzero(slots >= 0)
+        coef[i, j, first + slots[i, j]] = 1.0
+        expr = Affine(np.zeros(shape), coef, tuple(self._names))
         if name in self._variables:
             raise LMIShapeError(f"{self.name}: variable {name!r} declared twice")
         self._variables[name] = expr
         return expr
 
-    def scalar(self, name: str) -> ca.SX:
-        return self._register(name, self._fresh(name, 1)[0])
+    def scalar(self, name: str) -> Affine:
+        return self._fresh(name, (1, 1), np.zeros((1, 1), dtype=int), 1)
 
-    def matrix(self, name: str, rows: int, cols: int) -> ca.SX:
-        syms = self._fresh(name, rows * cols)
-        return self._register(name, ca.reshape(ca.vertcat(*syms), rows, cols))
+    def matrix(self, name: str, rows: int, cols: int) -> Affine:
+        # column-major numbering, as a reshaped vector of scalars
+        return self._fresh(name, (rows, cols), np.arange(rows * cols).reshape(cols, rows).T, rows * cols)
 
-    def symmetric(self, name: str, n: int) -> ca.SX:
-        syms = iter(self._fresh(name, n * (n + 1) // 2))
-        mat = ca.SX(n, n)
-        for i, j in _triu_pairs(n):
-            s = next(syms)
-            mat[i, j] = s
-            mat[j, i] = s
-        return self._register(name, mat)
+    def symmetric(self, name: str, n: int) -> Affine:
+        slots = np.zeros((n, n), dtype=int)
+        rows, cols, _ = _triu_index(n)
+        slots[rows, cols] = slots[cols, rows] = np.arange(rows.size)
+        return self._fresh(name, (n, n), slots, rows.size)
 
     # -- constraints --------------------------------------------------------
     def require_psd(self, label: str, expr, margin: float = 0.0, hint: str = "") -> None:
         """Require ``expr >= margin * I``."""
-        expr = ca.SX(expr) if not isinstance(expr, ca.SX) else expr
+        expr = _as_affine(expr)
         if expr.shape[0] != expr.shape[1]:
             raise LMIShapeError(f"{self.name}: LMI {label!r} is {expr.shape[0]}x{expr.shape[1]}, not square")
         self._constraints.append(Constraint(label, expr, margin, hint))
 
     def require_nsd(self, label: str, expr, margin: float = 0.0, hint: str = "") -> None:
         """Require ``expr <= -margin * I``."""
-        self.require_psd(label, -expr, margin, hint)
+        self.require_psd(label, -_as_affine(expr), margin, hint)
 
     def minimize(self, objective) -> None:
-        self._objective = ca.SX(objective)
+        objective = _as_affine(objective)
+        if objective.shape != (1, 1):
+            raise LMIShapeError(f"{self.name}: the objective must be a scalar, got shape {objective.shape}")
+        self._objective = objective
 
     # -- compilation and solve -----------------------------------------------
     def _compile(self):
         """Coefficients of every block, stacked in Clarabel's form.
 
-        Affinity is checked structurally (``casadi.which_depends`` of order 2: no entry may
-        depend nonlinearly on a variable); the coefficients are then read by evaluating the
-        vectorized blocks at 0 and at 2**40 e_k (a power of two, so dividing back is exact
-        and the constant part cannot swamp the coefficient). Returns (x, A, b, q, cones,
-        blocks) with blocks = [(constraint, rows in the stacked triangles, rows in the stacked
-        full column-major blocks)].
+        Every block's coefficients are exact by construction; a block marked non-affine or
+        not symmetric (relative 1e-12) is refused. Returns (names, A, b, q, cones, blocks)
+        with blocks = [(constraint, rows in the stacked triangles, rows in the stacked full
+        column-major blocks)].
         """
-        x = ca.vertcat(*self._symbols)
-        nvar = x.shape[0]
-        vecs, blocks, cones, margins, tri_rows, full_offset, offset = [], [], [], [], [], 0, 0
-        sym_a, sym_b = [], []
+        nvar = len(self._names)
+        tri_a, tri_b, full_c, full_a, blocks, cones = [], [], [], [], [], []
+        offset = full_offset = 0
         for con in self._constraints:
-            n = con.expr.shape[0]
-            vecs.append(ca.vec(con.expr))
-            pairs = _triu_pairs(n)
-            for i, j in pairs:  # column-major vec: entry (i, j) sits at j*n + i
-                tri_rows.append((full_offset + j * n + i, 1.0 if i == j else SQRT2))
-                if i != j:
-                    sym_a.append(full_offset + j * n + i)
-                    sym_b.append(full_offset + i * n + j)
-            blocks.append((con, slice(offset, offset + len(pairs)), slice(full_offset, full_offset + n * n)))
-            margins.append(svec(con.margin * np.eye(n)))
+            expr = con.expr
+            if expr.nonaffine:
+                bad = [v for used in expr.nonaffine for v in used][:4]
+                raise NonAffineLMIError(
+                    f"{self.name}: LMI {con.label!r} is not affine in the decision variables "
+                    f"(products involving {', '.join(bad)}); fix one factor or use a change of variables")
+            n = expr.shape[0]
+            coef = _pad(expr.coef, nvar)
+            const = expr.const
+            if (np.abs(const - const.T) > 1e-12 * (1 + np.abs(const))).any() or \
+                    (np.abs(coef - coef.transpose(1, 0, 2)) > 1e-12 * (1 + np.abs(coef))).any():
+                raise LMIShapeError(f"{self.name}: LMI {con.label!r} is not symmetric")
+            rows, cols, scale = _triu_index(n)
+            tri_a.append(coef[rows, cols] * scale[:, None])
+            tri_b.append(const[rows, cols] * scale - con.margin * np.where(rows == cols, 1.0, 0.0))
+            # column-major full blocks, for the independent re-check
+            full_c.append(const.T.ravel())
+            full_a.append(coef.transpose(1, 0, 2).reshape(n * n, nvar))
+            blocks.append((con, slice(offset, offset + rows.size), slice(full_offset, full_offset + n * n)))
             cones.append(clarabel.PSDTriangleConeT(n))
-            offset += len(pairs)
+            offset += rows.size
             full_offset += n * n
-        V = ca.vertcat(*vecs) if vecs else ca.SX(0, 1)
-        nonlinear = ca.which_depends(V, x, 2, True) if nvar else []
-        if any(nonlinear):
-            for con in self._constraints:
-                dep = ca.which_depends(ca.vec(con.expr), x, 2, False)
-                if any(dep):
-                    bad = [str(self._symbols[k]) for k, d in enumerate(dep) if d][:4]
-                    raise NonAffineLMIError(
-                        f"{self.name}: LMI {con.label!r} is not affine in the decision variables "
-                        f"(products involving {', '.join(bad)}); fix one factor or use a change of variables")
-        f = ca.Function("blocks", [x], [V])
-        probe = 2.0 ** 40
-        vals = np.asarray(f.map(nvar + 1)(np.hstack([np.zeros((nvar, 1)), probe * np.eye(nvar)])).full())
-        c_full = vals[:, 0]
-        J_full = (vals[:, 1:] - c_full[:, None]) / probe
-        if sym_a:
-            mismatch = (np.abs(c_full[sym_a] - c_full[sym_b]) > 1e-12 * (1 + np.abs(c_full[sym_a]))) | \
-                (np.abs(J_full[sym_a] - J_full[sym_b]).max(axis=1) > 1e-12 * (1 + np.abs(J_full[sym_a]).max(axis=1)))
-            if mismatch.any():
-                bad_row = sym_a[int(np.argmax(mismatch))]
-                start = 0
-                for con in self._constraints:
-                    n = con.expr.shape[0]
-                    if start <= bad_row < start + n * n:
-                        raise LMIShapeError(f"{self.name}: LMI {con.label!r} is not symmetric")
-                    start += n * n
-        rows = np.array([r for r, _ in tri_rows], dtype=int)
-        scale = np.array([w for _, w in tri_rows])
-        J = J_full[rows] * scale[:, None]
+        J = np.concatenate(tri_a) if tri_a else np.zeros((0, nvar))
         J[np.abs(J) < 1e-300] = 0.0
         A = -sparse.csc_matrix(J)
-        b = c_full[rows] * scale - (np.concatenate(margins) if margins else 0.0)
-        self._evaluate = f  # the original block expressions, for the independent re-check
+        b = np.concatenate(tri_b) if tri_b else np.zeros(0)
+        full_const = np.concatenate(full_c) if full_c else np.zeros(0)
+        full_coef = np.concatenate(full_a) if full_a else np.zeros((0, nvar))
+        # the original block expressions, for the independent re-check
+        self._evaluate = lambda xv: full_const + full_coef @ np.asarray(xv, dtype=float)
         if self._objective is None:
             q = np.zeros(nvar)
         else:
-            if any(ca.which_depends(self._objective, x, 2, True)):
+            if self._objective.nonaffine:
                 raise NonAffineLMIError(f"{self.name}: objective is not linear in the decision variables")
-            fo = ca.Function("obj", [x], [self._objective])
-            ov = np.asarray(fo.map(nvar + 1)(np.hstack([np.zeros((nvar, 1)), probe * np.eye(nvar)])).full()).ravel()
-            q = (ov[1:] - ov[0]) / probe
-        return x, A, b, q, cones, blocks
+            q = _pad(self._objective.coef, nvar)[0, 0].copy()
+        return tuple(self._names), A, b, q, cones, blocks
 
     def solve(self, tol: float = 1e-9, max_iter: int = 200, max_abs_value: float = 1e9,
               verbose: bool = False) -> LMISolution:
@@ -233,8 +357,8 @@ class LMIProblem:
         InaccurateSolveError, IllConditionedError, CertificateError
         """
         t0 = time.perf_counter()
-        x, A, b, q, cones, blocks = self._compile()
-        nvar = x.shape[0]
+        names, A, b, q, cones, blocks = self._compile()
+        nvar = len(names)
         settings = clarabel.DefaultSettings()
         settings.verbose = verbose
         settings.tol_gap_abs = tol
@@ -262,19 +386,16 @@ class LMIProblem:
                 f"{self.name}: solution has entries up to {np.abs(xv).max():.3g} (limit "
                 f"{max_abs_value:g}); the problem is nearly unbounded — add or tighten a bound "
                 f"on the gains/Lyapunov matrices")
-        names = list(self._variables)
-        evaluated = ca.Function("v", [x], [ca.SX(self._variables[k]) for k in names])(xv)
-        evaluated = evaluated if isinstance(evaluated, (list, tuple)) else [evaluated]
-        values = {k: np.array(v.full(), dtype=float) for k, v in zip(names, evaluated)}
+        values = {k: v.value(xv) for k, v in self._variables.items()}
         values = {k: (v.item() if v.size == 1 else v) for k, v in values.items()}
         checks = self.certify_values(xv, blocks, self._evaluate)
         return LMISolution(values, float(result.obj_val), status, t2 - t1, t1 - t0,
                            int(result.iterations), checks)
 
     @staticmethod
-    def certify_values(xv: np.ndarray, blocks, evaluate: ca.Function) -> tuple:
+    def certify_values(xv: np.ndarray, blocks, evaluate) -> tuple:
         """Evaluate every block at ``xv`` and check its eigenvalues with numpy."""
-        full = np.asarray(evaluate(xv).full()).ravel()
+        full = np.asarray(evaluate(xv), dtype=float).ravel()
         checks = []
         for con, _, rows in blocks:
             n = con.expr.shape[0]

@@ -93,6 +93,14 @@ class ObserverBuild:
                      if s.derived is None])
         return state, inputs, state
 
+    def reference_step(self, z, u, y, rho):
+        """Independent numpy step (tests, the benchmark's numpy peer)."""
+        return discrete.step_numpy(self.data, z, u, y, rho)
+
+    def lmi_problem(self):
+        """A fresh LMI problem of this design (benchmark: our path vs CVXPY on the same blocks)."""
+        return linf_uio.build_problem(self.poly, self.design.settings)[0]
+
     def derived_input_docs(self) -> list:
         return [{"name": str(sym), "unit": self.lpv.definition.units.get(str(sym), "-")}
                 for sym, _ in self.lpv.derived_inputs]
@@ -121,6 +129,12 @@ class TSFuzzyBuild:
 
     def step_numpy(self, z, u, y):
         return ts_fuzzy_uio.step_numpy(self.ts, self.design, z, u, y)
+
+    def reference_step(self, z, u, y, rho):
+        return self.step_numpy(z, u, y)
+
+    def lmi_problem(self):
+        return ts_fuzzy_uio.build_problem(self.ts, self.design.T, self.design.settings)
 
     @property
     def state_names(self) -> list:

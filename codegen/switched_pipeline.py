@@ -43,6 +43,12 @@ class SwitchedPIBuild:
     def step_numpy(self, z, u, y, rho):
         return switched_pi.step_numpy(self.model, self.design, self.discrete, z, u, y, rho)
 
+    reference_step = step_numpy     # the numpy peer of the benchmark
+
+    def lmi_problem(self):
+        """A fresh LMI problem of this design (benchmark: our path vs CVXPY on the same blocks)."""
+        return switched_pi.build_problem(self.model, self.design.T, self.design.settings)
+
     @property
     def state_names(self) -> list:
         return switched_pi.state_layout(self.model)

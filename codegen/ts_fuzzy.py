@@ -94,6 +94,22 @@ class TSFuzzyModel:
         """A_i(theta) = A_i + G_i Theta (eq. (24))."""
         return self.A[i] + self.G[i] @ theta
 
+    def functions(self, xp) -> tuple:
+        """(f, premises, phi) as callables of (measured..., u...) / (x..., u...) for numpy or CasADi."""
+        import casadi as ca
+        mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "atan": ca.atan, "sin": ca.sin,
+                 "cos": ca.cos, "Abs": ca.fabs}, "math"] if xp is ca else "numpy"
+        meas_args = (*self.measured, *self.definition.known_inputs)
+        state_args = (*self.definition.states, *self.definition.known_inputs)
+        return ([sp.lambdify(meas_args, e, mods) for e in self.f],
+                [sp.lambdify(meas_args, p.expr, mods) for p in self.premises],
+                [sp.lambdify(state_args, e, mods) for e in self.phi])
+
+    @cached_property
+    def numpy_functions(self) -> tuple:
+        """:meth:`functions` for numpy, compiled once (the reference step runs per sample)."""
+        return self.functions(np)
+
     @cached_property
     def premise_functions(self) -> tuple:
         args = (*self.measured, *self.definition.known_inputs)

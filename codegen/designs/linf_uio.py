@@ -20,11 +20,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 
 from ..errors import RankConditionError
-from ..lmi import BlockCheck, LMIProblem, LMISolution, check_blocks
+from ..lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks
 from ..polytope import Polytope
 
 
@@ -84,7 +83,7 @@ def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.
         X = prob.symmetric("X", nx)
         P = [prob.symmetric(f"P{i + 1}", nx) for i in range(N)]
     elif settings.lyapunov == "quadratic":
-        X = ca.SX(nx, nx)
+        X = np.zeros((nx, nx))
         common = prob.symmetric("P", nx)
         P = [common] * N
     else:
@@ -96,25 +95,23 @@ def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.
     m, a = settings.margin, settings.alpha
     for i in range(N):
         prob.require_psd(f"(19) P{i + 1}+X > 0", Q[i], m, "Lyapunov matrix at a vertex")
-        prob.require_psd(f"(20) i={i + 1}", ca.vertcat(ca.horzcat(Q[i], F.T),
-                                                       ca.horzcat(F, mu * np.eye(F.shape[0]))), m,
+        prob.require_psd(f"(20) i={i + 1}", bmat([[Q[i], F.T], [F, mu * np.eye(F.shape[0])]]), m,
                          "performance output bound (mu)")
         g = settings.gain_bound
         prob.require_psd(f"gain bound ||L{i + 1}|| <= {g:g}",
-                         ca.vertcat(ca.horzcat(g * np.eye(nx), L[i]), ca.horzcat(L[i].T, g * np.eye(ny))),
+                         bmat([[g * np.eye(nx), L[i]], [L[i].T, g * np.eye(ny)]]),
                          m, "raise gain_bound (faster observer) or lower alpha")
-    # products shared by many blocks, formed once (expression building dominates otherwise)
-    A = [ca.DM(poly.A[j]) for j in range(N)]
-    PA = [[P[i] @ A[j] for j in range(N)] for i in range(N)]
-    LC = [[L[i] @ ca.DM(poly.C[j]) for j in range(N)] for i in range(N)]
-    QD = [[Q[i] @ ca.DM(poly.D[j]) for j in range(N)] for i in range(N)]
-    XA = [2 * X @ A[j] + 2 * a * X for j in range(N)]
+    # products shared by many blocks, formed once
+    PA = [[P[i] @ poly.A[j] for j in range(N)] for i in range(N)]
+    LC = [[L[i] @ poly.C[j] for j in range(N)] for i in range(N)]
+    QD = [[Q[i] @ poly.D[j] for j in range(N)] for i in range(N)]
+    XA = [2 * X @ poly.A[j] + 2 * a * X for j in range(N)]
     nd = poly.D.shape[2]
-    corner = ca.horzcat(ca.SX(nd, nx), -a * nu * ca.SX.eye(nd))
+    corner = bmat([[np.zeros((nd, nx)), -a * nu * np.eye(nd)]])
 
     def upsilon(i, j, rate_term):
         top_left = PA[i][j] + LC[i][j] + a * P[i] + 0.5 * (rate_term + XA[j])
-        blk = ca.vertcat(ca.horzcat(top_left, QD[i][j]), corner)
+        blk = bmat([[top_left, QD[i][j]], [corner]])
         return blk + blk.T
 
     for v, rates in enumerate(poly.rate_vertices):

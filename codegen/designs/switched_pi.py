@@ -43,7 +43,7 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import CertificateError, DiscretizationError, RankConditionError
-from ..lmi import LMIProblem, LMISolution, check_blocks
+from ..lmi import LMIProblem, LMISolution, bmat, check_blocks
 from ..switched import SwitchedModel
 from .linf_uio import round_significant
 
@@ -142,17 +142,16 @@ def check_assumptions(sm: SwitchedModel, T: np.ndarray, tol: float = 1e-9) -> di
 
 def _blocks(sm: SwitchedModel, T, P, G, gamma2, r, a, xp):
     """The LMI blocks, each required <= 0: (20), the pole disk and the decay region per mode."""
-    wrap = (lambda a: a) if xp is np else ca.DM
-    cat = np.block if xp is np else ca.blockcat
+    # numpy numbers for the re-check; Affine decision matrices (codegen.lmi) for the problem
+    cat = np.block if xp is np else bmat
     nw, np_ = sm.nw, sm.L.shape[0]
     out = []
     for i in range(sm.n_modes):
-        Aa, Ca, Fa, La = (wrap(x) for x in augmented(sm, i, T))
+        Aa, Ca, Fa, La = augmented(sm, i, T)
         PAcl = P @ Aa + G[i] @ Ca
-        Z = (lambda a, b: np.zeros((a, b))) if xp is np else (lambda a, b: ca.SX(a, b))
         blk = cat([[PAcl + PAcl.T, P @ Fa, La.T],
-                   [(P @ Fa).T, -gamma2 * (np.eye(nw) if xp is np else ca.SX.eye(nw)), Z(nw, np_)],
-                   [La, Z(np_, nw), -(np.eye(np_) if xp is np else ca.SX.eye(np_))]])
+                   [(P @ Fa).T, -gamma2 * np.eye(nw), np.zeros((nw, np_))],
+                   [La, np.zeros((np_, nw)), -np.eye(np_)]])
         out.append((f"(20) mode {i + 1}", blk))
         out.append((f"pole disk |s| < {r:g} mode {i + 1}", cat([[-r * P, PAcl.T], [PAcl, -r * P]])))
         out.append((f"decay Re s < -{a:g} mode {i + 1}", PAcl + PAcl.T + 2 * a * P))
@@ -197,7 +196,7 @@ def build_problem(sm: SwitchedModel, T: np.ndarray, settings: SwitchedPIDesignSe
     G = [prob.matrix(f"Gamma_a{i + 1}", n_a, m) for i in range(sm.n_modes)]
     g2 = prob.scalar("gamma2")
     prob.require_psd("P > 0", P, margin=settings.margin)
-    for label, blk in _blocks(sm, T, P, G, g2, settings.pole_radius, settings.decay_rate, ca):
+    for label, blk in _blocks(sm, T, P, G, g2, settings.pole_radius, settings.decay_rate, LMIProblem):
         prob.require_nsd(label, blk, margin=settings.margin,
                          hint="the modes may not share a Lyapunov matrix; widen the pole disk or change the rule")
     prob.minimize(g2)

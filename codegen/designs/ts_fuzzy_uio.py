@@ -25,7 +25,7 @@ import numpy as np
 
 from ..errors import CertificateError, RankConditionError
 from ..discrete import solve_unpivoted
-from ..lmi import LMIProblem, LMISolution, check_blocks
+from ..lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
 from ..polytope import sector_weights_product
 from ..ts_fuzzy import TSFuzzyModel
 from .linf_uio import round_significant
@@ -87,14 +87,13 @@ def decoupling_matrices(ts: TSFuzzyModel, rank_tol: float = 1e-9) -> tuple:
 
 
 def _blocks(ts: TSFuzzyModel, T, P, M, L, decay, xp):
-    """All blocks of (27a)-(27b) as (label, matrix); numpy arrays or CasADi SX (``xp``)."""
+    """All blocks of (27a)-(27b) as (label, matrix): numbers (``xp`` numpy, the re-check) or
+    Affine decision matrices of :mod:`codegen.lmi` (the problem)."""
     N = ts.n_rules
-    wrap = (lambda a: a) if xp is np else ca.DM
-    C, T = wrap(ts.C), wrap(T)
-    cat = np.block if xp is np else ca.blockcat
+    cat = np.block if xp is np else bmat
 
     def phi(i, j, l, theta):
-        off = M[j] @ (T @ wrap(ts.A_theta(i, theta))) - L[j] @ C
+        off = M[j] @ (T @ ts.A_theta(i, theta)) - L[j] @ ts.C
         return cat([[decay ** 2 * P[j], off.T], [off, M[j] + M[j].T - P[l]]])
 
     out = []
@@ -144,10 +143,10 @@ def build_problem(ts: TSFuzzyModel, T: np.ndarray, settings: TSDesignSettings):
     for i in range(N):
         # normalization of the homogeneous (27); the re-check sees P_i itself (slack 1)
         prob.require_psd(f"P{i + 1} >= I", P[i], margin=1.0)
-    for label, block in _blocks(ts, T, P, M, L, settings.decay, ca):
+    for label, block in _blocks(ts, T, P, M, L, settings.decay, LMIProblem):
         prob.require_psd(label, block, margin=settings.margin,
                          hint="the DMVT box or the premise ranges may be too wide for this sample time")
-    prob.minimize(sum(ca.trace(p) for p in P))
+    prob.minimize(sum(trace(p) for p in P))
     return prob
 
 
@@ -213,19 +212,6 @@ def lyapunov_decrease(ts: TSFuzzyModel, d: TSDesign, samples: int = 20000, seed:
 # [zeta_k, y_k, primed]; the first call (primed = 0) has no y_k yet and uses y_{k+1} in its place
 # (flagged as warm-up).
 
-def _measured_model(ts: TSFuzzyModel, xp):
-    """f(xi), the premise functions and phi as callables of (measured..., u...) / (x..., u...)."""
-    import sympy as sp
-    mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "atan": ca.atan, "sin": ca.sin,
-             "cos": ca.cos, "Abs": ca.fabs}, "math"] if xp is ca else "numpy"
-    meas_args = (*ts.measured, *ts.definition.known_inputs)
-    state_args = (*ts.definition.states, *ts.definition.known_inputs)
-    f = [sp.lambdify(meas_args, e, mods) for e in ts.f]
-    prem = [sp.lambdify(meas_args, p.expr, mods) for p in ts.premises]
-    phi = [sp.lambdify(state_args, e, mods) for e in ts.phi]
-    return f, prem, phi
-
-
 def step_parts(ts: TSFuzzyModel, d: TSDesign, zeta, y_k, y_next, u, xp=np):
     """(zeta_next, x_hat_next, d_hat_k, excess) of (16) on numpy arrays or CasADi SX.
 
@@ -236,7 +222,8 @@ def step_parts(ts: TSFuzzyModel, d: TSDesign, zeta, y_k, y_next, u, xp=np):
     Measured values are clamped to D_x for the model (the certificate only holds there);
     ``excess`` sums how far they (at k and k+1), and the unmeasured estimates, lie outside D_x.
     """
-    f_fn, prem_fn, phi_fn = _measured_model(ts, xp)
+    # numpy: compiled once per model (the reference step runs per sample); CasADi: traced once
+    f_fn, prem_fn, phi_fn = ts.numpy_functions if xp is np else ts.functions(ca)
     fmin, fmax, fabs = (ca.fmin, ca.fmax, ca.fabs) if xp is ca else (min, max, abs)
     nx, ny = ts.nx, ts.ny
     meas = [y_k[k] for k in range(ny)]
@@ -276,7 +263,7 @@ def step_parts(ts: TSFuzzyModel, d: TSDesign, zeta, y_k, y_next, u, xp=np):
         Phi = blend(ts.A) @ x_hat + f + (blend(ts.G) @ phi if phi_fn else 0)
         innovation = blend(d.L) @ (y_k - ca.DM(ts.C) @ x_hat)
         # M(h) + M(h)' > P(h+) > 0 by (27): unpivoted elimination is safe (no zero pivot)
-        zeta_next = ca.DM(T) @ Phi + solve_unpivoted(blend(d.M), innovation)
+        zeta_next = ca.DM(T) @ Phi + solve_unpivoted(blend(d.M), innovation, tail=0)
         d_hat = ca.DM(np.linalg.pinv(ts.C @ ts.D)) @ (y_next - ca.DM(ts.C) @ Phi)
         x_next = zeta_next + ca.DM(N) @ y_next
     for k, s in enumerate(ts.definition.states):
