@@ -65,7 +65,9 @@ class Affine:
     __array_ufunc__ = None   # numpy defers to our reflected operators (ndarray @ Affine)
 
     def __init__(self, const, coef=None, names: tuple = (), nonaffine: tuple = ()):
-        self.const = np.atleast_2d(np.asarray(const, dtype=float))
+        if not (type(const) is np.ndarray and const.ndim == 2 and const.dtype == np.float64):
+            const = np.atleast_2d(np.asarray(const, dtype=float))
+        self.const = const
         self.coef = np.zeros(self.const.shape + (0,)) if coef is None else coef
         self.names = names            # names of the first coef.shape[2] scalar variables
         self.nonaffine = nonaffine    # variables of a product that is not affine
@@ -94,8 +96,18 @@ class Affine:
         return Affine(-self.const, -self.coef, self.names, self.nonaffine)
 
     def __add__(self, other) -> "Affine":
-        a, b = _common(self, other)
-        return Affine(a.const + b.const, a.coef + b.coef, a.names, a.nonaffine + b.nonaffine)
+        other = _as_affine(other)
+        if other.shape != self.shape:
+            a, b = _common(self, other)
+            return Affine(a.const + b.const, a.coef + b.coef, a.names, a.nonaffine + b.nonaffine)
+        ka, kb = self.coef.shape[2], other.coef.shape[2]
+        if ka == kb:
+            coef = self.coef + other.coef
+        else:
+            coef = (self.coef if ka > kb else other.coef).copy()
+            coef[:, :, :min(ka, kb)] += (other.coef if ka > kb else self.coef)
+        names = self.names if ka >= kb else other.names
+        return Affine(self.const + other.const, coef, names, self.nonaffine + other.nonaffine)
 
     __radd__ = __add__
 
@@ -175,7 +187,7 @@ def bmat(rows) -> Affine:
     k = max(b.coef.shape[2] for row in rows for b in row)
     names = max((b.names for row in rows for b in row), key=len)
     nonaffine = tuple(t for row in rows for b in row for t in b.nonaffine)
-    const = np.block([[b.const for b in row] for row in rows])
+    const = np.concatenate([np.concatenate([b.const for b in row], axis=1) for row in rows], axis=0)
     coef = np.concatenate([np.concatenate([_pad(b.coef, k) for b in row], axis=1) for row in rows], axis=0)
     return Affine(const, coef, names, nonaffine)
 
@@ -306,6 +318,7 @@ class LMIProblem:
         """
         nvar = len(self._names)
         tri_a, tri_b, full_c, full_a, blocks, cones = [], [], [], [], [], []
+        index = {}   # triangle index arrays by block size, within this compilation
         offset = full_offset = 0
         for con in self._constraints:
             expr = con.expr
@@ -320,7 +333,9 @@ class LMIProblem:
             if (np.abs(const - const.T) > 1e-12 * (1 + np.abs(const))).any() or \
                     (np.abs(coef - coef.transpose(1, 0, 2)) > 1e-12 * (1 + np.abs(coef))).any():
                 raise LMIShapeError(f"{self.name}: LMI {con.label!r} is not symmetric")
-            rows, cols, scale = _triu_index(n)
+            if n not in index:
+                index[n] = _triu_index(n)
+            rows, cols, scale = index[n]
             tri_a.append(coef[rows, cols] * scale[:, None])
             tri_b.append(const[rows, cols] * scale - con.margin * np.where(rows == cols, 1.0, 0.0))
             # column-major full blocks, for the independent re-check
