@@ -225,6 +225,13 @@ def cmd_validate(args) -> int:
     if args.json:
         print(validate.to_json(result))
         return 0
+    if result.get("family") == "algebraic_uio":
+        from .validation import algebraic
+        print(algebraic.header(args.name, result))
+        print(validate.format_table(result))
+        if args.plot:
+            print(f"plot: {args.plot}")
+        return 0
     print(f"{args.name}: scenario {args.scenario} on the {args.plant} plant ({result['plant_model']}), {result['samples']} samples, "
           f"max |a_y| {result['max_abs_ay']:.2f} m/s^2, {result['status_flags']} flagged samples; "
           f"errors after {validate.SETTLE_TIME:g} s" + (" (SI units, seed 004 Table II format)"

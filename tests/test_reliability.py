@@ -32,7 +32,8 @@ def scheduling_boxes(name: str, obs) -> dict:
     import json
     art = json.loads((ROOT / "generated_c" / name / f"{name}_design.json").read_text())
     boxes = {obs.input_names.index(k): tuple(v) for k, v in art["signals"]["input_boxes"].items()}
-    return boxes, art["config"]["family"] != "ts_fuzzy_uio"
+    # the TS family also flags estimates, the algebraic family its differentiators' parameter-derivative estimates
+    return boxes, art["config"]["family"] not in ("ts_fuzzy_uio", "algebraic_uio")
 
 
 def hostile_inputs(seed: int, n: int, n_input: int, boxes: dict, p_special: float,
@@ -179,6 +180,9 @@ def realistic_inputs(name, obs):
         if all(lo <= log[:, c].min() and log[:, c].max() <= hi for c, (lo, hi) in boxes.items()):
             return log
     cfg = observers.get(name)
+    if cfg.family == "algebraic_uio":      # the seed-002 plant's steady period: tiles smoothly
+        from codegen.validation import algebraic
+        return algebraic.periodic_inputs(pipeline.build(cfg))
     if cfg.family == "ts_fuzzy_uio":
         res = validate.run_scenario(name, "random_trajectory_accel", "nominal")
         truth = res["signals"]["truth"]
