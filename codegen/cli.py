@@ -87,6 +87,9 @@ def cmd_design(args) -> int:
     path = Path(args.out) if args.out else emit.GENERATED_DIR / b.name / f"{b.name}_design.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(b.artifact(), indent=1, sort_keys=True) + "\n")
+    if b.config.family == "algebraic_uio":
+        from . import algebraic_uio
+        return algebraic_uio.print_design(b, path, args.json)
     if isinstance(b, pipeline.TSFuzzyBuild):
         s = _ts_summary(b, path)
         if args.json:

@@ -32,7 +32,6 @@ import tomllib
 from dataclasses import dataclass
 from functools import cached_property
 
-import numpy as np
 import sympy as sp
 
 from .bounds import BoundsError, range_bound
@@ -96,6 +95,11 @@ def derivative_boxes(lpv: LPVModel) -> dict:
 
 def _is_zero(expr) -> bool:
     return sp.simplify(sp.cancel(sp.together(expr))) == 0
+
+
+def _num(e) -> str:
+    """An expression with its exact rational coefficients shown as 12-digit decimals."""
+    return str(sp.N(sp.expand(e), 12))
 
 
 def _simplify_matrix(m: sp.Matrix) -> sp.Matrix:
@@ -188,7 +192,7 @@ class Decoupling:
         return tuple(derivative_symbol(b, m) for b in self.base for m in range(self.derivative_orders[b] + 1))
 
     def to_json(self) -> dict:
-        rows = lambda m: [[str(e) for e in m.row(i)] for i in range(m.shape[0])]
+        rows = lambda m: [[_num(e) for e in m.row(i)] for i in range(m.shape[0])]
         return {
             "relative_degrees": list(self.relative_degrees),
             "M": [[rows(mj) for mj in mi] for mi in self.M],
@@ -240,7 +244,7 @@ def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:
                 target = MD[0] if nd == 1 else sum(e ** 2 for e in MD)
                 cert = nonvanishing(target, boxes, what if nd == 1 else f"|{what}|^2", rel_tol)
                 certificates["uniform_relative_degree"].append(
-                    {"output": lpv.definition.output_names[i], "relative_degree": r, "M_D": [str(e) for e in MD],
+                    {"output": lpv.definition.output_names[i], "relative_degree": r, "M_D": [_num(e) for e in MD],
                      "bound": [cert["lower"], cert["upper"]]})
                 break
             rows.append(_simplify_matrix(rows[j] * A + time_derivative(rows[j], base)))
@@ -270,7 +274,7 @@ def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:
         cert = nonvanishing(det, boxes, label, rel_tol)
     except RelativeDegreeError as exc:
         raise RankConditionError(f"rank condition (64) fails on the box: {exc}") from None
-    certificates["rank_condition_64"] = {"quantity": label, "expr": str(det), "bound": [cert["lower"], cert["upper"]]}
+    certificates["rank_condition_64"] = {"quantity": label, "expr": _num(det), "bound": [cert["lower"], cert["upper"]]}
     Gamma_inv = _simplify_matrix(Gamma.inv() if square else G2.inv() * Gamma.T)
     Q = _simplify_matrix(D * Gamma_inv)
     P = _simplify_matrix(sp.eye(n) - Q * Mprev)
@@ -291,18 +295,3 @@ def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:
             f"([scheduling.NAME] derivative_bounds = [[min2, max2], ...])")
     return Decoupling(lpv, tuple(degrees), tuple(M_all), Gamma, Mcal, Q, P, Gamma_inv, F0, base, orders, boxes,
                       certificates)
-
-
-def evaluate_along(expr, base: tuple, signals: dict, t: np.ndarray):
-    """Numeric values of an expression in scheduling signals/derivatives along sampled trajectories.
-
-    ``signals`` maps each base symbol to a callable ``order -> array over t`` (tests, validation).
-    """
-    expr = sp.sympify(expr)
-    syms = sorted(expr.free_symbols, key=str)
-    fn = sp.lambdify(syms, expr, "numpy")
-    vals = []
-    for s in syms:
-        k, m = derivative_order(s, base)
-        vals.append(signals[base[k]](m))
-    return np.broadcast_to(np.asarray(fn(*vals), dtype=float), t.shape) if not syms else fn(*vals)

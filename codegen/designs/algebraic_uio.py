@@ -36,26 +36,21 @@ Discrete step (what the C runs), at the configured sample time h:
 """
 from __future__ import annotations
 
-import itertools
 import math
-import time
-import tomllib
 from dataclasses import dataclass, field
-from functools import cached_property
 
 import casadi as ca
 import numpy as np
 import sympy as sp
-from scipy.linalg import expm, matrix_balance
+from scipy.linalg import matrix_balance
 
 from .. import relative_degree as rdeg
 from ..bounds import range_bound
-from ..differentiators import HosmdSpec, hosmd_step_numpy, hosmd_step_sx
-from ..discrete import solve_unpivoted
+from ..differentiators import HosmdSpec
 from ..errors import (CertificateError, DiscretizationError, InfeasibleLMIError, ModelDefinitionError,
                       SolverError)
 from ..lmi import LMIProblem, LMISolution, check_blocks
-from ..model import LPVModel, instantiate, load_parameters
+from ..model import LPVModel
 from ..polytope import Premise, affine_decomposition, nonlinear_factors, sector_weights_product, vertex_matrices
 from .linf_uio import round_significant
 

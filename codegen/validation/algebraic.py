@@ -30,7 +30,7 @@ import numpy as np
 import sympy as sp
 from scipy.integrate import solve_ivp
 
-from ..errors import ModelDefinitionError, SampleError
+from ..errors import ModelDefinitionError
 from .. import relative_degree as rdeg
 
 TOL_REL = 1e-6
