@@ -163,6 +163,9 @@ class AlgebraicUIOBuild:
             for k, field_name in enumerate(self.state_names[sl]):
                 if name in ("xhat", "dhat"):
                     state.append({"name": field_name, "doc": f"estimate of {field_name} [{units.get(field_name, '-')}]"})
+                elif name.startswith("hosmd_"):
+                    state.append({"name": field_name, "doc": f"differentiator of {name[6:]}: derivative {k} at the next "
+                                                             f"sample time (Taylor state)"})
                 else:
                     state.append({"name": field_name, "doc": doc + (f" (entry {k})" if size > 1 else "")})
         inputs = ([{"name": str(s), "doc": f"known input [{units.get(str(s), '-')}]"} for s in d.known_inputs]

@@ -49,18 +49,18 @@ extern "C" {
 
 typedef struct {
     double primed; /* 1 once the differentiators are started, else 0 */
-    double hosmd_y_x1_d0; /* Levant differentiator of y_x1: estimates of its derivatives 0..5 (entry 0) */
-    double hosmd_y_x1_d1; /* Levant differentiator of y_x1: estimates of its derivatives 0..5 (entry 1) */
-    double hosmd_y_x1_d2; /* Levant differentiator of y_x1: estimates of its derivatives 0..5 (entry 2) */
-    double hosmd_y_x1_d3; /* Levant differentiator of y_x1: estimates of its derivatives 0..5 (entry 3) */
-    double hosmd_y_x1_d4; /* Levant differentiator of y_x1: estimates of its derivatives 0..5 (entry 4) */
-    double hosmd_y_x1_d5; /* Levant differentiator of y_x1: estimates of its derivatives 0..5 (entry 5) */
-    double hosmd_rho_d0; /* Levant differentiator of rho: estimates of its derivatives 0..5 (entry 0) */
-    double hosmd_rho_d1; /* Levant differentiator of rho: estimates of its derivatives 0..5 (entry 1) */
-    double hosmd_rho_d2; /* Levant differentiator of rho: estimates of its derivatives 0..5 (entry 2) */
-    double hosmd_rho_d3; /* Levant differentiator of rho: estimates of its derivatives 0..5 (entry 3) */
-    double hosmd_rho_d4; /* Levant differentiator of rho: estimates of its derivatives 0..5 (entry 4) */
-    double hosmd_rho_d5; /* Levant differentiator of rho: estimates of its derivatives 0..5 (entry 5) */
+    double hosmd_y_x1_d0; /* differentiator of y_x1: derivative 0 at the next sample time (Taylor state) */
+    double hosmd_y_x1_d1; /* differentiator of y_x1: derivative 1 at the next sample time (Taylor state) */
+    double hosmd_y_x1_d2; /* differentiator of y_x1: derivative 2 at the next sample time (Taylor state) */
+    double hosmd_y_x1_d3; /* differentiator of y_x1: derivative 3 at the next sample time (Taylor state) */
+    double hosmd_y_x1_d4; /* differentiator of y_x1: derivative 4 at the next sample time (Taylor state) */
+    double hosmd_y_x1_d5; /* differentiator of y_x1: derivative 5 at the next sample time (Taylor state) */
+    double hosmd_rho_d0; /* differentiator of rho: derivative 0 at the next sample time (Taylor state) */
+    double hosmd_rho_d1; /* differentiator of rho: derivative 1 at the next sample time (Taylor state) */
+    double hosmd_rho_d2; /* differentiator of rho: derivative 2 at the next sample time (Taylor state) */
+    double hosmd_rho_d3; /* differentiator of rho: derivative 3 at the next sample time (Taylor state) */
+    double hosmd_rho_d4; /* differentiator of rho: derivative 4 at the next sample time (Taylor state) */
+    double hosmd_rho_d5; /* differentiator of rho: derivative 5 at the next sample time (Taylor state) */
     double x1; /* estimate of x1 [-] */
     double x2; /* estimate of x2 [-] */
     double d; /* estimate of d [-] */

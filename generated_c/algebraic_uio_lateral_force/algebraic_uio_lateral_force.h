@@ -52,15 +52,15 @@ extern "C" {
 
 typedef struct {
     double primed; /* 1 once the differentiators are started, else 0 */
-    double hosmd_y_v_y_d0; /* Levant differentiator of y_v_y: estimates of its derivatives 0..3 (entry 0) */
-    double hosmd_y_v_y_d1; /* Levant differentiator of y_v_y: estimates of its derivatives 0..3 (entry 1) */
-    double hosmd_y_v_y_d2; /* Levant differentiator of y_v_y: estimates of its derivatives 0..3 (entry 2) */
-    double hosmd_y_v_y_d3; /* Levant differentiator of y_v_y: estimates of its derivatives 0..3 (entry 3) */
-    double hosmd_v_x_d0; /* Levant differentiator of v_x: estimates of its derivatives 0..4 (entry 0) */
-    double hosmd_v_x_d1; /* Levant differentiator of v_x: estimates of its derivatives 0..4 (entry 1) */
-    double hosmd_v_x_d2; /* Levant differentiator of v_x: estimates of its derivatives 0..4 (entry 2) */
-    double hosmd_v_x_d3; /* Levant differentiator of v_x: estimates of its derivatives 0..4 (entry 3) */
-    double hosmd_v_x_d4; /* Levant differentiator of v_x: estimates of its derivatives 0..4 (entry 4) */
+    double hosmd_y_v_y_d0; /* differentiator of y_v_y: derivative 0 at the next sample time (Taylor state) */
+    double hosmd_y_v_y_d1; /* differentiator of y_v_y: derivative 1 at the next sample time (Taylor state) */
+    double hosmd_y_v_y_d2; /* differentiator of y_v_y: derivative 2 at the next sample time (Taylor state) */
+    double hosmd_y_v_y_d3; /* differentiator of y_v_y: derivative 3 at the next sample time (Taylor state) */
+    double hosmd_v_x_d0; /* differentiator of v_x: derivative 0 at the next sample time (Taylor state) */
+    double hosmd_v_x_d1; /* differentiator of v_x: derivative 1 at the next sample time (Taylor state) */
+    double hosmd_v_x_d2; /* differentiator of v_x: derivative 2 at the next sample time (Taylor state) */
+    double hosmd_v_x_d3; /* differentiator of v_x: derivative 3 at the next sample time (Taylor state) */
+    double hosmd_v_x_d4; /* differentiator of v_x: derivative 4 at the next sample time (Taylor state) */
     double aux_v_y; /* auxiliary system (20) s' = A s + B u (entry 0) */
     double aux_r; /* auxiliary system (20) s' = A s + B u (entry 1) */
     double aux_F_yr; /* auxiliary system (20) s' = A s + B u (entry 2) */
