@@ -227,7 +227,9 @@ class AlgebraicUIOBuild:
             "observer": self.name,
             "config": self.config.to_json(),
             "signals": {"state": self.state_names, "input": self.input_names, "output": self.output_names,
-                        "scheduling": [str(s) for s in self.dec.symbols], "input_boxes": self.input_boxes()},
+                        "scheduling": [str(s) for s in self.dec.symbols], "input_boxes": self.input_boxes(),
+                        # parameter-derivative estimates outside their bounds are flagged too
+                        "flags_from_inputs_only": False},
             "decoupling": _sig(self.dec.to_json()),
             "classical_uio_11": _sig(self.classical),
             **_sig(self.design.gains_json(), 12),

@@ -227,6 +227,8 @@ def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:
     if any(e.free_symbols for e in C):
         raise ModelDefinitionError(f"model {lpv.definition.name!r}: this family needs a constant output matrix C "
                                    f"(seed 002, eq. (1)); C depends on {sorted(map(str, set().union(*(e.free_symbols for e in C))))}")
+    if getattr(lpv, "Bw", None) is not None and lpv.Bw.shape[1] > 0:
+        raise ModelDefinitionError(f"model {lpv.definition.name!r}: derived inputs are not supported by this family")
     if lpv.Du is not None and any(e != 0 for e in lpv.Du):
         raise ModelDefinitionError(f"model {lpv.definition.name!r}: outputs with a known-input feedthrough are not "
                                    f"supported by this family (y = C x)")

@@ -201,6 +201,9 @@ def run_scenario(name: str, scenario: str, plant: str = "nominal", duration: flo
     config = observers.get(name)
     if config.family == "ts_fuzzy_uio":
         return run_ts_scenario(config, scenario, plant, duration, seed, progress=progress)
+    if config.family == "switched_pi":
+        from .validation import banked_road
+        return banked_road.run_scenario(config, scenario, plant, duration, seed, progress=progress)
     if config.family == "algebraic_uio":
         from .validation import algebraic
         return algebraic.run(config, scenario, plant, duration, seed, progress=progress)
@@ -274,6 +277,9 @@ def format_table(result: dict) -> str:
         return algebraic.format_table(result)
     if "seed_table" in result:
         return format_seed004_table(result)
+    if result.get("seed001"):
+        from .validation import banked_road
+        return banked_road.format_table(result)
     lines = [f"{'signal':14s} {'E_mean':>9s} {'E_max':>9s} {'Std':>9s} {'RMS':>9s}"]
     units = result["units"]
     for sig, row in result["observer"].items():
