@@ -129,6 +129,9 @@ def cmd_design(args) -> int:
         else:
             _print_switched(s)
         return 0
+    if b.config.family == "algebraic_uio":
+        from . import algebraic_uio
+        return algebraic_uio.print_design(b, path, args.json)
     if isinstance(b, pipeline.TSFuzzyBuild):
         s = _ts_summary(b, path)
         if args.json:
@@ -266,6 +269,13 @@ def cmd_validate(args) -> int:
         validate.plot(result, args.plot)
     if args.json:
         print(validate.to_json(result))
+        return 0
+    if result.get("family") == "algebraic_uio":
+        from .validation import algebraic
+        print(algebraic.header(args.name, result))
+        print(validate.format_table(result))
+        if args.plot:
+            print(f"plot: {args.plot}")
         return 0
     print(f"{args.name}: scenario {args.scenario} on the {args.plant} plant ({result['plant_model']}), {result['samples']} samples, "
           f"max |a_y| {result['max_abs_ay']:.2f} m/s^2, {result['status_flags']} flagged samples; "

@@ -318,12 +318,13 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     C = _affine_part(h, x, "the states", model.name)
     Du = _affine_part(h, u, "the known inputs", model.name)
     Duw = _affine_part(h, w, "the derived inputs", model.name)
-    rest = sp.simplify(f - A * sp.Matrix(x) - B * sp.Matrix(u) - D * sp.Matrix(d)
+    col = lambda syms: sp.Matrix(len(syms), 1, list(syms))   # a (k, 1) column, also for k = 0
+    rest = sp.simplify(f - A * col(x) - B * col(u) - D * col(d)
                        - (Bw * sp.Matrix(w) if w else sp.zeros(*f.shape))) if x else f
     if any(sp.simplify(e) != 0 for e in rest):
         raise NotAffineError(f"model {model.name!r}: dynamics have a drift term independent of "
                              f"states and inputs: {list(rest)}")
-    h_rest = sp.simplify(h - C * sp.Matrix(x) - Du * sp.Matrix(u) - (Duw * sp.Matrix(w) if w else sp.zeros(*h.shape)))
+    h_rest = sp.simplify(h - C * col(x) - Du * col(u) - (Duw * sp.Matrix(w) if w else sp.zeros(*h.shape)))
     if any(sp.simplify(e) != 0 for e in h_rest):
         raise NotAffineError(f"model {model.name!r}: outputs must be C(rho) x + Du(rho) u; left over: "
                              f"{list(h_rest)} (unknown inputs may not reach the outputs in this family)")

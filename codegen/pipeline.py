@@ -265,6 +265,9 @@ def build(config: ObserverConfig, tol: float | None = None):
     if config.family == "switched_pi":
         from .switched_pipeline import build_switched_pi
         return build_switched_pi(config, tol)
+    if config.family == "algebraic_uio":
+        from . import algebraic_uio
+        return algebraic_uio.build(config, tol)
     return build_linf(config, tol)
 
 

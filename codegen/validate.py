@@ -204,6 +204,9 @@ def run_scenario(name: str, scenario: str, plant: str = "nominal", duration: flo
     if config.family == "switched_pi":
         from .validation import banked_road
         return banked_road.run_scenario(config, scenario, plant, duration, seed, progress=progress)
+    if config.family == "algebraic_uio":
+        from .validation import algebraic
+        return algebraic.run(config, scenario, plant, duration, seed, progress=progress)
     lpv = pipeline.representation(config)[0]
     scn = scenario_for(config, scenario, duration)
     if plant == "commonroad":
@@ -269,6 +272,9 @@ def format_seed004_table(result: dict) -> str:
 
 
 def format_table(result: dict) -> str:
+    if result.get("family") == "algebraic_uio":
+        from .validation import algebraic
+        return algebraic.format_table(result)
     if "seed_table" in result:
         return format_seed004_table(result)
     if result.get("seed001"):

@@ -182,6 +182,9 @@ def realistic_inputs(name, obs):
         if all(lo <= log[:, c].min() and log[:, c].max() <= hi for c, (lo, hi) in boxes.items()):
             return log
     cfg = observers.get(name)
+    if cfg.family == "algebraic_uio":      # the seed-002 plant's steady period: tiles smoothly
+        from codegen.validation import algebraic
+        return algebraic.periodic_inputs(pipeline.build(cfg))
     if cfg.family in ("ts_fuzzy_uio", "switched_pi"):
         from codegen.demo import DEMO_SCENARIOS
         res = validate.run_scenario(name, DEMO_SCENARIOS[cfg.family][0], "nominal")
