@@ -9,7 +9,10 @@ Per observer:
   numpy implementation of the same step; batch ``run`` throughput;
 * design time: our LMI path (build + Clarabel solve) vs the same LMIs through CVXPY with
   Clarabel and with SCS at the same tolerance, and the objective each reaches;
-* toolchain: ``uiogen generate`` cold (forced) and with nothing changed.
+* toolchain: ``uiogen generate`` cold (forced) and with nothing changed;
+* HOSMD (``codegen/differentiators.py``): compiled-C cost per sample per differentiator order, and
+  accuracy against ``AlgDiff`` (algebraic differentiators) and a backward difference on the same
+  noisy signals (RMS error and lag of the first and second derivative).
 """
 from __future__ import annotations
 
@@ -26,7 +29,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from . import discrete, harness, observers, pipeline
+from . import differentiators, discrete, harness, observers, pipeline
 from .designs import linf_uio
 
 ARITHMETIC_OPS = ("OP_ADD", "OP_SUB", "OP_MUL", "OP_DIV", "OP_NEG", "OP_SQ", "OP_SQRT", "OP_FMIN",
@@ -181,9 +184,158 @@ def bench_toolchain() -> dict:
     return {"generate_cold_s": cold, "generate_unchanged_s": warm}
 
 
+# ---- HOSMD ------------------------------------------------------------------------------------------
+
+HOSMD_TARGET_NS_PER_ORDER = 50.0   # issue 5: <= 50 ns per sample per differentiator order
+
+
+def _callgrind_hosmd(exe: Path, n1: int = 20000, n2: int = 120000) -> float | None:
+    """Instructions inside ``hosmd_step`` per call (callgrind, difference of two run lengths)."""
+    if shutil.which("valgrind") is None:
+        return None
+    counts = []
+    for n in (n1, n2):
+        proc = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null",
+                               "--toggle-collect=hosmd_step", str(exe), str(n), "1"],
+                              capture_output=True, text=True)
+        m = re.search(r"Collected\s*:\s*(\d+)", proc.stderr)
+        if proc.returncode != 0 or not m:
+            return None
+        counts.append(int(m.group(1)))
+    return (counts[1] - counts[0]) / (n2 - n1)
+
+
+def bench_hosmd_cost(n: int = 200000, repeats: int = 15) -> dict:
+    """C cost of one differentiator step per order: the driver's batch loop over a noisy sine
+    (tau = 1 ms, L = 1, the regime the step runs in), median and minimum of the repeats."""
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in range(1, differentiators.MAX_ORDER + 1):
+            spec = differentiators.HosmdSpec(k, 1.0, 1e-3)
+            exe = differentiators.build_c_driver(spec, Path(tmp) / f"k{k}")
+            proc = subprocess.run([str(exe), str(n), str(repeats)], capture_output=True, text=True, check=True)
+            ns = np.array([float(v) for v in proc.stdout.split()])
+            instr = _callgrind_hosmd(exe)
+            flops = flop_count(differentiators.hosmd_function(spec))
+            out[k] = {"ns_per_sample": float(np.median(ns)), "ns_per_sample_min": float(ns.min()),
+                      "ns_per_sample_per_order": float(np.median(ns)) / k,
+                      "instructions_per_step": instr, "flops_per_step": flops,
+                      "meets_target": float(np.median(ns)) / k <= HOSMD_TARGET_NS_PER_ORDER}
+    return out
+
+
+def _phase_lag(est: np.ndarray, truth: np.ndarray, t: np.ndarray, omega: float) -> float:
+    """Delay (s) of ``est`` behind ``truth`` at the signal frequency (negative: ahead)."""
+    basis = np.exp(-1j * omega * t)
+    return float(-np.angle(np.sum(est * basis) / np.sum(truth * basis)) / omega)
+
+
+def bench_hosmd_accuracy(sample_time: float = 0.01, freq_hz: float = 0.5, noise=(0.0, 1e-3, 1e-2),
+                         duration: float = 20.0, settle: float = 4.0, margins=(1.0, 4.0)) -> dict:
+    """HOSMD vs AlgDiff vs backward difference on f = sin(2 pi freq t) + uniform noise in [-eps, eps].
+
+    For each method and derivative (1, 2): RMS error over whole periods after ``settle`` (percent of
+    the derivative's RMS), the same after removing the method's own lag (shape error), and the lag
+    (phase delay at the signal frequency).  The HOSMD's L is each of ``margins`` times the true bound
+    max|f^(k+1)| (exactly the bound, and with a margin), the same for every noise level; AlgDiff gets the alpha = beta, N and window length T
+    (120 combinations) that minimise its RMS error, per noise level and derivative (in its favour);
+    the backward difference has nothing to tune.  The HOSMD runs the CasADi graph that is the C.
+    """
+    import warnings
+    omega = 2 * np.pi * freq_hz
+    n = int(round(duration / sample_time))
+    t = np.arange(n) * sample_time
+    period = 1.0 / freq_hz
+    ev = (t >= settle) & (t < settle + np.floor((duration - settle) / period) * period - 0.5 * sample_time)
+
+    def deriv(i, shift=0.0):
+        return omega ** i * np.sin(omega * (t - shift) + i * np.pi / 2)
+
+    def score(est, i):
+        lag = _phase_lag(est[ev], deriv(i)[ev], t[ev], omega)
+        scale = np.sqrt(np.mean(deriv(i)[ev] ** 2))
+        return {"rms_pct": float(100 * np.sqrt(np.mean((est[ev] - deriv(i)[ev]) ** 2)) / scale),
+                "rms_lag_removed_pct": float(100 * np.sqrt(np.mean((est[ev] - deriv(i, lag)[ev]) ** 2)) / scale),
+                "lag_ms": 1e3 * lag}
+
+    try:
+        from AlgDiff import AlgebraicDifferentiator
+    except ImportError:
+        AlgebraicDifferentiator = None
+    res = {"signal": f"sin(2 pi {freq_hz:g} t), sample time {sample_time:g} s, uniform noise +-eps",
+           "hosmd_L_margins": list(margins), "levels": {}}
+    for eps in noise:
+        f = deriv(0) + eps * np.random.default_rng(2024).uniform(-1.0, 1.0, n)
+        rows = {}
+        bd1 = np.zeros(n)
+        bd1[1:] = np.diff(f) / sample_time
+        bd2 = np.zeros(n)
+        bd2[2:] = (f[2:] - 2 * f[1:-1] + f[:-2]) / sample_time ** 2
+        rows["backward difference"] = {"d1": score(bd1, 1), "d2": score(bd2, 2)}
+        for k in (2, 3):
+            for margin in margins:
+                spec = differentiators.HosmdSpec(k, margin * omega ** (k + 1), sample_time)
+                z = differentiators.hosmd_run(spec, f)
+                rows[f"HOSMD k={k}, L={margin:g}x"] = {"d1": score(z[:, 1], 1), "d2": score(z[:, 2], 2),
+                                                      "params": f"L = {spec.lipschitz:.4g}"}
+        if AlgebraicDifferentiator is None:
+            rows["algdiff"] = {"status": "AlgDiff not installed (pip install '.[bench]')"}
+        else:
+            best = {}
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                for ab in (1.5, 2.0, 3.0, 4.0, 6.0):
+                    for N in (0, 1, 2):
+                        for T in (0.03, 0.05, 0.07, 0.1, 0.15, 0.2, 0.3, 0.4):
+                            for i in (1, 2):
+                                try:
+                                    diff = AlgebraicDifferentiator(ts=sample_time, alpha=ab, beta=ab, N=N, T=T,
+                                                                   display=False)
+                                    s = score(diff.estimateDer(i, f), i)
+                                except Exception:   # a window too short for this order: not a candidate
+                                    continue
+                                if np.isfinite(s["rms_pct"]) and (i not in best or s["rms_pct"] < best[i][0]["rms_pct"]):
+                                    best[i] = (s, f"alpha = beta = {ab:g}, N = {N}, T = {T:g} s")
+            rows["algdiff"] = {"d1": best[1][0], "d2": best[2][0],
+                               "params": f"f': {best[1][1]}; f'': {best[2][1]}"}
+        res["levels"][repr(eps)] = rows
+    return res
+
+
+def bench_hosmd() -> dict:
+    return {"cost": bench_hosmd_cost(), "accuracy": bench_hosmd_accuracy()}
+
+
+def _print_hosmd(r: dict) -> None:
+    print("== HOSMD (codegen/differentiators.py): compiled C step, batch loop, gcc strict flags")
+    print(f"   order  ns/sample (median / min)   ns/sample/order   instructions   flops   "
+          f"target <= {HOSMD_TARGET_NS_PER_ORDER:.0f} ns/order")
+    for k, c in r["cost"].items():
+        ins = c["instructions_per_step"]
+        print(f"   k={k}   {c['ns_per_sample']:8.1f} / {c['ns_per_sample_min']:6.1f}        "
+              f"{c['ns_per_sample_per_order']:8.1f}        {ins if ins is None else f'{ins:8.0f}'}   "
+              f"{c['flops_per_step']['total']:5d}   {'met' if c['meets_target'] else 'NOT met'}")
+    a = r["accuracy"]
+    print(f"== HOSMD vs peers: {a['signal']}; HOSMD L = {' or '.join(f'{m:g}' for m in a['hosmd_L_margins'])}"
+          f" x max|f^(k+1)|; AlgDiff tuned per row for least RMS")
+    print("   RMS error in % of the derivative's RMS (in brackets: with the method's own lag removed), lag in ms")
+    for eps, rows in a["levels"].items():
+        print(f"   eps = {float(eps):g}")
+        print(f"     {'method':22s} {'f_dot RMS %':>22s} {'lag ms':>8s}   {'f_ddot RMS %':>22s} {'lag ms':>8s}   params")
+        for name, row in rows.items():
+            if "status" in row:
+                print(f"     {name:22s} {row['status']}")
+                continue
+            cells = []
+            for d in ("d1", "d2"):
+                s = row[d]
+                cells.append(f"{s['rms_pct']:10.3f} ({s['rms_lag_removed_pct']:9.3f}) {s['lag_ms']:8.1f}")
+            print(f"     {name:22s} {cells[0]}   {cells[1]}   {row.get('params', '')}")
+
+
 def main(json_output: bool = False) -> int:
     res = {"observers": {name: bench_observer(name) for name in observers.names()},
-           "toolchain": bench_toolchain()}
+           "toolchain": bench_toolchain(), "hosmd": bench_hosmd()}
     if json_output:
         print(json.dumps(res, indent=1, sort_keys=True))
         return 0
@@ -214,4 +366,5 @@ def main(json_output: bool = False) -> int:
                   f"({p['status']}; ours {p['speedup_of_ours']:.1f}x faster)")
     t = res["toolchain"]
     print(f"== toolchain: uiogen generate cold {t['generate_cold_s']:.2f} s, unchanged {t['generate_unchanged_s']:.2f} s")
+    _print_hosmd(res["hosmd"])
     return 0
