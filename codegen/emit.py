@@ -37,7 +37,8 @@ _ENV = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)), undefi
 # The toolchain modules whose code decides what is generated (validation, CLI, bench do not).
 GENERATION_SOURCES = ("errors.py", "model.py", "polytope.py", "lmi.py", "bounds.py", "ts_fuzzy.py",
                       "designs/__init__.py", "designs/linf_uio.py", "designs/ts_fuzzy_uio.py", "discrete.py",
-                      "observers.py", "pipeline.py", "emit.py")
+                      "observers.py", "pipeline.py", "emit.py", "interconnected.py",
+                      "designs/interconnected_uio.py", "differentiators.py")
 
 
 def inputs_hash(config: observers.ObserverConfig) -> str:
@@ -92,6 +93,8 @@ def _kernel_sources(b: ObserverBuild, f: ca.Function) -> tuple:
 
 
 def _signal_docs(b: ObserverBuild) -> tuple:
+    if hasattr(b, "signal_docs"):      # families that document their own vectors
+        return b.signal_docs()
     if isinstance(b, TSFuzzyBuild):
         d = b.ts.definition
         units = d.units

@@ -201,6 +201,9 @@ def run_scenario(name: str, scenario: str, plant: str = "nominal", duration: flo
     config = observers.get(name)
     if config.family == "ts_fuzzy_uio":
         return run_ts_scenario(config, scenario, plant, duration, seed, progress=progress)
+    if config.family == "interconnected_uio":
+        from .validation import satory
+        return satory.run_scenario(name, scenario, plant, duration, progress=progress)
     lpv = pipeline.representation(config)[0]
     scn = scenario_for(config, scenario, duration)
     if plant == "commonroad":
@@ -268,6 +271,9 @@ def format_seed004_table(result: dict) -> str:
 def format_table(result: dict) -> str:
     if "seed_table" in result:
         return format_seed004_table(result)
+    if "seed003" in result:
+        from .validation import satory
+        return satory.format_result(result)
     lines = [f"{'signal':14s} {'E_mean':>9s} {'E_max':>9s} {'Std':>9s} {'RMS':>9s}"]
     units = result["units"]
     for sig, row in result["observer"].items():

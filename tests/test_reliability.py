@@ -32,7 +32,7 @@ def scheduling_boxes(name: str, obs) -> dict:
     import json
     art = json.loads((ROOT / "generated_c" / name / f"{name}_design.json").read_text())
     boxes = {obs.input_names.index(k): tuple(v) for k, v in art["signals"]["input_boxes"].items()}
-    return boxes, art["config"]["family"] != "ts_fuzzy_uio"
+    return boxes, art["config"]["family"] not in ("ts_fuzzy_uio", "interconnected_uio")
 
 
 def hostile_inputs(seed: int, n: int, n_input: int, boxes: dict, p_special: float,
@@ -179,6 +179,10 @@ def realistic_inputs(name, obs):
         if all(lo <= log[:, c].min() and log[:, c].max() <= hi for c, (lo, hi) in boxes.items()):
             return log
     cfg = observers.get(name)
+    if cfg.family == "interconnected_uio":      # one lap of a closed oval: tiling stays continuous
+        from codegen.validation import satory
+        truth = satory.periodic_lap(name)
+        return np.column_stack([truth[c[2:]] for c in obs.input_names])
     if cfg.family == "ts_fuzzy_uio":
         res = validate.run_scenario(name, "random_trajectory_accel", "nominal")
         truth = res["signals"]["truth"]
