@@ -558,10 +558,13 @@ def step_parts(ts: icm.InterconnectedTS, d: ICDesign, layout: StepLayout, z, y, 
     prev_out = [z[nzs + nd + 1 + k] for k in range(len(layout.output_names()))]
     prem_fn, zeta_fn, init_fn = _lambdas(layout, xp)
     meas = {name: y[k] for k, name in enumerate(layout.measured)}
-    excess = 0.0
+    # inputs outside their boxes: finite for finite inputs, kept apart from the estimate part (which
+    # is NaN when absurd inputs overflow the step; fmax ignores NaN, so the input flag survives)
+    excess_inputs = 0.0
     for name in layout.step.flag_outside_box:
         lo, hi = ts.state_box[sp.Symbol(name)]
-        excess = excess + ops.fmax(0.0, ops.fmax(lo - meas[name], meas[name] - hi))
+        excess_inputs = excess_inputs + ops.fmax(0.0, ops.fmax(lo - meas[name], meas[name] - hi))
+    excess = 0.0
     # differentiators: predictor values at this sample (state before the update), then the update
     dvals, dnext, off = {}, [], nzs
     for sig, spec in diffs:
@@ -691,6 +694,10 @@ def step_parts(ts: icm.InterconnectedTS, d: ICDesign, layout: StepLayout, z, y, 
         rec.append(acc)
     outputs = [x_hat[s] for s in states] + u_hat + rec
     z_new = z_next + dnext + [1.0] + outputs
+    if xp is ca:
+        excess = ca.fmax(excess_inputs, excess)
+    else:
+        excess = float(np.fmax(excess_inputs, excess))
     return z_new, outputs, excess, 1.0 - primed
 
 
