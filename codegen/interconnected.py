@@ -33,7 +33,6 @@ constant and T' = 0 exactly. Other premise-dependent B columns are refused.
 """
 from __future__ import annotations
 
-import itertools
 import tomllib
 from dataclasses import dataclass, field
 from functools import cached_property

@@ -128,6 +128,27 @@ def test_decoupling_and_gains(icb):
         assert du.affine_parts(sub, sd.Omega) is not None
 
 
+@pytest.mark.parametrize("mode", ["measured_rows", "minimum_norm"])
+def test_force_split_is_the_unobservable_mode(icb, mode):
+    """Assumption 1(ii): (T A_i, C) detectable at every vertex. The only unobservable mode is the
+    relaxation -v_x/sigma of the axle-force split: F_xf - F_xr always (the torques are unknown), and
+    F_yf - F_yr with the measured-rows H, whose zero r row of T gives up the yaw equation."""
+    sigma = icb.ts.parameters.values["sigma"]
+    design = icb.design if mode == "measured_rows" else \
+        du.design(icb.ts, dataclasses.replace(icb.design.settings, decoupling=mode))
+    for sub, sd in zip(icb.ts.subsystems, design.subsystems):
+        S = np.diag(sd.S)
+        for i, theta in enumerate(du.vertex_premises(sub)):
+            A = np.linalg.solve(S, sd.T @ sub.A[i] @ S)
+            C = sub.C @ S / sd.W[:, None]
+            bad = [lam for lam in np.linalg.eigvals(A)
+                   if np.linalg.svd(np.vstack([lam * np.eye(sub.n) - A, C]), compute_uv=False)[-1] < 1e-9]
+            if sub.name == "longitudinal" or mode == "measured_rows":
+                assert len(bad) == 1 and bad[0] == pytest.approx(-theta[0] / sigma, rel=1e-9)
+            else:
+                assert not bad
+
+
 def test_minimum_norm_decoupling_is_26(icb):
     sub = icb.ts.subsystems[1]
     H, T, CBp = du.decoupling(sub, mode="minimum_norm")

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 
@@ -619,8 +618,11 @@ def run_scenario(name: str, scenario: str, plant: str = "commonroad", duration: 
     ``satory_table1`` (all three, Table 1 side by side); ``plant`` commonroad or model."""
     if scenario not in SCENARIOS:
         raise ModelDefinitionError(f"seed-003 observers validate on {', '.join(SCENARIOS)}, not {scenario!r}")
-    if plant == "nominal":
-        plant = "commonroad"
+    if plant == "nominal":      # the independent plant where the observer was designed for its car
+        from .. import observers as _obs
+        from ..model import load_parameters as _lp
+        twin = _lp(_obs.get(name).parameter_path).meta.get("commonroad_vehicle") in ("1", "2", "3")
+        plant = "commonroad" if twin else "model"
     runs = [run(name, mu, plant, duration, progress=progress) for mu in SCENARIOS[scenario]]
     last = runs[0]
     observer = {s: last["table"][s] for s in TABLE1_SIGNALS}
