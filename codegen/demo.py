@@ -73,7 +73,7 @@ def main(json_output: bool = False) -> int:
         for scen, r in e["scenarios"].items():
             noise = ("sensor noise" if e["family"] == "linf_uio" else "noise-free as the seed's Table II"
                      if e["family"] == "ts_fuzzy_uio" else "noise-free as the seed's simulator runs")
-            print(f"   {scen}: nominal plant, {noise}, compiled C step, {r['samples']} samples, "
+            print(f"   {scen}: {r['plant']} plant, {noise}, compiled C step, {r['samples']} samples, "
                   f"max |a_y| {r['max_abs_ay']:.1f} m/s^2, {r['status_flags']} flagged")
             print("     " + validate.format_table(r).replace("\n", "\n     "))
     print(f"== real data: {REAL_DATA_OBSERVER} on {real['data']} ({real['samples']} samples at 100 Hz, "
