@@ -168,7 +168,11 @@ class HosmdSpec:
         object.__setattr__(self, "order", int(self.order))
         object.__setattr__(self, "lipschitz", _positive("Lipschitz constant", self.lipschitz))
         object.__setattr__(self, "sample_time", _positive("sample time", self.sample_time))
-        gains = self.gains if len(self.gains) else levant_gains(self.order)
+        try:
+            gains = tuple(self.gains) if len(self.gains) else levant_gains(self.order)
+        except TypeError:
+            raise ModelDefinitionError(f"differentiator {self.name!r}: gains must be a sequence of numbers, "
+                                       f"got {self.gains!r}") from None
         if len(gains) != self.order + 1:
             raise ModelDefinitionError(f"differentiator {self.name!r}: order {self.order} needs "
                                        f"{self.order + 1} gains, got {len(gains)}")
@@ -314,17 +318,6 @@ def hosmd_step_numpy(spec: HosmdSpec, z, f: float) -> np.ndarray:
     delta = -np.expm1(q * nu)                          # complex; 1 - (discrete eigenvalue)
     b = np.poly(-delta)[::-1]                          # prod (w + delta_j), lowest power first
     return Phi @ z - (V @ b[:n].real) * sigma
-
-
-def hosmd_run_numpy(spec: HosmdSpec, samples, z0=None) -> np.ndarray:
-    """Run the numpy step over ``samples``; row j is the state z_j (before the update with f_j)."""
-    samples = np.asarray(samples, dtype=np.float64).ravel()
-    z = spec.initial_state(samples[0] if samples.size else 0.0) if z0 is None else np.asarray(z0, float)
-    out = np.empty((samples.size, spec.n_state))
-    for j, f in enumerate(samples):
-        out[j] = z
-        z = hosmd_step_numpy(spec, z, f)
-    return out
 
 
 def hosmd_run(spec: HosmdSpec, samples, z0=None) -> np.ndarray:

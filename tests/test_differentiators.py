@@ -61,6 +61,7 @@ def test_non_recursive_form_equals_levants_recursive_form(k):
     (dict(sample_time=0.0), "sample time"),
     (dict(sample_time=float("nan")), "sample time"),
     (dict(gains=(1.1, 2.0)), "needs 3 gains, got 2"),
+    (dict(gains=2.0), "sequence of numbers"),
     (dict(gains=(1.1, -2.0, 2.0)), "gain must be finite and > 0"),
     (dict(gains=(1.0, 0.1, 5.0)), "not make the gain polynomial Hurwitz"),   # 5 * 0.1 < 1
 ])
