@@ -31,6 +31,12 @@ from .errors import DiscretizationError, ModelDefinitionError
 from .polytope import Polytope, sector_weights_product
 
 
+# Functions a derived expression may use, for the CasADi lambdify (sympy prints them unqualified).
+CASADI_FUNCTIONS = {"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "Abs": ca.fabs, "Min": ca.fmin,
+                    "Max": ca.fmax, "sin": ca.sin, "cos": ca.cos, "tan": ca.tan, "asin": ca.asin,
+                    "acos": ca.acos, "atan": ca.atan, "tanh": ca.tanh}
+
+
 @dataclass(frozen=True)
 class ObserverData:
     """Numbers the discrete step needs: polytope vertices, Lyapunov/gain vertex matrices."""
@@ -42,6 +48,7 @@ class ObserverData:
     Ts: float
     derived: tuple = ()         # (signal symbol, expression in the output symbols y_<name>)
     output_symbols: tuple = ()
+    derived_inputs: tuple = ()  # (input symbol, expression in y_<name> and the raw signals)
 
     def __post_init__(self):
         if np.ptp(self.poly.D, axis=0).max(initial=0) > 0:
@@ -78,14 +85,34 @@ class ObserverData:
 
     def _derived_functions(self, xp):
         args = (*self.output_symbols, *self.raw_signals)
-        mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "Abs": ca.fabs,
-                 "Min": ca.fmin, "Max": ca.fmax}, "math"] if xp is ca else "numpy"
+        mods = [CASADI_FUNCTIONS, "math"] if xp is ca else "numpy"
         return {sym: sp.lambdify(args, expr, mods) for sym, expr in self.derived}
 
     @cached_property
     def _derived_numpy(self) -> dict:
         """Derived-signal functions compiled once: the numpy step calls them every sample."""
         return self._derived_functions(np)
+
+    @property
+    def nw(self) -> int:
+        return len(self.derived_inputs)
+
+    def _derived_inputs_function(self, xp):
+        """All derived inputs as one function, common subexpressions shared (one slip inversion
+        serves several inputs)."""
+        args = (*self.output_symbols, *self.raw_signals)
+        mods = [CASADI_FUNCTIONS, "math"] if xp is ca else "numpy"
+        return sp.lambdify(args, [expr for _, expr in self.derived_inputs], mods, cse=True)
+
+    @cached_property
+    def _derived_inputs_numpy(self):
+        return self._derived_inputs_function(np)
+
+    def derived_input_values(self, rho_raw, y, xp=np) -> list:
+        """Derived known inputs w (model order), from the measurements y and the raw signals."""
+        f = self._derived_inputs_numpy if xp is np else self._derived_inputs_function(ca)
+        values = [y[k] for k in range(len(self.output_symbols))] + list(rho_raw)
+        return list(f(*values))
 
     def signal_values(self, rho_raw, y, xp=np):
         """All scheduling signals in polytope order: raw ones from the input, derived ones from y."""
@@ -115,6 +142,14 @@ def augmented_matrices(data: ObserverData, theta: np.ndarray):
     return Aa, Ba, By
 
 
+def derived_input_matrix(data: ObserverData, theta: np.ndarray) -> np.ndarray:
+    """Bwa at premise values ``theta``: z' = ... + Bwa w for the derived known inputs w."""
+    eta = sector_weights_product(np.asarray(theta, float), data.poly.premises)
+    Bw, Duw = _blend(eta, data.poly.Bw), _blend(eta, data.poly.Duw)
+    M = np.linalg.solve(_blend(eta, data.Q), _blend(eta, data.L))
+    return np.vstack([Bw + M @ Duw, data.Dp @ M @ Duw / data.Tf])
+
+
 def premise_of_signal(poly: Polytope, rho, xp=np):
     """Premise values theta(rho); ``rho`` is a scalar (one signal) or a list in ``poly.signals`` order."""
     rho = list(rho) if isinstance(rho, (list, tuple, np.ndarray)) and np.ndim(rho) > 0 else [rho]
@@ -128,14 +163,19 @@ def step_numpy(data: ObserverData, z, u, y, rho):
     """Reference step in numpy (tests, benchmark peer); ``rho`` holds the raw scheduling inputs.
 
     Returns (z_next, clamped) with clamped = 1.0 when a scheduling signal (raw or derived)
-    left its box."""
-    values = data.signal_values(np.atleast_1d(np.asarray(rho, float)), np.asarray(y, float))
+    left its box. Derived known inputs are computed from ``y`` and ``rho`` as in the C step."""
+    rho_raw = np.atleast_1d(np.asarray(rho, float))
+    values = data.signal_values(rho_raw, np.asarray(y, float))
     clamped = [min(max(v, lo), hi) for v, lo, hi in zip(values, data.poly.lowers, data.poly.uppers)]
     theta = np.array(premise_of_signal(data.poly, clamped), dtype=float)
     Aa, Ba, By = augmented_matrices(data, theta)
     G = np.eye(data.nz) - data.Ts * Aa
     flag = float(any(c != v for c, v in zip(clamped, values)))
-    return np.linalg.solve(G, z + data.Ts * (Ba @ u + By @ y)), flag
+    rhs = z + data.Ts * (Ba @ u + By @ y)
+    if data.nw:
+        w = np.array(data.derived_input_values(rho_raw, np.asarray(y, float)), dtype=float)
+        rhs = rhs + data.Ts * (derived_input_matrix(data, theta) @ w)
+    return np.linalg.solve(G, rhs), flag
 
 
 def _affine_in_scalar_premise(data: ObserverData):
@@ -284,9 +324,16 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
     nx, Ts, Tf = data.nx, data.Ts, data.Tf
     x, d = z[:nx], z[nx:]
     y_t = y - Du @ u
+    Bu = B @ u
+    if data.nw:
+        # derived known inputs: computed here from the measurements, enter like u
+        w = ca.vertcat(*data.derived_input_values([rho[k] for k in range(rho.shape[0])],
+                                                  [y[k] for k in range(ny)], xp=ca))
+        y_t = y_t - blend_or_const(poly.Duw) @ w
+        Bu = Bu + blend_or_const(poly.Bw) @ w
     K = (Ts / Tf) * (Dp @ M)
     G_x = ca.DM.eye(nx) - Ts * (A + M @ C) - Ts * (D @ K @ C)
-    rhs = x + Ts * (B @ u - M @ y_t) + Ts * (D @ (d - K @ y_t))
+    rhs = x + Ts * (Bu - M @ y_t) + Ts * (D @ (d - K @ y_t))
     if lu_without_pivoting_is_safe(data)["safe"]:
         x_next = solve_unpivoted(G_x, rhs)
     else:

@@ -19,7 +19,7 @@ import casadi as ca
 import jinja2
 
 from . import observers
-from .pipeline import ObserverBuild, TSFuzzyBuild, build
+from .pipeline import ObserverBuild, build
 
 ROOT = Path(__file__).resolve().parent.parent
 GENERATED_DIR = ROOT / "generated_c"
@@ -37,8 +37,9 @@ _ENV = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)), undefi
 # The toolchain modules whose code decides what is generated (validation, CLI, bench do not).
 GENERATION_SOURCES = ("errors.py", "model.py", "polytope.py", "lmi.py", "bounds.py", "ts_fuzzy.py",
                       "designs/__init__.py", "designs/linf_uio.py", "designs/ts_fuzzy_uio.py", "discrete.py",
-                      "observers.py", "pipeline.py", "emit.py", "interconnected.py",
-                      "designs/interconnected_uio.py", "differentiators.py")
+                      "observers.py", "pipeline.py", "emit.py", "switched.py", "designs/switched_pi.py",
+                      "switched_pipeline.py", "interconnected.py", "designs/interconnected_uio.py",
+                      "differentiators.py")
 
 
 def inputs_hash(config: observers.ObserverConfig) -> str:
@@ -92,35 +93,11 @@ def _kernel_sources(b: ObserverBuild, f: ca.Function) -> tuple:
     return banner(b, what) + "\n" + c_code, banner(b, what) + "\n" + h_code
 
 
-def _signal_docs(b: ObserverBuild) -> tuple:
-    if hasattr(b, "signal_docs"):      # families that document their own vectors
-        return b.signal_docs()
-    if isinstance(b, TSFuzzyBuild):
-        d = b.ts.definition
-        units = d.units
-        outs = [{"name": n, "doc": f"estimate of {n} [{units.get(n, '-')}]"
-                 + (" (previous sample)" if n in map(str, d.unknown_inputs) else "")} for n in b.output_names]
-        state = ([{"name": n, "doc": "observer internal state zeta of (16a)"} for n in b.state_names[:b.ts.nx]]
-                 + [{"name": f"y_prev_{n}", "doc": f"previous measured {n} [{units.get(n, '-')}]"}
-                    for n in d.output_names]
-                 + [{"name": "primed", "doc": "1 once a previous output is stored, else 0"}] + outs)
-        inputs = [{"name": f"y_{n}", "doc": f"measured {n} [{units.get(n, '-')}]"} for n in d.output_names]
-        return state, inputs, outs
-    d = b.lpv.definition
-    units = d.units
-    state = [{"name": n, "doc": f"estimate of {n} [{units.get(n, '-')}]"} for n in b.state_names]
-    inputs = ([{"name": str(s), "doc": f"known input [{units.get(str(s), '-')}]"} for s in d.known_inputs]
-              + [{"name": f"y_{n}", "doc": f"measured {n} [{units.get(n, '-')}]"} for n in d.output_names]
-              + [{"name": str(s.symbol), "doc": f"scheduling signal [{s.unit or '-'}]"} for s in d.scheduling
-                 if s.derived is None])
-    return state, inputs, state
-
-
 def render(b: ObserverBuild) -> dict:
     """All files of one observer as {file name: text}."""
     f = b.step_function()
     kernel_c, kernel_h = _kernel_sources(b, f)
-    state, inputs, outputs = _signal_docs(b)
+    state, inputs, outputs = b.signal_docs()
     nu, ny = b.nu, b.ny
     notes = b.emit_notes()
     ctx = {
@@ -133,6 +110,7 @@ def render(b: ObserverBuild) -> dict:
         "output_offset": len(state) - len(outputs),
         "scheduling": [{"name": n, "min": repr(lo), "max": repr(hi), "derived": derived}
                        for n, lo, hi, derived in b.scheduling_boxes()],
+        "derived_inputs": b.derived_input_docs() if hasattr(b, "derived_input_docs") else [],
         "offset_u": 0, "offset_y": nu, "offset_rho": nu + ny,
         "sz_arg": max(int(f.sz_arg()), 1), "sz_res": max(int(f.sz_res()), 1),
         "sz_iw": max(int(f.sz_iw()), 1), "sz_w": max(int(f.sz_w()), 1),

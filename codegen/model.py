@@ -41,6 +41,22 @@ class SchedulingSignal:
 
 
 @dataclass(frozen=True)
+class DerivedInput:
+    """A known input computed inside the observer step from the measurements.
+
+    A nonlinear term of the model that depends only on measured signals (seed 004's
+    "measured nonlinear consequents") enters the dynamics affinely as a known input whose
+    value ``expr`` is a function of measured outputs (symbols ``y_<output>``), input
+    scheduling signals and parameters. It is not an input of the generated step: the step
+    evaluates it from the same measurements it receives.
+    """
+
+    symbol: sp.Symbol
+    expr: sp.Expr
+    unit: str = ""
+
+
+@dataclass(frozen=True)
 class SchedulingBox:
     """Numeric range of one scheduling signal and of its time derivative."""
 
@@ -71,6 +87,8 @@ class ModelDefinition:
         Physical parameters; each needs a value in the parameter file.
     units : mapping of str to str
         Units of states/inputs/outputs, for reports.
+    derived_inputs : tuple of DerivedInput
+        Known inputs computed inside the step from the measurements (not step inputs).
     """
 
     name: str
@@ -83,10 +101,15 @@ class ModelDefinition:
     parameters: tuple
     units: Mapping[str, str] = field(default_factory=dict)
     doc: str = ""
+    derived_inputs: tuple = ()
 
     def __post_init__(self) -> None:
+        for w in self.derived_inputs:
+            if not isinstance(w, DerivedInput):
+                raise ModelDefinitionError(f"model {self.name!r}: derived_inputs must hold DerivedInput, got {w!r}")
         names = [str(s) for s in (*self.states, *self.known_inputs, *self.unknown_inputs,
-                                  *(g.symbol for g in self.scheduling), *self.parameters)]
+                                  *(g.symbol for g in self.scheduling), *self.parameters,
+                                  *(w.symbol for w in self.derived_inputs))]
         allowed_derived = ({str(p) for p in self.parameters} | {f"y_{n}" for n, _ in self.outputs}
                            | {str(g.symbol) for g in self.scheduling if g.derived is None})
         for g in self.scheduling:
@@ -96,6 +119,12 @@ class ModelDefinition:
                     raise ModelDefinitionError(
                         f"model {self.name!r}: derived scheduling signal {g.symbol} uses {', '.join(sorted(stray))}; "
                         f"it may only use parameters, measured outputs y_<name> and input scheduling signals")
+        for w in self.derived_inputs:
+            stray = {str(x) for x in sp.sympify(w.expr).free_symbols} - allowed_derived
+            if stray:
+                raise ModelDefinitionError(
+                    f"model {self.name!r}: derived input {w.symbol} uses {', '.join(sorted(stray))}; "
+                    f"it may only use parameters, measured outputs y_<name> and input scheduling signals")
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
             raise ModelDefinitionError(f"model {self.name!r}: symbol(s) declared twice: {', '.join(dup)}")
@@ -160,6 +189,9 @@ class LPVModel:
     boxes: tuple
     Du: sp.Matrix = None        # output feedthrough of the known inputs: y = C x + Du u
     derived: tuple = ()         # (symbol, expression in y_<output>) with parameters substituted
+    Bw: sp.Matrix = None        # dynamics of the derived inputs w: x' = A x + B u + Bw w + D d
+    Duw: sp.Matrix = None       # output feedthrough of the derived inputs
+    derived_inputs: tuple = ()  # (symbol, expression in y_<output>) with parameters substituted
 
     @property
     def nx(self) -> int:
@@ -278,30 +310,35 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     f = sp.Matrix(model.dynamics)
     h = sp.Matrix([expr for _, expr in model.outputs])
     x, u, d = tuple(model.states), tuple(model.known_inputs), tuple(model.unknown_inputs)
+    w = tuple(g.symbol for g in model.derived_inputs)
     A = _affine_part(f, x, "the states", model.name)
     B = _affine_part(f, u, "the known inputs", model.name)
+    Bw = _affine_part(f, w, "the derived inputs", model.name)
     D = _affine_part(f, d, "the unknown inputs", model.name)
     C = _affine_part(h, x, "the states", model.name)
     Du = _affine_part(h, u, "the known inputs", model.name)
-    rest = sp.simplify(f - A * sp.Matrix(x) - B * sp.Matrix(u) - D * sp.Matrix(d)) if x else f
+    Duw = _affine_part(h, w, "the derived inputs", model.name)
+    rest = sp.simplify(f - A * sp.Matrix(x) - B * sp.Matrix(u) - D * sp.Matrix(d)
+                       - (Bw * sp.Matrix(w) if w else sp.zeros(*f.shape))) if x else f
     if any(sp.simplify(e) != 0 for e in rest):
         raise NotAffineError(f"model {model.name!r}: dynamics have a drift term independent of "
                              f"states and inputs: {list(rest)}")
-    h_rest = sp.simplify(h - C * sp.Matrix(x) - Du * sp.Matrix(u))
+    h_rest = sp.simplify(h - C * sp.Matrix(x) - Du * sp.Matrix(u) - (Duw * sp.Matrix(w) if w else sp.zeros(*h.shape)))
     if any(sp.simplify(e) != 0 for e in h_rest):
         raise NotAffineError(f"model {model.name!r}: outputs must be C(rho) x + Du(rho) u; left over: "
                              f"{list(h_rest)} (unknown inputs may not reach the outputs in this family)")
-    for mat, label in ((B, "B"), (D, "D"), (C, "C"), (Du, "Du")):
-        if any(e.free_symbols & set(x + u + d) for e in mat):
+    for mat, label in ((B, "B"), (D, "D"), (C, "C"), (Du, "Du"), (Bw, "Bw"), (Duw, "Duw")):
+        if any(e.free_symbols & set(x + u + d + w) for e in mat):
             raise NotAffineError(f"model {model.name!r}: {label} depends on states or inputs")
-    A, B, D, C, Du = (m.subs(subs) for m in (A, B, D, C, Du))
+    A, B, D, C, Du, Bw, Duw = (m.subs(subs) for m in (A, B, D, C, Du, Bw, Duw))
     sched = tuple(sig.symbol for sig in model.scheduling)
     allowed = set(sched)
-    for mat, label in ((A, "A"), (B, "B"), (D, "D"), (C, "C"), (Du, "Du")):
+    for mat, label in ((A, "A"), (B, "B"), (D, "D"), (C, "C"), (Du, "Du"), (Bw, "Bw"), (Duw, "Duw")):
         stray = set().union(*(e.free_symbols for e in mat)) - allowed if len(mat) else set()
         if stray:
             raise ModelDefinitionError(
                 f"model {model.name!r}: {label} depends on {', '.join(sorted(map(str, stray)))}, "
                 f"which is neither a parameter nor a scheduling signal")
     derived = tuple((g.symbol, sp.sympify(g.derived).subs(subs)) for g in model.scheduling if g.derived is not None)
-    return LPVModel(model, params, A, B, D, C, sched, tuple(boxes), Du, derived)
+    derived_inputs = tuple((g.symbol, sp.sympify(g.expr).subs(subs)) for g in model.derived_inputs)
+    return LPVModel(model, params, A, B, D, C, sched, tuple(boxes), Du, derived, Bw, Duw, derived_inputs)

@@ -17,7 +17,7 @@ from .errors import ModelDefinitionError, UnknownObserverError
 from .model import ModelDefinition
 
 OBSERVERS_DIR = PARAMS_DIR.parent / "observers"
-FAMILIES = ("linf_uio", "ts_fuzzy_uio", "interconnected_uio")
+FAMILIES = ("linf_uio", "ts_fuzzy_uio", "switched_pi", "interconnected_uio")
 
 
 @dataclass(frozen=True)
@@ -35,6 +35,7 @@ class ObserverConfig:
     ui_filter: dict = field(default_factory=dict)
     doc: str = ""
     source: str = ""
+    switching: dict = field(default_factory=dict)     # switched families: the rule, as data
 
     def load_model(self) -> ModelDefinition:
         try:
@@ -54,7 +55,8 @@ class ObserverConfig:
         return {"name": self.name, "family": self.family, "model": self.model,
                 "parameters": self.parameters, "polytope": self.polytope,
                 "rate_bounds": self.rate_bounds, "sample_time": self.sample_time,
-                "design": dict(self.design), "ui_filter": dict(self.ui_filter)}
+                "design": dict(self.design), "ui_filter": dict(self.ui_filter),
+                **({"switching": self.switching} if self.switching else {})}
 
 
 def _parse(path: Path) -> ObserverConfig:
@@ -79,7 +81,8 @@ def _parse(path: Path) -> ObserverConfig:
                 break
     return ObserverConfig(path.stem, data["family"], data["model"], data["parameters"], data.get("polytope", ""),
                           data.get("rate_bounds", "exact"), float(data["sample_time"]),
-                          dict(data.get("design", {})), dict(data.get("ui_filter", {})), doc.strip(), str(path))
+                          dict(data.get("design", {})), dict(data.get("ui_filter", {})), doc.strip(), str(path),
+                          dict(data.get("switching", {})))
 
 
 def names() -> list:

@@ -82,6 +82,21 @@ class ObserverBuild:
             "has_warmup": False,
         }
 
+    def signal_docs(self) -> tuple:
+        """(state, inputs, outputs) field docs of the C API; the outputs are the state."""
+        d = self.lpv.definition
+        units = d.units
+        state = [{"name": n, "doc": f"estimate of {n} [{units.get(n, '-')}]"} for n in self.state_names]
+        inputs = ([{"name": str(s), "doc": f"known input [{units.get(str(s), '-')}]"} for s in d.known_inputs]
+                  + [{"name": f"y_{n}", "doc": f"measured {n} [{units.get(n, '-')}]"} for n in d.output_names]
+                  + [{"name": str(s.symbol), "doc": f"scheduling signal [{s.unit or '-'}]"} for s in d.scheduling
+                     if s.derived is None])
+        return state, inputs, state
+
+    def derived_input_docs(self) -> list:
+        return [{"name": str(sym), "unit": self.lpv.definition.units.get(str(sym), "-")}
+                for sym, _ in self.lpv.derived_inputs]
+
     def artifact(self) -> dict:
         return artifact(self)
 
@@ -148,6 +163,19 @@ class TSFuzzyBuild:
                            " * and the unknown-input estimate of this sample is not meaningful."),
             "has_warmup": True,
         }
+
+    def signal_docs(self) -> tuple:
+        """(state, inputs, outputs) field docs of the C API; the outputs are the state's tail."""
+        d = self.ts.definition
+        units = d.units
+        outs = [{"name": n, "doc": f"estimate of {n} [{units.get(n, '-')}]"
+                 + (" (previous sample)" if n in map(str, d.unknown_inputs) else "")} for n in self.output_names]
+        state = ([{"name": n, "doc": "observer internal state zeta of (16a)"} for n in self.state_names[:self.ts.nx]]
+                 + [{"name": f"y_prev_{n}", "doc": f"previous measured {n} [{units.get(n, '-')}]"}
+                    for n in d.output_names]
+                 + [{"name": "primed", "doc": "1 once a previous output is stored, else 0"}] + outs)
+        inputs = [{"name": f"y_{n}", "doc": f"measured {n} [{units.get(n, '-')}]"} for n in d.output_names]
+        return state, inputs, outs
 
     def artifact(self) -> dict:
         sol = self.design.solution
@@ -223,6 +251,9 @@ def build(config: ObserverConfig, tol: float | None = None):
     if config.family == "interconnected_uio":
         from .designs import interconnected_uio
         return interconnected_uio.build(config, tol)
+    if config.family == "switched_pi":
+        from .switched_pipeline import build_switched_pi
+        return build_switched_pi(config, tol)
     return build_linf(config, tol)
 
 
@@ -241,7 +272,7 @@ def build_linf(config: ObserverConfig, tol: float | None = None) -> ObserverBuil
     cert = linf_uio.certify(poly, design.P, design.X, design.L, settings.alpha)
     data = discrete.ObserverData(poly, design.Q, design.L,
                                  float(config.ui_filter.get("time_constant", 0.005)), config.sample_time,
-                                 lpv.derived, lpv.definition.output_symbols)
+                                 lpv.derived, lpv.definition.output_symbols, lpv.derived_inputs)
     dcert = discrete.certify_step(data, settings.alpha)
     t3 = time.perf_counter()
     timings = {"representation_s": t1 - t0, "design_s": t2 - t1,
@@ -252,6 +283,8 @@ def build_linf(config: ObserverConfig, tol: float | None = None) -> ObserverBuil
 
 def input_boxes(b) -> dict:
     """{input name: [min, max]} of the inputs that schedule the step (outside: SCHEDULING_CLAMPED)."""
+    if hasattr(b, "input_boxes"):
+        return b.input_boxes()
     if isinstance(b, TSFuzzyBuild):
         names = dict(zip(b.ts.measured, b.ts.definition.output_names))
         return {f"y_{names[s]}": list(b.ts.state_box[s]) for s in b.ts.measured}
@@ -279,7 +312,9 @@ def artifact(b: ObserverBuild) -> dict:
         "observer": b.name,
         "config": b.config.to_json(),
         "signals": {"state": b.state_names, "input": b.input_names, "output": b.output_names,
-                    "scheduling": [str(x) for x in b.poly.signals], "input_boxes": input_boxes(b)},
+                    "scheduling": [str(x) for x in b.poly.signals], "input_boxes": input_boxes(b),
+                    **({"derived_inputs": {str(sym): str(expr) for sym, expr in b.lpv.derived_inputs}}
+                       if b.lpv.derived_inputs else {})},
         "polytope": b.poly.to_json(),
         "taylor_error": _sig(b.taylor_error),
         **b.design.gains_json(),

@@ -65,6 +65,8 @@ class Polytope:
     rate_bound_mode: str
     expansion_point: float | None
     Du: np.ndarray = None
+    Bw: np.ndarray = None        # derived-input matrices (N, nx, nw); nw = 0 without derived inputs
+    Duw: np.ndarray = None
 
     # the primary (first) scheduling signal, for the single-signal reports
     @property
@@ -135,6 +137,8 @@ class Polytope:
             "expansion_point": self.expansion_point,
             "A": self.A.tolist(), "B": self.B.tolist(), "C": self.C.tolist(), "D": self.D.tolist(),
             "Du": self.Du.tolist(),
+            **({"Bw": self.Bw.tolist(), "Duw": self.Duw.tolist()}
+               if self.Bw is not None and self.Bw.shape[-1] else {}),
         }
 
 
@@ -157,9 +161,18 @@ def nonlinear_factors(matrices, symbols) -> tuple:
     return tuple(sorted(found.values(), key=lambda g: (sp.count_ops(g), sp.default_sort_key(g))))
 
 
+def _derived_input_matrices(lpv: LPVModel) -> tuple:
+    """(Bw, Duw), with zero columns for a model without derived inputs."""
+    nw = len(lpv.derived_inputs)
+    Bw = lpv.Bw if lpv.Bw is not None else sp.zeros(lpv.nx, nw)
+    Duw = lpv.Duw if lpv.Duw is not None else sp.zeros(lpv.ny, nw)
+    return Bw, Duw
+
+
 def scheduling_nonlinearities(lpv: LPVModel) -> tuple:
-    """:func:`nonlinear_factors` of A, B, C, D, Du in the scheduling signals."""
-    return nonlinear_factors((lpv.A, lpv.B, lpv.C, lpv.D, lpv.Du), lpv.scheduling_symbols)
+    """:func:`nonlinear_factors` of A, B, C, D, Du, Bw, Duw in the scheduling signals."""
+    return nonlinear_factors((lpv.A, lpv.B, lpv.C, lpv.D, lpv.Du, *_derived_input_matrices(lpv)),
+                             lpv.scheduling_symbols)
 
 
 def affine_decomposition(matrices: dict, symbols, nonlinearities: tuple) -> dict:
@@ -190,7 +203,9 @@ def affine_decomposition(matrices: dict, symbols, nonlinearities: tuple) -> dict
 
 
 def _affine_decomposition(lpv: LPVModel, nonlinearities: tuple):
-    return affine_decomposition({"A": lpv.A, "B": lpv.B, "C": lpv.C, "D": lpv.D, "Du": lpv.Du},
+    Bw, Duw = _derived_input_matrices(lpv)
+    return affine_decomposition({"A": lpv.A, "B": lpv.B, "C": lpv.C, "D": lpv.D, "Du": lpv.Du,
+                                 "Bw": Bw, "Duw": Duw},
                                 lpv.scheduling_symbols, nonlinearities)
 
 
@@ -330,7 +345,7 @@ def sector_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polytope:
     rates = _rate_bounds(etas, lpv.scheduling_symbols[0], lpv.boxes[0], rate_bounds, None)
     return Polytope("sector", tuple(lpv.scheduling_symbols), tuple(b.lower for b in lpv.boxes),
                     tuple(b.upper for b in lpv.boxes), premises, nonlin, mats["A"], mats["B"],
-                    mats["C"], mats["D"], etas, rates, rate_bounds, None, mats["Du"])
+                    mats["C"], mats["D"], etas, rates, rate_bounds, None, mats["Du"], mats["Bw"], mats["Duw"])
 
 
 def taylor_reduced_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polytope:
@@ -381,7 +396,7 @@ def taylor_reduced_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polyto
     return Polytope("taylor_reduced", (signal,), (box.lower,), (box.upper,), (premise,), nonlin, mats["A"],
                     mats["B"], mats["C"], mats["D"], etas,
                     _rate_bounds(etas, signal, box, rate_bounds, expansion_point), rate_bounds,
-                    expansion_point, mats["Du"])
+                    expansion_point, mats["Du"], mats["Bw"], mats["Duw"])
 
 
 def exact_matrix_function(lpv: LPVModel, label: str = "A"):

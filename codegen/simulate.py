@@ -29,9 +29,16 @@ def plant_rhs(lpv: LPVModel, definition=None):
                                    f"{lpv.parameters.source}")
     subs = {p: values[str(p)] for p in d.parameters}
     f = sp.Matrix(d.dynamics).subs(subs)
-    args = [*d.states, *d.known_inputs, *d.unknown_inputs, *(s.symbol for s in d.scheduling)]
-    fn = sp.lambdify(args, f, "numpy")
+    sched = [s.symbol for s in d.scheduling]
+    args = [*d.states, *d.known_inputs, *d.unknown_inputs, *sched]
     nx, nu, nd = len(d.states), len(d.known_inputs), len(d.unknown_inputs)
+    if d.derived_inputs:
+        # derived known inputs: the same functions of the measurements as in the observer,
+        # here of the plant's own (noise-free) outputs
+        outputs = {sp.Symbol(f"y_{n}"): expr for n, expr in d.outputs}
+        w_of_x = [sp.sympify(g.expr).subs(outputs).subs(subs) for g in d.derived_inputs]
+        f = f.subs({g.symbol: e for g, e in zip(d.derived_inputs, w_of_x)})
+    fn = sp.lambdify(args, f, "numpy")
 
     def rhs(x, u, dd, rho):
         return np.asarray(fn(*x, *u, *dd, *np.atleast_1d(rho)), dtype=float).reshape(nx)

@@ -204,6 +204,9 @@ def run_scenario(name: str, scenario: str, plant: str = "nominal", duration: flo
     if config.family == "interconnected_uio":
         from .validation import satory
         return satory.run_scenario(name, scenario, plant, duration, progress=progress)
+    if config.family == "switched_pi":
+        from .validation import banked_road
+        return banked_road.run_scenario(config, scenario, plant, duration, seed, progress=progress)
     lpv = pipeline.representation(config)[0]
     scn = scenario_for(config, scenario, duration)
     if plant == "commonroad":
@@ -274,6 +277,9 @@ def format_table(result: dict) -> str:
     if "seed003" in result:
         from .validation import satory
         return satory.format_result(result)
+    if result.get("seed001"):
+        from .validation import banked_road
+        return banked_road.format_table(result)
     lines = [f"{'signal':14s} {'E_mean':>9s} {'E_max':>9s} {'Std':>9s} {'RMS':>9s}"]
     units = result["units"]
     for sig, row in result["observer"].items():

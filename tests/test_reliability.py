@@ -28,11 +28,13 @@ pytestmark = pytest.mark.reliability
 
 def scheduling_boxes(name: str, obs) -> dict:
     """{input column: (lo, hi)} of the inputs that schedule the observer (design artifact), and
-    whether only the inputs can raise SCHEDULING_CLAMPED (the TS family also flags estimates)."""
+    whether only the inputs can raise SCHEDULING_CLAMPED (the TS family, and switched observers with
+    premises computed from estimates, also flag estimates)."""
     import json
     art = json.loads((ROOT / "generated_c" / name / f"{name}_design.json").read_text())
     boxes = {obs.input_names.index(k): tuple(v) for k, v in art["signals"]["input_boxes"].items()}
-    return boxes, art["config"]["family"] not in ("ts_fuzzy_uio", "interconnected_uio")
+    exact = art["signals"].get("flags_from_inputs_only", art["config"]["family"] != "ts_fuzzy_uio")
+    return boxes, exact
 
 
 def hostile_inputs(seed: int, n: int, n_input: int, boxes: dict, p_special: float,
@@ -183,8 +185,9 @@ def realistic_inputs(name, obs):
         from codegen.validation import satory
         truth = satory.periodic_lap(name)
         return np.column_stack([truth[c[2:]] for c in obs.input_names])
-    if cfg.family == "ts_fuzzy_uio":
-        res = validate.run_scenario(name, "random_trajectory_accel", "nominal")
+    if cfg.family in ("ts_fuzzy_uio", "switched_pi"):
+        from codegen.demo import DEMO_SCENARIOS
+        res = validate.run_scenario(name, DEMO_SCENARIOS[cfg.family][0], "nominal")
         truth = res["signals"]["truth"]
         return simulate.observer_input_matrix(obs.input_names, truth, {})
     lpv = pipeline.representation(cfg)[0]

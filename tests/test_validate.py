@@ -48,7 +48,10 @@ def test_commonroad_cli_json_and_plot(tmp_path):
     assert set(res) >= {"observer", "baselines"}
     for sig in ("beta", "T_d"):
         assert set(res["observer"][sig]) >= {"rms", "mae", "max"}
-    assert res["observer"]["beta"]["rms"] < 0.5
+    # 6 s of the circle (a_y up to 4.7 m/s^2): 0.009 deg and 0.28 N m with the camber/remainder
+    # model; the seed's linear model gave 0.088 deg and 1.45 N m
+    assert res["observer"]["beta"]["rms"] < 0.03
+    assert res["observer"]["T_d"]["rms"] < 0.5
     assert png.stat().st_size > 10_000
 
 

@@ -69,11 +69,12 @@ def test_column_torque_balance(circle):
 
 def test_params_toml_format_and_slope(tmp_path):
     from codegen import model
-    from model_defs.steering_single_track import MODEL
+    from model_defs.steering_single_track_camber import MODEL
     text = C.params_toml(2)
     data = tomllib.loads(text)
     ref = tomllib.loads(TABLE1.read_text())
-    assert set(data["parameters"]) == set(ref["parameters"])
+    assert set(data["parameters"]) == {str(p) for p in MODEL.parameters}
+    assert set(ref["parameters"]) <= set(data["parameters"])           # the seed's names, plus camber/tyre
     assert data["scheduling"] == ref["scheduling"]
     for k in ("eta_t", "R_s", "B_s", "K_p", "I_s"):
         assert data["parameters"][k] == ref["parameters"][k]
@@ -82,10 +83,63 @@ def test_params_toml_format_and_slope(tmp_path):
     assert data["parameters"]["C_f"] == pytest.approx(abs(pv.tire.p_ky1) * fzf, rel=1e-6)
     assert data["parameters"]["C_r"] == pytest.approx(abs(pv.tire.p_ky1) * fzr, rel=1e-6)
     assert data["parameters"]["M"] == pv.m and data["parameters"]["l_f"] == pv.a
+    assert data["parameters"]["F_zf"] == pytest.approx(2 * fzf) and data["parameters"]["mu_y"] == pv.tire.p_dy1
     f = tmp_path / "cr2.toml"
     f.write_text(text)
     lpv = model.instantiate(MODEL, model.load_parameters(f))   # the toolchain accepts it
-    assert lpv.nx == 4
+    assert lpv.nx == 4 and len(lpv.derived_inputs) == 4
+
+
+def test_camber_coefficients_are_the_tyre_functions():
+    """c0 + c1 |gamma| is what the package's formula_lateral adds at zero slip, gamma against the turn."""
+    from vehiclemodels.utils import tire_model
+    pv = C.vehicle_parameters(2)
+    c0, c1 = C.camber_force_coefficients(pv.tire)
+    fz = 3000.0
+    for gamma in (-1e-6, -0.01, -0.04):
+        added = tire_model.formula_lateral(0.0, gamma, fz, pv.tire)[0] - tire_model.formula_lateral(0.0, 0.0, fz, pv.tire)[0]
+        assert added == pytest.approx(fz * (c0 + c1 * abs(gamma)), rel=1e-2)   # small-slip linearization
+    assert 0.015 < c0 < 0.03 and 0.8 < c1 < 1.2
+
+
+def test_roll_camber_matches_the_multibody_steady_roll(circle):
+    """The quasi-static roll/camber formula against the plant's own steady state on a circle."""
+    sc, gt = circle
+    last = slice(-100, None)
+    rc = C.roll_camber(C.vehicle_parameters(2))
+    roll, ay = gt.roll[last].mean(), gt.a_y[last].mean()
+    assert roll < 0 < ay                                                      # rolls out of the turn
+    assert -roll / ay == pytest.approx(rc.roll_gradient, rel=0.03)
+    assert gt.camber_f[last].mean() / roll == pytest.approx(rc.camber_per_roll_f, rel=0.03)
+
+
+def test_camber_model_reproduces_the_plant_steady_state(circle):
+    """From the measured r and v_x alone, the observer's model predicts the plant's steady sideslip,
+    steering angle and aligning torque; the seed's linear model misses the aligning torque by 30 %."""
+    import sympy as sp
+    from codegen import model
+    from model_defs import steering_single_track, steering_single_track_camber
+    sc, gt = circle
+    last = slice(-100, None)
+    r, vx = gt.r[last].mean(), gt.v_x[last].mean()
+    values = tomllib.loads(C.params_toml(2))["parameters"]
+    b, d, T_d = sp.symbols("beta delta T_d")
+    predicted = {}
+    for m in (steering_single_track.MODEL, steering_single_track_camber.MODEL):
+        subs = {p: values[str(p)] for p in m.parameters}
+        v_sym = sp.Symbol("v_x", positive=True)
+        w = {g.symbol: sp.sympify(g.expr).subs(subs).subs({sp.Symbol("y_r"): r, v_sym: vx}) for g in m.derived_inputs}
+        f = m.dynamics.subs(subs).subs(w).subs({sp.Symbol("r"): r, v_sym: vx, sp.Symbol("delta_dot"): 0,
+                                               sp.Symbol("T_a"): 0})
+        sol = sp.solve([f[0], f[1]], [b, d], dict=True)[0]
+        t_d = sp.solve(f[3].subs(sol), T_d)[0]           # the driver holds the column still
+        predicted[m.name] = (float(sol[b]), float(sol[d]), -float(t_d))
+    beta_c, delta_c, t_al_c = predicted["steering_single_track_camber"]
+    assert np.degrees(beta_c) == pytest.approx(np.degrees(gt.beta[last].mean()), abs=0.02)
+    assert np.degrees(delta_c) == pytest.approx(np.degrees(gt.delta[last].mean()), abs=0.01)
+    assert t_al_c == pytest.approx(gt.T_al[last].mean(), abs=0.15)
+    t_al_lin = predicted["steering_single_track"][2]
+    assert abs(t_al_lin - gt.T_al[last].mean()) > 1.0
 
 
 def test_plant_config_errors():

@@ -909,7 +909,9 @@ class InterconnectedBuild:
             "config": self.config.to_json(),
             "signals": {"state": self.state_names, "input": self.input_names, "output": self.output_names,
                         "scheduling": [str(p.expr) for sub in self.ts.subsystems for p in sub.premises],
-                        "input_boxes": self.input_boxes()},
+                        "input_boxes": self.input_boxes(),
+                        # the v_x estimate and the premises are flagged too, not only the inputs
+                        "flags_from_inputs_only": False},
             "ts_model": _sig(self.ts.to_json(), 12),
             "settings": {k: getattr(self.design.settings, k) for k in
                          ("alpha", "weight", "coupling_gain", "gain_bound", "margin", "tol")},

@@ -229,6 +229,10 @@ def _measured_model(ts: TSFuzzyModel, xp):
 def step_parts(ts: TSFuzzyModel, d: TSDesign, zeta, y_k, y_next, u, xp=np):
     """(zeta_next, x_hat_next, d_hat_k, excess) of (16) on numpy arrays or CasADi SX.
 
+    The two branches are kept apart on purpose: the numpy one is the independent reference of the
+    portability tests (pivoted LAPACK solve, dense blends), the CasADi one is what becomes C
+    (constant matrices folded, unrolled unpivoted elimination).
+
     Measured values are clamped to D_x for the model (the certificate only holds there);
     ``excess`` sums how far they (at k and k+1), and the unmeasured estimates, lie outside D_x.
     """

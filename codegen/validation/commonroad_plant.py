@@ -53,7 +53,8 @@ from ..errors import ModelDefinitionError, SampleError, UiogenError
 
 __all__ = [
     "PlantError", "ColumnParams", "TABLE1_COLUMN", "PlantConfig", "GroundTruth", "vehicle_parameters",
-    "tyre_cornering_stiffness", "params_toml", "simulate", "pneumatic_trail",
+    "tyre_cornering_stiffness", "params_toml", "simulate", "pneumatic_trail", "RollCamber", "roll_camber",
+    "camber_force_coefficients",
 ]
 
 G = 9.81
@@ -146,10 +147,16 @@ class GroundTruth:
         Aligning torque at the handwheel [N m] (the column's tyre feedback).
     alpha_f : ndarray
         Mean conventional front slip angle [rad].
+    camber_f : ndarray
+        Mean front wheel camber, the package's signs [rad].
     X, Y, psi : ndarray
         Global position [m] and yaw angle [rad].
     mu : ndarray
         Friction scale applied to the tyres (1 = the tyre's nominal coefficients).
+    roll, roll_rate : ndarray
+        Sprung-mass roll angle x[6] [rad] and rate x[7] [rad/s] of ``vehicle_dynamics_mb``, in the
+        package's sign convention (negative in a left turn: its roll moment from the lateral joint
+        forces is -F_RA (h_s - h_ra)).
     """
 
     t: np.ndarray
@@ -165,10 +172,13 @@ class GroundTruth:
     T_a: np.ndarray
     T_al: np.ndarray
     alpha_f: np.ndarray
+    camber_f: np.ndarray
     X: np.ndarray
     Y: np.ndarray
     psi: np.ndarray
     mu: np.ndarray
+    roll: np.ndarray
+    roll_rate: np.ndarray
 
 
 def vehicle_parameters(vehicle: int = 2):
@@ -199,20 +209,84 @@ def tyre_cornering_stiffness(p, fz: float, h: float = 1e-5) -> float:
     return abs((fp - fm) / (2 * h))
 
 
-def params_toml(vehicle: int = 2, column: ColumnParams = TABLE1_COLUMN) -> str:
-    """A parameter file in the format of ``model_defs/params/seed000_table1.toml``, as a string.
+@dataclass(frozen=True)
+class RollCamber:
+    """Quasi-static roll and camber of a CommonRoad multi-body parameter set.
+
+    Attributes
+    ----------
+    roll_gradient : float
+        |body roll| per lateral acceleration [rad/(m/s²)] (the body rolls out of the turn).
+    camber_per_roll_f, camber_per_roll_r : float
+        Wheel camber per body roll, front and rear axle [-] (same sign as the roll when > 0).
+    """
+
+    roll_gradient: float
+    camber_per_roll_f: float
+    camber_per_roll_r: float
+
+
+def roll_camber(p) -> RollCamber:
+    """Steady roll of ``vehicle_dynamics_mb`` under a lateral acceleration, from its parameters.
+
+    The sprung mass m_s (CoG at h_s, roll axes at the ground: h_raf = h_rar = 0 in all three
+    sets) rolls against each axle's suspension roll stiffness (springs K_s at ±T/2 and the
+    torsion term K_ts of the package's F_S equations: k_s = K_s T²/2 - K_ts) in series with the
+    tyres' vertical stiffness (K_zt T²/2), less the gravity moment m_s g h_s:
+
+        |φ| / a_y = m_s h_s / (k_f + k_r - m_s g h_s),   k = (1/k_s + 1/k_t)^-1.
+
+    Camber (``gamma = φ ± D z_S``, z_S = ±T/2 times the suspension's share k/k_s of the roll)
+    per body roll: g = 1 + D T k / (2 k_s).
+    """
+    if p.h_raf != 0 or p.h_rar != 0 or p.E_f != 0 or p.E_r != 0:
+        raise ModelDefinitionError("roll_camber assumes roll axes at the ground and linear camber "
+                                   "kinematics (h_raf = h_rar = E_f = E_r = 0, as in sets 1-3)")
+    k_sf = 0.5 * p.T_f ** 2 * p.K_sf - p.K_tsf
+    k_sr = 0.5 * p.T_r ** 2 * p.K_sr - p.K_tsr
+    k_f = 1.0 / (1.0 / k_sf + 1.0 / (0.5 * p.T_f ** 2 * p.K_zt))
+    k_r = 1.0 / (1.0 / k_sr + 1.0 / (0.5 * p.T_r ** 2 * p.K_zt))
+    gradient = p.m_s * p.h_s / (k_f + k_r - p.m_s * G * p.h_s)
+    return RollCamber(gradient, 1.0 + 0.5 * p.D_f * p.T_f * k_f / k_sf, 1.0 + 0.5 * p.D_r * p.T_r * k_r / k_sr)
+
+
+def camber_force_coefficients(tire) -> tuple:
+    """(c0, c1) of the package's PAC2002 at zero slip: a wheel cambered against the turn
+    (gamma of sign opposite to a_y) adds F_z (c0 + c1 |gamma|) to the cornering force.
+
+    From ``formula_lateral``: S_Hy = sgn(γ)(p_hy1 + p_hy3|γ|), S_Vy = sgn(γ) F_z (p_vy1 +
+    p_vy3|γ|), K_y = p_ky1 F_z, so F_y(0, γ) = sgn(γ) F_z [(p_ky1 p_hy1 + p_vy1) +
+    (p_ky1 p_hy3 + p_vy3)|γ|] (small slip).
+    """
+    return -(tire.p_ky1 * tire.p_hy1 + tire.p_vy1), -(tire.p_ky1 * tire.p_hy3 + tire.p_vy3)
+
+
+def params_toml(vehicle: int = 2, column: ColumnParams = TABLE1_COLUMN, a_s: float = 0.1) -> str:
+    """The parameter file of ``model_defs/steering_single_track_camber.py`` for a CommonRoad car.
 
     Mass, yaw inertia and axle distances from the CommonRoad set; per-tyre cornering stiffness
     C_f, C_r from the PAC2002 linear slope at zero slip and the static tyre load; steering-column
     values from ``column`` (Table I by default). Yaw inertia: ``p.I_z`` (sprung-mass yaw inertia,
-    the one ``vehicle_dynamics_mb`` uses). The [scheduling] block is that of Table I's file.
+    the one ``vehicle_dynamics_mb`` uses). Roll camber: :func:`roll_camber` and
+    :func:`camber_force_coefficients` give the camber thrust per lateral acceleration of each
+    axle, k = 2 F_z c1 g |φ|/a_y, and its camber offset F_c = 2 F_z c0 (sign of g); the tyre's
+    shape factors are the PAC2002 p_dy1, p_cy1, p_ey1. ``a_s`` is the width of the ramp that
+    stands for sgn(a_y) [m/s²]. The [scheduling] block is that of Table I's file.
     """
     p = vehicle_parameters(vehicle)
     fzf, fzr = _static_loads(p)
     cf, cr = tyre_cornering_stiffness(p, fzf), tyre_cornering_stiffness(p, fzr)
+    rc = roll_camber(p)
+    c0, c1 = camber_force_coefficients(p.tire)
+    k_f = 2 * fzf * c1 * rc.camber_per_roll_f * rc.roll_gradient
+    k_r = 2 * fzr * c1 * rc.camber_per_roll_r * rc.roll_gradient
+    F_cf = 2 * fzf * c0 * math.copysign(1.0, rc.camber_per_roll_f)
+    F_cr = 2 * fzr * c0 * math.copysign(1.0, rc.camber_per_roll_r)
     names = {1: "Ford Escort", 2: "BMW 320i", 3: "VW Vanagon"}
     return f"""# CommonRoad parameter set {vehicle} ({names[vehicle]}), derived by codegen.validation.commonroad_plant.
 # Steering column: seed 000 Table I. Cornering stiffness: PAC2002 slope at zero slip, static load.
+# Roll camber: quasi-static roll of the multi-body model ({math.degrees(rc.roll_gradient):.3f} deg per m/s^2),
+# camber per roll {rc.camber_per_roll_f:.4f} (front) / {rc.camber_per_roll_r:.4f} (rear), PAC2002 camber terms.
 
 [meta]
 source = "commonroad-vehicle-models parameters_vehicle{vehicle} + seed 000 Table I column"
@@ -231,6 +305,16 @@ I_z = {p.I_z!r}        # kg m^2, yaw inertia
 I_s = {column.I_s!r}        # kg m^2, steering system inertia
 C_f = {cf!r}        # N/rad, front cornering stiffness (per tyre; F_z = {fzf:.1f} N)
 C_r = {cr!r}        # N/rad, rear cornering stiffness (per tyre; F_z = {fzr:.1f} N)
+k_f = {k_f!r}        # N/(m/s^2), front camber thrust per lateral acceleration
+k_r = {k_r!r}        # N/(m/s^2), rear camber thrust per lateral acceleration
+F_cf = {F_cf!r}        # N, front camber offset (PAC2002 sgn(gamma) shifts)
+F_cr = {F_cr!r}        # N, rear camber offset
+F_zf = {2 * fzf!r}        # N, static front axle load
+F_zr = {2 * fzr!r}        # N, static rear axle load
+mu_y = {p.tire.p_dy1!r}        # -, PAC2002 p_dy1 (peak friction)
+C_y = {p.tire.p_cy1!r}        # -, PAC2002 p_cy1 (shape factor)
+E_y = {p.tire.p_ey1!r}        # -, PAC2002 p_ey1 (curvature factor)
+a_s = {a_s!r}        # m/s^2, width of the ramp standing for sgn(a_y) (a few times the v_x y_r noise)
 
 [scheduling.v_x]
 min = 5.0        # m/s
@@ -281,6 +365,13 @@ class _Plant:
             mz += pneumatic_trail(a, col.eta_t, tsl) * fy
             al += 0.5 * a
         return -col.K_p * mz / col.R_s, al
+
+    def front_camber(self, x) -> float:
+        """Mean camber of the front wheels (``gamma_LF``, ``gamma_RF`` of ``vehicle_dynamics_mb``)."""
+        p = self.p
+        base = (p.h_s - p.R_w + x[16] - x[11]) / math.cos(x[6]) - p.h_s + p.R_w + p.a * x[8]
+        z_l, z_r = base + 0.5 * (x[6] - x[13]) * p.T_f, base - 0.5 * (x[6] - x[13]) * p.T_f
+        return 0.5 * ((x[6] + p.D_f * z_l + p.E_f * z_l ** 2) + (x[6] - p.D_f * z_r - p.E_f * z_r ** 2))
 
     def rhs(self, z, torque, a_cmd):
         x = list(z[:29])
@@ -358,6 +449,7 @@ def simulate(scenario, cfg: PlantConfig = PlantConfig(), progress=None) -> Groun
         out["a_y"][k] = dz[10] + z[5] * z[3]
         out["T_d"][k], out["T_a"][k], out["T_al"][k], out["alpha_f"][k] = t_d, t_a, t_al, alf
         out["X"][k], out["Y"][k], out["psi"][k], out["mu"][k] = z[0], z[1], z[4], plant.mu
+        out["roll"][k], out["roll_rate"][k], out["camber_f"][k] = z[6], z[7], plant.front_camber(z)
         if k == n - 1:
             break
         for _ in range(sub):

@@ -13,7 +13,7 @@ Library (seed paper and section in each description): ``track_varying_speed``,
 ``takeover_opposing_assist``, ``zigzag_growing_ay``, ``zigzag_constant_speed_assist``
 (seed 000 scenarios 1-4), ``random_trajectory_accel``, ``circular_path``, ``time_varying_grip``
 (seed 004 scenarios 1-3; ``circular_path_normal`` is scenario 2 within the seed's linear-tyre
-range), ``braking_on_bend``.
+range), ``braking_on_bend``, ``banked_road_braking`` (seed 001: road bank profile ``bank``).
 """
 from __future__ import annotations
 
@@ -167,6 +167,9 @@ class Scenario:
         ``grip(t, X, Y) -> μ scale``; None: constant ``mu``.
     mu : float
         Constant friction scale when ``grip`` is None.
+    bank : ndarray or None
+        Road bank angle [rad] per sample (None: flat road); positive when gravity's component in
+        the road plane points to the vehicle's right (-y).
     """
 
     name: str
@@ -183,6 +186,7 @@ class Scenario:
     driver: DriverGains | None = None
     grip: Callable | None = None
     mu: float = 1.0
+    bank: np.ndarray | None = None
 
     @property
     def duration(self) -> float:
@@ -205,6 +209,8 @@ class Scenario:
         out = {k: getattr(self, k) for k in ("t", "v_ref", "a_ref", "T_a", "T_d_open")}
         if self.kappa_ref is not None:
             out["kappa_ref"] = self.kappa_ref
+        if self.bank is not None:
+            out["bank"] = self.bank
         return out
 
 
@@ -213,14 +219,15 @@ def _grid(duration: float, rate: float) -> np.ndarray:
 
 
 def _finish(name, seed, desc, rate, t, v, T_a, T_d, kappa=None, circle=None, driver=None,
-            grip=None, mu=1.0) -> Scenario:
+            grip=None, mu=1.0, bank=None) -> Scenario:
     a = np.gradient(v, 1.0 / rate)
     arrs = [np.ascontiguousarray(x, dtype=float) for x in (t, v, a, T_a, T_d)]
     kap = None if kappa is None else np.ascontiguousarray(kappa, dtype=float)
-    for x in arrs + ([kap] if kap is not None else []):
+    bnk = None if bank is None else np.ascontiguousarray(bank, dtype=float)
+    for x in arrs + [y for y in (kap, bnk) if y is not None]:
         x.setflags(write=False)
     return Scenario(name, seed, desc, rate, *arrs, kappa_ref=kap, circle=circle, driver=driver,
-                    grip=grip, mu=mu)
+                    grip=grip, mu=mu, bank=bnk)
 
 
 def _speed_random(t, rng, lo, hi, a_max, n_knots):
@@ -379,6 +386,32 @@ def _braking_on_bend(seed, rate):
                    np.zeros_like(t), td, kap, driver=DriverGains())
 
 
+def _banked_road_braking(seed, rate):
+    rng = np.random.default_rng(seed)
+    t = _grid(60.0, rate)
+    ss = _smoothstep
+    # speed: 90 km/h, sharp braking (peak -4.5 m/s^2) to 36 km/h (14-19 s) in a banked left bend, 36 km/h,
+    # back to 22 m/s, braking (peak -3.75 m/s^2) to 12 m/s (44-48 s) in a second banked bend
+    v = (25.0 - 15.0 * ss(t, 14.0, 19.0) + 12.0 * ss(t, 28.0, 38.0) - 10.0 * ss(t, 44.0, 48.0))
+    # bends: left R = 200 m (5-21 s), right R = 80 m (30-35 s), left R = 120 m (42-52 s), plus a
+    # little lane-keeping curvature noise
+    kap = (ss(t, 5.0, 9.0) * (1 - ss(t, 17.0, 21.0)) / 200.0
+           - ss(t, 30.0, 31.5) * (1 - ss(t, 34.0, 35.5)) / 80.0
+           + ss(t, 42.0, 44.0) * (1 - ss(t, 50.0, 52.0)) / 120.0
+           + band_limited(t, rng, 2e-4, 0.05, 0.5, 8))
+    # bank: superelevation -3 deg in the first bend (gravity towards the inside), +2 deg crossfall on
+    # the straight after it and in the right bend, -1.5 deg in the last bend, flat at both ends
+    deg = np.pi / 180.0
+    bank = deg * (-3.0 * ss(t, 5.0, 9.0) + 5.0 * ss(t, 20.0, 24.0) - 2.0 * ss(t, 36.0, 40.0)
+                  - 1.5 * ss(t, 40.0, 44.0) + 1.5 * ss(t, 51.0, 55.0))
+    td = band_limited(t, rng, 0.2)
+    return _finish("banked_road_braking", seed,
+                   "seed 001 Sec. IV hard case: banked road with sharp braking (90 -> 36 km/h, peak -4.5 m/s², in a "
+                   "200 m left bend with -3° superelevation), +2° crossfall, a right bend, a second braking "
+                   "(22 -> 12 m/s) in a -1.5° bend; speed 10-25 m/s, |a_y| <= 4 m/s²", rate, t, v,
+                   np.zeros_like(t), td, kap, driver=DriverGains(), bank=bank)
+
+
 def straight_line(speed: float = 20.0, duration: float = 3.0, sample_rate: float = 100.0) -> Scenario:
     """Constant speed, no steering torque at all (open loop, T_d = T_a = 0): β must stay 0."""
     t = _grid(duration, sample_rate)
@@ -409,6 +442,7 @@ SCENARIOS: dict[str, tuple[Callable, int]] = {
     "circular_path_normal": (_circular_path_normal, 9),
     "time_varying_grip": (_time_varying_grip, 7),
     "braking_on_bend": (_braking_on_bend, 8),
+    "banked_road_braking": (_banked_road_braking, 10),
 }
 """name -> (builder, default seed)."""
 
