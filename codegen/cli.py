@@ -122,6 +122,13 @@ def cmd_design(args) -> int:
     path = Path(args.out) if args.out else emit.GENERATED_DIR / b.name / f"{b.name}_design.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(b.artifact(), indent=1, sort_keys=True) + "\n")
+    if hasattr(b, "summary_lines"):        # families that summarize themselves
+        s = b.summary(path)
+        if args.json:
+            _print_json(s)
+            return 0
+        print("\n".join(b.summary_lines(s)))
+        return 0
     if b.config.family == "switched_pi":
         s = _switched_summary(b, path)
         if args.json:
@@ -280,7 +287,8 @@ def cmd_validate(args) -> int:
     print(f"{args.name}: scenario {args.scenario} on the {args.plant} plant ({result['plant_model']}), {result['samples']} samples, "
           f"max |a_y| {result['max_abs_ay']:.2f} m/s^2, {result['status_flags']} flagged samples; "
           f"errors after {validate.SETTLE_TIME:g} s" + (" (SI units, seed 004 Table II format)"
-                                                          if "seed_table" in result else " (angles in degrees)"))
+                                                          if "seed_table" in result else " (seed 003 Table 1 format)"
+                                                          if "seed003" in result else " (angles in degrees)"))
     print(validate.format_table(result))
     if args.plot:
         print(f"plot: {args.plot}")

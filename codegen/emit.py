@@ -39,7 +39,8 @@ GENERATION_SOURCES = ("errors.py", "model.py", "polytope.py", "lmi.py", "bounds.
                       "designs/__init__.py", "designs/linf_uio.py", "designs/ts_fuzzy_uio.py", "discrete.py",
                       "observers.py", "pipeline.py", "emit.py", "switched.py", "designs/switched_pi.py",
                       "switched_pipeline.py", "differentiators.py", "relative_degree.py",
-                      "designs/algebraic_uio.py", "algebraic_uio.py")
+                      "designs/algebraic_uio.py", "algebraic_uio.py", "interconnected.py",
+                      "designs/interconnected_uio.py")
 
 
 def inputs_hash(config: observers.ObserverConfig) -> str:

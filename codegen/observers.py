@@ -17,7 +17,7 @@ from .errors import ModelDefinitionError, UnknownObserverError
 from .model import ModelDefinition
 
 OBSERVERS_DIR = PARAMS_DIR.parent / "observers"
-FAMILIES = ("linf_uio", "ts_fuzzy_uio", "switched_pi", "algebraic_uio")
+FAMILIES = ("linf_uio", "ts_fuzzy_uio", "switched_pi", "algebraic_uio", "interconnected_uio")
 
 
 @dataclass(frozen=True)

@@ -262,6 +262,9 @@ def build(config: ObserverConfig, tol: float | None = None):
     """Run the pipeline of the configuration's family; returns its build."""
     if config.family == "ts_fuzzy_uio":
         return build_ts_fuzzy(config, tol)
+    if config.family == "interconnected_uio":
+        from .designs import interconnected_uio
+        return interconnected_uio.build(config, tol)
     if config.family == "switched_pi":
         from .switched_pipeline import build_switched_pi
         return build_switched_pi(config, tol)

@@ -201,6 +201,9 @@ def run_scenario(name: str, scenario: str, plant: str = "nominal", duration: flo
     config = observers.get(name)
     if config.family == "ts_fuzzy_uio":
         return run_ts_scenario(config, scenario, plant, duration, seed, progress=progress)
+    if config.family == "interconnected_uio":
+        from .validation import satory
+        return satory.run_scenario(name, scenario, plant, duration, progress=progress)
     if config.family == "switched_pi":
         from .validation import banked_road
         return banked_road.run_scenario(config, scenario, plant, duration, seed, progress=progress)
@@ -277,6 +280,9 @@ def format_table(result: dict) -> str:
         return algebraic.format_table(result)
     if "seed_table" in result:
         return format_seed004_table(result)
+    if "seed003" in result:
+        from .validation import satory
+        return satory.format_result(result)
     if result.get("seed001"):
         from .validation import banked_road
         return banked_road.format_table(result)

@@ -185,6 +185,10 @@ def realistic_inputs(name, obs):
     if cfg.family == "algebraic_uio":      # the seed-002 plant's steady period: tiles smoothly
         from codegen.validation import algebraic
         return algebraic.periodic_inputs(pipeline.build(cfg))
+    if cfg.family == "interconnected_uio":      # one lap of a closed oval: tiling stays continuous
+        from codegen.validation import satory
+        truth = satory.periodic_lap(name)
+        return np.column_stack([truth[c[2:]] for c in obs.input_names])
     if cfg.family in ("ts_fuzzy_uio", "switched_pi"):
         from codegen.demo import DEMO_SCENARIOS
         res = validate.run_scenario(name, DEMO_SCENARIOS[cfg.family][0], "nominal")
