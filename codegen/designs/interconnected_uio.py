@@ -791,6 +791,14 @@ class InterconnectedBuild:
     def step_numpy(self, z, u, y):
         return step_numpy(self.ts, self.design, self.layout, self.config.sample_time, z, y)
 
+    def reference_step(self, z, u, y, rho):
+        """Independent numpy step (tests, the benchmark's numpy peer)."""
+        return self.step_numpy(z, u, y)
+
+    def lmi_problem(self):
+        """A fresh LMI problem of this design (benchmark: our path vs CVXPY on the same blocks)."""
+        return build_problem(self.ts, self.design.settings)[0]
+
     @property
     def state_names(self) -> list:
         return self.layout.state_names()
