@@ -33,6 +33,7 @@ def main(json_output: bool = False) -> int:
                             "classical_uio_exists": art["classical_uio_11"]["exists"],
                             "worst_lmi_margin": art["certificate"]["recheck"]["worst_min_eig"],
                             "discrete": art["discrete"], "scenarios": scen}
+            continue
         if family == "interconnected_uio":
             cert = art["certificate"]["recheck"]
             report[name] = {"family": family, "worst_lmi_margin": cert["worst_min_eig"],
