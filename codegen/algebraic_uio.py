@@ -36,16 +36,6 @@ from .model import LPVModel, instantiate, load_parameters
 from .polytope import sector_weights_product
 
 
-def _sig(x, digits=6):
-    if isinstance(x, dict):
-        return {k: _sig(v, digits) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_sig(v, digits) for v in x]
-    if isinstance(x, float) and np.isfinite(x):
-        return float(f"{x:.{digits}g}")
-    return x
-
-
 def _entry_functions(symbols, mat, xp):
     """One compiled callable per entry (numpy or CasADi), evaluated into a matrix of that kind."""
     mat = sp.Matrix(mat)
@@ -222,6 +212,7 @@ class AlgebraicUIOBuild:
         }
 
     def artifact(self) -> dict:
+        from .pipeline import _sig    # the one report rounding (pipeline imports this module lazily)
         sol = self.design.solution
         return {
             "observer": self.name,

@@ -44,7 +44,7 @@ import sympy as sp
 from .bounds import range_bound
 from .errors import (MissingParameterError, ModelDefinitionError, NotAffineError, SchedulingBoundsError,
                      UnknownParameterError)
-from .model import ParameterSet, load_parameters
+from .model import ParameterSet, load_parameters, parameter_substitution
 from .polytope import Premise, affine_decomposition, memberships, nonlinear_factors, sector_weights_product, \
     vertex_matrices
 
@@ -321,14 +321,7 @@ def build(model: InterconnectedModelDefinition, params: ParameterSet) -> Interco
     MissingParameterError, UnknownParameterError, ModelDefinitionError, NotAffineError,
     SchedulingBoundsError
     """
-    needed = [str(p) for p in model.parameters]
-    missing = [n for n in needed if n not in params.values]
-    if missing:
-        raise MissingParameterError(f"model {model.name!r}: parameter file {params.source} lacks {', '.join(missing)}")
-    unknown = sorted(set(params.values) - set(needed))
-    if unknown:
-        raise UnknownParameterError(f"parameter file {params.source} sets {', '.join(unknown)}, which model "
-                                    f"{model.name!r} does not use")
+    subs = parameter_substitution(model, params)
     extra = _read_extra_tables(params.source)
     exo_nominal = {}
     for e in model.exogenous:
@@ -339,7 +332,6 @@ def build(model: InterconnectedModelDefinition, params: ParameterSet) -> Interco
     if stray:
         raise UnknownParameterError(f"{params.source}: [exogenous] sets {sorted(stray)}, not exogenous signals of "
                                     f"model {model.name!r}")
-    subs = {p: params.values[str(p)] for p in model.parameters}
     switched = {w.symbol: sp.sympify(w.definition).subs(subs) for w in model.switched}
     sched = (*model.scheduling_states, *switched)
     rhs = model.rhs

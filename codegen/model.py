@@ -280,12 +280,12 @@ def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str) 
     return jac
 
 
-def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
-    """Substitute a parameter set into a model and extract its LPV matrices.
+def parameter_substitution(model: ModelDefinition, params: ParameterSet) -> dict:
+    """{parameter symbol: value}, after checking the file sets exactly the model's parameters.
 
     Raises
     ------
-    MissingParameterError, UnknownParameterError, SchedulingBoundsError, NotAffineError
+    MissingParameterError, UnknownParameterError
     """
     needed = [str(p) for p in model.parameters]
     missing = [n for n in needed if n not in params.values]
@@ -297,6 +297,17 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
         raise UnknownParameterError(
             f"parameter file {params.source} sets {', '.join(unknown)}, which model "
             f"{model.name!r} does not use (declared: {', '.join(needed)})")
+    return {p: params.values[str(p)] for p in model.parameters}
+
+
+def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
+    """Substitute a parameter set into a model and extract its LPV matrices.
+
+    Raises
+    ------
+    MissingParameterError, UnknownParameterError, SchedulingBoundsError, NotAffineError
+    """
+    subs = parameter_substitution(model, params)
     boxes = []
     for sig in model.scheduling:
         box = params.scheduling.get(str(sig.symbol))
@@ -305,7 +316,6 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
                 f"model {model.name!r}: scheduling signal {sig.symbol} has no "
                 f"[scheduling.{sig.symbol}] bounds in {params.source}")
         boxes.append(box)
-    subs = {p: params.values[str(p)] for p in model.parameters}
     # structure is checked exactly, with the parameters still symbolic; numbers come after
     f = sp.Matrix(model.dynamics)
     h = sp.Matrix([expr for _, expr in model.outputs])

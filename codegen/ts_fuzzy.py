@@ -26,7 +26,7 @@ import sympy as sp
 
 from .bounds import RangeBound, range_bound
 from .errors import ModelDefinitionError, NotAffineError, SchedulingBoundsError
-from .model import ModelDefinition, ParameterSet
+from .model import ModelDefinition, ParameterSet, parameter_substitution
 from .polytope import (Premise, affine_decomposition, memberships, nonlinear_factors,
                        sector_weights_product, vertex_matrices)
 
@@ -70,6 +70,11 @@ class TSFuzzyModel:
     @property
     def nphi(self) -> int:
         return len(self.phi)
+
+    @cached_property
+    def CD_pinv(self) -> np.ndarray:
+        """(C D)^+ of (16c), computed once (the numpy reference step runs per sample)."""
+        return np.linalg.pinv(self.C @ self.D)
 
     @cached_property
     def theta_box(self) -> np.ndarray:
@@ -193,16 +198,12 @@ def build(model: ModelDefinition, params: ParameterSet, sample_time: float,
 
     Raises
     ------
-    ModelDefinitionError, NotAffineError, SchedulingBoundsError
+    ModelDefinitionError (MissingParameterError, UnknownParameterError), NotAffineError,
+    SchedulingBoundsError
     """
     if not sample_time > 0:
         raise ModelDefinitionError(f"sample time must be positive, got {sample_time}")
-    needed = [str(p) for p in model.parameters]
-    missing = [n for n in needed if n not in params.values]
-    if missing:
-        from .errors import MissingParameterError
-        raise MissingParameterError(f"model {model.name!r}: parameter file {params.source} lacks {', '.join(missing)}")
-    subs = {p: params.values[str(p)] for p in model.parameters}
+    subs = parameter_substitution(model, params)
     parts = split_consequents(model, subs)
     x = tuple(model.states)
     box = {}

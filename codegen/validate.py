@@ -118,15 +118,16 @@ def _car(config):
     return stanford.VehicleParams(m=v["M"], lf=v["l_f"], lr=v["l_r"], iz=v["I_z"], cf=2 * v["C_f"], cr=2 * v["C_r"])
 
 
-def truth_plant(config, lpv):
-    """The model module's truth plant (``PLANT``: e.g. Pacejka tyres) when its parameter file has the
-    ``[plant]`` values it needs, else None (the observer's own exact model is integrated)."""
+def truth_plant(config, params):
+    """The model module's truth plant (``PLANT``: e.g. Pacejka tyres) when the parameter set has the
+    ``[plant]`` values it needs (``mu`` may follow the scenario), else None (the observer's own
+    exact model is integrated)."""
     import importlib
     plant = getattr(importlib.import_module(f"model_defs.{config.model}"), "PLANT", None)
     if plant is None:
         return None
-    values = {**lpv.parameters.values, **lpv.parameters.plant}
-    return plant if all(str(p) in values for p in plant.parameters) else None
+    values = {**params.values, **params.plant}
+    return plant if all(str(p) in values or str(p) == "mu" for p in plant.parameters) else None
 
 
 def scenario_for(config, scenario: str, duration: float | None = None):
@@ -144,11 +145,11 @@ SEED004_TABLE_II = {
 
 
 def run_ts_scenario(config, scenario: str, plant: str = "nominal", duration: float | None = None,
-                    seed: int = 0, noise: bool = False, progress=None) -> dict:
+                    progress=None) -> dict:
     """Seed-004 observers: closed-loop angle/torque plant, compiled step, Table II metrics.
 
     The step returns x_hat_k and d_hat_{k-1} (one-sample lag of (16c)); the unknown inputs are
-    compared with the truth of the sample they estimate. ``noise`` adds :data:`TS_SENSOR_NOISE`.
+    compared with the truth of the sample they estimate. Noise-free, as the seed's Table II.
     """
     from python_bindings import load
     from .model import load_parameters
@@ -161,19 +162,13 @@ def run_ts_scenario(config, scenario: str, plant: str = "nominal", duration: flo
                                           progress=progress)
         plant_model = "CommonRoad multi-body (vehiclemodels), angle-steered"
     elif plant in ("nominal", "model"):
-        import importlib
-        definition = getattr(importlib.import_module(f"model_defs.{config.model}"), "PLANT", None)
-        values = {**params.values, **params.plant}
-        if plant == "model" or definition is None or \
-                any(str(p) not in values and str(p) != "mu" for p in definition.parameters):
-            definition = model_def    # no truth plant, or no [plant] values for it: the exact model
+        definition = (truth_plant(config, params) if plant == "nominal" else None) or model_def
         truth = simulate.angle_torque_plant(config, definition, params, scn, progress=progress)
         plant_model = definition.name
     else:
         raise ModelDefinitionError(f"plant must be 'nominal', 'model' or 'commonroad', got {plant!r}")
-    measured = simulate.add_sensor_noise(truth, TS_SENSOR_NOISE, seed) if noise else {}
     obs = load(config.name)
-    out, status, _ = obs.run(simulate.observer_input_matrix(obs.input_names, truth, measured))
+    out, status, _ = obs.run(simulate.observer_input_matrix(obs.input_names, truth, {}))
     units = dict(model_def.units)
     table, estimates = {}, {}
     for sig in obs.output_names:
@@ -186,12 +181,9 @@ def run_ts_scenario(config, scenario: str, plant: str = "nominal", duration: flo
             table[sig] = _stats(truth[sig][keep], est[keep], truth["t"][keep], angle=False)
     return {"observer": table, "baselines": {}, "status_flags": int(np.count_nonzero(status[1:])),
             "samples": int(len(status)), "max_abs_ay": float(np.abs(truth["a_y"]).max()), "plant": plant,
-            "plant_model": plant_model, "scenario": scenario, "noise": noise,
+            "plant_model": plant_model, "scenario": scenario,
             "seed_table": SEED004_TABLE_II.get(scenario),
             "signals": {"t": truth["t"], "truth": truth, "estimate": estimates}, "units": units}
-
-
-TS_SENSOR_NOISE = {"v_x": 0.01, "r": np.deg2rad(0.05)}
 
 
 def run_scenario(name: str, scenario: str, plant: str = "nominal", duration: float | None = None,
@@ -200,7 +192,7 @@ def run_scenario(name: str, scenario: str, plant: str = "nominal", duration: flo
     from python_bindings import load
     config = observers.get(name)
     if config.family == "ts_fuzzy_uio":
-        return run_ts_scenario(config, scenario, plant, duration, seed, progress=progress)
+        return run_ts_scenario(config, scenario, plant, duration, progress=progress)
     if config.family == "interconnected_uio":
         from .validation import satory
         return satory.run_scenario(name, scenario, plant, duration, progress=progress)
@@ -216,7 +208,7 @@ def run_scenario(name: str, scenario: str, plant: str = "nominal", duration: flo
         truth = _truth_commonroad(config, scn, progress)
         plant_model = "CommonRoad multi-body (vehiclemodels)"
     elif plant in ("nominal", "model"):
-        definition = truth_plant(config, lpv) if plant == "nominal" else None
+        definition = truth_plant(config, lpv.parameters) if plant == "nominal" else None
         truth = simulate.nominal_plant(config, lpv, scn, definition, progress=progress)
         plant_model = definition.name if definition is not None else lpv.definition.name + " (exact model)"
     else:

@@ -250,7 +250,7 @@ def step_parts(ts: TSFuzzyModel, d: TSDesign, zeta, y_k, y_next, u, xp=np):
         Mh = sum(w * m for w, m in zip(h, d.M))
         Lh = sum(w * l for w, l in zip(h, d.L))
         zeta_next = T @ Phi + np.linalg.solve(Mh, Lh @ (y_k - ts.C @ x_hat))
-        d_hat = np.linalg.pinv(ts.C @ ts.D) @ (y_next - ts.C @ Phi)
+        d_hat = ts.CD_pinv @ (y_next - ts.C @ Phi)
         x_next = zeta_next + N @ y_next
     else:
         blend = (lambda mats: ca.DM(mats[0]) if np.ptp(mats, axis=0).max(initial=0) == 0
@@ -264,7 +264,7 @@ def step_parts(ts: TSFuzzyModel, d: TSDesign, zeta, y_k, y_next, u, xp=np):
         innovation = blend(d.L) @ (y_k - ca.DM(ts.C) @ x_hat)
         # M(h) + M(h)' > P(h+) > 0 by (27): unpivoted elimination is safe (no zero pivot)
         zeta_next = ca.DM(T) @ Phi + solve_unpivoted(blend(d.M), innovation, tail=0)
-        d_hat = ca.DM(np.linalg.pinv(ts.C @ ts.D)) @ (y_next - ca.DM(ts.C) @ Phi)
+        d_hat = ca.DM(ts.CD_pinv) @ (y_next - ca.DM(ts.C) @ Phi)
         x_next = zeta_next + ca.DM(N) @ y_next
     for k, s in enumerate(ts.definition.states):
         if s in ts.unmeasured:
