@@ -230,6 +230,7 @@ class AlgebraicUIOBuild:
                 "solver_blocks": len(sol.checks), "solver_worst_block": sol.worst.label,
                 "solver_worst_min_eig": _sig(sol.worst.min_eig),
                 "recheck": _sig(self.certificate), "dense_check": _sig(self.dense),
+                "fixed_modes": _sig(self.design.fixed_modes),
                 "compare_gain": _sig(self.compare),
             },
             "discrete": _sig(self.discrete),
@@ -559,7 +560,8 @@ def design_summary(b: AlgebraicUIOBuild) -> dict:
            if d.factor_polytope is not None else []),
         "lmi_blocks": b.certificate["blocks"], "worst_block": b.certificate["worst_block"],
         "worst_min_eig": b.certificate["worst_min_eig"], "alpha": b.settings.alpha,
-        "dense_check_max_eig": b.dense["max_eig"], "gains": [l.ravel().tolist() for l in d.L],
+        "dense_check_max_eig": b.dense["max_eig"], "fixed_modes": d.fixed_modes,
+        "gains": [l.ravel().tolist() for l in d.L],
         "compare_gain": b.compare, "discrete": b.discrete, "auxiliary": b.aux,
         "differentiators": {k: f"order {s.order}, L = {s.lipschitz:g}" for k, s in b.settings.differentiators.items()},
         "design_time_s": b.timings["derivation_s"] + b.timings["design_s"],
@@ -589,6 +591,13 @@ def print_design(b: AlgebraicUIOBuild, path, as_json: bool) -> int:
     print(f"  LMI (39), {s['lmi_form']} form, {s['gain_vertices']} gain vertices; premises {'; '.join(s['premises'])}")
     print(f"    alpha = {s['alpha']:g}: {s['lmi_blocks']} blocks, worst margin {s['worst_min_eig']:.3e} in {s['worst_block']} "
           f"(numpy re-check); dense check of the exact A - Q M - L C: max eig {s['dense_check_max_eig']:.3e}")
+    fm = s["fixed_modes"]
+    if fm["count"]:
+        print(f"    {fm['count']} mode(s) of A - Q M unobservable from C (invariant zeros of (A, D, C)), Re in "
+              f"[{fm['real_range'][0]:.4g}, {fm['real_range'][1]:.4g}]: no gain makes the error decay faster "
+              f"than exp(-{fm['decay_limit']:.4g} t)")
+    else:
+        print("    no gain-independent mode: the decay rate is limited only by the LMI")
     for j, g in enumerate(s["gains"]):
         print(f"    L_{j + 1} = {np.round(g, 6).tolist()}")
     if s["compare_gain"] is not None:

@@ -9,7 +9,8 @@ import sympy as sp
 
 from codegen import algebraic_uio, observers, pipeline, relative_degree as rdeg
 from codegen.designs import algebraic_uio as alg
-from codegen.errors import DiscretizationError, ModelDefinitionError, RankConditionError, SchedulingBoundsError
+from codegen.errors import (DiscretizationError, InfeasibleLMIError, ModelDefinitionError, RankConditionError,
+                           SchedulingBoundsError)
 from codegen.model import ModelDefinition, SchedulingSignal, instantiate, load_parameters
 from codegen.observers import ObserverConfig
 
@@ -243,6 +244,28 @@ def test_lmi_and_discrete_certificates(builds):
             assert dc["contraction_bound_per_step"] <= math.exp(-0.9 * b.settings.alpha * b.config.sample_time)
     cmp = builds["algebraic_uio_example1"].compare       # the seed's hand gain (52), l = (3, 0)
     assert cmp["certified"] and cmp["alpha"] == pytest.approx(3.0, abs=1e-3)
+
+
+def test_fixed_modes_are_the_invariant_zeros(builds):
+    """Example 1: the error mode -((1+rho)^2/rho + 2) of (51) is unobservable from C, so no gain moves it
+    (it bounds the decay of any UIO of (40)); Example 2's pair is observable everywhere."""
+    fm = builds["algebraic_uio_example1"].design.fixed_modes
+    rho = np.linspace(1.0, 5.0, 401)
+    zeros = -((1 + rho) ** 2 / rho + 2)
+    assert fm["count"] == 1
+    assert fm["real_range"] == pytest.approx([zeros.min(), zeros.max()], abs=1e-9)   # corners are sampled
+    assert fm["decay_limit"] == pytest.approx(6.0, abs=1e-9)
+    # the gain cannot move it: the eigenvalue is there in F0 - L C for the designed gains too
+    for _, F in builds["algebraic_uio_example1"].design.closed_loop:
+        assert np.isclose(np.linalg.eigvals(F), F[1, 1]).any()
+    for name in ("algebraic_uio_example2", "algebraic_uio_lateral_force"):
+        assert builds[name].design.fixed_modes["count"] == 0
+
+
+def test_decay_rate_beyond_the_fixed_modes_is_refused(builds):
+    b = builds["algebraic_uio_example1"]
+    with pytest.raises(InfeasibleLMIError, match=r"invariant zeros.*alpha < 6"):
+        alg.design(b.dec, dataclasses.replace(b.settings, alpha=6.5))
 
 
 def test_gauss_step_is_b_stable_at_large_steps(builds):

@@ -233,6 +233,7 @@ class AlgebraicDesign:
     closed_loop: tuple              # (label, F_cl numeric n x n) covering F(p) - L(p) C
     scaling: np.ndarray             # diagonal state scaling used by the solver (powers of 2)
     solution: LMISolution | None
+    fixed_modes: dict | None = None   # gain-independent modes of F0 (see fixed_modes)
 
     def gains_json(self) -> dict:
         return {"form": self.form, "alpha": self.settings.alpha, "X": self.X.tolist(),
@@ -284,6 +285,13 @@ def design(dec: rdeg.Decoupling, settings: AlgebraicSettings) -> AlgebraicDesign
     else:
         F0_poly = matrix_polytope(dec.F0, dec.boxes, "A - Q Mcal")
         gain_poly, factor_poly, P_poly, A_poly = F0_poly, None, None, None
+    fixed = fixed_modes(dec)
+    if fixed["count"] and fixed["decay_limit"] <= settings.alpha:
+        lo, hi = fixed["real_range"]
+        raise InfeasibleLMIError(
+            f"{lpv.definition.name}: decay rate alpha = {settings.alpha:g} is out of reach for any gain: "
+            f"A - Q Mcal has {fixed['count']} mode(s) unobservable from C (invariant zeros of (A, D, C)) "
+            f"with real parts in [{lo:.4g}, {hi:.4g}] on the box; choose alpha < {fixed['decay_limit']:.4g}")
     blocks = _vertex_blocks(form, F0_poly, P_poly, A_poly, C)
     S = _balance([F for _, F, _ in blocks], C)
     Si = 1.0 / S
@@ -312,7 +320,7 @@ def design(dec: rdeg.Decoupling, settings: AlgebraicSettings) -> AlgebraicDesign
     L = tuple(round_significant(S[:, None] * l) for l in Ls)
     Xo = Si[:, None] * Xs * Si[None, :]
     closed = tuple((label, F - L[j] @ C) for label, F, j in blocks)
-    return AlgebraicDesign(settings, form, gain_poly, factor_poly, Xo, L, closed, S, sol)
+    return AlgebraicDesign(settings, form, gain_poly, factor_poly, Xo, L, closed, S, sol, fixed)
 
 
 def certify(d: AlgebraicDesign) -> dict:
@@ -355,6 +363,46 @@ def dense_check(dec: rdeg.Decoupling, d: AlgebraicDesign, samples: int = 4000, s
     if worst >= 0:
         raise CertificateError(f"dense check of the error dynamics fails: max eigenvalue {worst:.3e} >= 0")
     return {"samples": samples, "max_eig": worst}
+
+
+def fixed_modes(dec: rdeg.Decoupling, samples: int = 2000, seed: int = 0, rel_tol: float = 1e-9) -> dict:
+    """Modes of the error dynamics that no gain can move: eigenvalues of F0(p) = A - Q Mcal unobservable
+    from C (PBH test), at the corners and random points of the box.
+
+    They are the invariant zeros of (A, D, C) that the decoupling leaves in e' = (F0 - L C) e, so they bound
+    the decay of *any* unknown-input observer of this model, whatever its gain: with a fixed mode at
+    Re = -s the error decays no faster than exp(-s t). A frozen-parameter fact, so a sampled mode with
+    Re >= -alpha is a sound refutation of the decay rate alpha (LMI (39) is then infeasible), while
+    ``decay_limit`` itself is the sampled bound, not a certificate.
+
+    Returns
+    -------
+    dict
+        ``count`` (fixed modes per point, the largest seen), ``real_range`` [min, max] of their real
+        parts, ``decay_limit`` = -max real part (None when there is none), ``samples``.
+    """
+    rng = np.random.default_rng(seed)
+    syms = dec.symbols
+    F0 = _lambdify(syms, dec.F0, np)
+    C = np.array(dec.lpv.C.evalf(), dtype=float)
+    n = C.shape[1]
+    corners = [[dec.boxes[s][(k >> i) & 1] for i, s in enumerate(syms)] for k in range(2 ** len(syms))]
+    points = corners + [[rng.uniform(*dec.boxes[s]) for s in syms] for _ in range(samples)]
+    count, reals = 0, []
+    for vals in points:
+        F = np.asarray(F0(*vals), dtype=float)
+        scale = max(1.0, float(np.abs(F).max()), float(np.abs(C).max()))
+        found = 0
+        for lam in np.linalg.eigvals(F):
+            pbh = np.vstack([F - lam * np.eye(n), C.astype(complex)])
+            if np.linalg.svd(pbh, compute_uv=False)[-1] <= rel_tol * scale:
+                reals.append(float(lam.real))
+                found += 1
+        count = max(count, found)
+    if not reals:
+        return {"count": 0, "real_range": None, "decay_limit": None, "samples": len(points)}
+    return {"count": count, "real_range": [min(reals), max(reals)], "decay_limit": -max(reals),
+            "samples": len(points)}
 
 
 def check_fixed_gain(d: AlgebraicDesign, L: np.ndarray, C: np.ndarray, tol: float = 1e-9) -> dict:
