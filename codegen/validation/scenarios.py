@@ -11,9 +11,10 @@ Same name and seed -> bit-identical arrays (numpy ``default_rng(seed)``; no glob
 
 Library (seed paper and section in each description): ``track_varying_speed``,
 ``takeover_opposing_assist``, ``zigzag_growing_ay``, ``zigzag_constant_speed_assist``
-(seed 000 scenarios 1-4), ``random_trajectory_accel``, ``circular_path``, ``time_varying_grip``
-(seed 004 scenarios 1-3; ``circular_path_normal`` is scenario 2 within the seed's linear-tyre
-range), ``braking_on_bend``, ``banked_road_braking`` (seed 001: road bank profile ``bank``).
+(seed 000 scenarios 1-4), ``random_trajectory_accel``, ``circular_path_normal``,
+``time_varying_grip_normal`` (seed 004 scenarios 1-3 in the seed's 'normal driving' speed range;
+``circular_path`` and ``time_varying_grip`` are faster stress readings of scenarios 2 and 3),
+``braking_on_bend``, ``banked_road_braking`` (seed 001: road bank profile ``bank``).
 """
 from __future__ import annotations
 
