@@ -1,9 +1,9 @@
 """``uiogen demo``: the README's main job, after design + generate + build.
 
 For every generated observer: its design figures (from the artifact), then the compiled
-C step on two library scenarios against its nominal plant (the exact symbolic model in
-closed loop with the scenario's driver, sensor noise), beside the KF/EKF baselines,
-in the seed's table format (angles in degrees).
+C step on its family's library scenarios (two; seed 004: the seed's three) against its nominal
+plant (the exact symbolic model in closed loop with the scenario's driver, sensor noise), beside
+the KF/EKF baselines, in the seed's table format (angles in degrees).
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from . import observers, validate
 from .emit import GENERATED_DIR
 
 DEMO_SCENARIOS = {"linf_uio": ("track_varying_speed", "takeover_opposing_assist"),
-                  "ts_fuzzy_uio": ("random_trajectory_accel", "circular_path_normal"),
+                  "ts_fuzzy_uio": ("random_trajectory_accel", "circular_path_normal", "time_varying_grip_normal"),
                   "switched_pi": ("banked_road_braking", "braking_on_bend"),
                   "algebraic_uio": ("seed002",),
                   "interconnected_uio": ("satory",)}

@@ -193,6 +193,11 @@ def test_scenario_specifics():
     assert g.friction(0.0, 0.0, 0.0) == pytest.approx(0.6)
     assert g.friction(0.0, 0.7, 0.0) == pytest.approx(1.2)            # sin(π/2) with l_r = 1.4
     assert g.friction(0.0, 2.1, 0.0) == pytest.approx(0.05)           # floored
+    gn = S.make("time_varying_grip_normal")                            # seed 004 scenario 3
+    assert np.all((1 / gn.kappa_ref >= 44.99) & (1 / gn.kappa_ref <= 55.01))
+    assert gn.v_ref[0] == 6.0 and gn.v_ref[-1] == 9.0 and np.all(np.diff(gn.v_ref) >= 0)   # increasing
+    assert gn.friction(0.0, 0.745, 0.0) == pytest.approx(1.2)           # sin(π/2) with Table I's l_r = 1.49
+    assert gn.friction(0.0, 0.0, 2.235) == pytest.approx(0.05)          # sin(3π/2), floored
     assert S.make("circular_path").circle == (0.0, 40.0, 40.0)
 
 

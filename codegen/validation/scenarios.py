@@ -11,9 +11,10 @@ Same name and seed -> bit-identical arrays (numpy ``default_rng(seed)``; no glob
 
 Library (seed paper and section in each description): ``track_varying_speed``,
 ``takeover_opposing_assist``, ``zigzag_growing_ay``, ``zigzag_constant_speed_assist``
-(seed 000 scenarios 1-4), ``random_trajectory_accel``, ``circular_path``, ``time_varying_grip``
-(seed 004 scenarios 1-3; ``circular_path_normal`` is scenario 2 within the seed's linear-tyre
-range), ``braking_on_bend``, ``banked_road_braking`` (seed 001: road bank profile ``bank``).
+(seed 000 scenarios 1-4), ``random_trajectory_accel``, ``circular_path_normal``,
+``time_varying_grip_normal`` (seed 004 scenarios 1-3 in the seed's 'normal driving' speed range;
+``circular_path`` and ``time_varying_grip`` are faster stress readings of scenarios 2 and 3),
+``braking_on_bend``, ``banked_road_braking`` (seed 001: road bank profile ``bank``).
 """
 from __future__ import annotations
 
@@ -355,21 +356,38 @@ def _circular_path_normal(seed, rate):
                    "tyre model (3)): circle of radius 40 m, speed 6 -> 9 m/s (a_y 0.9 -> 2.0 m/s²)")
 
 
-def _time_varying_grip(seed, rate):
+def _contour_grip(name, seed, rate, v0, v1, l_r, description):
+    """Contour whose radius of curvature swings 50 ± 5 m (period 15-25 s, drawn), speed v0 -> v1
+    (smooth, 2-38 s), grip :func:`seed004_grip` with length scale ``l_r`` over world coordinates
+    whose origin is the start point (the plant starts at X = Y = 0), curvature-following driver."""
     rng = np.random.default_rng(seed)
     t = _grid(40.0, rate)
-    v = 8.0 + 5.0 * _smoothstep(t, 2.0, 38.0)                # 8 -> 13 m/s
+    v = v0 + (v1 - v0) * _smoothstep(t, 2.0, 38.0)
     radius = 50.0 + 5.0 * np.sin(2 * np.pi * t / rng.uniform(15.0, 25.0))
     kap = 1.0 / radius
     td = band_limited(t, rng, 0.2)
 
     def grip(_t, X, Y):
-        return seed004_grip(X, Y)
+        return seed004_grip(X, Y, l_r=l_r)
 
-    return _finish("time_varying_grip", seed,
-                   "seed 004 Sec. IV-D scenario 3: contour with radius 45-55 m, speed 8 -> 13 m/s, "
-                   "grip 0.6 (1 + sin(π sqrt(X² + Y²) / l_r)) (floored at 0.05)", rate, t, v,
-                   np.zeros_like(t), td, kap, driver=DriverGains(), grip=grip)
+    return _finish(name, seed, description, rate, t, v, np.zeros_like(t), td, kap, driver=DriverGains(),
+                   grip=grip)
+
+
+def _time_varying_grip(seed, rate):
+    return _contour_grip("time_varying_grip", seed, rate, 8.0, 13.0, 1.4,
+                         "seed 004 Sec. IV-D scenario 3, stress case: contour with radius 45-55 m, speed "
+                         "8 -> 13 m/s (a_y up to 3.7 m/s² on the path), grip 0.6 (1 + sin(π sqrt(X² + Y²) "
+                         "/ l_r)), l_r = 1.4 m, floored at 0.05")
+
+
+def _time_varying_grip_normal(seed, rate):
+    return _contour_grip("time_varying_grip_normal", seed, rate, 6.0, 9.0, 1.49,
+                         "seed 004 Sec. IV-D scenario 3 in the seed's 'normal driving' range (the speeds "
+                         "of circular_path_normal): contour with radius 45-55 m, increasing speed 6 -> 9 m/s "
+                         "(a_y 0.7 -> 1.8 m/s² on the path), the literal grip law 0.6 (1 + sin(π "
+                         "sqrt(X² + Y²) / l_r)) with Table I's l_r = 1.49 m (floored at 0.05), X, Y from the "
+                         "start point")
 
 
 def _braking_on_bend(seed, rate):
@@ -441,6 +459,7 @@ SCENARIOS: dict[str, tuple[Callable, int]] = {
     "circular_path": (_circular_path, 6),
     "circular_path_normal": (_circular_path_normal, 9),
     "time_varying_grip": (_time_varying_grip, 7),
+    "time_varying_grip_normal": (_time_varying_grip_normal, 12),
     "braking_on_bend": (_braking_on_bend, 8),
     "banked_road_braking": (_banked_road_braking, 10),
 }
