@@ -328,3 +328,11 @@ def test_identification_reproduces_the_committed_coefficients():
         assert r2 > 0.9
     # load transfer: under braking the rear axle's effective slip stiffness is about half its static slope
     assert fits["C_lr"][0] < 0.6 * 102807.0
+
+
+def test_identification_calibration_drive_arguments_are_checked():
+    """frictions / braking of the calibration drive: typed error before any simulation."""
+    from codegen.validation import satory
+    for bad in ({"frictions": ()}, {"frictions": (1.0, 0.0)}, {"braking": ()}, {"braking": (0.6, 1.5)}):
+        with pytest.raises(ModelDefinitionError, match="calibration"):
+            satory.identify(1, **bad)

@@ -231,8 +231,10 @@ def _l_s(config) -> float:
 
 
 def simulate_commonroad(track: Track, mu: float, vehicle: int, l_s: float, duration: float | None = None,
-                        sample_rate: float = 100.0, dt_internal: float = 1e-3, progress=None) -> dict:
-    """Drive ``track`` on the CommonRoad multi-body plant (seed-000 column, PAC2002, wheel dynamics)."""
+                        sample_rate: float = 100.0, dt_internal: float = 1e-3, progress=None,
+                        limits: ProfileLimits = ProfileLimits()) -> dict:
+    """Drive ``track`` on the CommonRoad multi-body plant (seed-000 column, PAC2002, wheel dynamics);
+    ``limits``: the driver's speed profile (braking, traction, cornering as fractions of mu g)."""
     from vehiclemodels.init_mb import init_mb
     from vehiclemodels.utils.acceleration_constraints import acceleration_constraints
     from .commonroad_plant import PlantConfig, PlantError, _Plant
@@ -241,7 +243,7 @@ def simulate_commonroad(track: Track, mu: float, vehicle: int, l_s: float, durat
     plant.set_mu(mu)
     p = plant.p
     col = cfg.column
-    driver = TrackDriver(track, mu, p.a + p.b, 1.0 / sample_rate, R_s=col.R_s)
+    driver = TrackDriver(track, mu, p.a + p.b, 1.0 / sample_rate, R_s=col.R_s, limits=limits)
     v0 = driver.reference_speed(0.0)
     z = np.array(init_mb([track.X[0], track.Y[0], 0.0, v0, track.theta[0], 0.0, 0.0], p) + [0.0])
     driver.preload(-plant.aligning(z)[0])
@@ -368,46 +370,58 @@ def simulate_model(ts, track: Track, mu: float, brake_front: float, drive_front:
 CALIBRATION_LAPS = 1
 
 
-def identify(vehicle: int = 1, laps: int = CALIBRATION_LAPS) -> dict:
+def identify(vehicle: int = 1, laps: int = CALIBRATION_LAPS, frictions: tuple = (1.0,),
+             braking: tuple = (ProfileLimits.braking,)) -> dict:
     """Effective tyre and aligning coefficients of the model (5), (4), identified on a calibration drive.
 
     Seed 003 identifies its model parameters "from an identification process using recorded
     experimental data" (Sec. 5.4). Here the recorded data come from ``laps`` laps of
-    :func:`oval_track` (straights with braking at 0.6 g and traction, 60 m bends at 0.5 g; *not* the
-    validation track) on the CommonRoad plant at mu = 1. Least squares through the origin, as the
+    :func:`oval_track` (straights with braking and traction, 60 m bends at 0.5 mu g; *not* the
+    validation track) on the CommonRoad plant, once per friction level in ``frictions`` and braking
+    level (fraction of mu g) in ``braking``; the committed parameters use the default, one drive at
+    mu = 1 braking at 0.6 g. Least squares through the origin over all drives together, as the
     model's linear laws (static form of (5)): F_xi = C_li lambda_i (axle forces from the wheel
     equations, lambda_i of (6)); F_yi = C_i alpha_i (axle forces from m a_y and I_z r' by the
     bicycle balance, alpha_i of (6)); aligning torque at the handwheel -T_al = t_sb alpha_f. The
     static-load PAC2002 slopes are returned beside them (the fits differ because of load transfer:
     under braking the rear axle's effective slip stiffness is about half its static slope).
-    Returns {name: (value, r2, static slope or None)}.
+    Returns {name: (value, r2)}.
     """
-    from .commonroad_plant import TABLE1_COLUMN, vehicle_parameters
+    from .commonroad_plant import vehicle_parameters
+    if not frictions or not braking or not all(f > 0 for f in frictions) or not all(0 < b <= 1 for b in braking):
+        raise ModelDefinitionError(f"calibration frictions must be > 0 and braking levels in (0, 1], got "
+                                   f"{frictions!r}, {braking!r}")
     p = vehicle_parameters(vehicle)
-    track = oval_track()
-    col = TABLE1_COLUMN
-    tr = simulate_commonroad(_repeat(track, laps), 1.0, vehicle, 5.0)
-    R, vx = p.R_w, tr["v_x"]
-    keep = tr["t"] >= SETTLE_TIME
-    lam_f = (R * tr["omega_f"] - vx) / np.maximum(vx, R * tr["omega_f"])
-    lam_r = (R * tr["omega_r"] - vx) / np.maximum(vx, R * tr["omega_r"])
-    rdot = np.gradient(tr["r"], tr["t"])
-    L = p.a + p.b
-    F_yf = (p.m * tr["a_y"] * p.b + p.I_z * rdot) / L
-    F_yr = (p.m * tr["a_y"] * p.a - p.I_z * rdot) / L
-    a_f = tr["delta"] - (tr["v_y"] + p.a * tr["r"]) / vx
-    a_r = -(tr["v_y"] - p.b * tr["r"]) / vx
+    track = _repeat(oval_track(), laps)
+    R, L = p.R_w, p.a + p.b
+    terms = {k: ([], []) for k in ("C_lf", "C_lr", "C_f", "C_r", "t_sb")}
+    for mu in frictions:
+        for b in braking:
+            tr = simulate_commonroad(track, float(mu), vehicle, 5.0, limits=ProfileLimits(braking=float(b)))
+            vx = tr["v_x"]
+            keep = tr["t"] >= SETTLE_TIME
+            lam_f = (R * tr["omega_f"] - vx) / np.maximum(vx, R * tr["omega_f"])
+            lam_r = (R * tr["omega_r"] - vx) / np.maximum(vx, R * tr["omega_r"])
+            rdot = np.gradient(tr["r"], tr["t"])
+            F_yf = (p.m * tr["a_y"] * p.b + p.I_z * rdot) / L
+            F_yr = (p.m * tr["a_y"] * p.a - p.I_z * rdot) / L
+            a_f = tr["delta"] - (tr["v_y"] + p.a * tr["r"]) / vx
+            a_r = -(tr["v_y"] - p.b * tr["r"]) / vx
+            # the rear axle has torque only when braking (front-wheel drive)
+            rear = keep & (np.abs(tr["B_r"]) > 1.0) if p.T_se == 1.0 else keep
+            for k, y, x, mask in (("C_lf", tr["F_xf"], lam_f, keep), ("C_lr", tr["F_xr"], lam_r, rear),
+                                  ("C_f", F_yf, a_f, keep), ("C_r", F_yr, a_r, keep),
+                                  ("t_sb", -tr["T_al"], a_f, keep)):
+                terms[k][0].append(y[mask])
+                terms[k][1].append(x[mask])
 
-    def fit(y, x, mask=keep):
-        x, y = x[mask], y[mask]
+    def fit(ys, xs):
+        y, x = np.concatenate(ys), np.concatenate(xs)
         c = float(x @ y / (x @ x))
         r2 = 1.0 - float(np.sum((y - c * x) ** 2) / np.sum((y - y.mean()) ** 2))
         return c, r2
 
-    braking_r = keep & (np.abs(tr["B_r"]) > 1.0)      # the rear axle has torque only when braking (FWD)
-    out = {"C_lf": fit(tr["F_xf"], lam_f), "C_lr": fit(tr["F_xr"], lam_r, braking_r if p.T_se == 1.0 else keep),
-           "C_f": fit(F_yf, a_f), "C_r": fit(F_yr, a_r), "t_sb": fit(-tr["T_al"], a_f)}
-    return out
+    return {k: fit(*v) for k, v in terms.items()}
 
 
 def _repeat(track: Track, laps: int) -> Track:
