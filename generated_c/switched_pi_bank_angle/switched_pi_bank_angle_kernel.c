@@ -57,21 +57,11 @@ extern "C" {
 #endif
 
 casadi_real casadi_fmax(casadi_real x, casadi_real y) {
-/* Pre-c99 compatibility */
-#if __STDC_VERSION__ < 199901L
-  return x>y ? x : y;
-#else
-  return fmax(x, y);
-#endif
+  return (x >= y || y != y) ? x : y;
 }
 
 casadi_real casadi_fmin(casadi_real x, casadi_real y) {
-/* Pre-c99 compatibility */
-#if __STDC_VERSION__ < 199901L
-  return x<y ? x : y;
-#else
-  return fmin(x, y);
-#endif
+  return (x <= y || y != y) ? x : y;
 }
 
 casadi_real casadi_fabs(casadi_real x) {
