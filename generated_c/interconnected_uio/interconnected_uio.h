@@ -13,7 +13,7 @@ extern "C" {
 
 /* interconnected_uio: Seed-003 two-stage interconnected LPV UIO (virtual sensor): longitudinal (v_x, w_f, w_r, F_xf, F_xr) and lateral (v_y, r, psi_L, y_L, F_yf, F_yr, delta, delta_dot) states, braking/traction torques T_Bf, B_r, steering torque T_s and road curvature kappa from wheel speeds, a_x, r, psi_L, y_L, a_y and delta.
  *
- * Discrete-time step at Ts = 0.01 s (backward Euler, common P per subsystem from (27): sqrt(V) contracts by <= 0.965219 per step for every membership sequence (matched premises)). One call = one sample.
+ * Discrete-time step at Ts = 0.01 s (backward Euler, common P per subsystem from (27): sqrt(V) contracts by <= 0.965467 per step for every membership sequence (matched premises)). One call = one sample.
  * Stages per call: differentiators (predictor values, then update), longitudinal UIO scheduled
  * on the previous v_x estimate, lateral UIO scheduled on the new one, inversion (30).
  * The state holds [z, differentiator states, primed, outputs]; the outputs are its last entries.

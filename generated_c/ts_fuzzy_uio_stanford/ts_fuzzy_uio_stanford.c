@@ -14,7 +14,7 @@
 #define TS_FUZZY_UIO_STANFORD_SZ_ARG 4
 #define TS_FUZZY_UIO_STANFORD_SZ_RES 3
 #define TS_FUZZY_UIO_STANFORD_SZ_IW 1
-#define TS_FUZZY_UIO_STANFORD_SZ_W 35
+#define TS_FUZZY_UIO_STANFORD_SZ_W 36
 
 void ts_fuzzy_uio_stanford_init(ts_fuzzy_uio_stanford_state *s)
 {
