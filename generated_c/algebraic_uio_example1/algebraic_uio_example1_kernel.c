@@ -67,13 +67,23 @@ casadi_real casadi_fabs(casadi_real x) {
 }
 
 casadi_real casadi_fmax(casadi_real x, casadi_real y) {
-  return (x >= y || y != y) ? x : y;
+/* Pre-c99 compatibility */
+#if __STDC_VERSION__ < 199901L
+  return x>y ? x : y;
+#else
+  return fmax(x, y);
+#endif
 }
 
 casadi_real casadi_sq(casadi_real x) { return x*x;}
 
 casadi_real casadi_fmin(casadi_real x, casadi_real y) {
-  return (x <= y || y != y) ? x : y;
+/* Pre-c99 compatibility */
+#if __STDC_VERSION__ < 199901L
+  return x<y ? x : y;
+#else
+  return fmin(x, y);
+#endif
 }
 
 /* Configuration this file was compiled with */

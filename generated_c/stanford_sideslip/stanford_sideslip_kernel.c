@@ -35,7 +35,6 @@ extern "C" {
 /* Add prefix to internal symbols */
 #define casadi_f0 CASADI_PREFIX(f0)
 #define casadi_fabs CASADI_PREFIX(fabs)
-#define casadi_fmax CASADI_PREFIX(fmax)
 #define casadi_fmin CASADI_PREFIX(fmin)
 #define casadi_s0 CASADI_PREFIX(s0)
 #define casadi_s1 CASADI_PREFIX(s1)
@@ -67,11 +66,12 @@ casadi_real casadi_fabs(casadi_real x) {
 }
 
 casadi_real casadi_fmin(casadi_real x, casadi_real y) {
-  return (x <= y || y != y) ? x : y;
-}
-
-casadi_real casadi_fmax(casadi_real x, casadi_real y) {
-  return (x >= y || y != y) ? x : y;
+/* Pre-c99 compatibility */
+#if __STDC_VERSION__ < 199901L
+  return x<y ? x : y;
+#else
+  return fmin(x, y);
+#endif
 }
 
 casadi_real casadi_sq(casadi_real x) { return x*x;}
@@ -115,31 +115,47 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a03=(a02*a03);
   a05=(a05+a03);
   a05=(a05+a02);
-  a03=casadi_fmax(a05,a02);
-  a03=casadi_fmin(a03,a00);
-  a06=(a00-a03);
-  a07=6.6666666666666674e-01;
-  a06=(a06/a07);
+  a03=(a05<a02);
+  a06=(a03!=0?a02:0);
+  a03=(a03==0);
+  a03=(a03!=0?a05:0);
+  a06=(a06+a03);
+  a03=(a00<a06);
+  a07=(a03!=0?a00:0);
+  a03=(a03==0);
+  a03=(a03!=0?a06:0);
+  a07=(a07+a03);
+  a03=(a00-a07);
+  a06=6.6666666666666674e-01;
+  a03=(a03/a06);
   a08=6.6666666666666666e-02;
-  a09=arg[3]? arg[3][0] : 0;
-  a10=15.;
-  a10=casadi_fmax(a09,a10);
-  a11=65.;
-  a10=casadi_fmin(a10,a11);
-  a11=(a03/a10);
-  a08=(a08-a11);
-  a12=6.1538461538461535e-02;
-  a08=(a08/a12);
-  a13=(a06*a08);
+  a09=65.;
+  a10=arg[3]? arg[3][0] : 0;
+  a11=15.;
+  a12=(a10<a11);
+  a11=(a12!=0?a11:0);
+  a12=(a12==0);
+  a12=(a12!=0?a10:0);
+  a11=(a11+a12);
+  a12=(a09<a11);
+  a09=(a12!=0?a09:0);
+  a12=(a12==0);
+  a12=(a12!=0?a11:0);
+  a09=(a09+a12);
+  a12=(a07/a09);
+  a08=(a08-a12);
+  a11=6.1538461538461535e-02;
+  a08=(a08/a11);
+  a13=(a03*a08);
   a14=4.4444444444444444e-03;
-  a15=casadi_sq(a10);
-  a15=(a03/a15);
+  a15=casadi_sq(a09);
+  a15=(a07/a15);
   a14=(a14-a15);
   a16=4.3655489809335960e-03;
   a14=(a14/a16);
   a13=(a13*a14);
   a17=(a01*a13);
-  a18=(a06*a08);
+  a18=(a03*a08);
   a19=7.8895463510848121e-05;
   a15=(a15-a19);
   a15=(a15/a16);
@@ -148,31 +164,31 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a17=(a17+a16);
   a16=-1.0852474364861485e-01;
   a19=5.1282051282051282e-03;
-  a11=(a11-a19);
-  a11=(a11/a12);
-  a12=(a06*a11);
-  a12=(a12*a14);
-  a19=(a16*a12);
+  a12=(a12-a19);
+  a12=(a12/a11);
+  a11=(a03*a12);
+  a11=(a11*a14);
+  a19=(a16*a11);
   a17=(a17+a19);
-  a06=(a06*a11);
-  a06=(a06*a15);
-  a19=(a16*a06);
+  a03=(a03*a12);
+  a03=(a03*a15);
+  a19=(a16*a03);
   a17=(a17+a19);
-  a02=(a03-a02);
-  a02=(a02/a07);
-  a07=(a02*a08);
-  a07=(a07*a14);
-  a19=(a01*a07);
+  a02=(a07-a02);
+  a02=(a02/a06);
+  a06=(a02*a08);
+  a06=(a06*a14);
+  a19=(a01*a06);
   a17=(a17+a19);
   a08=(a02*a08);
   a08=(a08*a15);
   a01=(a01*a08);
   a17=(a17+a01);
-  a01=(a02*a11);
+  a01=(a02*a12);
   a01=(a01*a14);
   a14=(a16*a01);
   a17=(a17+a14);
-  a02=(a02*a11);
+  a02=(a02*a12);
   a02=(a02*a15);
   a16=(a16*a02);
   a17=(a17+a16);
@@ -183,13 +199,13 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a15=(a15*a18);
   a16=(a16+a15);
   a15=-1.4824971406832299e-01;
-  a15=(a15*a12);
+  a15=(a15*a11);
   a16=(a16+a15);
   a15=-1.4825324010954136e-01;
-  a15=(a15*a06);
+  a15=(a15*a03);
   a16=(a16+a15);
   a15=-2.9669964837221596e-01;
-  a15=(a15*a07);
+  a15=(a15*a06);
   a16=(a16+a15);
   a15=-2.9670752604177209e-01;
   a15=(a15*a08);
@@ -201,26 +217,26 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a15=(a15*a02);
   a16=(a16+a15);
   a15=(a13+a18);
-  a15=(a15+a12);
+  a15=(a15+a11);
+  a15=(a15+a03);
   a15=(a15+a06);
-  a15=(a15+a07);
   a15=(a15+a08);
   a15=(a15+a01);
   a15=(a15+a02);
-  a11=(a16*a15);
+  a12=(a16*a15);
   a14=1.6925512923345505e-03;
   a14=(a14*a13);
   a19=1.6920831304602713e-03;
   a19=(a19*a18);
   a14=(a14+a19);
   a19=1.6759605861915055e-03;
-  a19=(a19*a12);
+  a19=(a19*a11);
   a14=(a14+a19);
   a19=1.6758639015290126e-03;
-  a19=(a19*a06);
+  a19=(a19*a03);
   a14=(a14+a19);
   a19=1.6842080425965012e-03;
-  a19=(a19*a07);
+  a19=(a19*a06);
   a14=(a14+a19);
   a19=1.6840016209041732e-03;
   a19=(a19*a08);
@@ -236,11 +252,11 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a21=(a19*a18);
   a20=(a20+a21);
   a21=2.3964697895451463e+00;
-  a22=(a21*a12);
+  a22=(a21*a11);
   a20=(a20+a22);
-  a22=(a21*a06);
+  a22=(a21*a03);
   a20=(a20+a22);
-  a22=(a19*a07);
+  a22=(a19*a06);
   a20=(a20+a22);
   a19=(a19*a08);
   a20=(a20+a19);
@@ -249,20 +265,20 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a21=(a21*a02);
   a20=(a20+a21);
   a21=(a14*a20);
-  a11=(a11+a21);
-  a17=(a17-a11);
-  a11=arg[0]? arg[0][0] : 0;
+  a12=(a12+a21);
+  a17=(a17-a12);
+  a12=arg[0]? arg[0][0] : 0;
   a21=1.0000000000000000e-02;
   a19=3.6555433704109874e-01;
   a22=(a19*a13);
   a23=(a19*a18);
   a22=(a22+a23);
   a23=4.7522063815342834e+00;
-  a24=(a23*a12);
+  a24=(a23*a11);
   a22=(a22+a24);
-  a24=(a23*a06);
+  a24=(a23*a03);
   a22=(a22+a24);
-  a24=(a19*a07);
+  a24=(a19*a06);
   a22=(a22+a24);
   a19=(a19*a08);
   a22=(a22+a19);
@@ -273,20 +289,20 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a22=(a21*a22);
   a23=arg[1]? arg[1][0] : 0;
   a22=(a22*a23);
-  a11=(a11+a22);
+  a12=(a12+a22);
   a22=6.0440947212060470e-03;
   a22=(a22*a13);
   a19=4.3899801241183891e-03;
   a19=(a19*a18);
   a22=(a22+a19);
   a19=1.8567576588310762e-03;
-  a19=(a19*a12);
+  a19=(a19*a11);
   a22=(a22+a19);
   a19=2.6384134346051915e-04;
-  a19=(a19*a06);
+  a19=(a19*a03);
   a22=(a22+a19);
   a19=-1.8936332259162072e-03;
-  a19=(a19*a07);
+  a19=(a19*a06);
   a22=(a22+a19);
   a19=-3.5671638112142602e-03;
   a19=(a19*a08);
@@ -305,13 +321,13 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a26=(a26*a18);
   a25=(a25+a26);
   a26=1.1419613419788198e-03;
-  a26=(a26*a12);
+  a26=(a26*a11);
   a25=(a25+a26);
   a26=1.1419620843022928e-03;
-  a26=(a26*a06);
+  a26=(a26*a03);
   a25=(a25+a26);
   a26=1.0109396184369525e-03;
-  a26=(a26*a07);
+  a26=(a26*a06);
   a25=(a25+a26);
   a26=1.0109403169008611e-03;
   a26=(a26*a08);
@@ -326,12 +342,12 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a27=(a26*a13);
   a28=(a26*a18);
   a27=(a27+a28);
-  a28=(a26*a12);
+  a28=(a26*a11);
   a27=(a27+a28);
-  a26=(a26*a06);
+  a26=(a26*a03);
   a27=(a27+a26);
   a26=7.1283095723014256e+01;
-  a28=(a26*a07);
+  a28=(a26*a06);
   a27=(a27+a28);
   a28=(a26*a08);
   a27=(a27+a28);
@@ -343,18 +359,18 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a04=(a04-a27);
   a27=(a25*a04);
   a24=(a24+a27);
-  a11=(a11-a24);
-  a24=(a17*a11);
+  a12=(a12-a24);
+  a24=(a17*a12);
   a27=-9.9716394107746131e-03;
   a26=(a27*a13);
   a28=-8.4023534736365688e-03;
   a29=(a28*a18);
   a26=(a26+a29);
-  a29=(a27*a12);
+  a29=(a27*a11);
   a26=(a26+a29);
-  a29=(a28*a06);
+  a29=(a28*a03);
   a26=(a26+a29);
-  a29=(a27*a07);
+  a29=(a27*a06);
   a26=(a26+a29);
   a29=(a28*a08);
   a26=(a26+a29);
@@ -371,12 +387,12 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a27=(a28*a13);
   a29=(a28*a18);
   a27=(a27+a29);
-  a29=(a28*a12);
+  a29=(a28*a11);
   a27=(a27+a29);
-  a28=(a28*a06);
+  a28=(a28*a03);
   a27=(a27+a28);
   a28=5.8020069792348188e+01;
-  a29=(a28*a07);
+  a29=(a28*a06);
   a27=(a27+a29);
   a29=(a28*a08);
   a27=(a27+a29);
@@ -404,11 +420,11 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a30=(a28*a18);
   a29=(a29+a30);
   a30=-1.2898845892735911e-01;
-  a31=(a30*a12);
+  a31=(a30*a11);
   a29=(a29+a31);
-  a31=(a30*a06);
+  a31=(a30*a03);
   a29=(a29+a31);
-  a31=(a28*a07);
+  a31=(a28*a06);
   a29=(a29+a31);
   a28=(a28*a08);
   a29=(a29+a28);
@@ -421,12 +437,12 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a30=(a29*a13);
   a28=(a29*a18);
   a30=(a30+a28);
-  a28=(a29*a12);
+  a28=(a29*a11);
   a30=(a30+a28);
-  a29=(a29*a06);
+  a29=(a29*a03);
   a30=(a30+a29);
   a29=-1.9348268839103866e+02;
-  a28=(a29*a07);
+  a28=(a29*a06);
   a30=(a30+a28);
   a28=(a29*a08);
   a30=(a30+a28);
@@ -441,13 +457,13 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a13=(a25*a13);
   a18=(a25*a18);
   a13=(a13+a18);
-  a12=(a25*a12);
-  a13=(a13+a12);
-  a25=(a25*a06);
+  a11=(a25*a11);
+  a13=(a13+a11);
+  a25=(a25*a03);
   a13=(a13+a25);
   a25=2.1999016795594961e-01;
-  a07=(a25*a07);
-  a13=(a13+a07);
+  a06=(a25*a06);
+  a13=(a13+a06);
   a08=(a25*a08);
   a13=(a13+a08);
   a01=(a25*a01);
@@ -462,7 +478,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a21=(a21*a27);
   a24=(a24*a21);
   if (res[0]!=0) res[0][0]=a24;
-  a13=(a13*a11);
+  a13=(a13*a12);
   a00=(a00*a22);
   a13=(a13+a00);
   a13=(a13*a21);
@@ -481,12 +497,12 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a21=(a21*a30);
   a23=(a23+a21);
   if (res[0]!=0) res[0][2]=a23;
-  a09=(a09-a10);
-  a09=casadi_fabs(a09);
-  a05=(a05-a03);
+  a10=(a10-a09);
+  a10=casadi_fabs(a10);
+  a05=(a05-a07);
   a05=casadi_fabs(a05);
-  a09=(a09+a05);
-  if (res[1]!=0) res[1][0]=a09;
+  a10=(a10+a05);
+  if (res[1]!=0) res[1][0]=a10;
   return 0;
 }
 
