@@ -70,8 +70,11 @@ def _per_call(fn, repeat: int = 7, number: int = 2000) -> float:
     return float(np.median(timeit.repeat(fn, repeat=repeat, number=number)) / number)
 
 
-def _cvxpy_same_lmis(prob_builder, solver: str, tol: float):
-    """The same LMI blocks (same coefficients) through CVXPY; returns (seconds, objective) or None."""
+def _cvxpy_same_lmis(prob_builder, solver: str, tol: float, reduced: bool = False):
+    """The same LMI blocks (same coefficients) through CVXPY; returns (seconds, objective) or None.
+
+    ``reduced``: instead of the LMIs as stated, the problem our solve hands to Clarabel after its
+    exact reductions (``LMIProblem._reduce``), for the ablation: same problem, same solver."""
     try:
         import cvxpy as cp
     except ImportError:
@@ -80,11 +83,15 @@ def _cvxpy_same_lmis(prob_builder, solver: str, tol: float):
     t0 = time.perf_counter()
     prob = prob_builder()
     x_sym, A, b, q, cones, blocks = prob._compile()
+    if reduced:
+        red = prob._reduce(q, blocks)
+        A, b, q = red.A, red.b, red.q
+        blocks = [(None, sl, None) for _, sl in red.blocks]
     x = cp.Variable(A.shape[1])
     constraints = []
-    for con, sl, _ in blocks:
-        n = con.expr.shape[0]
-        k = n * (n + 1) // 2
+    for _, sl, _ in blocks:
+        k = sl.stop - sl.start
+        n = int(round((np.sqrt(8 * k + 1) - 1) / 2))
         rows = -A[sl]
         # unpack the scaled triangle into a full symmetric matrix expression
         iu = [(i, j) for j in range(n) for i in range(j + 1)]
@@ -113,20 +120,24 @@ def bench_design(b) -> dict:
     Compared at equal objective (for the seed-000 family the objective is gamma^2)."""
     settings = b.design.settings
     builder = b.lmi_problem
-    ours = []
-    for _ in range(5):
-        t0 = time.perf_counter()
-        sol = builder().solve(tol=settings.tol)
-        ours.append((time.perf_counter() - t0, sol.objective))
-    t_ours = float(np.median([t for t, _ in ours]))
-    obj = ours[0][1]
-    out = {"ours_clarabel": {"seconds": t_ours, "objective": obj}}
-    if isinstance(b, pipeline.ObserverBuild):
-        out["ours_clarabel"]["gamma"] = float(np.sqrt(obj))
-    for solver in ("CLARABEL", "SCS"):
-        res = _cvxpy_same_lmis(builder, solver, settings.tol)
+    out = {}
+    for key, reduce in (("ours_clarabel", False), ("ours_clarabel_reduced", True)):
+        ours = []
+        for _ in range(5):
+            t0 = time.perf_counter()
+            sol = builder().solve(tol=settings.tol, reduce=reduce)
+            ours.append((time.perf_counter() - t0, sol.objective))
+        out[key] = {"seconds": float(np.median([t for t, _ in ours])), "objective": ours[0][1],
+                    "iterations": sol.iterations, "clarabel_solve_seconds": sol.solve_time_s}
+        if isinstance(b, pipeline.ObserverBuild):
+            out[key]["gamma"] = float(np.sqrt(ours[0][1]))
+    t_ours, obj = out["ours_clarabel"]["seconds"], out["ours_clarabel"]["objective"]
+    red = out["ours_clarabel_reduced"]
+    for solver, reduced in (("CLARABEL", False), ("CLARABEL", True), ("SCS", False)):
+        key = f"cvxpy_{solver.lower()}" + ("_our_reduced_problem" if reduced else "")
+        res = _cvxpy_same_lmis(builder, solver, settings.tol, reduced)
         if res is None:
-            out[f"cvxpy_{solver.lower()}"] = {"status": "cvxpy not installed (pip install '.[bench]')"}
+            out[key] = {"status": "cvxpy not installed (pip install '.[bench]')"}
             continue
         if res["objective"] is not None:
             res["objective_rel_diff"] = abs(res["objective"] - obj) / max(abs(obj), 1e-300)
@@ -134,7 +145,10 @@ def bench_design(b) -> dict:
                 res["gamma"] = float(np.sqrt(res["objective"]))
                 res["gamma_rel_diff"] = abs(res["gamma"] - out["ours_clarabel"]["gamma"]) / out["ours_clarabel"]["gamma"]
         res["speedup_of_ours"] = res["seconds"] / t_ours
-        out[f"cvxpy_{solver.lower()}"] = res
+        res["speedup_of_ours_reduced"] = res["seconds"] / red["seconds"]
+        if res["objective"] is not None:
+            res["objective_rel_diff_reduced"] = abs(res["objective"] - red["objective"]) / max(abs(red["objective"]), 1e-300)
+        out[key] = res
     return out
 
 
@@ -399,13 +413,22 @@ def main(json_output: bool = False) -> int:
         print(f"   numpy implementation, same step   {r['numpy_step_ns']:9.0f} ns   "
               f"(C step {r['speedup_vs_numpy']:.0f}x faster)")
         d = r["design"]
-        print(f"   LMI design, build + solve: ours (Clarabel) {1e3 * d['ours_clarabel']['seconds']:.1f} ms, "
-              f"objective {d['ours_clarabel']['objective']:.6g}")
-        for peer in ("cvxpy_clarabel", "cvxpy_scs"):
+        for key, what in (("ours_clarabel", "as stated"), ("ours_clarabel_reduced", "exact reductions")):
+            o = d[key]
+            print(f"   LMI design, build + solve: ours (Clarabel, {what}) {1e3 * o['seconds']:.1f} ms, "
+                  f"objective {o['objective']:.6g}, {o['iterations']} iterations")
+        for peer in ("cvxpy_clarabel", "cvxpy_clarabel_our_reduced_problem", "cvxpy_scs"):
             p = d[peer]
-            if "seconds" not in p:
+            if "seconds" not in p or p["objective"] is None:
                 print(f"     {peer}: {p['status']}")
                 continue
+            diff = p.get("gamma_rel_diff", p.get("objective_rel_diff"))
+            print(f"     {peer}: {1e3 * p['seconds']:.1f} ms (ours {p['speedup_of_ours']:.1f}x faster, "
+                  f"reduced {p['speedup_of_ours_reduced']:.1f}x), status {p['status']}, objective "
+                  f"{p['objective']:.6g}"
+                  + ("" if diff is None else f" ({'gamma' if 'gamma_rel_diff' in p else 'objective'} "
+                                             f"differs by {100 * diff:.2f} %; objective vs reduced "
+                                             f"{100 * p['objective_rel_diff_reduced']:.2f} %)"))
     for name, r in res["algebraic_uio"].items():
         ins = r["instructions_per_step"]
         orders = ", ".join(f"{k}: {v}" for k, v in r["differentiator_orders"].items())

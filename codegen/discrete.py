@@ -331,6 +331,16 @@ def _const_times(a: np.ndarray, b: ca.SX) -> ca.SX:
     return ca.vertcat(*rows)
 
 
+def _clamp(v, lo: float, hi: float):
+    """v clamped to [lo, hi] by comparisons and selects, exact for every finite v (the sum adds a
+    zero). CasADi's fmax/fmin helpers call libm, which compilers do not inline without
+    -ffinite-math-only: a call in the step around which every live floating-point register is
+    spilled. A NaN v gives NaN (fmax would give lo); the wrapper flags such a sample and keeps
+    nothing the step computed from it."""
+    low = ca.if_else(v < lo, lo, v)
+    return ca.if_else(hi < low, hi, low)
+
+
 def step_casadi(data: ObserverData, name: str) -> ca.Function:
     """The step as a CasADi Function: (z, u, y, rho) -> (z_next, excess).
 
@@ -352,7 +362,7 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
     y = ca.SX.sym("y", ny)
     rho = ca.SX.sym("rho", len(data.raw_signals))
     values = data.signal_values([rho[k] for k in range(rho.shape[0])], [y[k] for k in range(ny)], xp=ca)
-    clamped = [ca.fmin(ca.fmax(v, lo), hi) for v, lo, hi in zip(values, poly.lowers, poly.uppers)]
+    clamped = [_clamp(v, lo, hi) for v, lo, hi in zip(values, poly.lowers, poly.uppers)]
     excess = sum(ca.fabs(v - c) for v, c in zip(values, clamped))
     theta = premise_of_signal(poly, clamped, xp=ca)
     eta = sector_weights_product(theta, poly.premises, xp=ca)

@@ -79,6 +79,14 @@ def _fix_unused_parameters(code: str, kernel: str) -> str:
     return code
 
 
+def _fix_float_conditions(code: str) -> str:
+    """CasADi's selects (``if_else``) test a double as a condition, ``(a?x:0)`` and ``(!a)``,
+    which clang's -Wconversion refuses; the same tests written out: ``a != 0`` (true for NaN,
+    like the implicit test) and ``a == 0``."""
+    code = re.sub(r"=\((a\d+)\?", r"=(\1!=0?", code)
+    return re.sub(r"=\(!(a\d+)\);", r"=(\1==0);", code)
+
+
 def _kernel_sources(b: ObserverBuild, f: ca.Function) -> tuple:
     kernel = f.name()
     opts = {"with_header": True, "casadi_real": "double", "casadi_int": "int", "with_mem": False,
@@ -89,7 +97,7 @@ def _kernel_sources(b: ObserverBuild, f: ca.Function) -> tuple:
         cg.generate(tmp + "/")
         c_code = Path(tmp, f"{kernel}.c").read_text()
         h_code = Path(tmp, f"{kernel}.h").read_text()
-    c_code = _fix_unused_parameters(c_code, kernel)
+    c_code = _fix_float_conditions(_fix_unused_parameters(c_code, kernel))
     what = "Numerical kernel of the observer step (CasADi code generation)."
     return banner(b, what) + "\n" + c_code, banner(b, what) + "\n" + h_code
 

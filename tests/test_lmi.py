@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from codegen.errors import CertificateError, InfeasibleLMIError, LMIShapeError, NonAffineLMIError
-from codegen.lmi import LMIProblem, svec, trace, unsvec
+from codegen.lmi import LMIProblem, bmat, svec, trace, unsvec
 
 
 def test_svec_roundtrip_and_order():
@@ -68,3 +68,38 @@ def test_certificate_rejects_a_wrong_solution():
     _, _, _, _, _, blocks = prob._compile()
     with pytest.raises(CertificateError, match="P >= I"):
         LMIProblem.certify_values(np.array([0.5, 0.0, 2.0]), blocks, prob._evaluate)
+
+
+def _slack_problem():
+    """A Lyapunov-type problem written with a redundant slack (it enters only through P + S), a
+    block with a constant part (Schur-reducible) and a block that block implies."""
+    A = np.array([[-1.0, 2.0], [0.0, -3.0]])
+    prob = LMIProblem("slack")
+    S = prob.symmetric("S", 2)
+    P = prob.symmetric("P", 2)
+    Q = P + S
+    t = prob.scalar("t")
+    prob.require_psd("Q >= 0", Q, 1e-6)
+    prob.require_psd("[[Q, I], [I, I]] >= 0", bmat([[Q, np.eye(2)], [np.eye(2), np.eye(2)]]), 1e-6)
+    prob.require_nsd("A'Q + QA <= -I", A.T @ Q + Q @ A + np.eye(2), 1e-6)
+    prob.require_psd("t >= trace Q", t - trace(Q), 1e-6)
+    prob.minimize(t)
+    return prob
+
+
+def test_exact_reductions_keep_the_optimum_and_the_certificate():
+    prob = _slack_problem()
+    _, _, _, q, _, blocks = prob._compile()
+    red = prob._reduce(q, blocks)
+    labels = [con.label for con, _ in red.blocks]
+    assert "Q >= 0" not in labels                       # implied by the reduced 4x4 block
+    sizes = [round((np.sqrt(8 * (sl.stop - sl.start) + 1) - 1) / 2) for _, sl in red.blocks]
+    assert sizes[labels.index("[[Q, I], [I, I]] >= 0")] == 2     # Schur complement of the constant I
+    assert red.kept_variables.size == len(prob._names) - 3     # the slack S is fixed at 0
+    full = _slack_problem().solve(tol=1e-9)
+    reduced = _slack_problem().solve(tol=1e-9, reduce=True)
+    assert reduced.objective == pytest.approx(full.objective, rel=1e-6)
+    assert np.all(reduced["S"] == 0.0)
+    np.testing.assert_allclose(reduced["P"], full["P"] + full["S"], atol=1e-6)
+    assert [c.label for c in reduced.checks] == [c.label for c in full.checks]   # every original block
+    assert all(c.min_eig >= 0 for c in reduced.checks)

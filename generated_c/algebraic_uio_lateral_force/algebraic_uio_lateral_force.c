@@ -6,6 +6,9 @@
 #include "algebraic_uio_lateral_force.h"
 #include "algebraic_uio_lateral_force_kernel.h"
 
+#include <stdint.h>
+#include <string.h>
+
 /* Fixed work sizes from the kernel's work query at generation time; checked by
  * algebraic_uio_lateral_force_check_work(). The arrays live on the stack of each call: no state between calls. */
 #define ALGEBRAIC_UIO_LATERAL_FORCE_SZ_ARG 4
@@ -48,6 +51,17 @@ int algebraic_uio_lateral_force_check_work(void)
     return 0;
 }
 
+/* Bit 63 of the result is set iff x is +-Inf or NaN (all exponent bits set: the masked exponent
+ * plus one exponent unit carries into the sign bit only then). Integer instructions only, so the
+ * per-sample checks do not compete with the step for the floating-point units, which bound the
+ * batch loop. */
+static uint64_t nonfinite_bit(const double *x)
+{
+    uint64_t bits;
+    memcpy(&bits, x, sizeof bits);
+    return (bits & UINT64_C(0x7ff0000000000000)) + UINT64_C(0x0010000000000000);
+}
+
 /* The whole step is in the batch loop (the single step calls it with n = 1), so that the
  * compiler can fuse loop, step and kernel into one function. With link-time optimization GCC
  * would also clone the loop for n = 1 and then inline the kernel into neither copy: one copy. */
@@ -69,8 +83,8 @@ void algebraic_uio_lateral_force_run_flat(double *state, const double *inputs, s
     size_t k;
 
     /* The kernel writes nothing but next, excess and warmup: it runs first, and the checks after
-     * it, off its critical path, decide what is kept. x - x is 0 for every finite x and NaN for
-     * NaN and +-Inf: one comparison per vector. */
+     * it, off its critical path, decide what is kept (integer tests of the exponent bits, one
+     * per vector). */
     for (k = 0; k < n; ++k) {
         input = inputs + k * ALGEBRAIC_UIO_LATERAL_FORCE_N_INPUT;
         out = outputs + k * ALGEBRAIC_UIO_LATERAL_FORCE_N_OUTPUT;
@@ -84,13 +98,13 @@ void algebraic_uio_lateral_force_run_flat(double *state, const double *inputs, s
         res[2] = &warmup;
         warmup = 0.0;
         failed = algebraic_uio_lateral_force_kernel(arg, res, iw, w, 0) != 0;
-        if (!(((input[0] - input[0]) + ((input[1] - input[1]) + (input[2] - input[2]))) == 0.0)) {
+        if (((nonfinite_bit(input + 0) | nonfinite_bit(input + 1) | nonfinite_bit(input + 2)) >> 63) != 0) {
             /* a NaN or infinite input: the state is held and the outputs repeat it */
             for (i = 0; i < ALGEBRAIC_UIO_LATERAL_FORCE_N_OUTPUT; ++i) out[i] = state[18 + i];
             status[k] = ALGEBRAIC_UIO_LATERAL_FORCE_NONFINITE_INPUT;
             continue;
         }
-        status[k] = (failed || !((((((next[0] - next[0]) + (next[1] - next[1])) + ((next[2] - next[2]) + ((next[3] - next[3]) + (next[4] - next[4])))) + (((next[5] - next[5]) + ((next[6] - next[6]) + (next[7] - next[7]))) + ((next[8] - next[8]) + ((next[9] - next[9]) + (next[10] - next[10]))))) + ((((next[11] - next[11]) + (next[12] - next[12])) + ((next[13] - next[13]) + ((next[14] - next[14]) + (next[15] - next[15])))) + (((next[16] - next[16]) + ((next[17] - next[17]) + (next[18] - next[18]))) + ((next[19] - next[19]) + ((next[20] - next[20]) + (next[21] - next[21])))))) == 0.0))
+        status[k] = (failed || ((nonfinite_bit(next + 0) | nonfinite_bit(next + 1) | nonfinite_bit(next + 2) | nonfinite_bit(next + 3) | nonfinite_bit(next + 4) | nonfinite_bit(next + 5) | nonfinite_bit(next + 6) | nonfinite_bit(next + 7) | nonfinite_bit(next + 8) | nonfinite_bit(next + 9) | nonfinite_bit(next + 10) | nonfinite_bit(next + 11) | nonfinite_bit(next + 12) | nonfinite_bit(next + 13) | nonfinite_bit(next + 14) | nonfinite_bit(next + 15) | nonfinite_bit(next + 16) | nonfinite_bit(next + 17) | nonfinite_bit(next + 18) | nonfinite_bit(next + 19) | nonfinite_bit(next + 20) | nonfinite_bit(next + 21)) >> 63) != 0)
             ? ALGEBRAIC_UIO_LATERAL_FORCE_NUMERICAL_FAILURE : ALGEBRAIC_UIO_LATERAL_FORCE_OK;
         /* the kernel clamps the scheduling signals for the memberships and reports by how much */
         if (excess > 0.0) status[k] |= ALGEBRAIC_UIO_LATERAL_FORCE_SCHEDULING_CLAMPED;

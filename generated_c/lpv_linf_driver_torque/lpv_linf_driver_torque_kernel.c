@@ -35,8 +35,6 @@ extern "C" {
 /* Add prefix to internal symbols */
 #define casadi_f0 CASADI_PREFIX(f0)
 #define casadi_fabs CASADI_PREFIX(fabs)
-#define casadi_fmax CASADI_PREFIX(fmax)
-#define casadi_fmin CASADI_PREFIX(fmin)
 #define casadi_s0 CASADI_PREFIX(s0)
 #define casadi_s1 CASADI_PREFIX(s1)
 #define casadi_s2 CASADI_PREFIX(s2)
@@ -55,24 +53,6 @@ extern "C" {
     #define CASADI_SYMBOL_EXPORT
   #endif
 #endif
-
-casadi_real casadi_fmax(casadi_real x, casadi_real y) {
-/* Pre-c99 compatibility */
-#if __STDC_VERSION__ < 199901L
-  return x>y ? x : y;
-#else
-  return fmax(x, y);
-#endif
-}
-
-casadi_real casadi_fmin(casadi_real x, casadi_real y) {
-/* Pre-c99 compatibility */
-#if __STDC_VERSION__ < 199901L
-  return x<y ? x : y;
-#else
-  return fmin(x, y);
-#endif
-}
 
 casadi_real casadi_fabs(casadi_real x) {
 /* Pre-c99 compatibility */
@@ -105,32 +85,40 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   casadi_real a36, a37, a38, a39, a40, a41, a42, a43, a44;
   a00=arg[0]? arg[0][0] : 0;
   a01=-5.2039929178356612e-04;
-  a02=arg[3]? arg[3][0] : 0;
-  a03=5.;
-  a03=casadi_fmax(a02,a03);
-  a04=35.;
-  a03=casadi_fmin(a03,a04);
-  a04=6.5230289651478368e-01;
-  a04=(a04*a03);
-  a05=3.0423496554956424e+00;
+  a02=35.;
+  a03=arg[3]? arg[3][0] : 0;
+  a04=5.;
+  a05=(a03<a04);
+  a04=(a05!=0?a04:0);
+  a05=(a05==0);
+  a05=(a05!=0?a03:0);
   a04=(a04+a05);
-  a04=(a03/a04);
-  a05=1.9801788726891445e+01;
+  a05=(a02<a04);
+  a02=(a05!=0?a02:0);
+  a05=(a05==0);
+  a05=(a05!=0?a04:0);
+  a02=(a02+a05);
+  a05=6.5230289651478368e-01;
+  a05=(a05*a02);
+  a04=3.0423496554956424e+00;
+  a05=(a05+a04);
+  a05=(a02/a05);
+  a04=1.9801788726891445e+01;
   a06=2.8380785970210076e+00;
   a07=1.3333333333333299e+00;
   a08=1.1666666666666700e+01;
-  a08=(a08/a03);
+  a08=(a08/a02);
   a07=(a07-a08);
   a06=(a06*a07);
-  a05=(a05+a06);
-  a05=(a04*a05);
-  a06=(a01*a05);
+  a04=(a04+a06);
+  a04=(a05*a04);
+  a06=(a01*a04);
   a08=1.7027647796567799e-04;
   a09=9.9530344342081889e-01;
-  a09=(a09*a03);
+  a09=(a09*a02);
   a10=4.1094870067834230e-02;
   a09=(a09+a10);
-  a09=(a03/a09);
+  a09=(a02/a09);
   a10=-2.4271374455708600e-01;
   a11=1.5570324385550482e+00;
   a11=(a11*a07);
@@ -140,10 +128,10 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a06=(a06+a11);
   a11=-7.6312099349585291e-04;
   a12=1.2468239311974827e+00;
-  a12=(a12*a03);
+  a12=(a12*a02);
   a13=2.1597093979779727e+00;
   a12=(a12-a13);
-  a12=(a03/a12);
+  a12=(a02/a12);
   a13=-1.0138499473820881e+01;
   a14=-2.6462944747640660e+00;
   a14=(a14*a07);
@@ -152,10 +140,10 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a14=(a11*a13);
   a15=-2.0874307110189326e-04;
   a16=1.7544262537537978e+00;
-  a16=(a16*a03);
+  a16=(a16*a02);
   a17=6.6012297203457280e+00;
   a16=(a16-a17);
-  a16=(a03/a16);
+  a16=(a02/a16);
   a17=2.7367809198555538e+01;
   a18=2.6786638727069807e+00;
   a18=(a18*a07);
@@ -170,7 +158,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a20=-3.0495335617386359e+00;
   a20=(a20*a07);
   a19=(a19+a20);
-  a19=(a04*a19);
+  a19=(a05*a19);
   a20=(a01*a19);
   a21=5.2004411307263423e+00;
   a22=-1.9706382578507460e+00;
@@ -200,8 +188,8 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a26=-3.0023375647072470e-01;
   a26=(a26*a07);
   a25=(a25+a26);
-  a04=(a04*a25);
-  a01=(a01*a04);
+  a05=(a05*a25);
+  a01=(a01*a05);
   a25=-9.9097177852823592e+01;
   a26=-1.3956824747257834e-01;
   a26=(a26*a07);
@@ -232,7 +220,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a15=(a15*a07);
   a18=(a18+a15);
   a15=-2.6868187532090417e-03;
-  a08=(a15*a05);
+  a08=(a15*a04);
   a25=-2.7099106235295255e-04;
   a26=(a25*a10);
   a08=(a08+a26);
@@ -286,7 +274,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a39=(a39-a20);
   a20=(a27*a39);
   a37=(a37-a20);
-  a20=(a31*a05);
+  a20=(a31*a04);
   a40=(a33*a10);
   a20=(a20+a40);
   a40=(a34*a13);
@@ -304,17 +292,17 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a41=(a41*a42);
   a40=(a40+a41);
   a41=4.1172728332855449e-04;
-  a05=(a41*a05);
+  a04=(a41*a04);
   a43=2.9786950909933378e-02;
   a10=(a43*a10);
-  a05=(a05+a10);
+  a04=(a04+a10);
   a10=3.1382134080405561e-03;
   a13=(a10*a13);
   a44=-1.0774625412309049e-03;
   a17=(a44*a17);
   a13=(a13+a17);
-  a05=(a05+a13);
-  a13=(a05*a14);
+  a04=(a04+a13);
+  a13=(a04*a14);
   a19=(a41*a19);
   a21=(a43*a21);
   a19=(a19+a21);
@@ -324,7 +312,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a19=(a19+a22);
   a22=(a19*a23);
   a13=(a13+a22);
-  a41=(a41*a04);
+  a41=(a41*a05);
   a43=(a43*a09);
   a41=(a41+a43);
   a10=(a10*a12);
@@ -348,7 +336,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a22=6.4506696428571431e-01;
   a22=(a22*a07);
   a43=(a43+a22);
-  a43=(a43-a05);
+  a43=(a43-a04);
   a22=(a13*a30);
   a43=(a43-a22);
   a22=(a06*a43);
@@ -357,7 +345,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a08=(a08*a14);
   a38=(a38*a23);
   a08=(a08+a38);
-  a15=(a15*a04);
+  a15=(a15*a05);
   a25=(a25*a09);
   a15=(a15+a25);
   a26=(a26*a12);
@@ -377,7 +365,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a25=(a20*a14);
   a32=(a32*a23);
   a25=(a25+a32);
-  a31=(a31*a04);
+  a31=(a31*a05);
   a33=(a33*a09);
   a31=(a31+a33);
   a34=(a34*a12);
@@ -460,14 +448,14 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a36=(a36-a23);
   a19=(a19*a36);
   a42=(a42+a19);
-  a00=(a00*a05);
+  a00=(a00*a04);
   a13=(a13-a14);
   a00=(a00*a13);
   a42=(a42+a00);
   if (res[0]!=0) res[0][4]=a42;
-  a02=(a02-a03);
-  a02=casadi_fabs(a02);
-  if (res[1]!=0) res[1][0]=a02;
+  a03=(a03-a02);
+  a03=casadi_fabs(a03);
+  if (res[1]!=0) res[1][0]=a03;
   return 0;
 }
 

@@ -56,21 +56,21 @@ extern "C" {
   #endif
 #endif
 
-casadi_real casadi_fmax(casadi_real x, casadi_real y) {
-/* Pre-c99 compatibility */
-#if __STDC_VERSION__ < 199901L
-  return x>y ? x : y;
-#else
-  return fmax(x, y);
-#endif
-}
-
 casadi_real casadi_fmin(casadi_real x, casadi_real y) {
 /* Pre-c99 compatibility */
 #if __STDC_VERSION__ < 199901L
   return x<y ? x : y;
 #else
   return fmin(x, y);
+#endif
+}
+
+casadi_real casadi_fmax(casadi_real x, casadi_real y) {
+/* Pre-c99 compatibility */
+#if __STDC_VERSION__ < 199901L
+  return x>y ? x : y;
+#else
+  return fmax(x, y);
 #endif
 }
 
@@ -110,28 +110,36 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a03=1.;
   a04=1.3333333333333299e+00;
   a05=1.1666666666666700e+01;
-  a06=arg[3]? arg[3][0] : 0;
-  a07=5.;
-  a07=casadi_fmax(a06,a07);
-  a08=35.;
-  a07=casadi_fmin(a07,a08);
-  a05=(a05/a07);
+  a06=35.;
+  a07=arg[3]? arg[3][0] : 0;
+  a08=5.;
+  a09=(a07<a08);
+  a08=(a09!=0?a08:0);
+  a09=(a09==0);
+  a09=(a09!=0?a07:0);
+  a08=(a08+a09);
+  a09=(a06<a08);
+  a06=(a09!=0?a06:0);
+  a09=(a09==0);
+  a09=(a09!=0?a08:0);
+  a06=(a06+a09);
+  a05=(a05/a06);
   a04=(a04-a05);
   a05=(a03-a04);
-  a08=2.;
-  a05=(a05/a08);
+  a09=2.;
+  a05=(a05/a09);
   a02=(a02*a05);
-  a09=6.6260954267007262e-03;
+  a08=6.6260954267007262e-03;
   a10=-1.;
   a11=(a04-a10);
-  a11=(a11/a08);
-  a09=(a09*a11);
-  a02=(a02+a09);
+  a11=(a11/a09);
+  a08=(a08*a11);
+  a02=(a02+a08);
   a02=(a01*a02);
-  a09=10.;
-  a09=(a09*a06);
+  a08=10.;
+  a08=(a08*a07);
   a12=arg[2]? arg[2][0] : 0;
-  a13=(a09*a12);
+  a13=(a08*a12);
   a13=casadi_fmin(a03,a13);
   a13=casadi_fmax(a10,a13);
   a02=(a02*a13);
@@ -142,7 +150,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a15=(a15+a17);
   a15=(a01*a15);
   a17=1000000000.;
-  a17=(a17*a06);
+  a17=(a17*a07);
   a17=(a17*a12);
   a17=casadi_fmin(a03,a17);
   a10=casadi_fmax(a10,a17);
@@ -152,12 +160,12 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a20=0.;
   a21=5.3109508661785105e+02;
   a22=casadi_fabs(a12);
-  a23=(a06*a22);
+  a23=(a07*a22);
   a21=(a21*a23);
   a24=1.2471755008580099e+02;
-  a09=(a09*a22);
-  a09=casadi_fmin(a03,a09);
-  a24=(a24*a09);
+  a08=(a08*a22);
+  a08=casadi_fmin(a03,a08);
+  a24=(a24*a08);
   a21=(a21-a24);
   a21=casadi_fmax(a20,a21);
   a19=(a19*a21);
@@ -192,7 +200,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a21=4.5448785468045202e+02;
   a21=(a21*a23);
   a23=1.0385228161318200e+02;
-  a23=(a23*a09);
+  a23=(a23*a08);
   a21=(a21-a23);
   a21=casadi_fmax(a20,a21);
   a15=(a15*a21);
@@ -218,10 +226,10 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a00=(a00+a02);
   a02=-3.5113276497196185e-04;
   a14=7.9184682838357323e-01;
-  a14=(a14*a07);
+  a14=(a14*a06);
   a15=1.8213402516437338e+00;
   a14=(a14+a15);
-  a14=(a07/a14);
+  a14=(a06/a14);
   a15=2.0182454563288701e+01;
   a25=2.3250808039494335e+00;
   a25=(a25*a04);
@@ -230,10 +238,10 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a25=(a02*a15);
   a27=1.8832669137866208e-04;
   a24=1.0004612824838706e+00;
-  a24=(a24*a07);
+  a24=(a24*a06);
   a18=4.0362217338668314e-03;
   a24=(a24-a18);
-  a24=(a07/a24);
+  a24=(a06/a24);
   a18=-2.1164143124824801e+00;
   a21=6.0683005823338443e-01;
   a21=(a21*a04);
@@ -243,22 +251,22 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a25=(a25+a21);
   a21=-7.8526309205514814e-04;
   a23=1.2822840790129957e+00;
-  a23=(a23*a07);
-  a09=2.4699856913637119e+00;
-  a23=(a23-a09);
-  a23=(a07/a23);
-  a09=-7.4727700056410260e+00;
+  a23=(a23*a06);
+  a08=2.4699856913637119e+00;
+  a23=(a23-a08);
+  a23=(a06/a23);
+  a08=-7.4727700056410260e+00;
   a28=-1.2606776908611281e+00;
   a28=(a28*a04);
-  a09=(a09+a28);
-  a09=(a23*a09);
-  a28=(a21*a09);
+  a08=(a08+a28);
+  a08=(a23*a08);
+  a28=(a21*a08);
   a29=1.4237997926364604e-04;
   a30=2.1847483329964286e+00;
-  a30=(a30*a07);
+  a30=(a30*a06);
   a31=1.0366547913718749e+01;
   a30=(a30-a31);
-  a30=(a07/a30);
+  a30=(a06/a30);
   a31=-2.7547861436009125e+01;
   a32=-1.8169901408833005e+00;
   a32=(a32*a04);
@@ -339,7 +347,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a39=(a38*a18);
   a27=(a27+a39);
   a39=1.1038786994198035e-03;
-  a40=(a39*a09);
+  a40=(a39*a08);
   a41=3.0198353392399710e-03;
   a42=(a41*a31);
   a40=(a40+a42);
@@ -390,7 +398,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a33=(a25*a15);
   a53=(a45*a18);
   a33=(a33+a53);
-  a53=(a46*a09);
+  a53=(a46*a08);
   a54=(a48*a31);
   a53=(a53+a54);
   a33=(a33+a53);
@@ -439,12 +447,12 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a18=(a57*a18);
   a15=(a15+a18);
   a18=1.8871766207652506e-03;
-  a09=(a18*a09);
+  a08=(a18*a08);
   a56=-1.6065710005324634e-06;
   a31=(a56*a31);
-  a09=(a09+a31);
-  a15=(a15+a09);
-  a09=(a15*a12);
+  a08=(a08+a31);
+  a15=(a15+a08);
+  a08=(a15*a12);
   a32=(a54*a32);
   a34=(a57*a34);
   a32=(a32+a34);
@@ -453,7 +461,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a35=(a35+a37);
   a32=(a32+a35);
   a35=(a32*a36);
-  a09=(a09+a35);
+  a08=(a08+a35);
   a54=(a54*a14);
   a57=(a57*a24);
   a54=(a54+a57);
@@ -462,16 +470,16 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a18=(a18+a56);
   a54=(a54+a18);
   a18=(a54*a21);
-  a09=(a09+a18);
-  a53=(a53-a09);
-  a09=-6.5141691530928636e+00;
-  a09=(a09/a42);
-  a18=(a09*a00);
+  a08=(a08+a18);
+  a53=(a53-a08);
+  a08=-6.5141691530928636e+00;
+  a08=(a08/a42);
+  a18=(a08*a00);
   a53=(a53-a18);
   a49=(a49*a53);
   a18=6.5141691530928636e+00;
   a18=(a18-a32);
-  a56=(a09*a52);
+  a56=(a08*a52);
   a18=(a18-a56);
   a56=(a33*a18);
   a57=-8.6076050349363331e-01;
@@ -479,7 +487,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a35=(a35*a04);
   a57=(a57+a35);
   a57=(a57-a15);
-  a35=(a09*a43);
+  a35=(a08*a43);
   a57=(a57-a35);
   a35=(a47*a57);
   a56=(a56+a35);
@@ -544,14 +552,14 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a27=5.0000000000000000e-01;
   a39=2.1459999999999999e+00;
   a39=(a39-a54);
-  a09=(a09*a02);
-  a39=(a39+a09);
-  a09=(a47*a39);
+  a08=(a08*a02);
+  a39=(a39+a08);
+  a08=(a47*a39);
   a38=-1.0000000000000000e-02;
   a38=(a38-a25);
   a25=(a38*a18);
-  a09=(a09-a25);
-  a25=(a28*a09);
+  a08=(a08-a25);
+  a25=(a28*a08);
   a46=(a33*a39);
   a48=(a38*a57);
   a46=(a46+a48);
@@ -561,7 +569,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a40=(a40-a29);
   a56=(a40*a56);
   a25=(a25-a56);
-  a25=(a08/a25);
+  a25=(a09/a25);
   a25=(a27*a25);
   a49=(a49*a25);
   a02=(a02*a49);
@@ -580,25 +588,25 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a46=(a46*a25);
   a52=(a52*a46);
   a00=(a00-a52);
-  a09=(a09*a35);
+  a08=(a08*a35);
   a39=(a50*a39);
   a18=(a40*a18);
   a39=(a39-a18);
   a39=(a39*a41);
-  a09=(a09-a39);
+  a08=(a08-a39);
   a50=(a50*a38);
   a40=(a40*a47);
   a50=(a50-a40);
   a50=(a50*a53);
-  a09=(a09+a50);
-  a09=(a09*a25);
-  a43=(a43*a09);
+  a08=(a08+a50);
+  a08=(a08*a25);
+  a43=(a43*a08);
   a00=(a00-a43);
-  a08=(a08/a42);
-  a27=(a27*a08);
+  a09=(a09/a42);
+  a27=(a27*a09);
   a00=(a00*a27);
   if (res[0]!=0) res[0][0]=a00;
-  if (res[0]!=0) res[0][1]=a09;
+  if (res[0]!=0) res[0][1]=a08;
   if (res[0]!=0) res[0][2]=a46;
   if (res[0]!=0) res[0][3]=a49;
   a00=5.3333333333333336e+01;
@@ -611,13 +619,13 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a32=(a32*a46);
   a55=(a55+a32);
   a00=(a00*a15);
-  a09=(a09-a12);
-  a00=(a00*a09);
+  a08=(a08-a12);
+  a00=(a00*a08);
   a55=(a55+a00);
   if (res[0]!=0) res[0][4]=a55;
-  a06=(a06-a07);
-  a06=casadi_fabs(a06);
-  if (res[1]!=0) res[1][0]=a06;
+  a07=(a07-a06);
+  a07=casadi_fabs(a07);
+  if (res[1]!=0) res[1][0]=a07;
   return 0;
 }
 

@@ -6,6 +6,9 @@
 #include "switched_pi_bank_angle_slip.h"
 #include "switched_pi_bank_angle_slip_kernel.h"
 
+#include <stdint.h>
+#include <string.h>
+
 /* Fixed work sizes from the kernel's work query at generation time; checked by
  * switched_pi_bank_angle_slip_check_work(). The arrays live on the stack of each call: no state between calls. */
 #define SWITCHED_PI_BANK_ANGLE_SLIP_SZ_ARG 4
@@ -37,6 +40,17 @@ int switched_pi_bank_angle_slip_check_work(void)
     return 0;
 }
 
+/* Bit 63 of the result is set iff x is +-Inf or NaN (all exponent bits set: the masked exponent
+ * plus one exponent unit carries into the sign bit only then). Integer instructions only, so the
+ * per-sample checks do not compete with the step for the floating-point units, which bound the
+ * batch loop. */
+static uint64_t nonfinite_bit(const double *x)
+{
+    uint64_t bits;
+    memcpy(&bits, x, sizeof bits);
+    return (bits & UINT64_C(0x7ff0000000000000)) + UINT64_C(0x0010000000000000);
+}
+
 /* The whole step is in the batch loop (the single step calls it with n = 1), so that the
  * compiler can fuse loop, step and kernel into one function. With link-time optimization GCC
  * would also clone the loop for n = 1 and then inline the kernel into neither copy: one copy. */
@@ -57,8 +71,8 @@ void switched_pi_bank_angle_slip_run_flat(double *state, const double *inputs, s
     size_t k;
 
     /* The kernel writes nothing but next, excess: it runs first, and the checks after
-     * it, off its critical path, decide what is kept. x - x is 0 for every finite x and NaN for
-     * NaN and +-Inf: one comparison per vector. */
+     * it, off its critical path, decide what is kept (integer tests of the exponent bits, one
+     * per vector). */
     for (k = 0; k < n; ++k) {
         input = inputs + k * SWITCHED_PI_BANK_ANGLE_SLIP_N_INPUT;
         out = outputs + k * SWITCHED_PI_BANK_ANGLE_SLIP_N_OUTPUT;
@@ -70,13 +84,13 @@ void switched_pi_bank_angle_slip_run_flat(double *state, const double *inputs, s
         res[1] = &excess;
         excess = 0.0;
         failed = switched_pi_bank_angle_slip_kernel(arg, res, iw, w, 0) != 0;
-        if (!((((input[0] - input[0]) + (input[1] - input[1])) + ((input[2] - input[2]) + ((input[3] - input[3]) + (input[4] - input[4])))) == 0.0)) {
+        if (((nonfinite_bit(input + 0) | nonfinite_bit(input + 1) | nonfinite_bit(input + 2) | nonfinite_bit(input + 3) | nonfinite_bit(input + 4)) >> 63) != 0) {
             /* a NaN or infinite input: the state is held and the outputs repeat it */
             for (i = 0; i < SWITCHED_PI_BANK_ANGLE_SLIP_N_OUTPUT; ++i) out[i] = state[5 + i];
             status[k] = SWITCHED_PI_BANK_ANGLE_SLIP_NONFINITE_INPUT;
             continue;
         }
-        status[k] = (failed || !(((((next[0] - next[0]) + (next[1] - next[1])) + ((next[2] - next[2]) + ((next[3] - next[3]) + (next[4] - next[4])))) + (((next[5] - next[5]) + ((next[6] - next[6]) + (next[7] - next[7]))) + ((next[8] - next[8]) + ((next[9] - next[9]) + (next[10] - next[10]))))) == 0.0))
+        status[k] = (failed || ((nonfinite_bit(next + 0) | nonfinite_bit(next + 1) | nonfinite_bit(next + 2) | nonfinite_bit(next + 3) | nonfinite_bit(next + 4) | nonfinite_bit(next + 5) | nonfinite_bit(next + 6) | nonfinite_bit(next + 7) | nonfinite_bit(next + 8) | nonfinite_bit(next + 9) | nonfinite_bit(next + 10)) >> 63) != 0)
             ? SWITCHED_PI_BANK_ANGLE_SLIP_NUMERICAL_FAILURE : SWITCHED_PI_BANK_ANGLE_SLIP_OK;
         /* the kernel clamps the scheduling signals for the memberships and reports by how much */
         if (excess > 0.0) status[k] |= SWITCHED_PI_BANK_ANGLE_SLIP_SCHEDULING_CLAMPED;
