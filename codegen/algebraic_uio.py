@@ -212,27 +212,17 @@ class AlgebraicUIOBuild:
         }
 
     def artifact(self) -> dict:
-        from .pipeline import _sig    # the one report rounding (pipeline imports this module lazily)
-        sol = self.design.solution
+        from .pipeline import _sig, artifact_head, solver_certificate   # pipeline imports this module lazily
         return {
-            "observer": self.name,
-            "config": self.config.to_json(),
-            "signals": {"state": self.state_names, "input": self.input_names, "output": self.output_names,
-                        "scheduling": [str(s) for s in self.dec.symbols], "input_boxes": self.input_boxes(),
-                        # parameter-derivative estimates outside their bounds are flagged too
-                        "flags_from_inputs_only": False},
+            # parameter-derivative estimates outside their bounds are flagged too
+            **artifact_head(self, self.dec.symbols, flags_from_inputs_only=False),
             "decoupling": _sig(self.dec.to_json()),
             "classical_uio_11": _sig(self.classical),
             **_sig(self.design.gains_json(), 12),
             "differentiators": {k: {"order": s.order, "lipschitz": s.lipschitz, "gains": list(s.gains)}
                                 for k, s in self.settings.differentiators.items()},
-            "certificate": {
-                "solver_blocks": len(sol.checks), "solver_worst_block": sol.worst.label,
-                "solver_worst_min_eig": _sig(sol.worst.min_eig),
-                "recheck": _sig(self.certificate), "dense_check": _sig(self.dense),
-                "fixed_modes": _sig(self.design.fixed_modes),
-                "compare_gain": _sig(self.compare),
-            },
+            "certificate": solver_certificate(self.design.solution, recheck=self.certificate, dense_check=self.dense,
+                                              fixed_modes=self.design.fixed_modes, compare_gain=self.compare),
             "discrete": _sig(self.discrete),
             "auxiliary_system": _sig(self.aux),
         }

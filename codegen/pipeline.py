@@ -192,21 +192,12 @@ class TSFuzzyBuild:
         return state, inputs, outs
 
     def artifact(self) -> dict:
-        sol = self.design.solution
         return {
-            "observer": self.name,
-            "config": self.config.to_json(),
-            "signals": {"state": self.state_names, "input": self.input_names, "output": self.output_names,
-                        "scheduling": [str(p.expr) for p in self.ts.premises],
-                        "input_boxes": input_boxes(self)},
+            **artifact_head(self, [p.expr for p in self.ts.premises]),
             "ts_model": _sig(self.ts.to_json(), 12),
             **self.design.gains_json(),
-            "certificate": {
-                "solver_blocks": len(sol.checks), "solver_worst_block": sol.worst.label,
-                "solver_worst_min_eig": _sig(sol.worst.min_eig),
-                "recheck": _sig(self.certificate),
-                "lyapunov_decrease_33": _sig(self.decrease),
-            },
+            "certificate": solver_certificate(self.design.solution, recheck=self.certificate,
+                                              lyapunov_decrease_33=self.decrease),
         }
 
 
@@ -309,6 +300,19 @@ def input_boxes(b) -> dict:
             if sym in b.data.raw_signals}
 
 
+def artifact_head(b, scheduling: list, **signals) -> dict:
+    """The part of every family's design artifact that names the observer and its signals."""
+    return {"observer": b.name, "config": b.config.to_json(),
+            "signals": {"state": b.state_names, "input": b.input_names, "output": b.output_names,
+                        "scheduling": [str(x) for x in scheduling], "input_boxes": input_boxes(b), **signals}}
+
+
+def solver_certificate(sol, **rechecks) -> dict:
+    """Solver's worst block and the independent re-checks, as every family's artifact reports them."""
+    return {"solver_blocks": len(sol.checks), "solver_worst_block": sol.worst.label,
+            "solver_worst_min_eig": _sig(sol.worst.min_eig), **{k: _sig(v) for k, v in rechecks.items()}}
+
+
 def _sig(x, digits=6):
     """Round report figures so the committed artifact does not depend on last-bit noise."""
     if isinstance(x, dict):
@@ -325,13 +329,10 @@ def artifact(b: ObserverBuild) -> dict:
     sol = b.design.solution
     worst = sol.worst
     gains = {f"M{i + 1}": np.linalg.solve(q, l).tolist() for i, (q, l) in enumerate(zip(b.design.Q, b.design.L))}
+    derived = ({"derived_inputs": {str(sym): str(expr) for sym, expr in b.lpv.derived_inputs}}
+               if b.lpv.derived_inputs else {})
     return {
-        "observer": b.name,
-        "config": b.config.to_json(),
-        "signals": {"state": b.state_names, "input": b.input_names, "output": b.output_names,
-                    "scheduling": [str(x) for x in b.poly.signals], "input_boxes": input_boxes(b),
-                    **({"derived_inputs": {str(sym): str(expr) for sym, expr in b.lpv.derived_inputs}}
-                       if b.lpv.derived_inputs else {})},
+        **artifact_head(b, b.poly.signals, **derived),
         "polytope": b.poly.to_json(),
         "taylor_error": _sig(b.taylor_error),
         **b.design.gains_json(),

@@ -123,26 +123,16 @@ class SwitchedPIBuild:
         }
 
     def artifact(self) -> dict:
-        from .pipeline import _sig
-        sol = self.design.solution
+        from .pipeline import _sig, artifact_head, solver_certificate
         return {
-            "observer": self.name,
-            "config": self.config.to_json(),
-            "signals": {"state": self.state_names, "input": self.input_names, "output": self.output_names,
-                        "scheduling": [str(a.premise) for a in self.model.rule.axes],
-                        "input_boxes": self.input_boxes(),
-                        "flags_from_inputs_only": self.flags_from_inputs_only},
+            **artifact_head(self, [a.premise for a in self.model.rule.axes],
+                            flags_from_inputs_only=self.flags_from_inputs_only),
             "switched_model": _sig(self.model.to_json(), 12),
             "assumptions": self.assumptions,
             **self.design.gains_json(),
             "discrete": {"Phi": self.discrete.Phi.tolist(), "G": self.discrete.G.tolist(),
                          **_sig(self.discrete_certificate)},
-            "certificate": {
-                "solver_blocks": len(sol.checks), "solver_worst_block": sol.worst.label,
-                "solver_worst_min_eig": _sig(sol.worst.min_eig),
-                "recheck": _sig(self.certificate),
-                "hinf": _sig(self.hinf),
-            },
+            "certificate": solver_certificate(self.design.solution, recheck=self.certificate, hinf=self.hinf),
         }
 
 

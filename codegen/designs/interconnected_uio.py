@@ -906,30 +906,23 @@ class InterconnectedBuild:
         return lines
 
     def artifact(self) -> dict:
-        from ..pipeline import _sig
-        sol = self.design.solution
+        from ..pipeline import _sig, artifact_head, solver_certificate
         gains = {}
         for sd in self.design.subsystems:
             gains[sd.name] = {"H": sd.H.tolist(), "T": sd.T.tolist(), "S": sd.S.tolist(), "W": sd.W.tolist(),
                               "Z": sd.Z.tolist(), "P": sd.P.tolist(), "eta": sd.eta,
                               "Omega": [o.tolist() for o in sd.Omega], "CB_pinv": sd.CBp.tolist()}
         return {
-            "observer": self.name,
-            "config": self.config.to_json(),
-            "signals": {"state": self.state_names, "input": self.input_names, "output": self.output_names,
-                        "scheduling": [str(p.expr) for sub in self.ts.subsystems for p in sub.premises],
-                        "input_boxes": self.input_boxes(),
-                        # the v_x estimate and the premises are flagged too, not only the inputs
-                        "flags_from_inputs_only": False},
+            # the v_x estimate and the premises are flagged too, not only the inputs
+            **artifact_head(self, [p.expr for sub in self.ts.subsystems for p in sub.premises],
+                            flags_from_inputs_only=False),
             "ts_model": _sig(self.ts.to_json(), 12),
             "settings": {k: getattr(self.design.settings, k) for k in
                          ("alpha", "weight", "coupling_gain", "gain_bound", "margin", "tol")},
             "differentiators": {sig: {"order": s.order, "lipschitz": s.lipschitz, "gains": list(s.gains)}
                                 for sig, s in self.layout.hosmd},
             "gains": _sig(gains, 12),
-            "certificate": {"solver_blocks": len(sol.checks), "solver_worst_block": sol.worst.label,
-                            "solver_worst_min_eig": _sig(sol.worst.min_eig),
-                            "recheck": _sig(self.certificate), "discrete": _sig(self.discrete)},
+            "certificate": solver_certificate(self.design.solution, recheck=self.certificate, discrete=self.discrete),
         }
 
 
