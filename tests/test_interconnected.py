@@ -336,3 +336,6 @@ def test_identification_calibration_drive_arguments_are_checked():
     for bad in ({"frictions": ()}, {"frictions": (1.0, 0.0)}, {"braking": ()}, {"braking": (0.6, 1.5)}):
         with pytest.raises(ModelDefinitionError, match="calibration"):
             satory.identify(1, **bad)
+    # the effective rolling radius comes from a free-rolling rear axle: not on a rear-wheel-drive car
+    with pytest.raises(ModelDefinitionError, match="calibration"):
+        satory.identify(2, effective_radius=True)

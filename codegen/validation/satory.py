@@ -371,7 +371,7 @@ CALIBRATION_LAPS = 1
 
 
 def identify(vehicle: int = 1, laps: int = CALIBRATION_LAPS, frictions: tuple = (1.0,),
-             braking: tuple = (ProfileLimits.braking,)) -> dict:
+             braking: tuple = (ProfileLimits.braking,), effective_radius: bool = False) -> dict:
     """Effective tyre and aligning coefficients of the model (5), (4), identified on a calibration drive.
 
     Seed 003 identifies its model parameters "from an identification process using recorded
@@ -385,35 +385,53 @@ def identify(vehicle: int = 1, laps: int = CALIBRATION_LAPS, frictions: tuple = 
     bicycle balance, alpha_i of (6)); aligning torque at the handwheel -T_al = t_sb alpha_f. The
     static-load PAC2002 slopes are returned beside them (the fits differ because of load transfer:
     under braking the rear axle's effective slip stiffness is about half its static slope).
-    Returns {name: (value, r2)}.
+    ``effective_radius``: first identify the effective rolling radius R of (2), (6) (the standard
+    wheel-speed calibration: least squares v_x = R w_r over the samples where the undriven rear axle
+    rolls free, |B_r| <= 1 N m; front-wheel drive only), then the slip stiffnesses with the slips of
+    that R; returned as "R" with the R^2 of v_x about its mean. Off for the committed parameters
+    (R = the set's R_w). Returns {name: (value, r2)}.
     """
     from .commonroad_plant import vehicle_parameters
     if not frictions or not braking or not all(f > 0 for f in frictions) or not all(0 < b <= 1 for b in braking):
         raise ModelDefinitionError(f"calibration frictions must be > 0 and braking levels in (0, 1], got "
                                    f"{frictions!r}, {braking!r}")
     p = vehicle_parameters(vehicle)
+    if effective_radius and p.T_se != 1.0:
+        raise ModelDefinitionError(f"calibration of the effective rolling radius needs a free-rolling (undriven) "
+                                   f"rear axle; CommonRoad vehicle {vehicle} drives its rear axle")
     track = _repeat(oval_track(), laps)
-    R, L = p.R_w, p.a + p.b
+    L = p.a + p.b
+    traces = [simulate_commonroad(track, float(mu), vehicle, 5.0, limits=ProfileLimits(braking=float(b)))
+              for mu in frictions for b in braking]
+    fits = {}
+    R = p.R_w
+    if effective_radius:
+        v, w = [], []
+        for tr in traces:
+            free = (tr["t"] >= SETTLE_TIME) & (np.abs(tr["B_r"]) <= 1.0)
+            v.append(tr["v_x"][free])
+            w.append(tr["omega_r"][free])
+        v, w = np.concatenate(v), np.concatenate(w)
+        R = float(w @ v / (w @ w))
+        fits["R"] = (R, 1.0 - float(np.sum((v - R * w) ** 2) / np.sum((v - v.mean()) ** 2)))
     terms = {k: ([], []) for k in ("C_lf", "C_lr", "C_f", "C_r", "t_sb")}
-    for mu in frictions:
-        for b in braking:
-            tr = simulate_commonroad(track, float(mu), vehicle, 5.0, limits=ProfileLimits(braking=float(b)))
-            vx = tr["v_x"]
-            keep = tr["t"] >= SETTLE_TIME
-            lam_f = (R * tr["omega_f"] - vx) / np.maximum(vx, R * tr["omega_f"])
-            lam_r = (R * tr["omega_r"] - vx) / np.maximum(vx, R * tr["omega_r"])
-            rdot = np.gradient(tr["r"], tr["t"])
-            F_yf = (p.m * tr["a_y"] * p.b + p.I_z * rdot) / L
-            F_yr = (p.m * tr["a_y"] * p.a - p.I_z * rdot) / L
-            a_f = tr["delta"] - (tr["v_y"] + p.a * tr["r"]) / vx
-            a_r = -(tr["v_y"] - p.b * tr["r"]) / vx
-            # the rear axle has torque only when braking (front-wheel drive)
-            rear = keep & (np.abs(tr["B_r"]) > 1.0) if p.T_se == 1.0 else keep
-            for k, y, x, mask in (("C_lf", tr["F_xf"], lam_f, keep), ("C_lr", tr["F_xr"], lam_r, rear),
-                                  ("C_f", F_yf, a_f, keep), ("C_r", F_yr, a_r, keep),
-                                  ("t_sb", -tr["T_al"], a_f, keep)):
-                terms[k][0].append(y[mask])
-                terms[k][1].append(x[mask])
+    for tr in traces:
+        vx = tr["v_x"]
+        keep = tr["t"] >= SETTLE_TIME
+        lam_f = (R * tr["omega_f"] - vx) / np.maximum(vx, R * tr["omega_f"])
+        lam_r = (R * tr["omega_r"] - vx) / np.maximum(vx, R * tr["omega_r"])
+        rdot = np.gradient(tr["r"], tr["t"])
+        F_yf = (p.m * tr["a_y"] * p.b + p.I_z * rdot) / L
+        F_yr = (p.m * tr["a_y"] * p.a - p.I_z * rdot) / L
+        a_f = tr["delta"] - (tr["v_y"] + p.a * tr["r"]) / vx
+        a_r = -(tr["v_y"] - p.b * tr["r"]) / vx
+        # the rear axle has torque only when braking (front-wheel drive)
+        rear = keep & (np.abs(tr["B_r"]) > 1.0) if p.T_se == 1.0 else keep
+        for k, y, x, mask in (("C_lf", tr["F_xf"], lam_f, keep), ("C_lr", tr["F_xr"], lam_r, rear),
+                              ("C_f", F_yf, a_f, keep), ("C_r", F_yr, a_r, keep),
+                              ("t_sb", -tr["T_al"], a_f, keep)):
+            terms[k][0].append(y[mask])
+            terms[k][1].append(x[mask])
 
     def fit(ys, xs):
         y, x = np.concatenate(ys), np.concatenate(xs)
@@ -421,7 +439,8 @@ def identify(vehicle: int = 1, laps: int = CALIBRATION_LAPS, frictions: tuple = 
         r2 = 1.0 - float(np.sum((y - c * x) ** 2) / np.sum((y - y.mean()) ** 2))
         return c, r2
 
-    return {k: fit(*v) for k, v in terms.items()}
+    fits.update({k: fit(*v) for k, v in terms.items()})
+    return fits
 
 
 def _repeat(track: Track, laps: int) -> Track:
@@ -464,6 +483,10 @@ def params_toml(vehicle: int = 1, identified: dict | None = None) -> str:
 
     def note(k):
         return f"identified, R^2 {r2[k]!r} (static-load PAC2002 value {static[k]:.6g})"
+    radius = f"R = {p.R_w!r}        # m"
+    if "R" in ident:
+        radius = (f"R = {ident['R']!r}        # m, effective rolling radius (free-rolling rear axle), identified, "
+                  f"R^2 {r2['R']!r} (the set's R_w {p.R_w!r})")
     names = {1: "Ford Escort", 2: "BMW 320i", 3: "VW Vanagon"}
     drive = "front" if p.T_se == 1.0 else "rear" if p.T_se == 0.0 else "split"
     return f"""# CommonRoad parameter set {vehicle} ({names[vehicle]}) for the seed-003 model, derived by
@@ -489,7 +512,7 @@ C_lf = {clf!r}        # N, axle longitudinal slip stiffness, {note("C_lf")}
 C_lr = {clr!r}        # N, {note("C_lr")}
 I_wf = {2 * p.I_y_w!r}        # kg m^2, two wheels
 I_wr = {2 * p.I_y_w!r}
-R = {p.R_w!r}        # m
+{radius}
 I_s = {col.I_s!r}        # kg m^2, the plant's column
 R_s = {col.R_s!r}
 B_s = {col.B_s!r}
