@@ -2,7 +2,8 @@
 
 For every generated observer: its design figures (from the artifact), then the compiled
 C step on its family's library scenarios (two; seed 004: the seed's three) against its nominal
-plant (the exact symbolic model in closed loop with the scenario's driver, sensor noise), beside
+plant in closed loop with the scenario's driver (the model module's truth plant, e.g. Pacejka tyres,
+where the parameter set has its values, else the exact symbolic model; the line names which), beside
 the KF/EKF baselines, in the seed's table format (angles in degrees).
 """
 from __future__ import annotations
@@ -102,7 +103,7 @@ def main(json_output: bool = False) -> int:
         for scen, r in e["scenarios"].items():
             noise = {"ts_fuzzy_uio": "noise-free as the seed's Table II",
                      "interconnected_uio": "noise-free as the seed's simulator runs"}.get(e["family"], "sensor noise")
-            print(f"   {scen}: {r['plant']} plant, {noise}, compiled C step, {r['samples']} samples, "
+            print(f"   {scen}: plant {r.get('plant_model', r['plant'])}, {noise}, compiled C step, {r['samples']} samples, "
                   f"max |a_y| {r['max_abs_ay']:.1f} m/s^2, {r['status_flags']} flagged")
             print("     " + validate.format_table(r).replace("\n", "\n     "))
     print(f"== real data: {REAL_DATA_OBSERVER} on {real['data']} ({real['samples']} samples at 100 Hz, "

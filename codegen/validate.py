@@ -176,7 +176,7 @@ def run_ts_scenario(config, scenario, plant: str = "nominal", duration: float | 
     elif plant in ("nominal", "model"):
         definition = (truth_plant(config, params) if plant == "nominal" else None) or model_def
         truth = simulate.angle_torque_plant(config, definition, params, scn, progress=progress)
-        plant_model = definition.name
+        plant_model = definition.name + (" (exact model)" if definition is model_def else "")
     else:
         raise ModelDefinitionError(f"plant must be 'nominal', 'model' or 'commonroad', got {plant!r}")
     obs = load(config.name)
