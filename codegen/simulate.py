@@ -15,6 +15,15 @@ from .errors import ModelDefinitionError, SampleError
 from .model import LPVModel
 
 
+def rk4_step(rhs, x, h: float):
+    """One classical Runge-Kutta step of x' = rhs(x): the integrator of every truth plant in the library."""
+    k1 = rhs(x)
+    k2 = rhs(x + 0.5 * h * k1)
+    k3 = rhs(x + 0.5 * h * k2)
+    k4 = rhs(x + h * k3)
+    return x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
 def plant_rhs(lpv: LPVModel, definition=None):
     """Numeric x_dot = f(x, u, d, rho) from a symbolic definition (exact, not the polytope).
 
@@ -97,11 +106,7 @@ def nominal_plant(config, lpv: LPVModel, scn, definition=None, progress=None) ->
         if k == n - 1:
             break
         for _ in range(sub):
-            k1 = f(x, t_d, t_a, vx, ax)
-            k2 = f(x + 0.5 * h * k1, t_d, t_a, vx, ax)
-            k3 = f(x + 0.5 * h * k2, t_d, t_a, vx, ax)
-            k4 = f(x + h * k3, t_d, t_a, vx, ax)
-            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            x = rk4_step(lambda xs: f(xs, t_d, t_a, vx, ax), x, h)
         if not np.all(np.isfinite(x)):
             raise SampleError(f"nominal plant diverged at t = {scn.t[k]:.2f} s in scenario {scn.name!r}")
     out["t"] = np.asarray(scn.t, float)
@@ -233,11 +238,7 @@ def angle_torque_plant(config, definition, params, scn, progress=None, substeps:
         if k == n - 1:
             break
         for _ in range(substeps):
-            k1 = f(z, T, delta, mu)
-            k2 = f(z + 0.5 * h * k1, T, delta, mu)
-            k3 = f(z + 0.5 * h * k2, T, delta, mu)
-            k4 = f(z + h * k3, T, delta, mu)
-            z = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            z = rk4_step(lambda zs: f(zs, T, delta, mu), z, h)
         if not np.all(np.isfinite(z)):
             raise SampleError(f"plant diverged at t = {scn.t[k]:.2f} s in scenario {scn.name!r}")
     out["t"] = np.asarray(scn.t, float)

@@ -58,19 +58,18 @@ def secant_axle_stiffness(vehicle: int, slip: float) -> tuple:
 
 def roll_params_toml(vehicle: int = 2) -> str:
     """The parameter file of ``roll_single_track`` for a CommonRoad car, as a string."""
-    from .commonroad_plant import _static_loads, tyre_cornering_stiffness, vehicle_parameters
+    from .commonroad_plant import VEHICLE_NAMES, _static_loads, tyre_cornering_stiffness, vehicle_parameters
     p = vehicle_parameters(vehicle)
     fzf, fzr = _static_loads(p)
     cf, cr = tyre_cornering_stiffness(p, fzf), tyre_cornering_stiffness(p, fzr)
     eq = roll_equivalents(p)
-    names = {1: "Ford Escort", 2: "BMW 320i", 3: "VW Vanagon"}
-    return f"""# Roll-augmented single-track model (seed 001) of CommonRoad parameter set {vehicle} ({names[vehicle]}),
+    return f"""# Roll-augmented single-track model (seed 001) of CommonRoad parameter set {vehicle} ({VEHICLE_NAMES[vehicle]}),
 # derived number by number by codegen.validation.banked_road.roll_params_toml (a test re-derives it).
 
 [meta]
 source = "commonroad-vehicle-models parameters_vehicle{vehicle} (vehicle_dynamics_mb), linear roll equivalents"
 commonroad_vehicle = "{vehicle}"
-car = "{names[vehicle]} (CommonRoad vehicle {vehicle})"
+car = "{VEHICLE_NAMES[vehicle]} (CommonRoad vehicle {vehicle})"
 
 [parameters]
 m = {p.m!r}        # kg, total mass (p.m)

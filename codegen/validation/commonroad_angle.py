@@ -21,8 +21,9 @@ import math
 import numpy as np
 
 from ..errors import SampleError
-from .commonroad_plant import PlantError, _Plant, PlantConfig, _static_loads, tyre_cornering_stiffness, \
-    vehicle_parameters
+from ..simulate import rk4_step
+from .commonroad_plant import VEHICLE_NAMES, PlantError, _Plant, PlantConfig, _static_loads, \
+    tyre_cornering_stiffness, vehicle_parameters
 
 SERVO_GAIN = 20.0     # rad/s, steering servo bandwidth
 
@@ -37,14 +38,13 @@ def seed004_params_toml(vehicle: int = 2) -> str:
     p = vehicle_parameters(vehicle)
     fzf, fzr = _static_loads(p)
     cf, cr = tyre_cornering_stiffness(p, fzf), tyre_cornering_stiffness(p, fzr)
-    names = {1: "Ford Escort", 2: "BMW 320i", 3: "VW Vanagon"}
-    return f"""# CommonRoad parameter set {vehicle} ({names[vehicle]}) for the seed-004 model, derived by
+    return f"""# CommonRoad parameter set {vehicle} ({VEHICLE_NAMES[vehicle]}) for the seed-004 model, derived by
 # codegen.validation.commonroad_angle.seed004_params_toml. Do not edit by hand (a test regenerates it).
 
 [meta]
 source = "commonroad-vehicle-models parameters_vehicle{vehicle}; D_x of seed 004 eq. (5)"
 commonroad_vehicle = "{vehicle}"
-car = "{names[vehicle]} (CommonRoad vehicle {vehicle})"
+car = "{VEHICLE_NAMES[vehicle]} (CommonRoad vehicle {vehicle})"
 
 [parameters]
 M = {p.m!r}        # kg, vehicle mass
@@ -112,14 +112,7 @@ def simulate(scenario, vehicle: int = 2, sample_rate: float = 100.0, dt_internal
             break
         for _ in range(sub):
             # the servo acts continuously on the held command; the torque demand is held
-            k1 = rhs(z, SERVO_GAIN * (delta_cmd - z[2]), a_x)
-            z2 = z + 0.5 * h * k1
-            k2 = rhs(z2, SERVO_GAIN * (delta_cmd - z2[2]), a_x)
-            z3 = z + 0.5 * h * k2
-            k3 = rhs(z3, SERVO_GAIN * (delta_cmd - z3[2]), a_x)
-            z4 = z + h * k3
-            k4 = rhs(z4, SERVO_GAIN * (delta_cmd - z4[2]), a_x)
-            z = z + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+            z = rk4_step(lambda zs: rhs(zs, SERVO_GAIN * (delta_cmd - zs[2]), a_x), z, h)
         if not np.all(np.isfinite(z)):
             raise PlantError(f"{scenario.name}: non-finite plant state at t = {scenario.t[k]:.3f} s")
         if abs(z[2]) >= dmax or z[3] < 1.0 or math.isnan(z[3]):

@@ -50,6 +50,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ModelDefinitionError, SampleError, UiogenError
+from ..simulate import rk4_step
+
+VEHICLE_NAMES = {1: "Ford Escort", 2: "BMW 320i", 3: "VW Vanagon"}   # CommonRoad parameter sets
 
 __all__ = [
     "PlantError", "ColumnParams", "TABLE1_COLUMN", "PlantConfig", "GroundTruth", "vehicle_parameters",
@@ -282,8 +285,7 @@ def params_toml(vehicle: int = 2, column: ColumnParams = TABLE1_COLUMN, a_s: flo
     k_r = 2 * fzr * c1 * rc.camber_per_roll_r * rc.roll_gradient
     F_cf = 2 * fzf * c0 * math.copysign(1.0, rc.camber_per_roll_f)
     F_cr = 2 * fzr * c0 * math.copysign(1.0, rc.camber_per_roll_r)
-    names = {1: "Ford Escort", 2: "BMW 320i", 3: "VW Vanagon"}
-    return f"""# CommonRoad parameter set {vehicle} ({names[vehicle]}), derived by codegen.validation.commonroad_plant.
+    return f"""# CommonRoad parameter set {vehicle} ({VEHICLE_NAMES[vehicle]}), derived by codegen.validation.commonroad_plant.
 # Steering column: seed 000 Table I. Cornering stiffness: PAC2002 slope at zero slip, static load.
 # Roll camber: quasi-static roll of the multi-body model ({math.degrees(rc.roll_gradient):.3f} deg per m/s^2),
 # camber per roll {rc.camber_per_roll_f:.4f} (front) / {rc.camber_per_roll_r:.4f} (rear), PAC2002 camber terms.
@@ -291,7 +293,7 @@ def params_toml(vehicle: int = 2, column: ColumnParams = TABLE1_COLUMN, a_s: flo
 [meta]
 source = "commonroad-vehicle-models parameters_vehicle{vehicle} + seed 000 Table I column"
 commonroad_vehicle = "{vehicle}"
-car = "{names[vehicle]} (CommonRoad vehicle {vehicle})"
+car = "{VEHICLE_NAMES[vehicle]} (CommonRoad vehicle {vehicle})"
 
 [parameters]
 l_f = {p.a!r}        # m, CoG to front axle
@@ -453,11 +455,7 @@ def simulate(scenario, cfg: PlantConfig = PlantConfig(), progress=None) -> Groun
         if k == n - 1:
             break
         for _ in range(sub):
-            k1 = plant.rhs(z, torque, a_cmd)
-            k2 = plant.rhs(z + 0.5 * h * k1, torque, a_cmd)
-            k3 = plant.rhs(z + 0.5 * h * k2, torque, a_cmd)
-            k4 = plant.rhs(z + h * k3, torque, a_cmd)
-            z = z + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+            z = rk4_step(lambda zs: plant.rhs(zs, torque, a_cmd), z, h)
         if not np.all(np.isfinite(z)):
             raise PlantError(f"{scenario.name}: non-finite plant state at t = {tk:.3f} s")
         if abs(z[2]) >= dmax:

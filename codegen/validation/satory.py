@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ModelDefinitionError, SampleError
+from ..simulate import rk4_step
 from . import metrics
 
 G = 9.81
@@ -281,11 +282,7 @@ def simulate_commonroad(track: Track, mu: float, vehicle: int, l_s: float, durat
         rows["F_xr"].append((rows["B_r"][-1] - p.I_y_w * (dz[25] + dz[26])) / p.R_w)
         rows["F_yf"].append(np.nan); rows["F_yr"].append(np.nan)
         for _ in range(sub):
-            k1 = plant.rhs(z, torque, a_x)
-            k2 = plant.rhs(z + 0.5 * h * k1, torque, a_x)
-            k3 = plant.rhs(z + 0.5 * h * k2, torque, a_x)
-            k4 = plant.rhs(z + h * k3, torque, a_x)
-            z = z + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+            z = rk4_step(lambda zs: plant.rhs(zs, torque, a_x), z, h)
         if not np.all(np.isfinite(z)):
             raise PlantError(f"{track.name}: non-finite plant state at t = {t:.3f} s")
         if abs(z[2]) >= dmax or z[3] < 1.0:
@@ -348,11 +345,7 @@ def simulate_model(ts, track: Track, mu: float, brake_front: float, drive_front:
         for _ in range(sub):
             kap = track.kappa_at(s)
             u = [T_Bf, B_r, torque, kap]
-            k1 = np.asarray(f(list(x), u, exo), float)
-            k2 = np.asarray(f(list(x + 0.5 * h * k1), u, exo), float)
-            k3 = np.asarray(f(list(x + 0.5 * h * k2), u, exo), float)
-            k4 = np.asarray(f(list(x + h * k3), u, exo), float)
-            x = x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+            x = rk4_step(lambda xs: np.asarray(f(list(xs), u, exo), float), x, h)
             s += h * x[idx["v_x"]]
         if not np.all(np.isfinite(x)):
             raise SampleError(f"{track.name}: the model plant diverged at t = {t:.2f} s")
@@ -463,7 +456,8 @@ def params_toml(vehicle: int = 1, identified: dict | None = None) -> str:
     plant: c_a = 0, F_rr = F_w = 0.
     """
     from vehiclemodels.utils import tire_model
-    from .commonroad_plant import TABLE1_COLUMN, _static_loads, tyre_cornering_stiffness, vehicle_parameters
+    from .commonroad_plant import TABLE1_COLUMN, VEHICLE_NAMES, _static_loads, tyre_cornering_stiffness, \
+        vehicle_parameters
     p = vehicle_parameters(vehicle)
     fzf, fzr = _static_loads(p)
     h = 1e-5
@@ -487,9 +481,8 @@ def params_toml(vehicle: int = 1, identified: dict | None = None) -> str:
     if "R" in ident:
         radius = (f"R = {ident['R']!r}        # m, effective rolling radius (free-rolling rear axle), identified, "
                   f"R^2 {r2['R']!r} (the set's R_w {p.R_w!r})")
-    names = {1: "Ford Escort", 2: "BMW 320i", 3: "VW Vanagon"}
     drive = "front" if p.T_se == 1.0 else "rear" if p.T_se == 0.0 else "split"
-    return f"""# CommonRoad parameter set {vehicle} ({names[vehicle]}) for the seed-003 model, derived by
+    return f"""# CommonRoad parameter set {vehicle} ({VEHICLE_NAMES[vehicle]}) for the seed-003 model, derived by
 # codegen.validation.satory.params_toml: set values + tyre/aligning coefficients identified on a calibration
 # drive ({CALIBRATION_LAPS} lap of the oval, mu = 1; not the validation track). Do not edit by hand (a test
 # regenerates it).
@@ -497,7 +490,7 @@ def params_toml(vehicle: int = 1, identified: dict | None = None) -> str:
 [meta]
 source = "commonroad-vehicle-models parameters_vehicle{vehicle} + seed 000 Table I column (the plant's)"
 commonroad_vehicle = "{vehicle}"
-car = "{names[vehicle]} (CommonRoad vehicle {vehicle}, {drive}-wheel drive, brake split T_sb = {p.T_sb})"
+car = "{VEHICLE_NAMES[vehicle]} (CommonRoad vehicle {vehicle}, {drive}-wheel drive, brake split T_sb = {p.T_sb})"
 
 [parameters]
 m = {p.m!r}        # kg
