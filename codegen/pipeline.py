@@ -101,6 +101,11 @@ class ObserverBuild:
         """A fresh LMI problem of this design (benchmark: our path vs CVXPY on the same blocks)."""
         return linf_uio.build_problem(self.poly, self.design.settings)[0]
 
+    def input_boxes(self) -> dict:
+        """{input name: [min, max]} of the inputs that schedule the step (outside: SCHEDULING_CLAMPED)."""
+        return {str(sym): [lo, hi] for sym, lo, hi in zip(self.poly.signals, self.poly.lowers, self.poly.uppers)
+                if sym in self.data.raw_signals}
+
     def derived_input_docs(self) -> list:
         return [{"name": str(sym), "unit": self.lpv.definition.units.get(str(sym), "-")}
                 for sym, _ in self.lpv.derived_inputs]
@@ -177,6 +182,11 @@ class TSFuzzyBuild:
                            " * and the unknown-input estimate of this sample is not meaningful."),
             "has_warmup": True,
         }
+
+    def input_boxes(self) -> dict:
+        """{input name: [min, max]}: the measured outputs that are premises (outside: SCHEDULING_CLAMPED)."""
+        names = dict(zip(self.ts.measured, self.ts.definition.output_names))
+        return {f"y_{names[s]}": list(self.ts.state_box[s]) for s in self.ts.measured}
 
     def signal_docs(self) -> tuple:
         """(state, inputs, outputs) field docs of the C API; the outputs are the state's tail."""
@@ -289,22 +299,11 @@ def build_linf(config: ObserverConfig, tol: float | None = None) -> ObserverBuil
     return ObserverBuild(config, lpv, poly, err, design, quadratic, cert, data, dcert, timings)
 
 
-def input_boxes(b) -> dict:
-    """{input name: [min, max]} of the inputs that schedule the step (outside: SCHEDULING_CLAMPED)."""
-    if hasattr(b, "input_boxes"):
-        return b.input_boxes()
-    if isinstance(b, TSFuzzyBuild):
-        names = dict(zip(b.ts.measured, b.ts.definition.output_names))
-        return {f"y_{names[s]}": list(b.ts.state_box[s]) for s in b.ts.measured}
-    return {str(sym): [lo, hi] for sym, lo, hi in zip(b.poly.signals, b.poly.lowers, b.poly.uppers)
-            if sym in b.data.raw_signals}
-
-
 def artifact_head(b, scheduling: list, **signals) -> dict:
     """The part of every family's design artifact that names the observer and its signals."""
     return {"observer": b.name, "config": b.config.to_json(),
             "signals": {"state": b.state_names, "input": b.input_names, "output": b.output_names,
-                        "scheduling": [str(x) for x in scheduling], "input_boxes": input_boxes(b), **signals}}
+                        "scheduling": [str(x) for x in scheduling], "input_boxes": b.input_boxes(), **signals}}
 
 
 def solver_certificate(sol, **rechecks) -> dict:
