@@ -42,6 +42,7 @@ import csv
 import gzip
 import io
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -53,7 +54,7 @@ from ..errors import ModelDefinitionError, SampleError
 from . import kalman, metrics
 
 __all__ = [
-    "STANFORD_PATH", "COLUMNS", "DatasetError", "StanfordRun", "load", "VehicleParams",
+    "STANFORD_PATH", "COLUMNS", "UNITS", "DatasetError", "StanfordRun", "load", "VehicleParams",
     "STANFORD_CAR", "highpass_std", "BaselineResult", "linear_kf", "EKFConfig", "ekf",
 ]
 
@@ -63,9 +64,17 @@ STANFORD_PATH = (Path(__file__).resolve().parents[3] / "shared" / "data" / "stan
 
 COLUMNS = ("t", "vx", "vy", "beta_true", "ax", "ay", "yaw_rate", "yaw_acc",
            "delta", "delta_fl", "delta_fr")
-"""Required CSV columns, SI units (s, m/s, rad, m/s², rad/s, rad/s²)."""
+"""Required CSV columns, SI units (s, m/s, rad, m/s², rad/s, rad/s²); see :data:`UNITS`."""
+
+UNITS = {"t": "s", "vx": "m/s", "vy": "m/s", "beta_true": "rad", "ax": "m/s^2", "ay": "m/s^2",
+         "yaw_rate": "rad/s", "yaw_acc": "rad/s^2", "delta": "rad", "delta_fl": "rad",
+         "delta_fr": "rad"}
+"""Declared unit of every column (data README: ``t`` [s], ``vx``, ``vy`` [m/s] at the CoG,
+``beta_true`` [rad], ``ax``, ``ay`` [m/s²] at the CoG, ``yaw_rate`` [rad/s], ``yaw_acc`` [rad/s²],
+``delta``, ``delta_fl``, ``delta_fr`` [rad] road-wheel angles)."""
 
 # Plausibility limits used to catch unit mistakes (degrees instead of radians, km/h, g units).
+# ``t`` has none: its unit is checked through the sample period (see ``_check_time``).
 _LIMITS = {
     "vx": (-5.0, 100.0),          # m/s
     "vy": (-20.0, 20.0),          # m/s
@@ -78,6 +87,31 @@ _LIMITS = {
     "delta_fl": (-0.8, 0.8),
     "delta_fr": (-0.8, 0.8),
 }
+
+_DEG = math.pi / 180.0
+_G = 9.81
+_KMH = 1.0 / 3.6
+_MPH = 0.44704
+
+# Larger-valued units a range violation may come from: (name, factor to the declared unit).
+_ALT_UNITS = {"rad": (("degrees", _DEG),), "rad/s": (("deg/s", _DEG),), "rad/s^2": (("deg/s^2", _DEG),),
+              "m/s": (("km/h", _KMH), ("mph", _MPH)), "m/s^2": (("ft/s^2", 0.3048),)}
+
+PERIOD_RTOL = 0.01
+"""Relative tolerance of ``load(..., sample_time=Ts)``: the log's median period must be Ts (1 ± 0.01)."""
+GAP_FACTOR = 1.5
+"""A time step longer than GAP_FACTOR x the median period is a gap (samples missing)."""
+SHORT_FACTOR = 0.5
+"""A time step shorter than SHORT_FACTOR x the median period is irregular sampling."""
+MAX_PERIOD = 1.0
+"""[s] A vehicle-dynamics log sampled slower than 1 Hz is implausible: t is likely in milliseconds."""
+
+# Physics consistency checks (see ``_check_physics``): minimum |correlation| and number of samples
+# for a relation to be conclusive, and the band around the expected ratio 1 that is accepted.
+_MIN_CORR = 0.5
+_MIN_SAMPLES = 50
+_RATIO_BAND = (1 / 1.6, 1.6)
+_SMOOTH_S = 0.05            # [s] half-width of the boxcar / central difference used for derivatives
 
 
 class DatasetError(SampleError):
@@ -138,14 +172,248 @@ def _resolve(path) -> Path:
     return Path(path)
 
 
-def load(path="stanford") -> StanfordRun:
+_SEPARATORS = {",": "comma ','", ";": "semicolon ';'", "\t": "tab"}
+
+
+def _decode(p: Path, raw: bytes) -> str:
+    """Bytes of a (possibly gzip) file -> text; a UTF-8 byte-order mark is dropped."""
+    try:
+        if raw[:2] == b"\x1f\x8b":
+            raw = gzip.decompress(raw)
+    except (OSError, EOFError, gzip.BadGzipFile) as exc:
+        raise DatasetError(f"cannot read {p}: {exc}") from None
+    if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise DatasetError(f"cannot read {p}: the file is UTF-16 encoded (byte-order mark {raw[:2]!r}); "
+                           f"allowed: UTF-8 or ASCII text; save it as UTF-8")
+    try:
+        return raw.decode("utf-8-sig")          # utf-8-sig strips a leading BOM, if any
+    except UnicodeDecodeError as exc:
+        raise DatasetError(f"cannot read {p}: not UTF-8 text ({exc}); allowed: UTF-8 or ASCII text") from None
+
+
+def _split_header(line: str, sep: str) -> list:
+    return [h.strip() for h in next(csv.reader([line], delimiter=sep), [])]
+
+
+def _separator(p: Path, first_line: str) -> str:
+    """The field separator: the one of ',', ';', tab whose header split holds every column."""
+    fits = [s for s in _SEPARATORS if set(COLUMNS) <= set(_split_header(first_line, s))]
+    if len(fits) == 1:
+        return fits[0]
+    if len(fits) > 1:           # e.g. column names containing the other separator
+        raise DatasetError(f"{p}: ambiguous separator: the header splits into all columns with "
+                           f"{' and with '.join(_SEPARATORS[s] for s in fits)}; allowed: exactly one of "
+                           f"comma, semicolon or tab")
+    # no separator gives every column: let the missing-column message show the widest split
+    return max(_SEPARATORS, key=lambda s: (len(_split_header(first_line, s)), s == ","))
+
+
+_DECIMAL_COMMA = re.compile(r"^\s*[+-]?(\d+,\d*|,\d+)([eE][+-]?\d+)?\s*$")
+
+
+def _to_float(p: Path, rows: list, header: list, sep: str) -> np.ndarray:
+    try:
+        return np.array(rows, dtype=float)
+    except ValueError:
+        pass
+    for i, r in enumerate(rows):           # locate the first bad cell for the message
+        for j, v in enumerate(r):
+            try:
+                float(v)
+            except ValueError:
+                where = f"{p}: column {header[j]!r}, data row {i + 1}"
+                if _DECIMAL_COMMA.match(v):
+                    raise DatasetError(
+                        f"{where}: value {v!r} uses a decimal comma (file read with {_SEPARATORS[sep]} "
+                        f"separators); allowed: '.' as the decimal mark (e.g. 1.5). Re-export the log with "
+                        f"'.' decimals, e.g. pandas.read_csv(path, sep={sep!r}, decimal=',')"
+                        f".to_csv(out, index=False)") from None
+                raise DatasetError(f"{where}: non-numeric value {v!r}; allowed: a decimal number "
+                                   f"such as 1.5 or -2.5e-3") from None
+    raise DatasetError(f"{p}: non-numeric value")   # pragma: no cover (np.array and float agree)
+
+
+def _range_error(p: Path, c: str, a: np.ndarray, lo: float, hi: float) -> DatasetError:
+    unit = UNITS[c]
+    hint = ""
+    for name, f in _ALT_UNITS.get(unit, ()):
+        if lo <= a.min() * f and a.max() * f <= hi:
+            hint = f"; it looks like {name} (x {f:.4g} gives [{a.min() * f:.4g}, {a.max() * f:.4g}] {unit})"
+            break
+    return DatasetError(
+        f"{p}: column {c!r} spans [{a.min():.4g}, {a.max():.4g}], outside the plausible range "
+        f"[{lo}, {hi}] of its declared unit {unit} (wrong unit?){hint}")
+
+
+def _check_time(p: Path, t: np.ndarray, sample_time) -> None:
+    """Strictly increasing, plausible period (not milliseconds), = sample_time, no gaps."""
+    d = np.diff(t)
+    if np.any(d <= 0):
+        i = int(np.flatnonzero(d <= 0)[0])
+        raise DatasetError(f"{p}: time column 't' is not strictly increasing: data row {i + 2} has "
+                           f"t = {t[i + 1]!r} after t = {t[i]!r}; allowed: strictly increasing times in s")
+    per = float(np.median(d))
+    ratio = per / sample_time if sample_time is not None else None
+    if per > MAX_PERIOD or (ratio is not None and 300.0 <= ratio <= 3000.0):
+        expect = f"the sample time {sample_time:g} s" if sample_time is not None else \
+            f"a period of at most {MAX_PERIOD:g} s for a vehicle log"
+        raise DatasetError(
+            f"{p}: column 't' (declared unit s): median step of t {per:.6g} (in the file's unit), "
+            f"expected {expect}; t looks like milliseconds (t / 1000 gives a period of {per / 1000:.6g} s, "
+            f"{1000 / per:.4g} Hz); convert the column to seconds")
+    if ratio is not None and abs(ratio - 1.0) > PERIOD_RTOL:
+        raise DatasetError(
+            f"{p}: column 't': median sample period {per:.6g} s ({1 / per:.4g} Hz), but the expected "
+            f"sample time is {sample_time:.6g} s ({1 / sample_time:.4g} Hz), allowed within "
+            f"{PERIOD_RTOL:.0%}; resample the log to {1 / sample_time:.4g} Hz (e.g. "
+            f"scipy.signal.resample_poly on a uniform grid) or use an observer designed for "
+            f"{per:.6g} s")
+    long, short = d > GAP_FACTOR * per, d < SHORT_FACTOR * per
+    if long.any() or short.any():
+        i = int(np.flatnonzero(long | short)[0])           # the first irregular step of the log
+        bad, what, allowed = ((long, "gap", f"at most {GAP_FACTOR:g}") if long[i] else
+                              (short, "short step", f"at least {SHORT_FACTOR:g}"))
+        missing = f", about {d[i] / per - 1:.0f} sample(s) missing" if long[i] else ""
+        raise DatasetError(
+            f"{p}: column 't': {what} of {d[i]:.6g} s before data row {i + 2} (t = {t[i]:.6g} -> "
+            f"{t[i + 1]:.6g} s{missing}), {d[i] / per:.3g} x the median period {per:.6g} s; "
+            f"{int(bad.sum())} {what}(s) in the log ({int((long | short).sum())} irregular step(s) in "
+            f"all); allowed: steps {allowed} x the median period (no interpolation is done: split the "
+            f"log at the {what} or resample it)")
+
+
+def _box(x: np.ndarray, h: int) -> np.ndarray:
+    """Centered moving average over 2h+1 samples ('valid' part)."""
+    return np.convolve(x, np.full(2 * h + 1, 1.0 / (2 * h + 1)), mode="valid") if h else x
+
+
+def _ddt(x: np.ndarray, t: np.ndarray, h: int) -> np.ndarray:
+    """Central difference over +-h samples (aligned with ``_box(., h)``)."""
+    h = max(h, 1)
+    return (x[2 * h:] - x[:-2 * h]) / (t[2 * h:] - t[:-2 * h])
+
+
+def _relation(p, col, y, x, *, what, unit, band, guesses, min_std):
+    """Check that y ~ k x with k in ``band``; y, x of equal length.
+
+    The ratio k is bracketed by the direct and the reverse least-squares slopes, cov/var(x) and
+    var(y)/cov (with errors in both variables the true slope lies between the two): the relation
+    fails only when the whole bracket misses ``band``. It is inconclusive (skipped) when x barely
+    moves (std < min_std), |correlation| < _MIN_CORR or fewer than _MIN_SAMPLES samples.
+    ``guesses``: (factor, "looks like ...", fix): the ratio a known unit mistake would give.
+    """
+    if y.size < _MIN_SAMPLES:
+        return
+    xc, yc = x - x.mean(), y - y.mean()
+    sxx, syy, sxy = float(xc @ xc), float(yc @ yc), float(xc @ yc)
+    if not (math.sqrt(sxx / x.size) >= min_std and syy > 0 and sxy != 0):
+        return
+    corr = sxy / math.sqrt(sxx * syy)
+    if abs(corr) < _MIN_CORR:
+        return
+    k1, k2 = sxy / sxx, syy / sxy
+    lo, hi = min(k1, k2), max(k1, k2)
+
+    def meets(a, b):
+        a, b = min(a, b), max(a, b)
+        return lo <= b and a <= hi
+
+    if meets(*band):
+        return
+    found = f"ratio {k1:.4g} (bracket [{lo:.4g}, {hi:.4g}], correlation {corr:.2f}, {y.size} samples)"
+    allowed = f"{band[0]:.3g} to {band[1]:.3g}{unit} in the declared units"
+    fits = [(f, looks, fix) for f, looks, fix in guesses if meets(band[0] * f, band[1] * f)]
+    if fits:
+        raise DatasetError(f"{p}: column {col!r} is inconsistent with {what}: {found}; allowed: "
+                           f"{allowed}. It looks like "
+                           + "; or ".join(f"{looks} (ratio ~ {f:.4g}): {fix}" for f, looks, fix in fits))
+    raise DatasetError(f"{p}: column {col!r} is inconsistent with {what}: {found}; allowed: {allowed}; "
+                       f"no single known unit mistake explains it: check the units and sign conventions "
+                       f"of the columns involved ({', '.join(f'{c} [{UNITS[c]}]' for c in _INVOLVED[col])})")
+
+
+_INVOLVED = {"beta_true": ("beta_true", "vy", "vx"), "ax": ("ax", "vx", "vy", "yaw_rate"),
+             "ay": ("ay", "vx", "yaw_rate"), "yaw_acc": ("yaw_acc", "yaw_rate"),
+             "delta": ("delta", "yaw_rate", "vx"), "delta_fl": ("delta_fl", "delta"),
+             "delta_fr": ("delta_fr", "delta")}
+
+
+def _check_physics(p: Path, c: dict) -> None:
+    """Unit consistency of the columns with one another (rules that a range check cannot give).
+
+    * beta_true = atan(vy / vx) (definition of the sideslip angle);
+    * ax = dvx/dt - vy r and ay = dvy/dt + vx r (CoG accelerations of a planar rigid body; for ay
+      the term vx r dominates while cornering, so ay / (vx r) ~ 1, and ~ 1/9.81 when ay is in g);
+    * yaw_acc = d(yaw_rate)/dt;
+    * yaw_rate / (vx delta) = 1 / (wheelbase + K_us vx²) (steady-state single track), 0.02 to
+      2 1/m for road-wheel angles in rad (wheelbases 1.5-5 m, strong understeer at speed), 57x
+      smaller in degrees and ~15x smaller for a steering-wheel angle;
+    * delta_fl, delta_fr ~ delta (delta is their mean).
+
+    Derivatives are central differences over +-_SMOOTH_S, compared with the other side averaged
+    over the same window. A relation is skipped when the log does not excite it (see _relation).
+    """
+    t = c["t"]
+    per = float(np.median(np.diff(t)))
+    h = max(1, int(round(_SMOOTH_S / per)))
+    if t.size < _MIN_SAMPLES + 2 * h:          # too short to judge any relation
+        return
+
+    def b(k):
+        return _box(c[k], h)
+
+    _relation(p, "beta_true", c["beta_true"], np.arctan2(c["vy"], c["vx"]),
+              what="beta_true = atan(vy / vx)", unit="", band=_RATIO_BAND, min_std=1e-3, guesses=(
+                  (1 / _DEG, "beta_true in degrees", "convert it with numpy.radians"),
+                  (-1.0, "opposite sign conventions of beta_true and vy", "flip the sign of one of them"),
+                  (1 / _KMH, "vx in km/h (vy in m/s)", "divide vx by 3.6"),
+                  (_KMH, "vy in km/h (vx in m/s)", "divide vy by 3.6")))
+    _relation(p, "ax", b("ax"), _ddt(c["vx"], t, h) - _box(c["vy"] * c["yaw_rate"], h),
+              what="ax = dvx/dt - vy yaw_rate", unit="", band=_RATIO_BAND, min_std=0.2, guesses=(
+                  (1 / _G, "ax in g", "multiply it by 9.81"),
+                  (_KMH, "vx in km/h", "divide vx by 3.6"),
+                  (_MPH, "vx in mph", "multiply vx by 0.44704"),
+                  (-1.0, "ax of the opposite sign (braking positive)", "flip its sign")))
+    _relation(p, "ay", b("ay"), _box(c["vx"] * c["yaw_rate"], h),
+              what="ay = dvy/dt + vx yaw_rate (ay ~ vx yaw_rate while cornering)", unit="",
+              band=_RATIO_BAND, min_std=0.2, guesses=(
+                  (1 / _G, "ay in g", "multiply it by 9.81"),
+                  (_DEG, "yaw_rate in deg/s", "convert yaw_rate with numpy.radians"),
+                  (_KMH, "vx in km/h", "divide vx by 3.6"),
+                  (_MPH, "vx in mph", "multiply vx by 0.44704"),
+                  (-1.0, "opposite sign conventions of ay and yaw_rate", "flip the sign of one of them")))
+    _relation(p, "yaw_acc", b("yaw_acc"), _ddt(c["yaw_rate"], t, h),
+              what="yaw_acc = d(yaw_rate)/dt", unit="", band=_RATIO_BAND, min_std=0.05, guesses=(
+                  (1 / _DEG, "yaw_acc in deg/s^2", "convert it with numpy.radians"),
+                  (_DEG, "yaw_rate in deg/s (yaw_acc in rad/s^2)", "convert yaw_rate with numpy.radians"),
+                  (-1.0, "yaw_acc of the opposite sign", "flip its sign")))
+    _relation(p, "delta", b("yaw_rate"), _box(c["vx"] * c["delta"], h),
+              what="yaw_rate / (vx delta) = 1 / (wheelbase + K_us vx^2)", unit=" 1/m",
+              band=(0.02, 2.0), min_std=0.05, guesses=(
+                  (_DEG, "delta in degrees, or a steering-wheel angle instead of the road-wheel angle",
+                   "convert it with numpy.radians, or divide a steering-wheel angle by the steering ratio"),
+                  (-1.0, "opposite sign conventions of delta and yaw_rate", "flip the sign of one of them")))
+    for side in ("delta_fl", "delta_fr"):
+        _relation(p, side, c[side], c["delta"], what="delta (the mean road-wheel angle)", unit="",
+                  band=_RATIO_BAND, min_std=1e-3, guesses=(
+                      (1 / _DEG, f"{side} in degrees (delta in rad)", "convert it with numpy.radians"),
+                      (_DEG, f"delta in degrees ({side} in rad)", "convert delta with numpy.radians"),
+                      (-1.0, f"{side} of the opposite sign", "flip its sign")))
+
+
+def load(path="stanford", sample_time=None) -> StanfordRun:
     """Read a Stanford-format CSV (plain or gzip) and validate it.
 
     Parameters
     ----------
     path : str or os.PathLike, optional
         File to read; ``"stanford"`` (default) resolves to :data:`STANFORD_PATH`. Gzip is detected
-        from the file's magic bytes, not its name.
+        from the file's magic bytes, not its name. A UTF-8 byte-order mark is ignored; the field
+        separator may be a comma, a semicolon or a tab (detected from the header); the decimal
+        mark must be '.'.
+    sample_time : float, optional
+        Expected sample time [s] (e.g. the observer's): the log's median period must equal it
+        within :data:`PERIOD_RTOL` (relative). None: not compared.
 
     Returns
     -------
@@ -154,21 +422,33 @@ def load(path="stanford") -> StanfordRun:
     Raises
     ------
     DatasetError
-        Missing or unreadable file, missing or duplicated columns, non-numeric or non-finite
-        values, fewer than 2 rows, non-increasing time, or values outside physical ranges
-        (typical of a unit mistake, e.g. degrees for radians).
+        Missing or unreadable file (UTF-16, not UTF-8), missing or duplicated columns, non-numeric
+        values (a decimal comma included) or non-finite values, fewer than 2 rows; a time column
+        that is not strictly increasing, looks like milliseconds, has gaps (a step >
+        :data:`GAP_FACTOR` x the median period) or short steps (< :data:`SHORT_FACTOR` x), or whose
+        period differs from ``sample_time``; values outside physical ranges, or columns that
+        contradict one another physically (a unit mistake: degrees for radians, g, km/h, deg/s;
+        see :func:`_check_physics`). The message names the file, the column, what was found and
+        what is allowed.
     """
     p = _resolve(path)
+    if sample_time is not None:
+        try:
+            sample_time = float(sample_time)
+        except (TypeError, ValueError):
+            raise DatasetError(f"sample_time must be a number of seconds, got {sample_time!r}") from None
+        if not (math.isfinite(sample_time) and sample_time > 0):
+            raise DatasetError(f"sample_time must be finite and > 0 s, got {sample_time!r}")
     if not p.is_file():
         raise DatasetError(f"data file not found: {p}")
     try:
         raw = p.read_bytes()
-        if raw[:2] == b"\x1f\x8b":
-            raw = gzip.decompress(raw)
-        text = raw.decode("utf-8")
-    except (OSError, EOFError, gzip.BadGzipFile, UnicodeDecodeError) as exc:
+    except OSError as exc:
         raise DatasetError(f"cannot read {p}: {exc}") from None
-    reader = csv.reader(io.StringIO(text))
+    text = _decode(p, raw)
+    first = next(iter(io.StringIO(text)), "")
+    sep = _separator(p, first)
+    reader = csv.reader(io.StringIO(text), delimiter=sep)
     try:
         header = [h.strip() for h in next(reader)]
     except StopIteration:
@@ -178,35 +458,32 @@ def load(path="stanford") -> StanfordRun:
         raise DatasetError(f"{p}: duplicated column(s) {dup}")
     missing = [c for c in COLUMNS if c not in header]
     if missing:
-        raise DatasetError(f"{p}: missing column(s) {missing}; found {header}")
+        raise DatasetError(f"{p}: missing column(s) {missing}; found {header} (fields separated by "
+                           f"{_SEPARATORS[sep]}; allowed separators: comma, semicolon or tab)")
     rows = [r for r in reader if r and any(f.strip() for f in r)]
     if len(rows) < 2:
         raise DatasetError(f"{p}: needs at least 2 data rows, found {len(rows)}")
     bad_len = next((i for i, r in enumerate(rows) if len(r) != len(header)), None)
     if bad_len is not None:
         raise DatasetError(f"{p}: data row {bad_len + 1} has {len(rows[bad_len])} fields, "
-                           f"header has {len(header)}")
-    try:
-        table = np.array(rows, dtype=float)
-    except ValueError as exc:
-        raise DatasetError(f"{p}: non-numeric value ({exc})") from None
+                           f"header has {len(header)} (separator {_SEPARATORS[sep]})")
+    table = _to_float(p, rows, header, sep)
     cols = {}
     for c in COLUMNS:
         a = table[:, header.index(c)].copy()
         nonfinite = ~np.isfinite(a)
         if nonfinite.any():
             raise DatasetError(f"{p}: column {c!r} has {int(nonfinite.sum())} non-finite value(s), "
-                               f"first at data row {int(np.flatnonzero(nonfinite)[0]) + 1}")
+                               f"first at data row {int(np.flatnonzero(nonfinite)[0]) + 1}; allowed: "
+                               f"finite numbers in {UNITS[c]}")
         if c in _LIMITS:
             lo, hi = _LIMITS[c]
             if a.min() < lo or a.max() > hi:
-                raise DatasetError(
-                    f"{p}: column {c!r} spans [{a.min():.4g}, {a.max():.4g}], outside the plausible "
-                    f"SI range [{lo}, {hi}] (wrong unit?)")
+                raise _range_error(p, c, a, lo, hi)
         a.setflags(write=False)
         cols[c] = a
-    if np.any(np.diff(cols["t"]) <= 0):
-        raise DatasetError(f"{p}: time column is not strictly increasing")
+    _check_time(p, cols["t"], sample_time)
+    _check_physics(p, cols)
     return StanfordRun(source=str(p), **cols)
 
 
