@@ -3,21 +3,25 @@
 #   make test    the test suite (CI runs this through .ci/run)
 #   make check   reliability suite (hostile input, sanitizers, static facts, determinism, long runs)
 #   make generate | build | bench | clean
+#   make lock    refresh constraints.txt (exact versions of everything the targets install)
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
+# Exact versions for every install (see the file's header; `make lock` refreshes it).
+PIP    := $(BIN)/python -m pip --disable-pip-version-check
+PIN    := -c constraints.txt
 CC     ?= cc
 export CC
 
-.PHONY: all venv generate build demo test check bench clean
+.PHONY: all venv generate build demo test check bench clean lock
 
 all: demo
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,validation]'
+	$(PIP) install --quiet $(PIN) pip setuptools wheel
+	$(PIP) install --quiet $(PIN) --no-build-isolation -e '.[test,validation]'
 	touch $@
 
 venv: $(STAMP)
@@ -38,8 +42,18 @@ check: build
 	$(BIN)/python -m pytest -q -m reliability tests
 
 bench: build
-	$(BIN)/python -m pip install --quiet -e '.[bench]'
+	$(PIP) install --quiet $(PIN) --no-build-isolation -e '.[bench]'
 	$(BIN)/uiogen bench
+
+# Refresh constraints.txt: the newest versions pyproject.toml allows, resolved in a scratch venv.
+lock:
+	rm -rf .venv-lock
+	$(PYTHON) -m venv .venv-lock
+	.venv-lock/bin/python -m pip install --quiet --upgrade pip setuptools wheel
+	.venv-lock/bin/python -m pip install --quiet -e '.[test,validation,bench]'
+	{ sed -n '/^#/p' constraints.txt; .venv-lock/bin/python -m pip freeze --all --exclude-editable; } > constraints.txt.new
+	mv constraints.txt.new constraints.txt
+	rm -rf .venv-lock
 
 clean:
 	rm -rf python_bindings/_ext python_bindings/_build .pytest_cache

@@ -27,6 +27,7 @@ import numpy as np
 import sympy as sp
 from scipy.linalg import eigh
 
+from . import canonical
 from .errors import DiscretizationError, ModelDefinitionError
 from .polytope import Polytope, sector_weights_product
 
@@ -71,7 +72,7 @@ class ObserverData:
 
     @cached_property
     def Dp(self):
-        return np.linalg.pinv(self.poly.D[0])
+        return canonical.pinv(self.poly.D[0])
 
     @cached_property
     def raw_signals(self) -> tuple:
@@ -200,8 +201,8 @@ def gain_factorization(data: ObserverData):
     if parts is None:
         return None
     Q0, Q1, L0, L1 = parts
-    lam, V = eigh(0.5 * (Q1 + Q1.T), 0.5 * (Q0 + Q0.T))
-    return lam, V, V.T @ L0, V.T @ L1
+    lam, V = canonical.eigh(Q1, Q0)     # emitted: machine-independent (see codegen.canonical)
+    return lam, V, canonical.matmul(V.T, L0), canonical.matmul(V.T, L1)
 
 
 def signal_grid(poly: Polytope, n_single: int = 401, n_multi: int = 41) -> np.ndarray:
@@ -372,7 +373,7 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
     # The gain enters the step only through N = Ts E M (x+ system and right-hand side, with
     # E = I + (Ts/Tf) D Dp), formed directly with the constant factors folded into its
     # coefficients, and K = (Ts/Tf) Dp M = Dp N / (Tf + Ts) (the d update; Dp D = I).
-    left_N = Ts * (np.eye(nx) + (Ts / Tf) * D @ Dp)
+    left_N = Ts * (np.eye(nx) + (Ts / Tf) * canonical.matmul(D, Dp))
     if fact is not None:
         # two vertices: every blended matrix is affine in the premise; entries that do not
         # vary become constants in the generated code
@@ -389,13 +390,13 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
         scale = [sp.lambdify(poly.signals, n_, mods)(*clamped) / sp.lambdify(poly.signals, d_, mods)(*clamped)
                  for n_, d_ in num_den]
         SW = ca.vertcat(*[scale[k] * (ca.DM(W0[k:k + 1]) + th * ca.DM(W1[k:k + 1])) for k in range(nx)])
-        N = _const_times(left_N @ V, SW)
+        N = _const_times(canonical.matmul(left_N, V), SW)
     else:
         G_0 = ca.DM.eye(nx) - _blend(eta, [ca.DM(Ts * a) for a in poly.A])
         if data.quadratic:
             # common Lyapunov matrix: M(th) = sum eta_i P^-1 L_i, no solve at run time
-            Ms = [np.linalg.solve(data.Q[0], l) for l in data.L]
-            N = _blend(eta, [ca.DM(left_N @ m) for m in Ms])
+            Ms = [canonical.solve(data.Q[0], l) for l in data.L]
+            N = _blend(eta, [ca.DM(canonical.matmul(left_N, m)) for m in Ms])
         else:
             M = ca.solve(_blend(eta, [ca.DM(q) for q in data.Q]), _blend(eta, [ca.DM(l) for l in data.L]))
             N = _const_times(left_N, M)

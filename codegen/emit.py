@@ -8,8 +8,10 @@ Files carry a banner and no timestamp: regeneration is byte-for-byte reproducibl
 """
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import hashlib
-import json
+import os
 import re
 import shutil
 import tempfile
@@ -18,11 +20,12 @@ from pathlib import Path
 import casadi as ca
 import jinja2
 
-from . import observers
-from .pipeline import ObserverBuild, build
+from . import design_lock, observers, pipeline, sources
+from .errors import GenerationError, UiogenError
+from .pipeline import ObserverBuild
 
-ROOT = Path(__file__).resolve().parent.parent
-GENERATED_DIR = ROOT / "generated_c"
+ROOT = sources.ROOT
+GENERATED_DIR = design_lock.GENERATED_DIR
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 
 # Every emitted file must compile cleanly with these (gcc and clang); never -ffast-math, and
@@ -34,26 +37,40 @@ _ENV = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)), undefi
                           keep_trailing_newline=True, autoescape=False)
 
 
-# The toolchain modules whose code decides what is generated (validation, CLI, bench do not).
-GENERATION_SOURCES = ("errors.py", "model.py", "polytope.py", "lmi.py", "bounds.py", "ts_fuzzy.py",
-                      "designs/__init__.py", "designs/linf_uio.py", "designs/ts_fuzzy_uio.py", "discrete.py",
-                      "observers.py", "pipeline.py", "emit.py", "switched.py", "designs/switched_pi.py",
-                      "switched_pipeline.py", "differentiators.py", "relative_degree.py",
-                      "designs/algebraic_uio.py", "algebraic_uio.py", "interconnected.py",
-                      "designs/interconnected_uio.py")
+STAMP = "INPUTS.sha256"
+EMIT_PACKAGES = ("casadi", "jinja2")
 
 
-def inputs_hash(config: observers.ObserverConfig) -> str:
-    """SHA-256 of every file the generated code derives from, plus the CasADi version."""
-    h = hashlib.sha256()
-    files = [Path(config.source), config.parameter_path, ROOT / "model_defs" / f"{config.model}.py",
-             ROOT / "model_defs" / "tyres.py"]
-    files += [ROOT / "codegen" / f for f in GENERATION_SOURCES] + sorted(TEMPLATES.glob("*.j2"))
-    for f in files:
-        h.update(str(f.relative_to(ROOT)).encode())
-        h.update(f.read_bytes())
-    h.update(ca.__version__.encode())
-    return h.hexdigest()
+def emission_inputs(config: observers.ObserverConfig, lock_text: str) -> str:
+    """Hash of everything the C of ``config`` derives from: the design's inputs, the design
+    lock itself, every toolchain module emission imports, the templates and the versions."""
+    files = [*design_lock.design_sources(config), *sources.closure("codegen.emit"), *sorted(TEMPLATES.glob("*.j2"))]
+    v = sources.versions()
+    return sources.digest(files, {"lock": hashlib.sha256(lock_text.encode()).hexdigest(),
+                                  **{k: v[k] for k in (*design_lock.DESIGN_PACKAGES, *EMIT_PACKAGES)}})
+
+
+def _stamp_text(inputs: str, files: dict) -> str:
+    rows = [f"{inputs}  inputs"] + [f"{hashlib.sha256(text.encode()).hexdigest()}  {name}"
+                                    for name, text in sorted(files.items())]
+    return "\n".join(rows) + "\n"
+
+
+def stamp_matches(target: Path, inputs: str) -> bool:
+    """True when ``target`` holds exactly the files its stamp lists, unmodified, generated from
+    ``inputs``: a truncated, edited, missing or extra file makes it regenerate."""
+    stamp = target / STAMP
+    try:
+        rows = [line.split("  ", 1) for line in stamp.read_text().splitlines()]
+    except (OSError, UnicodeDecodeError):
+        return False
+    if not rows or rows[0] != [inputs, "inputs"] or any(len(r) != 2 for r in rows):
+        return False
+    listed = {name: digest for digest, name in rows[1:]}
+    present = {p.name for p in target.iterdir() if p.name != STAMP}
+    if present != set(listed):
+        return False
+    return all(hashlib.sha256((target / n).read_bytes()).hexdigest() == d for n, d in listed.items())
 
 
 def banner(b: ObserverBuild, what: str) -> str:
@@ -124,39 +141,94 @@ def render(b: ObserverBuild) -> dict:
         "sz_arg": max(int(f.sz_arg()), 1), "sz_res": max(int(f.sz_res()), 1),
         "sz_iw": max(int(f.sz_iw()), 1), "sz_w": max(int(f.sz_w()), 1),
     }
-    design_json = json.dumps(b.artifact(), indent=1, sort_keys=True) + "\n"
     return {
         f"{b.name}_kernel.c": kernel_c,
         f"{b.name}_kernel.h": kernel_h,
         f"{b.name}.h": _ENV.get_template("observer.h.j2").render(ctx),
         f"{b.name}.c": _ENV.get_template("observer.c.j2").render(ctx),
-        f"{b.name}_design.json": design_json,
     }
+
+
+@contextlib.contextmanager
+def _exclusive(out_dir: Path):
+    """One ``generate`` at a time per output folder (a second one waits for the first)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with open(out_dir / ".generate.lock", "w") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def _write_atomically(target: Path, files: dict) -> None:
+    """Write every file into a fresh sibling folder, then swap it in: a reader (or an
+    interrupted run) sees the old complete set or the new complete set, never a mixture."""
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.new-", dir=target.parent))
+    try:
+        for fname, text in files.items():
+            (tmp / fname).write_text(text)
+        old = None
+        if target.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
+            os.replace(target, old / target.name)
+        os.replace(tmp, target)
+        if old is not None:
+            shutil.rmtree(old)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
 
 
 def generate(names: list | None = None, out_dir: Path = GENERATED_DIR, force: bool = False,
              log=print) -> list:
     """Generate the C of the named observers (all if None); returns the builds that ran.
 
-    An observer whose ``INPUTS.sha256`` matches the current inputs is skipped unless ``force``.
+    The design comes from the committed lock (:mod:`codegen.design_lock`), replayed without
+    solving; only a missing or stale lock is re-solved (and written beside the C). An observer
+    whose stamp matches its inputs and whose files are intact is skipped unless ``force``.
+    One failing observer does not stop the others: each failure is reported, and
+    :class:`GenerationError` lists them at the end.
     """
-    done = []
-    for name in names or observers.names():
-        config = observers.get(name)
-        target = Path(out_dir) / name
-        digest = inputs_hash(config)
-        stamp = target / "INPUTS.sha256"
-        if not force and stamp.is_file() and stamp.read_text().strip() == digest:
-            log(f"{name}: unchanged (inputs hash {digest[:12]}), skipped")
-            continue
-        b = build(config)
-        files = render(b)
-        if target.exists():
-            shutil.rmtree(target)
-        target.mkdir(parents=True)
-        for fname, text in files.items():
-            (target / fname).write_text(text)
-        stamp.write_text(digest + "\n")
-        log(f"{name}: generated {len(files)} files in {target} ({b.emit_notes()['headline']})")
-        done.append(b)
+    out_dir = Path(out_dir)
+    done, failed = [], []
+    with _exclusive(out_dir):
+        for name in names or observers.names():
+            try:
+                b = _generate_one(name, out_dir, force, log)
+            except UiogenError as exc:
+                log(f"{name}: FAILED: {type(exc).__name__}: {exc}")
+                failed.append(f"{name} ({type(exc).__name__})")
+                continue
+            if b is not None:
+                done.append(b)
+    if failed:
+        raise GenerationError(f"{len(failed)} observer(s) failed to generate: {', '.join(failed)}; "
+                              f"the others were generated")
     return done
+
+
+def _generate_one(name: str, out_dir: Path, force: bool, log):
+    config = observers.get(name)
+    target = out_dir / name
+    data, why = design_lock.status(config)
+    records = None
+    if data is None:
+        log(f"{name}: {why}: solving the design")
+        b, records = pipeline.solve(config)
+        lock_text = design_lock.dumps(design_lock.document(b, records))
+    else:
+        lock_text = design_lock.path(config).read_text()
+    digest = emission_inputs(config, lock_text)
+    if records is None and not force and target.is_dir() and stamp_matches(target, digest):
+        log(f"{name}: unchanged (inputs hash {digest[:12]}), skipped")
+        return None
+    if records is None:
+        b = pipeline.build(config)     # the committed design, replayed and re-checked
+    files = render(b)
+    files[design_lock.path(config).name] = lock_text
+    files[STAMP] = _stamp_text(digest, files)
+    _write_atomically(target, files)
+    log(f"{name}: generated {len(files)} files in {target} ({b.emit_notes()['headline']}"
+        f"{'; design re-solved' if records is not None else '; committed design'})")
+    return b

@@ -76,3 +76,12 @@ class UnknownObserverError(UiogenError, KeyError):
 
 class SampleError(UiogenError, ValueError):
     """An input sample or array passed to an observer has the wrong shape, type or values."""
+
+
+class DesignLockError(UiogenError, ValueError):
+    """A committed design (``NAME_design.json``) is missing, unreadable, stale or does not fit
+    the problem it is replayed into; ``uiogen design NAME --update`` re-solves it."""
+
+
+class GenerationError(UiogenError, RuntimeError):
+    """One or more observers failed to generate (each failure was reported; the others ran)."""

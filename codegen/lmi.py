@@ -14,6 +14,8 @@ returned.
 """
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import functools
 import time
 from dataclasses import dataclass, field
@@ -24,6 +26,7 @@ from scipy import sparse
 
 from .errors import (
     CertificateError,
+    DesignLockError,
     IllConditionedError,
     InaccurateSolveError,
     InfeasibleLMIError,
@@ -270,6 +273,97 @@ class LMISolution:
         return self.values[name]
 
 
+# Second stage of every solve (:meth:`LMIProblem.solve`): the objective may exceed its optimum
+# by this fraction; far above the solver's tolerance, so the least-norm point is well determined.
+OPTIMALITY_SLACK = 1e-4
+# Column scaling never shrinks a variable below this fraction of the largest one: a variable the
+# first solve left at noise level must not become a column of 1e-12s.
+SCALE_FLOOR = 1e-6
+
+
+def _exact_json(values: dict) -> dict:
+    """Decision variables as nested lists of floats (JSON writes the shortest repr that
+    round-trips, so a replayed value is bit-identical to the solved one)."""
+    return {k: (float(v) if np.ndim(v) == 0 else np.asarray(v, dtype=float).tolist()) for k, v in values.items()}
+
+
+@dataclass(frozen=True)
+class SolveRecord:
+    """One solved LMI problem of a design: what the design lock commits."""
+
+    problem: str
+    variables: dict
+    objective: float
+    iterations: int
+
+    def to_json(self) -> dict:
+        return {"problem": self.problem, "objective": self.objective, "iterations": self.iterations,
+                "variables": self.variables}
+
+    @classmethod
+    def from_json(cls, data: dict, source: str = "") -> "SolveRecord":
+        try:
+            return cls(str(data["problem"]), dict(data["variables"]), float(data["objective"]),
+                       int(data["iterations"]))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise DesignLockError(f"{source}: malformed LMI solution record ({exc})") from None
+
+
+@dataclass
+class Ledger:
+    """The LMI solutions of one design, in the order they are solved (recording), or the
+    committed ones handed back in that order (replaying)."""
+
+    replay: list | None = None
+    source: str = ""
+    records: list = field(default_factory=list)
+
+    @property
+    def replaying(self) -> bool:
+        return self.replay is not None
+
+    def take(self, problem: str) -> SolveRecord:
+        k = len(self.records)
+        if k >= len(self.replay):
+            raise DesignLockError(f"{self.source}: the design solves more LMI problems than the {len(self.replay)} "
+                                  f"committed (next: {problem!r}); re-solve with `uiogen design NAME --update`")
+        rec = self.replay[k]
+        if rec.problem != problem:
+            raise DesignLockError(f"{self.source}: committed LMI solution {k + 1} is for {rec.problem!r}, the "
+                                  f"design asks for {problem!r}; re-solve with `uiogen design NAME --update`")
+        self.records.append(rec)
+        return rec
+
+
+_LEDGER: contextvars.ContextVar = contextvars.ContextVar("uiogen_lmi_ledger", default=None)
+
+
+@contextlib.contextmanager
+def recording():
+    """Collect every LMI solve inside the block: ``with recording() as ledger: ...; ledger.records``."""
+    ledger = Ledger()
+    token = _LEDGER.set(ledger)
+    try:
+        yield ledger
+    finally:
+        _LEDGER.reset(token)
+
+
+@contextlib.contextmanager
+def replaying(records, source: str = ""):
+    """Inside the block, every :meth:`LMIProblem.solve` returns the next committed solution
+    (checked to be for the same problem, then re-checked block by block) instead of solving."""
+    ledger = Ledger(list(records), source)
+    token = _LEDGER.set(ledger)
+    try:
+        yield ledger
+    finally:
+        _LEDGER.reset(token)
+    if len(ledger.records) != len(ledger.replay):
+        raise DesignLockError(f"{source}: the design used {len(ledger.records)} of the {len(ledger.replay)} committed "
+                              f"LMI solutions; re-solve with `uiogen design NAME --update`")
+
+
 @dataclass(frozen=True)
 class ReducedProblem:
     """The problem handed to Clarabel (after :meth:`LMIProblem._reduce`, or as compiled)."""
@@ -468,20 +562,34 @@ class LMIProblem:
                               q[kept].copy(), cones, tuple(solver_blocks), kept)
 
     def solve(self, tol: float = 1e-9, max_iter: int = 200, max_abs_value: float = 1e9,
-              verbose: bool = False, reduce: bool = False) -> LMISolution:
+              verbose: bool = False, reduce: bool = False, unique: bool = True,
+              optimality_slack: float = OPTIMALITY_SLACK) -> LMISolution:
         """Solve with Clarabel, then re-check every block with numpy eigenvalues.
+
+        ``unique``: the optimum of an SDP is often a face, not a point (the interconnected
+        design's gains differ in sign between two BLAS kernels at the same gamma). A second
+        stage picks the point of least Euclidean norm of all decision variables among those
+        within ``optimality_slack`` (relative) of the first stage's objective: a strictly convex
+        objective over a convex set has exactly one minimizer, so a re-solve on another machine
+        gives materially the same design. Problems without an objective get the least-norm
+        feasible point directly.
 
         ``reduce``: hand Clarabel the exactly equivalent problem of :meth:`_reduce` (fewer and
         smaller cones, fewer variables: fewer and cheaper iterations). Off by default: the
-        emitted designs come from the problem as stated; the reduced solve reaches another
-        point within the tolerance (see README, Performance).
+        emitted designs come from the problem as stated (see docs, Performance).
+
+        Inside :func:`replaying`, nothing is solved: the committed solution of this problem is
+        taken from the design lock and re-checked block by block like a fresh one.
 
         Raises
         ------
         InfeasibleLMIError
             names the blocks carrying most of the infeasibility certificate.
-        InaccurateSolveError, IllConditionedError, CertificateError
+        InaccurateSolveError, IllConditionedError, CertificateError, DesignLockError
         """
+        ledger = _LEDGER.get()
+        if ledger is not None and ledger.replaying:
+            return self._replay(ledger.take(self.name))
         t0 = time.perf_counter()
         names, A, b, q, cones, blocks = self._compile()
         nvar = len(names)
@@ -489,6 +597,121 @@ class LMIProblem:
             red = self._reduce(q, blocks)
         else:
             red = ReducedProblem(A, b, q, cones, tuple((con, tri) for con, tri, _ in blocks), np.arange(nvar))
+        kept = red.kept_variables
+        t1 = time.perf_counter()
+        zero_P = sparse.csc_matrix((kept.size, kept.size))
+        result, solve_time = self._clarabel(zero_P, red.q, red.A, red.b, red.cones, red.blocks, tol, max_iter, verbose)
+        iterations = int(result.iterations)
+        xs = np.asarray(result.x, dtype=float)
+        if unique:
+            xs, its, dt = self._unique_point(red, blocks, xs, tol, max_iter, verbose, optimality_slack)
+            iterations, solve_time = iterations + its, solve_time + dt
+        xv = np.zeros(nvar)
+        xv[kept] = xs   # variables left out by _reduce are 0
+        if not np.all(np.isfinite(xv)) or np.abs(xv).max(initial=0) > max_abs_value:
+            raise IllConditionedError(
+                f"{self.name}: solution has entries up to {np.abs(xv).max():.3g} (limit "
+                f"{max_abs_value:g}); the problem is nearly unbounded — add or tighten a bound "
+                f"on the gains/Lyapunov matrices")
+        sol = self._solution(xv, blocks, float(q @ xv), "Solved", solve_time, t1 - t0, iterations)
+        if ledger is not None:
+            ledger.records.append(SolveRecord(self.name, _exact_json(sol.values), sol.objective, iterations))
+        return sol
+
+    def _unique_point(self, red: "ReducedProblem", blocks, x0: np.ndarray, tol, max_iter, verbose, slack) -> tuple:
+        """The least-norm point of the optimal set (see :meth:`solve`); returns (x, iterations, seconds).
+
+        1. The optimum is refined with column scaling: each variable measured in a power of two
+           of its magnitude at ``x0``. The problem and its optimum are the same, its conditioning
+           is not (Theorem 1: gamma^2 ~ 1e-4 beside Lyapunov entries ~ 1e2 leaves a tolerance-1e-8
+           solve 1-60 % above the optimum at gain bounds of 100-3000 1/s). The better of the two
+           objectives bounds the second stage.
+        2. min ||x / scale|| (a second-order cone) with the objective at most (1 + slack) times that
+           optimum. A least-norm point lies on the boundary of the feasible set, within the
+           solver's tolerance: blocks that then fail the numpy re-check get their margin raised
+           by twice the violation and the stage is solved again (at most three times).
+        """
+        its, secs = 0, 0.0
+        n = x0.size
+        scale = np.ones(n)
+        floor = SCALE_FLOOR * np.abs(x0).max(initial=0.0)
+        for slots in self._variable_slots(red.kept_variables).values():
+            m = max(np.abs(x0[slots]).max(initial=0.0), floor)
+            if m > 0:
+                scale[slots] = 2.0 ** np.round(np.log2(m))
+        has_objective = bool(np.any(red.q))
+        t_best = float(red.q @ x0)
+        if has_objective and np.any(scale != 1.0):
+            try:
+                result, dt = self._clarabel(sparse.csc_matrix((n, n)), red.q * scale, red.A @ sparse.diags(scale),
+                                            red.b, red.cones, red.blocks, tol, max_iter, verbose, stage="scaled optimum")
+                its, secs = its + int(result.iterations), secs + dt
+                t_best = min(t_best, float(red.q @ (scale * np.asarray(result.x, dtype=float))))
+            except (InaccurateSolveError, InfeasibleLMIError):
+                pass        # the unscaled optimum stands
+        b = red.b.copy()
+        evaluate = self._evaluate
+        for attempt in range(4):
+            x, it, dt = self._least_norm(red, b, t_best, slack, has_objective, scale, tol, max_iter, verbose)
+            its, secs = its + it, secs + dt
+            xv = np.zeros(len(self._names))
+            xv[red.kept_variables] = x
+            full = np.asarray(evaluate(xv), dtype=float).ravel()
+            solver_rows = {id(con): rows for con, rows in red.blocks}
+            failing = []
+            for con, _, full_rows in blocks:
+                k = con.expr.shape[0]
+                mat = full[full_rows].reshape(k, k, order="F")
+                lo = float(np.linalg.eigvalsh(0.5 * (mat + mat.T))[0])
+                if lo < 0.0 and id(con) in solver_rows:
+                    failing.append((solver_rows[id(con)], k, lo))
+            if not failing or attempt == 3:
+                return x, its, secs
+            for rows, k, lo in failing:
+                r, cidx, _ = _triu_index(k)
+                diag = np.flatnonzero(r == cidx)
+                if rows.stop - rows.start == r.size:       # a block the reduction left whole
+                    b[np.arange(rows.start, rows.stop)[diag]] -= 2.0 * abs(lo)
+        return x, its, secs
+
+    def _least_norm(self, red, b, t_best, slack, has_objective, scale, tol, max_iter, verbose) -> tuple:
+        """min tau s.t. ||x / scale|| <= tau, the blocks, and (with an objective) q x <= (1 + slack) t_best.
+
+        Each variable is weighed in its own magnitude (``scale``, powers of two): with one norm for
+        all, a large objective variable (a gain bound t ~ 1e7) would be all the norm sees."""
+        n = red.q.size
+        rows, rhs, cones, shift = red.A, b, list(red.cones), 0
+        if has_objective:
+            rows = sparse.vstack([sparse.csc_matrix(red.q[None, :]), red.A], format="csc")
+            rhs = np.concatenate([[t_best + slack * abs(t_best) + 1e-14], b])
+            cones, shift = [clarabel.NonnegativeConeT(1), *red.cones], 1
+        soc = sparse.vstack([sparse.csc_matrix(([-1.0], ([0], [n])), shape=(1, n + 1)),
+                             sparse.hstack([-sparse.diags(1.0 / scale), sparse.csc_matrix((n, 1))])])
+        rows = sparse.vstack([sparse.hstack([rows, sparse.csc_matrix((rows.shape[0], 1))]), soc], format="csc")
+        q2 = np.zeros(n + 1)
+        q2[n] = 1.0
+        result, dt = self._clarabel(sparse.csc_matrix((n + 1, n + 1)), q2, rows, np.concatenate([rhs, np.zeros(n + 1)]),
+                                    [*cones, clarabel.SecondOrderConeT(n + 1)], red.blocks, tol, max_iter, verbose,
+                                    shift=shift, stage="least-norm point")
+        return np.asarray(result.x, dtype=float)[:n], int(result.iterations), dt
+
+    def _variable_slots(self, kept: np.ndarray) -> dict:
+        """{variable name: positions in ``kept`` of its scalar variables}."""
+        where = {int(k): pos for pos, k in enumerate(kept)}
+        out = {}
+        for key, expr in self._variables.items():
+            slots = sorted({where[int(k)] for k in np.nonzero(expr.coef)[2] if int(k) in where})
+            if slots:
+                out[key] = np.array(slots, dtype=int)
+        return out
+
+    def _clarabel(self, P, q, A, b, cones, blocks, tol, max_iter, verbose, shift: int = 0, stage: str = ""):
+        """One Clarabel solve; ``blocks`` name the cones from row ``shift`` on (for the
+        infeasibility message). Returns (result, solve seconds).
+
+        The refining stages (``stage`` given) start from a point the first solve proved feasible
+        and accept Clarabel's AlmostSolved (its reduced tolerances): what counts is the numpy
+        re-check of every block, which the returned solution still has to pass."""
         settings = clarabel.DefaultSettings()
         settings.verbose = verbose
         settings.tol_gap_abs = tol
@@ -497,32 +720,45 @@ class LMIProblem:
         settings.tol_infeas_abs = tol
         settings.tol_infeas_rel = tol
         settings.max_iter = max_iter
-        kept = red.kept_variables
-        P = sparse.csc_matrix((kept.size, kept.size))
-        solver = clarabel.DefaultSolver(P, red.q, red.A, red.b, red.cones, settings)
-        t1 = time.perf_counter()
+        solver = clarabel.DefaultSolver(P, q, A, b, cones, settings)
+        t0 = time.perf_counter()
         result = solver.solve()
-        t2 = time.perf_counter()
+        dt = time.perf_counter() - t0
         status = str(result.status)
         if "Infeasible" in status:
-            raise InfeasibleLMIError(self._infeasibility_message(status, np.asarray(result.z), red.blocks))
-        if status.split(".")[-1] != "Solved":
+            z = np.asarray(result.z)[shift:]
+            raise InfeasibleLMIError(self._infeasibility_message(status, z, blocks))
+        if status.split(".")[-1] != "Solved" and not (stage and status.split(".")[-1] == "AlmostSolved"):
             raise InaccurateSolveError(
-                f"{self.name}: Clarabel stopped with status {status} after {result.iterations} "
+                f"{self.name}{' (' + stage + ')' if stage else ''}: Clarabel stopped with status {status} after {result.iterations} "
                 f"iterations; loosen the tolerance (now {tol:g}), rescale the data, or relax the "
                 f"design constraints")
-        xv = np.zeros(nvar)
-        xv[kept] = np.asarray(result.x, dtype=float)   # variables left out by _reduce are 0
-        if not np.all(np.isfinite(xv)) or np.abs(xv).max(initial=0) > max_abs_value:
-            raise IllConditionedError(
-                f"{self.name}: solution has entries up to {np.abs(xv).max():.3g} (limit "
-                f"{max_abs_value:g}); the problem is nearly unbounded — add or tighten a bound "
-                f"on the gains/Lyapunov matrices")
+        return result, dt
+
+    def _solution(self, xv, blocks, objective, status, solve_time, build_time, iterations) -> LMISolution:
         values = {k: v.value(xv) for k, v in self._variables.items()}
         values = {k: (v.item() if v.size == 1 else v) for k, v in values.items()}
         checks = self.certify_values(xv, blocks, self._evaluate)
-        return LMISolution(values, float(result.obj_val), status, t2 - t1, t1 - t0,
-                           int(result.iterations), checks)
+        return LMISolution(values, objective, status, solve_time, build_time, iterations, checks)
+
+    def _replay(self, record: "SolveRecord") -> LMISolution:
+        """The committed solution of this problem, re-checked block by block."""
+        t0 = time.perf_counter()
+        names, _, _, q, _, blocks = self._compile()
+        if set(record.variables) != set(self._variables):
+            raise DesignLockError(
+                f"{self.name}: the committed solution has variables {sorted(record.variables)}, the problem "
+                f"{sorted(self._variables)}; re-solve with `uiogen design NAME --update`")
+        xv = np.zeros(len(names))
+        for key, expr in self._variables.items():
+            value = np.atleast_2d(np.asarray(record.variables[key], dtype=float))
+            if value.shape != expr.shape:
+                raise DesignLockError(f"{self.name}: committed {key} has shape {value.shape}, the problem "
+                                      f"{expr.shape}; re-solve with `uiogen design NAME --update`")
+            i, j, k = np.nonzero(expr.coef)
+            xv[k] = value[i, j]
+        return self._solution(xv, blocks, record.objective, "Committed", 0.0, time.perf_counter() - t0,
+                              record.iterations)
 
     @staticmethod
     def certify_values(xv: np.ndarray, blocks, evaluate) -> tuple:

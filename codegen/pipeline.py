@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from . import discrete, polytope, ts_fuzzy
+from . import design_lock, discrete, lmi, polytope, ts_fuzzy
 from .designs import linf_uio, ts_fuzzy_uio
 from .errors import ModelDefinitionError
 from .model import LPVModel, instantiate, load_parameters
@@ -259,7 +259,27 @@ def build_ts_fuzzy(config: ObserverConfig, tol: float | None = None) -> TSFuzzyB
     return TSFuzzyBuild(config, ts, design, cert, decrease, timings)
 
 
-def build(config: ObserverConfig, tol: float | None = None):
+def build(config: ObserverConfig, tol: float | None = None, fresh: bool = False):
+    """The observer of ``config``: its committed design (:mod:`codegen.design_lock`) when it is
+    current, replayed and re-checked block by block; otherwise (or with ``fresh`` or a solver
+    ``tol``) a new solve. Use :func:`solve` to also get the LMI solutions for a new lock."""
+    if not fresh and tol is None:
+        data, _ = design_lock.status(config)
+        if data is not None:
+            where = str(design_lock.path(config))
+            with lmi.replaying(design_lock.solutions(data, where), source=where):
+                return _build_family(config, None)
+    return _build_family(config, tol)
+
+
+def solve(config: ObserverConfig, tol: float | None = None) -> tuple:
+    """A fresh design of ``config`` and the LMI solutions it solved: (build, [SolveRecord])."""
+    with lmi.recording() as ledger:
+        b = _build_family(config, tol)
+    return b, list(ledger.records)
+
+
+def _build_family(config: ObserverConfig, tol: float | None = None):
     """Run the pipeline of the configuration's family; returns its build."""
     if config.family == "ts_fuzzy_uio":
         return build_ts_fuzzy(config, tol)

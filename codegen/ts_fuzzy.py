@@ -24,6 +24,7 @@ from functools import cached_property
 import numpy as np
 import sympy as sp
 
+from . import canonical
 from .bounds import RangeBound, range_bound
 from .errors import ModelDefinitionError, NotAffineError, SchedulingBoundsError
 from .model import ModelDefinition, ParameterSet, parameter_substitution
@@ -74,7 +75,7 @@ class TSFuzzyModel:
     @cached_property
     def CD_pinv(self) -> np.ndarray:
         """(C D)^+ of (16c), computed once (the numpy reference step runs per sample)."""
-        return np.linalg.pinv(self.C @ self.D)
+        return canonical.pinv(canonical.matmul(self.C, self.D))   # emitted: machine-independent
 
     @cached_property
     def theta_box(self) -> np.ndarray:

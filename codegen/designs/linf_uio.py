@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import canonical
 from ..errors import RankConditionError
 from ..lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks
 from ..polytope import Polytope
@@ -158,12 +159,9 @@ class LinfDesign:
 
 
 def round_significant(a, digits: int = 12):
-    """Round to ``digits`` significant digits so emitted gains do not depend on the last solver bits."""
-    a = np.asarray(a, dtype=float)
-    with np.errstate(divide="ignore"):
-        mag = np.where(a == 0, 0, np.floor(np.log10(np.abs(np.where(a == 0, 1, a)))))
-    scale = 10.0 ** (digits - 1 - mag)
-    return np.round(a * scale) / scale
+    """Round to ``digits`` significant digits so emitted gains do not depend on the last solver
+    bits; through the decimal string, so the result is the same on every machine."""
+    return canonical.decimal_round(a, digits)
 
 
 def design(poly: Polytope, settings: LinfDesignSettings) -> LinfDesign:

@@ -28,6 +28,7 @@ from ..discrete import solve_unpivoted
 from ..lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
 from ..polytope import sector_weights_product
 from ..ts_fuzzy import TSFuzzyModel
+from .. import canonical
 from .linf_uio import round_significant
 
 
@@ -76,7 +77,7 @@ def decoupling_matrices(ts: TSFuzzyModel, rank_tol: float = 1e-9) -> tuple:
         raise RankConditionError(
             f"rank condition (15b) fails: rank [[I, D], [C, 0]] = {r_xi} < n_x + n_d = {nx + nd}; "
             f"T D = 0 and T + N C = I have no common solution")
-    TN = np.hstack([np.eye(nx), np.zeros((nx, nd))]) @ np.linalg.pinv(Xi)
+    TN = canonical.pinv(Xi)[:nx]     # [I 0] pinv(Xi); emitted, so machine-independent
     # entries that are round-off of the pseudo-inverse (|.| < 1e-13 max) are exact zeros
     TN[np.abs(TN) < 1e-13 * np.abs(TN).max()] = 0.0
     T, N = TN[:, :nx], TN[:, nx:]

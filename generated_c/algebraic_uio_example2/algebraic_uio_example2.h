@@ -13,7 +13,7 @@ extern "C" {
 
 /* algebraic_uio_example2: Seed-002 Example 2 (eq. (40) with D = [0, 1 + rho]'): relative degree 2; observer (59) on the 4-vertex polytope over rho and rho_2 of (71), gain by LMI (39); y'' and rho' from HOSMD differentiators.
  *
- * Discrete-time step at Ts = 0.001 s (2-stage Gauss-Legendre on the observer ODE, B-stable: sqrt(V) contracts by at most 0.996287 per step for any scheduling in the box). One call = one sample.
+ * Discrete-time step at Ts = 0.001 s (2-stage Gauss-Legendre on the observer ODE, B-stable: sqrt(V) contracts by at most 0.996286 per step for any scheduling in the box). One call = one sample.
  * Each call takes the sample at t_j and returns x_hat(t_j) and d_hat(t_j). Output and
  * parameter derivatives come from Levant differentiators whose states are in the state
  * struct (hosmd_*); the observer ODE is integrated over [t_{j-1}, t_j] with their

@@ -1,0 +1,94 @@
+"""The certified design as a committed artifact, like a lock file.
+
+An LMI solve is not reproducible bit for bit across machines: Clarabel's PSD algebra runs
+through the BLAS kernel of the CPU it runs on. So the design is solved once, certified, and
+committed as ``NAME_design.json`` (the design lock); everything after it, C generation
+included, is a pure function of (model, parameters, configuration, design lock, templates,
+pinned tool versions) and never solves an LMI again.
+
+The lock records, beside the design report of the family (gains, certificates), the exact
+decision variables of every LMI problem the design solved (:class:`codegen.lmi.SolveRecord`)
+and the hash of the design's inputs (:func:`design_inputs`: the observer file, the parameter
+file, the model and every toolchain module the design imports, the numeric packages'
+versions). A lock whose hash matches is *current*: :func:`codegen.pipeline.build` replays it
+(:func:`codegen.lmi.replaying`), re-checking every block with numpy. A stale or missing lock
+is re-solved by ``uiogen generate`` (and on request by ``uiogen design NAME --update``).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from . import sources
+from .errors import DesignLockError
+from .lmi import SolveRecord
+from .observers import ObserverConfig
+
+FORMAT = 1
+GENERATED_DIR = sources.ROOT / "generated_c"
+DESIGN_PACKAGES = ("numpy", "scipy", "sympy", "mpmath", "clarabel")
+
+
+def path(config: ObserverConfig, base: Path = GENERATED_DIR) -> Path:
+    """Where the design lock of ``config`` lives (``base/NAME/NAME_design.json``)."""
+    return Path(base) / config.name / f"{config.name}_design.json"
+
+
+def design_sources(config: ObserverConfig) -> list:
+    """Every file the design of ``config`` derives from, in a fixed order."""
+    code = sources.closure("codegen.pipeline", f"model_defs.{config.model}")
+    return [Path(config.source), config.parameter_path, *code]
+
+
+def design_inputs(config: ObserverConfig) -> str:
+    """Hash of the design's inputs: files (:func:`design_sources`) and numeric package versions."""
+    v = sources.versions()
+    return sources.digest(design_sources(config), {k: v[k] for k in DESIGN_PACKAGES})
+
+
+def read(config: ObserverConfig, base: Path = GENERATED_DIR) -> tuple:
+    """(parsed lock or None, reason) of the file at :func:`path`."""
+    p = path(config, base)
+    if not p.is_file():
+        return None, "no committed design"
+    try:
+        data = json.loads(p.read_text())
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        return None, f"the committed design is unreadable ({type(exc).__name__})"
+    if not isinstance(data, dict) or not isinstance(data.get("lock"), dict):
+        return None, "the committed design has no lock record"
+    return data, ""
+
+
+def status(config: ObserverConfig, base: Path = GENERATED_DIR) -> tuple:
+    """(lock or None, reason): the lock when it is current, else None and why not."""
+    data, why = read(config, base)
+    if data is None:
+        return None, why
+    lock = data["lock"]
+    if lock.get("format") != FORMAT:
+        return None, f"lock format {lock.get('format')!r}, this toolchain writes {FORMAT}"
+    if lock.get("design_inputs") != design_inputs(config):
+        return None, "design inputs changed (model, parameters, configuration, toolchain or package versions)"
+    return data, "current"
+
+
+def solutions(data: dict, source: str = "") -> list:
+    """The committed LMI solutions of a lock, in solve order."""
+    raw = data["lock"].get("lmi_solutions")
+    if not isinstance(raw, list):
+        raise DesignLockError(f"{source}: the lock has no list 'lmi_solutions'")
+    return [SolveRecord.from_json(r, source) for r in raw]
+
+
+def document(build, records: list) -> dict:
+    """The lock of a freshly solved design: the family's report plus the solutions and the hash."""
+    v = sources.versions()
+    return {**build.artifact(),
+            "lock": {"format": FORMAT, "design_inputs": design_inputs(build.config),
+                     "versions": {k: v[k] for k in DESIGN_PACKAGES},
+                     "lmi_solutions": [r.to_json() for r in records]}}
+
+
+def dumps(doc: dict) -> str:
+    return json.dumps(doc, indent=1, sort_keys=True) + "\n"
