@@ -15,6 +15,20 @@ class ModelDefinitionError(UiogenError, ValueError):
     """A symbolic model definition is malformed (shapes, names, structure)."""
 
 
+class ConfigurationError(ModelDefinitionError):
+    """A key or value of an observer file, a parameter file or a design table is not allowed.
+
+    The message reads ``FILE: [section] key = value: what is allowed`` (with a did-you-mean for a
+    misspelt key or choice); the parts are also attributes, for scripts. :mod:`codegen.settings`
+    raises it.
+    """
+
+    def __init__(self, message: str, *, source: str = "", section: str | None = None, key: str | None = None,
+                 value=None, allowed: str = ""):
+        super().__init__(message)
+        self.source, self.section, self.key, self.value, self.allowed = source, section, key, value, allowed
+
+
 class MissingParameterError(ModelDefinitionError):
     """A parameter used by the equations has no value in the parameter file."""
 

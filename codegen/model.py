@@ -9,6 +9,7 @@ D(rho), C(rho) as sympy matrices in the scheduling symbols only.
 """
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +24,7 @@ from .errors import (
     SchedulingBoundsError,
     UnknownParameterError,
 )
+from .settings import Rule, check_keys, config_error, parse_table, parse_value, suggest
 
 
 @dataclass(frozen=True)
@@ -89,6 +91,12 @@ class ModelDefinition:
         Units of states/inputs/outputs, for reports.
     derived_inputs : tuple of DerivedInput
         Known inputs computed inside the step from the measurements (not step inputs).
+    parameter_ranges : mapping of str to tuple
+        Admissible values of parameters beyond their sympy assumptions (``positive=True``: > 0,
+        ``nonnegative=True``: >= 0, ``negative``, ``nonpositive``, ``nonzero``): ``NAME: (min, max)``,
+        closed bounds, either None for no bound; a third element ``"()"``, ``"(]"`` or ``"[)"``
+        opens them (``"mu": (0, 2, "(]")`` is 0 < mu <= 2). :func:`parameter_substitution` refuses
+        a parameter file's value outside its range, before any design.
     """
 
     name: str
@@ -102,8 +110,10 @@ class ModelDefinition:
     units: Mapping[str, str] = field(default_factory=dict)
     doc: str = ""
     derived_inputs: tuple = ()
+    parameter_ranges: Mapping[str, tuple] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        _check_parameter_ranges(self)
         for w in self.derived_inputs:
             if not isinstance(w, DerivedInput):
                 raise ModelDefinitionError(f"model {self.name!r}: derived_inputs must hold DerivedInput, got {w!r}")
@@ -210,14 +220,47 @@ class LPVModel:
         return self.D.shape[1]
 
 
+# Tables of a parameter file and the keys of a [scheduling.NAME] table (derivative_bounds is read by
+# codegen.relative_degree.derivative_boxes; exogenous and premise_bounds by codegen.interconnected).
+PARAMETER_TABLES = ("parameters", "scheduling", "meta", "plant", "state_bounds", "exogenous", "premise_bounds")
+SCHEDULING_KEYS = {"min": Rule(float), "max": Rule(float), "rate_min": Rule(float), "rate_max": Rule(float),
+                   "derivative_bounds": Rule(list, doc="[[min, max], ...] of the derivatives of order 2, 3, ...")}
+_NUMBER = Rule(float)
+_PAIR = Rule(list, items=Rule(float), allowed="[min, max], two finite numbers")
+
+
+def _pair(value, path, section, key) -> tuple:
+    """[min, max] of finite numbers (min < max is checked by the caller)."""
+    pair = parse_value(value, _PAIR, source=str(path), section=section, key=key)
+    if len(pair) != 2:
+        raise config_error(str(path), section, key, value, "must be " + _PAIR.allowed)
+    return pair[0], pair[1]
+
+
+def _table(data, name, path) -> dict:
+    table = data.get(name, {})
+    if not isinstance(table, dict):
+        raise config_error(str(path), None, name, table, "must be a table")
+    return table
+
+
 def load_parameters(path: str | Path) -> ParameterSet:
     """Read a TOML parameter file.
 
     The file has a ``[parameters]`` table of name = number, a ``[scheduling.NAME]``
-    table per scheduling signal with ``min``, ``max``, ``rate_min``, ``rate_max``, and
-    an optional ``[meta]`` table of strings (source, car), an optional ``[plant]`` table of
-    truth-plant-only numbers and an optional ``[state_bounds]`` table ``NAME = [min, max]``
-    (the compact state set of designs that bound unmeasured nonlinearities).
+    table per scheduling signal with ``min``, ``max``, ``rate_min``, ``rate_max`` (and optionally
+    ``derivative_bounds``), and an optional ``[meta]`` table of strings (source, car), an optional
+    ``[plant]`` table of truth-plant-only numbers and an optional ``[state_bounds]`` table
+    ``NAME = [min, max]`` (the compact state set of designs that bound unmeasured nonlinearities);
+    ``[exogenous]`` and ``[premise_bounds]`` are read by :mod:`codegen.interconnected`.
+
+    Raises
+    ------
+    ConfigurationError
+        An unknown table or ``[scheduling.NAME]`` key (with a did-you-mean), or a value that is
+        not a finite number (booleans, strings, nan and inf are refused).
+    ModelDefinitionError, SchedulingBoundsError
+        No file, not TOML, no ``[parameters]``, missing or inverted bounds.
     """
     path = Path(path)
     try:
@@ -227,40 +270,45 @@ def load_parameters(path: str | Path) -> ParameterSet:
         raise ModelDefinitionError(f"parameter file not found: {path}") from None
     except tomllib.TOMLDecodeError as exc:
         raise ModelDefinitionError(f"parameter file {path} is not valid TOML: {exc}") from None
+    check_keys(data, PARAMETER_TABLES, source=str(path), what="tables")
     raw = data.get("parameters")
     if not isinstance(raw, dict):
         raise ModelDefinitionError(f"parameter file {path} has no [parameters] table")
-    values = {}
-    for key, value in raw.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ModelDefinitionError(f"{path}: parameter {key!r} must be a number, got {value!r}")
-        values[key] = float(value)
+    values = {key: parse_value(value, _NUMBER, source=str(path), section="parameters", key=key)
+              for key, value in raw.items()}
     boxes = {}
-    for key, table in (data.get("scheduling") or {}).items():
+    for key, table in _table(data, "scheduling", path).items():
+        section = f"scheduling.{key}"
+        if not isinstance(table, dict):
+            raise config_error(str(path), "scheduling", key, table, "must be a table [scheduling.NAME] with min, "
+                               "max, rate_min, rate_max")
         missing = [k for k in ("min", "max", "rate_min", "rate_max") if k not in table]
         if missing:
             raise SchedulingBoundsError(
                 f"{path}: scheduling signal {key!r} lacks {', '.join(missing)}")
-        box = SchedulingBox(key, float(table["min"]), float(table["max"]),
-                            float(table["rate_min"]), float(table["rate_max"]))
+        table = parse_table(table, SCHEDULING_KEYS, source=str(path), section=section)
+        for m, pair in enumerate(table.get("derivative_bounds", ()), start=2):
+            _pair(pair, path, section, f"derivative_bounds[{m - 2}]")
+        box = SchedulingBox(key, table["min"], table["max"], table["rate_min"], table["rate_max"])
         if not box.lower < box.upper:
             raise SchedulingBoundsError(f"{path}: scheduling {key!r} needs min < max, got "
                                         f"[{box.lower}, {box.upper}]")
         if not box.rate_lower <= box.rate_upper:
             raise SchedulingBoundsError(f"{path}: scheduling {key!r} needs rate_min <= rate_max")
         boxes[key] = box
-    meta = {k: str(v) for k, v in (data.get("meta") or {}).items()}
-    plant = {}
-    for key, value in (data.get("plant") or {}).items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ModelDefinitionError(f"{path}: plant parameter {key!r} must be a number, got {value!r}")
-        plant[key] = float(value)
+    meta = {k: str(v) for k, v in _table(data, "meta", path).items()}
+    plant = {key: parse_value(value, _NUMBER, source=str(path), section="plant", key=key)
+             for key, value in _table(data, "plant", path).items()}
+    for key, value in _table(data, "exogenous", path).items():
+        parse_value(value, _NUMBER, source=str(path), section="exogenous", key=key)
+    for key, value in _table(data, "premise_bounds", path).items():
+        _pair(value, path, "premise_bounds", key)
     state_bounds = {}
-    for key, value in (data.get("state_bounds") or {}).items():
+    for key, value in _table(data, "state_bounds", path).items():
         if (not isinstance(value, list) or len(value) != 2
                 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
             raise SchedulingBoundsError(f"{path}: state bound {key!r} must be [min, max], got {value!r}")
-        lo, hi = float(value[0]), float(value[1])
+        lo, hi = _pair(value, path, "state_bounds", key)
         if not lo < hi:
             raise SchedulingBoundsError(f"{path}: state bound {key!r} needs min < max, got [{lo}, {hi}]")
         state_bounds[key] = (lo, hi)
@@ -280,12 +328,86 @@ def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str) 
     return jac
 
 
-def parameter_substitution(model: ModelDefinition, params: ParameterSet) -> dict:
-    """{parameter symbol: value}, after checking the file sets exactly the model's parameters.
+_BRACKETS = ("[]", "[)", "(]", "()")
+_OPS = {">": lambda v, b: v > b, ">=": lambda v, b: v >= b, "<": lambda v, b: v < b, "<=": lambda v, b: v <= b,
+        "!=": lambda v, b: v != b}
+
+
+def _check_parameter_ranges(model) -> None:
+    """``model.parameter_ranges`` names parameters of the model, with (min, max[, brackets]) ranges."""
+    names = [str(p) for p in model.parameters]
+    for name, rng in (getattr(model, "parameter_ranges", None) or {}).items():
+        if name not in names:
+            raise ModelDefinitionError(f"model {model.name!r}: parameter_ranges names {name!r}, which is not a "
+                                       f"parameter (declared: {', '.join(names)})"
+                                       + (f"; did you mean {suggest(name, names)!r}?" if suggest(name, names) else ""))
+        bounds = rng[:2] if isinstance(rng, tuple) else ()
+        if (len(bounds) != 2 or len(rng) > 3 or (len(rng) == 3 and rng[2] not in _BRACKETS)
+                or not all(b is None or (isinstance(b, (int, float)) and not isinstance(b, bool) and math.isfinite(b))
+                           for b in bounds)
+                or (None not in bounds and not bounds[0] <= bounds[1])):
+            raise ModelDefinitionError(f"model {model.name!r}: parameter_ranges[{name!r}] must be (min, max) or "
+                                       f"(min, max, one of {', '.join(_BRACKETS)}) with finite min <= max or None, "
+                                       f"got {rng!r}")
+
+
+def parameter_conditions(model, symbol) -> list:
+    """[(op, bound, reason)] every value of parameter ``symbol`` must satisfy (op in >, >=, <, <=, !=).
+
+    From the symbol's sympy assumptions and the model's ``parameter_ranges``.
+    """
+    conds = []
+    if symbol.is_positive:
+        conds.append((">", 0.0, "positive=True"))
+    elif symbol.is_negative:
+        conds.append(("<", 0.0, "negative=True"))
+    else:
+        if symbol.is_nonnegative:
+            conds.append((">=", 0.0, "nonnegative=True"))
+        elif symbol.is_nonpositive:
+            conds.append(("<=", 0.0, "nonpositive=True"))
+        if symbol.is_nonzero:
+            conds.append(("!=", 0.0, "nonzero=True"))
+    rng = (getattr(model, "parameter_ranges", None) or {}).get(str(symbol))
+    if rng:
+        brackets = rng[2] if len(rng) == 3 else "[]"
+        why = f"parameter_ranges {rng[:2]!r}" + (f" {brackets}" if len(rng) == 3 else "")
+        if rng[0] is not None:
+            conds.append((">" if brackets[0] == "(" else ">=", float(rng[0]), why))
+        if rng[1] is not None:
+            conds.append(("<" if brackets[1] == ")" else "<=", float(rng[1]), why))
+    return conds
+
+
+def check_parameter_values(model, values: Mapping[str, float], source: str, section: str = "parameters") -> None:
+    """Refuse a value of ``values`` outside the admissible range of its model parameter.
 
     Raises
     ------
-    MissingParameterError, UnknownParameterError
+    ConfigurationError
+        Naming the file, the parameter, its value and the allowed range (and where it is declared).
+    """
+    for p in model.parameters:
+        value = values[str(p)]
+        conds = parameter_conditions(model, p)
+        if not math.isfinite(value) or not all(_OPS[op](value, b) for op, b, _ in conds):
+            allowed = " and ".join(f"{op} {b:g}" for op, b, _ in conds)
+            reasons = "; ".join(dict.fromkeys(why for _, _, why in conds))
+            raise config_error(source, section, str(p), value,
+                               f"must be a finite number{(' ' + allowed) if allowed else ''}"
+                               + (f" (model {model.name!r} declares {p}: {reasons})" if reasons else ""))
+
+
+def parameter_substitution(model: ModelDefinition, params: ParameterSet) -> dict:
+    """{parameter symbol: value}, after checking the file sets exactly the model's parameters.
+
+    Every value must lie in the parameter's admissible range (:func:`parameter_conditions`: its
+    sympy assumptions and the model's ``parameter_ranges``); this is the one parameter check of
+    every family, so a negative mass or a zero inertia is refused before any design.
+
+    Raises
+    ------
+    MissingParameterError, UnknownParameterError, ConfigurationError
     """
     needed = [str(p) for p in model.parameters]
     missing = [n for n in needed if n not in params.values]
@@ -297,6 +419,7 @@ def parameter_substitution(model: ModelDefinition, params: ParameterSet) -> dict
         raise UnknownParameterError(
             f"parameter file {params.source} sets {', '.join(unknown)}, which model "
             f"{model.name!r} does not use (declared: {', '.join(needed)})")
+    check_parameter_values(model, params.values, params.source)
     return {p: params.values[str(p)] for p in model.parameters}
 
 

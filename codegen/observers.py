@@ -15,9 +15,31 @@ from model_defs import PARAMS_DIR
 
 from .errors import ModelDefinitionError, UnknownObserverError
 from .model import ModelDefinition
+from .settings import Rule, config_error, parse_table, suggest
 
 OBSERVERS_DIR = PARAMS_DIR.parent / "observers"
+MODELS_DIR = PARAMS_DIR.parent
 FAMILIES = ("linf_uio", "ts_fuzzy_uio", "switched_pi", "algebraic_uio", "interconnected_uio")
+
+# Top level of an observer file: the keys every family reads, and those only some families read.
+# The [design] and [switching] tables are checked by the family's own parser (codegen.settings).
+COMMON_KEYS = {
+    "family": Rule(str, choices=FAMILIES, required=True),
+    "model": Rule(str, required=True, doc="module model_defs/MODEL.py"),
+    "parameters": Rule(str, required=True, doc="file in model_defs/params"),
+    "sample_time": Rule(float, gt=0, required=True, doc="s"),
+    "design": Rule(dict),
+}
+FAMILY_KEYS = {
+    "linf_uio": {"polytope": Rule(str, choices=("taylor_reduced", "sector"), required=True),
+                 "rate_bounds": Rule(str, choices=("exact", "at_expansion_point", "none")),
+                 "ui_filter": Rule(dict)},
+    "ts_fuzzy_uio": {},
+    "switched_pi": {"switching": Rule(dict)},
+    "algebraic_uio": {"validation": Rule(dict)},       # scenarios, read by codegen.validation.algebraic
+    "interconnected_uio": {},
+}
+UI_FILTER_KEYS = {"time_constant": Rule(float, gt=0, doc="T_f of the UI filter, s")}
 
 
 @dataclass(frozen=True)
@@ -65,13 +87,21 @@ def _parse(path: Path) -> ObserverConfig:
             data = tomllib.load(fh)
         except tomllib.TOMLDecodeError as exc:
             raise ModelDefinitionError(f"{path}: not valid TOML: {exc}") from None
-    required = ("family", "model", "parameters", "sample_time") + \
-        (("polytope",) if data.get("family") == "linf_uio" else ())
-    missing = [k for k in required if k not in data]
-    if missing:
-        raise ModelDefinitionError(f"{path}: missing {', '.join(missing)}")
-    if data["family"] not in FAMILIES:
-        raise ModelDefinitionError(f"{path}: unknown family {data['family']!r} (known: {', '.join(FAMILIES)})")
+    source = str(path)
+    if "family" not in data:
+        raise ModelDefinitionError(f"{path}: missing family (one of {', '.join(FAMILIES)})")
+    parse_table({"family": data["family"]}, {"family": COMMON_KEYS["family"]}, source=source)
+    family = data["family"]
+    parse_table(data, {**COMMON_KEYS, **FAMILY_KEYS[family]}, source=source, what=f"for family {family}")
+    parse_table(data.get("ui_filter", {}), UI_FILTER_KEYS, source=source, section="ui_filter")
+    models = sorted(p.stem for p in MODELS_DIR.glob("*.py") if not p.stem.startswith("_"))
+    if data["model"] not in models:
+        raise config_error(source, None, "model", data["model"], f"no module model_defs/{data['model']}.py; "
+                           f"known: {', '.join(models)}", suggest(data["model"], models))
+    if not (PARAMS_DIR / data["parameters"]).is_file():
+        files = sorted(p.name for p in PARAMS_DIR.glob("*.toml"))
+        raise config_error(source, None, "parameters", data["parameters"], f"no file {PARAMS_DIR / data['parameters']}; "
+                           f"known: {', '.join(files)}", suggest(data["parameters"], files))
     doc = ""
     with path.open() as fh:
         for line in fh:

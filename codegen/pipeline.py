@@ -212,17 +212,22 @@ class TSFuzzyBuild:
 
 
 def _settings(config: ObserverConfig, lyapunov: str | None = None) -> linf_uio.LinfDesignSettings:
-    d = dict(config.design)
-    known = {"alpha", "lyapunov", "gain_bound_times_sample_time", "margin", "tol"}
-    unknown = set(d) - known
-    if unknown:
-        raise ModelDefinitionError(f"{config.source}: unknown [design] keys {sorted(unknown)}")
-    return linf_uio.LinfDesignSettings(
-        alpha=float(d.get("alpha", 5.0)),
-        lyapunov=lyapunov or d.get("lyapunov", "pdlf"),
-        gain_bound=float(d.get("gain_bound_times_sample_time", 1.0)) / config.sample_time,
-        margin=float(d.get("margin", 1e-5)),
-        tol=float(d.get("tol", 1e-8)))
+    """The ``[design]`` table, every key and value checked (codegen.settings).
+
+    The TOML key ``gain_bound_times_sample_time`` (default 1.0) is the bound on ||M|| Ts: the field
+    ``gain_bound`` is its value / sample_time (``gain_bound`` itself is not a key). ``lyapunov``
+    overrides the table's.
+    """
+    from .settings import Alias, config_error, parse_settings
+    settings = parse_settings(
+        linf_uio.LinfDesignSettings, config.design, source=config.source, section="design",
+        aliases={"gain_bound_times_sample_time": Alias("gain_bound", lambda v: v / config.sample_time, default=1.0)},
+        **({"lyapunov": lyapunov} if lyapunov else {}))
+    if settings.lyapunov == "pdlf" and config.rate_bounds == "none":
+        raise config_error(config.source, "design", "lyapunov", "pdlf",
+                           'the parameter-dependent design needs membership rate bounds; with rate_bounds = "none" '
+                           'use lyapunov = "quadratic"')
+    return settings
 
 
 def representation(config: ObserverConfig):
@@ -240,12 +245,9 @@ def representation(config: ObserverConfig):
 
 def build_ts_fuzzy(config: ObserverConfig, tol: float | None = None) -> TSFuzzyBuild:
     """Seed 004: model -> TS form + Jacobian bounds -> rank conditions, (30), LMIs (27) -> certificates."""
-    d = dict(config.design)
-    unknown = set(d) - {"decay", "margin", "tol"}
-    if unknown:
-        raise ModelDefinitionError(f"{config.source}: unknown [design] keys {sorted(unknown)}")
-    settings = ts_fuzzy_uio.TSDesignSettings(decay=float(d.get("decay", 1.0)), margin=float(d.get("margin", 1e-4)),
-                                             tol=float(tol if tol is not None else d.get("tol", 1e-8)))
+    from .settings import parse_settings
+    settings = parse_settings(ts_fuzzy_uio.TSDesignSettings, config.design, source=config.source, section="design",
+                              **({"tol": tol} if tol is not None else {}))
     t0 = time.perf_counter()
     ts = ts_fuzzy.build(config.load_model(), load_parameters(config.parameter_path), config.sample_time)
     t1 = time.perf_counter()

@@ -209,8 +209,77 @@ def _affine_decomposition(lpv: LPVModel, nonlinearities: tuple):
                                 lpv.scheduling_symbols, nonlinearities)
 
 
+def _pole_on_box(den: sp.Expr, sym: sp.Symbol, bounds: dict) -> str | None:
+    """Where the denominator ``den`` vanishes on the closed box (text: "v_x = 0"), or None.
+
+    ``bounds`` is {signal: (lo, hi)}. Factors in ``sym`` alone that are polynomials: their real
+    roots, exactly; other factors: a zero, a non-finite value or a sign change at the box corners.
+    """
+    _, factors = sp.factor_list(den)
+    for f, _ in factors:
+        used = sorted((s for s in f.free_symbols if s in bounds), key=str)
+        if sym not in used:
+            continue
+        lo, hi = bounds[sym]
+        if used == [sym] and f.is_polynomial(sym):
+            for root in sp.real_roots(sp.Poly(f, sym)):
+                if lo <= float(root) <= hi:
+                    return f"{sym} = {float(root):g}"
+            continue
+        fn = sp.lambdify(used, f, "math")
+        corners = list(itertools.product(*[bounds[s] for s in used]))
+        values = []
+        for c in corners:
+            try:
+                values.append(float(fn(*c)))
+            except (ZeroDivisionError, ValueError, TypeError, OverflowError):
+                values.append(float("nan"))
+        bad = [c for c, v in zip(corners, values) if v == 0 or not np.isfinite(v)]
+        if bad:
+            return ", ".join(f"{s} = {v:g}" for s, v in zip(used, bad[0]))
+        if min(values) < 0 < max(values):
+            return f"a point of the box (the denominator factor {f} changes sign)"
+    return None
+
+
+def check_regular_on_box(lpv: LPVModel) -> None:
+    """Refuse a scheduling box on which an entry of A, B, C, D, Du, Bw, Duw is singular (1/v_x, v_x in [0, 35]).
+
+    Raises
+    ------
+    SchedulingBoundsError
+        Naming the parameter file, the signal, its box and the singular entry, before any range
+        computation divides by zero.
+    """
+    syms = set(lpv.scheduling_symbols)
+    bounds = {s: (b.lower, b.upper) for s, b in zip(lpv.scheduling_symbols, lpv.boxes)}
+    Bw, Duw = _derived_input_matrices(lpv)
+    for label, mat in (("A", lpv.A), ("B", lpv.B), ("C", lpv.C), ("D", lpv.D), ("Du", lpv.Du), ("Bw", Bw),
+                       ("Duw", Duw)):
+        if mat is None:
+            continue
+        for i, j in itertools.product(range(mat.shape[0]), range(mat.shape[1])):
+            entry = sp.sympify(mat[i, j])
+            if not entry.free_symbols & syms:
+                continue
+            _, den = sp.fraction(sp.together(entry))
+            for sym in sorted(den.free_symbols & syms, key=str):
+                at = _pole_on_box(den, sym, bounds)
+                if at is not None:
+                    lo, hi = bounds[sym]
+                    text = str(entry) if len(str(entry)) <= 80 else str(entry)[:77] + "..."
+                    raise SchedulingBoundsError(
+                        f"{lpv.parameters.source}: [scheduling.{sym}] min = {lo!r}, max = {hi!r}: {label}[{i},{j}] = "
+                        f"{text} is singular at {at}, which the box [{lo:g}, {hi:g}] of {sym} contains or touches; "
+                        f"choose a box of {sym} that excludes it")
+
+
 def _range_on_interval(expr: sp.Expr, x: sp.Symbol, lo: float, hi: float) -> tuple:
     """Exact min and max of a smooth rational ``expr`` over [lo, hi] (endpoints + real stationary points)."""
+    _, den = sp.fraction(sp.together(expr))
+    at = _pole_on_box(den, x, {x: (lo, hi)}) if x in den.free_symbols else None
+    if at is not None:
+        raise SchedulingBoundsError(f"{expr} is singular at {at}, in or at an end of [{lo:g}, {hi:g}]")
     candidates = [lo, hi]
     num, _ = sp.fraction(sp.together(sp.diff(expr, x)))
     poly = sp.Poly(sp.expand(num), x)
@@ -326,6 +395,7 @@ def sector_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polytope:
         raise SchedulingBoundsError(
             f"model {lpv.definition.name!r}: membership rate bounds are derived for one scheduling signal; "
             f"with {len(lpv.scheduling_symbols)} signals use rate_bounds = \"none\" and the quadratic design")
+    check_regular_on_box(lpv)
     nonlin = scheduling_nonlinearities(lpv)
     if not nonlin:
         raise ModelDefinitionError(f"model {lpv.definition.name!r} does not depend on its scheduling signal")
@@ -358,6 +428,7 @@ def taylor_reduced_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polyto
     1/v_x**2 ~ (1 + 2 v0/v1 theta)/v0**2, as in the paper.
     """
     signal, box = _single_signal(lpv)
+    check_regular_on_box(lpv)
     nonlin = scheduling_nonlinearities(lpv)
     if not nonlin:
         raise ModelDefinitionError(f"model {lpv.definition.name!r} does not depend on its scheduling signal")

@@ -137,19 +137,10 @@ class SwitchedPIBuild:
 
 
 def settings_of(config: ObserverConfig, tol: float | None = None) -> switched_pi.SwitchedPIDesignSettings:
-    d = dict(config.design)
-    unknown = set(d) - {"pole_radius", "decay_rate", "margin", "tol"}
-    if unknown:
-        raise ModelDefinitionError(f"{config.source}: unknown [design] keys {sorted(unknown)}")
-    base = switched_pi.SwitchedPIDesignSettings()
-    try:
-        return switched_pi.SwitchedPIDesignSettings(
-            pole_radius=float(d.get("pole_radius", base.pole_radius)),
-            decay_rate=float(d.get("decay_rate", base.decay_rate)),
-            margin=float(d.get("margin", base.margin)),
-            tol=float(tol if tol is not None else d.get("tol", base.tol)))
-    except ValueError as exc:
-        raise ModelDefinitionError(f"{config.source}: [design]: {exc}") from None
+    """The ``[design]`` table, every key and value checked (codegen.settings); ``tol`` overrides its tol."""
+    from .settings import parse_settings
+    return parse_settings(switched_pi.SwitchedPIDesignSettings, config.design, source=config.source,
+                          section="design", **({"tol": tol} if tol is not None else {}))
 
 
 def build_switched_pi(config: ObserverConfig, tol: float | None = None) -> SwitchedPIBuild:

@@ -23,7 +23,8 @@ from model_defs.tyres import magic_formula_axle
 v_y, r = sp.symbols("v_y r")
 v_x = sp.Symbol("v_x", positive=True)
 T_eng, delta = sp.symbols("T_eng delta")
-M, l_f, l_r, I_e, I_z, C_f, C_r, C_x, C_y = sp.symbols("M l_f l_r I_e I_z C_f C_r C_x C_y", positive=True)
+M, l_f, l_r, I_e, I_z, C_f, C_r = sp.symbols("M l_f l_r I_e I_z C_f C_r", positive=True)
+C_x, C_y = sp.symbols("C_x C_y", nonnegative=True)      # drag coefficients: 0 for a model without drag
 
 
 def _dynamics(F_yf, F_yr):
@@ -74,6 +75,7 @@ PLANT = ModelDefinition(
     outputs=(("v_x", v_x), ("r", r)),
     scheduling=(),
     parameters=(M, l_f, l_r, I_e, I_z, C_f, C_r, C_x, C_y, mu, g, C_pac, E_pac),
+    parameter_ranges={"mu": (0, None, "()"), "g": (0, None, "()"), "C_pac": (0, None, "()"), "E_pac": (None, 1)},
     units=UNITS,
     doc="Truth plant: seed-004 vehicle (1) with the magic-formula tyres (2).",
 )

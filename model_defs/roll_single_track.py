@@ -95,7 +95,8 @@ MODEL = ModelDefinition(
 # accelerating (longitudinal force shared in proportion to the axle loads), sin/cos of the exact
 # roll kinematics and of the bank's gravity terms.
 v_y, a_x = sp.symbols("v_y a_x")
-mu, h_cg, C_pac, E_pac = sp.symbols("mu h_cg C_pac E_pac", positive=True)
+mu, h_cg, C_pac = sp.symbols("mu h_cg C_pac", positive=True)
+E_pac = sp.Symbol("E_pac", real=True)                  # curvature factor, either sign, <= 1
 _L = l_f + l_r
 _Fz_f0, _Fz_r0 = m * g * l_r / _L, m * g * l_f / _L
 _Fz_f = m * (g * sp.cos(phi_r) * l_r - h_cg * a_x) / _L
@@ -118,6 +119,7 @@ PLANT = ModelDefinition(
     outputs=(("r", r), ("phi", phi), ("phi_dot", phi_dot)),
     scheduling=(SchedulingSignal(v_x, "m/s"), SchedulingSignal(a_x, "m/s^2")),
     parameters=(m, m_s, I_x, I_z, l_f, l_r, h_r, K_r, b_r, C_f, C_r, g, mu, h_cg, C_pac, E_pac),
+    parameter_ranges={"E_pac": (None, 1)},
     units=UNITS,
     doc="Truth plant: roll and bank with sin/cos, Pacejka axles with load-dependent stiffness, "
         "load transfer and friction ellipse.",

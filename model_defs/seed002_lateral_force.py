@@ -72,6 +72,8 @@ PLANT = ModelDefinition(
     outputs=(("v_y", v_y),),
     scheduling=(SchedulingSignal(v_x, "m/s"),),
     parameters=(M, I_z, l_f, l_r, c_r, sigma_r, c_f, mu, g, C_pac, E_pac),
+    parameter_ranges={"c_f": (0, None, "()"), "mu": (0, None, "()"), "g": (0, None, "()"),
+                      "C_pac": (0, None, "()"), "E_pac": (None, 1)},
     units=UNITS,
     doc="Truth plant: bicycle model (76) with magic-formula tyres (79) and rear relaxation (78).",
 )

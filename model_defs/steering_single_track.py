@@ -83,6 +83,8 @@ PLANT = ModelDefinition(
     outputs=(("r", r), ("delta", delta), ("delta_dot", delta_dot)),
     scheduling=(SchedulingSignal(v_x, "m/s"), SchedulingSignal(a_x, "m/s^2")),
     parameters=(l_f, l_r, eta_t, R_s, B_s, K_p, M, I_z, I_s, C_f, C_r, mu, h_cg, g, C_pac, E_pac),
+    parameter_ranges={"mu": (0, None, "()"), "h_cg": (0, None, "()"), "g": (0, None, "()"),
+                      "C_pac": (0, None, "()"), "E_pac": (None, 1)},
     units=MODEL.units,
     doc="Truth plant: seed-000 vehicle with Pacejka tyres, load transfer and trail-based aligning torque.",
 )

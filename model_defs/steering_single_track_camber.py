@@ -115,6 +115,7 @@ MODEL = ModelDefinition(
            "T_a": "N m", "T_d": "N m", "v_x": "m/s",
            "s_c": "-", "F_nf": "N", "F_nr": "N", "T_nl": "N m"},
     doc=__doc__,
+    parameter_ranges={"E_y": (None, 1, "[)")},        # the inversion divides by 1 - E_y
     derived_inputs=(DerivedInput(s_c, s_c_expr, "-"), DerivedInput(F_nf, F_nf_expr, "N"),
                     DerivedInput(F_nr, F_nr_expr, "N"), DerivedInput(T_nl, T_nl_expr, "N m")),
 )

@@ -37,7 +37,7 @@ Discrete step (what the C runs), at the configured sample time h:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
@@ -46,12 +46,13 @@ from scipy.linalg import matrix_balance
 
 from .. import relative_degree as rdeg
 from ..bounds import range_bound
-from ..differentiators import HosmdSpec
+from ..differentiators import MAX_ORDER, HosmdSpec
 from ..errors import (CertificateError, DiscretizationError, InfeasibleLMIError, ModelDefinitionError,
                       SolverError)
 from ..lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
 from ..model import LPVModel
 from ..polytope import Premise, affine_decomposition, nonlinear_factors, sector_weights_product, vertex_matrices
+from ..settings import Rule, number_matrix, parse_settings, parse_table, parse_value, setting
 from .linf_uio import round_significant
 
 # 2-stage Gauss-Legendre (order 4)
@@ -88,14 +89,14 @@ class AlgebraicSettings:
         A hand-picked constant gain (e.g. the seed's (52)) to certify beside the design, reported only.
     """
 
-    lmi: str = "direct"
-    alpha: float = 1.0
-    margin: float = 1e-6
-    tol: float = 1e-9
-    differentiators: dict = field(default_factory=dict)
-    compare_gain: tuple | None = None
-    auxiliary: str = "open_loop"
-    auxiliary_alpha: float = 0.5
+    lmi: str = setting("direct", choices=("product", "direct"))
+    alpha: float = setting(1.0, gt=0, doc="certified decay rate")
+    margin: float = setting(1e-6, ge=0)
+    tol: float = setting(1e-9, gt=0)
+    differentiators: dict = setting(default_factory=dict, doc="[design.differentiators.NAME] order, lipschitz")
+    compare_gain: tuple | None = setting(None, parse=number_matrix)
+    auxiliary: str = setting("open_loop", choices=("open_loop", "output_injection"))
+    auxiliary_alpha: float = setting(0.5, gt=0, doc="decay rate of the output-injected auxiliary system")
 
     def __post_init__(self):
         if self.lmi not in ("product", "direct"):
@@ -104,25 +105,21 @@ class AlgebraicSettings:
             raise ModelDefinitionError("[design] needs alpha > 0, margin >= 0, tol > 0")
 
 
+# [design.differentiators.NAME]: both keys required
+DIFFERENTIATOR_RULES = {"order": Rule(int, ge=1, le=MAX_ORDER, required=True, doc="highest derivative estimated"),
+                        "lipschitz": Rule(float, gt=0, required=True, doc="bound of |f^(order+1)|")}
+
+
 def settings_from_config(config) -> AlgebraicSettings:
+    """The ``[design]`` table as :class:`AlgebraicSettings` (every key and value checked, see codegen.settings)."""
     d = dict(config.design)
-    unknown = set(d) - {"lmi", "alpha", "margin", "tol", "differentiators", "compare_gain", "auxiliary",
-                        "auxiliary_alpha"}
-    if unknown:
-        raise ModelDefinitionError(f"{config.source}: unknown [design] keys {sorted(unknown)}")
     specs = {}
-    for name, tbl in dict(d.get("differentiators", {})).items():
-        extra = set(tbl) - {"order", "lipschitz"}
-        if extra or "order" not in tbl or "lipschitz" not in tbl:
-            raise ModelDefinitionError(f"{config.source}: [design.differentiators.{name}] needs exactly order and "
-                                       f"lipschitz (got {sorted(tbl)})")
+    diffs = parse_value(d.get("differentiators", {}), Rule(dict), source=config.source, section="design",
+                        key="differentiators")
+    for name, tbl in diffs.items():
+        tbl = parse_table(tbl, DIFFERENTIATOR_RULES, source=config.source, section=f"design.differentiators.{name}")
         specs[name] = HosmdSpec(tbl["order"], tbl["lipschitz"], config.sample_time, name=name)
-    gain = d.get("compare_gain")
-    return AlgebraicSettings(lmi=d.get("lmi", "direct"), alpha=float(d.get("alpha", 1.0)),
-                             margin=float(d.get("margin", 1e-6)), tol=float(d.get("tol", 1e-9)),
-                             differentiators=specs, auxiliary=d.get("auxiliary", "open_loop"),
-                             auxiliary_alpha=float(d.get("auxiliary_alpha", 0.5)),
-                             compare_gain=None if gain is None else tuple(tuple(float(v) for v in row) for row in gain))
+    return parse_settings(AlgebraicSettings, d, source=config.source, section="design", differentiators=specs)
 
 
 # ---- exact polytopes of symbolic matrices -------------------------------------------------------------

@@ -79,11 +79,12 @@ import scipy.linalg
 import sympy as sp
 
 from .. import interconnected as icm
-from ..differentiators import HosmdSpec, hosmd_step_numpy, hosmd_step_sx
+from ..differentiators import MAX_ORDER, HosmdSpec, hosmd_step_numpy, hosmd_step_sx
 from ..discrete import solve_unpivoted
 from ..errors import CertificateError, DiscretizationError, ModelDefinitionError, RankConditionError
 from ..lmi import LMIProblem, LMISolution, bmat, check_blocks
 from ..polytope import sector_weights_product
+from ..settings import Rule, parse_settings, parse_table, setting
 from .linf_uio import round_significant
 
 FAMILY = "interconnected_uio"
@@ -115,14 +116,14 @@ class ICDesignSettings:
         ``"minimum_norm"`` (default): H of (26); ``"measured_rows"``: choice 9 of the module docstring.
     """
 
-    alpha: float = 2.0
-    weight: float = 0.5
-    coupling_gain: float = 1.0
-    gain_bound: float = 100.0
-    margin: float = 1e-6
-    tol: float = 1e-7
-    gain_structure: str = "affine"
-    decoupling: str = "minimum_norm"
+    alpha: float = setting(2.0, gt=0, doc="alpha of (27b)")
+    weight: float = setting(0.5, ge=0, le=1, doc="a of (27a)")
+    coupling_gain: float = setting(1.0, gt=0, doc="g of G = g I")
+    gain_bound: float = setting(100.0, gt=0, doc="ell: ||K_i|| <= ell")
+    margin: float = setting(1e-6, ge=0)
+    tol: float = setting(1e-7, gt=0)
+    gain_structure: str = setting("affine", choices=("affine", "vertex"))
+    decoupling: str = setting("minimum_norm", choices=("minimum_norm", "measured_rows"))
 
     def __post_init__(self):
         if self.gain_structure not in ("affine", "vertex"):
@@ -467,15 +468,19 @@ class StepLayout:
         return self.z_names() + self.output_names()
 
 
+# [design] keys read by step_settings, not ICDesignSettings fields (checked by parse_settings in build)
+STEP_KEYS = {"differentiators": Rule(dict, items=Rule(dict)), "derivative_outputs": Rule(dict, items=Rule(str)),
+             "flag_outside_box": Rule(list, items=Rule(str)), "initial": Rule(dict, items=Rule(str))}
+DIFFERENTIATOR_RULES = {"order": Rule(int, ge=1, le=MAX_ORDER), "lipschitz": Rule(float, gt=0)}
+
+
 def step_settings(ts: icm.InterconnectedTS, design_table: dict, sample_time: float, source: str) -> StepSettings:
     outs = ts.definition.output_names
     diffs = []
     for sig, spec in sorted((design_table.get("differentiators") or {}).items()):
         if sig not in outs:
             raise ModelDefinitionError(f"{source}: differentiator for {sig!r}, which is not a model output")
-        unknown = set(spec) - {"order", "lipschitz"}
-        if unknown:
-            raise ModelDefinitionError(f"{source}: differentiator {sig!r} has unknown keys {sorted(unknown)}")
+        spec = parse_table(spec, DIFFERENTIATOR_RULES, source=source, section=f"design.differentiators.{sig}")
         diffs.append((sig, HosmdSpec(int(spec.get("order", 2)), float(spec.get("lipschitz", 1.0)), sample_time,
                                      name=f"hosmd_{sig}")))
     derived = []
@@ -928,17 +933,9 @@ class InterconnectedBuild:
 
 def build(config, tol: float | None = None) -> InterconnectedBuild:
     """Seed 003: model -> interconnected T-S form -> (16), (26), LMIs (27), (28) -> certificates -> step."""
-    known = {"alpha", "weight", "coupling_gain", "gain_bound", "margin", "tol", "differentiators",
-             "derivative_outputs", "flag_outside_box", "initial", "gain_structure", "decoupling"}
     table = dict(config.design)
-    unknown = set(table) - known
-    if unknown:
-        raise ModelDefinitionError(f"{config.source}: unknown [design] keys {sorted(unknown)}")
-    settings = ICDesignSettings(**{k: float(table[k]) for k in ("alpha", "weight", "coupling_gain", "gain_bound",
-                                                               "margin", "tol") if k in table},
-                                **{k: str(table[k]) for k in ("gain_structure", "decoupling") if k in table})
-    if tol is not None:
-        settings = ICDesignSettings(**{**settings.__dict__, "tol": tol})
+    settings = parse_settings(ICDesignSettings, table, source=config.source, section="design", extra=STEP_KEYS,
+                              **({"tol": tol} if tol is not None else {}))
     t0 = time.perf_counter()
     ts = icm.load(config.model, config.parameter_path)
     step = step_settings(ts, table, config.sample_time, config.source)

@@ -26,6 +26,7 @@ from .. import canonical
 from ..errors import RankConditionError
 from ..lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks
 from ..polytope import Polytope
+from ..settings import setting
 
 
 @dataclass(frozen=True)
@@ -46,11 +47,11 @@ class LinfDesignSettings:
         Clarabel gap/feasibility tolerance.
     """
 
-    alpha: float = 5.0
-    lyapunov: str = "pdlf"
-    gain_bound: float = 100.0
-    margin: float = 1e-5
-    tol: float = 1e-8
+    alpha: float = setting(5.0, gt=0, doc="decay rate")
+    lyapunov: str = setting("pdlf", choices=("pdlf", "quadratic"))
+    gain_bound: float = setting(100.0, gt=0, doc="bound on ||M(theta)|| in 1/s")
+    margin: float = setting(1e-5, ge=0)
+    tol: float = setting(1e-8, gt=0)
 
 
 def _check_assumptions(poly: Polytope) -> None:

@@ -44,6 +44,7 @@ import scipy.linalg
 
 from ..errors import CertificateError, DiscretizationError, RankConditionError
 from ..lmi import LMIProblem, LMISolution, bmat, check_blocks
+from ..settings import setting
 from ..switched import SwitchedModel
 from .linf_uio import round_significant
 
@@ -64,10 +65,10 @@ class SwitchedPIDesignSettings:
         Clarabel gap/feasibility tolerance.
     """
 
-    pole_radius: float = 100.0
-    decay_rate: float = 1.0
-    margin: float = 1e-6
-    tol: float = 1e-9
+    pole_radius: float = setting(100.0, gt=0, doc="r [rad/s]: error poles in |s| < r")
+    decay_rate: float = setting(1.0, ge=0, doc="a [1/s], below pole_radius")
+    margin: float = setting(1e-6, ge=0)
+    tol: float = setting(1e-9, gt=0)
 
     def __post_init__(self):
         if not (self.pole_radius > 0 and np.isfinite(self.pole_radius)):

@@ -27,6 +27,7 @@ from ..errors import CertificateError, RankConditionError
 from ..discrete import solve_unpivoted
 from ..lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
 from ..polytope import sector_weights_product
+from ..settings import setting
 from ..ts_fuzzy import TSFuzzyModel
 from .. import canonical
 from .linf_uio import round_significant
@@ -46,9 +47,9 @@ class TSDesignSettings:
         Clarabel gap/feasibility tolerance.
     """
 
-    decay: float = 1.0
-    margin: float = 1e-4
-    tol: float = 1e-8
+    decay: float = setting(1.0, gt=0, le=1, doc="lambda: V_{k+1} <= lambda^2 V_k")
+    margin: float = setting(1e-4, ge=0)
+    tol: float = setting(1e-8, gt=0)
 
     def __post_init__(self):
         if not 0 < self.decay <= 1:
