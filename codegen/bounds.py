@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from .errors import ModelDefinitionError
+from .errors import BoundsError, ModelDefinitionError
 
 _INF = math.inf
 
@@ -69,10 +69,6 @@ class Interval:
     def monotone(self, fn, increasing: bool = True) -> "Interval":
         a, b = fn(self.lo), fn(self.hi)
         return Interval(_down(a), _up(b)) if increasing else Interval(_down(b), _up(a))
-
-
-class BoundsError(ModelDefinitionError):
-    """An expression cannot be bounded over the box (singularity, unsupported function)."""
 
 
 def _sin_cos(iv: Interval, phase: float) -> Interval:

@@ -50,6 +50,11 @@ def _np(m, shape=None) -> np.ndarray:
 def matmul(*mats) -> np.ndarray:
     """Product of 2-D matrices, exact then rounded once (vectors are treated as columns)."""
     shapes = [np.shape(m) for m in mats]
+    if any(0 in sh for sh in shapes):       # an empty factor: numpy's (exact) zeros of the right shape
+        out = np.asarray(mats[0], float)
+        for m in mats[1:]:
+            out = out @ np.asarray(m, float)
+        return np.zeros(out.shape)
     out = _mp(mats[0] if len(shapes[0]) == 2 else np.reshape(mats[0], (1, -1)))
     for m, sh in zip(mats[1:], shapes[1:]):
         out = out * _mp(m if len(sh) == 2 else np.reshape(m, (-1, 1)))
@@ -110,3 +115,11 @@ def eigh(A, B=None) -> tuple:
 def expm(A) -> np.ndarray:
     """Matrix exponential, exact (mpmath's Taylor/Pade at 40 digits) then rounded once."""
     return _np(_CTX.expm(_mp(A)))
+
+
+def polyroots(coeffs) -> list:
+    """Roots (complex) of the polynomial with ``coeffs`` (highest power first), by mpmath's
+    Durand-Kerner iteration at 40 digits, each rounded once; sorted by (real, imag)."""
+    roots = _CTX.polyroots([_CTX.mpf(float(c)) for c in coeffs], maxsteps=400, extraprec=80)
+    out = [complex(float(_CTX.re(r)), float(_CTX.im(r))) for r in roots]
+    return sorted(out, key=lambda z: (z.real, z.imag))

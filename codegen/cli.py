@@ -1,7 +1,7 @@
 """The ``uiogen`` command line.
 
     uiogen list [--json]
-    uiogen design NAME [--json] [--out FILE]
+    uiogen design NAME [--json] [--out FILE] [--update]
     uiogen generate [NAME ...] [--force] [--out DIR]
     uiogen build [NAME ...]
     uiogen check-gains NAME --gains FILE [--json]
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import emit, observers, pipeline
+from . import design_lock, emit, observers, pipeline
 from .designs import linf_uio
 from .errors import UiogenError
 
@@ -117,11 +117,84 @@ def _print_switched(s: dict) -> None:
     print(f"artifact: {s['artifact']}")
 
 
+def _objectives(records) -> list:
+    return [{"problem": r.problem, "objective": r.objective} for r in records]
+
+
+def _compare_with_committed(config, records) -> dict:
+    """Fresh objectives beside the committed design's (same machine: identical; another one:
+    within the solver's accuracy, see docs/guarantees)."""
+    data, why = design_lock.read(config)
+    if data is None:
+        return {"committed": None, "reason": why}
+    committed = design_lock.solutions(data, str(design_lock.path(config)))
+    rows = []
+    for fresh, old in zip(records, committed):
+        rel = abs(fresh.objective - old.objective) / max(abs(old.objective), 1e-300)
+        spread = {}
+        for key, value in old.variables.items():
+            if key in fresh.variables:
+                a, b = np.asarray(fresh.variables[key], float), np.asarray(value, float)
+                if a.shape == b.shape:
+                    spread[key] = float(np.abs(a - b).max(initial=0.0) / max(np.abs(b).max(initial=0.0), 1e-300))
+        worst = max(spread, key=spread.get) if spread else None
+        rows.append({"problem": fresh.problem, "fresh": fresh.objective, "committed": old.objective,
+                     "relative_difference": rel, "variables_relative_difference": spread,
+                     "worst_variable": worst})
+    status, _ = design_lock.status(config)
+    return {"committed": rows, "current": status is not None}
+
+
 def cmd_design(args) -> int:
-    b = pipeline.build(observers.get(args.name))
-    path = Path(args.out) if args.out else emit.GENERATED_DIR / b.name / f"{b.name}_design.json"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(b.artifact(), indent=1, sort_keys=True) + "\n")
+    config = observers.get(args.name)
+    b, records = pipeline.solve(config)
+    text = design_lock.dumps(design_lock.document(b, records))
+    compare = _compare_with_committed(config, records)
+    path = None
+    if args.update:
+        path = design_lock.path(config)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(text)
+        tmp.replace(path)
+    if args.out:
+        path = Path(args.out)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    shown = path if path is not None else "not written (--update commits it as the design lock, --out FILE writes a copy)"
+    code = _print_design(b, shown, args.json, compare)
+    if not args.json:
+        if compare["committed"] is None:
+            print(f"committed design: none ({compare['reason']})")
+        else:
+            for row in compare["committed"]:
+                worst = row["worst_variable"]
+                var = (f"; decision variables within {row['variables_relative_difference'][worst]:.2e} of their "
+                       f"size (largest: {worst})") if worst else ""
+                print(f"committed design: {row['problem']}: objective {row['committed']:.8g}, fresh "
+                      f"{row['fresh']:.8g} (relative difference {row['relative_difference']:.2e}){var}")
+        if args.update:
+            print(f"design lock updated: {design_lock.path(config)}; `uiogen generate {b.name}` emits its C")
+    return code
+
+
+def _print_design(b, path, as_json: bool, compare: dict) -> int:
+    """The family's design summary (text, or JSON with the comparison to the committed design)."""
+    args = argparse.Namespace(json=as_json)
+    if as_json:
+        import contextlib
+        import io
+        buf = io.StringIO()
+        with contextlib.redirect_stdout(buf):
+            code = _family_summary(b, path, args)
+        data = json.loads(buf.getvalue())
+        data["committed_design"] = compare
+        _print_json(data)
+        return code
+    return _family_summary(b, path, args)
+
+
+def _family_summary(b, path, args) -> int:
     if hasattr(b, "summary_lines"):        # families that summarize themselves
         s = b.summary(path)
         if args.json:
@@ -312,10 +385,12 @@ def main(argv=None) -> int:
     p = sub.add_parser("list", help="list observer configurations")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_list)
-    p = sub.add_parser("design", help="design and certify one observer, write its artifact")
+    p = sub.add_parser("design", help="solve and certify one observer's design (writes nothing unless --update/--out)")
     p.add_argument("name")
     p.add_argument("--json", action="store_true")
-    p.add_argument("--out", help="artifact path (default generated_c/NAME/NAME_design.json)")
+    p.add_argument("--out", help="also write the design (lock format) to this file")
+    p.add_argument("--update", action="store_true",
+                   help="commit the fresh design as the design lock generated_c/NAME/NAME_design.json")
     p.set_defaults(func=cmd_design)
     p = sub.add_parser("generate", help="emit C for observers whose inputs changed")
     p.add_argument("names", nargs="*")

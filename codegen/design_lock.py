@@ -29,9 +29,10 @@ GENERATED_DIR = sources.ROOT / "generated_c"
 DESIGN_PACKAGES = ("numpy", "scipy", "sympy", "mpmath", "clarabel")
 
 
-def path(config: ObserverConfig, base: Path = GENERATED_DIR) -> Path:
-    """Where the design lock of ``config`` lives (``base/NAME/NAME_design.json``)."""
-    return Path(base) / config.name / f"{config.name}_design.json"
+def path(config: ObserverConfig, base: Path | None = None) -> Path:
+    """Where the design lock of ``config`` lives (``base/NAME/NAME_design.json``, base defaulting
+    to the committed tree)."""
+    return Path(GENERATED_DIR if base is None else base) / config.name / f"{config.name}_design.json"
 
 
 def design_sources(config: ObserverConfig) -> list:
@@ -46,7 +47,7 @@ def design_inputs(config: ObserverConfig) -> str:
     return sources.digest(design_sources(config), {k: v[k] for k in DESIGN_PACKAGES})
 
 
-def read(config: ObserverConfig, base: Path = GENERATED_DIR) -> tuple:
+def read(config: ObserverConfig, base: Path | None = None) -> tuple:
     """(parsed lock or None, reason) of the file at :func:`path`."""
     p = path(config, base)
     if not p.is_file():
@@ -60,7 +61,7 @@ def read(config: ObserverConfig, base: Path = GENERATED_DIR) -> tuple:
     return data, ""
 
 
-def status(config: ObserverConfig, base: Path = GENERATED_DIR) -> tuple:
+def status(config: ObserverConfig, base: Path | None = None) -> tuple:
     """(lock or None, reason): the lock when it is current, else None and why not."""
     data, why = read(config, base)
     if data is None:

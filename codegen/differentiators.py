@@ -82,7 +82,8 @@ import casadi as ca
 import numpy as np
 from scipy.linalg import expm
 
-from .errors import ModelDefinitionError, SampleError
+from . import canonical
+from .errors import ModelDefinitionError, SampleError, ToolchainError
 
 # Levant (2003), Int. J. Control 76(9/10): lambda_0..lambda_5 of the recursive form, "suitable for k <= 5".
 LEVANT_RECURSIVE_GAINS = (1.1, 1.5, 2.0, 3.0, 5.0, 8.0)
@@ -179,7 +180,7 @@ class HosmdSpec:
         gains = tuple(_positive("gain", g) for g in gains)
         object.__setattr__(self, "gains", gains)
         # p(nu) = nu^(k+1) + lt_k nu^k + ... + lt_0 (numpy wants the highest power first)
-        roots = np.roots([1.0, *gains[::-1]])
+        roots = np.array(canonical.polyroots([1.0, *gains[::-1]]))   # emitted: machine-independent
         if not np.all(roots.real < 0):
             raise ModelDefinitionError(f"differentiator {self.name!r}: gains {gains} do not make the gain "
                                        f"polynomial Hurwitz (roots {np.round(roots, 4).tolist()})")
@@ -218,9 +219,14 @@ def _constants(spec: HosmdSpec) -> _Constants:
     # Everything in time-scaled coordinates zeta_i = tau^i z_i, where Phi and O are pure numbers.
     Phi_s = np.array([[1.0 / math.factorial(j - i) if j >= i else 0.0 for j in range(n)] for i in range(n)])
     O_s = np.array([[float(m) ** j / math.factorial(j) for j in range(n)] for m in range(n)])  # rows c^T Phi^m
-    g_s = np.linalg.solve(O_s, np.eye(n)[:, -1])
+    # emitted constants: exact arithmetic (codegen.canonical), the same on every machine
+    g_s = canonical.solve(O_s, np.eye(n)[:, -1])
     N_s = Phi_s - np.eye(n)
-    V_s = np.column_stack([np.linalg.matrix_power(N_s, j) @ g_s for j in range(n)])
+    cols, v = [], g_s
+    for j in range(n):
+        cols.append(v)
+        v = canonical.matmul(N_s, v)
+    V_s = np.column_stack(cols)
     scale = np.array([tau ** -i for i in range(n)])
     Phi = Phi_s * scale[:, None] / scale[None, :]
     V = V_s * scale[:, None]
@@ -487,12 +493,12 @@ def build_c_driver(spec: HosmdSpec, out_dir: Path, cc: str = "gcc", extra_flags=
         cmd = [cc, *STRICT_CFLAGS, *extra_flags, "-I", str(out_dir), "-c", str(out_dir / fname), "-o", str(obj)]
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0:
-            raise RuntimeError(f"{' '.join(cmd)}\n{proc.stderr}")
+            raise ToolchainError(f"{' '.join(cmd)}\n{proc.stderr}")
         objs.append(str(obj))
     exe = out_dir / "hosmd_driver"
     proc = subprocess.run([cc, *extra_flags, *objs, "-o", str(exe), "-lm"], capture_output=True, text=True)
     if proc.returncode != 0:
-        raise RuntimeError(proc.stderr)
+        raise ToolchainError(proc.stderr)
     return exe
 
 
@@ -502,5 +508,5 @@ def run_c_driver(exe: Path, spec: HosmdSpec, samples, z0) -> np.ndarray:
             + np.ascontiguousarray(samples, dtype=np.float64).tobytes())
     proc = subprocess.run([str(exe)], input=data, capture_output=True)
     if proc.returncode != 0:
-        raise RuntimeError(f"{exe} exited with {proc.returncode}: {proc.stderr.decode(errors='replace')}")
+        raise ToolchainError(f"{exe} exited with {proc.returncode}: {proc.stderr.decode(errors='replace')}")
     return np.frombuffer(proc.stdout, dtype=np.float64).reshape(-1, spec.n_state)

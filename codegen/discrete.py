@@ -28,7 +28,7 @@ import sympy as sp
 from scipy.linalg import eigh
 
 from . import canonical
-from .errors import DiscretizationError, ModelDefinitionError
+from .errors import ConfigurationError, DiscretizationError, ModelDefinitionError
 from .polytope import Polytope, sector_weights_product
 
 
@@ -56,7 +56,7 @@ class ObserverData:
             raise ModelDefinitionError("D depends on the scheduling signal; this observer family needs "
                                        "a constant D (its pseudo-inverse drives the UI filter (47))")
         if not self.Ts > 0 or not self.Tf > 0:
-            raise ValueError(f"sample time and filter constant must be positive (Ts={self.Ts}, Tf={self.Tf})")
+            raise ConfigurationError(f"sample time and filter constant must be positive (Ts={self.Ts}, Tf={self.Tf})")
 
     @property
     def nx(self):

@@ -21,7 +21,7 @@ import casadi as ca
 import jinja2
 
 from . import design_lock, observers, pipeline, sources
-from .errors import GenerationError, UiogenError
+from .errors import GenerationError, ToolchainError, UiogenError
 from .pipeline import ObserverBuild
 
 ROOT = sources.ROOT
@@ -91,7 +91,7 @@ def _fix_unused_parameters(code: str, kernel: str) -> str:
     for pattern, repl in fixes:
         code, count = re.subn(pattern, repl, code)
         if count != 1:
-            raise RuntimeError(f"CasADi {ca.__version__} output changed shape: pattern {pattern!r} "
+            raise ToolchainError(f"CasADi {ca.__version__} output changed shape: pattern {pattern!r} "
                                f"matched {count} times; update codegen/emit.py")
     return code
 

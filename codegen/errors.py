@@ -99,3 +99,32 @@ class DesignLockError(UiogenError, ValueError):
 
 class GenerationError(UiogenError, RuntimeError):
     """One or more observers failed to generate (each failure was reported; the others ran)."""
+
+
+class RelativeDegreeError(RankConditionError):
+    """An output has no (uniform) relative degree w.r.t. the unknown inputs on the box."""
+
+
+class DatasetError(SampleError):
+    """A data file is missing, unreadable, or has wrong columns, units or non-finite values."""
+
+
+class ScenarioError(ModelDefinitionError):
+    """Unknown scenario name or invalid scenario settings."""
+
+
+class MetricInputError(SampleError):
+    """Reference/estimate arrays are empty, of different shapes, or hold NaN/Inf."""
+
+
+class PlantError(UiogenError, RuntimeError):
+    """The plant simulation left its valid domain (steering stop, spin, non-finite state)."""
+
+
+class BoundsError(ModelDefinitionError):
+    """An expression cannot be bounded over the box (singularity, unsupported function)."""
+
+
+class ToolchainError(UiogenError, RuntimeError):
+    """The C toolchain failed: no compiler, a compiler error on generated code, or a CasADi
+    version whose output the emitter does not recognize."""

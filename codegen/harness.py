@@ -14,6 +14,7 @@ import jinja2
 import numpy as np
 
 from .emit import GENERATED_DIR, STRICT_CFLAGS, TEMPLATES
+from .errors import ToolchainError
 
 
 def render(name: str) -> str:
@@ -42,12 +43,12 @@ def build_harness(name: str, out_dir: Path, extra_flags=(), cc: str = "gcc") -> 
         cmd = [cc, *STRICT_CFLAGS, *extra_flags, "-I", str(src_dir), "-c", str(src), "-o", str(obj)]
         proc = subprocess.run(cmd, capture_output=True, text=True, cwd=out_dir)
         if proc.returncode != 0:
-            raise RuntimeError(f"{' '.join(cmd)}\n{proc.stderr}")
+            raise ToolchainError(f"{' '.join(cmd)}\n{proc.stderr}")
         objs.append(obj)
     exe = out_dir / f"{name}_harness"
     proc = subprocess.run([cc, *extra_flags, *map(str, objs), "-o", str(exe), "-lm"], capture_output=True, text=True)
     if proc.returncode != 0:
-        raise RuntimeError(proc.stderr)
+        raise ToolchainError(proc.stderr)
     return exe
 
 

@@ -392,6 +392,9 @@ class LMIProblem:
     """
 
     name: str
+    # False for an analysis (a bisection, a report): solved afresh every time, never committed
+    # to or replayed from a design lock, and without the least-norm stage unless asked.
+    design: bool = True
     _names: list = field(default_factory=list)
     _variables: dict = field(default_factory=dict)
     _constraints: list = field(default_factory=list)
@@ -562,11 +565,11 @@ class LMIProblem:
                               q[kept].copy(), cones, tuple(solver_blocks), kept)
 
     def solve(self, tol: float = 1e-9, max_iter: int = 200, max_abs_value: float = 1e9,
-              verbose: bool = False, reduce: bool = False, unique: bool = True,
+              verbose: bool = False, reduce: bool = False, unique: bool | None = None,
               optimality_slack: float = OPTIMALITY_SLACK) -> LMISolution:
         """Solve with Clarabel, then re-check every block with numpy eigenvalues.
 
-        ``unique``: the optimum of an SDP is often a face, not a point (the interconnected
+        ``unique`` (default: a design problem's ``design`` flag): the optimum of an SDP is often a face, not a point (the interconnected
         design's gains differ in sign between two BLAS kernels at the same gamma). A second
         stage picks the point of least Euclidean norm of all decision variables among those
         within ``optimality_slack`` (relative) of the first stage's objective: a strictly convex
@@ -587,7 +590,8 @@ class LMIProblem:
             names the blocks carrying most of the infeasibility certificate.
         InaccurateSolveError, IllConditionedError, CertificateError, DesignLockError
         """
-        ledger = _LEDGER.get()
+        ledger = _LEDGER.get() if self.design else None
+        unique = self.design if unique is None else unique
         if ledger is not None and ledger.replaying:
             return self._replay(ledger.take(self.name))
         t0 = time.perf_counter()

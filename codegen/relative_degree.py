@@ -35,12 +35,8 @@ from functools import cached_property
 import sympy as sp
 
 from .bounds import BoundsError, range_bound
-from .errors import ModelDefinitionError, RankConditionError, SchedulingBoundsError
+from .errors import ModelDefinitionError, RankConditionError, RelativeDegreeError, SchedulingBoundsError
 from .model import LPVModel
-
-
-class RelativeDegreeError(RankConditionError):
-    """An output has no (uniform) relative degree w.r.t. the unknown inputs on the box."""
 
 
 def derivative_symbol(sym: sp.Symbol, order: int) -> sp.Symbol:

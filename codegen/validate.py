@@ -319,8 +319,8 @@ def run_data(name: str, path: str = "stanford") -> dict:
     """
     from python_bindings import load
     from .validation import stanford
-    run = stanford.load(path)
     obs = load(name)
+    run = stanford.load(path, sample_time=obs.sample_time)   # a log at another rate is refused, not run
     missing = [c for c in obs.input_names if c not in DATA_COLUMNS]
     if missing:
         raise SampleError(f"observer {name!r} needs {', '.join(missing)}, which the log does not record "

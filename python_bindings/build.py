@@ -24,6 +24,7 @@ EXT_DIR = HERE / "_ext"
 BUILD_DIR = HERE / "_build"
 
 from codegen.emit import STRICT_CFLAGS
+from codegen.errors import ToolchainError
 
 STRICT_FLAGS = list(STRICT_CFLAGS)
 # Python.h is not -pedantic/-Wconversion clean; the glue gets the same flags minus those two.
@@ -65,7 +66,7 @@ def observer_sources(name: str) -> list:
 def _run(cmd: list) -> None:
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
-        raise RuntimeError(f"compiler failed:\n$ {shlex.join(map(str, cmd))}\n{proc.stdout}{proc.stderr}")
+        raise ToolchainError(f"compiler failed:\n$ {shlex.join(map(str, cmd))}\n{proc.stdout}{proc.stderr}")
 
 
 def build_extension(name: str, extra_flags: list | None = None, ext_dir: Path = EXT_DIR,

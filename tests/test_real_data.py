@@ -10,8 +10,14 @@ from codegen import validate
 from codegen.errors import SampleError
 from codegen.validation import stanford
 
+from conftest import require_shared
+
 ROOT = Path(__file__).resolve().parent.parent
-pytestmark = pytest.mark.skipif(not stanford.STANFORD_PATH.is_file(), reason="shared data missing")
+
+
+@pytest.fixture(autouse=True)
+def _shared_log():
+    require_shared(stanford.STANFORD_PATH, "shared Stanford log")
 
 
 def test_stanford_observer_beats_the_linear_kf():

@@ -7,6 +7,8 @@ import pytest
 from codegen.errors import ModelDefinitionError, SampleError
 from codegen.validation import stanford as S
 
+from conftest import require_shared
+
 HEADER = ",".join(S.COLUMNS)
 
 
@@ -26,8 +28,7 @@ def _write(tmp_path, lines, gz=False, name="d.csv"):
 
 @pytest.fixture(scope="module")
 def run():
-    if not S.STANFORD_PATH.is_file():
-        pytest.skip(f"data file missing: {S.STANFORD_PATH}")
+    require_shared(S.STANFORD_PATH, "shared Stanford log")
     return S.load("stanford")
 
 

@@ -53,6 +53,7 @@ from ..lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
 from ..model import LPVModel
 from ..polytope import Premise, affine_decomposition, nonlinear_factors, sector_weights_product, vertex_matrices
 from ..settings import Rule, number_matrix, parse_settings, parse_table, parse_value, setting
+from .. import canonical
 from .linf_uio import round_significant
 
 # 2-stage Gauss-Legendre (order 4)
@@ -312,7 +313,8 @@ def design(dec: rdeg.Decoupling, settings: AlgebraicSettings) -> AlgebraicDesign
     prob.minimize(t)
     sol = prob.solve(tol=settings.tol)
     Xs = round_significant(0.5 * (sol["X"] + sol["X"].T))
-    Ls = [np.linalg.solve(Xs, np.atleast_2d(sol[f"K{j + 1}"]).reshape(n, ny)) for j in range(len(K))]
+    # emitted: solved exactly (codegen.canonical), the same on every machine
+    Ls = [canonical.solve(Xs, np.atleast_2d(sol[f"K{j + 1}"]).reshape(n, ny)) for j in range(len(K))]
     # back to the model's coordinates: x = S x_s, L = S L_s, X = S^-1 X_s S^-1
     L = tuple(round_significant(S[:, None] * l) for l in Ls)
     Xo = Si[:, None] * Xs * Si[None, :]
@@ -413,7 +415,7 @@ def check_fixed_gain(d: AlgebraicDesign, L: np.ndarray, C: np.ndarray, tol: floa
     S = d.scaling
 
     def feasible(alpha):
-        prob = LMIProblem("fixed gain")
+        prob = LMIProblem("fixed gain", design=False)   # a report, not part of the design
         X = prob.symmetric("X", n)
         prob.require_psd("X >= I", X, margin=1.0)   # the re-check sees X itself (slack 1)
         for label, F in opens:
@@ -544,7 +546,7 @@ def aux_design(lpv: LPVModel, boxes: dict, mode: str, alpha: float, tol: float =
             raise
         raise DiscretizationError(str(exc)) from None
     Xs = round_significant(0.5 * (sol["Xs"] + sol["Xs"].T))
-    Ks = round_significant(S[:, None] * np.linalg.solve(Xs, np.atleast_2d(sol["Ws"]).reshape(n, ny))) \
+    Ks = round_significant(S[:, None] * canonical.solve(Xs, np.atleast_2d(sol["Ws"]).reshape(n, ny))) \
         if inject else None
     closed = [A - (Ks @ C if inject else 0) for A in poly.vertices]
     blocks = {}

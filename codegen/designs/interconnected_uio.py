@@ -85,6 +85,7 @@ from ..errors import CertificateError, DiscretizationError, ModelDefinitionError
 from ..lmi import LMIProblem, LMISolution, bmat, check_blocks
 from ..polytope import sector_weights_product
 from ..settings import Rule, parse_settings, parse_table, setting
+from .. import canonical
 from .linf_uio import round_significant
 
 FAMILY = "interconnected_uio"
@@ -167,7 +168,8 @@ class SubsystemDesign:
     def M(self, Ts: float) -> tuple:
         """M_i = P (I - Ts S^-1 N_i S) of the backward-Euler step (scaled coordinates)."""
         S, Si = np.diag(self.S), np.diag(1.0 / self.S)
-        return tuple(self.P @ (np.eye(len(self.S)) - Ts * Si @ n @ S) for n in self.N)
+        # emitted: exact arithmetic (codegen.canonical); S is diagonal, so S^-1 N S is exact as it is
+        return tuple(canonical.matmul(self.P, np.eye(len(self.S)) - Ts * (Si @ n @ S)) for n in self.N)
 
 
 @dataclass(frozen=True)
@@ -192,7 +194,7 @@ def decoupling(sub: icm.SubsystemTS, W: np.ndarray | None = None, rank_tol: floa
     RankConditionError
         naming the subsystem and the ranks.
     """
-    CB = sub.C @ sub.B
+    CB = canonical.matmul(sub.C, sub.B)      # (26)-(30) are emitted: exact arithmetic (codegen.canonical)
     r_cb = np.linalg.matrix_rank(CB, tol=rank_tol * max(np.abs(CB).max(), 1e-300))
     r_b = np.linalg.matrix_rank(sub.B, tol=rank_tol * max(np.abs(sub.B).max(), 1e-300))
     if r_cb != r_b:
@@ -202,8 +204,8 @@ def decoupling(sub: icm.SubsystemTS, W: np.ndarray | None = None, rank_tol: floa
             f"differentiator, the derivative that it reaches")
     Wi = np.diag(1.0 / (np.ones(sub.ny) if W is None else np.asarray(W, float)))
     CBs = Wi @ CB
-    CBp = np.linalg.solve(CBs.T @ CBs, CBs.T) @ Wi
-    H = -sub.B @ CBp
+    CBp = canonical.matmul(canonical.solve(canonical.matmul(CBs.T, CBs), CBs.T), Wi)
+    H = -canonical.matmul(sub.B, CBp)
     if mode == "measured_rows":
         for k in range(sub.ny):
             row = sub.C[k]
@@ -213,7 +215,7 @@ def decoupling(sub: icm.SubsystemTS, W: np.ndarray | None = None, rank_tol: floa
                 H[nz[0], k] = -1.0
     elif mode != "minimum_norm":
         raise ModelDefinitionError(f"decoupling must be 'minimum_norm' or 'measured_rows', got {mode!r}")
-    T = np.eye(sub.n) + H @ sub.C
+    T = np.eye(sub.n) + canonical.matmul(H, sub.C)
     if np.abs(T @ sub.B).max() > 1e-9 * max(1.0, np.abs(sub.B).max()):
         raise RankConditionError(f"{sub.name}: T B != 0 after (26)")
     return H, T, CBp
@@ -337,7 +339,7 @@ def affine_parts(sub: icm.SubsystemTS, mats) -> tuple:
     mats = np.asarray(mats, float)
     X = np.array([[1.0, *th] for th in vertex_premises(sub)])
     flat = mats.reshape(mats.shape[0], -1)
-    coef, *_ = np.linalg.lstsq(X, flat, rcond=None)
+    coef = canonical.matmul(canonical.pinv(X), flat)     # emitted: machine-independent
     if np.abs(X @ coef - flat).max() > 1e-9 * max(1.0, np.abs(flat).max()):
         return None
     return tuple(c.reshape(mats.shape[1:]) for c in coef)
@@ -345,10 +347,11 @@ def affine_parts(sub: icm.SubsystemTS, mats) -> tuple:
 
 def _gains(sub, H, T, CBp, S, W, Z, P, Om, eta) -> SubsystemDesign:
     Sd = np.diag(S)
-    K = tuple(Sd @ np.linalg.solve(P, o) @ np.diag(1.0 / W) for o in Om)
-    N = tuple(T @ sub.A[i] - K[i] @ sub.C for i in range(sub.n_vertices))
-    L = tuple(K[i] - N[i] @ H for i in range(sub.n_vertices))
-    G = tuple(T @ sub.D[i] for i in range(sub.n_vertices))
+    # the emitted gains (28): exact arithmetic (codegen.canonical), the same on every machine
+    K = tuple(canonical.matmul(Sd, canonical.solve(P, o), np.diag(1.0 / W)) for o in Om)
+    N = tuple(canonical.matmul(T, sub.A[i]) - canonical.matmul(K[i], sub.C) for i in range(sub.n_vertices))
+    L = tuple(K[i] - canonical.matmul(N[i], H) for i in range(sub.n_vertices))
+    G = tuple(canonical.matmul(T, sub.D[i]) for i in range(sub.n_vertices))
     return SubsystemDesign(sub.name, H, T, S, W, Z, P, Om, eta, K, N, L, G, CBp)
 
 

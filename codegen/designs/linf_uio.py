@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import canonical
-from ..errors import RankConditionError
+from ..errors import ConfigurationError, RankConditionError
 from ..lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks
 from ..polytope import Polytope
 from ..settings import setting
@@ -76,7 +76,7 @@ def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.
     """LMI problem of Theorem 1 under ``settings``; returns (problem, variables)."""
     _check_assumptions(poly)
     if settings.lyapunov == "pdlf" and poly.rate_bound_mode == "none":
-        raise ValueError("the parameter-dependent design needs membership rate bounds; with "
+        raise ConfigurationError("the parameter-dependent design needs membership rate bounds; with "
                          "rate_bounds = 'none' use lyapunov = 'quadratic'")
     N, nx, ny = poly.n_vertices, poly.A.shape[1], poly.C.shape[1]
     F = np.eye(nx) if performance is None else np.asarray(performance, dtype=float)
@@ -89,7 +89,7 @@ def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.
         common = prob.symmetric("P", nx)
         P = [common] * N
     else:
-        raise ValueError(f"lyapunov must be 'pdlf' or 'quadratic', got {settings.lyapunov!r}")
+        raise ConfigurationError(f"lyapunov must be 'pdlf' or 'quadratic', got {settings.lyapunov!r}")
     L = [prob.matrix(f"L{i + 1}", nx, ny) for i in range(N)]
     nu = prob.scalar("nu")
     mu = 1.0  # normalization (homogeneity), see module docstring

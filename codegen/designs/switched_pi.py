@@ -42,10 +42,11 @@ import casadi as ca
 import numpy as np
 import scipy.linalg
 
-from ..errors import CertificateError, DiscretizationError, RankConditionError
+from ..errors import CertificateError, ConfigurationError, DiscretizationError, RankConditionError
 from ..lmi import LMIProblem, LMISolution, bmat, check_blocks
 from ..settings import setting
 from ..switched import SwitchedModel
+from .. import canonical
 from .linf_uio import round_significant
 
 
@@ -72,17 +73,17 @@ class SwitchedPIDesignSettings:
 
     def __post_init__(self):
         if not (self.pole_radius > 0 and np.isfinite(self.pole_radius)):
-            raise ValueError(f"pole_radius must be positive and finite, got {self.pole_radius}")
+            raise ConfigurationError(f"pole_radius must be positive and finite, got {self.pole_radius}")
         if not (0 <= self.decay_rate < self.pole_radius):
-            raise ValueError(f"decay_rate must be in [0, pole_radius), got {self.decay_rate}")
+            raise ConfigurationError(f"decay_rate must be in [0, pole_radius), got {self.decay_rate}")
         if not self.margin >= 0 or not self.tol > 0:
-            raise ValueError("margin must be >= 0 and tol > 0")
+            raise ConfigurationError("margin must be >= 0 and tol > 0")
 
 
 def decoupling_matrices(C: np.ndarray) -> tuple:
     """(T, N) with [T N] = [I; C]^+ (Algorithm 1 step 1); T + N C = I exactly up to round-off."""
     n = C.shape[1]
-    TN = np.linalg.pinv(np.vstack([np.eye(n), C]))
+    TN = canonical.pinv(np.vstack([np.eye(n), C]))     # emitted: machine-independent (codegen.canonical)
     T, N = TN[:, :n], TN[:, n:]
     residual = np.abs(T + N @ C - np.eye(n)).max()
     if residual > 1e-12:
@@ -216,11 +217,12 @@ def design(sm: SwitchedModel, settings: SwitchedPIDesignSettings = SwitchedPIDes
     gamma = float(np.sqrt(round_significant(sol["gamma2"])))
     K, KI, Pi, Kp = [], [], [], []
     for i in range(sm.n_modes):
-        Ka = -np.linalg.solve(P, G[i])
+        # the emitted gains: exact arithmetic (codegen.canonical), the same on every machine
+        Ka = -canonical.solve(P, G[i])
         K.append(Ka[:sm.n])
         KI.append(Ka[sm.n:])
-        Pi.append(T @ sm.A[i] - K[i] @ sm.C[i])
-        Kp.append(K[i] + Pi[i] @ N)
+        Pi.append(canonical.matmul(T, sm.A[i]) - canonical.matmul(K[i], sm.C[i]))
+        Kp.append(K[i] + canonical.matmul(Pi[i], N))
     return SwitchedPIDesign(settings, T, N, P, G, gamma, tuple(K), tuple(KI), tuple(Pi), tuple(Kp), sol)
 
 
@@ -323,8 +325,9 @@ def observer_matrices(sm: SwitchedModel, d: SwitchedPIDesign, i: int) -> tuple:
     """(A_o, B_o) of the continuous observer (5) of mode i: q' = A_o q + B_o [u; y]."""
     T, N, C = d.T, d.N, sm.C[i]
     n, nw, m = sm.n, sm.nw, sm.m
-    Ao = np.block([[d.Pi[i], T @ sm.F[i]], [-d.KI[i] @ C, np.zeros((nw, nw))]])
-    Bo = np.block([[T @ sm.B[i], d.Kp[i]], [np.zeros((nw, sm.nu)), d.KI[i] @ (np.eye(m) - C @ N)]])
+    mm = canonical.matmul
+    Ao = np.block([[d.Pi[i], mm(T, sm.F[i])], [-mm(d.KI[i], C), np.zeros((nw, nw))]])
+    Bo = np.block([[mm(T, sm.B[i]), d.Kp[i]], [np.zeros((nw, sm.nu)), mm(d.KI[i], np.eye(m) - mm(C, N))]])
     return Ao, Bo
 
 
@@ -333,7 +336,7 @@ def discretize(sm: SwitchedModel, d: SwitchedPIDesign, Ts: float) -> DiscreteMod
     for i in range(sm.n_modes):
         Ao, Bo = observer_matrices(sm, d, i)
         na, nb = Ao.shape[0], Bo.shape[1]
-        E = scipy.linalg.expm(np.block([[Ao, Bo], [np.zeros((nb, na + nb))]]) * Ts)
+        E = canonical.expm(np.block([[Ao, Bo], [np.zeros((nb, na + nb))]]) * Ts)   # exact ZOH, machine-independent
         Phi.append(round_significant(E[:na, :na]))
         G.append(round_significant(E[:na, na:]))
     return DiscreteModes(Ts, np.array(Phi), np.array(G))

@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ModelDefinitionError, SampleError, UiogenError
+from ..errors import ModelDefinitionError, PlantError, SampleError, UiogenError
 from ..simulate import rk4_step
 
 VEHICLE_NAMES = {1: "Ford Escort", 2: "BMW 320i", 3: "VW Vanagon"}   # CommonRoad parameter sets
@@ -61,10 +61,6 @@ __all__ = [
 ]
 
 G = 9.81
-
-
-class PlantError(UiogenError, RuntimeError):
-    """The plant simulation left its valid domain (steering stop, spin, non-finite state)."""
 
 
 @dataclass(frozen=True)

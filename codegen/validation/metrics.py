@@ -23,16 +23,12 @@ from dataclasses import dataclass, asdict
 
 import numpy as np
 
-from ..errors import SampleError
+from ..errors import MetricInputError, SampleError
 
 __all__ = [
     "MetricInputError", "ErrorStats", "error_stats", "mean_abs_error", "max_abs_error",
     "std_error", "rms_error", "mae", "rmsd", "rmse_percent", "nmse_percent",
 ]
-
-
-class MetricInputError(SampleError):
-    """Reference/estimate arrays are empty, of different shapes, or hold NaN/Inf."""
 
 
 @dataclass(frozen=True)

@@ -24,15 +24,11 @@ from typing import Callable
 
 import numpy as np
 
-from ..errors import ModelDefinitionError
+from ..errors import ModelDefinitionError, ScenarioError
 
 __all__ = ["ScenarioError", "DriverGains", "Scenario", "SCENARIOS", "names", "make",
            "straight_line", "steady_circle",
            "band_limited", "seed004_grip"]
-
-
-class ScenarioError(ModelDefinitionError):
-    """Unknown scenario name or invalid scenario settings."""
 
 
 def band_limited(t: np.ndarray, rng: np.random.Generator, rms: float, f_lo: float = 0.1,

@@ -50,7 +50,7 @@ import numpy as np
 
 from model_defs.baselines import FIALA_SINGLE_TRACK, LINEAR_SINGLE_TRACK
 
-from ..errors import ModelDefinitionError, SampleError
+from ..errors import DatasetError, ModelDefinitionError, SampleError
 from . import kalman, metrics
 
 __all__ = [
@@ -112,10 +112,6 @@ _MIN_CORR = 0.5
 _MIN_SAMPLES = 50
 _RATIO_BAND = (1 / 1.6, 1.6)
 _SMOOTH_S = 0.05            # [s] half-width of the boxcar / central difference used for derivatives
-
-
-class DatasetError(SampleError):
-    """A data file is missing, unreadable, or has wrong columns, units or non-finite values."""
 
 
 @dataclass(frozen=True, eq=False)

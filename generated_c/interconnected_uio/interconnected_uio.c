@@ -14,7 +14,7 @@
 #define INTERCONNECTED_UIO_SZ_ARG 4
 #define INTERCONNECTED_UIO_SZ_RES 3
 #define INTERCONNECTED_UIO_SZ_IW 1
-#define INTERCONNECTED_UIO_SZ_W 112
+#define INTERCONNECTED_UIO_SZ_W 111
 
 void interconnected_uio_init(interconnected_uio_state *s)
 {

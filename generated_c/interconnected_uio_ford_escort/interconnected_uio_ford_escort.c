@@ -14,7 +14,7 @@
 #define INTERCONNECTED_UIO_FORD_ESCORT_SZ_ARG 4
 #define INTERCONNECTED_UIO_FORD_ESCORT_SZ_RES 3
 #define INTERCONNECTED_UIO_FORD_ESCORT_SZ_IW 1
-#define INTERCONNECTED_UIO_FORD_ESCORT_SZ_W 110
+#define INTERCONNECTED_UIO_FORD_ESCORT_SZ_W 109
 
 void interconnected_uio_ford_escort_init(interconnected_uio_ford_escort_state *s)
 {

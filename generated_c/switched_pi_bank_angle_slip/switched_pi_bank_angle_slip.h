@@ -13,7 +13,7 @@ extern "C" {
 
 /* switched_pi_bank_angle_slip: Seed-001 switched H-infinity PI observer with the slip-angle switching rule (27): two cornering-stiffness pairs, alpha* = 0.5 deg on the approximated axle slip angles (from the observer's own beta estimate), at the seed's middle speed 63 km/h (M = 2, as in the seed).
  *
- * Discrete-time step at Ts = 0.005 s (exact ZOH of each mode's observer (5); common Lyapunov matrix: sqrt(V) contracts by 0.994940 per step in every mode, under any switching). One call = one sample.
+ * Discrete-time step at Ts = 0.005 s (exact ZOH of each mode's observer (5); common Lyapunov matrix: sqrt(V) contracts by 0.994941 per step in every mode, under any switching). One call = one sample.
  * Switching rule (data of the configuration): slip = Max(Abs(beta - 1.4227170936*r/v_x), Abs(beta - delta + 1.1561957064*r/v_x)), thresholds [0.00872665], range [0, 0.15] rad.
  * Each call consumes u_k, y_k and the premise signals of sample k and returns the mode
  * and the estimates of sample k; the state holds [z, w_hat] of sample k+1, then the outputs.
