@@ -44,7 +44,10 @@ def design_sources(config: ObserverConfig) -> list:
 def design_inputs(config: ObserverConfig) -> str:
     """Hash of the design's inputs: files (:func:`design_sources`) and numeric package versions."""
     v = sources.versions()
-    return sources.digest(design_sources(config), {k: v[k] for k in DESIGN_PACKAGES})
+    # the parsed configuration too: a configuration changed in memory (dataclasses.replace) is
+    # another design even though its file is the same
+    return sources.digest(design_sources(config), {"configuration": json.dumps(config.to_json(), sort_keys=True),
+                                                   **{k: v[k] for k in DESIGN_PACKAGES}})
 
 
 def read(config: ObserverConfig, base: Path | None = None) -> tuple:

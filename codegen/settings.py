@@ -384,8 +384,12 @@ def parse_settings(cls, table, *, source: str, section: str = "design", aliases:
     kwargs.update(fixed)
     try:
         return cls(**kwargs)
-    except ConfigurationError:
-        raise
+    except ConfigurationError as exc:
+        if exc.source:          # already names its file
+            raise
+        text = str(exc)         # a dataclass's own cross-field check: give it the file and section
+        raise ConfigurationError(f"{_where(source, section)} {text}", source=source, section=section,
+                                 allowed=text) from None
     except (ValueError, TypeError) as exc:
         text = str(exc)
         raise ConfigurationError(f"{_where(source, section)} {text}", source=source, section=section,

@@ -117,7 +117,7 @@ def test_installed_versions_are_the_pinned_ones():
         assert pkg in pins, f"constraints.txt does not pin {pkg}"
         assert importlib.metadata.version(pkg) == pins[pkg], f"{pkg}: installed != pinned; run `make test`"
     make = (ROOT / "Makefile").read_text()
-    installs = [line for line in make.splitlines() if "pip install" in line and ".venv-lock" not in line]
+    installs = [line for line in make.splitlines() if "$(PIP) install" in line]
     assert installs and all("$(PIN)" in line for line in installs), installs
 
 

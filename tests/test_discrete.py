@@ -50,8 +50,14 @@ def test_numpy_and_casadi_steps_agree(build):
 
 
 def test_unstable_step_refused(build):
-    """A very fast design closes an unstable loop through the UI filter: no step is emitted."""
-    fast = linf_uio.design(build.poly, linf_uio.LinfDesignSettings(gain_bound=1000.0))
-    data = discrete.ObserverData(build.poly, fast.Q, fast.L, 0.005, 0.01)
+    """Gains that close an unstable loop through the UI filter (here the committed design's with
+    the wrong sign; Q, hence kappa, unchanged) are refused: no step is emitted. The least-norm
+    designs keep the loop stable up to gain bounds of 10^4 1/s (docs/families/linf_uio.md), so a
+    high bound alone no longer provokes this."""
+    data = discrete.ObserverData(build.poly, build.design.Q, tuple(-l for l in build.design.L), 0.005, 0.01)
     with pytest.raises(DiscretizationError, match="spectral radius"):
         discrete.certify_step(data, 5.0)
+    for gb in (1000.0, 10000.0):
+        fast = linf_uio.design(build.poly, linf_uio.LinfDesignSettings(gain_bound=gb))
+        assert discrete.certify_step(discrete.ObserverData(build.poly, fast.Q, fast.L, 0.005, 0.01),
+                                     5.0).augmented_radius_max < 0.98
