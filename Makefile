@@ -2,6 +2,7 @@
 #   make demo    main job: design + generate + build + summary (README)
 #   make test    the test suite (CI runs this through .ci/run)
 #   make check   reliability suite (hostile input, sanitizers, static facts, determinism, long runs)
+#   make docs    re-run demo and bench into docs/data/, rewrite the docs' tables, build the site
 #   make generate | build | bench | clean
 #   make lock    refresh constraints.txt (exact versions of everything the targets install)
 PYTHON ?= python3
@@ -14,7 +15,7 @@ PIN    := -c constraints.txt
 CC     ?= cc
 export CC
 
-.PHONY: all venv generate build demo test check bench clean lock
+.PHONY: all venv generate build demo test check bench docs clean lock
 
 all: demo
 
@@ -44,6 +45,15 @@ check: build
 bench: build
 	$(PIP) install --quiet $(PIN) --no-build-isolation -e '.[bench]'
 	$(BIN)/uiogen bench
+
+# The docs: re-run the demo and the benchmark, rewrite the docs' tables from them, build the site.
+docs: build
+	$(PIP) install --quiet $(PIN) --no-build-isolation -e '.[bench]'
+	mkdir -p docs/data
+	$(BIN)/uiogen demo --json > docs/data/demo.json
+	$(BIN)/uiogen bench --json > docs/data/bench.json
+	$(BIN)/uiogen docs
+	$(BIN)/mkdocs build --strict --quiet
 
 # Refresh constraints.txt: the newest versions pyproject.toml allows, resolved in a scratch venv.
 lock:

@@ -30,7 +30,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from . import differentiators, emit, harness, observers, pipeline
+from . import design_lock, differentiators, families, harness, observers, pipeline
 
 ARITHMETIC_OPS = ("OP_ADD", "OP_SUB", "OP_MUL", "OP_DIV", "OP_NEG", "OP_SQ", "OP_SQRT", "OP_FMIN",
                   "OP_FMAX", "OP_FABS", "OP_EXP", "OP_LOG", "OP_POW", "OP_CONSTPOW", "OP_INV",
@@ -117,7 +117,8 @@ def _cvxpy_same_lmis(prob_builder, solver: str, tol: float, reduced: bool = Fals
 def bench_design(b) -> dict:
     """Our LMI path (build + solve) vs the same blocks through CVXPY with Clarabel and SCS.
 
-    Compared at equal objective (for the seed-000 family the objective is gamma^2)."""
+    Compared at equal objective; each side solves once, without the least-norm stage that picks
+    the committed design's point of the optimal set (that stage is ours alone)."""
     settings = b.design.settings
     builder = b.lmi_problem
     out = {}
@@ -125,12 +126,10 @@ def bench_design(b) -> dict:
         ours = []
         for _ in range(5):
             t0 = time.perf_counter()
-            sol = builder().solve(tol=settings.tol, reduce=reduce)
+            sol = builder().solve(tol=settings.tol, reduce=reduce, unique=False)
             ours.append((time.perf_counter() - t0, sol.objective))
         out[key] = {"seconds": float(np.median([t for t, _ in ours])), "objective": ours[0][1],
                     "iterations": sol.iterations, "clarabel_solve_seconds": sol.solve_time_s}
-        if isinstance(b, pipeline.ObserverBuild):
-            out[key]["gamma"] = float(np.sqrt(ours[0][1]))
     t_ours, obj = out["ours_clarabel"]["seconds"], out["ours_clarabel"]["objective"]
     red = out["ours_clarabel_reduced"]
     for solver, reduced in (("CLARABEL", False), ("CLARABEL", True), ("SCS", False)):
@@ -141,9 +140,6 @@ def bench_design(b) -> dict:
             continue
         if res["objective"] is not None:
             res["objective_rel_diff"] = abs(res["objective"] - obj) / max(abs(obj), 1e-300)
-            if "gamma" in out["ours_clarabel"] and res["objective"] > 0:
-                res["gamma"] = float(np.sqrt(res["objective"]))
-                res["gamma_rel_diff"] = abs(res["gamma"] - out["ours_clarabel"]["gamma"]) / out["ours_clarabel"]["gamma"]
         res["speedup_of_ours"] = res["seconds"] / t_ours
         res["speedup_of_ours_reduced"] = res["seconds"] / red["seconds"]
         if res["objective"] is not None:
@@ -155,32 +151,41 @@ def bench_design(b) -> dict:
 def bench_observer(name: str) -> dict:
     """Step cost (Python call, batch loop, instructions, flops) and design time of any observer.
 
-    The sample is mid-box for the inputs that schedule the step (design artifact), small elsewhere;
-    the state is the one after 50 such samples from the initial state."""
-    from python_bindings import load
-    b = pipeline.build(observers.get(name))
-    obs = load(name)
+    The sample is mid-box for the inputs that schedule the step (design lock), small elsewhere,
+    unless the family gives a realistic input sequence (``Family.bench_inputs``, e.g. a periodic
+    scenario for steps with differentiators); the state is the one after 50 such samples."""
+    from .extension import load
+    config = observers.get(name)
+    family = families.get(config.family)
+    b = pipeline.build(config)
+    obs = load(config)
     f = b.step_function()
-    art = json.loads((emit.GENERATED_DIR / name / f"{name}_design.json").read_text())
+    art = json.loads(design_lock.path(config).read_text())
     boxes = {obs.input_names.index(k): v for k, v in art["signals"]["input_boxes"].items()}
-    rng = np.random.default_rng(0)
-    nu, ny = b.nu, b.ny
-    inp = rng.standard_normal(obs.n_input) * 0.01
-    for col, (lo, hi) in boxes.items():
-        inp[col] = 0.5 * (lo + hi)
-    state = obs.run(np.tile(inp, (50, 1)))[2]
+    n = 200000
+    sequence = family.bench_inputs(b)
+    if sequence is None:
+        rng = np.random.default_rng(0)
+        inp = rng.standard_normal(obs.n_input) * 0.01
+        for col, (lo, hi) in boxes.items():
+            inp[col] = 0.5 * (lo + hi)
+        state = obs.run(np.tile(inp, (50, 1)))[2]
+        batch = np.tile(inp, (n, 1))
+        if boxes:
+            col = max(boxes)
+            batch[:, col] = np.linspace(*boxes[col], n)
+    else:
+        batch = np.tile(sequence, (n // len(sequence) + 1, 1))[:n]
+        inp = batch[50]
+        state = obs.run(batch[:50])[2]
     out = np.empty(obs.n_output)
+    nu, ny = b.nu, b.ny
     u, y, rho = inp[:nu], inp[nu:nu + ny], inp[nu + ny:]
     step = obs.step
     s = state.copy()
     t_c = _per_call(lambda: step(s, inp, out), number=20000)
     t_casadi = _per_call(lambda: f(state, u, y, rho), number=2000)
     t_numpy = _per_call(lambda: b.reference_step(state, u, y, rho), number=500)
-    n = 200000
-    batch = np.tile(inp, (n, 1))
-    if boxes:
-        col = max(boxes)
-        batch[:, col] = np.linspace(*boxes[col], n)
     runs = []
     for _ in range(15):
         # CPU time of this thread (the C loop runs in it): time slices that other processes
@@ -201,6 +206,7 @@ def bench_observer(name: str) -> dict:
         "instructions_per_step": instr,
         "instructions_per_flop": (instr / flops["total"]) if instr else None,
         "design": bench_design(b),
+        "family_figures": family.bench_figures(b),
     }
 
 
@@ -367,32 +373,8 @@ def _print_hosmd(r: dict) -> None:
             print(f"     {name:22s} {cells[0]}   {cells[1]}   {row.get('params', '')}")
 
 
-def bench_algebraic(name: str, n: int = 200000) -> dict:
-    """Seed-002 observers: the compiled step on the scenario's realistic periodic input, its flops and the
-    share of them spent in the embedded differentiators (the HOSMD updates inside the step)."""
-    from python_bindings import load
-    from .validation import algebraic
-    b = pipeline.build(observers.get(name))
-    obs = load(name)
-    base = algebraic.periodic_inputs(b)
-    batch = np.tile(base, (n // len(base) + 1, 1))[:n]
-    runs = []
-    for _ in range(7):
-        t = time.perf_counter()
-        obs.run(batch)
-        runs.append((time.perf_counter() - t) / n)
-    flops = flop_count(b.step_function())
-    specs = b.settings.differentiators
-    hosmd_flops = sum(flop_count(differentiators.hosmd_function(s))["total"] for s in specs.values())
-    return {"batch_ns_per_sample": 1e9 * float(np.median(runs)), "flops_per_step": flops,
-            "hosmd_flops_per_step": hosmd_flops, "differentiator_orders": {k: s.order for k, s in specs.items()},
-            "instructions_per_step": callgrind_instructions_per_step(name)}
-
-
 def main(json_output: bool = False) -> int:
-    fam = {name: observers.get(name).family for name in observers.names()}
-    res = {"observers": {name: bench_observer(name) for name in observers.names() if fam[name] != "algebraic_uio"},
-           "algebraic_uio": {name: bench_algebraic(name) for name in observers.names() if fam[name] == "algebraic_uio"},
+    res = {"observers": {name: bench_observer(name) for name in observers.names()},
            "toolchain": bench_toolchain(), "hosmd": bench_hosmd()}
     if json_output:
         print(json.dumps(res, indent=1, sort_keys=True))
@@ -422,20 +404,14 @@ def main(json_output: bool = False) -> int:
             if "seconds" not in p or p["objective"] is None:
                 print(f"     {peer}: {p['status']}")
                 continue
-            diff = p.get("gamma_rel_diff", p.get("objective_rel_diff"))
+            diff = p.get("objective_rel_diff")
             print(f"     {peer}: {1e3 * p['seconds']:.1f} ms (ours {p['speedup_of_ours']:.1f}x faster, "
                   f"reduced {p['speedup_of_ours_reduced']:.1f}x), status {p['status']}, objective "
                   f"{p['objective']:.6g}"
-                  + ("" if diff is None else f" ({'gamma' if 'gamma_rel_diff' in p else 'objective'} "
-                                             f"differs by {100 * diff:.2f} %; objective vs reduced "
+                  + ("" if diff is None else f" (objective differs by {100 * diff:.2f} %; vs reduced "
                                              f"{100 * p['objective_rel_diff_reduced']:.2f} %)"))
-    for name, r in res["algebraic_uio"].items():
-        ins = r["instructions_per_step"]
-        orders = ", ".join(f"{k}: {v}" for k, v in r["differentiator_orders"].items())
-        print(f"== {name} (seed 002)")
-        print(f"   C step, batch loop on the scenario  {r['batch_ns_per_sample']:9.1f} ns/sample; flops per step "
-              f"{r['flops_per_step']['total']} of which {r['hosmd_flops_per_step']} in the HOSMD updates "
-              f"(orders {orders}); instructions per step {ins if ins is None else f'{ins:.0f}'}")
+        for line in families.get(observers.get(name).family).bench_lines(r["family_figures"]):
+            print("   " + line)
     t = res["toolchain"]
     print(f"== toolchain: uiogen generate cold {t['generate_cold_s']:.2f} s, unchanged {t['generate_unchanged_s']:.2f} s")
     _print_hosmd(res["hosmd"])

@@ -1,6 +1,6 @@
 """Sound bounds of symbolic functions over a box: interval arithmetic with subdivision.
 
-Used for the differential mean-value theorem (seed 004, Assumption 1): the Jacobian entries of
+Used for the differential mean-value theorem (Nguyen et al. 2021, Assumption 1): the Jacobian entries of
 an unmeasured nonlinearity phi(x) are bounded over the compact state set D_x. The bounds are
 *guaranteed*: every operation is evaluated in interval arithmetic with outward rounding
 (``math.nextafter`` after each floating-point operation), so the true range is always inside.
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from .errors import BoundsError, ModelDefinitionError
+from .errors import BoundsError
 
 _INF = math.inf
 

@@ -19,6 +19,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+
 from . import sources
 from .errors import DesignLockError
 from .lmi import SolveRecord
@@ -29,15 +31,31 @@ GENERATED_DIR = sources.ROOT / "generated_c"
 DESIGN_PACKAGES = ("numpy", "scipy", "sympy", "mpmath", "clarabel")
 
 
+def home(config: ObserverConfig) -> Path:
+    """The folder whose ``NAME/`` holds the observer's generated files: the package's generated_c/
+    for a built-in observer, ``generated_c/`` beside the observer file for a user's."""
+    return Path(config.home) if config.home else GENERATED_DIR
+
+
 def path(config: ObserverConfig, base: Path | None = None) -> Path:
     """Where the design lock of ``config`` lives (``base/NAME/NAME_design.json``, base defaulting
-    to the committed tree)."""
-    return Path(GENERATED_DIR if base is None else base) / config.name / f"{config.name}_design.json"
+    to :func:`home`)."""
+    return Path(home(config) if base is None else base) / config.name / f"{config.name}_design.json"
 
 
 def design_sources(config: ObserverConfig) -> list:
-    """Every file the design of ``config`` derives from, in a fixed order."""
-    code = sources.closure("codegen.pipeline", f"model_defs.{config.model}")
+    """Every file the design of ``config`` derives from, in a fixed order: the observer file, the
+    parameter file, the model and every project module the family and the model import (a family
+    or model defined outside the project by its own file)."""
+    import inspect
+    from . import families
+    family = type(families.get(config.family))
+    extra = [config.model_path]
+    if family.__module__.split(".")[0] not in sources.PACKAGES:      # a family registered by a user's code
+        extra.append(Path(inspect.getsourcefile(family)))
+    pipeline_module = f"{family.__module__}.build"      # a family package's pipeline (README of families/)
+    entry = pipeline_module if sources._module_file(pipeline_module) is not None else family.__module__
+    code = sources.closure("codegen.pipeline", entry, files=extra)
     return [Path(config.source), config.parameter_path, *code]
 
 
@@ -96,3 +114,18 @@ def document(build, records: list) -> dict:
 
 def dumps(doc: dict) -> str:
     return json.dumps(doc, indent=1, sort_keys=True) + "\n"
+
+
+def variable_spread(reference: dict, other: dict) -> dict:
+    """{variable: max |difference| / its size}: each decision matrix against its largest entry,
+    or a thousandth of the design's largest entry if it is smaller (a matrix the design leaves
+    near zero is not 'different' for an absolute difference of 1e-9)."""
+    big = max((np.abs(np.asarray(v, float)).max(initial=0.0) for v in reference.values()), default=0.0)
+    out = {}
+    for key, value in reference.items():
+        if key in other:
+            a, b = np.asarray(other[key], float), np.asarray(value, float)
+            if a.shape == b.shape:
+                size = max(np.abs(b).max(initial=0.0), 1e-3 * big, 1e-300)
+                out[key] = float(np.abs(a - b).max(initial=0.0) / size)
+    return out

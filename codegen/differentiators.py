@@ -74,7 +74,6 @@ from __future__ import annotations
 import functools
 import math
 import subprocess
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -83,6 +82,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from . import canonical
+from .toolchain import casadi_sources, compile_and_link, render_template
 from .errors import ModelDefinitionError, SampleError, ToolchainError
 
 # Levant (2003), Int. J. Control 76(9/10): lambda_0..lambda_5 of the recursive form, "suitable for k <= 5".
@@ -375,131 +375,22 @@ def hosmd_function(spec: HosmdSpec, name: str = "hosmd_step") -> ca.Function:
 
 # ---- stand-alone C (tests and `uiogen bench`) --------------------------------------------------------
 
-_DRIVER_C = r"""/* Stand-alone driver of one HOSMD step function (uiogen tests and bench).
- * stream:    stdin = z0 (N_STATE doubles) then samples (doubles); stdout = z_j before each update.
- * bench N R: N steps on a synthetic noisy sine, R repeats; prints ns/sample of each repeat. */
-#define _POSIX_C_SOURCE 200809L
-#include <math.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <time.h>
-#include "hosmd_kernel.h"
-
-#define N_STATE %(n_state)d
-
-static double now_ns(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return 1e9 * (double)ts.tv_sec + (double)ts.tv_nsec;
-}
-
-static int check_work(void)
-{
-    int n_arg, n_res, n_iw, n_w;
-    if (hosmd_step_work(&n_arg, &n_res, &n_iw, &n_w) != 0) return 1;
-    return (n_arg > 2 || n_res > 1 || n_iw > 1 || n_w > 1) ? 1 : 0;
-}
-
-static void step(const double *z, double f, double *out)
-{
-    const double *arg[2];
-    double *res[1];
-    int iw[1];
-    double w[1];
-    arg[0] = z;
-    arg[1] = &f;
-    res[0] = out;
-    (void)hosmd_step(arg, res, iw, w, 0);
-}
-
-static int run_stream(void)
-{
-    double z[N_STATE], nxt[N_STATE], f;
-    int i;
-    if (fread(z, sizeof(double), N_STATE, stdin) != N_STATE) return 1;
-    while (fread(&f, sizeof(double), 1, stdin) == 1) {
-        if (fwrite(z, sizeof(double), N_STATE, stdout) != N_STATE) return 1;
-        step(z, f, nxt);
-        for (i = 0; i < N_STATE; ++i) z[i] = nxt[i];
-    }
-    return 0;
-}
-
-static int run_bench(long n, int repeats)
-{
-    double *f = (double *)malloc((size_t)n * sizeof(double));
-    double z[2][N_STATE];
-    double checksum = 0.0, t0;
-    long j;
-    int r, i, cur;
-    unsigned long s = 12345u;
-    if (f == NULL) return 2;
-    for (j = 0; j < n; ++j) {
-        s = s * 6364136223846793005ul + 1442695040888963407ul;
-        f[j] = sin(1e-3 * (double)j) + 1e-3 * ((double)(s >> 11) / 9007199254740992.0 - 0.5);
-    }
-    for (r = 0; r < repeats; ++r) {
-        for (i = 0; i < N_STATE; ++i) z[0][i] = 0.0;
-        cur = 0;
-        t0 = now_ns();
-        for (j = 0; j < n; ++j) {
-            step(z[cur], f[j], z[1 - cur]);
-            cur = 1 - cur;
-        }
-        printf("%%.6f\n", (now_ns() - t0) / (double)n);
-        checksum += z[cur][N_STATE - 1];
-    }
-    fprintf(stderr, "checksum %%.17g\n", checksum);
-    free(f);
-    return 0;
-}
-
-int main(int argc, char **argv)
-{
-    if (check_work() != 0) return 3;
-    if (argc > 2) return run_bench(strtol(argv[1], NULL, 10), (int)strtol(argv[2], NULL, 10));
-    return run_stream();
-}
-"""
-
-
 def c_sources(spec: HosmdSpec) -> dict:
-    """CasADi C of the step (function ``hosmd_step``) plus the driver, as {file name: text}."""
-    from .emit import _fix_unused_parameters
-    f = hosmd_function(spec, "hosmd_step")
-    opts = {"with_header": True, "casadi_real": "double", "casadi_int": "int", "with_mem": False,
-            "verbose": False, "cpp": False, "main": False, "mex": False, "indent": 2}
-    with tempfile.TemporaryDirectory() as tmp:
-        cg = ca.CodeGenerator("hosmd_kernel.c", opts)
-        cg.add(f)
-        cg.generate(tmp + "/")
-        code = Path(tmp, "hosmd_kernel.c").read_text()
-        header = Path(tmp, "hosmd_kernel.h").read_text()
-    return {"hosmd_kernel.c": _fix_unused_parameters(code, "hosmd_step"), "hosmd_kernel.h": header,
-            "hosmd_driver.c": _DRIVER_C % {"n_state": spec.n_state}}
+    """CasADi C of the step (function ``hosmd_step``) plus the driver
+    (``templates/hosmd_driver.c.j2``), as {file name: text}."""
+    code, header = casadi_sources(hosmd_function(spec, "hosmd_step"))
+    return {"hosmd_kernel.c": code, "hosmd_kernel.h": header,
+            "hosmd_driver.c": render_template("hosmd_driver.c.j2", n_state=spec.n_state)}
 
 
 def build_c_driver(spec: HosmdSpec, out_dir: Path, cc: str = "gcc", extra_flags=()) -> Path:
     """Compile the step and its driver with the project's strict flags; returns the executable."""
-    from .emit import STRICT_CFLAGS
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    objs = []
     for fname, text in c_sources(spec).items():
         (out_dir / fname).write_text(text)
-    for fname in ("hosmd_kernel.c", "hosmd_driver.c"):
-        obj = out_dir / fname.replace(".c", ".o")
-        cmd = [cc, *STRICT_CFLAGS, *extra_flags, "-I", str(out_dir), "-c", str(out_dir / fname), "-o", str(obj)]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise ToolchainError(f"{' '.join(cmd)}\n{proc.stderr}")
-        objs.append(str(obj))
-    exe = out_dir / "hosmd_driver"
-    proc = subprocess.run([cc, *extra_flags, *objs, "-o", str(exe), "-lm"], capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise ToolchainError(proc.stderr)
-    return exe
+    return compile_and_link([out_dir / "hosmd_kernel.c", out_dir / "hosmd_driver.c"], out_dir / "hosmd_driver",
+                            include=[out_dir], extra_flags=extra_flags, cc=cc)
 
 
 def run_c_driver(exe: Path, spec: HosmdSpec, samples, z0) -> np.ndarray:

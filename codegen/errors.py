@@ -128,3 +128,12 @@ class BoundsError(ModelDefinitionError):
 class ToolchainError(UiogenError, RuntimeError):
     """The C toolchain failed: no compiler, a compiler error on generated code, or a CasADi
     version whose output the emitter does not recognize."""
+
+
+class UnsupportedError(UiogenError, ValueError):
+    """The request is valid but the chosen observer family does not offer it (the message says
+    which families do)."""
+
+
+class UnknownFamilyError(ConfigurationError):
+    """No observer family is registered under that name."""

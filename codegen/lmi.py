@@ -32,7 +32,6 @@ from .errors import (
     InfeasibleLMIError,
     LMIShapeError,
     NonAffineLMIError,
-    SolverError,
 )
 
 SQRT2 = np.sqrt(2.0)
@@ -279,6 +278,25 @@ OPTIMALITY_SLACK = 1e-4
 # Column scaling never shrinks a variable below this fraction of the largest one: a variable the
 # first solve left at noise level must not become a column of 1e-12s.
 SCALE_FLOOR = 1e-6
+# The second stage keeps every block this far inside (see LMIProblem._central_margin), giving up
+# this fraction of the largest common relative margin the optimal set allows.
+CENTRAL_MARGIN = False
+CENTRAL_GIVE = 0.5
+# Weight of the non-symmetric variables (gains) in the least-norm stage, against 1 for the
+# symmetric certificates (LMIProblem._norm_weights).
+GAIN_WEIGHT = 3e-2
+
+
+def objective_bound(t: float, slack: float = OPTIMALITY_SLACK) -> float:
+    """``t (1 + slack)`` rounded up to three significant digits, in decimal arithmetic (the same
+    on every machine): the second stage's bound on the objective."""
+    import decimal
+    v = t + slack * abs(t)
+    if v == 0.0:
+        return 1e-14
+    d = decimal.Decimal(repr(float(v)))
+    quantum = decimal.Decimal(1).scaleb(d.adjusted() - 2)
+    return float((d / quantum).to_integral_value(rounding=decimal.ROUND_CEILING) * quantum)
 
 
 def _exact_json(values: dict) -> dict:
@@ -317,6 +335,7 @@ class Ledger:
     replay: list | None = None
     source: str = ""
     records: list = field(default_factory=list)
+    solutions: list = field(default_factory=list)     # the re-checked LMISolution of each replayed record
 
     @property
     def replaying(self) -> bool:
@@ -400,6 +419,8 @@ class LMIProblem:
     _constraints: list = field(default_factory=list)
     _objective: Affine | None = None
     _evaluate: object = None
+    _compiled: object = None
+    _symmetric: set = field(default_factory=set)      # names of the symmetric matrix variables
 
     # -- decision variables -------------------------------------------------
     def _fresh(self, name: str, shape: tuple, slots: np.ndarray, count: int) -> Affine:
@@ -423,6 +444,7 @@ class LMIProblem:
         return self._fresh(name, (rows, cols), np.arange(rows * cols).reshape(cols, rows).T, rows * cols)
 
     def symmetric(self, name: str, n: int) -> Affine:
+        self._symmetric.add(name)
         slots = np.zeros((n, n), dtype=int)
         rows, cols, _ = _triu_index(n)
         slots[rows, cols] = slots[cols, rows] = np.arange(rows.size)
@@ -492,6 +514,7 @@ class LMIProblem:
         full_coef = np.concatenate(full_a) if full_a else np.zeros((0, nvar))
         # the original block expressions, for the independent re-check
         self._evaluate = lambda xv: full_const + full_coef @ np.asarray(xv, dtype=float)
+        self._compiled = blocks
         if self._objective is None:
             q = np.zeros(nvar)
         else:
@@ -593,7 +616,9 @@ class LMIProblem:
         ledger = _LEDGER.get() if self.design else None
         unique = self.design if unique is None else unique
         if ledger is not None and ledger.replaying:
-            return self._replay(ledger.take(self.name))
+            sol = self._replay(ledger.take(self.name))
+            ledger.solutions.append(sol)
+            return sol
         t0 = time.perf_counter()
         names, A, b, q, cones, blocks = self._compile()
         nvar = len(names)
@@ -630,10 +655,14 @@ class LMIProblem:
            is not (Theorem 1: gamma^2 ~ 1e-4 beside Lyapunov entries ~ 1e2 leaves a tolerance-1e-8
            solve 1-60 % above the optimum at gain bounds of 100-3000 1/s). The better of the two
            objectives bounds the second stage.
-        2. min ||x / scale|| (a second-order cone) with the objective at most (1 + slack) times that
-           optimum. A least-norm point lies on the boundary of the feasible set, within the
-           solver's tolerance: blocks that then fail the numpy re-check get their margin raised
-           by twice the violation and the stage is solved again (at most three times).
+        2. min ||x / scale|| (a second-order cone) with the objective at most
+           :func:`objective_bound` (the optimum times (1 + slack), rounded up to three significant
+           digits: two machines whose optima differ in the last digits bound the same set, and
+           the point on that bound does not move with their noise). A least-norm point lies on
+           the boundary of the feasible set, within the solver's tolerance: blocks that then fail
+           the numpy re-check get their margin raised by twice the violation and the stage is
+           solved again (at most three times). If the stage does not converge in either
+           coordinates, the refined optimum is returned (certified, not unique).
         """
         its, secs = 0, 0.0
         n = x0.size
@@ -644,19 +673,38 @@ class LMIProblem:
             if m > 0:
                 scale[slots] = 2.0 ** np.round(np.log2(m))
         has_objective = bool(np.any(red.q))
-        t_best = float(red.q @ x0)
+        t_best, x_best = float(red.q @ x0), x0
         if has_objective and np.any(scale != 1.0):
             try:
                 result, dt = self._clarabel(sparse.csc_matrix((n, n)), red.q * scale, red.A @ sparse.diags(scale),
                                             red.b, red.cones, red.blocks, tol, max_iter, verbose, stage="scaled optimum")
                 its, secs = its + int(result.iterations), secs + dt
-                t_best = min(t_best, float(red.q @ (scale * np.asarray(result.x, dtype=float))))
+                x_scaled = scale * np.asarray(result.x, dtype=float)
+                if float(red.q @ x_scaled) < t_best:
+                    t_best, x_best = float(red.q @ x_scaled), x_scaled
             except (InaccurateSolveError, InfeasibleLMIError):
                 pass        # the unscaled optimum stands
+        bound = objective_bound(t_best, slack) if has_objective else None
         b = red.b.copy()
         evaluate = self._evaluate
+        if CENTRAL_MARGIN:
+            central = self._central_margin(red, b, bound, x_best, tol, max_iter, verbose)
+            if central is not None:
+                b, it, dt = central
+                its, secs = its + it, secs + dt
         for attempt in range(4):
-            x, it, dt = self._least_norm(red, b, t_best, slack, has_objective, scale, tol, max_iter, verbose)
+            point = None
+            for coordinates in ("own", "scaled"):
+                try:
+                    point = self._least_norm(red, b, bound, scale, coordinates, tol, max_iter, verbose)
+                    break
+                except InaccurateSolveError:
+                    continue
+            if point is None:
+                # no least-norm point to the solver's accuracy: the refined optimum stands (certified
+                # like any solution, but not the unique point a re-solve elsewhere would reach)
+                return x_best, its, secs
+            x, it, dt = point
             its, secs = its + it, secs + dt
             xv = np.zeros(len(self._names))
             xv[red.kept_variables] = x
@@ -678,26 +726,94 @@ class LMIProblem:
                     b[np.arange(rows.start, rows.stop)[diag]] -= 2.0 * abs(lo)
         return x, its, secs
 
-    def _least_norm(self, red, b, t_best, slack, has_objective, scale, tol, max_iter, verbose) -> tuple:
-        """min tau s.t. ||x / scale|| <= tau, the blocks, and (with an objective) q x <= (1 + slack) t_best.
+    def _norm_weights(self, red, scale) -> np.ndarray:
+        """Weights of the least-norm stage: each variable in its own magnitude; the symmetric
+        matrices (Lyapunov-type certificates) with weight 1, every other variable (gains,
+        multipliers, the objective's scalars) with :data:`GAIN_WEIGHT`. The point is then the
+        smallest certificate among the near-optimal designs, unique because every variable is in
+        the norm; with all weights equal it would be the smallest gains instead, which at the same
+        gamma made the switched PI observer's bank estimate 3-4x slower (docs/guarantees.md)."""
+        w = 1.0 / scale
+        for key, slots in self._variable_slots(red.kept_variables).items():
+            if key not in self._symmetric:
+                w[slots] *= GAIN_WEIGHT
+        return w
+
+    def _central_margin(self, red, b, bound, x1, tol, max_iter, verbose):
+        """The largest common margin s, relative to each block's size at ``x1``, that every block
+        keeps inside the optimal set (blocks >= (margin + s size) I, objective <= bound); returns
+        the right-hand side with the margins raised to (1 - CENTRAL_GIVE) s* (decimal-rounded down),
+        or None. The least-norm point of what is left is then interior, as the solver's own
+        optimum was, instead of on the boundary where least norm alone would put it (smallest
+        gains: a sluggish observer at the same gamma)."""
+        import decimal
+        n = red.q.size
+        xv = np.zeros(len(self._names))
+        xv[red.kept_variables] = x1
+        sizes, diag_rows = [], []
+        full = np.asarray(self._evaluate(xv), dtype=float).ravel()
+        by_id = {id(con): full_rows for con, _, full_rows in self._compiled}
+        for con, rows in red.blocks:
+            k = con.expr.shape[0]
+            r, c, _ = _triu_index(k)
+            if rows.stop - rows.start != r.size or id(con) not in by_id:
+                sizes.append(0.0)
+                diag_rows.append(np.zeros(0, dtype=int))
+                continue
+            mat = full[by_id[id(con)]].reshape(k, k, order="F")
+            size = float(np.abs(np.linalg.eigvalsh(0.5 * (mat + mat.T))).max(initial=0.0))
+            sizes.append(2.0 ** np.round(np.log2(size)) if size > 0 else 0.0)
+            diag_rows.append(np.arange(rows.start, rows.stop)[np.flatnonzero(r == c)])
+        col = np.zeros(red.A.shape[0])
+        for size, d in zip(sizes, diag_rows):
+            col[d] = size
+        rows, rhs, cones, shift = sparse.hstack([red.A, sparse.csc_matrix(col[:, None])]), b, list(red.cones), 0
+        if bound is not None:
+            rows = sparse.vstack([sparse.csc_matrix(np.concatenate([red.q, [0.0]])[None, :]), rows])
+            rhs, cones, shift = np.concatenate([[bound], b]), [clarabel.NonnegativeConeT(1), *cones], 1
+        cap = sparse.csc_matrix(([1.0], ([0], [n])), shape=(1, n + 1))       # s <= 1
+        rows = sparse.vstack([rows, cap], format="csc")
+        rhs = np.concatenate([rhs, [1.0]])
+        q = np.zeros(n + 1)
+        q[n] = -1.0
+        try:
+            result, dt = self._clarabel(sparse.csc_matrix((n + 1, n + 1)), q, rows, rhs,
+                                        [*cones, clarabel.NonnegativeConeT(1)], red.blocks, tol, max_iter, verbose,
+                                        shift=shift, stage="central margin")
+        except (InaccurateSolveError, InfeasibleLMIError):
+            return None
+        s_star = float(np.asarray(result.x)[n])
+        if not s_star > 0:
+            return None
+        d = decimal.Decimal(repr(float(s_star * (1.0 - CENTRAL_GIVE))))
+        quantum = decimal.Decimal(1).scaleb(d.adjusted() - 2)
+        s_keep = float((d / quantum).to_integral_value(rounding=decimal.ROUND_FLOOR) * quantum)
+        return b - s_keep * col, int(result.iterations), dt
+
+    def _least_norm(self, red, b, bound, scale, coordinates, tol, max_iter, verbose) -> tuple:
+        """min tau s.t. ||x / scale|| <= tau, the blocks, and (with an objective) q x <= bound.
 
         Each variable is weighed in its own magnitude (``scale``, powers of two): with one norm for
-        all, a large objective variable (a gain bound t ~ 1e7) would be all the norm sees."""
+        all, a large objective variable (a gain bound t ~ 1e7) would be all the norm sees.
+        ``coordinates`` "scaled" solves for x / scale (the same point, other conditioning)."""
         n = red.q.size
-        rows, rhs, cones, shift = red.A, b, list(red.cones), 0
-        if has_objective:
-            rows = sparse.vstack([sparse.csc_matrix(red.q[None, :]), red.A], format="csc")
-            rhs = np.concatenate([[t_best + slack * abs(t_best) + 1e-14], b])
+        col = np.ones(n) if coordinates == "own" else scale
+        A = red.A @ sparse.diags(col) if coordinates == "scaled" else red.A
+        rows, rhs, cones, shift = A, b, list(red.cones), 0
+        if bound is not None:
+            rows = sparse.vstack([sparse.csc_matrix((red.q * col)[None, :]), A], format="csc")
+            rhs = np.concatenate([[bound], b])
             cones, shift = [clarabel.NonnegativeConeT(1), *red.cones], 1
         soc = sparse.vstack([sparse.csc_matrix(([-1.0], ([0], [n])), shape=(1, n + 1)),
-                             sparse.hstack([-sparse.diags(1.0 / scale), sparse.csc_matrix((n, 1))])])
+                             sparse.hstack([-sparse.diags(col * self._norm_weights(red, scale)),
+                                            sparse.csc_matrix((n, 1))])])
         rows = sparse.vstack([sparse.hstack([rows, sparse.csc_matrix((rows.shape[0], 1))]), soc], format="csc")
         q2 = np.zeros(n + 1)
         q2[n] = 1.0
         result, dt = self._clarabel(sparse.csc_matrix((n + 1, n + 1)), q2, rows, np.concatenate([rhs, np.zeros(n + 1)]),
                                     [*cones, clarabel.SecondOrderConeT(n + 1)], red.blocks, tol, max_iter, verbose,
                                     shift=shift, stage="least-norm point")
-        return np.asarray(result.x, dtype=float)[:n], int(result.iterations), dt
+        return col * np.asarray(result.x, dtype=float)[:n], int(result.iterations), dt
 
     def _variable_slots(self, kept: np.ndarray) -> dict:
         """{variable name: positions in ``kept`` of its scalar variables}."""

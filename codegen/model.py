@@ -46,7 +46,7 @@ class SchedulingSignal:
 class DerivedInput:
     """A known input computed inside the observer step from the measurements.
 
-    A nonlinear term of the model that depends only on measured signals (seed 004's
+    A nonlinear term of the model that depends only on measured signals (Nguyen et al. 2021's
     "measured nonlinear consequents") enters the dynamics affinely as a known input whose
     value ``expr`` is a function of measured outputs (symbols ``y_<output>``), input
     scheduling signals and parameters. It is not an input of the generated step: the step

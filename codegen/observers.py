@@ -1,45 +1,42 @@
-"""Observer configurations: data files in ``model_defs/observers/*.toml``.
+"""Observer configurations: data files, built-in (``model_defs/observers/*.toml``) or anywhere on disk.
 
-A configuration names the model module, the parameter file, the representation
-and the design settings of one observer; ``uiogen list`` shows them all. Adding
-an observer for another car is a new TOML file, not new code.
+A configuration names the model, the parameter file, the family (:mod:`codegen.families`) and
+the design settings of one observer; ``uiogen list`` shows the built-in ones. Adding an
+observer for another car is a new TOML file, not new code.
+
+A configuration outside the package (a user's project) may name its model and parameter file
+by paths relative to its own folder (``model = "my_car.py"``: a module defining
+``MODEL = ModelDefinition(...)``, exactly as in ``model_defs/``); its generated C, design lock
+and extension go to ``generated_c/NAME/`` beside it.
 """
 from __future__ import annotations
 
+import hashlib
 import importlib
+import importlib.util
+import sys
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from model_defs import PARAMS_DIR
-
 from .errors import ModelDefinitionError, UnknownObserverError
 from .model import ModelDefinition
 from .settings import Rule, config_error, parse_table, suggest
+from .sources import ROOT
 
-OBSERVERS_DIR = PARAMS_DIR.parent / "observers"
-MODELS_DIR = PARAMS_DIR.parent
-FAMILIES = ("linf_uio", "ts_fuzzy_uio", "switched_pi", "algebraic_uio", "interconnected_uio")
+MODELS_DIR = ROOT / "model_defs"
+PARAMS_DIR = MODELS_DIR / "params"
+OBSERVERS_DIR = MODELS_DIR / "observers"
 
-# Top level of an observer file: the keys every family reads, and those only some families read.
-# The [design] and [switching] tables are checked by the family's own parser (codegen.settings).
+# Top level of an observer file: the keys every family reads; each family adds its own
+# (Family.observer_keys). The [design] and [switching] tables are checked by the family's parser.
 COMMON_KEYS = {
-    "family": Rule(str, choices=FAMILIES, required=True),
-    "model": Rule(str, required=True, doc="module model_defs/MODEL.py"),
-    "parameters": Rule(str, required=True, doc="file in model_defs/params"),
+    "family": Rule(str, required=True, doc="an observer family (codegen.families)"),
+    "model": Rule(str, required=True, doc="model_defs/MODEL.py, or a .py path relative to this file"),
+    "parameters": Rule(str, required=True, doc="a file in model_defs/params, or a path relative to this file"),
     "sample_time": Rule(float, gt=0, required=True, doc="s"),
     "design": Rule(dict),
 }
-FAMILY_KEYS = {
-    "linf_uio": {"polytope": Rule(str, choices=("taylor_reduced", "sector"), required=True),
-                 "rate_bounds": Rule(str, choices=("exact", "at_expansion_point", "none")),
-                 "ui_filter": Rule(dict)},
-    "ts_fuzzy_uio": {},
-    "switched_pi": {"switching": Rule(dict)},
-    "algebraic_uio": {"validation": Rule(dict)},       # scenarios, read by codegen.validation.algebraic
-    "interconnected_uio": {},
-}
-UI_FILTER_KEYS = {"time_constant": Rule(float, gt=0, doc="T_f of the UI filter, s")}
 
 
 @dataclass(frozen=True)
@@ -59,19 +56,43 @@ class ObserverConfig:
     source: str = ""
     switching: dict = field(default_factory=dict)     # switched families: the rule, as data
 
+    home: str = ""          # folder of its generated_c/NAME/ outputs; "" = the package's generated_c/
+
+    @property
+    def folder(self) -> Path:
+        """The folder of the observer file (relative model and parameter paths start there)."""
+        return Path(self.source).resolve().parent if self.source else OBSERVERS_DIR
+
+    @property
+    def builtin(self) -> bool:
+        return not self.home
+
+    @property
+    def model_path(self) -> Path:
+        """The model's source file."""
+        return _model_file(self.model, self.folder)
+
+    @property
+    def model_module(self) -> str:
+        """Importable name of the model module (``model_defs.NAME`` for the built-in models)."""
+        f = self.model_path
+        if f.parent == MODELS_DIR:
+            return f"model_defs.{f.stem}"
+        return f"uiogen_user_model_{hashlib.sha256(str(f).encode()).hexdigest()[:12]}_{f.stem}"
+
+    def load_model_module(self):
+        return load_module(self.model_path, self.model_module)
+
     def load_model(self) -> ModelDefinition:
-        try:
-            module = importlib.import_module(f"model_defs.{self.model}")
-        except ModuleNotFoundError:
-            raise ModelDefinitionError(f"observer {self.name!r}: no model module model_defs/{self.model}.py") from None
+        module = self.load_model_module()
         model = getattr(module, "MODEL", None)
         if not isinstance(model, ModelDefinition):
-            raise ModelDefinitionError(f"model_defs/{self.model}.py does not define MODEL = ModelDefinition(...)")
+            raise ModelDefinitionError(f"{self.model_path} does not define MODEL = ModelDefinition(...)")
         return model
 
     @property
     def parameter_path(self) -> Path:
-        return PARAMS_DIR / self.parameters
+        return _parameter_file(self.parameters, self.folder)
 
     def to_json(self) -> dict:
         return {"name": self.name, "family": self.family, "model": self.model,
@@ -81,27 +102,79 @@ class ObserverConfig:
                 **({"switching": self.switching} if self.switching else {})}
 
 
+def _model_file(model: str, folder: Path) -> Path:
+    """``model``: a built-in module name (model_defs/NAME.py) or a .py path relative to ``folder``."""
+    if model.endswith(".py") or "/" in model:
+        return (folder / model).resolve()
+    return MODELS_DIR / f"{model}.py"
+
+
+def _parameter_file(parameters: str, folder: Path) -> Path:
+    local = (folder / parameters).resolve()
+    return local if folder != OBSERVERS_DIR and ("/" in parameters or local.is_file()) else PARAMS_DIR / parameters
+
+
+def builtin_model(name: str):
+    """A module of the built-in model library (``model_defs/NAME.py``), imported by name: the
+    toolchain reads the library as data, as it reads a user's model from its file."""
+    return load_module(MODELS_DIR / f"{name}.py", f"model_defs.{name}")
+
+
+def load_module(path: Path, name: str):
+    """Import a model module from its file (once per process; built-in models by their package name)."""
+    if name in sys.modules:
+        return sys.modules[name]
+    if name.startswith("model_defs."):
+        return importlib.import_module(name)
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:
+        raise ModelDefinitionError(f"cannot import a model from {path}")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except ModelDefinitionError:
+        del sys.modules[name]
+        raise
+    except Exception as exc:       # a user's module that does not run: say where, keep the cause
+        del sys.modules[name]
+        raise ModelDefinitionError(f"{path}: importing the model failed: {type(exc).__name__}: {exc}") from exc
+    return module
+
+
 def _parse(path: Path) -> ObserverConfig:
-    with path.open("rb") as fh:
-        try:
+    from . import families
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
             data = tomllib.load(fh)
-        except tomllib.TOMLDecodeError as exc:
-            raise ModelDefinitionError(f"{path}: not valid TOML: {exc}") from None
+    except FileNotFoundError:
+        raise UnknownObserverError(f"no observer file {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ModelDefinitionError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ModelDefinitionError(f"{path}: not UTF-8 text: {exc}") from None
     source = str(path)
+    known = families.names()
     if "family" not in data:
-        raise ModelDefinitionError(f"{path}: missing family (one of {', '.join(FAMILIES)})")
-    parse_table({"family": data["family"]}, {"family": COMMON_KEYS["family"]}, source=source)
-    family = data["family"]
-    parse_table(data, {**COMMON_KEYS, **FAMILY_KEYS[family]}, source=source, what=f"for family {family}")
-    parse_table(data.get("ui_filter", {}), UI_FILTER_KEYS, source=source, section="ui_filter")
-    models = sorted(p.stem for p in MODELS_DIR.glob("*.py") if not p.stem.startswith("_"))
-    if data["model"] not in models:
-        raise config_error(source, None, "model", data["model"], f"no module model_defs/{data['model']}.py; "
-                           f"known: {', '.join(models)}", suggest(data["model"], models))
-    if not (PARAMS_DIR / data["parameters"]).is_file():
+        raise config_error(source, None, "family", None, f"missing; one of {', '.join(known)}")
+    parse_table({"family": data["family"]}, {"family": Rule(str, choices=known, required=True)}, source=source)
+    family = families.get(data["family"])
+    parse_table(data, {**COMMON_KEYS, **family.observer_keys}, source=source, what=f"for family {family.name}")
+    builtin = path.resolve().parent == OBSERVERS_DIR
+    folder = path.resolve().parent
+    model_file = _model_file(data["model"], folder)
+    if not model_file.is_file():
+        models = sorted(p.stem for p in MODELS_DIR.glob("*.py") if not p.stem.startswith("_"))
+        raise config_error(source, None, "model", data["model"],
+                           f"no model file {model_file}; built-in models: {', '.join(models)} (or a .py path "
+                           f"relative to {folder})", suggest(data["model"], models))
+    param_file = _parameter_file(data["parameters"], folder)
+    if not param_file.is_file():
         files = sorted(p.name for p in PARAMS_DIR.glob("*.toml"))
-        raise config_error(source, None, "parameters", data["parameters"], f"no file {PARAMS_DIR / data['parameters']}; "
-                           f"known: {', '.join(files)}", suggest(data["parameters"], files))
+        raise config_error(source, None, "parameters", data["parameters"],
+                           f"no file {param_file}; built-in parameter files: {', '.join(files)} (or a path "
+                           f"relative to {folder})", suggest(data["parameters"], files))
     doc = ""
     with path.open() as fh:
         for line in fh:
@@ -109,18 +182,29 @@ def _parse(path: Path) -> ObserverConfig:
                 doc += line.lstrip("# ").rstrip() + " "
             else:
                 break
-    return ObserverConfig(path.stem, data["family"], data["model"], data["parameters"], data.get("polytope", ""),
-                          data.get("rate_bounds", "exact"), float(data["sample_time"]),
-                          dict(data.get("design", {})), dict(data.get("ui_filter", {})), doc.strip(), str(path),
-                          dict(data.get("switching", {})))
+    config = ObserverConfig(path.stem, data["family"], data["model"], data["parameters"], data.get("polytope", ""),
+                            data.get("rate_bounds", "exact"), float(data["sample_time"]),
+                            dict(data.get("design", {})), dict(data.get("ui_filter", {})), doc.strip(), str(path),
+                            dict(data.get("switching", {})), "" if builtin else str(folder / "generated_c"))
+    family.check_config(config, data)
+    return config
 
 
 def names() -> list:
+    """The built-in observers (``model_defs/observers/*.toml``)."""
     return sorted(p.stem for p in OBSERVERS_DIR.glob("*.toml"))
 
 
+def is_path(name: str) -> bool:
+    return name.endswith(".toml") or "/" in name
+
+
 def get(name: str) -> ObserverConfig:
+    """A built-in observer by name, or an observer file by path (``.toml``, anywhere on disk)."""
+    if is_path(str(name)):
+        return _parse(Path(name))
     path = OBSERVERS_DIR / f"{name}.toml"
     if not path.is_file():
-        raise UnknownObserverError(f"no observer named {name!r}; known: {', '.join(names()) or 'none'}")
+        raise UnknownObserverError(f"no observer named {name!r}; known: {', '.join(names()) or 'none'} "
+                                   f"(or give the path of an observer .toml file)")
     return _parse(path)

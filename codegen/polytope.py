@@ -6,14 +6,14 @@ matrix entries, e.g. 1/v_x and 1/v_x**2), and builds
 
 * the plain sector polytope: one premise per nonlinearity, 2**p vertices,
   exact: sum_i eta_i A_i == A(rho);
-* the Taylor-reduced form of seed 000 eqs. (6)-(9): the first nonlinearity is
+* the Taylor-reduced form of Nguyen et al. 2019 eqs. (6)-(9): the first nonlinearity is
   normalized to theta in [-1, 1] and the others are replaced by their first-order
   Taylor expansion in theta at theta = 0; 2 vertices for one signal, with the
   approximation error reported by :func:`taylor_error`.
 
 Membership functions are products of sector weights; their time-derivative
-bounds phi_kl (seed 000 eq. (14)) come from the scheduling rate bounds, either
-soundly over the whole box (``rate_bounds="exact"``) or, as the seed's eq. (11)
+bounds phi_kl (Nguyen et al. 2019 eq. (14)) come from the scheduling rate bounds, either
+soundly over the whole box (``rate_bounds="exact"``) or, as the paper's eq. (11)
 does, with the parameter map linearized at the expansion point
 (``rate_bounds="at_expansion_point"``).
 """
@@ -146,7 +146,7 @@ def nonlinear_factors(matrices, symbols) -> tuple:
     """Distinct non-constant factors in ``symbols`` of the matrices' entries, sorted by complexity.
 
     Each entry is expanded into a sum of terms ``c * g(symbols)``; the ``g`` are returned (for
-    seed 000: 1/v_x and 1/v_x**2; for seed 004: 1/v_x and r).
+    Nguyen et al. 2019: 1/v_x and 1/v_x**2; for Nguyen et al. 2021: 1/v_x and r).
     """
     symbols = set(symbols)
     found = {}
@@ -419,7 +419,7 @@ def sector_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polytope:
 
 
 def taylor_reduced_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polytope:
-    """Reduced polytope of seed 000 eqs. (6)-(9).
+    """Reduced polytope of Nguyen et al. 2019 eqs. (6)-(9).
 
     The simplest nonlinearity g_0 (1/v_x) is written g_0 = 1/v0 + theta/v1 with
     theta in [-1, 1]; every other g_k is replaced by its first-order Taylor
@@ -435,7 +435,7 @@ def taylor_reduced_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polyto
     g0 = nonlin[0]
     g_lo, g_hi = _range_on_interval(g0, signal, box.lower, box.upper)
     center, half = (g_hi + g_lo) / 2, (g_hi - g_lo) / 2
-    # Orient theta to increase with the signal (the seed's v1 < 0 for g0 = 1/v_x), so vertex 1
+    # Orient theta to increase with the signal (the paper's v1 < 0 for g0 = 1/v_x), so vertex 1
     # is the low end of the signal, as in eq. (9): A_1 = A(theta_min) = A(v_min).
     g_at_lo = float(g0.subs(signal, box.lower))
     if g_at_lo > center:

@@ -168,7 +168,7 @@ class AngleDriver:
 
 
 def angle_torque_plant(config, definition, params, scn, progress=None, substeps: int = 10) -> dict:
-    """Closed-loop truth for models driven by steering angle and engine torque (seed 004, eq. (1)).
+    """Closed-loop truth for models driven by steering angle and engine torque (Nguyen et al. 2021, eq. (1)).
 
     ``definition`` is the truth plant (states v_x, v_y, r; unknown inputs T_eng, delta), its values
     from the parameter file's [parameters] and [plant] tables; a ``mu`` parameter follows the

@@ -35,13 +35,18 @@ def _module_file(module: str) -> Path | None:
 
 
 @functools.lru_cache(maxsize=None)
-def _imports(path: Path) -> tuple:
-    """Project modules imported anywhere in ``path`` (absolute names)."""
+def _imports(path: Path, module_level: bool = False) -> tuple:
+    """Project modules imported in ``path`` (absolute names): anywhere, or with ``module_level``
+    only the statements that run when the module is imported."""
     tree = ast.parse(path.read_text(), str(path))
-    rel = path.relative_to(ROOT).with_suffix("")
-    package = list(rel.parts[:-1])      # the package a relative import starts from
+    try:
+        rel = path.relative_to(ROOT).with_suffix("")
+        package = list(rel.parts[:-1])      # the package a relative import starts from
+    except ValueError:                      # a file outside the project: no relative imports
+        package = []
     found = []
-    for node in ast.walk(tree):
+    nodes = tree.body if module_level else ast.walk(tree)
+    for node in nodes:
         if isinstance(node, ast.Import):
             found += [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -50,23 +55,39 @@ def _imports(path: Path) -> tuple:
                 mod = ".".join(base + ([node.module] if node.module else []))
             else:
                 mod = node.module or ""
-            found.append(mod)
-            found += [f"{mod}.{a.name}" for a in node.names]   # "from pkg import module"
+            for a in node.names:     # "from pkg import module" imports the module, else pkg's names
+                found.append(f"{mod}.{a.name}" if _module_file(f"{mod}.{a.name}") is not None else mod)
     return tuple(m for m in found if m and m.split(".")[0] in PACKAGES)
 
 
-def closure(*modules: str) -> list:
-    """Sorted files of ``modules`` and of every project module they import, transitively
-    (package ``__init__`` files of each imported module included)."""
-    seen, todo = set(), [m for m in modules]
+def closure(*modules: str, files=()) -> list:
+    """Sorted files of ``modules`` and of every project module they import, transitively.
+
+    A module counts with every import it makes (those inside functions run when its code
+    runs); the packages above a module count with the imports their ``__init__`` makes when
+    imported (a family's package wires its validation lazily: designs do not depend on it).
+    ``files``: more source files, e.g. a user's model outside the project, followed the same way.
+    """
+    seen, todo = set(), [(m, False) for m in modules]
+    for f in files:
+        f = Path(f).resolve()
+        if f not in seen:
+            seen.add(f)
+            todo += [(m, False) for m in _imports(f)]
+    done = set()
     while todo:
-        mod = todo.pop()
+        mod, parent_only = todo.pop()
+        if (mod, parent_only) in done:
+            continue
+        done.add((mod, parent_only))
         parts = mod.split(".")
         for k in range(1, len(parts) + 1):     # a module's packages run their __init__ first
             f = _module_file(".".join(parts[:k]))
-            if f is not None and f not in seen:
-                seen.add(f)
-                todo += list(_imports(f))
+            if f is None:
+                continue
+            seen.add(f)
+            module_level = parent_only or k < len(parts)
+            todo += [(m, False) for m in _imports(f, module_level) if (m, False) not in done]
     return sorted(seen)
 
 

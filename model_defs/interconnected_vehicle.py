@@ -1,4 +1,4 @@
-"""Interlinked road-vehicle longitudinal and lateral dynamics of seed 003, eqs. (1)-(7).
+"""Interlinked road-vehicle longitudinal and lateral dynamics of Sentouh et al. 2023, eqs. (1)-(7).
 
 Sentouh, Fouka, Popieul, "Virtual Sensor: Simultaneous State and Input Estimation for Nonlinear
 Interconnected Ground Vehicle System Dynamics", Sensors 23, 4236, 2023.
@@ -9,7 +9,7 @@ which unknown inputs and outputs belong to each subsystem, the coupling signals 
 one subsystem's equations that are not a premise times one of its own states or inputs), the
 premise variables (11) and the 2^q-vertex T-S matrices (9)-(13).
 
-Equations, with the seed's small-steering-angle assumption ("we assume a small variation in the
+Equations, with the paper's small-steering-angle assumption ("we assume a small variation in the
 steering angle under normal driving conditions", Sec. 2: cos(delta) = 1, sin(delta) = 0 in (1)):
 
     m v_x'      = F_xf + F_xr + m v_y r - F_a - F_rr,           F_a = c_a v_x^2       (1)
@@ -27,7 +27,7 @@ Outputs (8): w_f, w_r, a_x (longitudinal); r, psi_L, y_L, a_y, delta (lateral) w
 accelerometer signals m a_x = F_xf + F_xr - F_a - F_rr and m a_y = F_yf + F_yr + F_w, plus
 delta_dot, which the observer takes from the HOSMD of delta (see the observer configuration).
 
-(*) Where we depart from the printed equations (also in the README's seed-003 section):
+(*) Where we depart from the printed equations (also in the README's Sentouh et al. 2023 section):
 
 * (3): the printed y_L' has no -l_s kappa v_x. With y_L the lateral offset seen at the look-ahead
   distance l_s (y_L = y_cg + l_s psi_L), y_L' = (v_y + v_x psi_L) + l_s psi_L', and psi_L' carries
@@ -35,11 +35,11 @@ delta_dot, which the observer takes from the HOSMD of delta (see the observer co
 * (4): the printed r term, t_sr r/(R_s I_s), has no 1/v_x, which makes it dimensionally a
   different quantity from the v_y/v_x term beside it. We write the aligning torque of the front
   tyre as t_sb alpha_f (the -t_sb delta + t_sb v_y/v_x terms of (4) are exactly that with the
-  yaw part -t_sb l_f r/v_x), t_sb = K_p eta_t C_f / R_s as in seed 000's column.
+  yaw part -t_sb l_f r/v_x), t_sb = K_p eta_t C_f / R_s as in Nguyen et al. 2019's column.
 """
 import sympy as sp
 
-from codegen.interconnected import InterconnectedModelDefinition, SwitchedSignal
+from codegen.families.interconnected_uio.representation import InterconnectedModelDefinition, SwitchedSignal
 
 # longitudinal subsystem (Sigma_x)
 v_x, omega_f, omega_r, F_xf, F_xr = sp.symbols("v_x omega_f omega_r F_xf F_xr")

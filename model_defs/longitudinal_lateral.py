@@ -1,4 +1,4 @@
-"""Combined longitudinal-lateral single-track model of seed 004.
+"""Combined longitudinal-lateral single-track model of Nguyen et al. 2021.
 
 Nguyen, Dinh, Guerra, Pan, IEEE/ASME T-Mech 26(3), 2021, eqs. (1) and (3):
 
@@ -11,7 +11,7 @@ States x = [v_x, v_y, r]; unknown inputs d = [T_eng, delta]; measured y = [v_x, 
 Nothing here says which terms are premises or consequents: :mod:`codegen.ts_fuzzy` finds
 the measured premises (1/v_x, r) and the unmeasured consequent v_y^2 itself.
 
-Note on the seed's eq. (8): its f_v(xi) second entry prints (2(C_r l_r - C_f l_f) r - v_x r)/(M v_x),
+Note on the paper's eq. (8): its f_v(xi) second entry prints (2(C_r l_r - C_f l_f) r - v_x r)/(M v_x),
 which is dimensionally wrong for the -v_x r term of (1); the derivation from (1) gives
 (2(C_r l_r - C_f l_f)/(M v_x) - v_x) r, which is what the toolchain obtains.
 """
@@ -57,7 +57,7 @@ MODEL = ModelDefinition(
 
 # --- Truth plant (validation only) ----------------------------------------------------------------
 # Same equations (1) with the magic-formula tyres of eq. (2) and the exact slip angles below (2);
-# static axle loads (the seed's scenarios are gentle in a_x). B C D = 2 C_f (2 C_r), so the small
+# static axle loads (the paper's scenarios are gentle in a_x). B C D = 2 C_f (2 C_r), so the small
 # slip slope equals the observer's linear tyre; friction mu scales the peak (scenario 3: time-varying grip).
 mu, g, C_pac, E_pac = sp.symbols("mu g C_pac E_pac")
 _alpha_f = delta - sp.atan((v_y + l_f * r) / v_x)
@@ -77,5 +77,5 @@ PLANT = ModelDefinition(
     parameters=(M, l_f, l_r, I_e, I_z, C_f, C_r, C_x, C_y, mu, g, C_pac, E_pac),
     parameter_ranges={"mu": (0, None, "()"), "g": (0, None, "()"), "C_pac": (0, None, "()"), "E_pac": (None, 1)},
     units=UNITS,
-    doc="Truth plant: seed-004 vehicle (1) with the magic-formula tyres (2).",
+    doc="Truth plant: Nguyen et al. 2021 vehicle (1) with the magic-formula tyres (2).",
 )

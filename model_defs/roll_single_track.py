@@ -1,4 +1,4 @@
-"""Roll-augmented single-track model with road bank angle (seed 001, eqs. (1)-(2)).
+"""Roll-augmented single-track model with road bank angle (Menhour et al. 2014, eqs. (1)-(2)).
 
 Menhour, Koenig, d'Andréa-Novel, ECC 2014. Three balances, written once and shared by the
 observer's model and the truth plant (the road plane is banked by phi_r; phi is the sprung
@@ -13,14 +13,14 @@ with a = v_y' + v_x r the lateral acceleration of the roll axis and I_x the spru
 inertia about its own CoG. The bank enters both the lateral force balance (gravity component
 -m g sin phi_r) and the roll moment balance (gravity moment m_s g h_r sin phi_r); solving the two
 for (a, phi'') the bank cancels from phi'' exactly in the small-angle model, and what remains is
-the seed's F = [-g/V_x, 0, 0, 0]^T.
+the paper's F = [-g/V_x, 0, 0, 0]^T.
 
-Observer model (``MODEL``): small angles, beta = v_y / V_x at constant V_x (the seed's (1)),
+Observer model (``MODEL``): small angles, beta = v_y / V_x at constant V_x (the paper's (1)),
 linear axle forces (2) F_yf = C_f (delta - beta - l_f r / V_x), F_yr = C_r (l_r r / V_x - beta)
 (axle cornering stiffnesses), states x = [beta, r, phi, phi_dot], known input u = delta (road-wheel
 angle), unknown input omega = phi_r, outputs y = [r, phi, phi_dot], scheduling signal V_x.
-With m_s = m the toolchain's matrices equal the seed's (1) term by term, after three misprints of
-the seed are corrected (``tests/test_switched_pi.py`` checks it): A_22 = -C_a2/(I_z V_x) (printed
+With m_s = m the toolchain's matrices equal the paper's (1) term by term, after three misprints of
+the paper are corrected (``tests/test_switched_pi.py`` checks it): A_22 = -C_a2/(I_z V_x) (printed
 I_x), A_14 = -h_r b_r/(I_x V_x) (printed h_r L_r) and H_4 = h_r C_f / I_x (printed C_f / I_x).
 We keep the sprung mass m_s separate from the total mass m because the validation car has heavy
 unsprung masses (the CommonRoad BMW 320i: m_s / m = 0.88).

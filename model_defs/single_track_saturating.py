@@ -1,6 +1,6 @@
 """Single-track lateral dynamics with axle stiffness scheduled on the measured tyre utilization.
 
-Linear single-track model (seed 000 eq. (4), axle forces F_y = s C alpha) whose axle cornering
+Linear single-track model (Nguyen et al. 2019 eq. (4), axle forces F_y = s C alpha) whose axle cornering
 stiffnesses C_f, C_r are scaled by the Fiala (brush) tyre's *secant* ratio s at the force
 utilization eta = |a_y|/(mu g): at a static load split both axles use the same fraction of their
 grip, and for the Fiala tyre F/(mu F_z) = z - z^2/3 + z^3/27 with z = C|alpha|/(mu F_z), whose
@@ -10,7 +10,7 @@ inverse gives the closed form
 
 (no cancellation at small eta). s is computed from the measured a_y inside the observer step,
 so the model stays linear in the states with measured scheduling signals (v_x, s), as in the
-seeds' LPV method. States x = [beta, r], known input delta (road-wheel angle), unknown input M_z
+papers' LPV method. States x = [beta, r], known input delta (road-wheel angle), unknown input M_z
 (yaw-moment disturbance: load transfer, drive torque split, aero), outputs y = [r, a_y].
 """
 import sympy as sp

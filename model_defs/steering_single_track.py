@@ -1,4 +1,4 @@
-"""Single-track lateral dynamics with an electric power steering column (seed 000).
+"""Single-track lateral dynamics with an electric power steering column (Nguyen et al. 2019).
 
 Nguyen, Guerra, Sentouh, Zhang, IEEE/ASME T-Mech 24(6), 2019, eqs. (1)-(5):
 linear axle tyres F_yf = 2 C_f alpha_f, F_yr = 2 C_r alpha_r (eq. (3)), small angles,
@@ -53,7 +53,7 @@ MODEL = ModelDefinition(
 
 
 # --- Truth plant (validation only; the observer is designed from MODEL) ------------------------
-# Same vehicle and column, but Pacejka magic-formula axle forces (seed 004 eq. (2)) with
+# Same vehicle and column, but Pacejka magic-formula axle forces (Nguyen et al. 2021 eq. (2)) with
 # longitudinal load transfer, and an aligning torque from the plant's own front slip with a
 # pneumatic trail that falls linearly to zero at full sliding, instead of the linear eta_t term.
 # Extra values come from the [plant] table of the parameter file.
@@ -86,5 +86,5 @@ PLANT = ModelDefinition(
     parameter_ranges={"mu": (0, None, "()"), "h_cg": (0, None, "()"), "g": (0, None, "()"),
                       "C_pac": (0, None, "()"), "E_pac": (None, 1)},
     units=MODEL.units,
-    doc="Truth plant: seed-000 vehicle with Pacejka tyres, load transfer and trail-based aligning torque.",
+    doc="Truth plant: Nguyen et al. 2019 vehicle with Pacejka tyres, load transfer and trail-based aligning torque.",
 )

@@ -1,6 +1,6 @@
-"""Seed-000 single track and steering column, with roll camber and the tyres' nonlinear remainders.
+"""Nguyen et al. 2019 single track and steering column, with roll camber and the tyres' nonlinear remainders.
 
-The model of :mod:`model_defs.steering_single_track` (seed 000 eqs. (1)-(5): states
+The model of :mod:`model_defs.steering_single_track` (Nguyen et al. 2019 eqs. (1)-(5): states
 x = [beta, r, delta, delta_dot], known input T_a, unknown input T_d, outputs r, delta, delta_dot,
 scheduling v_x), written for a car whose tyre model is a magic formula with camber terms and whose
 body rolls, such as the CommonRoad multi-body vehicles (PAC2002 tyres). Three additions, each
@@ -15,19 +15,19 @@ derived from the car's parameter file, none fitted to a trajectory:
   S_Vy = sgn(gamma) F_z (p_vy1 + p_vy3 |gamma|): besides the thrust above, every cornering
   wheel gets a constant force F_c sgn(a_y) (about 0.02 F_z). Its sign is a function of the
   measured signals (s_c below, a ramp of width a_s).
-* **Nonlinear remainders** (seed 004's "measured nonlinear consequents"). The pure-slip axle force
+* **Nonlinear remainders** (Nguyen et al. 2021's "measured nonlinear consequents"). The pure-slip axle force
   F(alpha) = mu F_z sin(C atan(B alpha - E (B alpha - atan(B alpha)))) is 2 C alpha plus a
   remainder, and the aligning torque K_p t_p(alpha) F(alpha) / R_s with the brush-model trail
   t_p = eta_t (1 - tan|alpha| / tan alpha_sl), tan alpha_sl = 3 mu F_z / (2 C) (the plant's own
-  documented trail model) is the seed's linear term K_p eta_t 2 C alpha / R_s plus a remainder.
+  documented trail model) is the paper's linear term K_p eta_t 2 C alpha / R_s plus a remainder.
   The linear parts stay in the LPV matrices (the states carry them); the remainders are
   evaluated at the slip angle the *measured* lateral acceleration implies (q = v_x y_r, the
   quasi-steady a_y; the axle's pure-slip share (M l / L - k) |q| - F_c |s_c| of it, the magic
   formula inverted in closed form) and enter as known inputs computed inside the step. They
-  are zero at small slip, so the model is the seed's there apart from the camber terms.
+  are zero at small slip, so the model is the paper's there apart from the camber terms.
 
 Derived inputs w = [s_c, F_nf, F_nr, T_nl] (:class:`codegen.model.DerivedInput`); they use
-only y_r, v_x and parameters, so the generated step takes the same inputs as the seed's.
+only y_r, v_x and parameters, so the generated step takes the same inputs as the paper's.
 """
 import sympy as sp
 
@@ -88,7 +88,7 @@ a_y = (F_f0 + F_r0) / (M - k_f - k_r)                    # quasi-static roll cam
 F_yf = F_f0 + k_f * a_y
 F_yr = F_r0 + k_r * a_y
 
-# Self-aligning torque of the column (2): the seed's linear term in the pure-slip front slip
+# Self-aligning torque of the column (2): the paper's linear term in the pure-slip front slip
 # (the camber terms do not reach the kingpin moment) plus its measured nonlinear remainder.
 T_s_beta = 2 * K_p * C_f * eta_t / R_s
 T_s_r = 2 * K_p * C_f * eta_t * l_f / (R_s * v_x)

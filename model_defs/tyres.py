@@ -3,7 +3,7 @@ import sympy as sp
 
 
 def magic_formula_axle(alpha, cornering_stiffness, fz, mu, C, E):
-    """Pacejka magic formula of seed 004 eq. (2) for one axle.
+    """Pacejka magic formula of Nguyen et al. 2021 eq. (2) for one axle.
 
     F_y = D sin(C atan((1 - E) B alpha + E atan(B alpha))) with peak D = mu F_z and B from
     B C D = ``cornering_stiffness``, so the small-slip slope equals the observer's linear tyre.

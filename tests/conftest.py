@@ -5,6 +5,7 @@ from pathlib import Path
 import pytest
 
 from codegen import observers, pipeline
+from codegen.families.linf_uio import build as linf_build
 
 ROOT = Path(__file__).resolve().parent.parent
 SHARED = ROOT.parent / "shared"
@@ -36,7 +37,7 @@ def build(config):
 
 @pytest.fixture(scope="session")
 def lpv(config):
-    return pipeline.representation(config)[0]
+    return linf_build.representation(config)[0]
 
 
 @pytest.fixture(scope="session")

@@ -1,4 +1,4 @@
-"""Seed 002 (Ichalal & Mammar 2015): relative degree and decoupling derived, classical UIO refused,
+"""Ichalal and Mammar 2015: relative degree and decoupling derived, classical UIO refused,
 LMI (39) and discrete certificates, the compiled step against CasADi and numpy, the examples' targets."""
 import dataclasses
 import math
@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from codegen import algebraic_uio, observers, pipeline, relative_degree as rdeg
-from codegen.designs import algebraic_uio as alg
+from codegen import observers, pipeline
+from codegen.families.algebraic_uio import build as algebraic_uio
+from codegen.families.algebraic_uio import representation as rdeg
+from codegen.families.algebraic_uio import design as alg
 from codegen.errors import (DiscretizationError, InfeasibleLMIError, ModelDefinitionError, RankConditionError,
                            SchedulingBoundsError)
 from codegen.model import ModelDefinition, SchedulingSignal, instantiate, load_parameters
@@ -61,7 +63,7 @@ def test_example2_matrices_are_the_seeds(builds):
 
 def test_example3_relative_degree_three_with_speed_derivatives():
     lpv = _lpv("algebraic_uio_lateral_force")
-    dec = rdeg.derive(lpv)                  # the seed's model (81) itself (no output injection)
+    dec = rdeg.derive(lpv)                  # the paper's model (81) itself (no output injection)
     v = dec.base[0]
     p = lpv.parameters.values
     l, Iz, sig = p["l_f"] + p["l_r"], p["I_z"], p["sigma_r"]
@@ -242,7 +244,7 @@ def test_lmi_and_discrete_certificates(builds):
         assert dc["sampled_amplification_X_norm_max"] <= dc["contraction_bound_per_step"] + 1e-12
         if dc["h_a_f"] < 0.05:      # small steps: the bound is close to the continuous decay exp(-alpha h)
             assert dc["contraction_bound_per_step"] <= math.exp(-0.9 * b.settings.alpha * b.config.sample_time)
-    cmp = builds["algebraic_uio_example1"].compare       # the seed's hand gain (52), l = (3, 0)
+    cmp = builds["algebraic_uio_example1"].compare       # the paper's hand gain (52), l = (3, 0)
     assert cmp["certified"] and cmp["alpha"] == pytest.approx(3.0, abs=1e-3)
 
 
@@ -300,7 +302,7 @@ def test_differentiator_order_below_relative_degree_is_refused():
 @pytest.mark.parametrize("name", NAMES)
 def test_c_step_matches_casadi_and_numpy(builds, name):
     from python_bindings import load
-    from codegen.validation import algebraic
+    from codegen.families.algebraic_uio import validation as algebraic
     b = builds[name]
     obs = load(name)
     f = b.step_function()
@@ -343,7 +345,7 @@ def test_noise_free_examples_reach_1e_6(name):
     """State and UI errors below 1e-6 of each signal's peak once the differentiators have converged and
     the certified decay has shrunk the initial error by 1e6 (t >= t_c + T_obs); compiled C step."""
     from codegen import validate
-    res = validate.run_scenario(name, "seed002")
+    res = validate.run_scenario(name, "paper")
     assert res["status_flags"] == 0
     conv = res["differentiator_convergence"]
     assert conv["t_c"] < 3.0
@@ -355,7 +357,7 @@ def test_noise_free_examples_reach_1e_6(name):
 
 def test_lateral_force_with_noise_meets_5_percent():
     from codegen import validate
-    res = validate.run_scenario("algebraic_uio_lateral_force", "seed002")
+    res = validate.run_scenario("algebraic_uio_lateral_force", "paper")
     assert res["status_flags"] == 0 and res["noise"] == {"v_y": 0.01}
     assert res["observer"]["F_yr"]["rms_percent_after_5s"] <= 5.0
     assert res["max_abs_ay"] > 5.0          # the tyres are in their nonlinear range (xi != 0)

@@ -13,14 +13,20 @@ from pathlib import Path
 import pytest
 import sympy as sp
 
-from codegen import cli, observers, pipeline, polytope, settings, switched_pipeline, ts_fuzzy
-from codegen import interconnected as icm
-from codegen.designs import algebraic_uio as alg
-from codegen.designs import interconnected_uio as du
-from codegen.designs import linf_uio, switched_pi, ts_fuzzy_uio
+from codegen import cli, observers, pipeline, polytope, settings
+from codegen.families.switched_pi import build as switched_pipeline
+from codegen.families.ts_fuzzy_uio import representation as ts_fuzzy
+from codegen.families.interconnected_uio import representation as icm
+from codegen.families.algebraic_uio import design as alg
+from codegen.families.interconnected_uio import build as dub
+from codegen.families.interconnected_uio import design as du
+from codegen.families.linf_uio import design as linf_uio
+from codegen.families.switched_pi import design as switched_pi
+from codegen.families.ts_fuzzy_uio import design as ts_fuzzy_uio
 from codegen.differentiators import HosmdSpec
 from codegen.errors import ConfigurationError, ModelDefinitionError, SchedulingBoundsError, UiogenError
 from codegen.model import ModelDefinition, SchedulingSignal, instantiate, load_parameters
+from codegen.families.linf_uio import build as linf_build
 from model_defs import PARAMS_DIR
 
 OBS_DIR = PARAMS_DIR.parent / "observers"
@@ -117,7 +123,7 @@ def test_linf_gain_bound_is_not_a_key(tmp_path):
     """The TOML key is gain_bound_times_sample_time; the field name gain_bound is refused, with a hint."""
     path = observer_file(tmp_path, "lpv_linf_driver_torque", r"^gain_bound_times_sample_time", "gain_bound")
     with pytest.raises(ConfigurationError, match="gain_bound") as info:
-        pipeline._settings(observers._parse(path))
+        linf_build._settings(observers._parse(path))
     assert "did you mean 'gain_bound_times_sample_time'?" in str(info.value)
 
 
@@ -134,7 +140,7 @@ def test_unknown_differentiator_key(tmp_path):
 
 
 def test_unknown_scheduling_key_in_parameter_file(tmp_path):
-    path = params_file(tmp_path, "seed000_table1.toml", r"^rate_max =", "rate_mx = 4.0\nrate_max =")
+    path = params_file(tmp_path, "nguyen2019_table1.toml", r"^rate_max =", "rate_mx = 4.0\nrate_max =")
     with pytest.raises(ConfigurationError) as info:
         load_parameters(path)
     msg = _names_file_and_key(info.value, path, "[scheduling.v_x] rate_mx")
@@ -142,11 +148,11 @@ def test_unknown_scheduling_key_in_parameter_file(tmp_path):
 
 
 def test_unknown_table_in_parameter_file(tmp_path):
-    path = params_file(tmp_path, "seed000_table1.toml", r"^\[plant\]", "[plnat]")
+    path = params_file(tmp_path, "nguyen2019_table1.toml", r"^\[plant\]", "[plnat]")
     with pytest.raises(ConfigurationError) as info:
         load_parameters(path)
     assert "did you mean 'plant'?" in _names_file_and_key(info.value, path, "plnat")
-    path = params_file(tmp_path, "seed000_table1.toml", r"^\[meta\]", "M_typo = 1.0\n[meta]")
+    path = params_file(tmp_path, "nguyen2019_table1.toml", r"^\[meta\]", "M_typo = 1.0\n[meta]")
     with pytest.raises(ConfigurationError, match="unknown top-level keys"):
         load_parameters(path)
 
@@ -177,9 +183,9 @@ BAD_VALUES = [
     (L, r'^family = "linf_uio"', 'family = "linf"', "(did you mean 'linf_uio'?)"),
     (L, r'^model = "steering_single_track"', 'model = "steering_singletrack"',
      "(did you mean 'steering_single_track'?)"),
-    (L, r'^parameters = "seed000_table1.toml"', 'parameters = "seed000_tabel1.toml"',
-     "(did you mean 'seed000_table1.toml'?)"),
-    (L, r'^parameters = "seed000_table1.toml"', "parameters = 3", "parameters = 3: must be a string"),
+    (L, r'^parameters = "nguyen2019_table1.toml"', 'parameters = "nguyen2019_tabel1.toml"',
+     "(did you mean 'nguyen2019_table1.toml'?)"),
+    (L, r'^parameters = "nguyen2019_table1.toml"', "parameters = 3", "parameters = 3: must be a string"),
     ("stanford_sideslip", r'^lyapunov = "quadratic"\n', "",
      'lyapunov = "pdlf": the parameter-dependent design needs membership rate bounds'),
     ("ts_fuzzy_uio", r"^decay = 1.0", "decay = 1.5", "[design] decay = 1.5: must be a finite number in (0, 1]"),
@@ -242,20 +248,20 @@ def test_missing_required_key(tmp_path):
     (r"^mu = \S+", "mu = nan", "[plant] mu = nan: must be"),
 ])
 def test_parameter_file_values(tmp_path, pattern, repl, expected):
-    path = params_file(tmp_path, "seed000_table1.toml", pattern, repl)
+    path = params_file(tmp_path, "nguyen2019_table1.toml", pattern, repl)
     with pytest.raises(ConfigurationError) as info:
         load_parameters(path)
     assert expected in _names_file_and_key(info.value, path, repl.split(" =")[0])
 
 
 def test_parameter_file_bounds_tables(tmp_path):
-    path = params_file(tmp_path, "seed004_table1.toml", r"^v_x = \[.*\]", "v_x = [5.0, nan]")
+    path = params_file(tmp_path, "nguyen2021_table1.toml", r"^v_x = \[.*\]", "v_x = [5.0, nan]")
     with pytest.raises(ConfigurationError, match=r"\[state_bounds\] v_x\[1\] = nan"):
         load_parameters(path)
-    path = params_file(tmp_path, "seed003_twingo.toml", r"^\[premise_bounds\]\n", "[premise_bounds]\nzz = [1.0, inf]\n")
+    path = params_file(tmp_path, "sentouh2023_twingo.toml", r"^\[premise_bounds\]\n", "[premise_bounds]\nzz = [1.0, inf]\n")
     with pytest.raises(ConfigurationError, match=r"\[premise_bounds\] zz\[1\] = inf"):
         load_parameters(path)
-    path = params_file(tmp_path, "seed002_lateral_force.toml", r"^derivative_bounds = .*$",
+    path = params_file(tmp_path, "ichalal2015_lateral_force.toml", r"^derivative_bounds = .*$",
                        "derivative_bounds = [[-1.0, nan]]")
     with pytest.raises(ConfigurationError, match=r"derivative_bounds\[0\]\[1\] = nan"):
         load_parameters(path)
@@ -274,7 +280,7 @@ from model_defs.steering_single_track import MODEL as STEERING        # noqa: E4
     (r"^I_s = \S+", "I_s = 0", "[parameters] I_s = 0.0: must be a finite number > 0"),
 ])
 def test_parameter_outside_declared_range(tmp_path, pattern, repl, expected):
-    path = params_file(tmp_path, "seed000_table1.toml", pattern, repl)
+    path = params_file(tmp_path, "nguyen2019_table1.toml", pattern, repl)
     params = load_parameters(path)
     with pytest.raises(ConfigurationError) as info:
         instantiate(STEERING, params)
@@ -284,17 +290,17 @@ def test_parameter_outside_declared_range(tmp_path, pattern, repl, expected):
 def test_parameter_ranges_in_every_family(tmp_path):
     """parameter_substitution is the one check: the TS fuzzy and interconnected builds use it too."""
     from model_defs.longitudinal_lateral import MODEL as LONLAT
-    path = params_file(tmp_path, "seed004_table1.toml", r"^M = \S+", "M = -1500.0")
+    path = params_file(tmp_path, "nguyen2021_table1.toml", r"^M = \S+", "M = -1500.0")
     with pytest.raises(ConfigurationError, match=r"\[parameters\] M = -1500.0: must be a finite number > 0"):
         ts_fuzzy.build(LONLAT, load_parameters(path), 0.01)
-    # drag coefficients are nonnegative: 0 is allowed (committed commonroad_bmw320i_seed004.toml), -0.1 not
-    path = params_file(tmp_path, "seed004_table1.toml", r"^C_x = \S+", "C_x = -0.1")
+    # drag coefficients are nonnegative: 0 is allowed (committed commonroad_bmw320i_ts.toml), -0.1 not
+    path = params_file(tmp_path, "nguyen2021_table1.toml", r"^C_x = \S+", "C_x = -0.1")
     with pytest.raises(ConfigurationError, match=r"C_x = -0.1: must be a finite number >= 0"):
         ts_fuzzy.build(LONLAT, load_parameters(path), 0.01)
-    path = params_file(tmp_path, "seed003_twingo.toml", r"^m = \S+", "m = -1000.0")
+    path = params_file(tmp_path, "sentouh2023_twingo.toml", r"^m = \S+", "m = -1000.0")
     with pytest.raises(ConfigurationError, match=r"\[parameters\] m = -1000.0: must be a finite number > 0"):
         icm.load("interconnected_vehicle", path)
-    path = params_file(tmp_path, "seed003_twingo.toml", r"^c_a = \S+", "c_a = -0.3")
+    path = params_file(tmp_path, "sentouh2023_twingo.toml", r"^c_a = \S+", "c_a = -0.3")
     with pytest.raises(ConfigurationError, match=r"c_a = -0.3: must be a finite number >= 0"):
         icm.load("interconnected_vehicle", path)
 
@@ -332,7 +338,7 @@ def test_parameter_ranges_field(tmp_path):
 @pytest.mark.parametrize("lower", ["0.0", "-5.0"])
 @pytest.mark.parametrize("build", [polytope.sector_polytope, polytope.taylor_reduced_polytope])
 def test_singular_box_is_refused(tmp_path, lower, build):
-    path = params_file(tmp_path, "seed000_table1.toml", r"^min = \S+", f"min = {lower}")
+    path = params_file(tmp_path, "nguyen2019_table1.toml", r"^min = \S+", f"min = {lower}")
     lpv = instantiate(STEERING, load_parameters(path))
     with pytest.raises(SchedulingBoundsError) as info:
         build(lpv)
@@ -342,8 +348,8 @@ def test_singular_box_is_refused(tmp_path, lower, build):
 
 
 def test_singular_box_through_the_pipeline(tmp_path):
-    params = params_file(tmp_path, "seed000_table1.toml", r"^min = \S+", "min = 0.0")
-    path = observer_file(tmp_path, L, r'^parameters = "seed000_table1.toml"', f'parameters = "{params}"')
+    params = params_file(tmp_path, "nguyen2019_table1.toml", r"^min = \S+", "min = 0.0")
+    path = observer_file(tmp_path, L, r'^parameters = "nguyen2019_table1.toml"', f'parameters = "{params}"')
     with pytest.raises(SchedulingBoundsError, match=r"\[scheduling.v_x\] min = 0.0, max = 35.0: A\[0,0\]"):
         pipeline.build(observers._parse(path))
 
@@ -389,8 +395,8 @@ def test_cli_mistake_exits_2_with_one_line(tmp_path, monkeypatch, capsys, patter
 ])
 def test_cli_parameter_file_mistake(tmp_path, monkeypatch, capsys, pattern, repl, error):
     monkeypatch.setattr(observers, "OBSERVERS_DIR", tmp_path)
-    params = params_file(tmp_path, "seed000_table1.toml", pattern, repl)
-    observer_file(tmp_path, L, r'^parameters = "seed000_table1.toml"', f'parameters = "{params}"', stem="bad")
+    params = params_file(tmp_path, "nguyen2019_table1.toml", pattern, repl)
+    observer_file(tmp_path, L, r'^parameters = "nguyen2019_table1.toml"', f'parameters = "{params}"', stem="bad")
     assert cli.main(["design", "bad", "--out", str(tmp_path / "bad.json")]) == 2
     err = capsys.readouterr().err
     lines = err.strip().splitlines()
@@ -462,7 +468,7 @@ class _Stop(Exception):
 def new_settings(config, monkeypatch, tol=None):
     """The settings object each family's build makes from ``config`` (the build is stopped right after)."""
     if config.family == "linf_uio":
-        return pipeline._settings(config)
+        return linf_build._settings(config)
     if config.family == "switched_pi":
         return switched_pipeline.settings_of(config, tol)
     if config.family == "algebraic_uio":
@@ -474,7 +480,7 @@ def new_settings(config, monkeypatch, tol=None):
         seen.append(real(*args, **kwargs))
         raise _Stop
     monkeypatch.setattr(settings, "parse_settings", spy)       # build_ts_fuzzy imports it at call time
-    monkeypatch.setattr(du, "parse_settings", spy)
+    monkeypatch.setattr(dub, "parse_settings", spy)
     with pytest.raises(_Stop):
         pipeline.build(config, tol)
     monkeypatch.undo()
@@ -493,10 +499,10 @@ def test_settings_by_hand(monkeypatch):
     cfg = observers.get("lpv_linf_driver_torque")
     assert cfg.sample_time == 0.01 and cfg.polytope == "taylor_reduced" and cfg.rate_bounds == "exact"
     assert cfg.ui_filter == {"time_constant": 0.005}
-    s = pipeline._settings(cfg)
+    s = linf_build._settings(cfg)
     assert s == linf_uio.LinfDesignSettings(alpha=5.0, lyapunov="pdlf", gain_bound=1.0 / 0.01, margin=1e-5, tol=1e-8)
-    assert pipeline._settings(cfg, "quadratic").lyapunov == "quadratic"
-    s = pipeline._settings(observers.get("stanford_sideslip"))
+    assert linf_build._settings(cfg, "quadratic").lyapunov == "quadratic"
+    s = linf_build._settings(observers.get("stanford_sideslip"))
     assert (s.alpha, s.lyapunov, s.gain_bound, s.margin, s.tol) == (20.0, "quadratic", 100.0, 1e-5, 1e-8)
     cfg = observers.get("interconnected_uio")
     assert new_settings(cfg, monkeypatch) == du.ICDesignSettings(

@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from codegen import discrete, observers, pipeline, simulate, validate
+from codegen import observers, pipeline, simulate
+from codegen.families.linf_uio import discrete
+from codegen.validation import common
 from codegen.errors import ModelDefinitionError, NotAffineError
 from codegen.model import (DerivedInput, ModelDefinition, ParameterSet, SchedulingBox, SchedulingSignal,
                            instantiate)
@@ -49,7 +51,7 @@ def bmw():
 
 
 def test_bmw_twin_inputs_are_the_seeds(bmw):
-    """The camber/remainder terms are computed inside the step: the caller passes what the seed's does."""
+    """The camber/remainder terms are computed inside the step: the caller passes what the paper's does."""
     assert bmw.input_names == ["T_a", "y_r", "y_delta", "y_delta_dot", "v_x"]
     assert [str(s) for s, _ in bmw.lpv.derived_inputs] == ["s_c", "F_nf", "F_nr", "T_nl"]
     assert bmw.poly.n_vertices == 2 and bmw.poly.Bw.shape == (2, 4, 4)
@@ -60,10 +62,10 @@ def test_compiled_step_equals_numpy_step_with_derived_inputs(bmw):
     from python_bindings import load
     obs = load(NAME)
     lpv = bmw.lpv
-    scn = validate.scenario_for(bmw.config, "takeover_opposing_assist", duration=4.0)
+    scn = common.scenario_for(bmw.config, "takeover_opposing_assist", duration=4.0)
     truth = simulate.nominal_plant(bmw.config, lpv, scn)
     inputs = simulate.observer_input_matrix(obs.input_names, truth,
-                                            simulate.add_sensor_noise(truth, validate.SENSOR_NOISE, seed=1))
+                                            simulate.add_sensor_noise(truth, common.SENSOR_NOISE, seed=1))
     out, status, _ = obs.run(inputs)
     assert not status.any()
     z = np.zeros(obs.n_state)

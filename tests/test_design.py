@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from codegen import pipeline, polytope
-from codegen.designs import linf_uio
+from codegen.families.linf_uio import design as linf_uio
 from codegen.errors import RankConditionError
 
 

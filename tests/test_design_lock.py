@@ -217,3 +217,25 @@ def test_missing_shared_data_fails_in_ci_and_skips_elsewhere(monkeypatch, tmp_pa
     monkeypatch.setenv("CI", "false")
     with pytest.raises(pytest.skip.Exception):
         require_shared(tmp_path / "absent.csv")
+
+
+def test_check_gains_works_for_every_family_in_the_lock_form(tmp_path, capsys):
+    for name in ("ts_fuzzy_uio", "switched_pi_bank_angle", "interconnected_uio", "algebraic_uio_example1"):
+        data = json.loads(design_lock.path(observers.get(name)).read_text())
+        gains = tmp_path / f"{name}.json"
+        gains.write_text(json.dumps({"lmi_solutions": data["lock"]["lmi_solutions"]}))
+        assert cli.main(["check-gains", name, "--gains", str(gains)]) == 0, name
+        assert "PASS" in capsys.readouterr().out
+    # a gain that breaks an LMI block: FAIL, naming the block
+    data = json.loads(design_lock.path(observers.get("ts_fuzzy_uio")).read_text())
+    rec = data["lock"]["lmi_solutions"][0]
+    rec["variables"]["L1"] = (10.0 * np.asarray(rec["variables"]["L1"])).tolist()
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"lmi_solutions": data["lock"]["lmi_solutions"]}))
+    assert cli.main(["check-gains", "ts_fuzzy_uio", "--gains", str(bad)]) == 1
+    assert "FAIL" in capsys.readouterr().out
+    # a matrix of the wrong shape: a typed error naming the variable, exit 2
+    rec["variables"]["L1"] = [[1.0]]
+    bad.write_text(json.dumps({"lmi_solutions": data["lock"]["lmi_solutions"]}))
+    assert cli.main(["check-gains", "ts_fuzzy_uio", "--gains", str(bad)]) == 2
+    assert "L1" in capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""Seed 003: interconnected longitudinal-lateral LPV UIO (``interconnected_uio``, issue 7).
+"""Sentouh et al. 2023: interconnected longitudinal-lateral LPV UIO (``interconnected_uio``, issue 7).
 
 Correctness only: the derivation from the one vehicle model, the design conditions and their
 re-check, the generated step against its numpy reference and CasADi, and the validation runs
@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from codegen import interconnected as icm
+from codegen.families.interconnected_uio import representation as icm
 from codegen import observers, pipeline
-from codegen.designs import interconnected_uio as du
+from codegen.families.interconnected_uio import design as du
+from codegen.families.interconnected_uio import build as dub
 from codegen.errors import (CertificateError, ModelDefinitionError, RankConditionError, SchedulingBoundsError)
 from codegen.model import load_parameters
 from python_bindings import load
@@ -39,7 +40,7 @@ def _model():
 
 
 def _params():
-    return load_parameters(ROOT / "model_defs" / "params" / "seed003_twingo.toml")
+    return load_parameters(ROOT / "model_defs" / "params" / "sentouh2023_twingo.toml")
 
 
 def test_toolchain_splits_the_model_and_finds_the_coupling(icb):
@@ -84,7 +85,7 @@ def test_model_errors_are_clear(tmp_path):
     with pytest.raises(ModelDefinitionError, match="undeclared"):
         dataclasses.replace(m, dynamics=tuple((s, e + sp.Symbol("zzz") if str(s) == "r" else e) for s, e in m.dynamics))
     # a premise of a switched signal needs its range in [premise_bounds]
-    text = (ROOT / "model_defs" / "params" / "seed003_twingo.toml").read_text()
+    text = (ROOT / "model_defs" / "params" / "sentouh2023_twingo.toml").read_text()
     path = tmp_path / "twingo_without_premise_bounds.toml"
     path.write_text(text.split("[premise_bounds]")[0])
     with pytest.raises(SchedulingBoundsError, match="premise_bounds"):
@@ -184,13 +185,13 @@ def test_differentiator_configuration_errors(icb):
     table = dict(cfg.design)
     table["differentiators"] = {k: v for k, v in table["differentiators"].items() if k != "psi_L"}
     with pytest.raises(ModelDefinitionError, match="d/dt psi_L"):
-        du.build(dataclasses.replace(cfg, design=table))
+        dub.build(dataclasses.replace(cfg, design=table))
     table = dict(cfg.design)
     table["differentiators"] = {**table["differentiators"], "delta": {"order": 1, "lipschitz": 10.0}}
     with pytest.raises(ModelDefinitionError, match="order >= 2"):
-        du.build(dataclasses.replace(cfg, design=table))
+        dub.build(dataclasses.replace(cfg, design=table))
     with pytest.raises(ModelDefinitionError, match="unknown \\[design\\] keys"):
-        du.build(dataclasses.replace(cfg, design={**cfg.design, "alhpa": 1.0}))
+        dub.build(dataclasses.replace(cfg, design={**cfg.design, "alhpa": 1.0}))
 
 
 SCALE = {"v_x": 20.0, "omega_f": 60.0, "omega_r": 60.0, "F_xf": 500.0, "F_xr": 300.0, "v_y": 0.1, "r": 0.1,
@@ -253,7 +254,7 @@ def test_c_step_status_behaviour(compiled):
 def test_straight_driving_is_reproduced_exactly(compiled):
     """Steady straight driving at 20 m/s, consistent measurements: every estimate converges to the
     truth, the unknown inputs to the steady torques (rolling resistance and drag on the front axle)."""
-    p = load_parameters(ROOT / "model_defs" / "params" / "seed003_twingo.toml").values
+    p = load_parameters(ROOT / "model_defs" / "params" / "sentouh2023_twingo.toml").values
     v = 20.0
     resist = 155.3 + p["c_a"] * v * v
     # steady state of the model: F_xf = resist (front drive), slip lambda_f = F_xf / C_lf
@@ -272,7 +273,7 @@ def test_straight_driving_is_reproduced_exactly(compiled):
 
 def test_model_plant_run_is_nearly_exact():
     """On the observer's own model (1)-(7) the errors are those of discretization and differentiators."""
-    from codegen.validation import satory
+    from codegen.families.interconnected_uio import validation as satory
     r = satory.run(TWIN, 1.0, "model", duration=30.0)
     t = r["table"]
     assert r["flagged_after_settle"] == 0
@@ -286,17 +287,17 @@ def test_model_plant_run_is_nearly_exact():
 
 def test_commonroad_run_meets_the_mu1_target_on_the_first_bends():
     """CommonRoad multi-body plant, first 32 s of the Satory-like track at mu = 1 (two bends, two
-    strong stops): every RMSE% within 1.5 x the seed's Table 1 (regression; full table in the README)."""
-    from codegen.validation import satory
+    strong stops): every RMSE% within 1.5 x the paper's Table 1 (regression; full table in the README)."""
+    from codegen.families.interconnected_uio import validation as satory
     r = satory.run(TWIN, 1.0, "commonroad", duration=32.0)
     assert r["flagged_after_settle"] == 0
     assert r["min_ax"] < -5.0 and r["max_abs_ay"] > 4.0
     for s in satory.TABLE1_SIGNALS:
-        assert r["table"][s]["rmse_percent"] <= 1.5 * satory.SEED003_TABLE1[1.0][s][0], s
+        assert r["table"][s]["rmse_percent"] <= 1.5 * satory.PAPER_TABLE1[1.0][s][0], s
 
 
 def test_table1_metrics():
-    from codegen.validation import satory
+    from codegen.families.interconnected_uio import validation as satory
     t = np.arange(0, 10, 0.01)
     y = np.sin(t)
     m = satory.table1_metrics(y, y + 0.01, t)
@@ -308,8 +309,8 @@ def test_table1_metrics():
 def test_commonroad_parameter_file_is_derived_from_the_package():
     """Regenerates the committed twin parameter file from the package and the committed identification
     (the identification itself: next test)."""
-    from codegen.validation import satory
-    committed = (ROOT / "model_defs" / "params" / "commonroad_ford_escort_seed003.toml").read_text()
+    from codegen.families.interconnected_uio import validation as satory
+    committed = (ROOT / "model_defs" / "params" / "commonroad_ford_escort_interconnected.toml").read_text()
     fits = {}
     for line in committed.splitlines():
         if "identified, R^2" in line:
@@ -320,8 +321,8 @@ def test_commonroad_parameter_file_is_derived_from_the_package():
 
 
 def test_identification_reproduces_the_committed_coefficients():
-    from codegen.validation import satory
-    committed = tomllib.loads((ROOT / "model_defs" / "params" / "commonroad_ford_escort_seed003.toml").read_text())
+    from codegen.families.interconnected_uio import validation as satory
+    committed = tomllib.loads((ROOT / "model_defs" / "params" / "commonroad_ford_escort_interconnected.toml").read_text())
     fits = satory.identify(1)
     for k, (value, r2) in fits.items():
         assert value == pytest.approx(committed["parameters"][k], rel=1e-9), k
@@ -332,7 +333,7 @@ def test_identification_reproduces_the_committed_coefficients():
 
 def test_identification_calibration_drive_arguments_are_checked():
     """frictions / braking of the calibration drive: typed error before any simulation."""
-    from codegen.validation import satory
+    from codegen.families.interconnected_uio import validation as satory
     for bad in ({"frictions": ()}, {"frictions": (1.0, 0.0)}, {"braking": ()}, {"braking": (0.6, 1.5)}):
         with pytest.raises(ModelDefinitionError, match="calibration"):
             satory.identify(1, **bad)

@@ -1,4 +1,4 @@
-"""Model layer: the seed-000 equations come out as eq. (5), and bad definitions fail precisely."""
+"""Model layer: the Nguyen et al. 2019 equations come out as eq. (5), and bad definitions fail precisely."""
 import textwrap
 
 import numpy as np
@@ -8,7 +8,6 @@ import sympy as sp
 from codegen.errors import (MissingParameterError, ModelDefinitionError, NotAffineError,
                             SchedulingBoundsError, UnknownParameterError)
 from codegen.model import ModelDefinition, SchedulingSignal, instantiate, load_parameters
-from model_defs import PARAMS_DIR
 from model_defs.steering_single_track import MODEL
 
 TABLE1 = dict(l_f=1.3, l_r=1.6, eta_t=0.13, R_s=16.0, B_s=5.73, K_p=0.5, M=2052.0, I_z=2800.0,
@@ -16,7 +15,7 @@ TABLE1 = dict(l_f=1.3, l_r=1.6, eta_t=0.13, R_s=16.0, B_s=5.73, K_p=0.5, M=2052.
 
 
 def paper_A(vx):
-    """Eq. (4)-(5) of seed 000, typed from the paper independently of the symbolic model."""
+    """Eq. (4)-(5) of Nguyen et al. 2019, typed from the paper independently of the symbolic model."""
     return paper_A_w(1 / vx, 1 / vx ** 2)
 
 

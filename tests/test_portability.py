@@ -2,8 +2,9 @@
 import numpy as np
 import pytest
 
-from codegen import simulate, validate
+from codegen import simulate
 from codegen.errors import SampleError
+from codegen.validation import common
 
 REL = 1e-12
 
@@ -38,8 +39,8 @@ def test_random_samples_inside_box(build, compiled):
 
 
 def test_full_trajectory(build, lpv, compiled):
-    truth = simulate.nominal_plant(build.config, lpv, validate.scenario_for(build.config, "track_varying_speed"))
-    noisy = simulate.add_sensor_noise(truth, validate.SENSOR_NOISE, seed=3)
+    truth = simulate.nominal_plant(build.config, lpv, common.scenario_for(build.config, "track_varying_speed"))
+    noisy = simulate.add_sensor_noise(truth, common.SENSOR_NOISE, seed=3)
     inputs = simulate.observer_input_matrix(compiled.input_names, truth, noisy)
     out, status, final = compiled.run(inputs)
     assert not status.any()

@@ -13,6 +13,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from codegen import harness, observers, pipeline, simulate, validate
+from codegen.families.linf_uio import build as linf_build
+from codegen.validation import common
 from python_bindings import load
 from python_bindings.build import generated_names
 
@@ -182,22 +184,22 @@ def realistic_inputs(name, obs):
         if all(lo <= log[:, c].min() and log[:, c].max() <= hi for c, (lo, hi) in boxes.items()):
             return log
     cfg = observers.get(name)
-    if cfg.family == "algebraic_uio":      # the seed-002 plant's steady period: tiles smoothly
-        from codegen.validation import algebraic
+    if cfg.family == "algebraic_uio":      # the Ichalal and Mammar 2015 plant's steady period: tiles smoothly
+        from codegen.families.algebraic_uio import validation as algebraic
         return algebraic.periodic_inputs(pipeline.build(cfg))
     if cfg.family == "interconnected_uio":      # one lap of a closed oval: tiling stays continuous
-        from codegen.validation import satory
+        from codegen.families.interconnected_uio import validation as satory
         truth = satory.periodic_lap(name)
         return np.column_stack([truth[c[2:]] for c in obs.input_names])
     if cfg.family in ("ts_fuzzy_uio", "switched_pi"):
-        from codegen.demo import DEMO_SCENARIOS
-        res = validate.run_scenario(name, DEMO_SCENARIOS[cfg.family][0], "nominal")
+        from codegen import families
+        res = validate.run_scenario(name, families.get(cfg.family).demo_scenarios[0], "nominal")
         truth = res["signals"]["truth"]
         return simulate.observer_input_matrix(obs.input_names, truth, {})
-    lpv = pipeline.representation(cfg)[0]
-    truth = simulate.nominal_plant(cfg, lpv, validate.scenario_for(cfg, "track_varying_speed"))
+    lpv = linf_build.representation(cfg)[0]
+    truth = simulate.nominal_plant(cfg, lpv, common.scenario_for(cfg, "track_varying_speed"))
     return simulate.observer_input_matrix(obs.input_names, truth,
-                                          simulate.add_sensor_noise(truth, validate.SENSOR_NOISE, seed=5))
+                                          simulate.add_sensor_noise(truth, common.SENSOR_NOISE, seed=5))
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -6,7 +6,8 @@ import sympy as sp
 from codegen import observers, pipeline
 from codegen.errors import ModelDefinitionError
 from codegen.model import ModelDefinition, SchedulingSignal
-from model_defs.single_track_saturating import MODEL, secant
+from codegen.families.linf_uio import build as linf_build
+from model_defs.single_track_saturating import secant
 
 
 def test_secant_is_the_fiala_force_ratio():
@@ -28,7 +29,7 @@ def test_derived_signal_may_only_use_outputs_and_parameters():
 
 def test_stanford_polytope_and_step_inputs():
     cfg = observers.get("stanford_sideslip")
-    lpv, poly, _ = pipeline.representation(cfg)
+    lpv, poly, _ = linf_build.representation(cfg)
     assert poly.n_vertices == 8 and len(poly.signals) == 2
     # a_y measures the states *and* the steering angle: output feedthrough of the known input
     assert np.abs(poly.Du).max() > 0
@@ -46,7 +47,7 @@ def test_stanford_polytope_and_step_inputs():
 def test_rate_vertices_without_rate_information_do_not_enumerate_corners():
     """rate_bounds = "none": one zero vertex, whatever the vertex count (2^(N-1) corners otherwise)."""
     import dataclasses
-    poly = pipeline.representation(observers.get("stanford_sideslip"))[1]
+    poly = linf_build.representation(observers.get("stanford_sideslip"))[1]
     assert poly.rate_vertices.shape == (1, 8) and not poly.rate_vertices.any()
     big = dataclasses.replace(poly, A=np.zeros((32, 2, 2)), rate_bounds=np.ones((32, 2)))
     from codegen.errors import SchedulingBoundsError

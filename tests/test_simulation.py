@@ -2,17 +2,18 @@
 import numpy as np
 
 from codegen import observers, simulate, validate
+from codegen.validation import common
 
 
 def test_converges_on_track_scenario_with_noise():
     r = validate.run_scenario("lpv_linf_driver_torque", "track_varying_speed", "model")
     t = r["observer"]
     assert r["status_flags"] == 0
-    # measured 0.091 deg / 0.97 N m (a_y up to 5.5 m/s^2); seed 000 Table II on its simulator:
-    # beta RMS 0.053 deg, T_d RMS 0.25 N m
-    assert t["beta"]["rms"] < 0.15
-    assert t["T_d"]["rms"] < 1.5 and t["T_d"]["max"] < 4.5
-    assert t["r"]["rms"] < 0.05
+    # measured 0.102 deg / 0.95 N m / r 0.053 deg/s (a_y up to 5.5 m/s^2), bounds 10 % above;
+    # Nguyen et al. 2019 Table II on its simulator: beta RMS 0.053 deg, T_d RMS 0.25 N m
+    assert t["beta"]["rms"] < 0.113
+    assert t["T_d"]["rms"] < 1.05 and t["T_d"]["max"] < 4.5
+    assert t["r"]["rms"] < 0.059
 
 
 def test_takeover_with_opposing_assistance():
@@ -22,7 +23,7 @@ def test_takeover_with_opposing_assistance():
 
 def test_initial_error_decays(lpv, compiled):
     cfg = observers.get("lpv_linf_driver_torque")
-    truth = simulate.nominal_plant(cfg, lpv, validate.scenario_for(cfg, "track_varying_speed", 5.0))
+    truth = simulate.nominal_plant(cfg, lpv, common.scenario_for(cfg, "track_varying_speed", 5.0))
     inputs = simulate.observer_input_matrix(compiled.input_names, truth, {})
     wrong = np.array([np.deg2rad(2.0), 0.05, 0.01, 0.1, 5.0])
     out, _, _ = compiled.run(inputs, wrong)

@@ -1,4 +1,4 @@
-"""Seed 001: switched model from the symbolic model and a rule (data), Algorithm 1, certificates,
+"""Menhour et al. 2014: switched model from the symbolic model and a rule (data), Algorithm 1, certificates,
 independent H-infinity check, the generated C step with its switching logic, and validation targets."""
 import dataclasses
 
@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from codegen import observers, pipeline, switched
-from codegen.designs import switched_pi
+from codegen import observers, pipeline
+from codegen.families.switched_pi import representation as switched
+from codegen.families.switched_pi import design as switched_pi
 from codegen.errors import CertificateError, ModelDefinitionError, RankConditionError
 from codegen.model import load_parameters
 from model_defs import roll_single_track as mod
@@ -30,7 +31,7 @@ def compiled():
 # --- model ------------------------------------------------------------------------------------------
 
 def test_model_equals_the_seeds_matrices_with_its_misprints_corrected():
-    """With m_s = m the derived matrices are the seed's (1); A_22, A_14, H_4 as corrected in the module."""
+    """With m_s = m the derived matrices are the paper's (1); A_22, A_14, H_4 as corrected in the module."""
     d = mod.MODEL
     m, I_x, I_z, l_f, l_r, h, K, b, Cf, Cr, g = (mod.m, mod.I_x, mod.I_z, mod.l_f, mod.l_r, mod.h_r, mod.K_r,
                                                  mod.b_r, mod.C_f, mod.C_r, mod.g)
@@ -85,7 +86,7 @@ def builds_speed_model():
 
 
 def test_parameter_file_and_second_stiffness_pair_are_derived_not_typed():
-    from codegen.validation import banked_road
+    from codegen.families.switched_pi import validation as banked_road
     cfg = observers.get(SPEED)
     assert cfg.parameter_path.read_text() == banked_road.roll_params_toml(2)
     cf2, cr2 = banked_road.secant_axle_stiffness(2, np.deg2rad(1.0))
@@ -97,8 +98,9 @@ def test_parameter_file_and_second_stiffness_pair_are_derived_not_typed():
 
 def test_commonroad_roll_gradient_matches_the_derived_roll_stiffness():
     """Steady circle on the CommonRoad multi-body plant: roll per lateral acceleration within 2 % of
-    m_s h_r / (K_r - m_s g h_r) of the derived parameters, and of the seed's sign after the flip."""
-    from codegen.validation import banked_road, scenarios
+    m_s h_r / (K_r - m_s g h_r) of the derived parameters, and of the paper's sign after the flip."""
+    from codegen.validation import scenarios
+    from codegen.families.switched_pi import validation as banked_road
     params = load_parameters(observers.get(SPEED).parameter_path).values
     scn = scenarios.steady_circle(radius=60.0, speed=12.0, duration=10.0, sample_rate=200.0)
     tr = banked_road.commonroad_truth(observers.get(SPEED), scn, 2)
@@ -167,7 +169,7 @@ def test_assumption_failures_are_clear(builds):
 def test_design_certificates(builds, name):
     b = builds[name]
     d, sm = b.design, b.model
-    assert d.gamma <= 2.1                                       # the seed's gamma*
+    assert d.gamma <= 2.1                                       # the paper's gamma*
     np.testing.assert_allclose(d.T + d.N @ sm.C[0], np.eye(4), atol=1e-15)
     assert b.certificate["worst_min_eig"] > 0
     assert b.certificate["max_pole_real_part"] <= -d.settings.decay_rate
@@ -180,15 +182,17 @@ def test_design_certificates(builds, name):
     for i in range(sm.n_modes):                                 # Algorithm 1 step 3
         np.testing.assert_allclose(d.Pi[i], d.T @ sm.A[i] - d.K[i] @ sm.C[i], atol=1e-9)
         np.testing.assert_allclose(d.Kp[i], d.K[i] + d.Pi[i] @ d.N, atol=1e-9)
-        np.testing.assert_allclose(-np.linalg.solve(d.P, d.Gamma[i]), np.vstack([d.K[i], d.KI[i]]), rtol=1e-12)
+        K = np.vstack([d.K[i], d.KI[i]])                         # exact (codegen.canonical) vs LAPACK
+        np.testing.assert_allclose(-np.linalg.solve(d.P, d.Gamma[i]), K, rtol=1e-10, atol=1e-12 * np.abs(K).max())
 
 
 def test_without_decay_region_the_bank_estimate_does_not_converge(builds):
-    """The module's claim: minimizing gamma alone leaves the integral pole at the origin."""
+    """The module's claim: minimizing gamma alone leaves the integral pole at the origin (time
+    constant of tens of seconds; with decay_rate = 1 every pole is at Re <= -1)."""
     sm = builds[SPEED].model
     d = switched_pi.design(sm, switched_pi.SwitchedPIDesignSettings(pole_radius=100.0, decay_rate=0.0))
     slowest = max(np.linalg.eigvals(d.closed_loop(sm, i)).real.max() for i in range(sm.n_modes))
-    assert -0.01 < slowest < 0
+    assert -0.05 < slowest < 0
 
 
 def test_hinf_norm_of_known_systems():
@@ -273,7 +277,7 @@ def test_slip_premise_from_the_estimate_switches_and_flags(builds, compiled):
 
 def test_whole_trajectory_equals_casadi_mapaccum(builds, compiled):
     from codegen import simulate
-    from codegen.validation import banked_road
+    from codegen.families.switched_pi import validation as banked_road
     b, obs = builds[FINE], compiled[FINE]
     tr = banked_road.truth(b.config, "banked_road_braking", "nominal")
     inputs = simulate.observer_input_matrix(obs.input_names, tr, simulate.add_sensor_noise(tr, banked_road.SENSOR_NOISE, 1))

@@ -1,14 +1,17 @@
-"""Seed 004: TS form derived from the model, sound Jacobian bounds, design, certificates, C step."""
+"""Nguyen et al. 2021: TS form derived from the model, sound Jacobian bounds, design, certificates, C step."""
 import dataclasses
 
 import numpy as np
 import pytest
 import sympy as sp
 
-from codegen import bounds, observers, pipeline, ts_fuzzy
-from codegen.designs import ts_fuzzy_uio
+from codegen import bounds, observers, pipeline
+from codegen.families.ts_fuzzy_uio import representation as ts_fuzzy
+from codegen.families.ts_fuzzy_uio import design as ts_fuzzy_uio
 from codegen.errors import RankConditionError, SchedulingBoundsError, ModelDefinitionError
-from codegen.model import ModelDefinition, load_parameters
+from codegen.model import ModelDefinition
+from codegen.families.ts_fuzzy_uio import validation as ts_validation
+from codegen.validation import common
 
 NAME = "ts_fuzzy_uio"
 
@@ -178,9 +181,9 @@ def test_c_step_status_behaviour(compiled):
 def test_seed004_targets_on_the_pacejka_plant(scenario):
     from codegen import validate
     res = validate.run_scenario(NAME, scenario, "nominal")
-    seed = validate.SEED004_TABLE_II[scenario]
+    seed = ts_validation.PAPER_TABLE_II[scenario]
     obs = res["observer"]
-    if scenario == "circular_path_normal":      # issue target: the seed's scenario-2 figures or better
+    if scenario == "circular_path_normal":      # issue target: the paper's scenario-2 figures or better
         assert obs["v_y"]["mae"] <= 6e-4 and obs["delta"]["mae"] <= 1e-4
     assert obs["v_y"]["mae"] <= 2 * seed["v_y"][0] and obs["delta"]["mae"] <= 2 * seed["delta"][0]
     assert obs["T_eng"]["mae"] <= 1.0
@@ -188,14 +191,14 @@ def test_seed004_targets_on_the_pacejka_plant(scenario):
 
 
 def test_seed004_scenario3_on_the_pacejka_plant():
-    """Seed 004 scenario 3 in its normal-driving reading (``time_varying_grip_normal``): the delta
+    """Nguyen et al. 2021 scenario 3 in its normal-driving reading (``time_varying_grip_normal``): the delta
     target is met; v_y and T_eng miss the issue's targets (README: rear-tyre saturation in the literal
     grip law's minima, which the linear tyres (3) cannot follow) and are held to regression bounds;
     the same drive at the law's mean grip, constant, meets every target."""
     from codegen import validate
     cfg = observers.get(NAME)
     res = validate.run_scenario(NAME, "time_varying_grip_normal", "nominal")
-    seed = validate.SEED004_TABLE_II["time_varying_grip_normal"]
+    seed = ts_validation.PAPER_TABLE_II["time_varying_grip_normal"]
     obs, truth = res["observer"], res["signals"]["truth"]
     assert res["status_flags"] == 0
     assert truth["v_x"].max() <= 9.01 and res["max_abs_ay"] < 4.0          # normal driving on the path
@@ -203,14 +206,14 @@ def test_seed004_scenario3_on_the_pacejka_plant():
     assert obs["delta"]["mae"] <= 2 * seed["delta"][0]
     assert obs["v_y"]["mae"] < 0.03 and obs["T_eng"]["mae"] < 2.2               # regression (0.0245, 1.78)
     # where the v_y error comes from: samples with grip < 0.4 (a third of them) carry most of it
-    keep = truth["t"] >= validate.SETTLE_TIME
+    keep = truth["t"] >= common.SETTLE_TIME
     err = np.abs(res["signals"]["estimate"]["v_y"] - truth["v_y"])[keep]
     low = truth["mu"][keep] < 0.4
     assert low.mean() < 0.4 and err[low].sum() > 0.75 * err.sum()
     # the same drive at constant grip 0.6 (the law's mean): every target of the issue
-    const = dataclasses.replace(validate.scenario_for(cfg, "time_varying_grip_normal"),
+    const = dataclasses.replace(common.scenario_for(cfg, "time_varying_grip_normal"),
                                 name="time_varying_grip_normal_constant", grip=None, mu=0.6)
-    obs = validate.run_ts_scenario(cfg, const)["observer"]
+    obs = ts_validation.run(cfg, const)["observer"]
     assert obs["v_y"]["mae"] <= 2 * seed["v_y"][0] and obs["delta"]["mae"] <= 2 * seed["delta"][0]
     assert obs["T_eng"]["mae"] <= 1.0
 
@@ -225,8 +228,8 @@ def test_the_innovation_gain_never_acts(tsb):
 def test_commonroad_parameter_file_is_derived_from_the_package():
     from codegen.validation import commonroad_angle
     from pathlib import Path
-    committed = Path(__file__).resolve().parent.parent / "model_defs" / "params" / "commonroad_bmw320i_seed004.toml"
-    assert committed.read_text() == commonroad_angle.seed004_params_toml(2)
+    committed = Path(__file__).resolve().parent.parent / "model_defs" / "params" / "commonroad_bmw320i_ts.toml"
+    assert committed.read_text() == commonroad_angle.ts_params_toml(2)
 
 
 def test_commonroad_angle_steered_run():

@@ -20,7 +20,7 @@ def test_nominal_plant_short_run():
     assert r["status_flags"] == 0 and r["samples"] == 801
     assert ticks[-1] == 1.0 and len(ticks) > 10 and ticks == sorted(ticks)
     assert r["plant_model"] == "steering_single_track_pacejka_plant"
-    # seed 003 eq. (32) figures beside seed 000's
+    # Sentouh et al. 2023 eq. (32) figures beside Nguyen et al. 2019's
     assert {"rmse_percent", "nmse_percent"} <= set(r["observer"]["beta"])
     assert 0 < r["observer"]["beta"]["nmse_percent"] <= 100
     obs = r["observer"]
@@ -49,7 +49,7 @@ def test_commonroad_cli_json_and_plot(tmp_path):
     for sig in ("beta", "T_d"):
         assert set(res["observer"][sig]) >= {"rms", "mae", "max"}
     # 6 s of the circle (a_y up to 4.7 m/s^2): 0.009 deg and 0.28 N m with the camber/remainder
-    # model; the seed's linear model gave 0.088 deg and 1.45 N m
+    # model; the paper's linear model gave 0.088 deg and 1.45 N m
     assert res["observer"]["beta"]["rms"] < 0.03
     assert res["observer"]["T_d"]["rms"] < 0.5
     assert png.stat().st_size > 10_000

@@ -1,4 +1,4 @@
-"""CommonRoad multi-body plant driven by the seed-000 steering column, and the scenario library."""
+"""CommonRoad multi-body plant driven by the Nguyen et al. 2019 steering column, and the scenario library."""
 import tomllib
 
 import numpy as np
@@ -11,7 +11,7 @@ from codegen.validation import commonroad_plant as C  # noqa: E402
 from codegen.validation import scenarios as S  # noqa: E402
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parent.parent
-TABLE1 = ROOT / "model_defs" / "params" / "seed000_table1.toml"
+TABLE1 = ROOT / "model_defs" / "params" / "nguyen2019_table1.toml"
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +74,7 @@ def test_params_toml_format_and_slope(tmp_path):
     data = tomllib.loads(text)
     ref = tomllib.loads(TABLE1.read_text())
     assert set(data["parameters"]) == {str(p) for p in MODEL.parameters}
-    assert set(ref["parameters"]) <= set(data["parameters"])           # the seed's names, plus camber/tyre
+    assert set(ref["parameters"]) <= set(data["parameters"])           # the paper's names, plus camber/tyre
     assert data["scheduling"] == ref["scheduling"]
     for k in ("eta_t", "R_s", "B_s", "K_p", "I_s"):
         assert data["parameters"][k] == ref["parameters"][k]
@@ -115,9 +115,8 @@ def test_roll_camber_matches_the_multibody_steady_roll(circle):
 
 def test_camber_model_reproduces_the_plant_steady_state(circle):
     """From the measured r and v_x alone, the observer's model predicts the plant's steady sideslip,
-    steering angle and aligning torque; the seed's linear model misses the aligning torque by 30 %."""
+    steering angle and aligning torque; the paper's linear model misses the aligning torque by 30 %."""
     import sympy as sp
-    from codegen import model
     from model_defs import steering_single_track, steering_single_track_camber
     sc, gt = circle
     last = slice(-100, None)
@@ -193,7 +192,7 @@ def test_scenario_specifics():
     assert g.friction(0.0, 0.0, 0.0) == pytest.approx(0.6)
     assert g.friction(0.0, 0.7, 0.0) == pytest.approx(1.2)            # sin(π/2) with l_r = 1.4
     assert g.friction(0.0, 2.1, 0.0) == pytest.approx(0.05)           # floored
-    gn = S.make("time_varying_grip_normal")                            # seed 004 scenario 3
+    gn = S.make("time_varying_grip_normal")                            # Nguyen et al. 2021 scenario 3
     assert np.all((1 / gn.kappa_ref >= 44.99) & (1 / gn.kappa_ref <= 55.01))
     assert gn.v_ref[0] == 6.0 and gn.v_ref[-1] == 9.0 and np.all(np.diff(gn.v_ref) >= 0)   # increasing
     assert gn.friction(0.0, 0.745, 0.0) == pytest.approx(1.2)           # sin(π/2) with Table I's l_r = 1.49

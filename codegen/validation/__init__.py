@@ -2,7 +2,7 @@
 
 Modules:
 
-* :mod:`codegen.validation.metrics`           per-signal error metrics of the seed papers
+* :mod:`codegen.validation.metrics`           per-signal error metrics of the paper papers
 * :mod:`codegen.validation.stanford`          Stanford sideslip data set loader, KF and EKF baselines
 * :mod:`codegen.validation.commonroad_plant`  CommonRoad multi-body plant driven by steering torques
 * :mod:`codegen.validation.scenarios`         named, seeded, reproducible input profiles

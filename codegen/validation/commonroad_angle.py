@@ -1,7 +1,7 @@
-"""CommonRoad multi-body plant driven by road-wheel angle and engine torque (seed-004 observers).
+"""CommonRoad multi-body plant driven by road-wheel angle and engine torque (Nguyen et al. 2021 observers).
 
 The same independent 29-state ``vehicle_dynamics_mb`` with PAC2002 tyres as
-:mod:`codegen.validation.commonroad_plant`, closed differently: seed 004 treats the steering angle
+:mod:`codegen.validation.commonroad_plant`, closed differently: Nguyen et al. 2021 treats the steering angle
 and the engine torque as the (unknown) inputs, so an automated driver sets them directly:
 
 * steering: :class:`codegen.simulate.AngleDriver` commands δ; a steering servo turns it into the
@@ -9,8 +9,8 @@ and the engine torque as the (unknown) inputs, so an automated driver sets them 
 * longitudinal: the driver's acceleration demand is the plant's a_x input, which the package
   itself converts into engine torque T_E = m R_w a_x (a_x > 0) or brake torque (a_x < 0).
 
-Truth of the seed's "effective engine torque": T_eng = m R_w a_x, the torque the plant applies
-(braking negative); the observer's I_e is m R_w of the same car (:func:`seed004_params_toml`). The
+Truth of the paper's "effective engine torque": T_eng = m R_w a_x, the torque the plant applies
+(braking negative); the observer's I_e is m R_w of the same car (:func:`ts_params_toml`). The
 plant has no aerodynamic drag, so C_x = C_y = 0 in that file. Truth v_y, r, δ are the plant's
 states (body frame, sprung-mass CoG).
 """
@@ -28,21 +28,21 @@ from .commonroad_plant import VEHICLE_NAMES, PlantError, _Plant, PlantConfig, _s
 SERVO_GAIN = 20.0     # rad/s, steering servo bandwidth
 
 
-def seed004_params_toml(vehicle: int = 2) -> str:
-    """Parameter file of the seed-004 model (1)/(3) for CommonRoad vehicle ``vehicle``.
+def ts_params_toml(vehicle: int = 2) -> str:
+    """Parameter file of the Nguyen et al. 2021 model (1)/(3) for CommonRoad vehicle ``vehicle``.
 
     Mass, yaw inertia, axle distances from the set; per-tyre cornering stiffness from the PAC2002
     slope at zero slip and static load; I_e = m R_w (the package's torque conversion); no drag;
-    D_x of seed 004 eq. (5).
+    D_x of Nguyen et al. 2021 eq. (5).
     """
     p = vehicle_parameters(vehicle)
     fzf, fzr = _static_loads(p)
     cf, cr = tyre_cornering_stiffness(p, fzf), tyre_cornering_stiffness(p, fzr)
-    return f"""# CommonRoad parameter set {vehicle} ({VEHICLE_NAMES[vehicle]}) for the seed-004 model, derived by
-# codegen.validation.commonroad_angle.seed004_params_toml. Do not edit by hand (a test regenerates it).
+    return f"""# CommonRoad parameter set {vehicle} ({VEHICLE_NAMES[vehicle]}) for the Nguyen et al. 2021 model, derived by
+# codegen.validation.commonroad_angle.ts_params_toml. Do not edit by hand (a test regenerates it).
 
 [meta]
-source = "commonroad-vehicle-models parameters_vehicle{vehicle}; D_x of seed 004 eq. (5)"
+source = "commonroad-vehicle-models parameters_vehicle{vehicle}; D_x of Nguyen et al. 2021 eq. (5)"
 commonroad_vehicle = "{vehicle}"
 car = "{VEHICLE_NAMES[vehicle]} (CommonRoad vehicle {vehicle})"
 
@@ -58,7 +58,7 @@ C_x = 0.0        # the multi-body model has no aerodynamic drag
 C_y = 0.0
 
 [state_bounds]
-v_x = [5.0, 30.0]     # m/s, seed 004 eq. (5)
+v_x = [5.0, 30.0]     # m/s, Nguyen et al. 2021 eq. (5)
 v_y = [-1.5, 1.5]     # m/s
 r = [-0.55, 0.55]     # rad/s
 """

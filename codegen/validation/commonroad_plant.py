@@ -5,7 +5,7 @@ The plant is independent of every uiogen model: 29-state multi-body vehicle of
 PAC2002 magic-formula tyres (pure and combined slip). Its inputs are the front-wheel steering
 *velocity* and a longitudinal acceleration demand; we close both:
 
-* **steering column** of the form of seed 000 eq. (2), written for the road-wheel angle δ
+* **steering column** of the form of Nguyen et al. 2019 eq. (2), written for the road-wheel angle δ
   (δ_d = R_s δ)::
 
       I_s R_s δ̈ = T_d + T_a - B_s R_s δ̇ + T_al,     T_al = -K_p M_z / R_s
@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ModelDefinitionError, PlantError, SampleError, UiogenError
+from ..errors import ModelDefinitionError, PlantError, SampleError
 from ..simulate import rk4_step
 
 VEHICLE_NAMES = {1: "Ford Escort", 2: "BMW 320i", 3: "VW Vanagon"}   # CommonRoad parameter sets
@@ -65,7 +65,7 @@ G = 9.81
 
 @dataclass(frozen=True)
 class ColumnParams:
-    """Steering-column parameters of seed 000 Table I (eq. (2)).
+    """Steering-column parameters of Nguyen et al. 2019 Table I (eq. (2)).
 
     Attributes
     ----------
@@ -95,7 +95,7 @@ class ColumnParams:
 
 
 TABLE1_COLUMN = ColumnParams()
-"""Seed 000 Table I column values."""
+"""Nguyen et al. 2019 Table I column values."""
 
 
 @dataclass(frozen=True)
@@ -282,12 +282,12 @@ def params_toml(vehicle: int = 2, column: ColumnParams = TABLE1_COLUMN, a_s: flo
     F_cf = 2 * fzf * c0 * math.copysign(1.0, rc.camber_per_roll_f)
     F_cr = 2 * fzr * c0 * math.copysign(1.0, rc.camber_per_roll_r)
     return f"""# CommonRoad parameter set {vehicle} ({VEHICLE_NAMES[vehicle]}), derived by codegen.validation.commonroad_plant.
-# Steering column: seed 000 Table I. Cornering stiffness: PAC2002 slope at zero slip, static load.
+# Steering column: Nguyen et al. 2019 Table I. Cornering stiffness: PAC2002 slope at zero slip, static load.
 # Roll camber: quasi-static roll of the multi-body model ({math.degrees(rc.roll_gradient):.3f} deg per m/s^2),
 # camber per roll {rc.camber_per_roll_f:.4f} (front) / {rc.camber_per_roll_r:.4f} (rear), PAC2002 camber terms.
 
 [meta]
-source = "commonroad-vehicle-models parameters_vehicle{vehicle} + seed 000 Table I column"
+source = "commonroad-vehicle-models parameters_vehicle{vehicle} + Nguyen et al. 2019 Table I column"
 commonroad_vehicle = "{vehicle}"
 car = "{VEHICLE_NAMES[vehicle]} (CommonRoad vehicle {vehicle})"
 

@@ -1,10 +1,10 @@
-"""Per-signal estimation-error metrics, exactly as the seed papers define them.
+"""Per-signal estimation-error metrics, exactly as the paper papers define them.
 
-* seed 000 (Nguyen et al. 2019), Tables II-IV: ``E_mean`` (mean *absolute* error), ``E_max``
+* Nguyen et al. 2019, Tables II-IV: ``E_mean`` (mean *absolute* error), ``E_max``
   (maximal absolute error), ``Std`` (standard deviation of the error), ``RMS`` (root mean square
   of the error); angles reported in degrees.
-* seed 004, Table II: ``MAE`` (mean absolute error) and ``RMSD`` (root-mean-square deviation).
-* seed 003, eq. (32)::
+* Nguyen et al. 2021, Table II: ``MAE`` (mean absolute error) and ``RMSD`` (root-mean-square deviation).
+* Sentouh et al. 2023, eq. (32)::
 
       NMSE_% = 100 - 100 ||y - ŷ||² / ||y - mean(y)||²
       RMSE_% = 100 sqrt( (1/N) Σ (y - ŷ)² )
@@ -14,7 +14,7 @@
   perfect fit, it can be negative). ``NMSE_%`` is undefined for a constant reference signal.
 
 Errors are ``estimate - reference``. Every function rejects empty, mismatched or non-finite input
-with :class:`MetricInputError` (a :class:`codegen.errors.SampleError`); seed 003 states the same
+with :class:`MetricInputError` (a :class:`codegen.errors.SampleError`); Sentouh et al. 2023 states the same
 precondition ("the errors must not contain any NaN or Inf values").
 """
 from __future__ import annotations
@@ -23,7 +23,7 @@ from dataclasses import dataclass, asdict
 
 import numpy as np
 
-from ..errors import MetricInputError, SampleError
+from ..errors import MetricInputError
 
 __all__ = [
     "MetricInputError", "ErrorStats", "error_stats", "mean_abs_error", "max_abs_error",
@@ -38,13 +38,13 @@ class ErrorStats:
     Attributes
     ----------
     e_mean : float
-        Mean absolute error (seed 000 ``E_mean``; seed 004 ``MAE``).
+        Mean absolute error (Nguyen et al. 2019 ``E_mean``; Nguyen et al. 2021 ``MAE``).
     e_max : float
-        Maximal absolute error (seed 000 ``E_max``).
+        Maximal absolute error (Nguyen et al. 2019 ``E_max``).
     std : float
         Standard deviation of the signed error, population form (ddof = 0).
     rms : float
-        Root mean square of the error (seed 000 ``RMS``; seed 004 ``RMSD``).
+        Root mean square of the error (Nguyen et al. 2019 ``RMS``; Nguyen et al. 2021 ``RMSD``).
     n : int
         Number of samples.
     unit : str
@@ -87,7 +87,7 @@ def _errors(reference, estimate, degrees: bool = False) -> np.ndarray:
 
 
 def mean_abs_error(reference, estimate, *, degrees: bool = False) -> float:
-    """Mean absolute error, ``mean(|ŷ - y|)`` (seed 000 ``E_mean``).
+    """Mean absolute error, ``mean(|ŷ - y|)`` (Nguyen et al. 2019 ``E_mean``).
 
     Parameters
     ----------
@@ -109,33 +109,33 @@ def mean_abs_error(reference, estimate, *, degrees: bool = False) -> float:
 
 
 def max_abs_error(reference, estimate, *, degrees: bool = False) -> float:
-    """Maximal absolute error, ``max |ŷ - y|`` (seed 000 ``E_max``). See :func:`mean_abs_error`."""
+    """Maximal absolute error, ``max |ŷ - y|`` (Nguyen et al. 2019 ``E_max``). See :func:`mean_abs_error`."""
     return float(np.max(np.abs(_errors(reference, estimate, degrees))))
 
 
 def std_error(reference, estimate, *, degrees: bool = False) -> float:
-    """Standard deviation of the signed error (ddof = 0) (seed 000 ``Std``)."""
+    """Standard deviation of the signed error (ddof = 0) (Nguyen et al. 2019 ``Std``)."""
     return float(np.std(_errors(reference, estimate, degrees)))
 
 
 def rms_error(reference, estimate, *, degrees: bool = False) -> float:
-    """Root mean square error, ``sqrt(mean((ŷ - y)²))`` (seed 000 ``RMS``)."""
+    """Root mean square error, ``sqrt(mean((ŷ - y)²))`` (Nguyen et al. 2019 ``RMS``)."""
     e = _errors(reference, estimate, degrees)
     return float(np.sqrt(np.mean(e * e)))
 
 
 def mae(reference, estimate, *, degrees: bool = False) -> float:
-    """Mean absolute error (seed 004 ``MAE``); identical to :func:`mean_abs_error`."""
+    """Mean absolute error (Nguyen et al. 2021 ``MAE``); identical to :func:`mean_abs_error`."""
     return mean_abs_error(reference, estimate, degrees=degrees)
 
 
 def rmsd(reference, estimate, *, degrees: bool = False) -> float:
-    """Root-mean-square deviation (seed 004 ``RMSD``); identical to :func:`rms_error`."""
+    """Root-mean-square deviation (Nguyen et al. 2021 ``RMSD``); identical to :func:`rms_error`."""
     return rms_error(reference, estimate, degrees=degrees)
 
 
 def rmse_percent(reference, estimate, *, degrees: bool = False) -> float:
-    """``RMSE_%`` of seed 003 eq. (32): ``100 * sqrt(mean((y - ŷ)²))``.
+    """``RMSE_%`` of Sentouh et al. 2023 eq. (32): ``100 * sqrt(mean((y - ŷ)²))``.
 
     Literal reading of (32): no normalization by the signal's range or RMS, so the value carries
     the signal's unit times 100 (degrees when ``degrees=True``).
@@ -144,7 +144,7 @@ def rmse_percent(reference, estimate, *, degrees: bool = False) -> float:
 
 
 def nmse_percent(reference, estimate) -> float:
-    """``NMSE_%`` of seed 003 eq. (32): ``100 - 100 ||y - ŷ||² / ||y - mean(y)||²``.
+    """``NMSE_%`` of Sentouh et al. 2023 eq. (32): ``100 - 100 ||y - ŷ||² / ||y - mean(y)||²``.
 
     Dimensionless (unit conversion cancels). 100 means a perfect estimate, 0 means no better
     than the reference's mean, negative means worse.
@@ -163,7 +163,7 @@ def nmse_percent(reference, estimate) -> float:
 
 
 def error_stats(reference, estimate, *, degrees: bool = False, unit: str = "") -> ErrorStats:
-    """All seed-000 statistics of one signal at once.
+    """All Nguyen et al. 2019 statistics of one signal at once.
 
     Parameters
     ----------

@@ -11,10 +11,10 @@ Same name and seed -> bit-identical arrays (numpy ``default_rng(seed)``; no glob
 
 Library (seed paper and section in each description): ``track_varying_speed``,
 ``takeover_opposing_assist``, ``zigzag_growing_ay``, ``zigzag_constant_speed_assist``
-(seed 000 scenarios 1-4), ``random_trajectory_accel``, ``circular_path_normal``,
-``time_varying_grip_normal`` (seed 004 scenarios 1-3 in the seed's 'normal driving' speed range;
+(Nguyen et al. 2019 scenarios 1-4), ``random_trajectory_accel``, ``circular_path_normal``,
+``time_varying_grip_normal`` (Nguyen et al. 2021 scenarios 1-3 in the paper's 'normal driving' speed range;
 ``circular_path`` and ``time_varying_grip`` are faster stress readings of scenarios 2 and 3),
-``braking_on_bend``, ``banked_road_braking`` (seed 001: road bank profile ``bank``).
+``braking_on_bend``, ``banked_road_braking`` (Menhour et al. 2014: road bank profile ``bank``).
 """
 from __future__ import annotations
 
@@ -24,11 +24,11 @@ from typing import Callable
 
 import numpy as np
 
-from ..errors import ModelDefinitionError, ScenarioError
+from ..errors import ScenarioError
 
 __all__ = ["ScenarioError", "DriverGains", "Scenario", "SCENARIOS", "names", "make",
            "straight_line", "steady_circle",
-           "band_limited", "seed004_grip"]
+           "band_limited", "paper_grip"]
 
 
 def band_limited(t: np.ndarray, rng: np.random.Generator, rms: float, f_lo: float = 0.1,
@@ -54,11 +54,11 @@ def _smoothstep(t, t0, t1):
     return u * u * (3 - 2 * u)
 
 
-def seed004_grip(X: float, Y: float, mu_grip: float = 0.6, l_r: float = 1.4, floor: float = 0.05) -> float:
-    """Seed 004 Sec. IV-D road grip ``μ_grip (1 + sin(π sqrt(X² + Y²) / l_r))``.
+def paper_grip(X: float, Y: float, mu_grip: float = 0.6, l_r: float = 1.4, floor: float = 0.05) -> float:
+    """Nguyen et al. 2021 Sec. IV-D road grip ``μ_grip (1 + sin(π sqrt(X² + Y²) / l_r))``.
 
     Taken literally (range [0, 2 μ_grip]); floored at ``floor`` because a zero peak force makes
-    the magic formula singular (B = K / (C D)). ``l_r`` is the seed's length scale (its rear axle
+    the magic formula singular (B = K / (C D)). ``l_r`` is the paper's length scale (its rear axle
     distance; 1.4 m by default, of the order of the CommonRoad cars' b).
     """
     return max(floor, mu_grip * (1.0 + math.sin(math.pi * math.hypot(X, Y) / l_r)))
@@ -263,7 +263,7 @@ def _track_varying_speed(seed, rate):
     kap = _bends(t, rng, v, 4.0, 10)
     td = band_limited(t, rng, 0.3)
     return _finish("track_varying_speed", seed,
-                   "seed 000 Sec. V-A scenario 1: manual track driving, T_a = 0, speed 10-30 m/s "
+                   "Nguyen et al. 2019 Sec. V-A scenario 1: manual track driving, T_a = 0, speed 10-30 m/s "
                    "(|a_x| <= 2 m/s²), ten bends of 1.2-4 m/s² each (overlapping bends reach about "
                    "5.5 m/s²), driver model + 0.3 N m RMS band-limited human torque", rate, t, v, np.zeros_like(t), td, kap,
                    driver=DriverGains())
@@ -284,7 +284,7 @@ def _takeover_opposing_assist(seed, rate):
     T_a = band_limited(t, rng, 0.2, 0.1, 1.0, 8) - 2.0 * np.where(inside, np.sin(2 * np.pi * u), 0.0)
     td = band_limited(t, rng, 0.3)
     return _finish("takeover_opposing_assist", seed,
-                   "seed 000 Sec. V-B scenario 2: 14 m/s, lane-keeping assistance; the driver takes "
+                   "Nguyen et al. 2019 Sec. V-B scenario 2: 14 m/s, lane-keeping assistance; the driver takes "
                    "over for a lane change (10-16 s) against an assistance torque of opposite sign "
                    "(up to 2 N m)", rate, t, v, T_a, td, kap, driver=DriverGains())
 
@@ -298,7 +298,7 @@ def _zigzag_growing_ay(seed, rate):
     kap = ay_amp * np.sin(2 * np.pi * f * t) * _smoothstep(t, 0.0, 2.0) / v ** 2
     td = band_limited(t, rng, 0.3)
     return _finish("zigzag_growing_ay", seed,
-                   "seed 000 Sec. V-C scenario 3: zigzag without assistance, speed 14 -> 20 m/s, "
+                   "Nguyen et al. 2019 Sec. V-C scenario 3: zigzag without assistance, speed 14 -> 20 m/s, "
                    f"lateral acceleration amplitude growing 1 -> 8 m/s² at {f:.3f} Hz", rate, t, v,
                    np.zeros_like(t), td, kap, driver=DriverGains())
 
@@ -313,7 +313,7 @@ def _zigzag_constant_speed_assist(seed, rate):
     T_a = 1.5 * np.tanh(2.0 * np.sin(2 * np.pi * f * t + rng.uniform(0.2, 0.6))) * _smoothstep(t, 1, 3)
     td = band_limited(t, rng, 0.3)
     return _finish("zigzag_constant_speed_assist", seed,
-                   "seed 000 Sec. V-D scenario 4: straight road at 15 m/s, sharp zigzag (|a_y| <= 4 "
+                   "Nguyen et al. 2019 Sec. V-D scenario 4: straight road at 15 m/s, sharp zigzag (|a_y| <= 4 "
                    "m/s²) shared with an assistance torque of up to 1.5 N m", rate, t, v, T_a, td, kap,
                    driver=DriverGains())
 
@@ -326,7 +326,7 @@ def _random_trajectory_accel(seed, rate):
     kap = _bends(t, rng, v, 3.0, 7)
     td = band_limited(t, rng, 0.3)
     return _finish("random_trajectory_accel", seed,
-                   "seed 004 Sec. IV-B scenario 1: random trajectory, 12 m/s then accelerating at "
+                   "Nguyen et al. 2021 Sec. IV-B scenario 1: random trajectory, 12 m/s then accelerating at "
                    "1.5 m/s² after 14 s", rate, t, v, np.zeros_like(t), td, kap, driver=DriverGains())
 
 
@@ -342,19 +342,19 @@ def _circle(name, seed, rate, v0, v1, description, R=40.0):
 
 def _circular_path(seed, rate):
     return _circle("circular_path", seed, rate, 10.0, 15.0,
-                   "seed 004 Sec. IV-C scenario 2: circle of radius 40 m (left), speed 10 -> 15 m/s "
+                   "Nguyen et al. 2021 Sec. IV-C scenario 2: circle of radius 40 m (left), speed 10 -> 15 m/s "
                    "(a_y 2.5 -> 5.6 m/s²), path-following driver model")
 
 
 def _circular_path_normal(seed, rate):
     return _circle("circular_path_normal", seed, rate, 6.0, 9.0,
-                   "seed 004 Sec. IV-C scenario 2 in the seed's own 'normal driving' range (its linear "
+                   "Nguyen et al. 2021 Sec. IV-C scenario 2 in the paper's own 'normal driving' range (its linear "
                    "tyre model (3)): circle of radius 40 m, speed 6 -> 9 m/s (a_y 0.9 -> 2.0 m/s²)")
 
 
 def _contour_grip(name, seed, rate, v0, v1, l_r, description):
     """Contour whose radius of curvature swings 50 ± 5 m (period 15-25 s, drawn), speed v0 -> v1
-    (smooth, 2-38 s), grip :func:`seed004_grip` with length scale ``l_r`` over world coordinates
+    (smooth, 2-38 s), grip :func:`paper_grip` with length scale ``l_r`` over world coordinates
     whose origin is the start point (the plant starts at X = Y = 0), curvature-following driver."""
     rng = np.random.default_rng(seed)
     t = _grid(40.0, rate)
@@ -364,7 +364,7 @@ def _contour_grip(name, seed, rate, v0, v1, l_r, description):
     td = band_limited(t, rng, 0.2)
 
     def grip(_t, X, Y):
-        return seed004_grip(X, Y, l_r=l_r)
+        return paper_grip(X, Y, l_r=l_r)
 
     return _finish(name, seed, description, rate, t, v, np.zeros_like(t), td, kap, driver=DriverGains(),
                    grip=grip)
@@ -372,14 +372,14 @@ def _contour_grip(name, seed, rate, v0, v1, l_r, description):
 
 def _time_varying_grip(seed, rate):
     return _contour_grip("time_varying_grip", seed, rate, 8.0, 13.0, 1.4,
-                         "seed 004 Sec. IV-D scenario 3, stress case: contour with radius 45-55 m, speed "
+                         "Nguyen et al. 2021 Sec. IV-D scenario 3, stress case: contour with radius 45-55 m, speed "
                          "8 -> 13 m/s (a_y up to 3.7 m/s² on the path), grip 0.6 (1 + sin(π sqrt(X² + Y²) "
                          "/ l_r)), l_r = 1.4 m, floored at 0.05")
 
 
 def _time_varying_grip_normal(seed, rate):
     return _contour_grip("time_varying_grip_normal", seed, rate, 6.0, 9.0, 1.49,
-                         "seed 004 Sec. IV-D scenario 3 in the seed's 'normal driving' range (the speeds "
+                         "Nguyen et al. 2021 Sec. IV-D scenario 3 in the paper's 'normal driving' range (the speeds "
                          "of circular_path_normal): contour with radius 45-55 m, increasing speed 6 -> 9 m/s "
                          "(a_y 0.7 -> 1.8 m/s² on the path), the literal grip law 0.6 (1 + sin(π "
                          "sqrt(X² + Y²) / l_r)) with Table I's l_r = 1.49 m (floored at 0.05), X, Y from the "
@@ -420,7 +420,7 @@ def _banked_road_braking(seed, rate):
                   - 1.5 * ss(t, 40.0, 44.0) + 1.5 * ss(t, 51.0, 55.0))
     td = band_limited(t, rng, 0.2)
     return _finish("banked_road_braking", seed,
-                   "seed 001 Sec. IV hard case: banked road with sharp braking (90 -> 36 km/h, peak -4.5 m/s², in a "
+                   "Menhour et al. 2014 Sec. IV hard case: banked road with sharp braking (90 -> 36 km/h, peak -4.5 m/s², in a "
                    "200 m left bend with -3° superelevation), +2° crossfall, a right bend, a second braking "
                    "(22 -> 12 m/s) in a -1.5° bend; speed 10-25 m/s, |a_y| <= 4 m/s²", rate, t, v,
                    np.zeros_like(t), td, kap, driver=DriverGains(), bank=bank)

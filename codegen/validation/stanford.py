@@ -48,9 +48,9 @@ from pathlib import Path
 
 import numpy as np
 
-from model_defs.baselines import FIALA_SINGLE_TRACK, LINEAR_SINGLE_TRACK
 
 from ..errors import DatasetError, ModelDefinitionError, SampleError
+from ..observers import builtin_model
 from . import kalman, metrics
 
 __all__ = [
@@ -619,7 +619,7 @@ def linear_kf(run: StanfordRun, car: VehicleParams = STANFORD_CAR) -> BaselineRe
     _check_run(run)
     s_ay, s_r = highpass_std(run.ay), highpass_std(run.yaw_rate)
     s_d = highpass_std(run.delta) * 1000.0
-    model = kalman.kalman_model(LINEAR_SINGLE_TRACK, car.values(), outputs=("a_y", "r"), noisy_inputs=("delta",))
+    model = kalman.kalman_model(builtin_model("baselines").LINEAR_SINGLE_TRACK, car.values(), outputs=("a_y", "r"), noisy_inputs=("delta",))
     u, y, rho = _filter_inputs(run)
     est = kalman.linear_kalman_filter(model, u, y, rho, run.dt, R=np.diag([s_ay ** 2, s_r ** 2]),
                                       Sigma=[[s_d ** 2]], x0=np.zeros(2), P0=np.diag([1e4, 1e4]))
@@ -700,7 +700,7 @@ def ekf(run: StanfordRun, car: VehicleParams = STANFORD_CAR, cfg: EKFConfig = EK
     _check_run(run)
     s_ay = cfg.sigma_ay if cfg.sigma_ay is not None else highpass_std(run.ay)
     s_r = cfg.sigma_r if cfg.sigma_r is not None else highpass_std(run.yaw_rate)
-    model = kalman.kalman_model(FIALA_SINGLE_TRACK, {**car.values(), "mu": cfg.mu, "g": cfg.g},
+    model = kalman.kalman_model(builtin_model("baselines").FIALA_SINGLE_TRACK, {**car.values(), "mu": cfg.mu, "g": cfg.g},
                                 outputs=("a_y", "r"))
     u, y, rho = _filter_inputs(run)
     est = kalman.extended_kalman_filter(model, u, y, rho, run.dt, R=np.diag([s_ay ** 2, s_r ** 2]),

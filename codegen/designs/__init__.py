@@ -1,1 +1,0 @@
-"""Observer design families (LMI conditions of each seed)."""

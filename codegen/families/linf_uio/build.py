@@ -1,0 +1,238 @@
+"""The pipeline build of the L-infinity UIO family: model -> polytope -> Theorem 1 -> certificate
+-> backward-Euler step (:class:`LinfBuild`)."""
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ... import polytope
+from ...artifact import artifact_head, significant
+from ...model import LPVModel, instantiate, load_parameters
+from ...observers import ObserverConfig
+from ...errors import ModelDefinitionError
+from ..base import ObserverBuild
+from . import design as linf_uio
+from . import discrete
+
+
+FAMILY_TITLE = "LPV L-infinity UIO (Nguyen et al. 2019)"
+
+
+@dataclass(frozen=True)
+class LinfBuild(ObserverBuild):
+    config: ObserverConfig
+    lpv: LPVModel
+    poly: polytope.Polytope
+    taylor_error: dict | None
+    design: linf_uio.LinfDesign
+    quadratic: linf_uio.LinfDesign
+    certificate: dict
+    data: discrete.ObserverData
+    discrete_certificate: discrete.DiscreteCertificate
+    timings: dict
+
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    def step_function(self) -> ca.Function:
+        return discrete.step_casadi(self.data, f"{self.name}_kernel")
+
+    # signal names of the step's vectors
+    @property
+    def state_names(self) -> list:
+        d = self.lpv.definition
+        return [str(s) for s in d.states] + [str(s) for s in d.unknown_inputs]
+
+    @property
+    def input_names(self) -> list:
+        d = self.lpv.definition
+        return ([str(s) for s in d.known_inputs] + [f"y_{n}" for n in d.output_names]
+                + [str(s.symbol) for s in d.scheduling if s.derived is None])
+
+    @property
+    def output_names(self) -> list:
+        return self.state_names
+
+    @property
+    def nu(self) -> int:
+        return self.lpv.nu
+
+    @property
+    def ny(self) -> int:
+        return self.lpv.ny
+
+    def scheduling_boxes(self) -> list:
+        """(name, min, max, derived) of every scheduling signal, for the C header."""
+        return [(str(sym), lo, hi, sym not in self.data.raw_signals)
+                for sym, lo, hi in zip(self.poly.signals, self.poly.lowers, self.poly.uppers)]
+
+    def emit_notes(self) -> dict:
+        """Family-specific text of the C API."""
+        return {
+            "headline": f"gamma = {self.design.gamma:.6g}",
+            "stability": (f"backward Euler, certified: sqrt(V) contracts by "
+                          f"{self.discrete_certificate.contraction:.6f} per step over the whole scheduling box"),
+            "step_notes": [],
+            "clamp_doc": ("A scheduling signal outside its box: clamped for the membership functions and the "
+                          "step\n * taken; the stability certificate does not cover this sample."),
+            "warmup_doc": "never set by this observer (its step needs no previous sample).",
+            "has_warmup": False,
+        }
+
+    def signal_docs(self) -> tuple:
+        """(state, inputs, outputs) field docs of the C API; the outputs are the state."""
+        d = self.lpv.definition
+        units = d.units
+        state = [{"name": n, "doc": f"estimate of {n} [{units.get(n, '-')}]"} for n in self.state_names]
+        inputs = ([{"name": str(s), "doc": f"known input [{units.get(str(s), '-')}]"} for s in d.known_inputs]
+                  + [{"name": f"y_{n}", "doc": f"measured {n} [{units.get(n, '-')}]"} for n in d.output_names]
+                  + [{"name": str(s.symbol), "doc": f"scheduling signal [{s.unit or '-'}]"} for s in d.scheduling
+                     if s.derived is None])
+        return state, inputs, state
+
+    def reference_step(self, z, u, y, rho):
+        """Independent numpy step (tests, the benchmark's numpy peer)."""
+        return discrete.step_numpy(self.data, z, u, y, rho)
+
+    def lmi_problem(self):
+        """A fresh LMI problem of this design (benchmark: our path vs CVXPY on the same blocks)."""
+        return linf_uio.build_problem(self.poly, self.design.settings)[0]
+
+    def input_boxes(self) -> dict:
+        """{input name: [min, max]} of the inputs that schedule the step (outside: SCHEDULING_CLAMPED)."""
+        return {str(sym): [lo, hi] for sym, lo, hi in zip(self.poly.signals, self.poly.lowers, self.poly.uppers)
+                if sym in self.data.raw_signals}
+
+    def derived_input_docs(self) -> list:
+        return [{"name": str(sym), "unit": self.lpv.definition.units.get(str(sym), "-")}
+                for sym, _ in self.lpv.derived_inputs]
+
+    def artifact(self) -> dict:
+        return artifact(self)
+
+    def summary(self, path) -> dict:
+        sol = self.design.solution
+        return {
+            "observer": self.name, "artifact": str(path),
+            "gamma": self.design.gamma, "gamma_quadratic": self.quadratic.gamma,
+            "vertices": self.poly.n_vertices, "polytope": self.poly.kind, "lyapunov": self.design.settings.lyapunov,
+            "solve_time_s": sol.solve_time_s, "build_time_s": sol.build_time_s,
+            "total_design_time_s": sum(self.timings.values()),
+            "solver_iterations": sol.iterations,
+            "worst_block": sol.worst.label, "worst_min_eig": sol.worst.min_eig,
+            "worst_relative_margin": sol.worst.relative_margin,
+            "recheck_gamma": self.certificate["gamma"],
+            "discrete_kappa": self.discrete_certificate.kappa,
+            "discrete_contraction_per_step": self.discrete_certificate.contraction,
+            "discrete_spectral_radius_max": self.discrete_certificate.augmented_radius_max,
+            "sample_time": self.config.sample_time,
+            "taylor_error": self.taylor_error,
+        }
+
+    def summary_lines(self, s: dict) -> list:
+        lines = [f"observer {self.name}: {FAMILY_TITLE}, {s['polytope']} polytope, {s['vertices']} vertices",
+                 f"  gamma ({s['lyapunov']:9s})      {s['gamma']:.6g}   (quadratic: {s['gamma_quadratic']:.6g})",
+                 f"  re-checked gamma        {s['recheck_gamma']:.6g}   (numpy, no solver)",
+                 f"  solve / build time      {1e3 * s['solve_time_s']:.1f} ms / {1e3 * s['build_time_s']:.1f} ms "
+                 f"({s['solver_iterations']} Clarabel iterations); whole design {s['total_design_time_s']:.2f} s",
+                 f"  worst LMI margin        {s['worst_min_eig']:.3e} (relative {s['worst_relative_margin']:.3e}) "
+                 f"in {s['worst_block']}",
+                 f"  discrete step Ts={s['sample_time']:g}s  kappa {s['discrete_kappa']:.6f} -> sqrt(V) contracts by "
+                 f"{s['discrete_contraction_per_step']:.6f}/step; dense-grid spectral radius "
+                 f"{s['discrete_spectral_radius_max']:.6f}"]
+        if s["taylor_error"]:
+            te = s["taylor_error"]
+            lines.append(f"  Taylor-reduction error  {te['max_abs_error']:.4g} on A{tuple(te['entry'])} at "
+                         f"{self.poly.signal}={te['at']:g} ({100 * te['relative_error_there']:.1f}% of the entry)")
+        lines.append(f"artifact: {s['artifact']}")
+        return lines
+
+
+def _settings(config: ObserverConfig, lyapunov: str | None = None) -> linf_uio.LinfDesignSettings:
+    """The ``[design]`` table, every key and value checked (codegen.settings).
+
+    The TOML key ``gain_bound_times_sample_time`` (default 1.0) is the bound on ||M|| Ts: the field
+    ``gain_bound`` is its value / sample_time (``gain_bound`` itself is not a key). ``lyapunov``
+    overrides the table's.
+    """
+    from ...settings import Alias, config_error, parse_settings
+    settings = parse_settings(
+        linf_uio.LinfDesignSettings, config.design, source=config.source, section="design",
+        aliases={"gain_bound_times_sample_time": Alias("gain_bound", lambda v: v / config.sample_time, default=1.0)},
+        **({"lyapunov": lyapunov} if lyapunov else {}))
+    if settings.lyapunov == "pdlf" and config.rate_bounds == "none":
+        raise config_error(config.source, "design", "lyapunov", "pdlf",
+                           'the parameter-dependent design needs membership rate bounds; with rate_bounds = "none" '
+                           'use lyapunov = "quadratic"')
+    return settings
+
+
+def representation(config: ObserverConfig):
+    lpv = instantiate(config.load_model(), load_parameters(config.parameter_path))
+    if config.polytope == "taylor_reduced":
+        poly = polytope.taylor_reduced_polytope(lpv, config.rate_bounds)
+        err = polytope.taylor_error(lpv, poly)
+    elif config.polytope == "sector":
+        poly = polytope.sector_polytope(lpv, config.rate_bounds)
+        err = None
+    else:
+        raise ModelDefinitionError(f"{config.source}: polytope must be 'taylor_reduced' or 'sector'")
+    return lpv, poly, err
+
+
+def build(config: ObserverConfig, tol: float | None = None) -> LinfBuild:
+    """Run model -> polytope -> LMI design -> certificate -> discrete certificate."""
+    t0 = time.perf_counter()
+    lpv, poly, err = representation(config)
+    t1 = time.perf_counter()
+    settings = _settings(config)
+    if tol is not None:
+        settings = dataclasses.replace(settings, tol=tol)
+    design = linf_uio.design(poly, settings)
+    quadratic = design if settings.lyapunov == "quadratic" else \
+        linf_uio.design(poly, dataclasses.replace(settings, lyapunov="quadratic"))
+    t2 = time.perf_counter()
+    cert = linf_uio.certify(poly, design.P, design.X, design.L, settings.alpha)
+    data = discrete.ObserverData(poly, design.Q, design.L,
+                                 float(config.ui_filter.get("time_constant", 0.005)), config.sample_time,
+                                 lpv.derived, lpv.definition.output_symbols, lpv.derived_inputs)
+    dcert = discrete.certify_step(data, settings.alpha)
+    t3 = time.perf_counter()
+    timings = {"representation_s": t1 - t0, "design_s": t2 - t1,
+               "solve_s": design.solution.solve_time_s, "build_s": design.solution.build_time_s,
+               "certificates_s": t3 - t2}
+    return LinfBuild(config, lpv, poly, err, design, quadratic, cert, data, dcert, timings)
+
+
+def artifact(b: LinfBuild) -> dict:
+    """The design artifact: everything needed to re-check the design without uiogen."""
+    sol = b.design.solution
+    worst = sol.worst
+    gains = {f"M{i + 1}": np.linalg.solve(q, l).tolist() for i, (q, l) in enumerate(zip(b.design.Q, b.design.L))}
+    derived = ({"derived_inputs": {str(sym): str(expr) for sym, expr in b.lpv.derived_inputs}}
+               if b.lpv.derived_inputs else {})
+    return {
+        **artifact_head(b, b.poly.signals, **derived),
+        "polytope": b.poly.to_json(),
+        "taylor_error": significant(b.taylor_error),
+        **b.design.gains_json(),
+        "alpha": b.design.settings.alpha,
+        "gain_bound": b.design.settings.gain_bound,
+        "gains_at_vertices": gains,
+        "quadratic": {"gamma": b.quadratic.gamma, "P": b.quadratic.P[0].tolist(),
+                      "L": [l.tolist() for l in b.quadratic.L]},
+        "certificate": {
+            "solver_blocks": [significant({"label": c.label, "min_eig": c.min_eig,
+                                    "relative_margin": c.relative_margin}) for c in sol.checks],
+            "worst_block": worst.label,
+            "worst_min_eig": significant(worst.min_eig),
+            "worst_relative_margin": significant(worst.relative_margin),
+            "recheck": significant(b.certificate),
+        },
+        "discrete": {"ui_filter_time_constant": b.data.Tf, **significant(b.discrete_certificate.to_json())},
+    }

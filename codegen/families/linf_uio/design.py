@@ -1,0 +1,236 @@
+"""LPV L-infinity unknown-input observer, Nguyen et al. 2019 Theorem 1 (eqs. (19)-(23)).
+
+Observer (15): x_hat' = A(th) x_hat + B u + D d_hat + M(th)(C x_hat - y), with
+M(th) = P(th)^-1 L(th), P(th) = sum eta_i (P_i + X), L(th) = sum eta_i L_i.
+
+Two deliberate, documented choices (README, "Nguyen et al. 2019 design"):
+
+* Rate vertices. The paper's (21) pairs the bounds phi_kl of every membership
+  derivative with the same index l. Because sum_i eta_i' = 0, only *consistent*
+  corners (derivatives summing to zero) are reachable, so the conditions are
+  imposed at the corners returned by :attr:`Polytope.rate_vertices`, with the
+  literal Psi of (22)/(25) evaluated there.
+* Well-posedness. Theorem 1 is homogeneous in (P_i, X, L_i, nu, 1/mu), and gamma
+  can be driven to 0 by unbounded gains. We normalize mu = 1 (so (20) gives
+  P_i + X >= I) and bound ||L_i|| <= gain_bound; together they guarantee
+  ||M(th)||_2 <= gain_bound for every th. Minimizing nu then minimizes
+  gamma = sqrt(mu nu), which is what "minimize mu + nu" reaches at optimum.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...canonical import decimal_round
+from ...errors import ConfigurationError, RankConditionError
+from ...lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks
+from ...polytope import Polytope
+from ...settings import setting
+
+
+@dataclass(frozen=True)
+class LinfDesignSettings:
+    """Tuning of a Theorem-1 design.
+
+    Attributes
+    ----------
+    alpha : float
+        Decay rate of the Lyapunov function (paper: 5).
+    lyapunov : {"pdlf", "quadratic"}
+        Parameter-dependent (P_i, slack X) or common quadratic (X = 0, P_i = P).
+    gain_bound : float
+        Guaranteed bound on ||M(theta)||_2 in 1/s (implementability constraint).
+    margin : float
+        Strictness margin added to every LMI block, so the numpy re-check has slack.
+    tol : float
+        Clarabel gap/feasibility tolerance.
+    """
+
+    alpha: float = setting(5.0, gt=0, doc="decay rate")
+    lyapunov: str = setting("pdlf", choices=("pdlf", "quadratic"))
+    gain_bound: float = setting(100.0, gt=0, doc="bound on ||M(theta)|| in 1/s")
+    margin: float = setting(1e-5, ge=0)
+    tol: float = setting(1e-8, gt=0)
+
+
+def _check_assumptions(poly: Polytope) -> None:
+    n = poly.A.shape[1]
+    for i in range(poly.n_vertices):
+        D = poly.D[i]
+        if np.linalg.matrix_rank(D) < D.shape[1]:
+            raise RankConditionError(f"vertex {i + 1}: D is not of full column rank (assumption of "
+                                     f"Theorem 1); the unknown inputs cannot be reconstructed")
+        A, C = poly.A[i], poly.C[i]
+        # Hautus test of detectability at every eigenvalue with Re >= 0
+        for lam in np.linalg.eigvals(A):
+            if lam.real >= 0:
+                pbh = np.vstack([A - lam * np.eye(n), C])
+                if np.linalg.matrix_rank(pbh, tol=1e-9 * max(1.0, np.abs(pbh).max())) < n:
+                    raise RankConditionError(
+                        f"vertex {i + 1}: (A, C) is not detectable (mode {lam:.4g} unobservable); "
+                        f"measure another output or change the model")
+
+
+def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.ndarray | None = None):
+    """LMI problem of Theorem 1 under ``settings``; returns (problem, variables)."""
+    _check_assumptions(poly)
+    if settings.lyapunov == "pdlf" and poly.rate_bound_mode == "none":
+        raise ConfigurationError("the parameter-dependent design needs membership rate bounds; with "
+                         "rate_bounds = 'none' use lyapunov = 'quadratic'")
+    N, nx, ny = poly.n_vertices, poly.A.shape[1], poly.C.shape[1]
+    F = np.eye(nx) if performance is None else np.asarray(performance, dtype=float)
+    prob = LMIProblem(f"Theorem 1 ({settings.lyapunov})")
+    if settings.lyapunov == "pdlf":
+        X = prob.symmetric("X", nx)
+        P = [prob.symmetric(f"P{i + 1}", nx) for i in range(N)]
+    elif settings.lyapunov == "quadratic":
+        X = np.zeros((nx, nx))
+        common = prob.symmetric("P", nx)
+        P = [common] * N
+    else:
+        raise ConfigurationError(f"lyapunov must be 'pdlf' or 'quadratic', got {settings.lyapunov!r}")
+    L = [prob.matrix(f"L{i + 1}", nx, ny) for i in range(N)]
+    nu = prob.scalar("nu")
+    mu = 1.0  # normalization (homogeneity), see module docstring
+    Q = [P[i] + X for i in range(N)]
+    m, a = settings.margin, settings.alpha
+    for i in range(N):
+        prob.require_psd(f"(19) P{i + 1}+X > 0", Q[i], m, "Lyapunov matrix at a vertex")
+        prob.require_psd(f"(20) i={i + 1}", bmat([[Q[i], F.T], [F, mu * np.eye(F.shape[0])]]), m,
+                         "performance output bound (mu)")
+        g = settings.gain_bound
+        prob.require_psd(f"gain bound ||L{i + 1}|| <= {g:g}",
+                         bmat([[g * np.eye(nx), L[i]], [L[i].T, g * np.eye(ny)]]),
+                         m, "raise gain_bound (faster observer) or lower alpha")
+    # products shared by many blocks, formed once
+    PA = [[P[i] @ poly.A[j] for j in range(N)] for i in range(N)]
+    LC = [[L[i] @ poly.C[j] for j in range(N)] for i in range(N)]
+    QD = [[Q[i] @ poly.D[j] for j in range(N)] for i in range(N)]
+    XA = [2 * X @ poly.A[j] + 2 * a * X for j in range(N)]
+    nd = poly.D.shape[2]
+    corner = bmat([[np.zeros((nd, nx)), -a * nu * np.eye(nd)]])
+
+    def upsilon(i, j, rate_term):
+        top_left = PA[i][j] + LC[i][j] + a * P[i] + 0.5 * (rate_term + XA[j])
+        blk = bmat([[top_left, QD[i][j]], [corner]])
+        return blk + blk.T
+
+    for v, rates in enumerate(poly.rate_vertices):
+        rate_term = sum(rates[k] * (P[k] + X) for k in range(N))   # the phi_kl terms of Psi, (22)/(25)
+        for j in range(N):
+            for i in range(j + 1):
+                if i == j:
+                    blk = upsilon(i, i, rate_term)
+                    label = f"(21) Y_{i + 1}{i + 1}, rate vertex {v + 1}"
+                else:
+                    blk = upsilon(i, j, rate_term) + upsilon(j, i, rate_term)
+                    label = f"(21) Y_{i + 1}{j + 1}+Y_{j + 1}{i + 1}, rate vertex {v + 1}"
+                prob.require_nsd(label, blk, m, "lower alpha, widen the gain bound, or narrow the "
+                                               "scheduling/acceleration box")
+    prob.minimize(nu)
+    return prob, {"P": P, "X": X, "L": L, "nu": nu}
+
+
+@dataclass(frozen=True)
+class LinfDesign:
+    """Result of a Theorem-1 design: decision matrices, gamma and certificate."""
+
+    settings: LinfDesignSettings
+    P: tuple
+    X: np.ndarray
+    L: tuple
+    mu: float
+    nu: float
+    solution: LMISolution | None
+
+    @property
+    def gamma(self) -> float:
+        return float(np.sqrt(self.mu * self.nu))
+
+    @property
+    def Q(self) -> tuple:
+        return tuple(p + self.X for p in self.P)
+
+    def gains_json(self) -> dict:
+        out = {f"P{i + 1}": p.tolist() for i, p in enumerate(self.P)}
+        out.update({f"L{i + 1}": l.tolist() for i, l in enumerate(self.L)})
+        out.update({"X": self.X.tolist(), "mu": self.mu, "nu": self.nu, "gamma": self.gamma})
+        return out
+
+
+def design(poly: Polytope, settings: LinfDesignSettings) -> LinfDesign:
+    """Solve Theorem 1 on Clarabel; the rounded matrices are re-certified independently."""
+    prob, var = build_problem(poly, settings)
+    sol = prob.solve(tol=settings.tol)
+    N = poly.n_vertices
+    if settings.lyapunov == "pdlf":
+        P = tuple(decimal_round(sol[f"P{i + 1}"]) for i in range(N))
+        X = decimal_round(sol["X"])
+    else:
+        P = tuple(decimal_round(sol["P"]) for _ in range(N))
+        X = np.zeros_like(P[0])
+    L = tuple(decimal_round(sol[f"L{i + 1}"]) for i in range(N))
+    P = tuple(0.5 * (p + p.T) for p in P)
+    X = 0.5 * (X + X.T)
+    nu = float(decimal_round(sol["nu"]))
+    return LinfDesign(settings, P, X, L, 1.0, nu, sol)
+
+
+def certify(poly: Polytope, P, X, L, alpha: float, performance=None) -> dict:
+    """Independent numpy check of Theorem 1 for given matrices (no solver involved).
+
+    Returns the smallest mu and nu for which (20)-(21) hold, gamma = sqrt(mu nu),
+    and per block the largest eigenvalue of its nu-free part (must be < 0).
+    """
+    N, nx = poly.n_vertices, poly.A.shape[1]
+    F = np.eye(nx) if performance is None else np.asarray(performance, dtype=float)
+    P = [np.asarray(p, dtype=float) for p in P]
+    L = [np.asarray(l, dtype=float) for l in L]
+    X = np.asarray(X, dtype=float)
+    Q = [p + X for p in P]
+    blocks = {f"(19) P{i + 1}+X > 0": Q[i] for i in range(N)}
+    checks = list(check_blocks(blocks))
+    if any(c.min_eig <= 0 for c in checks):
+        return {"feasible": False, "gamma": float("inf"), "mu": float("inf"), "nu": float("inf"),
+                "blocks": [_check_json(c) for c in checks], "reason": "P_i + X not positive definite"}
+    mu = max(float(np.linalg.eigvalsh(F @ np.linalg.solve(q, F.T)).max()) for q in Q)
+    nu_needed, rows, feasible = 0.0, [], True
+    for v, rates in enumerate(poly.rate_vertices):
+        def S(i, j):
+            psi = sum(rates[k] * (P[k] + X) for k in range(N)) + 2 * X @ poly.A[j] + 2 * alpha * X
+            top = P[i] @ poly.A[j] + L[i] @ poly.C[j] + alpha * P[i] + 0.5 * psi
+            return top + top.T, Q[i] @ poly.D[j]
+        for j in range(N):
+            for i in range(j + 1):
+                if i == j:
+                    s, b = S(i, i)
+                    count, label = 1, f"(21) Y_{i + 1}{i + 1}, rate vertex {v + 1}"
+                else:
+                    s1, b1 = S(i, j)
+                    s2, b2 = S(j, i)
+                    s, b, count = s1 + s2, b1 + b2, 2
+                    label = f"(21) Y_{i + 1}{j + 1}+Y_{j + 1}{i + 1}, rate vertex {v + 1}"
+                lam_max = float(np.linalg.eigvalsh(s).max())
+                if lam_max >= 0:
+                    feasible, need = False, float("inf")
+                else:
+                    # [[s, b], [b', -2 count alpha nu I]] <= 0  <=>  nu >= lmax(b' (-s)^-1 b)/(2 count alpha)
+                    need = float(np.linalg.eigvalsh(b.T @ np.linalg.solve(-s, b)).max()) / (2 * count * alpha)
+                nu_needed = max(nu_needed, need)
+                rows.append({"label": label, "max_eig_state_block": lam_max, "nu_needed": need})
+    gamma = float(np.sqrt(mu * nu_needed)) if feasible else float("inf")
+    return {"feasible": feasible, "gamma": gamma, "mu": mu, "nu": nu_needed,
+            "blocks": [_check_json(c) for c in checks] + rows}
+
+
+def _check_json(c: BlockCheck) -> dict:
+    return {"label": c.label, "min_eig": c.min_eig, "relative_margin": c.relative_margin}
+
+
+def gain_at(poly: Polytope, Q, L, rho: float) -> np.ndarray:
+    """M(rho) = P(rho)^-1 L(rho) (eq. (23))."""
+    eta = poly.eta(rho)
+    Qt = sum(e * q for e, q in zip(eta, Q))
+    Lt = sum(e * l for e, l in zip(eta, L))
+    return np.linalg.solve(Qt, Lt)

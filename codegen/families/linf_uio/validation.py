@@ -1,0 +1,95 @@
+"""Validation of the L-infinity UIO family: the compiled step on the nominal (Pacejka) plant,
+the observer's exact model or the CommonRoad multi-body plant, beside the linear KF and the
+Fiala EKF generated from ``model_defs/baselines.py``; the paper's Table II format."""
+from __future__ import annotations
+
+import numpy as np
+
+from ... import simulate
+from ...errors import ModelDefinitionError
+from ...validation.common import (SENSOR_NOISE, commonroad_vehicle, scenario_for, signal_stats,
+                                  truth_plant)
+
+
+def truth_commonroad(config, scn, progress=None):
+    from ...validation import commonroad_plant
+    gt = commonroad_plant.simulate(scn, commonroad_plant.PlantConfig(vehicle=commonroad_vehicle(config)),
+                                   progress=progress)
+    return {"t": gt.t, "v_x": gt.v_x, "beta": gt.beta, "r": gt.r, "delta": gt.delta,
+            "delta_dot": gt.delta_dot, "T_d": gt.T_d, "T_a": gt.T_a, "a_y": gt.a_y, "a_x": gt.a_x,
+            "v_y": gt.v_y}
+
+
+def baselines(config, truth, noisy) -> dict:
+    """The source repository's linear KF and the Fiala EKF (generated from ``model_defs/baselines.py``
+    with the observer's car: axle stiffness = 2 x tyre stiffness, mu = 1), on the same noisy measurements."""
+    from ...validation import stanford
+    car_ = car(config)
+    run = stanford.StanfordRun(t=truth["t"], vx=truth["v_x"], vy=np.tan(truth["beta"]) * truth["v_x"],
+                               beta_true=truth["beta"], ax=np.zeros_like(truth["t"]), ay=noisy["a_y"],
+                               yaw_rate=noisy["r"], yaw_acc=np.gradient(truth["r"], truth["t"]),
+                               delta=noisy["delta"], delta_fl=noisy["delta"], delta_fr=noisy["delta"],
+                               source="simulation")
+    out = {}
+    for name, res in (("linear_kf", stanford.linear_kf(run, car_)),
+                      ("ekf", stanford.ekf(run, car_, stanford.EKFConfig(mu=1.0)))):
+        out[name] = {"beta": signal_stats(truth["beta"], res.beta, truth["t"], angle=True),
+                     "r": signal_stats(truth["r"], res.r, truth["t"], angle=True)}
+    return out
+
+
+def car(config):
+    from ...model import load_parameters
+    from ...validation import stanford
+    v = load_parameters(config.parameter_path).values
+    # axle cornering stiffness of the single-track baselines: two tyres per axle
+    return stanford.VehicleParams(m=v["M"], lf=v["l_f"], lr=v["l_r"], iz=v["I_z"], cf=2 * v["C_f"], cr=2 * v["C_r"])
+
+
+def run(config, scenario, plant: str = "nominal", duration: float | None = None, seed: int = 0,
+        progress=None) -> dict:
+    """Simulate, run the compiled observer and the baselines, return the tables and signals."""
+    from ...extension import load
+    from .build import representation
+    lpv = representation(config)[0]
+    scn = scenario_for(config, scenario, duration)
+    if plant == "commonroad":
+        truth = truth_commonroad(config, scn, progress)
+        plant_model = "CommonRoad multi-body (vehiclemodels)"
+    elif plant in ("nominal", "model"):
+        definition = truth_plant(config, lpv.parameters) if plant == "nominal" else None
+        truth = simulate.nominal_plant(config, lpv, scn, definition, progress=progress)
+        plant_model = definition.name if definition is not None else lpv.definition.name + " (exact model)"
+    else:
+        raise ModelDefinitionError(f"plant must be 'nominal', 'model' or 'commonroad', got {plant!r}")
+    noisy = simulate.add_sensor_noise(truth, SENSOR_NOISE, seed)
+    obs = load(config)
+    d = lpv.definition
+    inputs = simulate.observer_input_matrix(obs.input_names, truth, noisy)
+    out, status, _ = obs.run(inputs)
+    table = {}
+    for i, sig in enumerate(obs.state_names):
+        if sig in truth:
+            table[sig] = signal_stats(truth[sig], out[:, i], truth["t"], angle=d.units.get(sig, "").startswith("rad"))
+    return {"observer": table, "baselines": baselines(config, truth, noisy),
+            "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)),
+            "max_abs_ay": float(np.abs(truth["a_y"]).max()), "plant": plant, "plant_model": plant_model,
+            "scenario": scn.name,
+            "signals": {"t": truth["t"], "truth": truth, "estimate": {s: out[:, i] for i, s in enumerate(obs.state_names)}},
+            "units": dict(d.units)}
+
+
+
+
+def format_table(result: dict) -> str:
+    """The paper's Table II columns (E_mean, E_max, Std, RMS; angles in degrees), baselines below."""
+    lines = [f"{'signal':14s} {'E_mean':>9s} {'E_max':>9s} {'Std':>9s} {'RMS':>9s}"]
+    units = result["units"]
+    for sig, row in result["observer"].items():
+        u = units.get(sig, "")
+        u = ("deg" + ("/s" if u.endswith("/s") else "")) if u.startswith("rad") else u
+        lines.append(f"{sig + ' [' + u + ']':14s} {row['mae']:9.4f} {row['max']:9.4f} {row['std']:9.4f} {row['rms']:9.4f}")
+    for base, rows in result["baselines"].items():
+        b = rows["beta"]
+        lines.append(f"{'beta [deg] ' + base:14s} {b['mae']:9.4f} {b['max']:9.4f} {b['std']:9.4f} {b['rms']:9.4f}")
+    return "\n".join(lines)

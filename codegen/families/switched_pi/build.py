@@ -1,0 +1,205 @@
+"""Pipeline of the Menhour et al. 2014 family ``switched_pi``: rule -> modes -> Algorithm 1 -> certificates -> step.
+
+:func:`build_switched_pi` is what :func:`codegen.pipeline.build` runs for a configuration of this
+family; :class:`SwitchedPIBuild` offers the interface :mod:`codegen.emit` and the validation use
+(the same as :class:`codegen.pipeline.TSFuzzyBuild`).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+
+from ...artifact import artifact_head, significant, solver_certificate
+from ..base import ObserverBuild
+from . import representation as switched
+from . import design as switched_pi
+from ...model import load_parameters
+from ...observers import ObserverConfig
+
+
+# gamma* the paper reports for its design (Sec. V)
+PAPER_GAMMA = 2.1
+
+
+@dataclass(frozen=True)
+class SwitchedPIBuild(ObserverBuild):
+    """A Menhour et al. 2014 switched H-infinity PI observer: modes, design, certificates, discrete modes."""
+
+    config: ObserverConfig
+    model: switched.SwitchedModel
+    design: switched_pi.SwitchedPIDesign
+    certificate: dict
+    hinf: dict
+    assumptions: dict
+    discrete: switched_pi.DiscreteModes
+    discrete_certificate: dict
+    timings: dict
+
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    def step_function(self) -> ca.Function:
+        return switched_pi.step_casadi(self.model, self.design, self.discrete, f"{self.name}_kernel")
+
+    def step_numpy(self, z, u, y, rho):
+        return switched_pi.step_numpy(self.model, self.design, self.discrete, z, u, y, rho)
+
+    reference_step = step_numpy     # the numpy peer of the benchmark
+
+    def lmi_problem(self):
+        """A fresh LMI problem of this design (benchmark: our path vs CVXPY on the same blocks)."""
+        return switched_pi.build_problem(self.model, self.design.T, self.design.settings)
+
+    @property
+    def state_names(self) -> list:
+        return switched_pi.state_layout(self.model)
+
+    @property
+    def output_names(self) -> list:
+        return switched_pi.output_layout(self.model)
+
+    @property
+    def input_names(self) -> list:
+        d = self.model.definition
+        return ([str(s) for s in d.known_inputs] + [f"y_{n}" for n in d.output_names]
+                + list(switched_pi.scheduling_inputs(self.model)))
+
+    @property
+    def nu(self) -> int:
+        return self.model.nu
+
+    @property
+    def ny(self) -> int:
+        return self.model.m
+
+    def input_boxes(self) -> dict:
+        """{input name: [min, max]}: the scheduling inputs (outside: SCHEDULING_CLAMPED)."""
+        return {k: list(v) for k, v in self.model.scheduling_boxes.items()}
+
+    @property
+    def flags_from_inputs_only(self) -> bool:
+        """True when every premise is an input itself, so SCHEDULING_CLAMPED <=> an input outside its box."""
+        inputs = {s for s in self.model.scheduling_boxes}
+        return all(str(a.premise) in inputs for a in self.model.rule.axes)
+
+    def scheduling_boxes(self) -> list:
+        out = [(k, lo, hi, False) for k, (lo, hi) in self.model.scheduling_boxes.items()]
+        out += [(f"premise_{a.name}", a.lower, a.upper, True) for a in self.model.rule.axes
+                if str(a.premise) not in self.model.scheduling_boxes]
+        return out
+
+    def signal_docs(self) -> tuple:
+        """(state, inputs, outputs) entries {name, doc} for the C header."""
+        d = self.model.definition
+        units = d.units
+        outs = [{"name": "mode", "doc": f"active mode 1..{self.model.n_modes} of the sample (0 after init)"}]
+        outs += [{"name": n, "doc": f"estimate of {n} [{units.get(n, '-')}]"} for n in self.output_names[1:]]
+        state = ([{"name": f"z_{s}", "doc": "observer state z of (5)"} for s in d.states]
+                 + [{"name": f"z_{w}", "doc": f"integral state of (5), {w} at the next sample [{units.get(str(w), '-')}]"}
+                    for w in d.unknown_inputs] + outs)
+        inputs = ([{"name": str(s), "doc": f"known input [{units.get(str(s), '-')}]"} for s in d.known_inputs]
+                  + [{"name": f"y_{n}", "doc": f"measured {n} [{units.get(n, '-')}]"} for n in d.output_names]
+                  + [{"name": s, "doc": f"measured premise signal [{units.get(s, '-')}]"}
+                     for s in switched_pi.scheduling_inputs(self.model)])
+        return state, inputs, outs
+
+    def emit_notes(self) -> dict:
+        rule = self.model.rule
+        axes = "; ".join(f"{a.name} = {a.premise}, thresholds {[float(f'{t:.6g}') for t in a.thresholds]}, "
+                         f"range [{a.lower:.6g}, {a.upper:.6g}] {a.unit}" for a in rule.axes)
+        return {
+            "headline": f"gamma = {self.design.gamma:.6g}, {self.model.n_modes} modes",
+            "stability": (f"exact ZOH of each mode's observer (5); common Lyapunov matrix: sqrt(V) contracts by "
+                          f"{self.discrete_certificate['contraction_per_step']:.6f} per step in every mode, "
+                          f"under any switching"),
+            "step_notes": [
+                f"Switching rule (data of the configuration): {axes}.",
+                "Each call consumes u_k, y_k and the premise signals of sample k and returns the mode",
+                "and the estimates of sample k; the state holds [z, w_hat] of sample k+1, then the outputs.",
+            ],
+            "clamp_doc": ("A premise signal outside its range (the nearest mode is used; the certificate's\n"
+                          " * model does not cover this sample)."),
+            "warmup_doc": "never set by this observer.",
+            "has_warmup": False,
+        }
+
+    def summary(self, path) -> dict:
+        sm, d = self.model, self.design
+        return {
+            "observer": self.name, "artifact": str(path), "modes": sm.n_modes,
+            "operating_points": [dict(p) for p in sm.points], "rule": sm.rule.to_json()["axes"],
+            "gamma": d.gamma, "paper_gamma": PAPER_GAMMA, "hinf": self.hinf,
+            "worst_block": self.certificate["worst_block"],
+            "worst_min_eig": self.certificate["worst_min_eig"],
+            "max_pole_real_part": self.certificate["max_pole_real_part"],
+            "max_pole_modulus": self.certificate["max_pole_modulus"], "assumptions": self.assumptions,
+            "solve_time_s": d.solution.solve_time_s, "build_time_s": d.solution.build_time_s,
+            "total_design_time_s": self.timings["representation_s"] + self.timings["design_s"],
+            "discrete_spectral_radius_max": self.discrete_certificate["spectral_radius_max"],
+            "discrete_contraction_per_step": self.discrete_certificate["contraction_per_step"],
+            "sample_time": self.config.sample_time,
+        }
+
+    def summary_lines(self, s: dict) -> list:
+        lines = [f"observer {s['observer']}: switched H-inf PI observer (Menhour et al. 2014), {s['modes']} modes"]
+        for a in s["rule"]:
+            lines.append(f"  rule axis {a['name']}: premise {a['premise']}, thresholds {a['thresholds']}, "
+                         f"range {a['range']}")
+        ranks = s["assumptions"]["modes"]
+        lines += [f"  A1/A2                   hold in every mode (rank F_i = {min(m['rank_F'] for m in ranks)}, "
+                  f"rank C_i = {min(m['rank_C'] for m in ranks)}, (A_ai, C_ai) detectable)",
+                  f"  gamma (LMIs (20))       {s['gamma']:.6g}   (paper: gamma* = {s['paper_gamma']}, a different "
+                  f"pole-region choice: docs/families/switched_pi.md)",
+                  f"  LMI re-check            {s['worst_min_eig']:.3e} worst margin in {s['worst_block']} "
+                  f"(numpy, no solver)"]
+        for m in s["hinf"]["modes"]:
+            lines.append(f"  mode {m['mode']} H-inf norm      {m['hinf_bisection']:.6g} (Hamiltonian bisection, peak at "
+                         f"{m['peak_rad_s']:.3g} rad/s), {m['hinf_sweep']:.6g} (frequency sweep)  <= gamma")
+        lines += [f"  error poles             Re <= {s['max_pole_real_part']:.4g}, |s| <= "
+                  f"{s['max_pole_modulus']:.4g} rad/s",
+                  f"  discrete step Ts={s['sample_time']:g}s  spectral radius {s['discrete_spectral_radius_max']:.6f}; "
+                  f"common P: sqrt(V) contracts by {s['discrete_contraction_per_step']:.6f}/step in every mode",
+                  f"  design time             {s['total_design_time_s']:.2f} s (solve {1e3 * s['solve_time_s']:.0f} ms)",
+                  f"artifact: {s['artifact']}"]
+        return lines
+
+    def artifact(self) -> dict:
+        return {
+            **artifact_head(self, [a.premise for a in self.model.rule.axes],
+                            flags_from_inputs_only=self.flags_from_inputs_only),
+            "switched_model": significant(self.model.to_json(), 12),
+            "assumptions": self.assumptions,
+            **self.design.gains_json(),
+            "discrete": {"Phi": self.discrete.Phi.tolist(), "G": self.discrete.G.tolist(),
+                         **significant(self.discrete_certificate)},
+            "certificate": solver_certificate(self.design.solution, recheck=self.certificate, hinf=self.hinf),
+        }
+
+
+def settings_of(config: ObserverConfig, tol: float | None = None) -> switched_pi.SwitchedPIDesignSettings:
+    """The ``[design]`` table, every key and value checked (codegen.settings); ``tol`` overrides its tol."""
+    from ...settings import parse_settings
+    return parse_settings(switched_pi.SwitchedPIDesignSettings, config.design, source=config.source,
+                          section="design", **({"tol": tol} if tol is not None else {}))
+
+
+def build(config: ObserverConfig, tol: float | None = None) -> SwitchedPIBuild:
+    """Menhour et al. 2014: modes from the model and the rule -> A1/A2 -> LMIs (20) -> re-check, H-inf check -> ZOH step."""
+    settings = settings_of(config, tol)
+    t0 = time.perf_counter()
+    sm = switched.build(config.load_model(), load_parameters(config.parameter_path), config.switching, config.source)
+    t1 = time.perf_counter()
+    design = switched_pi.design(sm, settings)
+    t2 = time.perf_counter()
+    assumptions = switched_pi.check_assumptions(sm, design.T)
+    cert = switched_pi.certify(sm, design)
+    hinf = switched_pi.hinf_check(sm, design)
+    dm = switched_pi.discretize(sm, design, config.sample_time)
+    dcert = switched_pi.certify_discrete(sm, design, dm)
+    t3 = time.perf_counter()
+    timings = {"representation_s": t1 - t0, "design_s": t2 - t1, "solve_s": design.solution.solve_time_s,
+               "build_s": design.solution.build_time_s, "certificates_s": t3 - t2}
+    return SwitchedPIBuild(config, sm, design, cert, hinf, assumptions, dm, dcert, timings)

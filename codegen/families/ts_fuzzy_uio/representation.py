@@ -1,0 +1,251 @@
+"""Takagi-Sugeno form with measured and unmeasured nonlinear consequents (Nguyen et al. 2021, eqs. (8)-(12)).
+
+From a nonlinear model x' = F(x, u) + D_v d, y = C x (outputs select states) this module
+derives, with no hand-written split:
+
+* the *measured* states (those an output reads) and the unmeasured ones;
+* term by term: terms free of unmeasured states form the measured consequent f_v(xi, u); terms
+  linear in one unmeasured state form A_v(xi); every other term (nonlinear in unmeasured
+  states, e.g. v_y^2) becomes a component of the unmeasured consequent phi(x) with its column
+  of G_v;
+* the premise variables: the distinct non-constant factors of A_v and G_v in the measured
+  signals (for Nguyen et al. 2021: 1/v_x and r), with ranges over the compact state set D_x (sound
+  interval bounds, :mod:`codegen.bounds`), 2^p sector vertices and product memberships;
+* Euler discretization at T_s (eq. (9)): A = I + T_s A_v, D = T_s D_v, f = T_s f_v, G = T_s G_v;
+* sound bounds of the Jacobian of phi over D_x (Assumption 1, eq. (14)); entries of zero width
+  collapse, so the DMVT vertex set V_phi has only the vertices that matter.
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import sympy as sp
+
+from ... import canonical
+from ...bounds import RangeBound, range_bound
+from ...errors import ModelDefinitionError, NotAffineError, SchedulingBoundsError
+from ...model import ModelDefinition, ParameterSet, parameter_substitution
+from ...polytope import (Premise, affine_decomposition, memberships, nonlinear_factors,
+                       sector_weights_product, vertex_matrices)
+
+
+@dataclass(frozen=True)
+class TSFuzzyModel:
+    """Discrete TS model x+ = sum h_i A_i x + D d + f(xi, u) + sum h_i G_i phi(x, u), y = C x."""
+
+    definition: ModelDefinition
+    parameters: ParameterSet
+    sample_time: float
+    measured: tuple            # state symbols read by the outputs, in output order
+    unmeasured: tuple
+    premises: tuple            # Premise(expr in measured symbols / known inputs, lower, upper)
+    memberships: tuple         # sympy h_i(xi)
+    A: np.ndarray              # (N, nx, nx)
+    G: np.ndarray              # (N, nx, nphi)
+    D: np.ndarray              # (nx, nd)
+    C: np.ndarray              # (ny, nx)
+    f: sp.Matrix               # T_s f_v, in measured symbols and known inputs
+    phi: tuple                 # unmeasured consequents, in state symbols (and known inputs)
+    state_box: dict            # {state symbol: (lo, hi)}
+    jacobian_bounds: tuple     # ((RangeBound per state) per phi component)
+
+    @property
+    def nx(self) -> int:
+        return self.A.shape[1]
+
+    @property
+    def nd(self) -> int:
+        return self.D.shape[1]
+
+    @property
+    def ny(self) -> int:
+        return self.C.shape[0]
+
+    @property
+    def n_rules(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def nphi(self) -> int:
+        return len(self.phi)
+
+    @cached_property
+    def CD_pinv(self) -> np.ndarray:
+        """(C D)^+ of (16c), computed once (the numpy reference step runs per sample)."""
+        return canonical.pinv(canonical.matmul(self.C, self.D))   # emitted: machine-independent
+
+    @cached_property
+    def theta_box(self) -> np.ndarray:
+        """(nphi, nx, 2) bounds of d phi_l / d x_j (eq. (14))."""
+        return np.array([[[b.lower, b.upper] for b in row] for row in self.jacobian_bounds]).reshape(
+            self.nphi, self.nx, 2)
+
+    @cached_property
+    def theta_vertices(self) -> np.ndarray:
+        """V_phi: corners of the Jacobian box over its non-degenerate entries, shape (P, nphi, nx)."""
+        box = self.theta_box
+        free = [(l, j) for l in range(self.nphi) for j in range(self.nx) if box[l, j, 0] < box[l, j, 1]]
+        out = []
+        for pick in itertools.product((0, 1), repeat=len(free)):
+            theta = box[:, :, 0].copy()
+            for (l, j), b in zip(free, pick):
+                theta[l, j] = box[l, j, b]
+            out.append(theta)
+        return np.array(out).reshape(len(out), self.nphi, self.nx)
+
+    def A_theta(self, i: int, theta: np.ndarray) -> np.ndarray:
+        """A_i(theta) = A_i + G_i Theta (eq. (24))."""
+        return self.A[i] + self.G[i] @ theta
+
+    def functions(self, xp) -> tuple:
+        """(f, premises, phi) as callables of (measured..., u...) / (x..., u...) for numpy or CasADi."""
+        import casadi as ca
+        mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "atan": ca.atan, "sin": ca.sin,
+                 "cos": ca.cos, "Abs": ca.fabs}, "math"] if xp is ca else "numpy"
+        meas_args = (*self.measured, *self.definition.known_inputs)
+        state_args = (*self.definition.states, *self.definition.known_inputs)
+        return ([sp.lambdify(meas_args, e, mods) for e in self.f],
+                [sp.lambdify(meas_args, p.expr, mods) for p in self.premises],
+                [sp.lambdify(state_args, e, mods) for e in self.phi])
+
+    @cached_property
+    def numpy_functions(self) -> tuple:
+        """:meth:`functions` for numpy, compiled once (the reference step runs per sample)."""
+        return self.functions(np)
+
+    @cached_property
+    def premise_functions(self) -> tuple:
+        args = (*self.measured, *self.definition.known_inputs)
+        return tuple(sp.lambdify(args, p.expr, "numpy") for p in self.premises)
+
+    def h(self, measured_values, u=()) -> np.ndarray:
+        """Membership values h_i at measured values (in ``measured`` order)."""
+        xi = np.array([f(*measured_values, *u) for f in self.premise_functions], dtype=float)
+        return np.asarray(sector_weights_product(xi, self.premises), dtype=float)
+
+    def to_json(self) -> dict:
+        return {
+            "sample_time": self.sample_time,
+            "measured": [str(s) for s in self.measured],
+            "unmeasured": [str(s) for s in self.unmeasured],
+            "premises": [{"name": p.name, "expr": str(p.expr), "range": [p.lower, p.upper]}
+                         for p in self.premises],
+            "memberships": [str(m) for m in self.memberships],
+            "A": self.A.tolist(), "G": self.G.tolist(), "D": self.D.tolist(), "C": self.C.tolist(),
+            "f": [str(e) for e in self.f], "phi": [str(e) for e in self.phi],
+            "state_box": {str(k): list(v) for k, v in self.state_box.items()},
+            "jacobian_bounds": [[{"state": str(s), "lower": b.lower, "upper": b.upper,
+                                  "attained": [b.attained_min, b.attained_max]}
+                                 for s, b in zip(self.definition.states, row)] for row in self.jacobian_bounds],
+            "dmvt_vertices": int(self.theta_vertices.shape[0]),
+        }
+
+
+def _output_selection(model: ModelDefinition) -> tuple:
+    """Measured states: every output must be one state (y = C x with C a selection)."""
+    measured = []
+    for name, expr in model.outputs:
+        expr = sp.sympify(expr)
+        if expr not in model.states:
+            raise ModelDefinitionError(
+                f"model {model.name!r}: output {name!r} = {expr} is not a state; the TS fuzzy UIO needs "
+                f"outputs that measure states directly (its premises are measured states)")
+        measured.append(expr)
+    return tuple(measured)
+
+
+def split_consequents(model: ModelDefinition, subs: dict) -> dict:
+    """Term-by-term split of the drift into f_v (measured), A_v (linear in unmeasured), phi/G_v.
+
+    Returns {"A": sympy (nx, nx), "f": column, "G": sympy (nx, nphi), "phi": tuple, "D": sympy}.
+    """
+    x, u, d = tuple(model.states), tuple(model.known_inputs), tuple(model.unknown_inputs)
+    measured = _output_selection(model)
+    unmeasured = tuple(s for s in x if s not in measured)
+    F = sp.Matrix(model.dynamics).subs(subs)
+    Dv = F.jacobian(sp.Matrix(d)) if d else sp.zeros(len(x), 0)
+    if any(e.free_symbols for e in Dv):
+        raise NotAffineError(f"model {model.name!r}: the unknown inputs must enter with a constant matrix "
+                             f"(D_v depends on {sorted(map(str, set().union(*(e.free_symbols for e in Dv))))})")
+    drift = sp.expand(F - Dv * sp.Matrix(d))
+    Av = sp.zeros(len(x), len(x))
+    fv = sp.zeros(len(x), 1)
+    phis, gcols = [], []
+    for row, entry in enumerate(drift):
+        for term in sp.Add.make_args(entry):
+            coeff, dep = term.as_independent(*unmeasured, as_Add=False)
+            if dep == 1:
+                fv[row] += term
+            elif dep in unmeasured:
+                Av[row, x.index(dep)] += coeff
+            else:
+                key = next((k for k, p in enumerate(phis) if sp.simplify(p - dep) == 0), None)
+                if key is None:
+                    phis.append(dep)
+                    gcols.append(sp.zeros(len(x), 1))
+                    key = len(phis) - 1
+                gcols[key][row] += coeff
+    Gv = sp.Matrix.hstack(*gcols) if gcols else sp.zeros(len(x), 0)
+    return {"A": Av, "f": fv, "G": Gv, "phi": tuple(phis), "D": Dv, "measured": measured,
+            "unmeasured": unmeasured}
+
+
+def build(model: ModelDefinition, params: ParameterSet, sample_time: float,
+          rel_tol: float = 1e-3) -> TSFuzzyModel:
+    """Derive the discrete TS fuzzy model (10) from ``model`` and its parameter file.
+
+    Raises
+    ------
+    ModelDefinitionError (MissingParameterError, UnknownParameterError), NotAffineError,
+    SchedulingBoundsError
+    """
+    if not sample_time > 0:
+        raise ModelDefinitionError(f"sample time must be positive, got {sample_time}")
+    subs = parameter_substitution(model, params)
+    parts = split_consequents(model, subs)
+    x = tuple(model.states)
+    box = {}
+    for s in (*x, *model.known_inputs):
+        if str(s) not in params.state_bounds:
+            raise SchedulingBoundsError(f"model {model.name!r}: {s} has no bound in [state_bounds] of "
+                                        f"{params.source}; the TS form needs the compact set D_x (eq. (5))")
+        box[s] = params.state_bounds[str(s)]
+    premise_symbols = (*parts["measured"], *model.known_inputs)
+    stray = set().union(*(e.free_symbols for e in (*parts["A"], *parts["G"]))) - set(premise_symbols)
+    if stray:
+        raise ModelDefinitionError(f"model {model.name!r}: A_v/G_v depend on {sorted(map(str, stray))}, "
+                                   f"which are not measured")
+    factors = nonlinear_factors((parts["A"], parts["G"]), premise_symbols)
+    order = {s: k for k, s in enumerate(premise_symbols)}
+    factors = sorted(factors, key=lambda g: (min(order[s] for s in g.free_symbols), sp.count_ops(g)))
+    premises = []
+    for k, g in enumerate(factors):
+        rb = range_bound(g, {s: box[s] for s in g.free_symbols}, rel_tol=1e-9)
+        if not rb.upper > rb.lower:
+            raise SchedulingBoundsError(f"premise {g} is constant on D_x")
+        premises.append(Premise(f"xi{k}", g, rb.lower, rb.upper))
+    premises = tuple(premises)
+    decomp = affine_decomposition({"A": parts["A"], "G": parts["G"]}, premise_symbols, tuple(factors))
+    p = len(premises)
+    corners = [[(pr.upper if (idx >> (p - 1 - j)) & 1 else pr.lower) for j, pr in enumerate(premises)]
+               for idx in range(2 ** p)]
+    mats = vertex_matrices(decomp, corners)
+    Ts = float(sample_time)
+    nx = len(x)
+    A = np.array([np.eye(nx) + Ts * a for a in mats["A"]])
+    G = Ts * mats["G"].reshape(len(corners), nx, len(parts["phi"]))
+    D = Ts * np.array(parts["D"], dtype=float).reshape(nx, len(model.unknown_inputs))
+    C = np.array([[1.0 if s == m else 0.0 for s in x] for m in parts["measured"]])
+    jac = []
+    for phi in parts["phi"]:
+        row = []
+        for s in x:
+            dphi = sp.diff(phi, s)
+            row.append(RangeBound(0.0, 0.0, 0.0, 0.0, 0) if dphi == 0 else
+                       range_bound(dphi, {v: box[v] for v in dphi.free_symbols}, rel_tol=rel_tol))
+        jac.append(tuple(row))
+    return TSFuzzyModel(model, params, Ts, parts["measured"], parts["unmeasured"], premises,
+                        memberships(premises), A, G, D, C, Ts * parts["f"], parts["phi"], box, tuple(jac))

@@ -1,0 +1,114 @@
+"""Building blocks of the CasADi observer steps, shared by the families.
+
+Unrolled solves without pivoting (the step's critical path is the chain of dependent divisions),
+sums in a chosen order, constant-times-symbolic products that skip zeros, a clamp written with
+selects, and the functions a derived expression may use in a CasADi lambdify. Everything here
+builds SX graphs; nothing is evaluated numerically.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+# Functions a derived expression may use, for the CasADi lambdify (sympy prints them unqualified).
+CASADI_FUNCTIONS = {"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "Abs": ca.fabs, "Min": ca.fmin,
+                    "Max": ca.fmax, "sin": ca.sin, "cos": ca.cos, "tan": ca.tan, "asin": ca.asin,
+                    "acos": ca.acos, "atan": ca.atan, "tanh": ca.tanh}
+
+
+TAIL = 3   # trailing block solved by its adjugate (see :func:`solve_unpivoted`)
+
+
+def reciprocal(x):
+    """1/x as its own node: CasADi rewrites (1/x)*y into y/x, which would turn one shared
+    reciprocal into one division per use. 0.5*(2/x) is bit-identical to 1/x (power-of-two
+    scaling is exact) and is left alone, so each use costs a multiplication."""
+    return 0.5 * (2.0 / x)
+
+
+def adjugate(S):
+    """Adjugate of a 1x1, 2x2 or 3x3 matrix given as nested lists (cofactors by 2x2 minors)."""
+    n = len(S)
+    if n == 1:
+        return [[1.0]]
+    if n == 2:
+        return [[S[1][1], -S[0][1]], [-S[1][0], S[0][0]]]
+
+    def minor(r0, r1, c0, c1):
+        return S[r0][c0] * S[r1][c1] - S[r0][c1] * S[r1][c0]
+    return [[minor(1, 2, 1, 2), -minor(0, 2, 1, 2), minor(0, 1, 1, 2)],
+            [-minor(1, 2, 0, 2), minor(0, 2, 0, 2), -minor(0, 1, 0, 2)],
+            [minor(1, 2, 0, 1), -minor(0, 2, 0, 1), minor(0, 1, 0, 1)]]
+
+
+def solve_unpivoted(G, rhs, tail: int = TAIL):
+    """Unrolled solve without pivoting, for matrices where that is known to be safe (checked by
+    :func:`lu_without_pivoting_is_safe`, or with a positive definite symmetric part, ``tail=0``).
+
+    The leading columns are eliminated by LU; the trailing ``tail`` x ``tail`` Schur complement
+    is solved by its adjugate and one reciprocal of its determinant; back substitution gives the
+    leading unknowns. Unlike a full LU, whose pivots form a chain of dependent divisions, the
+    adjugate's cofactors are all computed at once: the step's critical path is much shorter.
+    ``tail=0`` is a plain unpivoted LU.
+    """
+    n = G.shape[0]
+    G = [[G[i, j] for j in range(n)] for i in range(n)]
+    b = [rhs[i] for i in range(n)]
+    lead = max(n - tail, 0)
+    for k in range(lead):
+        for i in range(k + 1, n):
+            factor = G[i][k] / G[k][k]
+            for j in range(k + 1, n):
+                G[i][j] = G[i][j] - factor * G[k][j]
+            b[i] = b[i] - factor * b[k]
+    m = n - lead
+    x = [None] * n
+    if m:
+        S = [row[lead:] for row in G[lead:]]
+        adj = adjugate(S)
+        inv_det = reciprocal(sum_in_order([S[0][k] * adj[k][0] for k in range(m)]))
+        x[lead:] = [sum_in_order([adj[i][k] * b[lead + k] for k in range(m)]) * inv_det for i in range(m)]
+    for i in reversed(range(lead)):
+        acc = b[i]
+        for j in reversed(range(i + 1, n)):
+            acc = acc - G[i][j] * x[j]
+        x[i] = acc * reciprocal(G[i][i])
+    return ca.vertcat(*x)
+
+
+def tree_sum(terms):
+    """Sum as a balanced tree (shorter dependency chains than a running sum)."""
+    while len(terms) > 1:
+        terms = [terms[t] + terms[t + 1] if t + 1 < len(terms) else terms[t] for t in range(0, len(terms), 2)]
+    return terms[0]
+
+
+def sum_in_order(terms):
+    """Running sum in the given order (terms ready last go last)."""
+    total = terms[0]
+    for t in terms[1:]:
+        total = total + t
+    return total
+
+
+def const_times(a: np.ndarray, b: ca.SX) -> ca.SX:
+    """Constant matrix times symbolic matrix, each entry summed as a balanced tree (shorter
+    dependency chains than CasADi's running sum); zero coefficients are skipped."""
+    rows = []
+    for i in range(a.shape[0]):
+        row = []
+        for j in range(b.shape[1]):
+            terms = [a[i, k] * b[k, j] for k in range(a.shape[1]) if a[i, k] != 0.0]
+            row.append(tree_sum(terms) if terms else ca.SX(0))
+        rows.append(ca.horzcat(*row))
+    return ca.vertcat(*rows)
+
+
+def clamp(v, lo: float, hi: float):
+    """v clamped to [lo, hi] by comparisons and selects, exact for every finite v (the sum adds a
+    zero). CasADi's fmax/fmin helpers call libm, which compilers do not inline without
+    -ffinite-math-only: a call in the step around which every live floating-point register is
+    spilled. A NaN v gives NaN (fmax would give lo); the wrapper flags such a sample and keeps
+    nothing the step computed from it."""
+    low = ca.if_else(v < lo, lo, v)
+    return ca.if_else(hi < low, hi, low)

@@ -1,0 +1,74 @@
+"""What every family's validation shares: the settle time, the error statistics in the papers'
+formats, scenarios at an observer's rate, the model module's truth plant and the CommonRoad
+vehicle an observer was designed for, and the sensor noise of the simulated measurements."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..errors import ModelDefinitionError, SampleError
+from . import metrics, scenarios
+
+SENSOR_NOISE = {"r": np.deg2rad(0.05), "delta": np.deg2rad(0.02), "delta_dot": np.deg2rad(0.2),
+                "a_y": 0.05}
+SETTLE_TIME = 2.0
+
+
+def signal_stats(truth, est, t=None, angle: bool = False) -> dict:
+    """Error statistics in the papers' formats (Nguyen et al. 2019 E_mean/E_max/Std/RMS, Nguyen et al. 2021 MAE,
+    Sentouh et al. 2023 eq. (32) RMSE% and NMSE%), after SETTLE_TIME when sample times ``t`` are given."""
+    mask = slice(None) if t is None else np.asarray(t) >= SETTLE_TIME
+    y, yh = np.asarray(truth)[mask], np.asarray(est)[mask]
+    s = metrics.error_stats(y, yh, degrees=angle)
+    try:
+        nmse = metrics.nmse_percent(y, yh)
+    except metrics.MetricInputError:   # constant reference: NMSE undefined
+        nmse = None
+    return {"mae": s.e_mean, "max": s.e_max, "std": s.std, "rms": s.rms,
+            "rmse_percent": metrics.rmse_percent(y, yh, degrees=angle), "nmse_percent": nmse}
+
+
+def truncate(scn, duration: float | None):
+    if duration is None or duration >= scn.duration:
+        return scn
+    n = int(round(duration * scn.sample_rate)) + 1
+    cut = {k: getattr(scn, k)[:n] for k in ("t", "v_ref", "a_ref", "T_a", "T_d_open")}
+    if scn.kappa_ref is not None:
+        cut["kappa_ref"] = scn.kappa_ref[:n]
+    return replace(scn, **cut)
+
+
+def commonroad_vehicle(config) -> int:
+    """The CommonRoad parameter set an observer was designed for ([meta] commonroad_vehicle)."""
+    from ..model import load_parameters
+    vehicle = load_parameters(config.parameter_path).meta.get("commonroad_vehicle")
+    if vehicle not in ("1", "2", "3"):
+        raise ModelDefinitionError(
+            f"observer {config.name!r} was designed for {config.parameters}, not for a CommonRoad car; "
+            f"validate on the CommonRoad plant with an observer designed for its parameters, e.g. "
+            f"lpv_linf_driver_torque_bmw320i or ts_fuzzy_uio_bmw320i")
+    return int(vehicle)
+
+
+def truth_plant(config, params):
+    """The model module's truth plant (``PLANT``: e.g. Pacejka tyres) when the parameter set has the
+    ``[plant]`` values it needs (``mu`` may follow the scenario), else None (the observer's own
+    exact model is integrated)."""
+    plant = getattr(config.load_model_module(), "PLANT", None)
+    if plant is None:
+        return None
+    values = {**params.values, **params.plant}
+    return plant if all(str(p) in values or str(p) == "mu" for p in plant.parameters) else None
+
+
+def scenario_for(config, scenario, duration: float | None = None):
+    """A library scenario (by name) at the observer's sample rate, or a built
+    :class:`~codegen.validation.scenarios.Scenario` (e.g. a variant made with ``dataclasses.replace``)
+    whose rate must be the observer's; optionally truncated."""
+    if isinstance(scenario, scenarios.Scenario):
+        if abs(scenario.sample_rate * config.sample_time - 1.0) > 1e-9:
+            raise SampleError(f"scenario {scenario.name!r} is sampled at {scenario.sample_rate} Hz; observer "
+                              f"{config.name!r} runs at {1.0 / config.sample_time} Hz")
+        return truncate(scenario, duration)
+    return truncate(scenarios.make(scenario, sample_rate=1.0 / config.sample_time), duration)

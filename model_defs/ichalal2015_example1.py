@@ -1,0 +1,26 @@
+"""Ichalal and Mammar (IEEE T-IE 62(9), 2015), Example 1, eq. (40).
+
+    x' = [[0, 1 + rho], [-rho, -2]] x + [rho, 1 + rho]' d,   y = [1 0] x,   rho in [1, 5].
+
+Relative degree 1 (C D = rho != 0 on the box): the toolchain derives Q, P of eq. (50), shows that
+the classical polytopic UIO (11) has no common H (eqs. (47)-(48)) and designs observer (23).
+"""
+import sympy as sp
+
+from codegen.model import ModelDefinition, SchedulingSignal
+
+x1, x2, d = sp.symbols("x1 x2 d")
+rho = sp.Symbol("rho", positive=True)
+
+MODEL = ModelDefinition(
+    name="ichalal2015_example1",
+    states=(x1, x2),
+    known_inputs=(),
+    unknown_inputs=(d,),
+    dynamics=sp.Matrix([(1 + rho) * x2 + rho * d, -rho * x1 - 2 * x2 + (1 + rho) * d]),
+    outputs=(("x1", x1),),
+    scheduling=(SchedulingSignal(rho, "-"),),
+    parameters=(),
+    units={"x1": "-", "x2": "-", "d": "-", "rho": "-"},
+    doc=__doc__,
+)
