@@ -50,8 +50,9 @@ bench: build
 docs: build
 	$(PIP) install --quiet $(PIN) --no-build-isolation -e '.[bench]'
 	mkdir -p docs/data
-	$(BIN)/uiogen demo --json > docs/data/demo.json
-	$(BIN)/uiogen bench --json > docs/data/bench.json
+	$(BIN)/uiogen demo --json > docs/data/demo.json.tmp && mv docs/data/demo.json.tmp docs/data/demo.json
+	$(BIN)/uiogen bench --json > docs/data/bench.json.tmp && mv docs/data/bench.json.tmp docs/data/bench.json
+	$(BIN)/python -m codegen.spread --out docs/data/spread.json
 	$(BIN)/uiogen docs
 	$(BIN)/mkdocs build --strict --quiet
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -194,6 +195,35 @@ def cmd_demo(args) -> int:
     return demo.main(json_output=args.json)
 
 
+def cmd_new(args) -> int:
+    """A starter project: the family's example observer, its model and its parameters, copied
+    into DIR and wired to each other by paths, ready to design, generate and build as written."""
+    family = families.get(args.family)
+    if not family.example:
+        raise ConfigurationError(f"family {family.name!r} has no example observer to start from")
+    folder = Path(args.dir)
+    example = observers.get(family.example)
+    name = args.name or family.example
+    files = {folder / "model.py": example.model_path, folder / "parameters.toml": example.parameter_path}
+    target = folder / f"{name}.toml"
+    existing = [str(p) for p in [*files, target] if p.exists()]
+    if existing:
+        raise ConfigurationError(f"uiogen new {folder}: would overwrite {', '.join(existing)}; choose an empty folder")
+    folder.mkdir(parents=True, exist_ok=True)
+    for dst, src in files.items():
+        dst.write_text(src.read_text())
+    text = Path(example.source).read_text()
+    text = re.sub(r'^model = "[^"]*"', 'model = "model.py"      ', text, count=1, flags=re.M)
+    text = re.sub(r'^parameters = "[^"]*"', 'parameters = "parameters.toml"', text, count=1, flags=re.M)
+    head = (f"# Starter for your own {family.title} ({family.citation}), copied from the built-in\n"
+            f"# observer {family.example}: edit model.py (your equations, sympy) and parameters.toml (your car),\n"
+            f"# then:  uiogen design {target} --update && uiogen generate {target} && uiogen build {target}\n#\n")
+    target.write_text(head + text)
+    print(f"wrote {target}, {folder / 'model.py'}, {folder / 'parameters.toml'}")
+    print(f"next: uiogen design {target} --update; uiogen generate {target}; uiogen build {target}")
+    return 0
+
+
 def cmd_docs(args) -> int:
     from . import docs
     return docs.main(check=args.check)
@@ -244,6 +274,11 @@ def main(argv=None) -> int:
     p = sub.add_parser("demo", help="simulate every observer on its nonlinear model and summarize")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_demo)
+    p = sub.add_parser("new", help="a starter project (model, parameters, observer file) in DIR")
+    p.add_argument("dir")
+    p.add_argument("--family", required=True, help="an observer family (uiogen list shows them in use)")
+    p.add_argument("--name", help="the observer's name (default: the family's example)")
+    p.set_defaults(func=cmd_new)
     p = sub.add_parser("docs", help="the docs' tables of figures from docs/data/{demo,bench}.json")
     p.add_argument("--check", action="store_true", help="only compare; exit 1 if a page differs")
     p.set_defaults(func=cmd_docs)

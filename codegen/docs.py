@@ -150,7 +150,13 @@ def _render(kind: str, arg: str, demo: dict | None, bench: dict | None, spread: 
 
 
 def _load(path: Path) -> dict | None:
-    return json.loads(path.read_text()) if path.is_file() else None
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigurationError(f"{path}: not a JSON record of `uiogen demo/bench --json` ({exc}); re-run `make docs`",
+                                 source=str(path)) from None
 
 
 # pages copied into the docs from where they live beside the code

@@ -137,3 +137,8 @@ class UnsupportedError(UiogenError, ValueError):
 
 class UnknownFamilyError(ConfigurationError):
     """No observer family is registered under that name."""
+
+
+class RepresentationError(ModelDefinitionError):
+    """A representation of the model (a reduced polytope, a TS form) is too far from the model,
+    or too large, to be designed with; the message names the better choice."""

@@ -118,6 +118,8 @@ class Family(abc.ABC):
     observer_keys: dict = {}
     #: the library scenarios ``uiogen demo`` runs
     demo_scenarios: tuple = ()
+    #: the built-in observer ``uiogen new DIR --family NAME`` copies as a starter
+    example: str = ""
 
     def check_config(self, config, data: dict) -> None:
         """Check the family's own tables of an observer file (``data``: the parsed TOML) beyond

@@ -21,6 +21,7 @@ class AlgebraicUIO(Family):
     short_citation = "Ichalal and Mammar 2015"
     observer_keys = {"validation": Rule(dict, doc="scenarios [validation.NAME] (see the family's validation)")}
     demo_scenarios = ("paper",)
+    example = "algebraic_uio_example2"
 
     def build(self, config, tol=None):
         from .build import build

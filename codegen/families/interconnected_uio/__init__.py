@@ -21,6 +21,7 @@ class InterconnectedUIO(Family):
     short_citation = "Sentouh et al. 2023"
     observer_keys = {}
     demo_scenarios = ("satory",)
+    example = "interconnected_uio"
 
     def build(self, config, tol=None):
         from .build import build

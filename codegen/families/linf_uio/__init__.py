@@ -28,6 +28,7 @@ class LinfUIO(Family):
                      "rate_bounds": Rule(str, choices=("exact", "at_expansion_point", "none")),
                      "ui_filter": Rule(dict)}
     demo_scenarios = ("track_varying_speed", "takeover_opposing_assist")
+    example = "lpv_linf_driver_torque"
 
     def check_config(self, config, data: dict) -> None:
         parse_table(data.get("ui_filter", {}), UI_FILTER_KEYS, source=config.source, section="ui_filter")

@@ -13,7 +13,7 @@ from ... import polytope
 from ...artifact import artifact_head, significant
 from ...model import LPVModel, instantiate, load_parameters
 from ...observers import ObserverConfig
-from ...errors import ModelDefinitionError
+from ...errors import ModelDefinitionError, RepresentationError
 from ..base import ObserverBuild
 from . import design as linf_uio
 from . import discrete
@@ -193,9 +193,19 @@ def build(config: ObserverConfig, tol: float | None = None) -> LinfBuild:
     settings = _settings(config)
     if tol is not None:
         settings = dataclasses.replace(settings, tol=tol)
+    if err is not None and err["relative_error_there"] > settings.taylor_error_limit:
+        raise RepresentationError(
+            f"{config.source}: the Taylor-reduced polytope misses A(rho) by {100 * err['relative_error_there']:.1f} % "
+            f"(entry A{tuple(err['entry'])} at {poly.signal} = {err['at']:g}: {err['max_abs_error']:.4g}), more than "
+            f"[design] taylor_error_limit = {settings.taylor_error_limit:g}; use the exact form, polytope = \"sector\" "
+            f"({2 ** len(polytope.scheduling_nonlinearities(lpv))} vertices), or narrow the scheduling box")
     design = linf_uio.design(poly, settings)
     quadratic = design if settings.lyapunov == "quadratic" else \
         linf_uio.design(poly, dataclasses.replace(settings, lyapunov="quadratic"))
+    if design.gamma > quadratic.gamma:
+        # the quadratic design is a point of the PDLF problem (P_i = P, X = 0, the rate terms
+        # cancel): PDLF never returns worse than what it contains
+        design = dataclasses.replace(quadratic, settings=settings, fallback="quadratic (the PDLF optimum was worse)")
     t2 = time.perf_counter()
     cert = linf_uio.certify(poly, design.P, design.X, design.L, settings.alpha)
     data = discrete.ObserverData(poly, design.Q, design.L,

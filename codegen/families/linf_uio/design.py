@@ -45,6 +45,10 @@ class LinfDesignSettings:
         Strictness margin added to every LMI block, so the numpy re-check has slack.
     tol : float
         Clarabel gap/feasibility tolerance.
+    taylor_error_limit : float
+        Largest relative error of a Taylor-reduced polytope's A(theta) against the exact A(rho)
+        (at the entry of the largest absolute error) that is accepted; beyond it the design is
+        refused with a pointer to ``polytope = "sector"`` (the exact form).
     """
 
     alpha: float = setting(5.0, gt=0, doc="decay rate")
@@ -52,6 +56,7 @@ class LinfDesignSettings:
     gain_bound: float = setting(100.0, gt=0, doc="bound on ||M(theta)|| in 1/s")
     margin: float = setting(1e-5, ge=0)
     tol: float = setting(1e-8, gt=0)
+    taylor_error_limit: float = setting(0.25, gt=0, doc="relative error a Taylor-reduced polytope may have")
 
 
 def _check_assumptions(poly: Polytope) -> None:
@@ -143,6 +148,7 @@ class LinfDesign:
     mu: float
     nu: float
     solution: LMISolution | None
+    fallback: str = ""           # set when the PDLF design is the quadratic one it contains
 
     @property
     def gamma(self) -> float:
@@ -156,6 +162,8 @@ class LinfDesign:
         out = {f"P{i + 1}": p.tolist() for i, p in enumerate(self.P)}
         out.update({f"L{i + 1}": l.tolist() for i, l in enumerate(self.L)})
         out.update({"X": self.X.tolist(), "mu": self.mu, "nu": self.nu, "gamma": self.gamma})
+        if self.fallback:
+            out["fallback"] = self.fallback
         return out
 
 

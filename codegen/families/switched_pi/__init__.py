@@ -22,6 +22,7 @@ class SwitchedPI(Family):
     short_citation = "Menhour et al. 2014"
     observer_keys = {"switching": Rule(dict)}
     demo_scenarios = ("banked_road_braking", "braking_on_bend")
+    example = "switched_pi_bank_angle"
 
     def build(self, config, tol=None):
         from .build import build

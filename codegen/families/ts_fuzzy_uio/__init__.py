@@ -20,6 +20,7 @@ class TSFuzzyUIO(Family):
     short_citation = "Nguyen et al. 2021"
     observer_keys = {}
     demo_scenarios = ("random_trajectory_accel", "circular_path_normal", "time_varying_grip_normal")
+    example = "ts_fuzzy_uio"
 
     def build(self, config, tol=None):
         from .build import build

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ...errors import CertificateError, ConfigurationError, RankConditionError
+from ...errors import CertificateError, ConfigurationError, RankConditionError, RepresentationError
 from ...stepgen import solve_unpivoted
 from ...lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
 from ...polytope import sector_weights_product
@@ -45,11 +45,21 @@ class TSDesignSettings:
         Every LMI block >= margin I.
     tol : float
         Clarabel gap/feasibility tolerance.
+    bounds_rel_tol, bounds_max_boxes : float, int
+        Accuracy of the sound Jacobian bounds (relative to the attained values) and the budget of
+        boxes their branch-and-bound may split (:func:`codegen.bounds.range_bound`).
+    max_lmi_blocks, max_memory_gb : int, float
+        Size guards, checked before any LMI is built (:func:`size_guard`): the number of blocks
+        of (27) and the memory their coefficients need.
     """
 
     decay: float = setting(1.0, gt=0, le=1, doc="lambda: V_{k+1} <= lambda^2 V_k")
     margin: float = setting(1e-4, ge=0)
     tol: float = setting(1e-8, gt=0)
+    bounds_rel_tol: float = setting(1e-3, gt=0, le=1, doc="accuracy of the Jacobian bounds")
+    bounds_max_boxes: int = setting(20000, gt=0, doc="boxes the bound refinement may split")
+    max_lmi_blocks: int = setting(50000, gt=0, doc="largest number of LMI blocks of (27) to build")
+    max_memory_gb: float = setting(4.0, gt=0, doc="largest memory the LMI coefficients may take")
 
     def __post_init__(self):
         if not 0 < self.decay <= 1:
@@ -86,6 +96,31 @@ def decoupling_matrices(ts: TSFuzzyModel, rank_tol: float = 1e-9) -> tuple:
     if residual > 1e-9:
         raise RankConditionError(f"(17)/(20) residual {residual:.3g} after (30): the decoupling is not exact")
     return T, N
+
+
+def size_guard(n_rules: int, nx: int, ny: int, dmvt_vertices: int, settings: TSDesignSettings,
+               source: str = "") -> dict:
+    """Counts of the LMI problem (27) before it is built, refused past the settings' limits.
+
+    (27) has V N^3 blocks for N rules and V DMVT vertices (27a for every (p, l, i), 27b for every
+    (p, l, i, j != i)), each 2 n_x square, with coefficients over N (n_x(n_x+1)/2 + n_x^2 + n_x n_y)
+    variables: the memory is that of their dense coefficient arrays (and a few copies of them
+    while the blocks are formed).
+    """
+    n_var = n_rules * (nx * (nx + 1) // 2 + nx * nx + nx * ny)
+    blocks = dmvt_vertices * n_rules ** 3 + n_rules
+    k = 2 * nx
+    memory_gb = 3.0 * blocks * k * k * n_var * 8 / 1e9
+    counts = {"rules": n_rules, "dmvt_vertices": dmvt_vertices, "lmi_blocks": blocks, "variables": n_var,
+              "memory_gb": memory_gb}
+    if blocks > settings.max_lmi_blocks or memory_gb > settings.max_memory_gb:
+        raise RepresentationError(
+            f"{source}: the TS design would need {n_rules} rules x {dmvt_vertices} DMVT vertices = {blocks} LMI "
+            f"blocks of size {k} over {n_var} variables, about {memory_gb:.3g} GB (limits: [design] max_lmi_blocks = "
+            f"{settings.max_lmi_blocks}, max_memory_gb = {settings.max_memory_gb:g}). Options: fewer premises (each "
+            f"one doubles the rules; measure a signal, or move a nonlinearity into the unmeasured consequents phi, "
+            f"whose Jacobian bounds add DMVT vertices instead of rules), a smaller state box, or raise the limits")
+    return counts
 
 
 def _blocks(ts: TSFuzzyModel, T, P, M, L, decay, xp):
@@ -155,6 +190,7 @@ def build_problem(ts: TSFuzzyModel, T: np.ndarray, settings: TSDesignSettings):
 def design(ts: TSFuzzyModel, settings: TSDesignSettings = TSDesignSettings()) -> TSDesign:
     """Algorithm 1: rank conditions, (30), LMIs (27) on Clarabel, rounded and re-certified."""
     T, N = decoupling_matrices(ts)
+    size_guard(ts.n_rules, ts.nx, ts.ny, int(ts.theta_vertices.shape[0]), settings, ts.definition.name)
     prob = build_problem(ts, T, settings)
     sol = prob.solve(tol=settings.tol)
     n = ts.n_rules

@@ -194,8 +194,13 @@ def split_consequents(model: ModelDefinition, subs: dict) -> dict:
 
 
 def build(model: ModelDefinition, params: ParameterSet, sample_time: float,
-          rel_tol: float = 1e-3) -> TSFuzzyModel:
+          rel_tol: float = 1e-3, max_boxes: int = 20000, before_bounds=None) -> TSFuzzyModel:
     """Derive the discrete TS fuzzy model (10) from ``model`` and its parameter file.
+
+    ``before_bounds(n_rules, nx, ny, nphi)`` runs once the rules are known, before the Jacobian
+    bounds are computed (the design's size guard refuses a too large model there, in well under
+    a second). Only the derivatives along unmeasured states are bounded: the observer evaluates
+    phi with the measured states themselves, so its error has no component along them.
 
     Raises
     ------
@@ -228,6 +233,8 @@ def build(model: ModelDefinition, params: ParameterSet, sample_time: float,
             raise SchedulingBoundsError(f"premise {g} is constant on D_x")
         premises.append(Premise(f"xi{k}", g, rb.lower, rb.upper))
     premises = tuple(premises)
+    if before_bounds is not None:
+        before_bounds(2 ** len(premises), len(x), len(parts["measured"]), len(parts["phi"]))
     decomp = affine_decomposition({"A": parts["A"], "G": parts["G"]}, premise_symbols, tuple(factors))
     p = len(premises)
     corners = [[(pr.upper if (idx >> (p - 1 - j)) & 1 else pr.lower) for j, pr in enumerate(premises)]
@@ -240,12 +247,14 @@ def build(model: ModelDefinition, params: ParameterSet, sample_time: float,
     D = Ts * np.array(parts["D"], dtype=float).reshape(nx, len(model.unknown_inputs))
     C = np.array([[1.0 if s == m else 0.0 for s in x] for m in parts["measured"]])
     jac = []
+    measured = set(parts["measured"])
     for phi in parts["phi"]:
         row = []
         for s in x:
             dphi = sp.diff(phi, s)
-            row.append(RangeBound(0.0, 0.0, 0.0, 0.0, 0) if dphi == 0 else
-                       range_bound(dphi, {v: box[v] for v in dphi.free_symbols}, rel_tol=rel_tol))
+            row.append(RangeBound(0.0, 0.0, 0.0, 0.0, 0) if dphi == 0 or s in measured else
+                       range_bound(dphi, {v: box[v] for v in dphi.free_symbols}, rel_tol=rel_tol,
+                                   max_boxes=max_boxes))
         jac.append(tuple(row))
     return TSFuzzyModel(model, params, Ts, parts["measured"], parts["unmeasured"], premises,
                         memberships(premises), A, G, D, C, Ts * parts["f"], parts["phi"], box, tuple(jac))

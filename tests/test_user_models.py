@@ -1,0 +1,123 @@
+"""Models the project has never seen, from folders outside the package (a user's project).
+
+Observer files with ``model = "my_car.py"`` and ``parameters = "my_car.toml"`` beside them; the
+structure checks that refuse what a family cannot take, with the reformulation that would work;
+the size guard that refuses a too large TS design before building it; sound bounds of a
+saturating tyre; ``uiogen new``.
+"""
+import dataclasses
+import textwrap
+import time
+
+import numpy as np
+import pytest
+
+from codegen import cli, emit, observers, pipeline
+from codegen.errors import RepresentationError
+from codegen.families.linf_uio import build as linf_build
+from codegen.families.linf_uio import design as linf_design
+
+TS_HEAD = '''
+import sympy as sp
+from codegen.model import ModelDefinition
+
+v_y, r = sp.symbols("v_y r")
+v_x = sp.Symbol("v_x", positive=True)
+T_eng, delta = sp.symbols("T_eng delta")
+M, l_f, l_r, I_e, I_z, C_f, C_r = sp.symbols("M l_f l_r I_e I_z C_f C_r", positive=True)
+'''
+
+TS_PARAMS = """[parameters]
+M = 1476.0
+l_f = 1.13
+l_r = 1.49
+I_e = 442.8
+I_z = 1810.0
+C_f = 57000.0
+C_r = 59000.0
+{extra}
+[state_bounds]
+v_x = [5.0, 30.0]
+v_y = [-1.5, 1.5]
+r = [-0.55, 0.55]
+"""
+
+
+def _ts_project(tmp_path, rear_force: str, extra_symbols: str = "", extra_params: str = "", design: str = ""):
+    (tmp_path / "car.py").write_text(TS_HEAD + extra_symbols + textwrap.dedent(f'''
+        F_yf = 2 * C_f * (delta - (v_y + l_f * r) / v_x)
+        F_yr = {rear_force}
+        MODEL = ModelDefinition(
+            name="user_ts_car", states=(v_x, v_y, r), known_inputs=(), unknown_inputs=(T_eng, delta),
+            dynamics=sp.Matrix([T_eng / I_e + v_y * r, (F_yf + F_yr) / M - v_x * r, (l_f * F_yf - l_r * F_yr) / I_z]),
+            outputs=(("v_x", v_x), ("r", r)), scheduling=(),
+            parameters=tuple(sorted(set(sp.Matrix([F_yf, F_yr]).free_symbols) | {{M, I_e, I_z, l_f, l_r}}
+                                    - {{v_x, v_y, r, delta}}, key=str)),
+            units={{"v_x": "m/s", "v_y": "m/s", "r": "rad/s", "T_eng": "N m", "delta": "rad"}})
+        '''))
+    (tmp_path / "car.toml").write_text(TS_PARAMS.format(extra=extra_params))
+    (tmp_path / "obs.toml").write_text(f'family = "ts_fuzzy_uio"\nmodel = "car.py"\nparameters = "car.toml"\n'
+                                       f'sample_time = 0.01\n\n[design]\n{design}')
+    return tmp_path / "obs.toml"
+
+
+def test_a_saturating_tanh_tyre_designs_fast(tmp_path):
+    """tanh rear tyre in the unmeasured v_y: split, sound Jacobian bounds, LMIs, certified step."""
+    path = _ts_project(tmp_path, "F_r * sp.tanh(2 * C_r * (l_r * r - v_y) / (v_x * F_r))",
+                       'F_r = sp.Symbol("F_r", positive=True)\n', "F_r = 5000.0\n")
+    t0 = time.perf_counter()
+    b = pipeline.build(observers.get(str(path)))
+    assert time.perf_counter() - t0 < 30                     # issue target: bounds + LMIs <= 30 s
+    assert b.certificate["worst_min_eig"] > 0 and b.decrease["max_ratio"] < 1
+    # d(phi)/d v_x is not bounded: v_x is measured and phi is evaluated with the measurement
+    for phi, row in zip(b.ts.phi, b.ts.jacobian_bounds):
+        for s, bound in zip(b.ts.definition.states, row):
+            if s in b.ts.measured:
+                assert bound.lower == bound.upper == 0.0
+
+
+def test_a_too_large_ts_design_is_refused_within_a_second(tmp_path):
+    """Cubic rear slip: 5 premises, 32 rules, ~1e5 blocks of (27) -- refused before the bounds."""
+    path = _ts_project(tmp_path, "2 * C_r * ((l_r * r - v_y) / v_x - k3 * ((l_r * r - v_y) / v_x) ** 3)",
+                       'k3 = sp.Symbol("k3", positive=True)\n', "k3 = 3.0\n")
+    t0 = time.perf_counter()
+    with pytest.raises(RepresentationError, match=r"32 rules .* LMI blocks .*max_lmi_blocks") as exc:
+        pipeline.build(observers.get(str(path)))
+    assert time.perf_counter() - t0 < 5       # model parsing and the TS split, then the guard
+    assert "fewer premises" in str(exc.value)
+    assert cli.main(["design", str(path)]) == 2
+
+
+def test_taylor_reduced_polytope_refused_beyond_its_limit():
+    cfg = observers.get("lpv_linf_driver_torque")          # 14.8 % Taylor error on a_12
+    strict = dataclasses.replace(cfg, design={**cfg.design, "taylor_error_limit": 0.1})
+    with pytest.raises(RepresentationError, match=r'14\.8 %.*polytope = "sector"'):
+        pipeline.build(strict, fresh=True)
+
+
+def test_pdlf_never_worse_than_the_quadratic_design_it_contains(monkeypatch):
+    real = linf_design.design
+
+    def worse_pdlf(poly, settings):
+        d = real(poly, settings)
+        return dataclasses.replace(d, nu=4 * d.nu) if settings.lyapunov == "pdlf" else d
+    monkeypatch.setattr(linf_design, "design", worse_pdlf)
+    b = linf_build.build(observers.get("lpv_linf_driver_torque"))
+    assert b.design.gamma == b.quadratic.gamma and b.design.fallback
+    assert b.certificate["feasible"] and b.certificate["gamma"] <= b.quadratic.gamma * (1 + 1e-6)
+
+
+@pytest.mark.parametrize("family", ["linf_uio", "ts_fuzzy_uio"])
+def test_uiogen_new_writes_a_starter_that_designs_generates_and_builds(tmp_path, family, capsys):
+    folder = tmp_path / "my_project"
+    assert cli.main(["new", str(folder), "--family", family, "--name", "my_observer"]) == 0
+    toml = folder / "my_observer.toml"
+    assert toml.is_file() and (folder / "model.py").is_file() and (folder / "parameters.toml").is_file()
+    assert cli.main(["design", str(toml), "--update"]) == 0
+    emit.generate([str(toml)], log=lambda *_: None)
+    assert cli.main(["build", str(toml)]) == 0
+    from python_bindings import load
+    obs = load(str(toml))
+    out, status, _ = obs.run(np.zeros((20, obs.n_input)) + 0.01 * np.arange(obs.n_input))
+    assert np.all(np.isfinite(out))
+    assert cli.main(["new", str(folder), "--family", family, "--name", "my_observer"]) == 2   # no overwrite
