@@ -263,7 +263,7 @@ def main(argv=None) -> int:
     p.set_defaults(func=cmd_check_gains)
     p = sub.add_parser("validate", help="errors on an independent plant, beside the KF/EKF baselines")
     p.add_argument("name")
-    p.add_argument("--scenario", help="one of codegen.validation.scenarios.names()")
+    p.add_argument("--scenario", help="excitation (any model: its own equations, swept and excited) or one of codegen.validation.scenarios.names()")
     p.add_argument("--data", help="a logged run in the shared CSV format (plain or .gz); 'stanford' = the shared log")
     p.add_argument("--plant", choices=("nominal", "model", "commonroad"), default="nominal",
                    help="nominal: our symbolic truth plant (Pacejka); model: the observer's exact model")

@@ -205,6 +205,6 @@ def main(check: bool = False) -> int:
     for p in changed:
         print(f"{'differs' if check else 'updated'}: {p.relative_to(ROOT)}")
     if check and changed:
-        print("the docs' tables differ from docs/data/*.json: run `uiogen docs` (after `make docs-data`)")
+        print("the docs' tables differ from docs/data/*.json: run `uiogen docs` (or `make docs` to re-record them first)")
         return 1
     return 0

@@ -629,7 +629,9 @@ class LMIProblem:
         kept = red.kept_variables
         t1 = time.perf_counter()
         zero_P = sparse.csc_matrix((kept.size, kept.size))
-        result, solve_time = self._clarabel(zero_P, red.q, red.A, red.b, red.cones, red.blocks, tol, max_iter, verbose)
+        # with the refining stages to follow, an AlmostSolved first point is a good enough start
+        result, solve_time = self._clarabel(zero_P, red.q, red.A, red.b, red.cones, red.blocks, tol, max_iter, verbose,
+                                            stage="first solve" if unique else "")
         iterations = int(result.iterations)
         xs = np.asarray(result.x, dtype=float)
         if unique:

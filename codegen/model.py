@@ -183,6 +183,7 @@ class ParameterSet:
     meta: Mapping[str, str]
     plant: Mapping[str, float] = field(default_factory=dict)   # truth-plant-only values ([plant])
     state_bounds: Mapping[str, tuple] = field(default_factory=dict)   # [state_bounds] NAME = [min, max]
+    inputs: Mapping[str, dict] = field(default_factory=dict)   # [inputs.NAME] min, max, bandwidth (excitation)
 
 
 @dataclass(frozen=True)
@@ -222,7 +223,10 @@ class LPVModel:
 
 # Tables of a parameter file and the keys of a [scheduling.NAME] table (derivative_bounds is read by
 # codegen.relative_degree.derivative_boxes; exogenous and premise_bounds by codegen.interconnected).
-PARAMETER_TABLES = ("parameters", "scheduling", "meta", "plant", "state_bounds", "exogenous", "premise_bounds")
+PARAMETER_TABLES = ("parameters", "scheduling", "meta", "plant", "state_bounds", "exogenous", "premise_bounds",
+                    "inputs")
+INPUT_KEYS = {"min": Rule(float, required=True), "max": Rule(float, required=True),
+              "bandwidth": Rule(float, gt=0, doc="Hz, highest frequency of the excitation signal")}
 SCHEDULING_KEYS = {"min": Rule(float), "max": Rule(float), "rate_min": Rule(float), "rate_max": Rule(float),
                    "derivative_bounds": Rule(list, doc="[[min, max], ...] of the derivatives of order 2, 3, ...")}
 _NUMBER = Rule(float)
@@ -252,7 +256,9 @@ def load_parameters(path: str | Path) -> ParameterSet:
     ``derivative_bounds``), and an optional ``[meta]`` table of strings (source, car), an optional
     ``[plant]`` table of truth-plant-only numbers and an optional ``[state_bounds]`` table
     ``NAME = [min, max]`` (the compact state set of designs that bound unmeasured nonlinearities);
-    ``[exogenous]`` and ``[premise_bounds]`` are read by :mod:`codegen.interconnected`.
+    ``[exogenous]`` and ``[premise_bounds]`` are read by the interconnected family; ``[inputs.NAME]``
+    (``min``, ``max``, optional ``bandwidth`` in Hz) bounds a known or unknown input for the generic
+    excitation scenario (:mod:`codegen.validation.excitation`).
 
     Raises
     ------
@@ -312,7 +318,15 @@ def load_parameters(path: str | Path) -> ParameterSet:
         if not lo < hi:
             raise SchedulingBoundsError(f"{path}: state bound {key!r} needs min < max, got [{lo}, {hi}]")
         state_bounds[key] = (lo, hi)
-    return ParameterSet(str(path), values, boxes, meta, plant, state_bounds)
+    inputs = {}
+    for key, table in _table(data, "inputs", path).items():
+        if not isinstance(table, dict):
+            raise config_error(str(path), "inputs", key, table, "must be a table [inputs.NAME] with min, max")
+        table = parse_table(table, INPUT_KEYS, source=str(path), section=f"inputs.{key}")
+        if not table["min"] < table["max"]:
+            raise config_error(str(path), f"inputs.{key}", "max", table["max"], f"must exceed min = {table['min']}")
+        inputs[key] = table
+    return ParameterSet(str(path), values, boxes, meta, plant, state_bounds, inputs)
 
 
 def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str) -> sp.Matrix:

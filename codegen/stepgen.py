@@ -10,10 +10,14 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-# Functions a derived expression may use, for the CasADi lambdify (sympy prints them unqualified).
+# The functions a model's expressions may use, for every CasADi lambdify of the toolchain (sympy
+# prints them unqualified); "math" after it only supplies constants such as pi. One table, so a
+# function a user's model uses (tanh of a tyre, say) is never NaN in one step and fine in another.
 CASADI_FUNCTIONS = {"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "Abs": ca.fabs, "Min": ca.fmin,
                     "Max": ca.fmax, "sin": ca.sin, "cos": ca.cos, "tan": ca.tan, "asin": ca.asin,
-                    "acos": ca.acos, "atan": ca.atan, "tanh": ca.tanh}
+                    "acos": ca.acos, "atan": ca.atan, "atan2": ca.atan2, "sinh": ca.sinh, "cosh": ca.cosh,
+                    "tanh": ca.tanh, "sign": ca.sign, "floor": ca.floor, "ceiling": ca.ceil}
+CASADI_MODULES = [CASADI_FUNCTIONS, "math"]
 
 
 TAIL = 3   # trailing block solved by its adjugate (see :func:`solve_unpivoted`)

@@ -40,17 +40,26 @@ def run_scenario(name, scenario, plant: str = "nominal", duration: float | None 
     """Simulate the observer's family plant, run the compiled step and the baselines; returns the
     tables (``observer``, ``baselines``), the signals and ``family`` (which formats the table)."""
     config = observers.get(name) if isinstance(name, str) else name
+    if scenario == "excitation":            # every model: its own equations, swept and excited
+        from .validation import excitation
+        return {"family": config.family, **excitation.run(config, duration, seed, progress=progress)}
     result = families.get(config.family).validate(config, scenario, plant, duration, seed, progress=progress)
     return {"family": config.family, **result}
 
 
 def format_table(result: dict) -> str:
-    """The validation table in the format of the observer family's paper."""
+    """The validation table in the format of the observer family's paper (or the generic one of
+    the excitation scenario)."""
+    if result.get("table_format") == "generic":
+        from .validation import excitation
+        return excitation.format_table(result)
     return families.get(result["family"]).format_validation(result)
 
 
 def header(name: str, result: dict) -> str:
     """The line above the table: scenario, plant, samples, flagged samples."""
+    if result.get("table_format") == "generic":
+        return families.Family.validation_header(families.get(result["family"]), name, result)
     return families.get(result["family"]).validation_header(name, result)
 
 

@@ -25,9 +25,11 @@ from codegen.errors import GenerationError
 ROOT = Path(__file__).resolve().parent.parent
 NAMES = observers.names()
 # A re-solve (another machine, another BLAS kernel) must reach the committed objective within
-# this relative tolerance: the least-norm stage allows 1e-4 above the optimum, the solver's
-# tolerances another ~1e-5 on these problems (docs/guarantees.md).
-OBJECTIVE_RTOL = 1e-3
+# this relative tolerance: the least-norm point sits on the objective bound, the optimum times
+# (1 + 1e-4) rounded up to three significant digits, and two machines whose optima straddle a
+# rounding step bound it one step apart (at most 1 %, for a leading digit 1). Measured across
+# CPUs: at most 4e-4 (docs/performance.md, re-solve spread).
+OBJECTIVE_RTOL = 1e-2
 
 
 def _c_files(d: Path) -> list:

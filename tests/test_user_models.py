@@ -51,7 +51,7 @@ def _ts_project(tmp_path, rear_force: str, extra_symbols: str = "", extra_params
             name="user_ts_car", states=(v_x, v_y, r), known_inputs=(), unknown_inputs=(T_eng, delta),
             dynamics=sp.Matrix([T_eng / I_e + v_y * r, (F_yf + F_yr) / M - v_x * r, (l_f * F_yf - l_r * F_yr) / I_z]),
             outputs=(("v_x", v_x), ("r", r)), scheduling=(),
-            parameters=tuple(sorted(set(sp.Matrix([F_yf, F_yr]).free_symbols) | {{M, I_e, I_z, l_f, l_r}}
+            parameters=tuple(sorted((sp.Matrix([F_yf, F_yr]).free_symbols | {{M, I_e, I_z, l_f, l_r}})
                                     - {{v_x, v_y, r, delta}}, key=str)),
             units={{"v_x": "m/s", "v_y": "m/s", "r": "rad/s", "T_eng": "N m", "delta": "rad"}})
         '''))

@@ -82,6 +82,11 @@ class ObserverBuild(abc.ABC):
         """[{name, unit}] of known inputs the step computes from the measurements."""
         return []
 
+    def output_lags(self) -> dict:
+        """{output name: samples} by which an estimate lags the sample it is returned with (a
+        step whose unknown-input estimate needs the next output returns the previous one)."""
+        return {}
+
     @abc.abstractmethod
     def emit_notes(self) -> dict:
         """Text of the C API: headline, stability, step_notes, clamp_doc, warmup_doc, has_warmup."""

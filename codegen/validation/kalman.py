@@ -31,15 +31,14 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
+from ..stepgen import CASADI_FUNCTIONS
 from ..errors import ModelDefinitionError, SampleError
 from ..model import ModelDefinition
 
 __all__ = ["KalmanModel", "kalman_model", "FilterResult", "linear_kalman_filter", "extended_kalman_filter",
            "to_casadi"]
 
-_CASADI_NAMESPACE = {"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "sin": ca.sin, "cos": ca.cos,
-                     "tan": ca.tan, "atan": ca.atan, "atan2": ca.atan2, "asin": ca.asin, "acos": ca.acos,
-                     "tanh": ca.tanh, "Abs": ca.fabs, "Min": ca.fmin, "Max": ca.fmax}
+_CASADI_NAMESPACE = CASADI_FUNCTIONS     # the toolchain's one table (codegen.stepgen)
 
 
 def to_casadi(exprs, symbols, values) -> list:

@@ -47,6 +47,7 @@ from scipy.linalg import matrix_balance
 from . import representation as rdeg
 from ...bounds import range_bound
 from ...differentiators import MAX_ORDER, HosmdSpec
+from ...stepgen import CASADI_MODULES
 from ...errors import (CertificateError, DiscretizationError, InfeasibleLMIError, ModelDefinitionError,
                       SolverError)
 from ...lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
@@ -62,8 +63,6 @@ GL_C = (0.5 - _S3 / 6.0, 0.5 + _S3 / 6.0)
 GL_A = ((0.25, 0.25 - _S3 / 6.0), (0.25 + _S3 / 6.0, 0.25))
 GL_B = (0.5, 0.5)
 
-_CASADI_MODULES = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "atan": ca.atan, "sin": ca.sin,
-                    "cos": ca.cos, "Abs": ca.fabs}, "math"]
 
 
 # ---- settings -----------------------------------------------------------------------------------------
@@ -165,7 +164,7 @@ def matrix_polytope(mat: sp.Matrix, boxes: dict, label: str) -> MatrixPolytope:
 def _lambdify(symbols, expr, xp):
     expr = sp.sympify(expr)
     expr = expr.evalf(20) if not isinstance(expr, sp.MatrixBase) else expr.applyfunc(lambda e: e.evalf(20))
-    return sp.lambdify(symbols, expr, _CASADI_MODULES if xp is ca else "numpy")
+    return sp.lambdify(symbols, expr, CASADI_MODULES if xp is ca else "numpy")
 
 
 # ---- the classical polytopic UIO (11) --------------------------------------------------------------------

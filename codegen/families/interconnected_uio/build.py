@@ -15,12 +15,12 @@ from ...artifact import artifact_head, significant, solver_certificate
 from ..base import ObserverBuild
 from . import representation as icm
 from ...differentiators import MAX_ORDER, HosmdSpec, hosmd_step_numpy, hosmd_step_sx
-from ...stepgen import solve_unpivoted
+from ...stepgen import CASADI_MODULES, solve_unpivoted
 from ...errors import ModelDefinitionError
 from ...polytope import sector_weights_product
 from ...settings import Rule, parse_settings, parse_table
 
-from .design import (_CA_MODULES, ICDesign, ICDesignSettings, StepSettings, affine_parts, build_problem, certify,
+from .design import (ICDesign, ICDesignSettings, StepSettings, affine_parts, build_problem, certify,
                      design, discrete_certificate)
 
 # --- the step --------------------------------------------------------------------------------------
@@ -140,7 +140,7 @@ class _Ops:
 def _lambdas(layout: StepLayout, xp):
     """Compiled premise, coupling and initial-state functions."""
     ts = layout.ts
-    mods = _CA_MODULES if xp is ca else "numpy"
+    mods = CASADI_MODULES if xp is ca else "numpy"
     states = ts.definition.states
     exo = ts.definition.exogenous
     prem = []
@@ -286,7 +286,7 @@ def step_parts(ts: icm.InterconnectedTS, d: ICDesign, layout: StepLayout, z, y, 
         for j, (u, g) in enumerate(zip(sub.unknown_inputs, sub.ui_scales)):
             up = sum(sd.CBp[j, r] * resid[r] for r in range(sub.ny) if sd.CBp[j, r] != 0)
             if g != 1:
-                gval = sp.lambdify([s for s in states], g, _CA_MODULES if xp is ca else "numpy")(
+                gval = sp.lambdify([s for s in states], g, CASADI_MODULES if xp is ca else "numpy")(
                     *[vals[s] for s in states])
                 up = up / gval
             u_hat.append(up)

@@ -71,7 +71,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 import scipy.linalg
 
@@ -83,7 +82,6 @@ from ... import canonical
 from ...canonical import decimal_round
 
 FAMILY = "interconnected_uio"
-_CA_MODULES = [{"Max": ca.fmax, "Min": ca.fmin, "Abs": ca.fabs, "sqrt": ca.sqrt}, "math"]
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ Two deliberate, documented choices (README, "Nguyen et al. 2019 design"):
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,8 +78,27 @@ def _check_assumptions(poly: Polytope) -> None:
                         f"measure another output or change the model")
 
 
+def ui_scaling(poly: Polytope) -> np.ndarray:
+    """Unknown-input units for the LMIs: each column of D scaled to a largest entry of 1.
+
+    Theorem 1 is invariant under d -> c d up to nu -> nu / c^2 in exact arithmetic, but not its
+    strictness margins, nor the solver: a driver torque in N m or a force in N (entries of D
+    ~1e-3) puts nu near 1e-12, under the margins, and the design then depends on the unit (a
+    force in N gave a UI-filter loop at spectral radius 1.66 where the same force in kN gave 0.94).
+    The design is solved for d_s = d * c; gamma is reported in the model's units.
+    """
+    c = np.abs(poly.D).max(axis=(0, 1))
+    return np.where(c > 0, 1.0 / np.where(c > 0, c, 1.0), 1.0)
+
+
+def _scaled(poly: Polytope, scale: np.ndarray) -> Polytope:
+    return dataclasses.replace(poly, D=poly.D * scale[None, None, :])
+
+
 def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.ndarray | None = None):
-    """LMI problem of Theorem 1 under ``settings``; returns (problem, variables)."""
+    """LMI problem of Theorem 1 under ``settings``, in the unknown-input units of :func:`ui_scaling`;
+    returns (problem, variables)."""
+    poly = _scaled(poly, ui_scaling(poly))
     _check_assumptions(poly)
     if settings.lyapunov == "pdlf" and poly.rate_bound_mode == "none":
         raise ConfigurationError("the parameter-dependent design needs membership rate bounds; with "
@@ -181,7 +201,10 @@ def design(poly: Polytope, settings: LinfDesignSettings) -> LinfDesign:
     L = tuple(decimal_round(sol[f"L{i + 1}"]) for i in range(N))
     P = tuple(0.5 * (p + p.T) for p in P)
     X = 0.5 * (X + X.T)
-    nu = float(decimal_round(sol["nu"]))
+    # back to the model's units: D d = (D / c)(c d), so nu = nu_s / c^2 (one unknown input; the
+    # largest c bounds it for several)
+    c = float(np.max(1.0 / ui_scaling(poly)))
+    nu = float(decimal_round(sol["nu"] * c * c))
     return LinfDesign(settings, P, X, L, 1.0, nu, sol)
 
 

@@ -30,7 +30,7 @@ from scipy.linalg import eigh
 from ... import canonical
 from ...errors import ConfigurationError, DiscretizationError, ModelDefinitionError
 from ...polytope import Polytope, sector_weights_product
-from ...stepgen import CASADI_FUNCTIONS, TAIL, clamp, const_times, solve_unpivoted, sum_in_order
+from ...stepgen import CASADI_MODULES, TAIL, clamp, const_times, solve_unpivoted, sum_in_order
 
 
 @dataclass(frozen=True)
@@ -81,7 +81,7 @@ class ObserverData:
 
     def _derived_functions(self, xp):
         args = (*self.output_symbols, *self.raw_signals)
-        mods = [CASADI_FUNCTIONS, "math"] if xp is ca else "numpy"
+        mods = CASADI_MODULES if xp is ca else "numpy"
         return {sym: sp.lambdify(args, expr, mods) for sym, expr in self.derived}
 
     @cached_property
@@ -97,7 +97,7 @@ class ObserverData:
         """All derived inputs as one function, common subexpressions shared (one slip inversion
         serves several inputs)."""
         args = (*self.output_symbols, *self.raw_signals)
-        mods = [CASADI_FUNCTIONS, "math"] if xp is ca else "numpy"
+        mods = CASADI_MODULES if xp is ca else "numpy"
         return sp.lambdify(args, [expr for _, expr in self.derived_inputs], mods, cse=True)
 
     @cached_property
@@ -151,7 +151,7 @@ def premise_of_signal(poly: Polytope, rho, xp=np):
     rho = list(rho) if isinstance(rho, (list, tuple, np.ndarray)) and np.ndim(rho) > 0 else [rho]
     if xp is np:
         return [f(*rho) for f in poly.premise_functions]
-    mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log}, "math"]
+    mods = CASADI_MODULES
     return [sp.lambdify(poly.signals, p.expr, mods)(*rho) for p in poly.premises]
 
 
@@ -281,7 +281,7 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
         lam, V, W0, W1 = fact
         # 1/(1 + lam theta(rho)) as one cancelled rational function of rho, one division each:
         # it does not wait for theta's own division
-        mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log}, "math"]
+        mods = CASADI_MODULES
         num_den = [sp.fraction(sp.cancel(1 / (1 + sp.Float(float(l), 17) * poly.premises[0].expr)))
                    for l in lam]
         scale = [sp.lambdify(poly.signals, n_, mods)(*clamped) / sp.lambdify(poly.signals, d_, mods)(*clamped)

@@ -102,6 +102,10 @@ class TSFuzzyBuild(ObserverBuild):
         inputs = [{"name": f"y_{n}", "doc": f"measured {n} [{units.get(n, '-')}]"} for n in d.output_names]
         return state, inputs, outs
 
+    def output_lags(self) -> dict:
+        """(16c) needs y_{k+1}: the unknown inputs are those of the previous sample."""
+        return {str(d): 1 for d in self.ts.definition.unknown_inputs}
+
     def summary(self, path) -> dict:
         sol = self.design.solution
         ts = self.ts

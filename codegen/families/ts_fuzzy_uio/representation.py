@@ -26,6 +26,7 @@ import sympy as sp
 
 from ... import canonical
 from ...bounds import RangeBound, range_bound
+from ...stepgen import CASADI_MODULES
 from ...errors import ModelDefinitionError, NotAffineError, SchedulingBoundsError
 from ...model import ModelDefinition, ParameterSet, parameter_substitution
 from ...polytope import (Premise, affine_decomposition, memberships, nonlinear_factors,
@@ -103,8 +104,7 @@ class TSFuzzyModel:
     def functions(self, xp) -> tuple:
         """(f, premises, phi) as callables of (measured..., u...) / (x..., u...) for numpy or CasADi."""
         import casadi as ca
-        mods = [{"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "atan": ca.atan, "sin": ca.sin,
-                 "cos": ca.cos, "Abs": ca.fabs}, "math"] if xp is ca else "numpy"
+        mods = CASADI_MODULES if xp is ca else "numpy"
         meas_args = (*self.measured, *self.definition.known_inputs)
         state_args = (*self.definition.states, *self.definition.known_inputs)
         return ([sp.lambdify(meas_args, e, mods) for e in self.f],
