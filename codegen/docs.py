@@ -191,7 +191,7 @@ def update(check: bool = False, demo_path: Path | None = None, bench_path: Path 
 
         def fill(m):
             body = _render(m.group(2), m.group(3), demo, bench, spread)
-            return m.group(0) if body is None else m.group(1) + body + m.group(4)
+            return m.group(0) if body is None else m.group(1) + body + m.group(5)
         new = REGION.sub(fill, text)
         if new != text:
             changed.append(page)
