@@ -81,6 +81,10 @@ class DiscretizationError(UiogenError, RuntimeError):
     """The discrete-time observer step could not be certified stable."""
 
 
+class UILoopError(DiscretizationError):
+    """The observer's error with its unknown-input filter loop closed cannot be certified."""
+
+
 class UnknownObserverError(UiogenError, KeyError):
     """No observer configuration is registered under that name."""
 

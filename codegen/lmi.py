@@ -313,16 +313,17 @@ class SolveRecord:
     variables: dict
     objective: float
     iterations: int
+    data: dict = field(default_factory=dict)     # constants of the problem found at design time
 
     def to_json(self) -> dict:
         return {"problem": self.problem, "objective": self.objective, "iterations": self.iterations,
-                "variables": self.variables}
+                **({"data": self.data} if self.data else {}), "variables": self.variables}
 
     @classmethod
     def from_json(cls, data: dict, source: str = "") -> "SolveRecord":
         try:
             return cls(str(data["problem"]), dict(data["variables"]), float(data["objective"]),
-                       int(data["iterations"]))
+                       int(data["iterations"]), dict(data.get("data", {})))
         except (KeyError, TypeError, ValueError) as exc:
             raise DesignLockError(f"{source}: malformed LMI solution record ({exc})") from None
 
@@ -355,6 +356,23 @@ class Ledger:
 
 
 _LEDGER: contextvars.ContextVar = contextvars.ContextVar("uiogen_lmi_ledger", default=None)
+
+
+def committed_data(problem: str) -> dict | None:
+    """The constants committed with the next LMI solution when it is for ``problem`` and a design
+    lock is being replayed; None otherwise (recording, or no lock).
+
+    A problem whose constants come from a search at design time (a bisection on a decay rate)
+    builds itself from the committed constants on replay instead of searching again: the
+    replayed solution is then re-checked against the same problem on every machine.
+    """
+    ledger = _LEDGER.get()
+    if ledger is None or not ledger.replaying:
+        return None
+    k = len(ledger.records)
+    if k < len(ledger.replay) and ledger.replay[k].problem == problem:
+        return dict(ledger.replay[k].data)
+    return None
 
 
 @contextlib.contextmanager
@@ -414,6 +432,9 @@ class LMIProblem:
     # False for an analysis (a bisection, a report): solved afresh every time, never committed
     # to or replayed from a design lock, and without the least-norm stage unless asked.
     design: bool = True
+    # constants found at design time that the problem is built from (committed with the solution;
+    # see :func:`committed_data`); exact JSON numbers
+    data: dict = field(default_factory=dict)
     _names: list = field(default_factory=list)
     _variables: dict = field(default_factory=dict)
     _constraints: list = field(default_factory=list)
@@ -646,7 +667,8 @@ class LMIProblem:
                 f"on the gains/Lyapunov matrices")
         sol = self._solution(xv, blocks, float(q @ xv), "Solved", solve_time, t1 - t0, iterations)
         if ledger is not None:
-            ledger.records.append(SolveRecord(self.name, _exact_json(sol.values), sol.objective, iterations))
+            ledger.records.append(SolveRecord(self.name, _exact_json(sol.values), sol.objective, iterations,
+                                              dict(self.data)))
         return sol
 
     def _unique_point(self, red: "ReducedProblem", blocks, x0: np.ndarray, tol, max_iter, verbose, slack) -> tuple:
@@ -867,6 +889,10 @@ class LMIProblem:
         """The committed solution of this problem, re-checked block by block."""
         t0 = time.perf_counter()
         names, _, _, q, _, blocks = self._compile()
+        if record.data != self.data:
+            raise DesignLockError(
+                f"{self.name}: committed for {record.data}, the problem is built for {self.data}; re-solve with "
+                f"`uiogen design NAME --update`")
         if set(record.variables) != set(self._variables):
             raise DesignLockError(
                 f"{self.name}: the committed solution has variables {sorted(record.variables)}, the problem "

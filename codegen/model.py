@@ -203,6 +203,29 @@ class LPVModel:
     Bw: sp.Matrix = None        # dynamics of the derived inputs w: x' = A x + B u + Bw w + D d
     Duw: sp.Matrix = None       # output feedthrough of the derived inputs
     derived_inputs: tuple = ()  # (symbol, expression in y_<output>) with parameters substituted
+    Dd: sp.Matrix = None        # unknown inputs reaching the outputs: y = C x + Du u + Dd d
+
+    @property
+    def has_ui_feedthrough(self) -> bool:
+        return self.Dd is not None and any(e != 0 for e in self.Dd)
+
+    def require_no_ui_feedthrough(self, family: str, reason: str) -> None:
+        """Refuse unknown inputs in the outputs for a family whose theory needs y = C x (+ Du u).
+
+        Raises
+        ------
+        NotAffineError
+            naming the outputs and unknown inputs, and the family that takes the structure.
+        """
+        if not self.has_ui_feedthrough:
+            return
+        names = [n for n, _ in self.definition.outputs]
+        hits = [f"{names[i]} <- {self.definition.unknown_inputs[j]}" for i in range(self.Dd.shape[0])
+                for j in range(self.Dd.shape[1]) if self.Dd[i, j] != 0]
+        raise NotAffineError(
+            f"model {self.definition.name!r}: unknown inputs reach the outputs ({', '.join(hits)}); the {family} "
+            f"needs y = C x + Du u ({reason}). The L-infinity UIO (family linf_uio) takes this feedthrough; "
+            f"or measure an output the unknown input does not reach")
 
     @property
     def nx(self) -> int:
@@ -465,23 +488,25 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     C = _affine_part(h, x, "the states", model.name)
     Du = _affine_part(h, u, "the known inputs", model.name)
     Duw = _affine_part(h, w, "the derived inputs", model.name)
+    Dd = _affine_part(h, d, "the unknown inputs", model.name)
     col = lambda syms: sp.Matrix(len(syms), 1, list(syms))   # a (k, 1) column, also for k = 0
     rest = sp.simplify(f - A * col(x) - B * col(u) - D * col(d)
                        - (Bw * sp.Matrix(w) if w else sp.zeros(*f.shape))) if x else f
     if any(sp.simplify(e) != 0 for e in rest):
         raise NotAffineError(f"model {model.name!r}: dynamics have a drift term independent of "
                              f"states and inputs: {list(rest)}")
-    h_rest = sp.simplify(h - C * col(x) - Du * col(u) - (Duw * sp.Matrix(w) if w else sp.zeros(*h.shape)))
+    h_rest = sp.simplify(h - C * col(x) - Du * col(u) - Dd * col(d)
+                         - (Duw * sp.Matrix(w) if w else sp.zeros(*h.shape)))
     if any(sp.simplify(e) != 0 for e in h_rest):
-        raise NotAffineError(f"model {model.name!r}: outputs must be C(rho) x + Du(rho) u; left over: "
-                             f"{list(h_rest)} (unknown inputs may not reach the outputs in this family)")
-    for mat, label in ((B, "B"), (D, "D"), (C, "C"), (Du, "Du"), (Bw, "Bw"), (Duw, "Duw")):
+        raise NotAffineError(f"model {model.name!r}: outputs must be C(rho) x + Du(rho) u + Dd(rho) d; left over: "
+                             f"{list(h_rest)} (a term independent of states and inputs)")
+    for mat, label in ((B, "B"), (D, "D"), (C, "C"), (Du, "Du"), (Bw, "Bw"), (Duw, "Duw"), (Dd, "Dd")):
         if any(e.free_symbols & set(x + u + d + w) for e in mat):
             raise NotAffineError(f"model {model.name!r}: {label} depends on states or inputs")
-    A, B, D, C, Du, Bw, Duw = (m.subs(subs) for m in (A, B, D, C, Du, Bw, Duw))
+    A, B, D, C, Du, Bw, Duw, Dd = (m.subs(subs) for m in (A, B, D, C, Du, Bw, Duw, Dd))
     sched = tuple(sig.symbol for sig in model.scheduling)
     allowed = set(sched)
-    for mat, label in ((A, "A"), (B, "B"), (D, "D"), (C, "C"), (Du, "Du"), (Bw, "Bw"), (Duw, "Duw")):
+    for mat, label in ((A, "A"), (B, "B"), (D, "D"), (C, "C"), (Du, "Du"), (Bw, "Bw"), (Duw, "Duw"), (Dd, "Dd")):
         stray = set().union(*(e.free_symbols for e in mat)) - allowed if len(mat) else set()
         if stray:
             raise ModelDefinitionError(
@@ -489,4 +514,4 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
                 f"which is neither a parameter nor a scheduling signal")
     derived = tuple((g.symbol, sp.sympify(g.derived).subs(subs)) for g in model.scheduling if g.derived is not None)
     derived_inputs = tuple((g.symbol, sp.sympify(g.expr).subs(subs)) for g in model.derived_inputs)
-    return LPVModel(model, params, A, B, D, C, sched, tuple(boxes), Du, derived, Bw, Duw, derived_inputs)
+    return LPVModel(model, params, A, B, D, C, sched, tuple(boxes), Du, derived, Bw, Duw, derived_inputs, Dd)

@@ -67,6 +67,7 @@ class Polytope:
     Du: np.ndarray = None
     Bw: np.ndarray = None        # derived-input matrices (N, nx, nw); nw = 0 without derived inputs
     Duw: np.ndarray = None
+    Dd: np.ndarray = None        # unknown inputs reaching the outputs (N, ny, nd); zeros without
 
     # the primary (first) scheduling signal, for the single-signal reports
     @property
@@ -139,7 +140,17 @@ class Polytope:
             "Du": self.Du.tolist(),
             **({"Bw": self.Bw.tolist(), "Duw": self.Duw.tolist()}
                if self.Bw is not None and self.Bw.shape[-1] else {}),
+            **({"Dd": self.Dd.tolist()} if self.has_ui_feedthrough else {}),
         }
+
+    @property
+    def has_ui_feedthrough(self) -> bool:
+        return self.Dd is not None and bool(np.any(self.Dd != 0))
+
+    @property
+    def D_varies(self) -> bool:
+        """Whether the unknown-input matrix D depends on the scheduling (differs between vertices)."""
+        return bool(np.ptp(self.D, axis=0).max(initial=0) > 0)
 
 
 def nonlinear_factors(matrices, symbols) -> tuple:
@@ -161,18 +172,19 @@ def nonlinear_factors(matrices, symbols) -> tuple:
     return tuple(sorted(found.values(), key=lambda g: (sp.count_ops(g), sp.default_sort_key(g))))
 
 
-def _derived_input_matrices(lpv: LPVModel) -> tuple:
-    """(Bw, Duw), with zero columns for a model without derived inputs."""
+def _matrices(lpv: LPVModel) -> dict:
+    """Every matrix of the LPV model by label; derived-input and UI-feedthrough matrices as zeros
+    (zero columns without derived inputs) where the model has none."""
     nw = len(lpv.derived_inputs)
-    Bw = lpv.Bw if lpv.Bw is not None else sp.zeros(lpv.nx, nw)
-    Duw = lpv.Duw if lpv.Duw is not None else sp.zeros(lpv.ny, nw)
-    return Bw, Duw
+    return {"A": lpv.A, "B": lpv.B, "C": lpv.C, "D": lpv.D, "Du": lpv.Du,
+            "Bw": lpv.Bw if lpv.Bw is not None else sp.zeros(lpv.nx, nw),
+            "Duw": lpv.Duw if lpv.Duw is not None else sp.zeros(lpv.ny, nw),
+            "Dd": lpv.Dd if lpv.Dd is not None else sp.zeros(lpv.ny, lpv.nd)}
 
 
 def scheduling_nonlinearities(lpv: LPVModel) -> tuple:
-    """:func:`nonlinear_factors` of A, B, C, D, Du, Bw, Duw in the scheduling signals."""
-    return nonlinear_factors((lpv.A, lpv.B, lpv.C, lpv.D, lpv.Du, *_derived_input_matrices(lpv)),
-                             lpv.scheduling_symbols)
+    """:func:`nonlinear_factors` of A, B, C, D, Du, Bw, Duw, Dd in the scheduling signals."""
+    return nonlinear_factors(tuple(_matrices(lpv).values()), lpv.scheduling_symbols)
 
 
 def affine_decomposition(matrices: dict, symbols, nonlinearities: tuple) -> dict:
@@ -203,10 +215,7 @@ def affine_decomposition(matrices: dict, symbols, nonlinearities: tuple) -> dict
 
 
 def _affine_decomposition(lpv: LPVModel, nonlinearities: tuple):
-    Bw, Duw = _derived_input_matrices(lpv)
-    return affine_decomposition({"A": lpv.A, "B": lpv.B, "C": lpv.C, "D": lpv.D, "Du": lpv.Du,
-                                 "Bw": Bw, "Duw": Duw},
-                                lpv.scheduling_symbols, nonlinearities)
+    return affine_decomposition(_matrices(lpv), lpv.scheduling_symbols, nonlinearities)
 
 
 def _pole_on_box(den: sp.Expr, sym: sp.Symbol, bounds: dict) -> str | None:
@@ -243,7 +252,7 @@ def _pole_on_box(den: sp.Expr, sym: sp.Symbol, bounds: dict) -> str | None:
 
 
 def check_regular_on_box(lpv: LPVModel) -> None:
-    """Refuse a scheduling box on which an entry of A, B, C, D, Du, Bw, Duw is singular (1/v_x, v_x in [0, 35]).
+    """Refuse a scheduling box on which an entry of A, B, C, D, Du, Bw, Duw, Dd is singular (1/v_x, v_x in [0, 35]).
 
     Raises
     ------
@@ -253,9 +262,7 @@ def check_regular_on_box(lpv: LPVModel) -> None:
     """
     syms = set(lpv.scheduling_symbols)
     bounds = {s: (b.lower, b.upper) for s, b in zip(lpv.scheduling_symbols, lpv.boxes)}
-    Bw, Duw = _derived_input_matrices(lpv)
-    for label, mat in (("A", lpv.A), ("B", lpv.B), ("C", lpv.C), ("D", lpv.D), ("Du", lpv.Du), ("Bw", Bw),
-                       ("Duw", Duw)):
+    for label, mat in _matrices(lpv).items():
         if mat is None:
             continue
         for i, j in itertools.product(range(mat.shape[0]), range(mat.shape[1])):
@@ -415,7 +422,8 @@ def sector_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polytope:
     rates = _rate_bounds(etas, lpv.scheduling_symbols[0], lpv.boxes[0], rate_bounds, None)
     return Polytope("sector", tuple(lpv.scheduling_symbols), tuple(b.lower for b in lpv.boxes),
                     tuple(b.upper for b in lpv.boxes), premises, nonlin, mats["A"], mats["B"],
-                    mats["C"], mats["D"], etas, rates, rate_bounds, None, mats["Du"], mats["Bw"], mats["Duw"])
+                    mats["C"], mats["D"], etas, rates, rate_bounds, None, mats["Du"], mats["Bw"], mats["Duw"],
+                    mats["Dd"])
 
 
 def taylor_reduced_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polytope:
@@ -467,7 +475,7 @@ def taylor_reduced_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polyto
     return Polytope("taylor_reduced", (signal,), (box.lower,), (box.upper,), (premise,), nonlin, mats["A"],
                     mats["B"], mats["C"], mats["D"], etas,
                     _rate_bounds(etas, signal, box, rate_bounds, expansion_point), rate_bounds,
-                    expansion_point, mats["Du"], mats["Bw"], mats["Duw"])
+                    expansion_point, mats["Du"], mats["Bw"], mats["Duw"], mats["Dd"])
 
 
 def exact_matrix_function(lpv: LPVModel, label: str = "A"):

@@ -15,12 +15,22 @@ from .errors import ModelDefinitionError, SampleError
 from .model import LPVModel
 
 
-def rk4_step(rhs, x, h: float):
-    """One classical Runge-Kutta step of x' = rhs(x): the integrator of every truth plant in the library."""
-    k1 = rhs(x)
-    k2 = rhs(x + 0.5 * h * k1)
-    k3 = rhs(x + 0.5 * h * k2)
-    k4 = rhs(x + h * k3)
+def rk4_step(rhs, x, h: float, stage_inputs=None):
+    """One classical Runge-Kutta step of x' = rhs(x): the integrator of every truth plant in the library.
+
+    With ``stage_inputs = (e0, e_half, e1)``, the inputs at the step's start, middle and end, it
+    integrates x' = rhs(x, e(t)) with inputs that vary within the step."""
+    if stage_inputs is None:
+        k1 = rhs(x)
+        k2 = rhs(x + 0.5 * h * k1)
+        k3 = rhs(x + 0.5 * h * k2)
+        k4 = rhs(x + h * k3)
+    else:
+        e0, e_half, e1 = stage_inputs
+        k1 = rhs(x, e0)
+        k2 = rhs(x + 0.5 * h * k1, e_half)
+        k3 = rhs(x + 0.5 * h * k2, e_half)
+        k4 = rhs(x + h * k3, e1)
     return x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
 
 

@@ -11,6 +11,28 @@ def test_certificate_contracts(build):
     c = build.discrete_certificate
     assert c.kappa > 1.0 and c.contraction < 1.0
     assert c.error_radius_max < 1.0 and c.augmented_radius_max < 1.0
+    # the UI filter loop: proven, and the proof is tight against the grid's evidence
+    assert 0.0 < c.ui_loop.beta and c.augmented_radius_max < c.ui_loop.contraction < 1.0
+    assert c.ui_loop.contraction - c.augmented_radius_max < 0.01
+
+
+def test_ui_loop_certificate_holds_along_random_scheduling(build):
+    """The full error z = [e; e_d] of the backward-Euler step, UI filter loop closed, decreases
+    V = z' P z by at least 1 + 2 beta Ts at every sample, for scheduling that jumps anywhere in
+    the box (the common Lyapunov function does not need rate bounds)."""
+    data, c = build.data, build.discrete_certificate.ui_loop
+    sol = discrete._ui_loop_problem(data, c.beta, data.Tf, design=False).solve()
+    P = np.asarray(sol["P"])
+    scale = np.concatenate([np.ones(data.nx), 1.0 / discrete.ui_scaling(data.poly)])   # e_d in solver units
+    rng = np.random.default_rng(3)
+    poly = data.poly
+    for _ in range(200):
+        v = rng.uniform(poly.signal_lower, poly.signal_upper)
+        Aa = discrete.augmented_matrices(data, np.array(discrete.premise_of_signal(poly, v), float))[0]
+        z = rng.standard_normal(data.nz)
+        z_next = np.linalg.solve(np.eye(data.nz) - data.Ts * Aa, z)
+        V, V_next = (z * scale) @ P @ (z * scale), (z_next * scale) @ P @ (z_next * scale)
+        assert V >= (1 + 2 * c.beta * data.Ts) * V_next * (1 - 1e-9)
 
 
 def test_lyapunov_decrease_along_random_scheduling(build):
@@ -55,8 +77,9 @@ def test_unstable_step_refused(build):
     designs keep the loop stable up to gain bounds of 10^4 1/s (docs/families/linf_uio.md), so a
     high bound alone no longer provokes this."""
     data = discrete.ObserverData(build.poly, build.design.Q, tuple(-l for l in build.design.L), 0.005, 0.01)
-    with pytest.raises(DiscretizationError, match="spectral radius"):
+    with pytest.raises(DiscretizationError, match="no common Lyapunov function.*unstable at v_x") as err:
         discrete.certify_step(data, 5.0)
+    assert "no filter constant up to" in str(err.value)      # measured: no Tf helps
     for gb in (1000.0, 10000.0):      # certify_step raises unless the step is certified
         fast = linf_uio.design(build.poly, linf_uio.LinfDesignSettings(gain_bound=gb))
         discrete.certify_step(discrete.ObserverData(build.poly, fast.Q, fast.L, 0.005, 0.01), 5.0)

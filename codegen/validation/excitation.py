@@ -1,7 +1,8 @@
 """``uiogen validate NAME --scenario excitation``: a validation scenario for any model.
 
 No driver, no track, nothing of a particular paper: the model's own nonlinear equations (the
-symbolic ``MODEL``, before any polytope or TS reduction) are integrated (RK4 at Ts/10) with
+symbolic ``MODEL``, before any polytope or TS reduction) are integrated (RK4 at Ts/10, the
+inputs evaluated continuously between the samples, as a real car's are) with
 
 * every input scheduling signal swept inside its box: a sine of 0.9 of the half-range about the
   box's centre whose slope stays within the box's rate bounds (at its centre when it has none);
@@ -27,38 +28,40 @@ from .common import SETTLE_TIME, signal_stats
 DURATION = 30.0
 
 
-def _smooth(t: np.ndarray, rng, lo: float, hi: float, bandwidth: float) -> np.ndarray:
-    """A seeded sum of sinusoids in [0.05, bandwidth] Hz, scaled to fill [lo, hi] (90 %)."""
+def _smooth(t: np.ndarray, rng, lo: float, hi: float, bandwidth: float):
+    """A seeded sum of sinusoids in [0.05, bandwidth] Hz, scaled to fill [lo, hi] (90 % of it on
+    the sample times ``t``); returned as a function of time."""
     f = np.exp(rng.uniform(np.log(0.05), np.log(bandwidth), 12))
     ph = rng.uniform(0.0, 2 * np.pi, 12)
-    x = (np.sin(2 * np.pi * f[:, None] * t[None, :] + ph[:, None]) / f[:, None]).sum(axis=0)
-    x = (x - x.min()) / max(x.max() - x.min(), 1e-300)
-    return lo + (0.05 + 0.9 * x) * (hi - lo)
+    raw = lambda tt: (np.sin(2 * np.pi * f[:, None] * np.atleast_1d(tt)[None, :] + ph[:, None]) / f[:, None]).sum(axis=0)
+    x = raw(t)
+    x_min, width = x.min(), max(x.max() - x.min(), 1e-300)
+    return lambda tt: lo + (0.05 + 0.9 * (raw(tt) - x_min) / width) * (hi - lo)
 
 
-def _sweep(t: np.ndarray, box) -> np.ndarray:
+def _sweep(box):
     mid, half = 0.5 * (box.lower + box.upper), 0.45 * (box.upper - box.lower)
     rate = min(abs(box.rate_lower), abs(box.rate_upper))
     if rate <= 0:
-        return np.full_like(t, mid)
+        return lambda tt: np.full(np.shape(np.atleast_1d(tt)), mid)
     omega = 0.9 * rate / half                  # |d/dt half sin(omega t)| <= 0.9 rate
-    return mid - half * np.cos(omega * t)
+    return lambda tt: mid - half * np.cos(omega * np.atleast_1d(tt))
 
 
-def signals(config, duration: float = DURATION, seed: int = 0) -> dict:
-    """The scenario's inputs at the observer's sample times: {name: array}, with ``t``."""
+def signal_functions(config, duration: float = DURATION, seed: int = 0) -> tuple:
+    """(sample times, {name: function of time}) of the scenario's raw scheduling signals and inputs."""
     model = config.load_model()
     params = load_parameters(config.parameter_path)
     t = np.arange(0.0, duration + 0.5 * config.sample_time, config.sample_time)
     rng = np.random.default_rng(seed)
-    out = {"t": t}
+    out = {}
     for sig in model.scheduling:
         if sig.derived is None:
             box = params.scheduling.get(str(sig.symbol))
             if box is None:
                 raise ModelDefinitionError(f"{params.source}: the excitation scenario sweeps {sig.symbol} inside "
                                            f"[scheduling.{sig.symbol}], which is missing")
-            out[str(sig.symbol)] = _sweep(t, box)
+            out[str(sig.symbol)] = _sweep(box)
     for u in (*model.known_inputs, *model.unknown_inputs):
         spec = params.inputs.get(str(u))
         if spec is None:
@@ -66,7 +69,13 @@ def signals(config, duration: float = DURATION, seed: int = 0) -> dict:
                 f"{params.source}: the excitation scenario needs the range of input {u}: add a table "
                 f"[inputs.{u}] with min = ..., max = ... (and optionally bandwidth = ... Hz)")
         out[str(u)] = _smooth(t, rng, spec["min"], spec["max"], spec.get("bandwidth", 1.0))
-    return out
+    return t, out
+
+
+def signals(config, duration: float = DURATION, seed: int = 0) -> dict:
+    """The scenario's inputs at the observer's sample times: {name: array}, with ``t``."""
+    t, funcs = signal_functions(config, duration, seed)
+    return {"t": t, **{name: f(t) for name, f in funcs.items()}}
 
 
 def simulate(config, duration: float = DURATION, seed: int = 0, substeps: int = 10) -> dict:
@@ -75,7 +84,8 @@ def simulate(config, duration: float = DURATION, seed: int = 0, substeps: int = 
     model = config.load_model()
     params = load_parameters(config.parameter_path)
     subs = parameter_substitution(model, params)
-    sig = signals(config, duration, seed)
+    t_s, funcs = signal_functions(config, duration, seed)
+    sig = {"t": t_s, **{name: f(t_s) for name, f in funcs.items()}}
     x_s, u_s, d_s = tuple(model.states), tuple(model.known_inputs), tuple(model.unknown_inputs)
     sched = tuple(s.symbol for s in model.scheduling)
     derived = {s.symbol: s.derived for s in model.scheduling if s.derived is not None}
@@ -92,14 +102,20 @@ def simulate(config, duration: float = DURATION, seed: int = 0, substeps: int = 
     x = np.array([0.5 * sum(params.state_bounds[str(s)]) if str(s) in params.state_bounds else 0.0 for s in x_s])
     X, Y = np.zeros((n, len(x_s))), np.zeros((n, len(model.outputs)))
     ext = np.column_stack([sig[str(s)] for s in (*u_s, *d_s, *raw)]) if (u_s or d_s or raw) else np.zeros((n, 0))
+    ext_funcs = [funcs[str(s)] for s in (*u_s, *d_s, *raw)]
     Ts = config.sample_time
+    h_sub = Ts / substeps
+    rhs = lambda z, e: np.asarray(fn(*z, *e), dtype=float).ravel()
+    # the inputs between two samples at the RK4 stages' times (t, t + h/2, t + h of each substep)
+    stage_t = lambda k: t_s[k] + 0.5 * h_sub * np.arange(2 * substeps + 1)
     for k in range(n):
         X[k] = x
         Y[k] = np.asarray(h(*x, *ext[k]), dtype=float).ravel()
         if k + 1 < n:
-            e = ext[k]
-            for _ in range(substeps):
-                x = rk4_step(lambda z: np.asarray(fn(*z, *e), dtype=float).ravel(), x, Ts / substeps)
+            tt = stage_t(k)
+            E = np.column_stack([f(tt) for f in ext_funcs]) if ext_funcs else np.zeros((tt.size, 0))
+            for j in range(substeps):
+                x = rk4_step(rhs, x, h_sub, (E[2 * j], E[2 * j + 1], E[2 * j + 2]))
             if not np.all(np.isfinite(x)):
                 raise ModelDefinitionError(f"model {model.name!r}: the excitation run left the finite numbers at "
                                            f"t = {sig['t'][k + 1]:.3g} s; narrow the [inputs.*] ranges")

@@ -14,7 +14,7 @@ extern "C" {
 
 /* lpv_linf_driver_torque: LPV L-infinity unknown-input observer (Nguyen, Guerra, Sentouh, Zhang, IEEE/ASME T-Mech 2019): sideslip, yaw rate, steering angle and rate, and the unknown driver torque T_d.
  *
- * Discrete-time step at Ts = 0.01 s (backward Euler, certified: sqrt(V) contracts by 0.954979 per step over the whole scheduling box). One call = one sample.
+ * Discrete-time step at Ts = 0.01 s (backward Euler, certified over the whole scheduling box: sqrt(V) of the state error contracts by 0.954979 per step, and the full error with the UI filter loop by 0.975900). One call = one sample.
  * Reentrant: all state is in lpv_linf_driver_torque_state; no globals, no malloc.
  */
 

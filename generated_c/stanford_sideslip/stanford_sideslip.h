@@ -14,7 +14,7 @@ extern "C" {
 
 /* stanford_sideslip: Sideslip virtual sensor for the Stanford race car (real data in ../shared/data): Nguyen et al. 2019 LPV L-infinity UIO on a single-track model whose axle stiffness is scheduled on the measured tyre utilization |a_y|/(mu g); measured delta, r, v_x, a_y; unknown input: a yaw-moment disturbance.
  *
- * Discrete-time step at Ts = 0.01 s (backward Euler, certified: sqrt(V) contracts by 0.845154 per step over the whole scheduling box). One call = one sample.
+ * Discrete-time step at Ts = 0.01 s (backward Euler, certified over the whole scheduling box: sqrt(V) of the state error contracts by 0.845154 per step, and the full error with the UI filter loop by 0.857493). One call = one sample.
  * Reentrant: all state is in stanford_sideslip_state; no globals, no malloc.
  */
 

@@ -515,6 +515,7 @@ def build(config, tol: float | None = None, lpv: LPVModel | None = None) -> Alge
         lpv = instantiate(config.load_model(), load_parameters(config.parameter_path))
     if any(s.derived is not None for s in lpv.definition.scheduling):
         raise ModelDefinitionError(f"{config.source}: derived scheduling signals are not supported by this family")
+    rdeg.check_structure(lpv)          # before anything evaluates the model's matrices
     boxes = rdeg.derivative_boxes(lpv)
     aux = alg.aux_design(lpv, boxes, settings.auxiliary, settings.auxiliary_alpha, settings.tol)
     lpv_obs = lpv

@@ -200,6 +200,29 @@ class Decoupling:
         }
 
 
+def check_structure(lpv: LPVModel) -> None:
+    """The model class of Ichalal and Mammar 2015, eq. (1): unknown inputs, a constant C, y = C x.
+
+    Raises
+    ------
+    ModelDefinitionError, NotAffineError
+        naming what the model has that the class does not take.
+    """
+    C = lpv.C
+    if lpv.nd == 0:
+        raise ModelDefinitionError(f"model {lpv.definition.name!r} has no unknown inputs")
+    lpv.require_no_ui_feedthrough("algebraic UIO", "Ichalal and Mammar 2015, eq. (1): the unknown inputs are "
+                                  "recovered from output derivatives of their relative degree")
+    if any(e.free_symbols for e in C):
+        raise ModelDefinitionError(f"model {lpv.definition.name!r}: this family needs a constant output matrix C "
+                                   f"(Ichalal and Mammar 2015, eq. (1)); C depends on {sorted(map(str, set().union(*(e.free_symbols for e in C))))}")
+    if getattr(lpv, "Bw", None) is not None and lpv.Bw.shape[1] > 0:
+        raise ModelDefinitionError(f"model {lpv.definition.name!r}: derived inputs are not supported by this family")
+    if lpv.Du is not None and any(e != 0 for e in lpv.Du):
+        raise ModelDefinitionError(f"model {lpv.definition.name!r}: outputs with a known-input feedthrough are not "
+                                   f"supported by this family (y = C x)")
+
+
 def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:
     """Relative degrees, M_{i rho}, Gamma, Q, P and F0 of an LPV model, proven uniform on the box.
 
@@ -218,16 +241,7 @@ def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:
     # exact rational arithmetic: structural cancellations (e.g. in A - Q M) come out as exact zeros
     exact = lambda m: m.applyfunc(lambda e: sp.nsimplify(e, rational=True))
     A, D, C = exact(lpv.A), exact(lpv.D), exact(lpv.C)
-    if nd == 0:
-        raise ModelDefinitionError(f"model {lpv.definition.name!r} has no unknown inputs")
-    if any(e.free_symbols for e in C):
-        raise ModelDefinitionError(f"model {lpv.definition.name!r}: this family needs a constant output matrix C "
-                                   f"(Ichalal and Mammar 2015, eq. (1)); C depends on {sorted(map(str, set().union(*(e.free_symbols for e in C))))}")
-    if getattr(lpv, "Bw", None) is not None and lpv.Bw.shape[1] > 0:
-        raise ModelDefinitionError(f"model {lpv.definition.name!r}: derived inputs are not supported by this family")
-    if lpv.Du is not None and any(e != 0 for e in lpv.Du):
-        raise ModelDefinitionError(f"model {lpv.definition.name!r}: outputs with a known-input feedthrough are not "
-                                   f"supported by this family (y = C x)")
+    check_structure(lpv)
     boxes = derivative_boxes(lpv)
     certificates = {"uniform_relative_degree": [], "rank_condition_64": None}
     degrees, M_all = [], []

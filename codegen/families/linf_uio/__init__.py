@@ -60,8 +60,9 @@ class LinfUIO(Family):
         d = e["discrete"]
         return [f"gamma {e['gamma']:.6g} (quadratic {e['gamma_quadratic']:.6g}); worst LMI margin "
                 f"{e['worst_lmi_margin']:.3g} in {e['worst_lmi_block']}",
-                f"discrete step Ts={d['Ts']:g}s: sqrt(V) contracts by {d['contraction_per_step']:.6f}/step "
-                f"(certified), dense-grid spectral radius {d['dense_grid_augmented_spectral_radius_max']:.6f}"]
+                f"discrete step Ts={d['Ts']:g}s, certified: sqrt(V) contracts by {d['contraction_per_step']:.6f}/step "
+                f"(state error), {d['ui_loop_contraction_per_step']:.6f}/step with the UI filter loop; dense-grid "
+                f"spectral radius {d['dense_grid_augmented_spectral_radius_max']:.6f}"]
 
     def check_gains(self, config, gains: dict) -> dict:
         """P_i, X, L_i (the paper's printed form) against Theorem 1, with both rate bounds of the

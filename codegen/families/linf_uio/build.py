@@ -9,11 +9,11 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ... import polytope
+from ... import lmi, polytope
 from ...artifact import artifact_head, significant
 from ...model import LPVModel, instantiate, load_parameters
 from ...observers import ObserverConfig
-from ...errors import ModelDefinitionError, RepresentationError
+from ...errors import ModelDefinitionError, RepresentationError, UILoopError, UiogenError
 from ..base import ObserverBuild
 from . import design as linf_uio
 from . import discrete
@@ -75,8 +75,9 @@ class LinfBuild(ObserverBuild):
         """Family-specific text of the C API."""
         return {
             "headline": f"gamma = {self.design.gamma:.6g}",
-            "stability": (f"backward Euler, certified: sqrt(V) contracts by "
-                          f"{self.discrete_certificate.contraction:.6f} per step over the whole scheduling box"),
+            "stability": (f"backward Euler, certified over the whole scheduling box: sqrt(V) of the state error "
+                          f"contracts by {self.discrete_certificate.contraction:.6f} per step, and the full error "
+                          f"with the UI filter loop by {self.discrete_certificate.ui_loop.contraction:.6f}"),
             "step_notes": [],
             "clamp_doc": ("A scheduling signal outside its box: clamped for the membership functions and the "
                           "step\n * taken; the stability certificate does not cover this sample."),
@@ -130,6 +131,8 @@ class LinfBuild(ObserverBuild):
             "discrete_kappa": self.discrete_certificate.kappa,
             "discrete_contraction_per_step": self.discrete_certificate.contraction,
             "discrete_spectral_radius_max": self.discrete_certificate.augmented_radius_max,
+            "ui_loop_decay_rate": self.discrete_certificate.ui_loop.beta,
+            "ui_loop_contraction_per_step": self.discrete_certificate.ui_loop.contraction,
             "sample_time": self.config.sample_time,
             "taylor_error": self.taylor_error,
         }
@@ -143,7 +146,9 @@ class LinfBuild(ObserverBuild):
                  f"  worst LMI margin        {s['worst_min_eig']:.3e} (relative {s['worst_relative_margin']:.3e}) "
                  f"in {s['worst_block']}",
                  f"  discrete step Ts={s['sample_time']:g}s  kappa {s['discrete_kappa']:.6f} -> sqrt(V) contracts by "
-                 f"{s['discrete_contraction_per_step']:.6f}/step; dense-grid spectral radius "
+                 f"{s['discrete_contraction_per_step']:.6f}/step",
+                 f"  with the UI filter loop decay {s['ui_loop_decay_rate']:.3g} 1/s certified (common Lyapunov "
+                 f"function) -> {s['ui_loop_contraction_per_step']:.6f}/step; dense-grid spectral radius "
                  f"{s['discrete_spectral_radius_max']:.6f}"]
         if s["taylor_error"]:
             te = s["taylor_error"]
@@ -211,12 +216,38 @@ def build(config: ObserverConfig, tol: float | None = None) -> LinfBuild:
     data = discrete.ObserverData(poly, design.Q, design.L,
                                  float(config.ui_filter.get("time_constant", 0.005)), config.sample_time,
                                  lpv.derived, lpv.definition.output_symbols, lpv.derived_inputs)
-    dcert = discrete.certify_step(data, settings.alpha)
+    try:
+        dcert = discrete.certify_step(data, settings.alpha)
+    except UILoopError as exc:
+        raise UILoopError(f"{config.source}: {exc}{_measured_remedies(poly, settings, data, config.sample_time)}") from None
     t3 = time.perf_counter()
     timings = {"representation_s": t1 - t0, "design_s": t2 - t1,
                "solve_s": design.solution.solve_time_s, "build_s": design.solution.build_time_s,
                "certificates_s": t3 - t2}
     return LinfBuild(config, lpv, poly, err, design, quadratic, cert, data, dcert, timings)
+
+
+def _measured_remedies(poly, settings, data, sample_time: float) -> str:
+    """Re-design with alpha halved, the gain bound halved, and both, and say which of them closes
+    a certifiable UI filter loop (the designs are measurements, not committed)."""
+    tries = (("alpha", dataclasses.replace(settings, alpha=settings.alpha / 2)),
+             ("gain_bound_times_sample_time", dataclasses.replace(settings, gain_bound=settings.gain_bound / 2)),
+             ("both", dataclasses.replace(settings, alpha=settings.alpha / 2, gain_bound=settings.gain_bound / 2)))
+    works = []
+    for label, s in tries:
+        with lmi.recording():          # a measurement: its solves stay out of the design lock
+            try:
+                d = linf_uio.design(poly, s)
+            except UiogenError:
+                continue
+        if discrete.loop_is_certifiable(dataclasses.replace(data, Q=d.Q, L=d.L)):
+            works.append({"alpha": f"alpha = {s.alpha:g}",
+                          "gain_bound_times_sample_time": f"gain_bound_times_sample_time = {s.gain_bound * sample_time:g}",
+                          "both": f"alpha = {s.alpha:g} with gain_bound_times_sample_time = "
+                                  f"{s.gain_bound * sample_time:g}"}[label])
+    if works:
+        return f"; re-designed with [design] {' or '.join(works[:2])}, it certifies"
+    return "; re-designed with [design] alpha, the gain bound, or both halved, it does not certify either"
 
 
 def artifact(b: LinfBuild) -> dict:

@@ -1,7 +1,12 @@
 """LPV L-infinity unknown-input observer, Nguyen et al. 2019 Theorem 1 (eqs. (19)-(23)).
 
-Observer (15): x_hat' = A(th) x_hat + B u + D d_hat + M(th)(C x_hat - y), with
+Observer (15): x_hat' = A(th) x_hat + B u + D d_hat + M(th)(C x_hat + Dd d_hat - y), with
 M(th) = P(th)^-1 L(th), P(th) = sum eta_i (P_i + X), L(th) = sum eta_i L_i.
+
+Beyond the paper, unknown inputs may reach the outputs (y = C x + Du u + Dd d: a lateral
+force seen by the accelerometer) and D, Dd may depend on the scheduling. The error then obeys
+e' = (A + M C) e + (D + M Dd)(d_hat - d), so the paper's block P D of (21) becomes
+P_i D_j + L_i Dd_j: still affine in the decision variables, and the same theorem holds.
 
 Two deliberate, documented choices (README, "Nguyen et al. 2019 design"):
 
@@ -60,11 +65,25 @@ class LinfDesignSettings:
     taylor_error_limit: float = setting(0.25, gt=0, doc="relative error a Taylor-reduced polytope may have")
 
 
+def ui_feedthrough(poly: Polytope) -> np.ndarray:
+    """Dd at every vertex, (N, ny, nd): zeros for a model whose unknown inputs stay out of the outputs."""
+    if poly.Dd is not None:
+        return poly.Dd
+    return np.zeros((poly.n_vertices, poly.C.shape[1], poly.D.shape[2]))
+
+
 def _check_assumptions(poly: Polytope) -> None:
     n = poly.A.shape[1]
+    Dd = ui_feedthrough(poly)
     for i in range(poly.n_vertices):
         D = poly.D[i]
         if np.linalg.matrix_rank(D) < D.shape[1]:
+            if np.linalg.matrix_rank(np.vstack([D, Dd[i]])) == D.shape[1]:
+                raise RankConditionError(
+                    f"vertex {i + 1}: an unknown input reaches the outputs only (D has a zero or dependent "
+                    f"column): the UI filter (47) reconstructs unknown inputs through the dynamics, d = D^+ (x' - A x "
+                    f"- B u). Model it as a state with zero dynamics (b' = 0, a sensor offset) seen by the "
+                    f"output, and estimate it with the states")
             raise RankConditionError(f"vertex {i + 1}: D is not of full column rank (assumption of "
                                      f"Theorem 1); the unknown inputs cannot be reconstructed")
         A, C = poly.A[i], poly.C[i]
@@ -92,7 +111,8 @@ def ui_scaling(poly: Polytope) -> np.ndarray:
 
 
 def _scaled(poly: Polytope, scale: np.ndarray) -> Polytope:
-    return dataclasses.replace(poly, D=poly.D * scale[None, None, :])
+    return dataclasses.replace(poly, D=poly.D * scale[None, None, :],
+                               Dd=ui_feedthrough(poly) * scale[None, None, :])
 
 
 def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.ndarray | None = None):
@@ -131,7 +151,9 @@ def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.
     # products shared by many blocks, formed once
     PA = [[P[i] @ poly.A[j] for j in range(N)] for i in range(N)]
     LC = [[L[i] @ poly.C[j] for j in range(N)] for i in range(N)]
-    QD = [[Q[i] @ poly.D[j] for j in range(N)] for i in range(N)]
+    Dd = ui_feedthrough(poly)
+    QD = [[Q[i] @ poly.D[j] + L[i] @ Dd[j] if poly.has_ui_feedthrough else Q[i] @ poly.D[j] for j in range(N)]
+          for i in range(N)]
     XA = [2 * X @ poly.A[j] + 2 * a * X for j in range(N)]
     nd = poly.D.shape[2]
     corner = bmat([[np.zeros((nd, nx)), -a * nu * np.eye(nd)]])
@@ -220,6 +242,7 @@ def certify(poly: Polytope, P, X, L, alpha: float, performance=None) -> dict:
     L = [np.asarray(l, dtype=float) for l in L]
     X = np.asarray(X, dtype=float)
     Q = [p + X for p in P]
+    Dd = ui_feedthrough(poly)
     blocks = {f"(19) P{i + 1}+X > 0": Q[i] for i in range(N)}
     checks = list(check_blocks(blocks))
     if any(c.min_eig <= 0 for c in checks):
@@ -231,7 +254,7 @@ def certify(poly: Polytope, P, X, L, alpha: float, performance=None) -> dict:
         def S(i, j):
             psi = sum(rates[k] * (P[k] + X) for k in range(N)) + 2 * X @ poly.A[j] + 2 * alpha * X
             top = P[i] @ poly.A[j] + L[i] @ poly.C[j] + alpha * P[i] + 0.5 * psi
-            return top + top.T, Q[i] @ poly.D[j]
+            return top + top.T, Q[i] @ poly.D[j] + L[i] @ Dd[j]
         for j in range(N):
             for i in range(j + 1):
                 if i == j:

@@ -1,24 +1,33 @@
-"""Discrete-time observer step and its stability certificate.
+"""Discrete-time observer step and its stability certificates.
 
 The continuous observer of Nguyen et al. 2019, eqs. (15), (23) and the UI filter (47),
 acts on z = [x_hat; d_hat]:
 
     z' = Aa(th) z + Ba u + By(th) y,
-    Aa = [[A + M C, D], [Dp M C / Tf, 0]],  By = [[-M], [-Dp M / Tf]],  Ba = [[B], [0]]
+    Aa = [[A + M C, D + M Dd], [Dp M C / Tf, Dp M Dd / Tf]],  By = [[-M], [-Dp M / Tf]],
+    Ba = [[B + M Du], [Dp M Du / Tf]]
 
-with M(th) = P(th)^-1 L(th) and Dp = pinv(D). Its error poles reach several hundred
-rad/s, so forward Euler at 100 Hz would diverge. The step is backward Euler with
-the scheduling of the new sample (L-stable, no extra tuning):
+with M(th) = P(th)^-1 L(th), Dp = pinv(D(th)) and Dd the unknown inputs' feedthrough to the
+outputs (zero in the paper). Its error poles reach several hundred rad/s, so forward Euler at
+100 Hz would diverge. The step is backward Euler with the scheduling of the new sample
+(L-stable, no extra tuning):
 
     (I - Ts Aa(th+)) z+ = z + Ts (Ba u+ + By(th+) y+).
 
-Certificate (:func:`certify_step`): the continuous Theorem-1 certificate is carried
-over to the sampled error dynamics by a vertex check (see the function), valid for
-any scheduling sequence inside the box; a dense-grid spectral radius of the full
-step (with the UI filter) is reported beside it.
+Certificates (:func:`certify_step`), both over the whole scheduling box:
+
+* the continuous Theorem-1 certificate carried over to the sampled state error by a vertex
+  check (kappa), for any scheduling sequence inside the box and rate bounds;
+* the full error of the step *with the UI filter loop*, by a common quadratic Lyapunov
+  function of the continuous error matrix Aa(th) over the polytope (:func:`certify_ui_loop`):
+  backward Euler keeps it contracting at every sample time and for every scheduling sequence.
+
+A dense-grid spectral radius of the full step is reported beside them, as evidence.
 """
 from __future__ import annotations
 
+import dataclasses
+import itertools
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -27,10 +36,12 @@ import numpy as np
 import sympy as sp
 from scipy.linalg import eigh
 
-from ... import canonical
-from ...errors import ConfigurationError, DiscretizationError, ModelDefinitionError
+from ... import canonical, lmi
+from ...errors import CertificateError, ConfigurationError, DiscretizationError, SolverError, UILoopError
+from ...lmi import LMIProblem
 from ...polytope import Polytope, sector_weights_product
 from ...stepgen import CASADI_MODULES, TAIL, clamp, const_times, solve_unpivoted, sum_in_order
+from .design import ui_feedthrough, ui_scaling
 
 
 @dataclass(frozen=True)
@@ -47,9 +58,6 @@ class ObserverData:
     derived_inputs: tuple = ()  # (input symbol, expression in y_<name> and the raw signals)
 
     def __post_init__(self):
-        if np.ptp(self.poly.D, axis=0).max(initial=0) > 0:
-            raise ModelDefinitionError("D depends on the scheduling signal; this observer family needs "
-                                       "a constant D (its pseudo-inverse drives the UI filter (47))")
         if not self.Ts > 0 or not self.Tf > 0:
             raise ConfigurationError(f"sample time and filter constant must be positive (Ts={self.Ts}, Tf={self.Tf})")
 
@@ -66,8 +74,23 @@ class ObserverData:
         return self.nx + self.nd
 
     @cached_property
+    def Dd(self) -> np.ndarray:
+        """The unknown inputs' feedthrough to the outputs at every vertex (zeros in the paper)."""
+        return ui_feedthrough(self.poly)
+
+    @property
+    def eliminated(self) -> bool:
+        """The paper's structure (constant D, no feedthrough): the step eliminates d_hat (see
+        :func:`step_casadi`); otherwise it solves the full (nx + nd) system."""
+        return not self.poly.D_varies and not self.poly.has_ui_feedthrough
+
+    @cached_property
     def Dp(self):
+        """pinv(D) for a constant D (emitted: machine-independent, see codegen.canonical)."""
         return canonical.pinv(self.poly.D[0])
+
+    def Dp_at(self, eta) -> np.ndarray:
+        return self.Dp if not self.poly.D_varies else np.linalg.pinv(_blend(eta, self.poly.D))
 
     @cached_property
     def raw_signals(self) -> tuple:
@@ -129,10 +152,11 @@ def augmented_matrices(data: ObserverData, theta: np.ndarray):
     """(Aa, Ba, By) at premise values ``theta`` (numpy): z' = Aa z + Ba u + By y, with the
     correction M (C x + Du u - y) of eq. (15) and the UI filter (47)."""
     eta = sector_weights_product(np.asarray(theta, float), data.poly.premises)
-    A, B, C, Du = (_blend(eta, m) for m in (data.poly.A, data.poly.B, data.poly.C, data.poly.Du))
+    A, B, C, Du, D, Dd = (_blend(eta, m) for m in (data.poly.A, data.poly.B, data.poly.C, data.poly.Du,
+                                                    data.poly.D, data.Dd))
     M = np.linalg.solve(_blend(eta, data.Q), _blend(eta, data.L))
-    D, Dp = data.poly.D[0], data.Dp
-    Aa = np.block([[A + M @ C, D], [Dp @ M @ C / data.Tf, np.zeros((data.nd, data.nd))]])
+    Dp = data.Dp_at(eta)
+    Aa = np.block([[A + M @ C, D + M @ Dd], [Dp @ M @ C / data.Tf, Dp @ M @ Dd / data.Tf]])
     Ba = np.vstack([B + M @ Du, Dp @ M @ Du / data.Tf])
     By = np.vstack([-M, -Dp @ M / data.Tf])
     return Aa, Ba, By
@@ -143,7 +167,7 @@ def derived_input_matrix(data: ObserverData, theta: np.ndarray) -> np.ndarray:
     eta = sector_weights_product(np.asarray(theta, float), data.poly.premises)
     Bw, Duw = _blend(eta, data.poly.Bw), _blend(eta, data.poly.Duw)
     M = np.linalg.solve(_blend(eta, data.Q), _blend(eta, data.L))
-    return np.vstack([Bw + M @ Duw, data.Dp @ M @ Duw / data.Tf])
+    return np.vstack([Bw + M @ Duw, data.Dp_at(eta) @ M @ Duw / data.Tf])
 
 
 def premise_of_signal(poly: Polytope, rho, xp=np):
@@ -252,7 +276,13 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
     and solved otherwise; it only enters through N = Ts (I + (Ts/Tf) D Dp) M, formed with the
     constants folded in. The x+ system is solved by :func:`solve_unpivoted` where
     :func:`lu_without_pivoting_is_safe` allows it.
+
+    Beyond the paper's structure (D depending on the scheduling, or unknown inputs in the
+    outputs) the d-block is no longer the identity: the full (nx + nd) system is solved
+    (:func:`_step_casadi_full`).
     """
+    if not data.eliminated:
+        return _step_casadi_full(data, name)
     poly = data.poly
     nz, nu, ny = data.nz, poly.B.shape[2], poly.C.shape[1]
     z = ca.SX.sym("z", nz)
@@ -326,6 +356,212 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
     return ca.Function(name, [z, u, y, rho], [z_next, excess], ["z", "u", "y", "rho"], ["z_next", "excess"])
 
 
+def _gain_casadi(data: ObserverData, eta):
+    """M(th) = Q(th)^-1 L(th) in CasADi: blended directly for a common Lyapunov matrix."""
+    if data.quadratic:
+        return _blend(eta, [ca.DM(canonical.solve(data.Q[0], l)) for l in data.L])
+    return ca.solve(_blend(eta, [ca.DM(q) for q in data.Q]), _blend(eta, [ca.DM(l) for l in data.L]))
+
+
+def _step_casadi_full(data: ObserverData, name: str) -> ca.Function:
+    """The step for D(th) or Dd != 0: (I - Ts Aa(th+)) z+ = z + Ts (Ba u + By y + Bwa w), solved
+    as one (nx + nd) system, with Dp(th) = (D' D)^-1 D' formed at run time where D varies."""
+    poly = data.poly
+    nz, nu, ny, nx, nd = data.nz, poly.B.shape[2], poly.C.shape[1], data.nx, data.nd
+    z, u, y = ca.SX.sym("z", nz), ca.SX.sym("u", nu), ca.SX.sym("y", ny)
+    rho = ca.SX.sym("rho", len(data.raw_signals))
+    values = data.signal_values([rho[k] for k in range(rho.shape[0])], [y[k] for k in range(ny)], xp=ca)
+    clamped = [clamp(v, lo, hi) for v, lo, hi in zip(values, poly.lowers, poly.uppers)]
+    excess = sum(ca.fabs(v - c) for v, c in zip(values, clamped))
+    eta = sector_weights_product(premise_of_signal(poly, clamped, xp=ca), poly.premises, xp=ca)
+    blend = (lambda mats: ca.DM(mats[0]) if np.ptp(mats, axis=0).max(initial=0) == 0
+             else _blend(eta, [ca.DM(m) for m in mats]))
+    A, B, C, Du, D, Dd = (blend(m) for m in (poly.A, poly.B, poly.C, poly.Du, poly.D, data.Dd))
+    M = _gain_casadi(data, eta)
+    Dp = ca.DM(data.Dp) if not poly.D_varies else ca.solve(D.T @ D, D.T)
+    K = Dp @ M / data.Tf
+    Aa = ca.vertcat(ca.horzcat(A + M @ C, D + M @ Dd), ca.horzcat(K @ C, K @ Dd))
+    Ts = data.Ts
+    # the innovation's known part: M (Du u - y) drives x_hat, K (Du u - y) drives d_hat
+    known = Du @ u - y
+    drive = ca.vertcat(B @ u + M @ known, K @ known)
+    if data.nw:
+        w = ca.vertcat(*data.derived_input_values([rho[k] for k in range(rho.shape[0])],
+                                                  [y[k] for k in range(ny)], xp=ca))
+        Bw, Duw = blend(poly.Bw), blend(poly.Duw)
+        drive = drive + ca.vertcat(Bw @ w + M @ (Duw @ w), K @ (Duw @ w))
+    z_next = ca.solve(ca.DM.eye(nz) - Ts * Aa, z + Ts * drive)
+    return ca.Function(name, [z, u, y, rho], [z_next, excess], ["z", "u", "y", "rho"], ["z_next", "excess"])
+
+
+@dataclass(frozen=True)
+class UILoopCertificate:
+    """A common quadratic Lyapunov function V = e_z' P e_z of the observer's full error (state
+    and unknown-input estimate, UI filter loop closed) over the whole polytope.
+
+    He(P Aa(th)) <= -2 beta P for every th gives, for the backward-Euler step at any sample time
+    and any scheduling sequence, V_k >= (1 + 2 beta Ts) V_{k+1} (homogeneous part): see
+    :func:`certify_ui_loop`.
+    """
+
+    beta: float                     # certified decay rate of V, 1/s
+    Ts: float
+    blocks: int
+    worst_relative_margin: float
+
+    @property
+    def contraction(self) -> float:
+        return float(1.0 / np.sqrt(1.0 + 2.0 * self.beta * self.Ts))
+
+
+UI_LOOP_PROBLEM = "UI-filter loop (common Lyapunov function)"
+UI_LOOP_BACKOFF = 0.9       # the committed decay rate, as a fraction of the largest one found
+
+
+def _ui_loop_problem(data: ObserverData, beta: float, Tf: float, design: bool, margin: float = 1e-6):
+    """The LMIs of :func:`certify_ui_loop` at decay ``beta`` and filter constant ``Tf``.
+
+    The error e_z = [x_hat - x; d_hat - d] obeys e_z' = A0 e_z + [I; 0] c + [0; I/Tf] g with
+    A0 = [[A, D], [0, 0]], the correction c = M (C e + Dd e_d), i.e. Q c = L (C e + Dd e_d), and
+    g = Dp c, i.e. D'D g = D' c. In xi = [e_z; c; g] the decrease of V is the quadratic form
+    Phi(eta) on the null space of those constraints; Finsler's lemma with multipliers affine in
+    the memberships, Lambda(eta) = sum_k eta_k Lambda_k, turns it into
+
+        Psi(eta) = Phi + He(Lambda_1(eta) [-L Cm, Q, 0]) + He(Lambda_2(eta) [0, -D', D'D]) < 0,
+
+    a cubic form in eta = sum_{i,j,k} eta_i eta_j eta_k T_ijk (homogenized with sum eta = 1):
+    the sum of T over the distinct orderings of every multiset {i, j, k} negative proves it for
+    every eta of the simplex, hence the whole box. The gain's rational dependence M = Q^-1 L
+    needs no bound. For a constant D, g = Dp c is substituted (no Lambda_2). Unknown inputs in
+    the units of :func:`ui_scaling`.
+    """
+    poly = data.poly
+    N, nx, nd, nz = poly.n_vertices, data.nx, data.nd, data.nz
+    c = 1.0 / ui_scaling(poly)
+    D = poly.D / c[None, None, :]
+    Dd = data.Dd / c[None, None, :]
+    varies = poly.D_varies
+    ng = nd if varies else 0
+    n = nz + nx + ng
+    prob = LMIProblem(UI_LOOP_PROBLEM, design=design, data={"beta": beta, "Tf": Tf})
+    P = prob.symmetric("P", nz)
+    L1 = [prob.matrix(f"Lambda1_{k + 1}", n, nx) for k in range(N)]
+    L2 = [prob.matrix(f"Lambda2_{k + 1}", n, nd) for k in range(N)] if varies else None
+    E = np.hstack([np.eye(nz), np.zeros((nz, nx + ng))])
+    if varies:
+        drive = np.block([[np.eye(nx), np.zeros((nx, nd))], [np.zeros((nd, nx)), np.eye(nd) / Tf]])
+    else:
+        drive = np.vstack([np.eye(nx), canonical.pinv(D[0]) / Tf])
+    W = 2.0 * beta * (E.T @ P @ E)
+    lyap = [E.T @ (P @ np.hstack([np.block([[poly.A[j], D[j]], [np.zeros((nd, nz))]]), drive])) for j in range(N)]
+    B1 = [[np.hstack([-data.L[i] @ np.hstack([poly.C[j], Dd[j]]), data.Q[i], np.zeros((nx, ng))]) for j in range(N)]
+          for i in range(N)]
+    B2 = [[np.hstack([np.zeros((nd, nz)), -D[i].T, D[i].T @ D[j]]) for j in range(N)] for i in range(N)] if varies else None
+
+    def T(i, j, k):
+        terms = lyap[j] + L1[k] @ B1[i][j]
+        if varies:
+            terms = terms + L2[k] @ B2[i][j]
+        return terms + terms.T + W
+
+    prob.require_psd("P >= I", P - np.eye(nz), margin, "normalization of the Lyapunov matrix")
+    for triple in itertools.combinations_with_replacement(range(N), 3):
+        orders = sorted(set(itertools.permutations(triple)))
+        total = T(*orders[0])
+        for o in orders[1:]:
+            total = total + T(*o)
+        prob.require_nsd("Psi_" + "".join(str(v + 1) for v in triple), total, margin, "the UI filter loop")
+    return prob
+
+
+def _ui_loop_feasible(data: ObserverData, beta: float, Tf: float) -> bool:
+    try:
+        _ui_loop_problem(data, beta, Tf, design=False).solve(tol=1e-9)
+        return True
+    except (SolverError, CertificateError):
+        return False
+
+
+def _round_down(x: float, digits: int = 2) -> float:
+    """``x`` rounded down to ``digits`` significant digits, in decimal arithmetic (the same on
+    every machine): the decay rate the committed certificate is solved at."""
+    import decimal
+    if x <= 0:
+        return 0.0
+    d = decimal.Decimal(repr(float(x)))
+    quantum = decimal.Decimal(1).scaleb(d.adjusted() - digits + 1)
+    return float((d / quantum).to_integral_value(rounding=decimal.ROUND_FLOOR) * quantum)
+
+
+def slowest_grid_decay(data: ObserverData, Tf: float | None = None, n_grid: int = 401) -> tuple:
+    """(min over a dense grid of -max Re eig Aa(th), where): evidence, and the ceiling of the
+    certified decay (a common P with He(P Aa) <= -2 beta P forces Re eig Aa <= -beta)."""
+    d = data if Tf is None else dataclasses.replace(data, Tf=Tf)
+    worst, at = np.inf, None
+    for s in signal_grid(d.poly, n_single=n_grid):
+        Aa = augmented_matrices(d, np.array(premise_of_signal(d.poly, s), float))[0]
+        decay = -float(np.linalg.eigvals(Aa).real.max())
+        if decay < worst:
+            worst, at = decay, s
+    return worst, at
+
+
+def certify_ui_loop(data: ObserverData) -> UILoopCertificate:
+    """Prove that the observer's full error, UI filter loop closed, contracts over the whole box.
+
+    At design time the largest decay rate beta a common Lyapunov function certifies is found by
+    bisection (analysis solves below the dense grid's slowest decay, the ceiling), rounded down
+    to two significant digits, and solved once more as a design problem: that solution goes to
+    the design lock with its beta and Tf, and every later ``generate`` re-checks the committed
+    matrices block by block (numpy) instead of solving.
+
+    Raises
+    ------
+    UILoopError
+        when no common Lyapunov function exists at this filter constant: the message gives what
+        was measured (the dense-grid decay, the filter constants that do certify).
+    """
+    committed = lmi.committed_data(UI_LOOP_PROBLEM)
+    if committed is not None:
+        beta = float(committed["beta"])
+    else:
+        ceiling, at = slowest_grid_decay(data)
+        if ceiling <= 0 or not _ui_loop_feasible(data, 0.0, data.Tf):
+            raise UILoopError(_ui_loop_advice(data, ceiling, at))
+        lo, hi = 0.0, ceiling
+        for _ in range(14):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if _ui_loop_feasible(data, mid, data.Tf) else (lo, mid)
+        # committed inside the feasible set, not on its edge: the re-check keeps a margin
+        beta = _round_down(UI_LOOP_BACKOFF * lo)
+    try:
+        sol = _ui_loop_problem(data, beta, data.Tf, design=True).solve(tol=1e-9)
+    except (SolverError, CertificateError) as exc:
+        raise DiscretizationError(f"the UI filter loop's certificate at decay {beta:g} 1/s failed: {exc}") from None
+    return UILoopCertificate(beta, data.Ts, len(sol.checks), float(sol.worst.relative_margin))
+
+
+def _ui_loop_advice(data: ObserverData, ceiling: float, at) -> str:
+    """What would certify the UI filter loop, measured: the filter constants tried, and where
+    the loop is unstable on the dense grid."""
+    where = ", ".join(f"{sym} = {v:.4g}" for sym, v in zip(data.poly.signals, np.atleast_1d(at)))
+    head = (f"the observer's error with the UI filter loop (Tf = {data.Tf:g} s) has no common Lyapunov function "
+            f"over the scheduling box")
+    if ceiling <= 0:
+        head += f" (it is unstable at {where}: eigenvalue with real part {-ceiling:.4g} 1/s)"
+    for factor in (2, 5, 10, 20, 50):
+        Tf = data.Tf * factor
+        if slowest_grid_decay(data, Tf, n_grid=101)[0] > 0 and _ui_loop_feasible(data, 0.0, Tf):
+            return f"{head}; measured: [ui_filter] time_constant = {Tf:g} s certifies it (a slower unknown-input estimate)"
+    return (f"{head}; measured: no filter constant up to {50 * data.Tf:g} s certifies it (the gains close an "
+            f"unstable loop through the UI filter)")
+
+
+def loop_is_certifiable(data: ObserverData) -> bool:
+    """Whether :func:`certify_ui_loop` would succeed (decay 0), without committing anything."""
+    return slowest_grid_decay(data, n_grid=101)[0] > 0 and _ui_loop_feasible(data, 0.0, data.Tf)
+
+
 @dataclass(frozen=True)
 class DiscreteCertificate:
     """Proof that the sampled error dynamics contract, plus dense-grid spectral figures."""
@@ -337,6 +573,7 @@ class DiscreteCertificate:
     augmented_radius_max: float       # dense grid: same for the full step with the UI filter
     augmented_radius_at: float
     grid_points: int
+    ui_loop: UILoopCertificate        # the full step, UI filter loop closed: proven over the box
 
     @property
     def contraction(self) -> float:
@@ -349,7 +586,10 @@ class DiscreteCertificate:
                 "dense_grid_error_spectral_radius_max": self.error_radius_max,
                 "dense_grid_augmented_spectral_radius_max": self.augmented_radius_max,
                 "dense_grid_augmented_spectral_radius_at": self.augmented_radius_at,
-                "dense_grid_points": self.grid_points}
+                "dense_grid_points": self.grid_points,
+                "ui_loop_certified_decay_rate": self.ui_loop.beta,
+                "ui_loop_contraction_per_step": self.ui_loop.contraction,
+                "ui_loop_lmi_blocks": self.ui_loop.blocks}
 
 
 def certify_step(data: ObserverData, alpha: float, n_grid: int = 2001) -> DiscreteCertificate:
@@ -368,7 +608,8 @@ def certify_step(data: ObserverData, alpha: float, n_grid: int = 2001) -> Discre
 
         kappa = 1 + 2 alpha Ts - max_{v,i,j} lambda_max(Delta_v Q_i^-1 Delta_v, Q_j).
 
-    The step is refused unless kappa > 1 and the dense-grid spectral radii are < 1.
+    The full error with the UI filter loop is proven to contract by :func:`certify_ui_loop`.
+    The step is refused unless both certificates hold.
     """
     poly, Ts = data.poly, data.Ts
     worst = 0.0
@@ -388,15 +629,14 @@ def certify_step(data: ObserverData, alpha: float, n_grid: int = 2001) -> Discre
         aug_r.append(float(np.abs(np.linalg.eigvals(np.linalg.inv(np.eye(data.nz) - Ts * Aa))).max()))
         err_r.append(float(np.abs(np.linalg.eigvals(np.linalg.inv(np.eye(nx) - Ts * Aa[:nx, :nx]))).max()))
     k = int(np.argmax(aug_r))
-    cert = DiscreteCertificate(Ts, kappa, worst, max(err_r), aug_r[k], float(sig[k][0]), len(sig))
     if kappa <= 1.0:
         raise DiscretizationError(
             f"cannot certify the Ts={Ts:g} s step: kappa = 1 + 2 alpha Ts - {worst:.4g} = {kappa:.6f} <= 1 "
             f"(the Lyapunov matrix varies too fast between samples); lower Ts, raise alpha, or use "
             f"the quadratic design")
+    ui_loop = certify_ui_loop(data)
+    # the proof implies the evidence (He(P Aa) < 0 makes every backward-Euler step contract)
     if max(err_r) >= 1.0 or aug_r[k] >= 1.0:
-        raise DiscretizationError(
-            f"the Ts={Ts:g} s step has spectral radius {max(max(err_r), aug_r[k]):.6f} >= 1 on the "
-            f"dense grid (with the UI filter, at {poly.signal}={sig[k][0]:.4g}); raise the filter "
-            f"constant Tf or lower Ts")
-    return cert
+        raise CertificateError(f"the certified Ts={Ts:g} s step has a dense-grid spectral radius "
+                               f"{max(max(err_r), aug_r[k]):.6f} >= 1: the certificates contradict the evidence")
+    return DiscreteCertificate(Ts, kappa, worst, max(err_r), aug_r[k], float(sig[k][0]), len(sig), ui_loop)
