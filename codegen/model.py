@@ -448,10 +448,14 @@ def parameter_substitution(model: ModelDefinition, params: ParameterSet) -> dict
     """
     needed = [str(p) for p in model.parameters]
     missing = [n for n in needed if n not in params.values]
-    if missing:
-        raise MissingParameterError(
-            f"model {model.name!r}: parameter file {params.source} lacks {', '.join(missing)}")
     unknown = sorted(set(params.values) - set(needed))
+    if missing:
+        import difflib
+        hints = [f"{u} (did you mean {m[0]}?)" for u in unknown
+                 for m in [difflib.get_close_matches(u, missing, n=1)] if m]
+        raise MissingParameterError(
+            f"model {model.name!r}: parameter file {params.source} lacks {', '.join(missing)}"
+            + (f"; it sets {', '.join(hints)}" if hints else ""))
     if unknown:
         raise UnknownParameterError(
             f"parameter file {params.source} sets {', '.join(unknown)}, which model "

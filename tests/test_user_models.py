@@ -204,3 +204,31 @@ def test_a_family_without_ui_feedthrough_names_the_one_that_takes_it(tmp_path):
     obs.write_text('family = "algebraic_uio"\nmodel = "car.py"\nparameters = "car.toml"\nsample_time = 0.01\n')
     with pytest.raises(NotAffineError, match=r"unknown inputs reach the outputs \(a_y <- F\).*linf_uio"):
         pipeline.build(observers.get(str(obs)))
+
+
+@pytest.mark.parametrize("what, edit, message", [
+    ("missing parameter", lambda m, p, o: (m, p.replace("C_r = 120000.0\n", ""), o), r"lacks C_r"),
+    ("misspelt parameter", lambda m, p, o: (m, p.replace("C_r = ", "C_rr = "), o), r"lacks C_r; it sets C_rr \(did you mean C_r\?\)"),
+    ("speed box touching 0", lambda m, p, o: (m, p.replace("min = 5.0", "min = 0.0"), o),
+     r"\[scheduling.v_x\] min = 0.0.*singular at v_x = 0"),
+    ("undetectable outputs", lambda m, p, o: (m.replace('states=(beta, r)', 'states=(beta, r, psi)')
+                                              .replace('(l_f * F_yf - l_r * F_yr) / I_z])', '(l_f * F_yf - l_r * F_yr) / I_z, r])')
+                                              .replace('beta, r, delta, F = ', 'psi, beta, r, delta, F = ')
+                                              .replace('sp.symbols("beta r delta F")', 'sp.symbols("psi beta r delta F")'), p, o),
+     r"obs.toml: vertex 1: \(A, C\) is not detectable \(mode 0 unobservable, along psi\); measure an output that sees psi"),
+    ("wrong family for the structure", lambda m, p, o: (m, p, o.replace('"linf_uio"', '"switched_pi"')),
+     r"unknown inputs reach the outputs|switched"),
+])
+def test_user_mistakes_on_the_way_are_one_line_and_exit_2(tmp_path, capsys, what, edit, message):
+    """The mistakes a new user meets on the disturbance-force model: typed error, exit 2, one line."""
+    import re
+    model, params, obs = edit(SIDESLIP_MODEL, SIDESLIP_PARAMS,
+                              'family = "linf_uio"\nmodel = "car.py"\nparameters = "car.toml"\npolytope = "sector"\n'
+                              'sample_time = 0.01\n')
+    (tmp_path / "car.py").write_text(model)
+    (tmp_path / "car.toml").write_text(params)
+    (tmp_path / "obs.toml").write_text(obs)
+    assert cli.main(["design", str(tmp_path / "obs.toml")]) == 2, what
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert re.search(message, err), err

@@ -13,7 +13,7 @@ from ... import lmi, polytope
 from ...artifact import artifact_head, significant
 from ...model import LPVModel, instantiate, load_parameters
 from ...observers import ObserverConfig
-from ...errors import ModelDefinitionError, RepresentationError, UILoopError, UiogenError
+from ...errors import ModelDefinitionError, RankConditionError, RepresentationError, UILoopError, UiogenError
 from ..base import ObserverBuild
 from . import design as linf_uio
 from . import discrete
@@ -204,7 +204,10 @@ def build(config: ObserverConfig, tol: float | None = None) -> LinfBuild:
             f"(entry A{tuple(err['entry'])} at {poly.signal} = {err['at']:g}: {err['max_abs_error']:.4g}), more than "
             f"[design] taylor_error_limit = {settings.taylor_error_limit:g}; use the exact form, polytope = \"sector\" "
             f"({2 ** len(polytope.scheduling_nonlinearities(lpv))} vertices), or narrow the scheduling box")
-    design = linf_uio.design(poly, settings)
+    try:
+        design = linf_uio.design(poly, settings, lpv.definition.states)
+    except RankConditionError as exc:
+        raise RankConditionError(f"{config.source}: {exc}") from None
     quadratic = design if settings.lyapunov == "quadratic" else \
         linf_uio.design(poly, dataclasses.replace(settings, lyapunov="quadratic"))
     if design.gamma > quadratic.gamma:

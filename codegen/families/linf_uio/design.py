@@ -72,8 +72,9 @@ def ui_feedthrough(poly: Polytope) -> np.ndarray:
     return np.zeros((poly.n_vertices, poly.C.shape[1], poly.D.shape[2]))
 
 
-def _check_assumptions(poly: Polytope) -> None:
+def _check_assumptions(poly: Polytope, states: tuple = ()) -> None:
     n = poly.A.shape[1]
+    names = [str(x) for x in states] if len(states) == n else [f"x{k + 1}" for k in range(n)]
     Dd = ui_feedthrough(poly)
     for i in range(poly.n_vertices):
         D = poly.D[i]
@@ -92,9 +93,12 @@ def _check_assumptions(poly: Polytope) -> None:
             if lam.real >= 0:
                 pbh = np.vstack([A - lam * np.eye(n), C])
                 if np.linalg.matrix_rank(pbh, tol=1e-9 * max(1.0, np.abs(pbh).max())) < n:
+                    vec = np.abs(np.linalg.svd(pbh)[2][-1])          # the unobservable direction
+                    along = ", ".join(names[k] for k in np.flatnonzero(vec >= 0.1 * vec.max()))
+                    mode = f"{lam.real:.4g}" if abs(lam.imag) < 1e-12 else f"{lam:.4g}"
                     raise RankConditionError(
-                        f"vertex {i + 1}: (A, C) is not detectable (mode {lam:.4g} unobservable); "
-                        f"measure another output or change the model")
+                        f"vertex {i + 1}: (A, C) is not detectable (mode {mode} unobservable, along {along}); "
+                        f"measure an output that sees {along}, or drop it from the states")
 
 
 def ui_scaling(poly: Polytope) -> np.ndarray:
@@ -115,11 +119,12 @@ def _scaled(poly: Polytope, scale: np.ndarray) -> Polytope:
                                Dd=ui_feedthrough(poly) * scale[None, None, :])
 
 
-def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.ndarray | None = None):
+def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.ndarray | None = None,
+                  states: tuple = ()):
     """LMI problem of Theorem 1 under ``settings``, in the unknown-input units of :func:`ui_scaling`;
-    returns (problem, variables)."""
+    returns (problem, variables). ``states`` names the states in the errors."""
     poly = _scaled(poly, ui_scaling(poly))
-    _check_assumptions(poly)
+    _check_assumptions(poly, states)
     if settings.lyapunov == "pdlf" and poly.rate_bound_mode == "none":
         raise ConfigurationError("the parameter-dependent design needs membership rate bounds; with "
                          "rate_bounds = 'none' use lyapunov = 'quadratic'")
@@ -209,9 +214,9 @@ class LinfDesign:
         return out
 
 
-def design(poly: Polytope, settings: LinfDesignSettings) -> LinfDesign:
+def design(poly: Polytope, settings: LinfDesignSettings, states: tuple = ()) -> LinfDesign:
     """Solve Theorem 1 on Clarabel; the rounded matrices are re-certified independently."""
-    prob, var = build_problem(poly, settings)
+    prob, var = build_problem(poly, settings, states=states)
     sol = prob.solve(tol=settings.tol)
     N = poly.n_vertices
     if settings.lyapunov == "pdlf":
