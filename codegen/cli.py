@@ -167,7 +167,8 @@ def cmd_validate(args) -> int:
         if args.plot:
             validate.plot_data(result, args.plot)
         if args.json:
-            print(json.dumps({k: result[k] for k in ("observer", "baselines")}, indent=1, sort_keys=True))
+            keys = ("observer", "baselines", "estimates", "status_flags", "samples")
+            print(json.dumps({k: result[k] for k in keys if k in result}, indent=1, sort_keys=True))
             return 0
         print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} flagged")
         print(validate.format_data_table(result))
@@ -264,7 +265,8 @@ def main(argv=None) -> int:
     p = sub.add_parser("validate", help="errors on an independent plant, beside the KF/EKF baselines")
     p.add_argument("name")
     p.add_argument("--scenario", help="excitation (any model: its own equations, swept and excited) or one of codegen.validation.scenarios.names()")
-    p.add_argument("--data", help="a logged run in the shared CSV format (plain or .gz); 'stanford' = the shared log")
+    p.add_argument("--data", help="a logged run (CSV, plain or .gz): the columns mapped by the observer file's [data] "
+                                  "table, or else the shared format; 'stanford' = the shared log")
     p.add_argument("--plant", choices=("nominal", "model", "commonroad"), default="nominal",
                    help="nominal: our symbolic truth plant (Pacejka); model: the observer's exact model")
     p.add_argument("--duration", type=float, default=None, help="truncate the scenario [s]")

@@ -44,9 +44,10 @@ def path(config: ObserverConfig, base: Path | None = None) -> Path:
 
 
 def design_sources(config: ObserverConfig) -> list:
-    """Every file the design of ``config`` derives from, in a fixed order: the observer file, the
-    parameter file, the model and every project module the family and the model import (a family
-    or model defined outside the project by its own file)."""
+    """Every file the design of ``config`` derives from, in a fixed order: the parameter file, the
+    model and every project module the family and the model import (a family or model defined
+    outside the project by its own file). The observer file enters as parsed
+    (:func:`observer_file_digest`)."""
     import inspect
     from . import families
     family = type(families.get(config.family))
@@ -56,7 +57,20 @@ def design_sources(config: ObserverConfig) -> list:
     pipeline_module = f"{family.__module__}.build"      # a family package's pipeline (README of families/)
     entry = pipeline_module if sources._module_file(pipeline_module) is not None else family.__module__
     code = sources.closure("codegen.pipeline", entry, files=extra)
-    return [Path(config.source), config.parameter_path, *code]
+    return [config.parameter_path, *code]
+
+
+def observer_file_digest(config: ObserverConfig) -> str:
+    """Hash of the observer file as parsed, less its ``[data]`` table (the column map of logs,
+    which no design or C derives from), with its leading comment (the C's description): editing a
+    log's map or a comment inside the file never re-solves a design."""
+    import hashlib
+    import tomllib
+    with open(config.source, "rb") as fh:
+        table = tomllib.load(fh)
+    table.pop("data", None)
+    text = json.dumps({"table": table, "doc": config.doc}, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def design_inputs(config: ObserverConfig) -> str:
@@ -65,6 +79,7 @@ def design_inputs(config: ObserverConfig) -> str:
     # the parsed configuration too: a configuration changed in memory (dataclasses.replace) is
     # another design even though its file is the same
     return sources.digest(design_sources(config), {"configuration": json.dumps(config.to_json(), sort_keys=True),
+                                                   "observer_file": observer_file_digest(config),
                                                    **{k: v[k] for k in DESIGN_PACKAGES}})
 
 

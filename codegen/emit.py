@@ -36,6 +36,7 @@ def emission_inputs(config: observers.ObserverConfig, lock_text: str) -> str:
              *sorted(TEMPLATES.glob("observer.*.j2"))]
     v = sources.versions()
     return sources.digest(files, {"lock": hashlib.sha256(lock_text.encode()).hexdigest(),
+                                  "observer_file": design_lock.observer_file_digest(config),
                                   **{k: v[k] for k in (*design_lock.DESIGN_PACKAGES, *EMIT_PACKAGES)}})
 
 

@@ -71,7 +71,10 @@ def generated_dir(observer) -> Path:
 
 
 def extension_dir(config: observers.ObserverConfig) -> Path:
-    return EXT_DIR if config.builtin else generated_dir(config)
+    """Where the compiled extension goes: python_bindings/_ext for the built-in observers, else
+    ``_ext/`` beside the observer's generated folder (never inside it: that folder holds exactly
+    the emitted files its stamp lists, and ``generate`` replaces it whole)."""
+    return EXT_DIR if config.builtin else generated_dir(config).parent / "_ext"
 
 
 def observer_sources(observer) -> list:
@@ -92,7 +95,7 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
                                    f"run `uiogen generate {config.source if not config.builtin else name}`")
     extra = SPEED_FLAGS + (LTO_FLAGS if lto_supported() else []) + list(extra_flags or [])
     ext_dir = Path(ext_dir) if ext_dir is not None else extension_dir(config)
-    build_dir = BUILD_DIR if config.builtin else src_dir / "_build"
+    build_dir = BUILD_DIR if config.builtin else src_dir.parent / "_build" / name
     build_dir.mkdir(parents=True, exist_ok=True)
     ext_dir.mkdir(parents=True, exist_ok=True)
     if ext_dir == EXT_DIR:

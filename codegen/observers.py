@@ -21,6 +21,7 @@ from pathlib import Path
 
 from .errors import ModelDefinitionError, UnknownObserverError
 from .model import ModelDefinition
+from . import columns
 from .settings import Rule, config_error, parse_table, suggest
 from .sources import ROOT
 
@@ -36,6 +37,7 @@ COMMON_KEYS = {
     "parameters": Rule(str, required=True, doc="a file in model_defs/params, or a path relative to this file"),
     "sample_time": Rule(float, gt=0, required=True, doc="s"),
     "design": Rule(dict),
+    "data": Rule(dict, doc="the column map of a logged run (uiogen validate --data; codegen.columns)"),
 }
 
 
@@ -57,6 +59,9 @@ class ObserverConfig:
     switching: dict = field(default_factory=dict)     # switched families: the rule, as data
 
     home: str = ""          # folder of its generated_c/NAME/ outputs; "" = the package's generated_c/
+    # [data]: how a logged run's columns map onto the observer's inputs. Not part of to_json (so
+    # not of the design hash): editing the map of a log never re-solves the design.
+    column_map: object = None
 
     @property
     def folder(self) -> Path:
@@ -185,7 +190,8 @@ def _parse(path: Path) -> ObserverConfig:
     config = ObserverConfig(path.stem, data["family"], data["model"], data["parameters"], data.get("polytope", ""),
                             data.get("rate_bounds", "exact"), float(data["sample_time"]),
                             dict(data.get("design", {})), dict(data.get("ui_filter", {})), doc.strip(), str(path),
-                            dict(data.get("switching", {})), "" if builtin else str(folder / "generated_c"))
+                            dict(data.get("switching", {})), "" if builtin else str(folder / "generated_c"),
+                            columns.parse(data["data"], source) if "data" in data else None)
     family.check_config(config, data)
     return config
 

@@ -93,13 +93,21 @@ DATA_COLUMNS = {"delta": "delta", "y_r": "yaw_rate", "y_a_y": "ay", "v_x": "vx",
 
 
 def run_data(name: str, path: str = "stanford") -> dict:
-    """Run the compiled step over a logged run in the shared CSV format, beside the baselines.
+    """Run the compiled step over a logged run, beside the baselines.
+
+    An observer file with a ``[data]`` table maps the log's own columns (:mod:`codegen.validation.logs`);
+    otherwise the log is in the shared (Stanford) CSV format.
 
     Returns ``{"observer": {SIGNAL: {"rms", "mae", "max", "std"}}, "baselines": {...}}`` with
     SIGNAL ``beta`` [deg] and ``vy`` [m/s] (v_y = v_x tan(beta)), plus the signals for plots.
     """
     from .extension import load
+    from .observers import get
     from .validation import stanford
+    config = get(name)
+    if config.column_map is not None:
+        from .validation import logs
+        return logs.run(config, path)
     obs = load(name)
     run = stanford.load(path, sample_time=obs.sample_time)   # a log at another rate is refused, not run
     missing = [c for c in obs.input_names if c not in DATA_COLUMNS]
@@ -136,6 +144,20 @@ def plot_data(result: dict, path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     sig = result["signals"]
+    if result.get("kind") == "column_map":       # a user's log: every estimate, with its reference
+        names = [k for k in sig if k != "t" and not k.endswith("_truth")]
+        fig, ax = plt.subplots(len(names), 1, figsize=(10, 2.2 * len(names)), sharex=True, squeeze=False)
+        for a, k in zip(ax[:, 0], names):
+            if f"{k}_truth" in sig:
+                a.plot(sig["t"], sig[f"{k}_truth"], "k", lw=0.8, label="reference")
+            a.plot(sig["t"], sig[k], "r", lw=0.8, label="observer (C step)")
+            a.set_ylabel(k)
+            a.legend(loc="upper right", fontsize=8)
+        ax[-1, 0].set_xlabel("t [s]")
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        return
     fig, ax = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
     deg = 180 / np.pi
     ax[0].plot(sig["t"], sig["beta_true"] * deg, "k", lw=0.8, label="optical sensor (truth)")
@@ -154,6 +176,9 @@ def plot_data(result: dict, path: str) -> None:
 
 
 def format_data_table(result: dict) -> str:
+    if result.get("kind") == "column_map":
+        from .validation import logs
+        return logs.format_table(result)
     rows = [("observer", result["observer"])] + list(result["baselines"].items())
     lines = [f"{'estimator':12s} {'beta RMSE':>10s} {'beta max':>9s} {'beta MAE':>9s} {'vy RMSE':>9s}   [deg, m/s]"]
     for name, t in rows:

@@ -67,8 +67,72 @@ def test_the_force_estimate_is_within_five_percent_and_unit_free(tutorial):
     assert np.abs(f_kn - f_n).max() <= 0.01 * np.abs(f_n).max()
 
 
+def test_a_log_in_its_own_units_gives_the_same_estimates(tutorial):
+    """The [data] column map: ms, degrees, deg/s, g, km/h and kN converted to the model's units;
+    the observer over the log gives what it gives over the simulated SI signals."""
+    from codegen import observers, validate
+    from codegen.extension import load
+    from codegen.validation import excitation
+    res = validate.run_data(str(tutorial / "disturbance.toml"), str(tutorial / "log.csv"))
+    run = excitation.simulate(observers.get(str(tutorial / "disturbance.toml")), duration=20.0)
+    obs = load(str(tutorial / "disturbance.toml"))
+    out = obs.run(np.column_stack([run[n] for n in obs.input_names]))[0]
+    k = obs.output_names.index("F")
+    assert np.abs(res["signals"]["F"] - out[:, k]).max() <= 1e-9 * np.abs(out[:, k]).max()
+    assert np.abs(res["signals"]["F_truth"] - run["F"]).max() <= 1e-9 * np.abs(run["F"]).max()
+    assert res["observer"]["F"]["rms"] <= 0.05 * np.sqrt(np.mean(run["F"][run["t"] >= 2.0] ** 2))
+    assert set(res["estimates"]) == {"v_y", "r"}
+
+
 def test_the_saturating_tyre_observer_tracks_its_model(tutorial):
     from codegen import validate
     res = validate.run_scenario(str(tutorial / "saturating.toml"), "excitation")
     obs = res["observer"]
     assert obs["v_y"]["rms"] < 0.01 and obs["T_eng"]["nmse_percent"] > 95 and obs["delta"]["nmse_percent"] > 95
+
+
+@pytest.fixture(scope="module")
+def mapped(tutorial):
+    """A copy of the disturbance observer, built; its column map is then edited per case (the map
+    is not part of the design: the build stays current)."""
+    from codegen import emit, extension
+    path = tutorial / "disturbance_map.toml"
+    path.write_text((tutorial / "disturbance.toml").read_text())
+    emit.generate([str(path)], log=lambda *_: None)
+    extension.build_extension(str(path))
+    return path
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ('unit = "km/h"', 'unit = "kmh"', r"\[data.inputs.v_x\] unit = \"kmh\": one of .* \(did you mean 'km/h'\?\)"),
+    ('unit = "km/h"', 'unit = "deg"', r"\[data.inputs.v_x\] unit = \"deg\": a unit of speed like the model's 'm/s' \(got a unit of angle\)"),
+    ('v_x = { column = "speed_kmh", unit = "km/h" }\n', '', r"\[data.inputs\] v_x = .*missing: v_x"),
+    ('F = { column = "wind_kN"', 'Fz = { column = "wind_kN"', r"\[data.truth\] Fz = .*one of v_y, r, F \(did you mean 'F'\?\)"),
+    ('column = "speed_kmh"', 'column = "speed"', r"log.csv: missing column\(s\) \['speed'\]"),
+    ('time = { column = "time_ms", unit = "ms" }', 'time = { column = "time_ms" }', r"column 'time_ms'.*looks like milliseconds"),
+    ('unit = "ms" }', 'unit = "ms", offset = 3 }', r"\[data.time\].*offset.*allowed.*column, scale, unit"),
+])
+def test_column_map_mistakes_name_the_file_and_key(tutorial, mapped, capsys, old, new, message):
+    import re
+    from codegen import cli
+    text = (tutorial / "disturbance.toml").read_text()
+    assert old in text
+    mapped.write_text(text.replace(old, new))
+    assert cli.main(["validate", str(mapped), "--data", str(tutorial / "log.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert re.search(message, err), err
+    mapped.write_text(text)
+
+
+def test_editing_the_column_map_never_re_solves(tutorial, mapped):
+    from codegen import emit, validate
+    text = (tutorial / "disturbance.toml").read_text()
+    mapped.write_text(text.replace('unit = "deg/s" }', 'unit = "rad/s", scale = 0.017453292519943295 }'))
+    lines = []
+    emit.generate([str(mapped)], log=lines.append)
+    assert len(lines) == 1 and "unchanged" in lines[0], lines
+    same = validate.run_data(str(mapped), str(tutorial / "log.csv"))
+    ref = validate.run_data(str(tutorial / "disturbance.toml"), str(tutorial / "log.csv"))
+    assert np.allclose(same["signals"]["F"], ref["signals"]["F"], rtol=1e-12, atol=1e-9)
+    mapped.write_text(text)

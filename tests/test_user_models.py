@@ -98,8 +98,8 @@ def test_taylor_reduced_polytope_refused_beyond_its_limit():
 def test_pdlf_never_worse_than_the_quadratic_design_it_contains(monkeypatch):
     real = linf_design.design
 
-    def worse_pdlf(poly, settings):
-        d = real(poly, settings)
+    def worse_pdlf(poly, settings, states=()):
+        d = real(poly, settings, states)
         return dataclasses.replace(d, nu=4 * d.nu) if settings.lyapunov == "pdlf" else d
     monkeypatch.setattr(linf_design, "design", worse_pdlf)
     b = linf_build.build(observers.get("lpv_linf_driver_torque"))

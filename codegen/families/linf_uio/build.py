@@ -209,7 +209,7 @@ def build(config: ObserverConfig, tol: float | None = None) -> LinfBuild:
     except RankConditionError as exc:
         raise RankConditionError(f"{config.source}: {exc}") from None
     quadratic = design if settings.lyapunov == "quadratic" else \
-        linf_uio.design(poly, dataclasses.replace(settings, lyapunov="quadratic"))
+        linf_uio.design(poly, dataclasses.replace(settings, lyapunov="quadratic"), lpv.definition.states)
     if design.gamma > quadratic.gamma:
         # the quadratic design is a point of the PDLF problem (P_i = P, X = 0, the rate terms
         # cancel): PDLF never returns worse than what it contains

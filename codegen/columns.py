@@ -1,0 +1,130 @@
+"""The column map of a logged run: the ``[data]`` table of an observer file, and units.
+
+Parsed with the observer file (every key and unit checked there, like the rest of the file);
+used by :mod:`codegen.validation.logs`, which reads the log and runs the compiled step. A
+column's value in the model's unit is ``value * unit factor * scale``; the unit converts to the
+one the model declares for that signal (``ModelDefinition.units``, a scheduling signal's unit).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from .settings import Rule, config_error, parse_table, suggest
+
+# unit -> (dimension, factor to the dimension's SI unit)
+UNITS = {
+    "rad": ("angle", 1.0), "deg": ("angle", math.pi / 180.0), "mrad": ("angle", 1e-3),
+    "rad/s": ("angular rate", 1.0), "deg/s": ("angular rate", math.pi / 180.0),
+    "rad/s^2": ("angular acceleration", 1.0), "deg/s^2": ("angular acceleration", math.pi / 180.0),
+    "m/s": ("speed", 1.0), "km/h": ("speed", 1.0 / 3.6), "mph": ("speed", 0.44704),
+    "m/s^2": ("acceleration", 1.0), "g": ("acceleration", 9.80665),
+    "N": ("force", 1.0), "kN": ("force", 1e3),
+    "N m": ("torque", 1.0), "kN m": ("torque", 1e3),
+    "s": ("time", 1.0), "ms": ("time", 1e-3),
+    "m": ("length", 1.0), "mm": ("length", 1e-3), "km": ("length", 1e3),
+    "1": ("dimensionless", 1.0),
+}
+_SPELLINGS = {"m/s²": "m/s^2", "rad/s²": "rad/s^2", "deg/s²": "deg/s^2", "Nm": "N m", "N*m": "N m", "N·m": "N m",
+              "kNm": "kN m", "-": "1", "kph": "km/h", "°": "deg", "°/s": "deg/s"}
+
+COLUMN_KEYS = {"column": Rule(str, required=True, doc="the CSV header of the column"),
+               "unit": Rule(str, doc="the column's unit, converted to the model's"),
+               "scale": Rule(float, doc="a factor applied after the unit (a steering ratio, a sign)")}
+DATA_KEYS = {"time": Rule(None, required=True, doc='"COLUMN" (seconds) or { column = ..., unit = ... }'),
+             "inputs": Rule(dict, required=True, doc="{ OBSERVER_INPUT = { column = ..., unit = ... } }"),
+             "truth": Rule(dict, doc="{ OBSERVER_OUTPUT = { column = ..., unit = ... } }")}
+
+
+def normalize_unit(unit: str) -> str:
+    u = " ".join(str(unit).split())
+    return _SPELLINGS.get(u, u)
+
+
+@dataclass(frozen=True)
+class Column:
+    """One mapped column: its header, unit and scale (the value in model units is x * factor * scale)."""
+
+    column: str
+    unit: str | None = None
+    scale: float = 1.0
+
+
+@dataclass(frozen=True)
+class ColumnMap:
+    """The ``[data]`` table of an observer file."""
+
+    source: str
+    time: Column
+    inputs: dict = field(default_factory=dict)
+    truth: dict = field(default_factory=dict)
+
+
+def _column(value, source: str, section: str, key: str) -> Column:
+    if isinstance(value, str):
+        return Column(value)
+    if not isinstance(value, dict):
+        raise config_error(source, section, key, value, '"COLUMN" or an inline table { column = "...", unit = "..." }')
+    parsed = parse_table(value, COLUMN_KEYS, source=source, section=f"{section}.{key}")
+    unit = parsed.get("unit")
+    if unit is not None:
+        unit = normalize_unit(unit)
+        if unit not in UNITS:
+            raise config_error(source, f"{section}.{key}", "unit", value["unit"],
+                               f"one of {', '.join(UNITS)}", suggest(unit, list(UNITS)))
+    return Column(parsed["column"], unit, float(parsed.get("scale", 1.0)))
+
+
+def parse(table, source: str) -> ColumnMap:
+    """Check a ``[data]`` table (every key, every column spec); names are checked against the
+    observer's inputs and outputs when a log is run (:func:`run`).
+
+    Raises
+    ------
+    ConfigurationError
+        naming the file, the key and what is allowed.
+    """
+    parse_table(table, DATA_KEYS, source=source, section="data")
+    time = _column(table["time"], source, "data", "time")
+    if time.unit is not None and UNITS[time.unit][0] != "time":
+        raise config_error(source, "data.time", "unit", time.unit, "s or ms")
+    inputs = {k: _column(v, source, "data.inputs", k) for k, v in table["inputs"].items()}
+    truth = {k: _column(v, source, "data.truth", k) for k, v in table.get("truth", {}).items()}
+    return ColumnMap(source, time, inputs, truth)
+
+
+def model_unit(model, signal: str) -> str | None:
+    """The unit the model declares for an observer input/output (y_NAME: the output NAME)."""
+    name = signal[2:] if signal.startswith("y_") and signal[2:] in [n for n, _ in model.outputs] else signal
+    for sig in model.scheduling:
+        if str(sig.symbol) == name and getattr(sig, "unit", None):
+            return sig.unit
+    return (model.units or {}).get(name)
+
+
+def factor(col: Column, model_unit: str | None, source: str, section: str, key: str) -> float:
+    """The factor from the column's numbers to the model's unit (unit conversion times scale).
+
+    Raises
+    ------
+    ConfigurationError
+        a unit that does not convert to the model's (another dimension, or a model unit the
+        table does not know: give ``scale`` instead).
+    """
+    if col.unit is None:
+        return col.scale
+    target = normalize_unit(model_unit) if model_unit else None
+    if target is None:
+        raise config_error(source, f"{section}.{key}", "unit", col.unit,
+                           f"a scale: the model declares no unit for {key} (add it to the model's units, or give "
+                           f"scale = ... instead of unit)")
+    if target not in UNITS:
+        if col.unit == target:
+            return col.scale
+        raise config_error(source, f"{section}.{key}", "unit", col.unit,
+                           f"the model's unit {model_unit!r}, which uiogen cannot convert to; give scale = ...")
+    (dim, f_col), (dim_model, f_model) = UNITS[col.unit], UNITS[target]
+    if dim != dim_model:
+        raise config_error(source, f"{section}.{key}", "unit", col.unit,
+                           f"a unit of {dim_model} like the model's {model_unit!r} (got a unit of {dim})")
+    return f_col / f_model * col.scale
