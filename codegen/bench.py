@@ -376,6 +376,7 @@ def _print_hosmd(r: dict) -> None:
 def main(json_output: bool = False) -> int:
     res = {"observers": {name: bench_observer(name) for name in observers.names()},
            "toolchain": bench_toolchain(), "hosmd": bench_hosmd()}
+    res["families"] = {name: rows for name in families.names() if (rows := families.get(name).bench_family())}
     if json_output:
         print(json.dumps(res, indent=1, sort_keys=True))
         return 0
@@ -415,4 +416,8 @@ def main(json_output: bool = False) -> int:
     t = res["toolchain"]
     print(f"== toolchain: uiogen generate cold {t['generate_cold_s']:.2f} s, unchanged {t['generate_unchanged_s']:.2f} s")
     _print_hosmd(res["hosmd"])
+    for name, rows in res["families"].items():
+        print(f"== {name}")
+        for line in families.get(name).bench_family_lines(rows):
+            print("   " + line)
     return 0

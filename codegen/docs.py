@@ -131,7 +131,19 @@ def spread_table(spread: dict) -> str:
                    "decision variables (relative)", "largest in"], rows)
 
 
+def family_bench_table(bench: dict, family: str) -> str:
+    """A family's own study in the bench record (``Family.bench_family``): one row per point,
+    every key a column (first-seen order)."""
+    rows = bench.get("families", {}).get(family)
+    if not rows:
+        return "(no study of this family in the recorded bench run)\n"
+    columns = list(dict.fromkeys(k for r in rows for k in r))
+    return _table(columns, [[r.get(c) for c in columns] for r in rows])
+
+
 def _render(kind: str, arg: str, demo: dict | None, bench: dict | None, spread: dict | None = None) -> str | None:
+    if kind == "family_bench":
+        return None if bench is None else family_bench_table(bench, arg)
     if kind == "spread":
         return None if spread is None else spread_table(spread)
     if kind in ("design", "validation", "real_data") and demo is None:
@@ -146,7 +158,8 @@ def _render(kind: str, arg: str, demo: dict | None, bench: dict | None, spread: 
         return real_data_table(demo)
     if kind == "bench":
         return bench_table(bench)
-    raise ConfigurationError(f"unknown docs table kind {kind!r} (design, validation, real_data, bench)")
+    raise ConfigurationError(f"unknown docs table kind {kind!r} (design, validation, real_data, bench, spread, "
+                             f"family_bench)")
 
 
 def _load(path: Path) -> dict | None:

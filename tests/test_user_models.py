@@ -77,15 +77,38 @@ def test_a_saturating_tanh_tyre_designs_fast(tmp_path):
 
 
 def test_a_too_large_ts_design_is_refused_within_a_second(tmp_path):
-    """Cubic rear slip: 5 premises, 32 rules, ~1e5 blocks of (27) -- refused before the bounds."""
+    """Cubic rear slip: 5 premises, 32 rules; the paper's rule triples would need ~1e5 blocks of
+    (27): refused before the bounds."""
     path = _ts_project(tmp_path, "2 * C_r * ((l_r * r - v_y) / v_x - k3 * ((l_r * r - v_y) / v_x) ** 3)",
-                       'k3 = sp.Symbol("k3", positive=True)\n', "k3 = 3.0\n")
+                       'k3 = sp.Symbol("k3", positive=True)\n', "k3 = 3.0\n", design='relaxation = "triples"\n')
     t0 = time.perf_counter()
     with pytest.raises(RepresentationError, match=r"32 rules .* LMI blocks .*max_lmi_blocks") as exc:
         pipeline.build(observers.get(str(path)))
     assert time.perf_counter() - t0 < 5       # model parsing and the TS split, then the guard
     assert "fewer premises" in str(exc.value)
     assert cli.main(["design", str(path)]) == 2
+
+
+def test_auto_relaxation_takes_rule_pairs_past_the_limits():
+    """N^2 blocks where the N^3 of the paper do not fit: 32 rules x 4 DMVT vertices is 131,104
+    blocks in triples, 4,160 in pairs (the cubic-slip model: 16 s, 3.4 GB peak, docs/performance.md)."""
+    from codegen.families.ts_fuzzy_uio import design as ts_design
+    settings = ts_design.TSDesignSettings()
+    triples = ts_design.problem_size(32, 3, 2, 4, "triples")
+    counts = ts_design.size_guard(32, 3, 2, 4, settings)
+    assert triples["lmi_blocks"] == 4 * 32 ** 3 + 32 and counts["relaxation"] == "pairs"
+    assert counts["lmi_blocks"] == 4 * 32 ** 2 + 64 and counts["memory_gb"] <= settings.max_memory_gb
+    assert ts_design.size_guard(4, 3, 2, 4, settings)["relaxation"] == "triples"      # the paper's, where it fits
+
+
+@pytest.mark.parametrize("name", ["ts_fuzzy_uio", "ts_fuzzy_uio_bmw320i"])
+def test_the_pair_relaxation_certifies_what_it_designs(name):
+    """relaxation = "pairs" on the paper's models: feasible, re-checked (P_bar >= P_l and the pair
+    blocks), and the Lyapunov function decreases on random samples."""
+    cfg = observers.get(name)
+    b = pipeline.build(dataclasses.replace(cfg, design={**cfg.design, "relaxation": "pairs"}), fresh=True)
+    assert b.design.relaxation == "pairs" and b.certificate["worst_min_eig"] > 0
+    assert b.certificate["blocks"] < 60 and b.decrease["max_ratio"] < 1.0
 
 
 def test_taylor_reduced_polytope_refused_beyond_its_limit():

@@ -169,6 +169,14 @@ class Family(abc.ABC):
     def bench_lines(self, figures: dict) -> list:
         return []
 
+    def bench_family(self) -> list:
+        """Rows of a family-wide study ``uiogen bench`` runs once (e.g. how the design grows with the
+        number of rules); [] for none."""
+        return []
+
+    def bench_family_lines(self, rows: list) -> list:
+        return []
+
     def check_gains(self, config, gains: dict) -> dict:
         """Check externally supplied decision variables against the family's LMIs, without a solver.
 

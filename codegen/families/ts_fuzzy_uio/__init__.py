@@ -45,6 +45,14 @@ class TSFuzzyUIO(Family):
         return {"worst_lmi_margin": cert["worst_min_eig"], "worst_lmi_block": cert["worst_block"],
                 "lmi_blocks": cert["blocks"], "lyapunov_decrease": art["certificate"]["lyapunov_decrease_33"]}
 
+    def bench_family(self) -> list:
+        from .scaling import growth
+        return growth()
+
+    def bench_family_lines(self, rows: list) -> list:
+        from .scaling import lines
+        return ["design growth with the number of rules (one model family, fresh process per point):", *lines(rows)]
+
     def demo_lines(self, e: dict) -> list:
         return [f"LMIs (27) ({self.short_citation}): {e['lmi_blocks']} blocks, worst margin {e['worst_lmi_margin']:.3g} "
                 f"in {e['worst_lmi_block']}; (33) on random samples: sqrt(V) contracts by "

@@ -117,6 +117,7 @@ class TSFuzzyBuild(ObserverBuild):
                                 for phi, row in zip(ts.phi, ts.jacobian_bounds)
                                 for s, b_ in zip(ts.definition.states, row)},
             "dmvt_vertices": int(ts.theta_vertices.shape[0]), "lmi_blocks": len(sol.checks),
+            "relaxation": self.design.relaxation,
             "solve_time_s": sol.solve_time_s, "build_time_s": sol.build_time_s,
             "total_design_time_s": self.timings["representation_s"] + self.timings["design_s"],
             "worst_block": self.certificate["worst_block"], "worst_min_eig": self.certificate["worst_min_eig"],
@@ -130,7 +131,7 @@ class TSFuzzyBuild(ObserverBuild):
                  f"  unmeasured consequents  {', '.join(s['unmeasured_consequents'])}; DMVT vertices {s['dmvt_vertices']}"]
         for k, v in s["jacobian_bounds"].items():
             lines.append(f"  {k:22s}  [{v[0]:.6g}, {v[1]:.6g}]  (sound, interval arithmetic)")
-        lines += [f"  LMIs (27)               {s['lmi_blocks']} blocks; worst margin {s['worst_min_eig']:.3e} "
+        lines += [f"  LMIs (27), rule {s['relaxation']:7s} {s['lmi_blocks']} blocks; worst margin {s['worst_min_eig']:.3e} "
                   f"(relative {s['worst_relative_margin']:.3e}) in {s['worst_block']} (numpy re-check)",
                   f"  design time             {s['total_design_time_s']:.2f} s (bounds + LMIs; solve "
                   f"{1e3 * s['solve_time_s']:.0f} ms)",

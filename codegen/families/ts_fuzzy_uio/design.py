@@ -10,6 +10,11 @@ relaxation). Two choices the paper leaves open, both documented in the README:
 
 * (30) has the free matrix Y; we take Y = 0 (the minimum-norm solution). When the matrix of
   (29) is square and invertible, as for Nguyen et al. 2021, the solution is unique anyway.
+* (27) has a block for every rule triple (i, j, l): l indexes P(h_{k+1}) = sum h_l+ P_l. Past the
+  size guard's limits (:func:`size_guard`, ``[design] relaxation = "auto"``) the blocks are
+  imposed with one bound P_bar >= P_l for every l in place of P_l (``"pairs"``): N^2 blocks
+  instead of N^3, a sufficient condition (the (2,2) block with -P_bar is below the one with
+  -P(h+) for every h+), so the certificate keeps its meaning.
 * (27) is a strict feasibility problem, homogeneous in (P_i, M_i, L_i). We normalize P_i >= I,
   impose every block >= margin I (so the numpy re-check has slack) and minimize sum trace(P_i),
   which keeps the Lyapunov matrices, and with them the gains, from growing without need.
@@ -45,6 +50,10 @@ class TSDesignSettings:
         Every LMI block >= margin I.
     tol : float
         Clarabel gap/feasibility tolerance.
+    relaxation : {"auto", "triples", "pairs"}
+        The blocks of (27): the paper's rule triples (N^3 per DMVT vertex), rule pairs with a
+        common bound of the next Lyapunov matrix (N^2), or "auto": triples when they pass the size
+        guard, else pairs.
     bounds_rel_tol, bounds_max_boxes : float, int
         Accuracy of the sound Jacobian bounds (relative to the attained values) and the budget of
         boxes their branch-and-bound may split (:func:`codegen.bounds.range_bound`).
@@ -60,6 +69,7 @@ class TSDesignSettings:
     bounds_max_boxes: int = setting(20000, gt=0, doc="boxes the bound refinement may split")
     max_lmi_blocks: int = setting(50000, gt=0, doc="largest number of LMI blocks of (27) to build")
     max_memory_gb: float = setting(4.0, gt=0, doc="largest memory the LMI coefficients may take")
+    relaxation: str = setting("auto", choices=("auto", "triples", "pairs"), doc="blocks of (27)")
 
     def __post_init__(self):
         if not 0 < self.decay <= 1:
@@ -98,42 +108,68 @@ def decoupling_matrices(ts: TSFuzzyModel, rank_tol: float = 1e-9) -> tuple:
     return T, N
 
 
+def problem_size(n_rules: int, nx: int, ny: int, dmvt_vertices: int, relaxation: str) -> dict:
+    """Counts of (27) under a relaxation: blocks, variables and the memory of their coefficients.
+
+    Triples: V N^3 blocks (27a for every (p, l, i), 27b for every (p, l, i, j != i)); pairs: V N^2
+    and N for P_bar >= P_l. Each is 2 n_x square (n_x for the bounds), with coefficients over
+    N (n_x(n_x+1)/2 + n_x^2 + n_x n_y) variables (+ n_x(n_x+1)/2 for P_bar): the memory is that
+    of their dense coefficient arrays (and a few copies of them while the blocks are formed).
+    """
+    n_var = n_rules * (nx * (nx + 1) // 2 + nx * nx + nx * ny) + (nx * (nx + 1) // 2 if relaxation == "pairs" else 0)
+    k = 2 * nx
+    big = dmvt_vertices * (n_rules ** 3 if relaxation == "triples" else n_rules ** 2)
+    blocks = big + n_rules + (n_rules if relaxation == "pairs" else 0)
+    memory_gb = 4.0 * big * k * k * n_var * 8 / 1e9    # measured: 3.4 GB peak for an estimated 3.2 (32 rules, pairs)
+    return {"relaxation": relaxation, "rules": n_rules, "dmvt_vertices": dmvt_vertices, "lmi_blocks": blocks,
+            "variables": n_var, "memory_gb": memory_gb}
+
+
 def size_guard(n_rules: int, nx: int, ny: int, dmvt_vertices: int, settings: TSDesignSettings,
                source: str = "") -> dict:
-    """Counts of the LMI problem (27) before it is built, refused past the settings' limits.
-
-    (27) has V N^3 blocks for N rules and V DMVT vertices (27a for every (p, l, i), 27b for every
-    (p, l, i, j != i)), each 2 n_x square, with coefficients over N (n_x(n_x+1)/2 + n_x^2 + n_x n_y)
-    variables: the memory is that of their dense coefficient arrays (and a few copies of them
-    while the blocks are formed).
-    """
-    n_var = n_rules * (nx * (nx + 1) // 2 + nx * nx + nx * ny)
-    blocks = dmvt_vertices * n_rules ** 3 + n_rules
-    k = 2 * nx
-    memory_gb = 3.0 * blocks * k * k * n_var * 8 / 1e9
-    counts = {"rules": n_rules, "dmvt_vertices": dmvt_vertices, "lmi_blocks": blocks, "variables": n_var,
-              "memory_gb": memory_gb}
-    if blocks > settings.max_lmi_blocks or memory_gb > settings.max_memory_gb:
-        raise RepresentationError(
-            f"{source}: the TS design would need {n_rules} rules x {dmvt_vertices} DMVT vertices = {blocks} LMI "
-            f"blocks of size {k} over {n_var} variables, about {memory_gb:.3g} GB (limits: [design] max_lmi_blocks = "
-            f"{settings.max_lmi_blocks}, max_memory_gb = {settings.max_memory_gb:g}). Options: fewer premises (each "
-            f"one doubles the rules; measure a signal, or move a nonlinearity into the unmeasured consequents phi, "
-            f"whose Jacobian bounds add DMVT vertices instead of rules), a smaller state box, or raise the limits")
-    return counts
+    """The counts of (27) before it is built (:func:`problem_size`), under the configured
+    relaxation ("auto": the paper's triples if they fit the limits, else pairs); refused past
+    the settings' limits with the counts and the options."""
+    tried = []
+    for relaxation in (("triples", "pairs") if settings.relaxation == "auto" else (settings.relaxation,)):
+        counts = problem_size(n_rules, nx, ny, dmvt_vertices, relaxation)
+        if counts["lmi_blocks"] <= settings.max_lmi_blocks and counts["memory_gb"] <= settings.max_memory_gb:
+            return counts
+        tried.append(counts)
+    what = "; ".join(f"{c['relaxation']}: {c['lmi_blocks']} LMI blocks over {c['variables']} variables, about "
+                     f"{c['memory_gb']:.3g} GB" for c in tried)
+    raise RepresentationError(
+        f"{source}: the TS design would need {n_rules} rules x {dmvt_vertices} DMVT vertices, blocks of size "
+        f"{2 * nx} ({what}); limits: [design] max_lmi_blocks = {settings.max_lmi_blocks}, max_memory_gb = "
+        f"{settings.max_memory_gb:g}. Options: fewer premises (each one doubles the rules; measure a signal, or "
+        f"move a nonlinearity into the unmeasured consequents phi, whose Jacobian bounds add DMVT vertices "
+        f"instead of rules), a smaller state box, or raise the limits")
 
 
-def _blocks(ts: TSFuzzyModel, T, P, M, L, decay, xp):
+def _blocks(ts: TSFuzzyModel, T, P, M, L, decay, xp, P_bar=None):
     """All blocks of (27a)-(27b) as (label, matrix): numbers (``xp`` numpy, the re-check) or
-    Affine decision matrices of :mod:`codegen.lmi` (the problem)."""
+    Affine decision matrices of :mod:`codegen.lmi` (the problem). With ``P_bar`` the pair
+    relaxation: P_bar in place of every P_l, and P_bar >= P_l."""
     N = ts.n_rules
     cat = np.block if xp is np else bmat
+    nxt = (lambda l: P[l]) if P_bar is None else (lambda l: P_bar)
 
     def phi(i, j, l, theta):
         off = M[j] @ (T @ ts.A_theta(i, theta)) - L[j] @ ts.C
-        return cat([[decay ** 2 * P[j], off.T], [off, M[j] + M[j].T - P[l]]])
+        return cat([[decay ** 2 * P[j], off.T], [off, M[j] + M[j].T - nxt(l)]])
 
     out = []
+    if P_bar is not None:
+        out += [(f"P_bar >= P{l + 1}", P_bar - P[l]) for l in range(N)]
+        for p, theta in enumerate(ts.theta_vertices):
+            for i in range(N):
+                out.append((f"(27a) i={i + 1} theta_{p + 1} (pairs)", phi(i, i, 0, theta)))
+                for j in range(N):
+                    if j != i:
+                        out.append((f"(27b) i={i + 1} j={j + 1} theta_{p + 1} (pairs)",
+                                    (2.0 / (N - 1)) * phi(i, i, 0, theta) + phi(i, j, 0, theta)
+                                    + phi(j, i, 0, theta)))
+        return out
     for p, theta in enumerate(ts.theta_vertices):
         for l in range(N):
             for i in range(N):
@@ -157,6 +193,11 @@ class TSDesign:
     M: tuple
     L: tuple
     solution: LMISolution | None
+    P_bar: np.ndarray | None = None      # the pair relaxation's bound of every P_l (None: triples)
+
+    @property
+    def relaxation(self) -> str:
+        return "triples" if self.P_bar is None else "pairs"
 
     def gain_at(self, h) -> np.ndarray:
         """L(h) = M(h)^-1 L(h) (eq. (28))."""
@@ -168,19 +209,23 @@ class TSDesign:
         out = {"T": self.T.tolist(), "N": self.N.tolist(), "decay": self.settings.decay}
         for i, (p, m, l) in enumerate(zip(self.P, self.M, self.L)):
             out.update({f"P{i + 1}": p.tolist(), f"M{i + 1}": m.tolist(), f"L{i + 1}": l.tolist()})
+        if self.P_bar is not None:
+            out.update({"relaxation": "pairs", "P_bar": self.P_bar.tolist()})
         return out
 
 
-def build_problem(ts: TSFuzzyModel, T: np.ndarray, settings: TSDesignSettings):
-    prob = LMIProblem(f"{ts.definition.name}: Nguyen et al. 2021 Theorem 1")
+def build_problem(ts: TSFuzzyModel, T: np.ndarray, settings: TSDesignSettings, relaxation: str = "triples"):
+    pairs = relaxation == "pairs"
+    prob = LMIProblem(f"{ts.definition.name}: Nguyen et al. 2021 Theorem 1" + (" (pair relaxation)" if pairs else ""))
     nx, ny, N = ts.nx, ts.ny, ts.n_rules
     P = [prob.symmetric(f"P{i + 1}", nx) for i in range(N)]
     M = [prob.matrix(f"M{i + 1}", nx, nx) for i in range(N)]
     L = [prob.matrix(f"L{i + 1}", nx, ny) for i in range(N)]
+    P_bar = prob.symmetric("P_bar", nx) if pairs else None
     for i in range(N):
         # normalization of the homogeneous (27); the re-check sees P_i itself (slack 1)
         prob.require_psd(f"P{i + 1} >= I", P[i], margin=1.0)
-    for label, block in _blocks(ts, T, P, M, L, settings.decay, LMIProblem):
+    for label, block in _blocks(ts, T, P, M, L, settings.decay, LMIProblem, P_bar):
         prob.require_psd(label, block, margin=settings.margin,
                          hint="the DMVT box or the premise ranges may be too wide for this sample time")
     prob.minimize(sum(trace(p) for p in P))
@@ -190,20 +235,21 @@ def build_problem(ts: TSFuzzyModel, T: np.ndarray, settings: TSDesignSettings):
 def design(ts: TSFuzzyModel, settings: TSDesignSettings = TSDesignSettings()) -> TSDesign:
     """Algorithm 1: rank conditions, (30), LMIs (27) on Clarabel, rounded and re-certified."""
     T, N = decoupling_matrices(ts)
-    size_guard(ts.n_rules, ts.nx, ts.ny, int(ts.theta_vertices.shape[0]), settings, ts.definition.name)
-    prob = build_problem(ts, T, settings)
+    size = size_guard(ts.n_rules, ts.nx, ts.ny, int(ts.theta_vertices.shape[0]), settings, ts.definition.name)
+    prob = build_problem(ts, T, settings, size["relaxation"])
     sol = prob.solve(tol=settings.tol)
     n = ts.n_rules
     P = tuple(decimal_round(0.5 * (sol[f"P{i + 1}"] + sol[f"P{i + 1}"].T)) for i in range(n))
     M = tuple(decimal_round(sol[f"M{i + 1}"]) for i in range(n))
     L = tuple(decimal_round(np.atleast_2d(sol[f"L{i + 1}"]).reshape(ts.nx, ts.ny)) for i in range(n))
-    return TSDesign(settings, T, N, P, M, L, sol)
+    P_bar = decimal_round(0.5 * (sol["P_bar"] + sol["P_bar"].T)) if size["relaxation"] == "pairs" else None
+    return TSDesign(settings, T, N, P, M, L, sol, P_bar)
 
 
 def certify(ts: TSFuzzyModel, d: TSDesign) -> dict:
     """Independent numpy check of (27) on the emitted (rounded) matrices; no solver involved."""
     checks = check_blocks({f"P{i + 1} > 0": p for i, p in enumerate(d.P)})
-    checks += check_blocks(dict(_blocks(ts, d.T, d.P, d.M, d.L, d.settings.decay, np)))
+    checks += check_blocks(dict(_blocks(ts, d.T, d.P, d.M, d.L, d.settings.decay, np, d.P_bar)))
     worst = min(checks, key=lambda c: c.min_eig)
     if worst.min_eig <= 0:
         raise CertificateError(f"Nguyen et al. 2021 LMI {worst.label!r} fails the numpy re-check on the emitted "
