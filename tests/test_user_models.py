@@ -76,6 +76,40 @@ def test_a_saturating_tanh_tyre_designs_fast(tmp_path):
                 assert bound.lower == bound.upper == 0.0
 
 
+@pytest.mark.parametrize("law, symbols, params", [
+    ("F_r * sp.atan(2 * C_r * (l_r * r - v_y) / (v_x * F_r)) * 2 / sp.pi",
+     'F_r = sp.Symbol("F_r", positive=True)\n', "F_r = 5000.0\n"),
+    # Pacejka's magic formula (B, C = 1.3, D, E = 0.5) in the rear slip, past its peak on this box
+    ("C_r * sp.sin(1.3 * sp.atan(B_r * (l_r * r - v_y) / v_x - 0.5 * (B_r * (l_r * r - v_y) / v_x"
+     " - sp.atan(B_r * (l_r * r - v_y) / v_x))))", 'B_r = sp.Symbol("B_r", positive=True)\n', "B_r = 18.0\n"),
+])
+def test_atan_and_magic_formula_tyres_bound_soundly_within_seconds(tmp_path, law, symbols, params):
+    """Sound Jacobian bounds of realistic tyre laws in the unmeasured v_y: within seconds, and
+    containing the derivative at every sampled point of the state box."""
+    import sympy as sp
+    from codegen.families.ts_fuzzy_uio import representation
+    from codegen.model import load_parameters, parameter_substitution
+    path = _ts_project(tmp_path, law, symbols, params)
+    cfg = observers.get(str(path))
+    model, par = cfg.load_model(), load_parameters(cfg.parameter_path)
+    t0 = time.perf_counter()
+    ts = representation.build(model, par, cfg.sample_time)
+    assert time.perf_counter() - t0 < 10
+    subs = parameter_substitution(model, par)
+    states = model.states
+    rng = np.random.default_rng(0)
+    box = [ts.state_box[x] for x in states]
+    pts = np.column_stack([rng.uniform(lo, hi, 4000) for lo, hi in box])
+    for phi, row in zip(ts.phi, ts.jacobian_bounds):
+        for x, bound in zip(states, row):
+            if bound.lower == bound.upper == 0.0:
+                continue
+            dfun = sp.lambdify(states, sp.diff(sp.sympify(phi).subs(subs), x), "numpy")
+            vals = np.asarray(dfun(*pts.T), dtype=float)
+            assert bound.lower <= vals.min() and vals.max() <= bound.upper, (phi, x)
+            assert bound.upper - bound.lower <= 1.5 * (vals.max() - vals.min()) + 1e-9     # tight, not just sound
+
+
 def test_a_too_large_ts_design_is_refused_within_a_second(tmp_path):
     """Cubic rear slip: 5 premises, 32 rules; the paper's rule triples would need ~1e5 blocks of
     (27): refused before the bounds."""
