@@ -65,6 +65,17 @@ def test_the_force_estimate_is_within_five_percent_and_unit_free(tutorial):
     f_n = res["signals"]["estimate"]["F"][keep]
     f_kn = 1000.0 * res_kn["signals"]["estimate"]["F"][keep]
     assert np.abs(f_kn - f_n).max() <= 0.01 * np.abs(f_n).max()
+    # and the outputs in deg/s and g: the same observer up to the units
+    (tutorial / "lateral_deg_g.py").write_text((tutorial / "lateral.py").read_text().replace(
+        'outputs=(("r", r), ("a_y", (F_yf + F_yr + F) / M)),',
+        'outputs=(("r", 57.29577951308232 * r), ("a_y", (F_yf + F_yr + F) / M / 9.80665)),'))
+    (tutorial / "disturbance_deg_g.toml").write_text((tutorial / "disturbance.toml").read_text()
+                                                     .replace('"lateral.py"', '"lateral_deg_g.py"'))
+    other = str(tutorial / "disturbance_deg_g.toml")
+    emit.generate([other], log=lambda *_: None)
+    extension.build_extension(other)
+    f_deg_g = validate.run_scenario(other, "excitation")["signals"]["estimate"]["F"][keep]
+    assert np.abs(f_deg_g - f_n).max() <= 1e-3 * np.abs(f_n).max()
 
 
 def test_a_log_in_its_own_units_gives_the_same_estimates(tutorial):

@@ -114,16 +114,26 @@ def ui_scaling(poly: Polytope) -> np.ndarray:
     return np.where(c > 0, 1.0 / np.where(c > 0, c, 1.0), 1.0)
 
 
-def _scaled(poly: Polytope, scale: np.ndarray) -> Polytope:
-    return dataclasses.replace(poly, D=poly.D * scale[None, None, :],
-                               Dd=ui_feedthrough(poly) * scale[None, None, :])
+def output_scaling(poly: Polytope) -> np.ndarray:
+    """Output units for the LMIs: each output scaled to a largest entry of 1 in its row of
+    [C, Dd] (over the vertices), so a yaw rate in deg/s or an acceleration in g gives the same
+    observer as in rad/s and m/s^2: the gain bound ||L|| <= gain_bound acts on these units.
+    Outputs that measure a state directly (a row of C with largest entry 1) are unchanged."""
+    rows = np.abs(np.concatenate([poly.C, ui_feedthrough(poly)], axis=2)).max(axis=(0, 2))
+    return np.where(rows > 0, 1.0 / np.where(rows > 0, rows, 1.0), 1.0)
+
+
+def _scaled(poly: Polytope, scale: np.ndarray, out_scale: np.ndarray | None = None) -> Polytope:
+    t = np.ones(poly.C.shape[1]) if out_scale is None else out_scale
+    return dataclasses.replace(poly, D=poly.D * scale[None, None, :], C=poly.C * t[None, :, None],
+                               Dd=ui_feedthrough(poly) * scale[None, None, :] * t[None, :, None])
 
 
 def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.ndarray | None = None,
                   states: tuple = ()):
     """LMI problem of Theorem 1 under ``settings``, in the unknown-input units of :func:`ui_scaling`;
     returns (problem, variables). ``states`` names the states in the errors."""
-    poly = _scaled(poly, ui_scaling(poly))
+    poly = _scaled(poly, ui_scaling(poly), output_scaling(poly))
     _check_assumptions(poly, states)
     if settings.lyapunov == "pdlf" and poly.rate_bound_mode == "none":
         raise ConfigurationError("the parameter-dependent design needs membership rate bounds; with "
@@ -225,7 +235,9 @@ def design(poly: Polytope, settings: LinfDesignSettings, states: tuple = ()) -> 
     else:
         P = tuple(decimal_round(sol["P"]) for _ in range(N))
         X = np.zeros_like(P[0])
-    L = tuple(decimal_round(sol[f"L{i + 1}"]) for i in range(N))
+    # back to the model's output units: L (T y) = (L T) y, column by column (exact per element)
+    t = output_scaling(poly)
+    L = tuple(decimal_round(np.asarray(sol[f"L{i + 1}"]) * t[None, :]) for i in range(N))
     P = tuple(0.5 * (p + p.T) for p in P)
     X = 0.5 * (X + X.T)
     # back to the model's units: D d = (D / c)(c d), so nu = nu_s / c^2 (one unknown input; the
