@@ -118,6 +118,24 @@ def _print_design(b, path, as_json: bool, compare: dict) -> int:
     return 0
 
 
+def cmd_sweep(args) -> int:
+    from . import sweep
+    grid = [sweep.parse_set(text) for text in args.sets]
+    columns = [c.strip() for c in args.show.split(",") if c.strip()]
+    if args.json:
+        _print_json({**sweep.run(args.name, grid), "show": columns})
+        return 0
+    result = {"observer": args.name, "grid": dict(grid), "points": []}
+    shown = []
+
+    def show(row):                  # the header with the first row: a mistake is one error line, no table
+        head, line = sweep.lines({**result, "points": [row]}, columns)
+        print(line if shown else f"{head}\n{line}", flush=True)
+        shown.append(row)
+    sweep.run(args.name, grid, log=show)
+    return 0
+
+
 def cmd_generate(args) -> int:
     emit.generate(args.names or None, Path(args.out) if args.out else None, force=args.force)
     return 0
@@ -249,6 +267,14 @@ def main(argv=None) -> int:
     p.add_argument("--update", action="store_true",
                    help="commit the fresh design as the design lock generated_c/NAME/NAME_design.json")
     p.set_defaults(func=cmd_design)
+    p = sub.add_parser("sweep", help="design one observer over a grid of its settings (writes nothing)")
+    p.add_argument("name")
+    p.add_argument("--set", dest="sets", action="append", required=True, metavar="KEY=[V, ...]",
+                   help="a dotted key of the observer file and a TOML array of values to try, e.g. "
+                        "design.pole_radius=[50,100,300]; repeat for a grid (every combination)")
+    p.add_argument("--show", default="gamma", help="comma-separated summary figures in the text table (default gamma)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_sweep)
     p = sub.add_parser("generate", help="emit C for observers whose inputs changed")
     p.add_argument("names", nargs="*")
     p.add_argument("--force", action="store_true", help="regenerate even if the inputs hash is unchanged")

@@ -141,7 +141,20 @@ def family_bench_table(bench: dict, family: str) -> str:
     return _table(columns, [[r.get(c) for c in columns] for r in rows])
 
 
+def sweep_table(sweep: dict) -> str:
+    """A recorded ``uiogen sweep --json``: one row per grid point, its settings, the outcome and
+    the figures the sweep was asked to show."""
+    keys = list(sweep["grid"])
+    show = sweep.get("show", ["gamma"])
+    rows = [[p["settings"][k] for k in keys] + [p["outcome"]] + [p.get(c, "–") for c in show]
+            for p in sweep["points"]]
+    return _table([f"`{k}`" for k in keys] + ["outcome"] + show, rows)
+
+
 def _render(kind: str, arg: str, demo: dict | None, bench: dict | None, spread: dict | None = None) -> str | None:
+    if kind == "sweep":
+        record = _load(DATA / "sweeps" / f"{arg}.json")
+        return None if record is None else sweep_table(record)
     if kind == "family_bench":
         return None if bench is None else family_bench_table(bench, arg)
     if kind == "spread":
@@ -159,7 +172,7 @@ def _render(kind: str, arg: str, demo: dict | None, bench: dict | None, spread: 
     if kind == "bench":
         return bench_table(bench)
     raise ConfigurationError(f"unknown docs table kind {kind!r} (design, validation, real_data, bench, spread, "
-                             f"family_bench)")
+                             f"family_bench, sweep)")
 
 
 def _load(path: Path) -> dict | None:

@@ -147,7 +147,29 @@ def load_module(path: Path, name: str):
     return module
 
 
-def _parse(path: Path) -> ObserverConfig:
+def apply_overrides(data: dict, overrides: dict, source: str) -> dict:
+    """A copy of an observer file's table with ``{"design.pole_radius": 50.0, ...}`` set in it.
+
+    The dotted key names a table path inside the file; a missing table is created. The result
+    goes through the same checks as the file itself, so a misspelt key or a value out of range is
+    the same typed error, naming the file and the key.
+    """
+    import copy
+    data = copy.deepcopy(data)
+    for key, value in overrides.items():
+        parts = key.split(".")
+        if not all(parts):
+            raise config_error(source, None, key, value, "a dotted key such as design.alpha")
+        table = data
+        for i, part in enumerate(parts[:-1]):
+            table = table.setdefault(part, {})
+            if not isinstance(table, dict):
+                raise config_error(source, None, key, value, f"{'.'.join(parts[:i + 1])} is not a table")
+        table[parts[-1]] = value
+    return data
+
+
+def _parse(path: Path, overrides: dict | None = None) -> ObserverConfig:
     from . import families
     path = Path(path)
     try:
@@ -160,6 +182,8 @@ def _parse(path: Path) -> ObserverConfig:
     except UnicodeDecodeError as exc:
         raise ModelDefinitionError(f"{path}: not UTF-8 text: {exc}") from None
     source = str(path)
+    if overrides:
+        data = apply_overrides(data, overrides, source)
     known = families.names()
     if "family" not in data:
         raise config_error(source, None, "family", None, f"missing; one of {', '.join(known)}")
@@ -205,12 +229,16 @@ def is_path(name: str) -> bool:
     return name.endswith(".toml") or "/" in name
 
 
-def get(name: str) -> ObserverConfig:
-    """A built-in observer by name, or an observer file by path (``.toml``, anywhere on disk)."""
+def get(name: str, overrides: dict | None = None) -> ObserverConfig:
+    """A built-in observer by name, or an observer file by path (``.toml``, anywhere on disk).
+
+    ``overrides`` (dotted key -> value, :func:`apply_overrides`) changes settings of the file as
+    read, for studies such as ``uiogen sweep``; the file on disk is not touched.
+    """
     if is_path(str(name)):
-        return _parse(Path(name))
+        return _parse(Path(name), overrides)
     path = OBSERVERS_DIR / f"{name}.toml"
     if not path.is_file():
         raise UnknownObserverError(f"no observer named {name!r}; known: {', '.join(names()) or 'none'} "
                                    f"(or give the path of an observer .toml file)")
-    return _parse(path)
+    return _parse(path, overrides)

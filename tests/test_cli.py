@@ -47,3 +47,17 @@ def test_errors_are_typed(tmp_path):
     bad.write_text(json.dumps({"P1": [[1]]}))
     proc = uiogen("check-gains", "lpv_linf_driver_torque", "--gains", str(bad))
     assert proc.returncode == 2 and "lack" in proc.stderr
+
+
+def test_sweep_json_and_mistakes():
+    proc = uiogen("sweep", "switched_pi_bank_angle", "--set", "design.pole_radius=[29, 100]",
+                  "--set", "design.decay_rate=[0]", "--show", "gamma,max_pole_modulus", "--json")
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads(proc.stdout)
+    assert [p["outcome"] for p in res["points"]] == ["InfeasibleLMIError", "certified"]
+    assert res["points"][1]["gamma"] < 0.013 and res["show"] == ["gamma", "max_pole_modulus"]
+    proc = uiogen("sweep", "switched_pi_bank_angle", "--set", "design.pole_radus=[50]")
+    assert proc.returncode == 2 and "pole_radus" in proc.stderr and "did you mean 'pole_radius'" in proc.stderr
+    assert "Traceback" not in proc.stderr and proc.stdout == ""
+    proc = uiogen("sweep", "switched_pi_bank_angle", "--set", "design.pole_radius=[50,")
+    assert proc.returncode == 2 and "not a TOML value" in proc.stderr and "Traceback" not in proc.stderr

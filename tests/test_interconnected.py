@@ -285,15 +285,52 @@ def test_model_plant_run_is_nearly_exact():
         assert t[s]["rmse_percent"] < 6.0, s
 
 
-def test_commonroad_run_meets_the_mu1_target_on_the_first_bends():
-    """CommonRoad multi-body plant, first 32 s of the Satory-like track at mu = 1 (two bends, two
-    strong stops): every RMSE% within 1.5 x the paper's Table 1 (regression; full table in the README)."""
+# Our Table 1 on the CommonRoad plant (whole Satory-like track, every sample after 2 s), (RMSE%, NMSE%)
+# per signal: `uiogen validate interconnected_uio_ford_escort --scenario satory_table1`, docs page.
+OURS_TABLE1 = {
+    1.0: {"r": (0.04234, 100), "omega_f": (0.02899, 100), "omega_r": (0.02694, 100), "T_Bf": (3.156, 98.84), "a_x": (0.8631, 99.9), "a_y": (1.962, 99.8), "delta": (0.08868, 100), "B_r": (6.794, 90.18), "kappa": (0.2062, 100), "v_x": (0.1054, 99.99), "v_y": (4.009, 96.92), "T_s": (4.396, 99.08)},
+    0.6: {"r": (0.04713, 100), "omega_f": (0.0172, 100), "omega_r": (0.0144, 100), "T_Bf": (4.18, 99.27), "a_x": (0.9288, 99.95), "a_y": (3.22, 99.63), "delta": (0.08108, 100), "B_r": (8.182, 93.58), "kappa": (0.1265, 100), "v_x": (0.07246, 100), "v_y": (3.807, 98.4), "T_s": (3.229, 99.51)},
+    0.4: {"r": (0.03658, 100), "omega_f": (0.0113, 100), "omega_r": (0.008676, 100), "T_Bf": (5.155, 99.21), "a_x": (0.9907, 99.96), "a_y": (3.086, 99.68), "delta": (0.05247, 100), "B_r": (12.25, 89.26), "kappa": (0.1244, 100), "v_x": (0.02873, 100), "v_y": (2.39, 99.52), "T_s": (2.429, 99.67)},
+}
+
+
+@pytest.mark.parametrize("mu", (1.0, 0.6, 0.4))
+def test_commonroad_table1_at_each_friction(mu):
+    """The full Table 1 run at mu = 1, 0.6, 0.4: every RMSE% within 5 % of ours above (0.005 points
+    at least), every NMSE% within 0.3 points; the paper's comparisons as the docs state them: at
+    mu = 1 every RMSE% within 1.5 x the paper's; on NMSE% (the unambiguous metric of (32)) the
+    braking torques T_Bf and B_r are the signals below the paper (a_y too at mu = 0.6, by 0.13); B_r at
+    mu = 0.4 is the accepted miss (RMSE% > 9.2)."""
     from codegen.families.interconnected_uio import validation as satory
-    r = satory.run(TWIN, 1.0, "commonroad", duration=32.0)
+    r = satory.run(TWIN, mu, "commonroad")
     assert r["flagged_after_settle"] == 0
-    assert r["min_ax"] < -5.0 and r["max_abs_ay"] > 4.0
+    paper = satory.PAPER_TABLE1[mu]
     for s in satory.TABLE1_SIGNALS:
-        assert r["table"][s]["rmse_percent"] <= 1.5 * satory.PAPER_TABLE1[1.0][s][0], s
+        rm, nm = OURS_TABLE1[mu][s]
+        row = r["table"][s]
+        assert row["rmse_percent"] == pytest.approx(rm, rel=0.05, abs=0.005), s
+        assert row["nmse_percent"] == pytest.approx(nm, abs=0.3), s
+    below = {s for s in satory.TABLE1_SIGNALS if r["table"][s]["nmse_percent"] < paper[s][1]}
+    assert below == ({"T_Bf", "B_r", "a_y"} if mu == 0.6 else {"T_Bf", "B_r"})
+    if mu == 1.0:
+        assert all(r["table"][s]["rmse_percent"] <= 1.5 * paper[s][0] for s in satory.TABLE1_SIGNALS)
+        assert r["min_ax"] < -5.0 and r["max_abs_ay"] > 4.0
+    if mu == 0.4:
+        over = {s for s in satory.TABLE1_SIGNALS if r["table"][s]["rmse_percent"] > 9.2}
+        assert over == {"B_r"}
+
+
+def test_paper_rmse_nmse_pairs_are_not_one_reading():
+    """Under the normalized RMSE% reading, the paper's (RMSE%, NMSE%) pairs imply std/max of the
+    truth 0.98 for T_Bf (a mostly-zero braking torque: ours 0.29) and 0.034 for kappa (ours 0.33)."""
+    from codegen.families.interconnected_uio import validation as satory
+    imp = {s: satory.implied_std_over_max(*satory.PAPER_TABLE1[1.0][s]) for s in satory.TABLE1_SIGNALS}
+    assert imp["T_Bf"] == pytest.approx(0.984, abs=1e-3) and imp["kappa"] == pytest.approx(0.0339, abs=1e-3)
+    t = np.arange(0.0, 20.0, 0.01)
+    y = np.sin(t)
+    m = satory.table1_metrics(y, y + 0.05 * np.cos(3 * t), t)
+    assert satory.implied_std_over_max(m["rmse_percent"], m["nmse_percent"]) == pytest.approx(
+        m["std_over_max_truth"], rel=1e-9)
 
 
 def test_table1_metrics():

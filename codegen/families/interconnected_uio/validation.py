@@ -552,7 +552,21 @@ def table1_metrics(truth, est, t, settle: float = SETTLE_TIME) -> dict:
         nmse = None
     return {"rmse_percent": 100.0 * rms / peak if peak > 0 else None, "nmse_percent": nmse,
             "rmse_percent_literal": metrics.rmse_percent(y, yh), "rms": rms, "max_abs_truth": peak,
+            "std_over_max_truth": float(np.std(y)) / peak if peak > 0 else None,
             "max_abs_error": float(np.abs(yh - y).max())}
+
+
+def implied_std_over_max(rmse_percent: float, nmse_percent: float) -> float | None:
+    """std(y)/max|y| that an (RMSE%, NMSE%) pair implies when RMSE% is normalized by max|y|.
+
+    (32): NMSE% = 100 (1 - mean(e^2)/var(y)), and RMSE% = 100 sqrt(mean(e^2))/max|y|, so
+    std(y)/max|y| = (RMSE%/100) / sqrt(1 - NMSE%/100). A signal's own std/max is at most 1 (a
+    square wave at +-max) and is far below it for a mostly-zero braking torque: a pair that implies
+    about 1 cannot both be on this reading.
+    """
+    if nmse_percent is None or nmse_percent >= 100.0:
+        return None
+    return (rmse_percent / 100.0) / math.sqrt(1.0 - nmse_percent / 100.0)
 
 
 def run(name: str, mu: float = 1.0, plant: str = "commonroad", duration: float | None = None,
