@@ -216,7 +216,7 @@ def test_seed004_scenario3_on_the_pacejka_plant():
     assert truth["v_x"].max() <= 9.01 and res["max_abs_ay"] < 4.0          # normal driving on the path
     assert truth["mu"].min() == pytest.approx(0.05) and truth["mu"].max() > 1.19   # the law's full range
     assert obs["delta"]["mae"] <= 2 * seed["delta"][0]
-    assert obs["v_y"]["mae"] < 0.03 and obs["T_eng"]["mae"] < 2.2               # regression (0.0245, 1.78)
+    assert obs["v_y"]["mae"] <= 1.15 * 0.0245 and obs["T_eng"]["mae"] <= 1.15 * 1.78  # measured + 15 %
     # where the v_y error comes from: samples with grip < 0.4 (a third of them) carry most of it
     keep = truth["t"] >= common.SETTLE_TIME
     err = np.abs(res["signals"]["estimate"]["v_y"] - truth["v_y"])[keep]
