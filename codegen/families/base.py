@@ -149,10 +149,6 @@ class Family(abc.ABC):
                 f"({result.get('plant_model', result['plant'])}), {result['samples']} samples, "
                 f"{result['status_flags']} flagged samples")
 
-    def demo_plant(self, config) -> str:
-        """The plant ``uiogen demo`` validates ``config`` on (a ``plant`` of :meth:`validate`)."""
-        return "nominal"
-
     def demo_report(self, artifact: dict) -> dict:
         """Design figures for ``uiogen demo`` from the committed design report."""
         return {}
