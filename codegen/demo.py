@@ -1,8 +1,9 @@
 """``uiogen demo``: the README's main job, after design + generate + build.
 
 For every built-in observer: its design figures (from the design lock, ``Family.demo_report``),
-then the compiled C step on its family's demo scenarios (``Family.demo_scenarios``) against its
-nominal plant, beside the baselines, in the table format of its paper; then the real-data table
+then the compiled C step on its family's demo scenarios (``Family.demo_scenarios``) against the
+plant its family names for it (an optional ``demo_plant(config)`` of the family, else the nominal
+one), beside the baselines, in the table format of its paper; then the real-data table
 (the shared Stanford log).
 """
 from __future__ import annotations
@@ -23,7 +24,8 @@ def main(json_output: bool = False) -> int:
         config = observers.get(name)
         family = families.get(config.family)
         art = json.loads(design_lock.path(config).read_text())
-        scen = {s: validate.run_scenario(config, s, "nominal") for s in family.demo_scenarios}
+        plant = getattr(family, "demo_plant", lambda _config: "nominal")(config)
+        scen = {s: validate.run_scenario(config, s, plant) for s in family.demo_scenarios}
         report[name] = {"family": config.family, **family.demo_report(art), "scenarios": scen}
     real = validate.run_data(REAL_DATA_OBSERVER, "stanford")
     others = {n: validate.run_data(n, "stanford") for n in REAL_DATA_OTHERS if n in observers.names()}

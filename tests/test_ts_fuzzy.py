@@ -177,16 +177,28 @@ def test_c_step_status_behaviour(compiled):
     assert np.isfinite(s).all()
 
 
+# Measured on the Pacejka plant (observer's own equations (1) with magic-formula tyres; NOT the paper's
+# 15-DOF simulator): (MAE, RMSD) per signal; docs/families/ts_fuzzy_uio.md. Tolerance 15 % above.
+PACEJKA_MEASURED = {
+    "circular_path_normal": {"v_y": (5.14e-4, 4.26e-4), "delta": (4.06e-5, 2.40e-5), "T_eng": (0.0489, 0.0437)},
+    "random_trajectory_accel": {"v_y": (7.84e-4, 1.60e-3), "delta": (4.99e-5, 6.77e-5), "T_eng": (0.0806, 0.125)},
+}
+
+
 @pytest.mark.parametrize("scenario", ["circular_path_normal", "random_trajectory_accel"])
 def test_seed004_targets_on_the_pacejka_plant(scenario):
+    """Table II's MAE and RMSD of v_y, delta, T_eng at the measured figures (+15 %); every MAE is at or
+    below the paper's, and so is the T_eng RMSD. The RMSDs of v_y (2x in scenario 2, 4x in 1) and of
+    delta in scenario 2 (8x) are above the paper's: asserted at our figure, not the paper's."""
     from codegen import validate
     res = validate.run_scenario(NAME, scenario, "nominal")
     seed = ts_validation.PAPER_TABLE_II[scenario]
     obs = res["observer"]
-    if scenario == "circular_path_normal":      # issue target: the paper's scenario-2 figures or better
-        assert obs["v_y"]["mae"] <= 6e-4 and obs["delta"]["mae"] <= 1e-4
-    assert obs["v_y"]["mae"] <= 2 * seed["v_y"][0] and obs["delta"]["mae"] <= 2 * seed["delta"][0]
-    assert obs["T_eng"]["mae"] <= 1.0
+    for sig, (mae, rmsd) in PACEJKA_MEASURED[scenario].items():
+        assert obs[sig]["mae"] <= 1.15 * mae, sig
+        assert obs[sig]["std"] <= 1.15 * rmsd, sig
+        assert obs[sig]["mae"] <= seed[sig][0], sig          # the paper's MAE met
+    assert obs["T_eng"]["std"] <= seed["T_eng"][1]
     assert res["status_flags"] == 0
 
 
@@ -204,7 +216,7 @@ def test_seed004_scenario3_on_the_pacejka_plant():
     assert truth["v_x"].max() <= 9.01 and res["max_abs_ay"] < 4.0          # normal driving on the path
     assert truth["mu"].min() == pytest.approx(0.05) and truth["mu"].max() > 1.19   # the law's full range
     assert obs["delta"]["mae"] <= 2 * seed["delta"][0]
-    assert obs["v_y"]["mae"] < 0.03 and obs["T_eng"]["mae"] < 2.2               # regression (0.0245, 1.78)
+    assert obs["v_y"]["mae"] <= 1.15 * 0.0245 and obs["T_eng"]["mae"] <= 1.15 * 1.78  # measured + 15 %
     # where the v_y error comes from: samples with grip < 0.4 (a third of them) carry most of it
     keep = truth["t"] >= common.SETTLE_TIME
     err = np.abs(res["signals"]["estimate"]["v_y"] - truth["v_y"])[keep]
@@ -232,15 +244,75 @@ def test_commonroad_parameter_file_is_derived_from_the_package():
     assert committed.read_text() == commonroad_angle.ts_params_toml(2)
 
 
+def test_commonroad_torque_truth_is_the_effective_torque_of_eq1():
+    """On the multi-body plant, T_eng truth = I_e (v_dot_x - v_y r) over each interval, and it is the
+    drive torque less the wheels' spin-up and the steered wheels' projection (exact split)."""
+    from codegen.validation import commonroad_angle
+    cfg = observers.get("ts_fuzzy_uio_bmw320i")
+    scn = common.scenario_for(cfg, "circular_path_normal", 6.0)
+    tr = commonroad_angle.simulate(scn, 2, 100.0)
+    p = commonroad_angle.vehicle_parameters(2)
+    i_e = p.m * p.R_w
+    np.testing.assert_allclose(tr["T_eng"] + tr["T_wheels"] + tr["T_steer"], tr["T_drive"], atol=1e-9)
+    # after the start transient, the interval mean agrees with a 10 ms trapezoid of v_y r to 0.05 N m
+    keep = tr["t"] >= 2.0
+    fd = i_e * (np.diff(tr["v_x"]) / 0.01 - 0.5 * (tr["v_y"][1:] * tr["r"][1:] + tr["v_y"][:-1] * tr["r"][:-1]))
+    assert np.max(np.abs(fd - tr["T_eng"][:-1])[keep[:-1]]) < 0.05
+    # cornering: the steered wheels' projection is R_w F_yf sin(delta), F_yf ~ m a_y l_r / L in steady
+    # state (12 N m here, at 6 m/s on R = 40 m): within 5 % of that estimate
+    est = p.R_w * p.m * tr["a_y"] * p.b / (p.a + p.b) * np.sin(tr["delta"])
+    assert np.all(tr["T_steer"][keep] > 0)
+    assert np.mean(tr["T_steer"][keep]) == pytest.approx(np.mean(est[keep]), rel=0.05)
+
+
+# Measured on the CommonRoad multi-body plant (the headline, like for like with the paper's simulator):
+# circular_path_normal, (MAE, RMSD); docs/families/ts_fuzzy_uio.md. Tolerance 15 % above.
+COMMONROAD_MEASURED = {"v_y": (0.01063, 0.00224), "delta": (4.44e-4, 1.24e-4), "T_eng": (0.784, 0.273)}
+
+
 def test_commonroad_angle_steered_run():
-    """The CommonRoad twin on the independent multi-body plant: runs, tracks, and the torque truth is
-    the plant's own m R_w a_x (regression bounds, figures in the README)."""
+    """The CommonRoad twin on the multi-body plant, scenario 2: MAE and RMSD of Table II at the measured
+    figures (+15 %). The paper's T_eng MAE 0.733 N m is missed by 7 %, its T_eng RMSD 5.21 met; v_y
+    (19x) and delta (4.6x) miss it, the cause measured by the next test. Against the old truth
+    (drive torque m R_w a_x) the T_eng MAE is 20.6 N m, 19.3 of it the steered-wheel projection."""
     from codegen import validate
-    res = validate.run_scenario("ts_fuzzy_uio_bmw320i", "circular_path_normal", "commonroad", duration=8.0)
+    res = validate.run_scenario("ts_fuzzy_uio_bmw320i", "circular_path_normal", "commonroad")
     obs = res["observer"]
+    seed = ts_validation.PAPER_TABLE_II["circular_path_normal"]
     assert res["status_flags"] == 0
-    assert obs["v_y"]["mae"] < 0.03 and obs["delta"]["mae"] < 2e-3
-    assert obs["T_eng"]["mae"] < 60.0
+    for sig, (mae, rmsd) in COMMONROAD_MEASURED.items():
+        assert obs[sig]["mae"] <= 1.15 * mae, sig
+        assert obs[sig]["std"] <= 1.15 * rmsd, sig
+    assert obs["T_eng"]["std"] <= seed["T_eng"][1]
+    truths = {k.split(" (")[0]: v["mae"] for k, v in res["torque_truths"].items()}
+    assert truths["drive torque m R_w a_x"] == pytest.approx(20.6, rel=0.1)
+    assert truths["drive torque less wheel spin-up"] == pytest.approx(19.0, rel=0.1)
+    assert truths["drive torque less steered-wheel projection"] == pytest.approx(1.25, rel=0.15)
+
+
+def test_commonroad_without_camber_force_meets_the_paper():
+    """The v_y and delta gap on the multi-body plant is the tyres' camber force (the body's roll
+    cambers the wheels; the package's PAC2002 multiplies its offsets p_hy1, p_vy1 by sgn(gamma)):
+    the same run with the camber terms off meets the paper's scenario-2 MAE of v_y and T_eng."""
+    cfg = observers.get("ts_fuzzy_uio_bmw320i")
+    res = ts_validation.run(cfg, "circular_path_normal", "commonroad", camber_force=False)
+    obs = res["observer"]
+    seed = ts_validation.PAPER_TABLE_II["circular_path_normal"]
+    assert res["status_flags"] == 0
+    assert obs["v_y"]["mae"] <= seed["v_y"][0]                   # 4.1e-4 (paper 5.66e-4)
+    assert obs["T_eng"]["mae"] <= seed["T_eng"][0]               # 0.033 (paper 0.733)
+    assert obs["delta"]["mae"] <= 1.15 * 1.03e-4                 # 1.03e-4 (paper 9.71e-5)
+    assert obs["v_y"]["mae"] < 0.05 * COMMONROAD_MEASURED["v_y"][0]
+
+
+def test_commonroad_ablation_knobs_are_checked():
+    from codegen.validation import commonroad_angle
+    cfg = observers.get("ts_fuzzy_uio_bmw320i")
+    scn = common.scenario_for(cfg, "circular_path_normal", 1.0)
+    with pytest.raises(commonroad_angle.PlantError, match="roll_stiffness_scale"):
+        commonroad_angle.simulate(scn, 2, 100.0, roll_stiffness_scale=0.0)
+    with pytest.raises(ModelDefinitionError, match="commonroad plant only"):
+        ts_validation.run(observers.get(NAME), "circular_path_normal", "nominal", camber_force=False)
 
 
 def test_real_data_with_delta_as_unknown_input():

@@ -9,10 +9,21 @@ and the engine torque as the (unknown) inputs, so an automated driver sets them 
 * longitudinal: the driver's acceleration demand is the plant's a_x input, which the package
   itself converts into engine torque T_E = m R_w a_x (a_x > 0) or brake torque (a_x < 0).
 
-Truth of the paper's "effective engine torque": T_eng = m R_w a_x, the torque the plant applies
-(braking negative); the observer's I_e is m R_w of the same car (:func:`ts_params_toml`). The
-plant has no aerodynamic drag, so C_x = C_y = 0 in that file. Truth v_y, r, δ are the plant's
-states (body frame, sprung-mass CoG).
+Truth of the paper's "effective engine torque". Nguyen et al. 2021 define T_eng as "the torque input
+for the vehicle longitudinal dynamics" (1), v̇_x = (T_eng − C_x v_x²)/I_e + v_y r, so the truth is
+that input on this plant: T_eng = I_e (v̇_x − v_y r) (C_x = 0: the plant has no drag), averaged
+over each sample interval (the interval the held inputs act on): I_e [(v_x,k+1 − v_x,k)/T_s −
+mean(v_y r)], with I_e = m R_w of the same car (:func:`ts_params_toml`). The multi-body model's
+own longitudinal balance, m (v̇_x − v_y r) = ΣF_x,rear + ΣF_x,front cos δ − ΣF_y,front sin δ, with
+the wheel spin I_y,w ω̇ = T − R_w F_x, splits it exactly into
+
+    T_eng = T_drive − T_wheels − T_steer,
+
+T_drive = m R_w a_x the drive/brake torque the package applies at the wheels (the plant's input;
+the earlier truth), T_wheels = I_y,w Σ ω̇ the torque that spins the four wheels up, and T_steer =
+R_w [ΣF_y,front sin δ + ΣF_x,front (1 − cos δ)] the steered wheels' forces projected on the body x
+axis; all three are returned (interval means, from the states: T_wheels = I_y,w Σ Δω / T_s).
+Truth v_y, r, δ are the plant's states (body frame, sprung-mass CoG).
 """
 from __future__ import annotations
 
@@ -26,6 +37,7 @@ from .commonroad_plant import VEHICLE_NAMES, PlantError, _Plant, PlantConfig, _s
     tyre_cornering_stiffness, vehicle_parameters
 
 SERVO_GAIN = 20.0     # rad/s, steering servo bandwidth
+CAMBER_TERMS = ("p_hy1", "p_hy3", "p_vy1", "p_vy3", "p_dy3", "r_vy3")   # PAC2002 lateral camber terms
 
 
 def ts_params_toml(vehicle: int = 2) -> str:
@@ -65,10 +77,16 @@ r = [-0.55, 0.55]     # rad/s
 
 
 def simulate(scenario, vehicle: int = 2, sample_rate: float = 100.0, dt_internal: float = 1e-3,
-             progress=None) -> dict:
+             progress=None, roll_stiffness_scale: float = 1.0, camber_force: bool = True) -> dict:
     """Run ``scenario`` on the multi-body plant with angle steering; truth per output sample.
 
-    Returns a dict with t, v_x, v_y, r, delta, T_eng, a_y, mu (SI units).
+    Returns a dict with t, v_x, v_y, r, delta, T_eng (the effective torque of the module
+    docstring), T_drive, T_wheels, T_steer, a_y, mu, roll (sprung-mass roll angle) (SI units).
+    ``roll_stiffness_scale`` multiplies the anti-roll bars' torsional stiffness (K_tsf, K_tsr):
+    an ablation knob (100 leaves a stiffer body, same loads and tyres). ``camber_force=False`` is the
+    other: the tyres' lateral force as at zero camber (PAC2002's camber terms p_hy1, p_hy3, p_vy1,
+    p_vy3, p_dy3, r_vy3 set to 0; the package multiplies the offsets p_hy1, p_vy1 by sgn(γ), so
+    any roll at all brings them in).
 
     Raises
     ------
@@ -78,8 +96,15 @@ def simulate(scenario, vehicle: int = 2, sample_rate: float = 100.0, dt_internal
     from ..simulate import AngleDriver
     if abs(scenario.sample_rate - sample_rate) > 1e-9:
         raise SampleError(f"scenario sampled at {scenario.sample_rate} Hz, plant outputs at {sample_rate} Hz")
+    if not roll_stiffness_scale > 0:
+        raise PlantError(f"roll_stiffness_scale must be positive, got {roll_stiffness_scale!r}")
     plant = _Plant(PlantConfig(vehicle=vehicle, sample_rate=sample_rate, dt_internal=dt_internal))
     p = plant.p
+    p.K_tsf, p.K_tsr = p.K_tsf * roll_stiffness_scale, p.K_tsr * roll_stiffness_scale
+    if not camber_force:
+        for key in CAMBER_TERMS:
+            setattr(p.tire, key, 0.0)
+    i_e = p.m * p.R_w
     n = scenario.t.size
     sub = int(round(1.0 / (sample_rate * dt_internal)))
     h = dt_internal
@@ -94,7 +119,8 @@ def simulate(scenario, vehicle: int = 2, sample_rate: float = 100.0, dt_internal
     def rhs(x, rate, a_x):
         return np.array(plant._f(list(x), [rate, a_x], p))
 
-    out = {k: np.empty(n) for k in ("t", "v_x", "v_y", "r", "delta", "T_eng", "a_y", "mu")}
+    out = {k: np.empty(n) for k in ("t", "v_x", "v_y", "r", "delta", "T_eng", "T_drive", "T_wheels", "T_steer",
+                                    "a_y", "mu", "roll")}
     for k in range(n):
         if progress is not None and (k % max(n // 50, 1) == 0 or k == n - 1):
             progress((k + 1) / n)
@@ -105,14 +131,24 @@ def simulate(scenario, vehicle: int = 2, sample_rate: float = 100.0, dt_internal
         dz = rhs(z, rate, a_x)
         out["t"][k] = scenario.t[k]
         out["v_x"][k], out["v_y"][k], out["r"][k], out["delta"][k] = z[3], z[10], z[5], z[2]
-        out["T_eng"][k] = p.m * p.R_w * a_x
+        out["T_drive"][k] = i_e * a_x
         out["a_y"][k] = dz[10] + z[5] * z[3]
         out["mu"][k] = plant.mu
-        if k == n - 1:
+        out["roll"][k] = z[6]
+        if k == n - 1:      # no interval left: the instantaneous values
+            out["T_eng"][k] = i_e * (dz[3] - z[10] * z[5])
+            out["T_wheels"][k] = p.I_y_w * float(np.sum(dz[23:27]))
+            out["T_steer"][k] = out["T_drive"][k] - out["T_wheels"][k] - out["T_eng"][k]
             break
-        for _ in range(sub):
+        z0, vyr = z, 0.5 * z[10] * z[5]
+        for j in range(sub):
             # the servo acts continuously on the held command; the torque demand is held
             z = rk4_step(lambda zs: rhs(zs, SERVO_GAIN * (delta_cmd - zs[2]), a_x), z, h)
+            vyr += z[10] * z[5] * (0.5 if j == sub - 1 else 1.0)
+        ts = sub * h
+        out["T_eng"][k] = i_e * ((z[3] - z0[3]) / ts - vyr / sub)      # trapezoid mean of v_y r
+        out["T_wheels"][k] = p.I_y_w * float(np.sum(z[23:27] - z0[23:27])) / ts
+        out["T_steer"][k] = out["T_drive"][k] - out["T_wheels"][k] - out["T_eng"][k]
         if not np.all(np.isfinite(z)):
             raise PlantError(f"{scenario.name}: non-finite plant state at t = {scenario.t[k]:.3f} s")
         if abs(z[2]) >= dmax or z[3] < 1.0 or math.isnan(z[3]):

@@ -30,6 +30,13 @@ class TSFuzzyUIO(Family):
         from .validation import run
         return run(config, scenario, plant, duration, progress=progress)
 
+    def demo_plant(self, config) -> str:
+        """An observer designed for a CommonRoad car runs on the multi-body plant, the counterpart of
+        the paper's 15-DOF simulator; the others on their model module's (Pacejka) truth plant."""
+        from ...model import load_parameters
+        meta = load_parameters(config.parameter_path).meta
+        return "commonroad" if meta.get("commonroad_vehicle") is not None else "nominal"
+
     def format_validation(self, result: dict) -> str:
         from .validation import format_table
         return format_table(result)
