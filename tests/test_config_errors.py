@@ -84,6 +84,29 @@ def test_ui_filter_typo(tmp_path):
     assert "did you mean 'time_constant'?" in msg
 
 
+def test_performance_output_names_a_state(tmp_path):
+    """[design] performance names states of the model (z = F e of (17)); a typo is refused with the
+    file, the key, the states and a did-you-mean, before anything is solved."""
+    path = observer_file(tmp_path, "lpv_linf_driver_torque_beta", r'^performance = \["beta"\]',
+                         'performance = ["betta"]')
+    config = observers._parse(path)
+    with pytest.raises(ConfigurationError) as info:
+        linf_build._settings(config)
+    msg = _names_file_and_key(info.value, path, "[design] performance")
+    assert "'betta' is not a state" in msg and "beta, r, delta, delta_dot" in msg and "did you mean 'beta'?" in msg
+    assert info.value.key == "performance"
+    path = observer_file(tmp_path, "lpv_linf_driver_torque_beta", r'^performance = \["beta"\]',
+                         'performance = ["beta", "beta"]', stem="twice")
+    with pytest.raises(ConfigurationError, match="named twice"):
+        linf_build._settings(observers._parse(path))
+    path = observer_file(tmp_path, "lpv_linf_driver_torque_beta", r'^performance = \["beta"\]',
+                         'performance = "beta"', stem="string")
+    with pytest.raises(ConfigurationError, match="performance"):
+        linf_build._settings(observers._parse(path))
+    assert linf_build._settings(observers.get("lpv_linf_driver_torque_beta")).performance == ("beta",)
+    assert linf_build._settings(observers.get("lpv_linf_driver_torque")).performance == ()
+
+
 @pytest.mark.parametrize("name", ["ts_fuzzy_uio", "interconnected_uio", "algebraic_uio_example1",
                                   "switched_pi_bank_angle"])
 def test_top_level_keys_are_family_specific(tmp_path, name):
@@ -437,7 +460,8 @@ def _old_settings(config):
         return linf_uio.LinfDesignSettings(
             alpha=float(d.get("alpha", 5.0)), lyapunov=d.get("lyapunov", "pdlf"),
             gain_bound=float(d.get("gain_bound_times_sample_time", 1.0)) / config.sample_time,
-            margin=float(d.get("margin", 1e-5)), tol=float(d.get("tol", 1e-8)))
+            margin=float(d.get("margin", 1e-5)), tol=float(d.get("tol", 1e-8)),
+            performance=tuple(d.get("performance", ())))
     if config.family == "ts_fuzzy_uio":
         return ts_fuzzy_uio.TSDesignSettings(decay=float(d.get("decay", 1.0)), margin=float(d.get("margin", 1e-4)),
                                              tol=float(d.get("tol", 1e-8)))

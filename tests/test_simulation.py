@@ -1,5 +1,6 @@
 """It runs and converges: compiled C step vs the exact nonlinear-in-speed plant, in closed loop."""
 import numpy as np
+import pytest
 
 from codegen import observers, simulate, validate
 from codegen.validation import common
@@ -9,11 +10,25 @@ def test_converges_on_track_scenario_with_noise():
     r = validate.run_scenario("lpv_linf_driver_torque", "track_varying_speed", "model")
     t = r["observer"]
     assert r["status_flags"] == 0
-    # measured 0.102 deg / 0.95 N m / r 0.053 deg/s (a_y up to 5.5 m/s^2), bounds 10 % above;
-    # Nguyen et al. 2019 Table II on its simulator: beta RMS 0.053 deg, T_d RMS 0.25 N m
-    assert t["beta"]["rms"] < 0.113
-    assert t["T_d"]["rms"] < 1.05 and t["T_d"]["max"] < 4.5
-    assert t["r"]["rms"] < 0.059
+    # measured beta 0.1047 deg / T_d 0.981 N m / r 0.0314 deg/s RMS (a_y up to 5.5 m/s^2), 5 % either way.
+    # Nguyen et al. 2019 Table II (0.053 deg / 0.25 N m) is not reached with the paper's Taylor-reduced
+    # polytope: its 14.8 % error on a_12 is the cause (the same gains with the exact A(v_x) in the step:
+    # 0.0087 deg / 0.27 N m; docs/families/linf_uio.md), see test_sector_polytope_reaches_table_ii
+    assert t["beta"]["rms"] == pytest.approx(0.1047, rel=0.05)
+    assert t["T_d"]["rms"] == pytest.approx(0.981, rel=0.05) and t["T_d"]["max"] < 3.2
+    assert t["r"]["rms"] == pytest.approx(0.0314, rel=0.05)
+
+
+def test_sector_polytope_reaches_table_ii():
+    """The exact 4-vertex polytope, same Theorem 1 and settings: on the observer's exact model the
+    errors reach the paper's Table II (beta RMS 0.053 deg, T_d RMS 0.25 N m on its simulator);
+    measured 0.0036 deg and 0.269 N m (a linear KF on the same run: 0.0029 deg)."""
+    r = validate.run_scenario("lpv_linf_driver_torque_sector", "track_varying_speed", "model")
+    t = r["observer"]
+    assert r["status_flags"] == 0
+    assert t["beta"]["rms"] < 0.053 and t["beta"]["rms"] == pytest.approx(0.0036, rel=0.1)
+    assert t["T_d"]["rms"] == pytest.approx(0.269, rel=0.05)
+    assert t["T_d"]["rms"] < 0.25 * 1.1       # the paper's figure, to 10 %
 
 
 def test_takeover_with_opposing_assistance():

@@ -70,9 +70,11 @@ class LinfUIO(Family):
         if "lmi_solutions" in gains:
             return super().check_gains(config, gains)
         from ... import polytope
-        from .build import representation
-        from .design import certify
+        from .build import _settings, representation
+        from .design import certify, performance_matrix
         lpv, poly, _ = representation(config)
+        performance = _settings(config).performance
+        F = performance_matrix(lpv.definition.states, performance)
         alpha = float(gains.get("alpha", config.design.get("alpha", 5.0)))
         N = poly.n_vertices
         missing = [k for k in [*(f"P{i + 1}" for i in range(N)), *(f"L{i + 1}" for i in range(N))] if k not in gains]
@@ -91,10 +93,11 @@ class LinfUIO(Family):
             if m.shape != shape:
                 raise ConfigurationError(f"gains: {label} has shape {m.shape}, expected {shape}", key=label)
         make = polytope.taylor_reduced_polytope if poly.kind == "taylor_reduced" else polytope.sector_polytope
-        out = {"observer": config.name, "alpha": alpha, "form": "theorem_1", "results": {}}
+        out = {"observer": config.name, "alpha": alpha, "form": "theorem_1", "results": {},
+               "performance": list(performance) or [str(x) for x in lpv.definition.states]}
         for mode in ("exact", "at_expansion_point") if poly.kind == "taylor_reduced" else ("exact",):
             p = make(lpv, mode)
-            res = certify(p, P, X, L, alpha)
+            res = certify(p, P, X, L, alpha, F)
             res["rate_bounds"] = p.rate_bounds.tolist()
             out["results"][mode] = res
         M = [np.linalg.solve(P[i] + X, L[i]) for i in range(N)]
@@ -108,7 +111,7 @@ class LinfUIO(Family):
         if res.get("form") != "theorem_1":
             return super().format_check_gains(res, source)
         lines = [f"Theorem 1 ({self.short_citation}) check of {source} on observer {res['observer']} "
-                 f"(alpha = {res['alpha']:g})"]
+                 f"(alpha = {res['alpha']:g}, performance output z = {', '.join(res.get('performance', []))})"]
         for mode, r in res["results"].items():
             label = {"exact": "sound rate bounds over the whole box",
                      "at_expansion_point": "rate bounds of the paper's eq. (11)"}[mode]

@@ -102,7 +102,8 @@ class LinfBuild(ObserverBuild):
 
     def lmi_problem(self):
         """A fresh LMI problem of this design (benchmark: our path vs CVXPY on the same blocks)."""
-        return linf_uio.build_problem(self.poly, self.design.settings)[0]
+        return linf_uio.build_problem(self.poly, self.design.settings, self.design.performance,
+                                      self.lpv.definition.states, self.design.ui_gain)[0]
 
     def input_boxes(self) -> dict:
         """{input name: [min, max]} of the inputs that schedule the step (outside: SCHEDULING_CLAMPED)."""
@@ -165,11 +166,18 @@ def _settings(config: ObserverConfig, lyapunov: str | None = None) -> linf_uio.L
     ``gain_bound`` is its value / sample_time (``gain_bound`` itself is not a key). ``lyapunov``
     overrides the table's.
     """
-    from ...settings import Alias, config_error, parse_settings
+    from ...settings import Alias, config_error, parse_settings, suggest
     settings = parse_settings(
         linf_uio.LinfDesignSettings, config.design, source=config.source, section="design",
         aliases={"gain_bound_times_sample_time": Alias("gain_bound", lambda v: v / config.sample_time, default=1.0)},
         **({"lyapunov": lyapunov} if lyapunov else {}))
+    states = [str(x) for x in config.load_model().states]
+    try:
+        linf_uio.performance_matrix(states, settings.performance)
+    except ValueError as exc:
+        unknown = [p for p in settings.performance if p not in states]
+        raise config_error(config.source, "design", "performance", list(settings.performance), str(exc),
+                           suggest(unknown[0], states) if unknown else None) from None
     if settings.lyapunov == "pdlf" and config.rate_bounds == "none":
         raise config_error(config.source, "design", "lyapunov", "pdlf",
                            'the parameter-dependent design needs membership rate bounds; with rate_bounds = "none" '
@@ -215,14 +223,15 @@ def build(config: ObserverConfig, tol: float | None = None) -> LinfBuild:
         # cancel): PDLF never returns worse than what it contains
         design = dataclasses.replace(quadratic, settings=settings, fallback="quadratic (the PDLF optimum was worse)")
     t2 = time.perf_counter()
-    cert = linf_uio.certify(poly, design.P, design.X, design.L, settings.alpha)
+    cert = linf_uio.certify(poly, design.P, design.X, design.L, settings.alpha, design.performance)
     data = discrete.ObserverData(poly, design.Q, design.L,
                                  float(config.ui_filter.get("time_constant", 0.005)), config.sample_time,
                                  lpv.derived, lpv.definition.output_symbols, lpv.derived_inputs)
     try:
         dcert = discrete.certify_step(data, settings.alpha)
     except UILoopError as exc:
-        raise UILoopError(f"{config.source}: {exc}{_measured_remedies(poly, settings, data, config.sample_time)}") from None
+        raise UILoopError(f"{config.source}: {exc}"
+                          f"{_measured_remedies(poly, settings, data, config.sample_time, lpv.definition.states)}") from None
     t3 = time.perf_counter()
     timings = {"representation_s": t1 - t0, "design_s": t2 - t1,
                "solve_s": design.solution.solve_time_s, "build_s": design.solution.build_time_s,
@@ -230,7 +239,7 @@ def build(config: ObserverConfig, tol: float | None = None) -> LinfBuild:
     return LinfBuild(config, lpv, poly, err, design, quadratic, cert, data, dcert, timings)
 
 
-def _measured_remedies(poly, settings, data, sample_time: float) -> str:
+def _measured_remedies(poly, settings, data, sample_time: float, states: tuple = ()) -> str:
     """Re-design with alpha halved, the gain bound halved, and both, and say which of them closes
     a certifiable UI filter loop (the designs are measurements, not committed)."""
     tries = (("alpha", dataclasses.replace(settings, alpha=settings.alpha / 2)),
@@ -240,7 +249,7 @@ def _measured_remedies(poly, settings, data, sample_time: float) -> str:
     for label, s in tries:
         with lmi.recording():          # a measurement: its solves stay out of the design lock
             try:
-                d = linf_uio.design(poly, s)
+                d = linf_uio.design(poly, s, states)
             except UiogenError:
                 continue
         if discrete.loop_is_certifiable(dataclasses.replace(data, Q=d.Q, L=d.L)):

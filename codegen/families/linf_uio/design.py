@@ -30,9 +30,10 @@ import numpy as np
 
 from ...canonical import decimal_round
 from ...errors import ConfigurationError, RankConditionError
-from ...lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks
+from ...errors import SolverError
+from ...lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks, committed_data
 from ...polytope import Polytope
-from ...settings import setting
+from ...settings import Rule, setting
 
 
 @dataclass(frozen=True)
@@ -63,6 +64,23 @@ class LinfDesignSettings:
     margin: float = setting(1e-5, ge=0)
     tol: float = setting(1e-8, gt=0)
     taylor_error_limit: float = setting(0.25, gt=0, doc="relative error a Taylor-reduced polytope may have")
+    performance: tuple = setting((), items=Rule(str), doc="states of the performance output z = F e of (17); empty: all (Remark 4, z = e)")
+
+
+def performance_matrix(states, performance: tuple = ()) -> np.ndarray | None:
+    """F of the performance output z = F e (17): the rows of the identity that pick the named
+    states, or None (F = I, Remark 4's z = e) for an empty selection. A name that is not a state
+    is a ``ValueError`` naming the states (the build turns it into a ConfigurationError)."""
+    if not performance:
+        return None
+    names = [str(x) for x in states]
+    unknown = [p for p in performance if p not in names]
+    if unknown:
+        raise ValueError(f"{', '.join(map(repr, unknown))} {'is not a state' if len(unknown) == 1 else 'are not states'}"
+                         f" of the model (states: {', '.join(names)})")
+    if len(set(performance)) != len(performance):
+        raise ValueError(f"a state is named twice in {list(performance)}")
+    return np.eye(len(names))[[names.index(p) for p in performance]]
 
 
 def ui_feedthrough(poly: Polytope) -> np.ndarray:
@@ -130,17 +148,18 @@ def _scaled(poly: Polytope, scale: np.ndarray, out_scale: np.ndarray | None = No
 
 
 def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.ndarray | None = None,
-                  states: tuple = ()):
-    """LMI problem of Theorem 1 under ``settings``, in the unknown-input units of :func:`ui_scaling`;
-    returns (problem, variables). ``states`` names the states in the errors."""
-    poly = _scaled(poly, ui_scaling(poly), output_scaling(poly))
+                  states: tuple = (), ui_gain: float = 1.0, design: bool = True):
+    """LMI problem of Theorem 1 under ``settings``, in the unknown-input units of :func:`ui_scaling`
+    times ``ui_gain`` (see :func:`ui_gain`); returns (problem, variables). ``states`` names the
+    states in the errors; ``performance`` is F of (17) (None: the identity)."""
+    poly = _scaled(poly, ui_scaling(poly) * ui_gain, output_scaling(poly))
     _check_assumptions(poly, states)
     if settings.lyapunov == "pdlf" and poly.rate_bound_mode == "none":
         raise ConfigurationError("the parameter-dependent design needs membership rate bounds; with "
                          "rate_bounds = 'none' use lyapunov = 'quadratic'")
     N, nx, ny = poly.n_vertices, poly.A.shape[1], poly.C.shape[1]
     F = np.eye(nx) if performance is None else np.asarray(performance, dtype=float)
-    prob = LMIProblem(f"Theorem 1 ({settings.lyapunov})")
+    prob = LMIProblem(problem_name(settings), design=design, data={"ui_gain": ui_gain} if design else {})
     if settings.lyapunov == "pdlf":
         X = prob.symmetric("X", nx)
         P = [prob.symmetric(f"P{i + 1}", nx) for i in range(N)]
@@ -155,13 +174,23 @@ def build_problem(poly: Polytope, settings: LinfDesignSettings, performance: np.
     mu = 1.0  # normalization (homogeneity), see module docstring
     Q = [P[i] + X for i in range(N)]
     m, a = settings.margin, settings.alpha
+    # ||M|| = ||Q(th)^-1 L(th)|| <= ||L|| / lambda_min(Q). With F = I, (20) and mu = 1 give Q >= I,
+    # and ||L_i|| <= g bounds ||M|| by g. A performance output of fewer states leaves Q free in the
+    # other directions (measured: ||M|| ~ 1e6-1e7 1/s with gamma -> 0 for z = beta); the bound
+    # then takes a scalar sigma: Q_i >= sigma I and ||L_i|| <= g sigma (both affine).
+    full = performance is None
+    sigma = 1.0 if full else prob.scalar("sigma")
+    g = settings.gain_bound
     for i in range(N):
-        prob.require_psd(f"(19) P{i + 1}+X > 0", Q[i], m, "Lyapunov matrix at a vertex")
+        if full:
+            prob.require_psd(f"(19) P{i + 1}+X > 0", Q[i], m, "Lyapunov matrix at a vertex")
+        else:
+            prob.require_psd(f"(19) P{i + 1}+X >= sigma I", Q[i] - sigma * np.eye(nx), m,
+                             "Lyapunov matrix at a vertex (sigma: gain bound with z = F e)")
         prob.require_psd(f"(20) i={i + 1}", bmat([[Q[i], F.T], [F, mu * np.eye(F.shape[0])]]), m,
                          "performance output bound (mu)")
-        g = settings.gain_bound
-        prob.require_psd(f"gain bound ||L{i + 1}|| <= {g:g}",
-                         bmat([[g * np.eye(nx), L[i]], [L[i].T, g * np.eye(ny)]]),
+        prob.require_psd(f"gain bound ||L{i + 1}|| <= {g:g}" + ("" if full else " sigma"),
+                         bmat([[g * sigma * np.eye(nx), L[i]], [L[i].T, g * sigma * np.eye(ny)]]),
                          m, "raise gain_bound (faster observer) or lower alpha")
     # products shared by many blocks, formed once
     PA = [[P[i] @ poly.A[j] for j in range(N)] for i in range(N)]
@@ -206,6 +235,8 @@ class LinfDesign:
     nu: float
     solution: LMISolution | None
     fallback: str = ""           # set when the PDLF design is the quadratic one it contains
+    ui_gain: float = 1.0         # the solver's unknown-input units (see ui_gain)
+    performance: np.ndarray | None = None     # F of (17); None: the identity
 
     @property
     def gamma(self) -> float:
@@ -218,15 +249,60 @@ class LinfDesign:
     def gains_json(self) -> dict:
         out = {f"P{i + 1}": p.tolist() for i, p in enumerate(self.P)}
         out.update({f"L{i + 1}": l.tolist() for i, l in enumerate(self.L)})
-        out.update({"X": self.X.tolist(), "mu": self.mu, "nu": self.nu, "gamma": self.gamma})
+        out.update({"X": self.X.tolist(), "mu": self.mu, "nu": self.nu, "gamma": self.gamma,
+                    "performance": list(self.settings.performance) or "all states (z = e)",
+                    "ui_gain": self.ui_gain})
         if self.fallback:
             out["fallback"] = self.fallback
         return out
 
 
+def problem_name(settings: LinfDesignSettings) -> str:
+    return f"Theorem 1 ({settings.lyapunov})"
+
+
+def ui_gain(poly: Polytope, settings: LinfDesignSettings, performance: np.ndarray | None = None,
+            states: tuple = ()) -> float:
+    """Factor on the unknown-input units of :func:`ui_scaling` that puts the solver's nu near 1.
+
+    Theorem 1 is invariant under d -> k d with nu -> nu / k^2, the solver is not: with mu = 1, nu
+    is gamma^2 ~ 1e-4..1e-5 in the units of :func:`ui_scaling`, the corner -2 alpha nu of every
+    (21) block sits 1e7 below its state part, and the interior-point method stops at its tolerance
+    up to 2x above the optimum at high gain bounds (measured: gamma 0.0051 instead of 0.0028 at
+    10^4 1/s, 0.0097 at 763 1/s where the published design certifies 0.0095), non-monotone in the
+    gain bound, while the strictness margin on those blocks costs up to 1 % of gamma. An analysis
+    solve in those units gives nu_0 and k_1 = 2^round(-log2(nu_0)/2); a second one at k_1 gives nu_1
+    (now accurate) and k = k_1 2^floor(-log2(nu_1)/2), which puts the solver's nu in (1/4, 1]:
+    there the least-norm stage's bound (the optimum rounded up to three significant digits,
+    codegen.lmi.objective_bound) gives up at most 0.4 % of nu. k is a power of two: exact, and the
+    same on machines whose nu differ in the last digits; any k within 8x of it gives the same
+    gamma to 3 digits (tests/test_design.py). Committed with the design (design lock) and read
+    back on replay."""
+    committed = committed_data(problem_name(settings))
+    if committed is not None and "ui_gain" in committed:
+        return float(committed["ui_gain"])
+    k = 1.0
+    for rounding in (np.round, np.floor):
+        try:
+            prob, _ = build_problem(poly, settings, performance, states, k, design=False)
+            nu = float(prob.solve(tol=settings.tol, unique=True)["nu"])     # AlmostSolved is a fine start
+        except SolverError:
+            return k            # the design's own solve reports what fails
+        if not (np.isfinite(nu) and nu > 0):
+            return k
+        k = float(k * 2.0 ** rounding(-0.5 * np.log2(nu)))
+    return k
+
+
 def design(poly: Polytope, settings: LinfDesignSettings, states: tuple = ()) -> LinfDesign:
-    """Solve Theorem 1 on Clarabel; the rounded matrices are re-certified independently."""
-    prob, var = build_problem(poly, settings, states=states)
+    """Solve Theorem 1 on Clarabel; the rounded matrices are re-certified independently.
+    ``settings.performance`` names the states of z (17); ``states`` are the model's."""
+    try:
+        F = performance_matrix(states, settings.performance)
+    except ValueError as exc:
+        raise ConfigurationError(f"[design] performance: {exc}", key="performance") from None
+    k = ui_gain(poly, settings, F, states)
+    prob, var = build_problem(poly, settings, F, states, k)
     sol = prob.solve(tol=settings.tol)
     N = poly.n_vertices
     if settings.lyapunov == "pdlf":
@@ -242,9 +318,9 @@ def design(poly: Polytope, settings: LinfDesignSettings, states: tuple = ()) -> 
     X = 0.5 * (X + X.T)
     # back to the model's units: D d = (D / c)(c d), so nu = nu_s / c^2 (one unknown input; the
     # largest c bounds it for several)
-    c = float(np.max(1.0 / ui_scaling(poly)))
+    c = float(np.max(1.0 / (ui_scaling(poly) * k)))
     nu = float(decimal_round(sol["nu"] * c * c))
-    return LinfDesign(settings, P, X, L, 1.0, nu, sol)
+    return LinfDesign(settings, P, X, L, 1.0, nu, sol, ui_gain=k, performance=F)
 
 
 def certify(poly: Polytope, P, X, L, alpha: float, performance=None) -> dict:
