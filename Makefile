@@ -57,6 +57,8 @@ docs: build
 	$(BIN)/uiogen sweep switched_pi_bank_angle --set 'design.pole_radius=[29, 30, 30.5, 35, 50, 100, 300, 1000, 10000]' \
 	  --set 'design.decay_rate=[0, 1]' --show gamma,max_pole_modulus,max_pole_real_part,discrete_contraction_per_step \
 	  --json > docs/data/sweeps/switched_pi_pole_radius.json
+	$(BIN)/uiogen sweep lpv_linf_driver_torque --set 'design.gain_bound_times_sample_time=[1, 3, 7.63, 7.633, 10, 30, 100]' \
+	  --show gamma,gamma_quadratic,discrete_kappa,discrete_contraction_per_step --json > docs/data/sweeps/linf_gain_bound.json
 	$(BIN)/uiogen docs
 	$(BIN)/mkdocs build --strict --quiet
 
