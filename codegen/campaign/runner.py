@@ -148,8 +148,8 @@ def run_one(spec, run: int, traces: bool = False):
     inputs = simulate.observer_input_matrix(obs.input_names, truth, measured)
     out, status, _ = obs.run(inputs)
     bits = obs.status_bits
-    row["clamped_fraction"] = float(np.mean((status & bits["SCHEDULING_CLAMPED"]) != 0))
-    row["flagged_fraction"] = float(np.mean((status & (bits["NONFINITE_INPUT"] | bits["NUMERICAL_FAILURE"])) != 0))
+    row["clamped_fraction"] = int(np.count_nonzero(status & bits["SCHEDULING_CLAMPED"])) / status.size
+    row["flagged_fraction"] = int(np.count_nonzero(status & (bits["NONFINITE_INPUT"] | bits["NUMERICAL_FAILURE"]))) / status.size
     keep = truth["t"] >= SETTLE_TIME
     est = {s: out[:, obs.output_names.index(s)] for s in signals}
     ok = all(np.all(np.isfinite(est[s][keep])) for s in signals)
@@ -157,7 +157,7 @@ def run_one(spec, run: int, traces: bool = False):
     for s in signals:
         scale = 180.0 / math.pi if units.get(s, "").startswith("rad") else 1.0
         e = (est[s] - truth[s])[keep] * scale
-        row[f"rms.{s}"] = float(np.sqrt(np.mean(e * e)))
+        row[f"rms.{s}"] = math.sqrt(_sum(e * e) / e.size)
         row[f"max.{s}"] = float(np.max(np.abs(e)))
     row["ratio"] = _ratio(spec, config, truth, est, keep)
     row["gamma"] = float(_artifact(spec)["gamma"])
@@ -165,6 +165,12 @@ def run_one(spec, run: int, traces: bool = False):
         return row, {"t": truth["t"], **{f"{s}_truth": truth[s] for s in signals},
                      **{f"{s}_estimate": est[s] for s in signals}}
     return row
+
+
+def _sum(x) -> float:
+    """Correctly rounded sum: the same double in every process (numpy's SIMD sums depend on the
+    array's alignment, which differs between a worker and a re-run)."""
+    return math.fsum(np.asarray(x, float).tolist())
 
 
 def _ratio(spec, config, truth, est, keep) -> float:
@@ -178,8 +184,8 @@ def _ratio(spec, config, truth, est, keep) -> float:
         return float(np.max(e) / peak_d) if peak_d > 0 else math.nan
     if kind == "l2":
         perf = list(config.switching.get("performance", ["beta"]))
-        e = np.sqrt(sum(np.sum((est[s] - truth[s])[keep] ** 2) for s in perf))
-        w = float(np.linalg.norm(truth["phi_r"][keep]))
+        e = math.sqrt(sum(_sum((est[s] - truth[s])[keep] ** 2) for s in perf))
+        w = math.sqrt(_sum(truth["phi_r"][keep] ** 2))
         return float(e / w) if w > 0 else math.nan
     return math.nan
 
