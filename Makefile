@@ -3,7 +3,7 @@
 #   make test    the test suite (CI runs this through .ci/run)
 #   make check   reliability suite (hostile input, sanitizers, static facts, determinism, long runs)
 #   make docs    re-run demo and bench into docs/data/, rewrite the docs' tables, build the site
-#   make generate | build | bench | clean
+#   make generate | build | bench | clean   (bench: also campaign runs/s, 1 and 2 workers, 10,000 runs)
 #   make lock    refresh constraints.txt (exact versions of everything the targets install)
 PYTHON ?= python3
 VENV   := .venv
@@ -45,6 +45,7 @@ check: build
 bench: build
 	$(PIP) install --quiet $(PIN) --no-build-isolation -e '.[bench]'
 	$(BIN)/uiogen bench
+	$(BIN)/python -m codegen.campaign.bench --target
 
 # The docs: re-run the demo and the benchmark, rewrite the docs' tables from them, build the site.
 docs: build

@@ -9,6 +9,7 @@
     uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png]
     uiogen demo [--json]
     uiogen bench [--json]
+    uiogen campaign SPEC.toml [--runs N] [--only K] [--json] [--scheduler ADDRESS] [--workers N] [--out DIR]
 """
 from __future__ import annotations
 
@@ -253,6 +254,32 @@ def cmd_bench(args) -> int:
     return bench.main(json_output=args.json)
 
 
+def cmd_campaign(args) -> int:
+    from .campaign import engine, report, runner, spec as campaign_spec
+    spec = campaign_spec.load(args.spec)
+    if args.runs is not None:
+        spec = spec.with_runs(args.runs)
+    if args.only is not None:
+        if args.only < 0:
+            raise ConfigurationError(f"--only {args.only}: a run index is >= 0", key="--only")
+        row = runner.run_one(spec, args.only)
+        if args.json:
+            print(json.dumps(row, indent=1))
+        else:
+            print(report.format_row(row))
+        return 0
+    out = Path(args.out) if args.out else Path("build") / "campaigns" / Path(args.spec).stem
+    summary = engine.run(spec, out, scheduler=args.scheduler, workers=args.workers,
+                         progress=None if args.json else engine.progress_bar())
+    if args.json:
+        _print_json(summary)
+    else:
+        print(report.format_summary(summary))
+        print(f"wrote {summary['files']['runs']}, {summary['files']['summary']}, "
+              f"{', '.join(summary['files']['plots'])}")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="uiogen", description="Certified unknown-input observers, "
                                      "from symbolic vehicle equations to embeddable C.")
@@ -313,7 +340,21 @@ def main(argv=None) -> int:
     p = sub.add_parser("bench", help="benchmarks (C step, Python call, design time)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_bench)
+    p = sub.add_parser("campaign", help="dispersed runs of an observer on its compiled truth plant, on Dask")
+    p.add_argument("spec", help="a campaign file (TOML), e.g. docs/campaigns/lpv_linf_driver_torque.toml")
+    p.add_argument("--runs", type=int, help="number of runs (default: the file's runs)")
+    p.add_argument("--only", type=int, metavar="K", help="re-run run K alone (no cluster) and print its row")
+    p.add_argument("--json", action="store_true", help="print the summary (or the row) as JSON")
+    p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: a local cluster)")
+    p.add_argument("--workers", type=int, help="local cluster size (default: the cores)")
+    p.add_argument("--out", help="directory for runs.csv, summary.json, traces and plots "
+                                 "(default build/campaigns/SPEC_STEM)")
+    p.set_defaults(func=cmd_campaign)
     args = parser.parse_args(argv)
+    if getattr(args, "runs", None) is not None and args.runs < 1:
+        parser.error("--runs must be >= 1")
+    if getattr(args, "workers", None) is not None and args.workers < 1:
+        parser.error("--workers must be >= 1")
     try:
         return args.func(args)
     except UiogenError as exc:

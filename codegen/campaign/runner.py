@@ -1,0 +1,206 @@
+"""One dispersed run, from (spec, run index) alone: draw, simulate the compiled plant, measure, run
+the compiled observer step, summarize. Everything a worker process needs is built on its first run
+and cached in the process (the observer's extension, the compiled plant per scenario length,
+the scenarios per seed)."""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from ..validation.common import SETTLE_TIME
+
+_CACHE: dict = {}
+SPIN_BETA = math.pi / 4      # |beta| above 45 deg: the plant car has spun (not an observer error)
+
+# The certified bound a run's empirical ratio is set beside, per family:
+# linf_uio: L-infinity, sup_t |x - x_hat|_2 (the model's states) / sup_t |d| (the unknown input);
+# switched_pi: L2 (H-infinity), |xi - xi_hat|_2 / |phi_r|_2 with xi the [switching] performance outputs.
+CERTIFICATE = {"linf_uio": "peak", "switched_pi": "l2"}
+
+
+def _cached(key, make):
+    if key not in _CACHE:
+        _CACHE[key] = make()
+    return _CACHE[key]
+
+
+def _config(spec):
+    from .. import observers
+    return _cached(("config", spec.observer), lambda: observers.get(spec.observer))
+
+
+def _observer(spec):
+    from ..extension import load
+    return _cached(("obs", spec.observer), lambda: load(spec.observer))
+
+
+def _artifact(spec) -> dict:
+    from .. import design_lock
+    return _cached(("art", spec.observer), lambda: json.loads(design_lock.path(_config(spec)).read_text()))
+
+
+def _plant(spec, n: int):
+    from .plants import CompiledPlant
+    return _cached(("plant", spec.observer, n), lambda: CompiledPlant(_config(spec), n))
+
+
+def _truncate(scn, duration):
+    if duration is None or duration >= scn.duration:
+        return scn
+    n = int(round(duration * scn.sample_rate)) + 1
+    cut = {k: getattr(scn, k)[:n] for k in ("t", "v_ref", "a_ref", "T_a", "T_d_open")}
+    for k in ("kappa_ref", "bank"):
+        if getattr(scn, k) is not None:
+            cut[k] = getattr(scn, k)[:n]
+    return replace(scn, **cut)
+
+
+def _scenario(spec, name: str, seed: int | None):
+    from ..validation import scenarios
+    rate = 1.0 / _config(spec).sample_time
+    if seed is not None:       # drawn per run: not kept (10,000 of them would fill a worker's memory)
+        return _truncate(scenarios.make(name, seed=seed, sample_rate=rate), spec.duration)
+    return _cached(("scn", name, rate, spec.duration),
+                   lambda: _truncate(scenarios.make(name, sample_rate=rate), spec.duration))
+
+
+def default_noise(config) -> dict:
+    """The sensor noise of the family's own validation (std per measured signal)."""
+    if config.family == "switched_pi":
+        from ..families.switched_pi.validation import SENSOR_NOISE
+    else:
+        from ..validation.common import SENSOR_NOISE
+    return dict(SENSOR_NOISE)
+
+
+def draw(spec, run: int) -> dict:
+    """The dispersed values of run ``run`` (and its scenario), from SeedSequence([seed, run]) alone:
+    one independent stream per kind of draw, so adding a dispersion of one kind leaves the others'."""
+    ss = np.random.SeedSequence([spec.seed, run])
+    s_scn, s_par, s_drv, s_sen, s_noise = (np.random.default_rng(s) for s in ss.spawn(5))
+    name = spec.scenarios[run % len(spec.scenarios)]
+    seed = int(s_scn.integers(0, 2 ** 31 - 1)) if spec.scenario_seed == "per_run" else None
+    config = _config(spec)
+    scn = _scenario(spec, name, seed)
+    plant = _plant(spec, scn.t.size)
+    from .plants import default_driver_gains
+    nominal = plant.spec.params
+    gains0 = default_driver_gains(plant.kind, scn)
+    values = {}
+    for k, d in spec.parameters:
+        values[f"param.{k}"] = d.draw(s_par, nominal[k])
+    for k, d in spec.driver:
+        values[f"driver.{k}"] = d.draw(s_drv, gains0[k])
+    for sig, fields in spec.sensors:
+        for f, d in fields:
+            values[f"sensor.{sig}.{f}"] = d.draw(s_sen, default_noise(config).get(sig, 0.0) if f == "noise" else 0.0)
+    return {"scenario": name, "scenario_seed": scn.seed, "scn": scn, "plant": plant, "values": values,
+            "noise_rng": s_noise}
+
+
+def _measure(spec, truth: dict, values: dict, rng, sample_time: float) -> dict:
+    config = _config(spec)
+    noise = {k: v for k, v in default_noise(config).items() if k in truth}
+    fields = {sig: dict(f) for sig, f in spec.sensors}
+    measured = {}
+    for sig in sorted(set(noise) | set(fields)):
+        y = np.asarray(truth[sig], float)
+        std = values.get(f"sensor.{sig}.noise", noise.get(sig, 0.0))
+        delay = int(round(values.get(f"sensor.{sig}.delay", 0.0) / sample_time))
+        if delay > 0:
+            y = np.concatenate([np.full(min(delay, y.size), y[0]), y[:max(y.size - delay, 0)]])
+        y = y + values.get(f"sensor.{sig}.bias", 0.0) + std * rng.standard_normal(y.shape)
+        measured[sig] = y
+    return measured
+
+
+def _error_signals(spec) -> tuple:
+    from .spec import _error_signals as errs
+    return _cached(("errs", spec.observer), lambda: errs(_config(spec)))
+
+
+def run_one(spec, run: int, traces: bool = False):
+    """The summary row of run ``run`` (a dict of numbers and strings); with ``traces``, also
+    (row, signals) with the truth and the estimates of the error signals over time."""
+    from .. import simulate
+    config, obs = _config(spec), _observer(spec)
+    d = draw(spec, run)
+    scn, plant, values = d["scn"], d["plant"], d["values"]
+    row = {"run": int(run), "scenario": d["scenario"], "scenario_seed": int(d["scenario_seed"]), **values}
+    params = {k[6:]: v for k, v in values.items() if k.startswith("param.")}
+    gains = {k[7:]: v for k, v in values.items() if k.startswith("driver.")}
+    truth = plant.simulate(scn, params, gains)
+    signals = _error_signals(spec)
+    units = dict(config.load_model().units) if ("units", spec.observer) not in _CACHE else _CACHE[("units", spec.observer)]
+    _CACHE[("units", spec.observer)] = units
+    finite = all(np.all(np.isfinite(truth[k])) for k in truth)
+    spun = finite and "beta" in truth and float(np.max(np.abs(truth["beta"]))) > SPIN_BETA
+    if not finite or spun:
+        # outside every model's domain (the car spun, or the integration blew up): counted, not scored
+        row.update({"status": "plant_diverged" if not finite else "plant_spun", "clamped_fraction": math.nan, "flagged_fraction": math.nan,
+                    "ratio": math.nan, **{f"rms.{s}": math.nan for s in signals},
+                    **{f"max.{s}": math.nan for s in signals}})
+        return (row, None) if traces else row
+    measured = _measure(spec, truth, values, d["noise_rng"], config.sample_time)
+    inputs = simulate.observer_input_matrix(obs.input_names, truth, measured)
+    out, status, _ = obs.run(inputs)
+    bits = obs.status_bits
+    row["clamped_fraction"] = int(np.count_nonzero(status & bits["SCHEDULING_CLAMPED"])) / status.size
+    row["flagged_fraction"] = int(np.count_nonzero(status & (bits["NONFINITE_INPUT"] | bits["NUMERICAL_FAILURE"]))) / status.size
+    keep = truth["t"] >= SETTLE_TIME
+    est = {s: out[:, obs.output_names.index(s)] for s in signals}
+    ok = all(np.all(np.isfinite(est[s][keep])) for s in signals)
+    row["status"] = "ok" if ok else "observer_nonfinite"
+    for s in signals:
+        scale = 180.0 / math.pi if units.get(s, "").startswith("rad") else 1.0
+        e = (est[s] - truth[s])[keep] * scale
+        row[f"rms.{s}"] = math.sqrt(_sum(e * e) / e.size)
+        row[f"max.{s}"] = float(np.max(np.abs(e)))
+    row["ratio"] = _ratio(spec, config, truth, est, keep)
+    row["gamma"] = float(_artifact(spec)["gamma"])
+    if traces:
+        return row, {"t": truth["t"], **{f"{s}_truth": truth[s] for s in signals},
+                     **{f"{s}_estimate": est[s] for s in signals}}
+    return row
+
+
+def _sum(x) -> float:
+    """Correctly rounded sum: the same double in every process (numpy's SIMD sums depend on the
+    array's alignment, which differs between a worker and a re-run)."""
+    return math.fsum(np.asarray(x, float).tolist())
+
+
+def _ratio(spec, config, truth, est, keep) -> float:
+    kind = CERTIFICATE.get(config.family)
+    if kind == "peak":
+        model = config.load_model()
+        states = [s for s in model.state_names if s in est]
+        ui = str(model.unknown_inputs[0])
+        e = np.sqrt(sum((est[s] - truth[s])[keep] ** 2 for s in states))
+        peak_d = float(np.max(np.abs(truth[ui][keep])))
+        return float(np.max(e) / peak_d) if peak_d > 0 else math.nan
+    if kind == "l2":
+        perf = list(config.switching.get("performance", ["beta"]))
+        e = math.sqrt(sum(_sum((est[s] - truth[s])[keep] ** 2) for s in perf))
+        w = math.sqrt(_sum(truth["phi_r"][keep] ** 2))
+        return float(e / w) if w > 0 else math.nan
+    return math.nan
+
+
+def run_chunk(spec, runs) -> list:
+    """Rows of several runs (one Dask task)."""
+    return [run_one(spec, int(k)) for k in runs]
+
+
+def run_traces(spec, run: int):
+    return run_one(spec, int(run), traces=True)
+
+
+def prepare(spec) -> None:
+    """Compile (or find in the cache) the plant of every scenario length of the campaign."""
+    for name in spec.scenarios:
+        scn = _scenario(spec, name, None)
+        _plant(spec, scn.t.size)

@@ -1,0 +1,231 @@
+"""A campaign file (TOML): the observer, its scenarios and the dispersions, as data.
+
+::
+
+    observer = "lpv_linf_driver_torque"
+    scenarios = ["track_varying_speed"]     # run K uses scenarios[K % len(scenarios)]
+    scenario_seed = "per_run"               # "fixed": the scenario's own seed; "per_run": drawn per run
+    runs = 1000
+    seed = 2024
+    duration = 60.0                         # s (optional: truncate the scenarios)
+    worst = 3                               # traces of the worst runs to keep
+    rank_by = "beta"                        # the signal whose RMS error ranks the runs
+
+    [parameters]                            # the plant's parameters (not the observer's model)
+    M = { dist = "uniform", low = 0.9, high = 1.1, relative = true }
+    mu = { dist = "uniform", low = 0.5, high = 1.0 }
+
+    [driver]                                # the driver model's gains
+    k_p = { dist = "normal", mean = 1.0, std = 0.1, relative = true }
+
+    [sensors.r]                             # a measured signal: noise std, bias, delay [s]
+    noise = 0.0009
+    bias = { dist = "normal", mean = 0.0, std = 0.0005 }
+    delay = { dist = "uniform", low = 0.0, high = 0.02 }
+
+A distribution is a number (a constant) or a table ``dist`` = ``"uniform"`` (``low``, ``high``)
+or ``"normal"`` (``mean``, ``std``), with ``relative = true`` for a factor on the nominal value.
+Every mistake is a :class:`~codegen.errors.ConfigurationError` naming the file, the key and what
+is allowed.
+"""
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import ConfigurationError
+from ..settings import Rule, check_keys, config_error, parse_table, suggest
+
+TOP = {
+    "observer": Rule(str, required=True, doc="a built-in observer name"),
+    "scenarios": Rule(list, items=Rule(str), required=True, doc="scenario names, cycled over the runs"),
+    "runs": Rule(int, ge=1, required=True, doc="number of dispersed runs"),
+    "seed": Rule(int, ge=0, doc="campaign seed: run K draws from SeedSequence([seed, K])"),
+    "duration": Rule(float, gt=0, doc="truncate every scenario to this many seconds"),
+    "scenario_seed": Rule(str, choices=("fixed", "per_run")),
+    "worst": Rule(int, ge=0, doc="traces of this many worst runs are written"),
+    "rank_by": Rule(str, doc="signal whose RMS error ranks the runs"),
+    "chunk": Rule(int, ge=1, doc="runs per Dask task (default: about 4 tasks per worker, at most 50)"),
+    "parameters": Rule(dict), "driver": Rule(dict), "sensors": Rule(dict),
+}
+DIST_KEYS = {"dist": Rule(str, choices=("uniform", "normal"), required=True), "low": Rule(float),
+             "high": Rule(float), "mean": Rule(float), "std": Rule(float, ge=0), "relative": Rule(bool)}
+SENSOR_KEYS = ("noise", "bias", "delay")
+
+
+@dataclass(frozen=True)
+class Dist:
+    """One dispersion: ``kind`` constant / uniform / normal; ``relative``: a factor on the nominal."""
+
+    kind: str
+    a: float = 0.0            # constant value, low, or mean
+    b: float = 0.0            # high or std
+    relative: bool = False
+
+    def draw(self, rng, nominal: float = 0.0) -> float:
+        if self.kind == "constant":
+            v = self.a
+        elif self.kind == "uniform":
+            v = float(rng.uniform(self.a, self.b))
+        else:
+            v = float(self.a + self.b * rng.standard_normal())
+        return v * nominal if self.relative else v
+
+
+@dataclass(frozen=True)
+class CampaignSpec:
+    source: str
+    observer: str
+    scenarios: tuple
+    runs: int
+    seed: int = 0
+    duration: float | None = None
+    scenario_seed: str = "fixed"
+    worst: int = 3
+    rank_by: str | None = None
+    chunk: int | None = None
+    parameters: tuple = ()           # ((name, Dist), ...) in file order
+    driver: tuple = ()
+    sensors: tuple = ()              # ((signal, ((field, Dist), ...)), ...)
+    raw: dict = field(default_factory=dict, compare=False, hash=False, repr=False)
+
+    def with_runs(self, runs: int) -> "CampaignSpec":
+        from dataclasses import replace
+        return replace(self, runs=int(runs))
+
+    def dispersed(self) -> list:
+        """Column names of the drawn values of a run's row, in draw order."""
+        cols = [f"param.{n}" for n, _ in self.parameters] + [f"driver.{n}" for n, _ in self.driver]
+        for sig, fields in self.sensors:
+            cols += [f"sensor.{sig}.{f}" for f, _ in fields]
+        return cols
+
+
+def parse_dist(value, *, source: str, section: str, key: str, ge: float | None = None) -> Dist:
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        if ge is not None and value < ge:
+            raise config_error(source, section, key, value, f"must be >= {ge:g}")
+        return Dist("constant", float(value))
+    if not isinstance(value, dict):
+        raise config_error(source, section, key, value, 'must be a number or a table { dist = "uniform", low, high } '
+                           'or { dist = "normal", mean, std } (optionally relative = true)')
+    sec = f"{section}.{key}"
+    t = parse_table(value, DIST_KEYS, source=source, section=sec)
+    need = ("low", "high") if t["dist"] == "uniform" else ("mean", "std")
+    other = [k for k in (("mean", "std") if t["dist"] == "uniform" else ("low", "high")) if k in t]
+    if other:
+        raise config_error(source, sec, other[0], t[other[0]], f"is not a key of dist = {t['dist']!r} "
+                           f"(it takes {', '.join(need)})")
+    missing = [k for k in need if k not in t]
+    if missing:
+        raise ConfigurationError(f"{source}: [{sec}] missing {', '.join(missing)} (dist = {t['dist']!r} takes "
+                                 f"{', '.join(need)})", source=source, section=sec, key=missing[0], allowed="required")
+    if t["dist"] == "uniform" and not t["low"] <= t["high"]:
+        raise config_error(source, sec, "high", t["high"], f"must be >= low = {t['low']:g}")
+    if ge is not None and not t.get("relative", False):
+        lo = t["low"] if t["dist"] == "uniform" else (t["mean"] if t["std"] == 0 else None)
+        if lo is None:
+            raise config_error(source, sec, "dist", "normal", f"must be 'uniform' here (values must stay >= {ge:g})")
+        if lo < ge:
+            raise config_error(source, sec, "low" if t["dist"] == "uniform" else "mean", lo, f"must be >= {ge:g}")
+    a, b = (t["low"], t["high"]) if t["dist"] == "uniform" else (t["mean"], t["std"])
+    return Dist(t["dist"], a, b, t.get("relative", False))
+
+
+def load(path) -> CampaignSpec:
+    """Parse a campaign file; every key checked against the observer, its plant and its sensors."""
+    path = Path(path)
+    source = str(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigurationError(f"{source}: no such campaign file", source=source) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigurationError(f"{source}: not valid TOML ({exc})", source=source) from None
+    return parse(data, source)
+
+
+def parse(data: dict, source: str) -> CampaignSpec:
+    from .. import observers
+    from ..errors import UnknownObserverError
+    from ..validation import scenarios as scn_lib
+    from .plants import DRIVER_KEYS, BANKED_DRIVER_KEYS, FAMILY_PLANT
+    top = parse_table(data, TOP, source=source)
+    name = top["observer"]
+    try:
+        config = observers.get(name)
+    except UnknownObserverError:
+        raise config_error(source, None, "observer", name, "must be a built-in observer: "
+                           + ", ".join(observers.names()), suggest(name, observers.names())) from None
+    if config.family not in FAMILY_PLANT:
+        raise config_error(source, None, "observer", name, "must be an observer of a family with a compiled "
+                           f"campaign plant ({', '.join(FAMILY_PLANT)}); {name!r} is {config.family!r}")
+    if not top["scenarios"]:
+        raise config_error(source, None, "scenarios", [], "must name at least one scenario")
+    for i, s in enumerate(top["scenarios"]):
+        if s not in scn_lib.names():
+            raise config_error(source, None, f"scenarios[{i}]", s, "must be one of " + ", ".join(scn_lib.names()),
+                               suggest(s, scn_lib.names()))
+    kind = FAMILY_PLANT[config.family]
+    plant_params = _plant_parameters(config, kind)
+    params = []
+    for k, v in top.get("parameters", {}).items():
+        if k not in plant_params:
+            raise config_error(source, "parameters", k, v, "must be a parameter of the plant: "
+                               + ", ".join(plant_params), suggest(k, plant_params))
+        params.append((k, parse_dist(v, source=source, section="parameters", key=k)))
+    gains = DRIVER_KEYS if kind == "steering_torque" else BANKED_DRIVER_KEYS
+    driver = []
+    for k, v in top.get("driver", {}).items():
+        if k not in gains:
+            raise config_error(source, "driver", k, v, "must be a gain of the driver: " + ", ".join(gains),
+                               suggest(k, gains))
+        driver.append((k, parse_dist(v, source=source, section="driver", key=k)))
+    measured = _measured_signals(config)
+    sensors = []
+    for sig, table in top.get("sensors", {}).items():
+        if sig not in measured:
+            raise config_error(source, "sensors", sig, table, "must be a signal the observer reads: "
+                               + ", ".join(measured), suggest(sig, measured))
+        sec = f"sensors.{sig}"
+        if not isinstance(table, dict):
+            raise config_error(source, "sensors", sig, table, "must be a table with noise, bias, delay")
+        check_keys(table, SENSOR_KEYS, source=source, section=sec)
+        fields = tuple((f, parse_dist(table[f], source=source, section=sec, key=f,
+                                      ge=0.0 if f in ("noise", "delay") else None)) for f in SENSOR_KEYS if f in table)
+        sensors.append((sig, fields))
+    signals = _error_signals(config)
+    rank = top.get("rank_by", signals[0])
+    if rank not in signals:
+        raise config_error(source, None, "rank_by", rank, "must be an estimated signal: " + ", ".join(signals),
+                           suggest(rank, signals))
+    return CampaignSpec(source=source, observer=name, scenarios=tuple(top["scenarios"]), runs=top["runs"],
+                        seed=top.get("seed", 0), duration=top.get("duration"),
+                        scenario_seed=top.get("scenario_seed", "fixed"), worst=top.get("worst", 3), rank_by=rank,
+                        chunk=top.get("chunk"), parameters=tuple(params), driver=tuple(driver),
+                        sensors=tuple(sensors), raw=data)
+
+
+def _plant_parameters(config, kind) -> tuple:
+    from .plants import KINDS
+    spec = KINDS[kind][0](config)
+    return tuple(n for n in spec.param_names if not n.startswith("driver."))
+
+
+def _measured_signals(config) -> tuple:
+    import json
+    from .. import design_lock
+    art = json.loads(design_lock.path(config).read_text())
+    return tuple(c[2:] if c.startswith("y_") else c for c in art["signals"]["input"])
+
+
+def _error_signals(config) -> tuple:
+    import json
+    from .. import design_lock
+    from .plants import KINDS, plant_kind
+    art = json.loads(design_lock.path(config).read_text())
+    outputs = art["signals"].get("output", art["signals"]["state"])
+    spec = KINDS[plant_kind(config)][0](config)
+    truth = set(spec.output_names) | {"phi_r"}
+    return tuple(s for s in outputs if s in truth)
