@@ -60,6 +60,8 @@ docs: build
 	  --json > docs/data/sweeps/switched_pi_pole_radius.json
 	$(BIN)/uiogen sweep lpv_linf_driver_torque --set 'design.gain_bound_times_sample_time=[1, 3, 7.63, 7.633, 10, 30, 100]' \
 	  --show gamma,gamma_quadratic,discrete_kappa,discrete_contraction_per_step --json > docs/data/sweeps/linf_gain_bound.json
+	for c in lpv_linf_driver_torque switched_pi_bank_angle; do \
+	  $(BIN)/uiogen campaign docs/campaigns/$$c.toml --out docs/campaigns/$$c || exit 1; done
 	$(BIN)/uiogen docs
 	$(BIN)/mkdocs build --strict --quiet
 
