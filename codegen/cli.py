@@ -9,6 +9,7 @@
     uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png]
     uiogen demo [--json]
     uiogen bench [--json]
+    uiogen export NAME --format fmu --out FILE.fmu
 """
 from __future__ import annotations
 
@@ -248,6 +249,12 @@ def cmd_docs(args) -> int:
     return docs.main(check=args.check)
 
 
+def cmd_export(args) -> int:
+    from . import fmu
+    fmu.export_fmu(args.name, args.out)
+    return 0
+
+
 def cmd_bench(args) -> int:
     from . import bench
     return bench.main(json_output=args.json)
@@ -313,6 +320,11 @@ def main(argv=None) -> int:
     p = sub.add_parser("bench", help="benchmarks (C step, Python call, design time)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_bench)
+    p = sub.add_parser("export", help="package a generated observer for another tool (fmu: FMI 2.0 co-simulation)")
+    p.add_argument("name")
+    p.add_argument("--format", choices=("fmu",), required=True)
+    p.add_argument("--out", required=True, help="the file to write (FILE.fmu)")
+    p.set_defaults(func=cmd_export)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

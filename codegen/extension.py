@@ -12,6 +12,7 @@ its observer file.
 """
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import json
 import sys
@@ -42,6 +43,8 @@ SPEED_FLAGS = ["-O3"]
 LTO_FLAGS = ["-flto", "-fvisibility=hidden"]
 
 _LTO = None
+# Open recordings of the inputs given to CompiledObserver.run (see :func:`recording`).
+_RECORDINGS: list = []
 
 
 def lto_supported() -> bool:
@@ -168,11 +171,26 @@ class CompiledObserver:
         state = self.initial_state() if state is None else np.array(state, dtype=np.float64)
         if state.shape != (self.n_state,):
             raise SampleError(f"{self.name}: state must have shape ({self.n_state},), got {state.shape}")
+        for rec in _RECORDINGS:
+            rec.append((self.name, inputs.copy(), state.copy()))
         n = inputs.shape[0]
         outputs = np.empty((n, self.n_output))
         status = np.empty(n, dtype=np.int32)
         self.module.run(state, inputs, outputs, status, n)
         return outputs, status, state
+
+
+@contextlib.contextmanager
+def recording():
+    """Record what :meth:`CompiledObserver.run` is given inside the block: yields a list that
+    fills with (observer name, inputs, initial state) per call, e.g. the input sequence of a
+    validation scenario, to replay it through the FMU or a cross-compiled build."""
+    rec: list = []
+    _RECORDINGS.append(rec)
+    try:
+        yield rec
+    finally:
+        _RECORDINGS.remove(rec)
 
 
 def load(observer) -> CompiledObserver:
