@@ -3,7 +3,7 @@
     uiogen list [--json]
     uiogen design NAME [--json] [--out FILE] [--update]
     uiogen generate [NAME ...] [--force] [--out DIR]
-    uiogen build [NAME ...]
+    uiogen build [NAME ...] [--float32]
     uiogen check-gains NAME --gains FILE [--json]
     uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png]
     uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png]
@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from . import design_lock, emit, families, observers, pipeline
-from .errors import ConfigurationError, UiogenError
+from .errors import CertificateError, ConfigurationError, UiogenError
 
 
 def _print_json(obj) -> None:
@@ -144,7 +144,21 @@ def cmd_generate(args) -> int:
 
 def cmd_build(args) -> int:
     from . import extension
-    return extension.main(args.names)
+    if not args.float32:
+        return extension.main(args.names)
+    from . import precision
+    refused = []
+    for name in args.names or observers.names():
+        report = precision.compare(name)
+        print(precision.format_report(report))
+        if report["passes"]:
+            print(f"{name}: built {precision.FLOAT_DIR / name / f'lib{name}_f32.so'} (API {name}_f32_*)")
+        else:
+            refused.append(name)
+    if refused:
+        raise CertificateError(f"float32 build refused for {', '.join(refused)}: the contraction margin does not "
+                               f"cover the rounding within {precision.TOLERANCE:g} of the signal RMS (figures above)")
+    return 0
 
 
 def _load_gains(path: Path) -> dict:
@@ -289,6 +303,10 @@ def main(argv=None) -> int:
     p.set_defaults(func=cmd_generate)
     p = sub.add_parser("build", help="compile the generated C into Python extensions")
     p.add_argument("names", nargs="*")
+    p.add_argument("--float32", action="store_true",
+                   help="emit and build the float (casadi_real) variant into build/float32/NAME/ instead, "
+                        "compared with the double step on the validation scenarios; refused where the "
+                        "certificate's margin does not cover the rounding")
     p.set_defaults(func=cmd_build)
     p = sub.add_parser("check-gains", help="verify external gains against an observer's LMIs")
     p.add_argument("name")

@@ -132,7 +132,15 @@ class CompiledObserver:
 
     @property
     def step(self):
-        return self.module.step
+        if not _RECORDINGS:
+            return self.module.step
+        step = self.module.step
+
+        def recorded(state, inputs, out):
+            for rec in _RECORDINGS:
+                rec.append((self.name, np.array(inputs, dtype=np.float64, copy=True), None))
+            return step(state, inputs, out)
+        return recorded
 
     @property
     def n_state(self) -> int:
@@ -182,8 +190,9 @@ class CompiledObserver:
 
 @contextlib.contextmanager
 def recording():
-    """Record what :meth:`CompiledObserver.run` is given inside the block: yields a list that
-    fills with (observer name, inputs, initial state) per call, e.g. the input sequence of a
+    """Record what :meth:`CompiledObserver.run` (and ``step``) is given inside the block: yields
+    a list that fills with (observer name, inputs, initial state) per call (one input row and
+    None for a step), e.g. the input sequence of a
     validation scenario, to replay it through the FMU or a cross-compiled build."""
     rec: list = []
     _RECORDINGS.append(rec)

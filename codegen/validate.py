@@ -208,4 +208,11 @@ def scenario_inputs(name, scenario, plant: str = "nominal", duration: float | No
     runs = [inputs for who, inputs, _ in rec if who == config.name]
     if not runs:
         raise SampleError(f"{config.name}: scenario {scenario!r} did not run the compiled observer")
+    if runs[0].ndim == 1:           # sample by sample (step): the consecutive rows of the first run
+        rows = []
+        for r in runs:
+            if r.ndim != 1:
+                break
+            rows.append(r)
+        return np.vstack(rows)
     return runs[0]
