@@ -1,6 +1,8 @@
 # uiogen — every target installs what it needs into .venv/ first.
 #   make demo    main job: design + generate + build + summary (README)
 #   make test    the test suite (CI runs this through .ci/run)
+#   make misra   cppcheck's MISRA C:2012 addon on the generated C, against misra/kernel_deviations.toml
+#   make embedded-tools  cppcheck, arm-none-eabi-gcc, qemu-system-arm (apt-get where available)
 #   make check   reliability suite (hostile input, sanitizers, static facts, determinism, long runs)
 #   make docs    re-run demo and bench into docs/data/, rewrite the docs' tables, build the site
 #   make generate | build | bench | clean   (bench: also campaign runs/s, 1 and 2 workers, 10,000 runs)
@@ -15,7 +17,7 @@ PIN    := -c constraints.txt
 CC     ?= cc
 export CC
 
-.PHONY: all venv generate build demo test check bench docs clean lock
+.PHONY: all venv generate build demo test check bench docs clean lock misra embedded-tools
 
 all: demo
 
@@ -36,8 +38,14 @@ build: generate
 demo: build
 	$(BIN)/uiogen demo
 
-test: build
+embedded-tools:
+	sh scripts/install_embedded_tools.sh
+
+test: build embedded-tools
 	$(BIN)/python -m pytest -q tests
+
+misra: generate embedded-tools
+	$(BIN)/python -m codegen.misra
 
 check: build
 	$(BIN)/python -m pytest -q -m reliability tests

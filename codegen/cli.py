@@ -3,13 +3,14 @@
     uiogen list [--json]
     uiogen design NAME [--json] [--out FILE] [--update]
     uiogen generate [NAME ...] [--force] [--out DIR]
-    uiogen build [NAME ...]
+    uiogen build [NAME ...] [--float32]
     uiogen check-gains NAME --gains FILE [--json]
     uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png]
     uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png]
     uiogen demo [--json]
     uiogen bench [--json]
     uiogen campaign SPEC.toml [--runs N] [--only K] [--json] [--scheduler ADDRESS] [--workers N] [--out DIR]
+    uiogen export NAME --format fmu --out FILE.fmu
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from . import design_lock, emit, families, observers, pipeline
-from .errors import ConfigurationError, UiogenError
+from .errors import CertificateError, ConfigurationError, UiogenError
 
 
 def _print_json(obj) -> None:
@@ -144,7 +145,21 @@ def cmd_generate(args) -> int:
 
 def cmd_build(args) -> int:
     from . import extension
-    return extension.main(args.names)
+    if not args.float32:
+        return extension.main(args.names)
+    from . import precision
+    refused = []
+    for name in args.names or observers.names():
+        report = precision.compare(name)
+        print(precision.format_report(report))
+        if report["passes"]:
+            print(f"{name}: built {precision.FLOAT_DIR / name / f'lib{name}_f32.so'} (API {name}_f32_*)")
+        else:
+            refused.append(name)
+    if refused:
+        raise CertificateError(f"float32 build refused for {', '.join(refused)}: the contraction margin does not "
+                               f"cover the rounding within {precision.TOLERANCE:g} of the signal RMS (figures above)")
+    return 0
 
 
 def _load_gains(path: Path) -> dict:
@@ -249,6 +264,12 @@ def cmd_docs(args) -> int:
     return docs.main(check=args.check)
 
 
+def cmd_export(args) -> int:
+    from . import fmu
+    fmu.export_fmu(args.name, args.out)
+    return 0
+
+
 def cmd_bench(args) -> int:
     from . import bench
     return bench.main(json_output=args.json)
@@ -309,6 +330,10 @@ def main(argv=None) -> int:
     p.set_defaults(func=cmd_generate)
     p = sub.add_parser("build", help="compile the generated C into Python extensions")
     p.add_argument("names", nargs="*")
+    p.add_argument("--float32", action="store_true",
+                   help="emit and build the float (casadi_real) variant into build/float32/NAME/ instead, "
+                        "compared with the double step on the validation scenarios; refused where the "
+                        "certificate's margin does not cover the rounding")
     p.set_defaults(func=cmd_build)
     p = sub.add_parser("check-gains", help="verify external gains against an observer's LMIs")
     p.add_argument("name")
@@ -350,6 +375,11 @@ def main(argv=None) -> int:
     p.add_argument("--out", help="directory for runs.csv, summary.json, traces and plots "
                                  "(default build/campaigns/SPEC_STEM)")
     p.set_defaults(func=cmd_campaign)
+    p = sub.add_parser("export", help="package a generated observer for another tool (fmu: FMI 2.0 co-simulation)")
+    p.add_argument("name")
+    p.add_argument("--format", choices=("fmu",), required=True)
+    p.add_argument("--out", required=True, help="the file to write (FILE.fmu)")
+    p.set_defaults(func=cmd_export)
     args = parser.parse_args(argv)
     if getattr(args, "runs", None) is not None and args.runs < 1:
         parser.error("--runs must be >= 1")

@@ -73,18 +73,41 @@ def banner(b: ObserverBuild, what: str) -> str:
             f"Ts = {b.config.sample_time:g} s.\n */")
 
 
-def render(b: ObserverBuild) -> dict:
-    """All files of one observer as {file name: text}."""
+# The floating-point type of the emitted C: the type, its zero, and the bits of its finite check.
+PRECISIONS = {
+    "double": {"real": "double", "zero": "0.0", "uint": "uint64_t", "sign_bit": 63, "suffix": "",
+               "exponent_mask": "UINT64_C(0x7ff0000000000000)", "exponent_unit": "UINT64_C(0x0010000000000000)"},
+    "float32": {"real": "float", "zero": "0.0f", "uint": "uint32_t", "sign_bit": 31, "suffix": "_f32",
+                "exponent_mask": "UINT32_C(0x7f800000)", "exponent_unit": "UINT32_C(0x00800000)"},
+}
+
+
+def render(b: ObserverBuild, precision: str = "double") -> dict:
+    """All files of one observer as {file name: text}. ``precision`` "float32" gives the same API
+    in ``float`` (CasADi's ``casadi_real``), every name suffixed ``_f32`` (``NAME_f32_step``, ...),
+    the finite checks on float bit patterns; the committed C is the "double" one."""
+    fp = PRECISIONS[precision]
+    name = b.name + fp["suffix"]
     f = b.step_function()
-    kernel_c, kernel_h = casadi_sources(f)
+    if precision == "float32":
+        from .floatgen import casadi_float_sources
+        kernel_c, kernel_h = casadi_float_sources(f)
+    else:
+        kernel_c, kernel_h = casadi_sources(f)
+    if fp["suffix"]:
+        kernel_c = kernel_c.replace(f"{b.name}_kernel", f"{name}_kernel")
+        kernel_h = kernel_h.replace(f"{b.name}_kernel", f"{name}_kernel")
     what = "Numerical kernel of the observer step (CasADi code generation)."
+    if fp["suffix"]:
+        what = what[:-1] + f", {fp['real']} (casadi_real) variant."
     kernel_c, kernel_h = banner(b, what) + "\n" + kernel_c, banner(b, what) + "\n" + kernel_h
     state, inputs, outputs = b.signal_docs()
     nu, ny = b.nu, b.ny
     notes = b.emit_notes()
+    api = f"C API of observer {b.name}." if not fp["suffix"] else f"C API of observer {b.name}, {fp['real']} variant."
     ctx = {
-        "banner": banner(b, f"C API of observer {b.name}."),
-        "name": b.name, "NAME": b.name.upper(), "guard": f"UIOGEN_{b.name.upper()}_H",
+        "banner": banner(b, api), "fp": fp,
+        "name": name, "NAME": name.upper(), "guard": f"UIOGEN_{name.upper()}_H",
         "doc": b.config.doc, "ts": repr(b.config.sample_time),
         "stability": notes["stability"], "step_notes": notes["step_notes"],
         "clamp_doc": notes["clamp_doc"], "warmup_doc": notes["warmup_doc"], "has_warmup": notes["has_warmup"],
@@ -98,10 +121,10 @@ def render(b: ObserverBuild) -> dict:
         "sz_iw": max(int(f.sz_iw()), 1), "sz_w": max(int(f.sz_w()), 1),
     }
     return {
-        f"{b.name}_kernel.c": kernel_c,
-        f"{b.name}_kernel.h": kernel_h,
-        f"{b.name}.h": render_template("observer.h.j2", **ctx),
-        f"{b.name}.c": render_template("observer.c.j2", **ctx),
+        f"{name}_kernel.c": kernel_c,
+        f"{name}_kernel.h": kernel_h,
+        f"{name}.h": render_template("observer.h.j2", **ctx),
+        f"{name}.c": render_template("observer.c.j2", **ctx),
     }
 
 

@@ -12,6 +12,7 @@ its observer file.
 """
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import json
 import sys
@@ -42,6 +43,8 @@ SPEED_FLAGS = ["-O3"]
 LTO_FLAGS = ["-flto", "-fvisibility=hidden"]
 
 _LTO = None
+# Open recordings of the inputs given to CompiledObserver.run (see :func:`recording`).
+_RECORDINGS: list = []
 
 
 def lto_supported() -> bool:
@@ -129,7 +132,15 @@ class CompiledObserver:
 
     @property
     def step(self):
-        return self.module.step
+        if not _RECORDINGS:
+            return self.module.step
+        step = self.module.step
+
+        def recorded(state, inputs, out):
+            for rec in _RECORDINGS:
+                rec.append((self.name, np.array(inputs, dtype=np.float64, copy=True), None))
+            return step(state, inputs, out)
+        return recorded
 
     @property
     def n_state(self) -> int:
@@ -168,11 +179,27 @@ class CompiledObserver:
         state = self.initial_state() if state is None else np.array(state, dtype=np.float64)
         if state.shape != (self.n_state,):
             raise SampleError(f"{self.name}: state must have shape ({self.n_state},), got {state.shape}")
+        for rec in _RECORDINGS:
+            rec.append((self.name, inputs.copy(), state.copy()))
         n = inputs.shape[0]
         outputs = np.empty((n, self.n_output))
         status = np.empty(n, dtype=np.int32)
         self.module.run(state, inputs, outputs, status, n)
         return outputs, status, state
+
+
+@contextlib.contextmanager
+def recording():
+    """Record what :meth:`CompiledObserver.run` (and ``step``) is given inside the block: yields
+    a list that fills with (observer name, inputs, initial state) per call (one input row and
+    None for a step), e.g. the input sequence of a
+    validation scenario, to replay it through the FMU or a cross-compiled build."""
+    rec: list = []
+    _RECORDINGS.append(rec)
+    try:
+        yield rec
+    finally:
+        _RECORDINGS.remove(rec)
 
 
 def load(observer) -> CompiledObserver:

@@ -189,3 +189,30 @@ def format_data_table(result: dict) -> str:
         lines.append(f"steering angle delta (an unknown input of this observer) vs the log's measured delta: "
                      f"RMSE {d['rms']:.4f} deg, max {d['max']:.4f} deg, MAE {d['mae']:.4f} deg")
     return "\n".join(lines)
+
+
+def scenario_names(name) -> tuple:
+    """The validation scenarios of an observer that ``uiogen demo`` runs (its family's
+    ``demo_scenarios``), or the generic excitation scenario for a family without its own."""
+    config = observers.get(name) if isinstance(name, str) else name
+    return tuple(families.get(config.family).demo_scenarios) or ("excitation",)
+
+
+def scenario_inputs(name, scenario, plant: str = "nominal", duration: float | None = None) -> np.ndarray:
+    """The (n, n_input) input sequence the compiled observer is given on a validation scenario
+    (recorded from the run itself: the noisy measurements, the derived scheduling signals)."""
+    from .extension import recording
+    config = observers.get(name) if isinstance(name, str) else name
+    with recording() as rec:
+        run_scenario(config, scenario, plant, duration=duration)
+    runs = [inputs for who, inputs, _ in rec if who == config.name]
+    if not runs:
+        raise SampleError(f"{config.name}: scenario {scenario!r} did not run the compiled observer")
+    if runs[0].ndim == 1:           # sample by sample (step): the consecutive rows of the first run
+        rows = []
+        for r in runs:
+            if r.ndim != 1:
+                break
+            rows.append(r)
+        return np.vstack(rows)
+    return runs[0]

@@ -39,11 +39,20 @@ void algebraic_uio_example2_init(algebraic_uio_example2_state *s)
 
 int algebraic_uio_example2_check_work(void)
 {
-    casadi_int sz_arg = 0, sz_res = 0, sz_iw = 0, sz_w = 0;
-    if (algebraic_uio_example2_kernel_work(&sz_arg, &sz_res, &sz_iw, &sz_w) != 0) return -1;
-    if (sz_arg > ALGEBRAIC_UIO_EXAMPLE2_SZ_ARG || sz_res > ALGEBRAIC_UIO_EXAMPLE2_SZ_RES) return 1;
-    if (sz_iw > ALGEBRAIC_UIO_EXAMPLE2_SZ_IW || sz_w > ALGEBRAIC_UIO_EXAMPLE2_SZ_W) return 1;
-    return 0;
+    casadi_int sz_arg = 0;
+    casadi_int sz_res = 0;
+    casadi_int sz_iw = 0;
+    casadi_int sz_w = 0;
+    int result;
+    if (algebraic_uio_example2_kernel_work(&sz_arg, &sz_res, &sz_iw, &sz_w) != 0) {
+        result = -1;
+    } else if ((sz_arg > ALGEBRAIC_UIO_EXAMPLE2_SZ_ARG) || (sz_res > ALGEBRAIC_UIO_EXAMPLE2_SZ_RES) ||
+               (sz_iw > ALGEBRAIC_UIO_EXAMPLE2_SZ_IW) || (sz_w > ALGEBRAIC_UIO_EXAMPLE2_SZ_W)) {
+        result = 1;
+    } else {
+        result = 0;
+    }
+    return result;
 }
 
 /* Bit 63 of the result is set iff x is +-Inf or NaN (all exponent bits set: the masked exponent
@@ -53,7 +62,7 @@ int algebraic_uio_example2_check_work(void)
 static uint64_t nonfinite_bit(const double *x)
 {
     uint64_t bits;
-    memcpy(&bits, x, sizeof bits);
+    (void)memcpy((void *)&bits, (const void *)x, sizeof bits);
     return (bits & UINT64_C(0x7ff0000000000000)) + UINT64_C(0x0010000000000000);
 }
 
@@ -74,44 +83,60 @@ void algebraic_uio_example2_run_flat(double *state, const double *inputs, size_t
     double warmup;
     const double *input;
     double *out;
-    int failed, i;
+    int failed;
+    int i;
     size_t k;
 
     /* The kernel writes nothing but next, excess and warmup: it runs first, and the checks after
      * it, off its critical path, decide what is kept (integer tests of the exponent bits, one
      * per vector). */
     for (k = 0; k < n; ++k) {
-        input = inputs + k * ALGEBRAIC_UIO_EXAMPLE2_N_INPUT;
-        out = outputs + k * ALGEBRAIC_UIO_EXAMPLE2_N_OUTPUT;
+        input = &inputs[k * (size_t)ALGEBRAIC_UIO_EXAMPLE2_N_INPUT];
+        out = &outputs[k * (size_t)ALGEBRAIC_UIO_EXAMPLE2_N_OUTPUT];
         arg[0] = state;
-        arg[1] = input + 0;
-        arg[2] = input + 0;
-        arg[3] = input + 1;
+        arg[1] = &input[0];
+        arg[2] = &input[0];
+        arg[3] = &input[1];
         res[0] = next;
         res[1] = &excess;
         excess = 0.0;
         res[2] = &warmup;
         warmup = 0.0;
-        failed = algebraic_uio_example2_kernel(arg, res, iw, w, 0) != 0;
-        if (((nonfinite_bit(input + 0) | nonfinite_bit(input + 1)) >> 63) != 0) {
+        failed = algebraic_uio_example2_kernel(arg, res, iw, w, 0);
+        if (((nonfinite_bit(&input[0]) | nonfinite_bit(&input[1])) >> 63) != 0u) {
             /* a NaN or infinite input: the state is held and the outputs repeat it */
-            for (i = 0; i < ALGEBRAIC_UIO_EXAMPLE2_N_OUTPUT; ++i) out[i] = state[13 + i];
+            for (i = 0; i < ALGEBRAIC_UIO_EXAMPLE2_N_OUTPUT; ++i) {
+                out[i] = state[i + 13];
+            }
             status[k] = ALGEBRAIC_UIO_EXAMPLE2_NONFINITE_INPUT;
             continue;
         }
-        status[k] = (failed || ((nonfinite_bit(next + 0) | nonfinite_bit(next + 1) | nonfinite_bit(next + 2) | nonfinite_bit(next + 3) | nonfinite_bit(next + 4) | nonfinite_bit(next + 5) | nonfinite_bit(next + 6) | nonfinite_bit(next + 7) | nonfinite_bit(next + 8) | nonfinite_bit(next + 9) | nonfinite_bit(next + 10) | nonfinite_bit(next + 11) | nonfinite_bit(next + 12) | nonfinite_bit(next + 13) | nonfinite_bit(next + 14) | nonfinite_bit(next + 15)) >> 63) != 0)
-            ? ALGEBRAIC_UIO_EXAMPLE2_NUMERICAL_FAILURE : ALGEBRAIC_UIO_EXAMPLE2_OK;
+        if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2]) | nonfinite_bit(&next[3]) | nonfinite_bit(&next[4]) | nonfinite_bit(&next[5]) | nonfinite_bit(&next[6]) | nonfinite_bit(&next[7]) | nonfinite_bit(&next[8]) | nonfinite_bit(&next[9]) | nonfinite_bit(&next[10]) | nonfinite_bit(&next[11]) | nonfinite_bit(&next[12]) | nonfinite_bit(&next[13]) | nonfinite_bit(&next[14]) | nonfinite_bit(&next[15])) >> 63) != 0u)) {
+            status[k] = ALGEBRAIC_UIO_EXAMPLE2_NUMERICAL_FAILURE;
+        } else {
+            status[k] = ALGEBRAIC_UIO_EXAMPLE2_OK;
+        }
         /* the kernel clamps the scheduling signals for the memberships and reports by how much */
-        if (excess > 0.0) status[k] |= ALGEBRAIC_UIO_EXAMPLE2_SCHEDULING_CLAMPED;
-        if (warmup > 0.0) status[k] |= ALGEBRAIC_UIO_EXAMPLE2_WARMING_UP;
+        if (excess > 0.0) {
+            status[k] |= ALGEBRAIC_UIO_EXAMPLE2_SCHEDULING_CLAMPED;
+        }
+        if (warmup > 0.0) {
+            status[k] |= ALGEBRAIC_UIO_EXAMPLE2_WARMING_UP;
+        }
         /* A non-finite result means the state had grown past what doubles hold (e.g. after
          * absurd but finite inputs such as 1e300): holding it would freeze the observer, so it
          * restarts from the initial estimate, which the certified step then drives back. */
-        if (status[k] & ALGEBRAIC_UIO_EXAMPLE2_NUMERICAL_FAILURE) {
-            for (i = 0; i < ALGEBRAIC_UIO_EXAMPLE2_N_STATE; ++i) next[i] = 0.0;
+        if ((status[k] & ALGEBRAIC_UIO_EXAMPLE2_NUMERICAL_FAILURE) != 0) {
+            for (i = 0; i < ALGEBRAIC_UIO_EXAMPLE2_N_STATE; ++i) {
+                next[i] = 0.0;
+            }
         }
-        for (i = 0; i < ALGEBRAIC_UIO_EXAMPLE2_N_STATE; ++i) state[i] = next[i];
-        for (i = 0; i < ALGEBRAIC_UIO_EXAMPLE2_N_OUTPUT; ++i) out[i] = state[13 + i];
+        for (i = 0; i < ALGEBRAIC_UIO_EXAMPLE2_N_STATE; ++i) {
+            state[i] = next[i];
+        }
+        for (i = 0; i < ALGEBRAIC_UIO_EXAMPLE2_N_OUTPUT; ++i) {
+            out[i] = state[i + 13];
+        }
     }
 }
 

@@ -72,11 +72,20 @@ void interconnected_uio_init(interconnected_uio_state *s)
 
 int interconnected_uio_check_work(void)
 {
-    casadi_int sz_arg = 0, sz_res = 0, sz_iw = 0, sz_w = 0;
-    if (interconnected_uio_kernel_work(&sz_arg, &sz_res, &sz_iw, &sz_w) != 0) return -1;
-    if (sz_arg > INTERCONNECTED_UIO_SZ_ARG || sz_res > INTERCONNECTED_UIO_SZ_RES) return 1;
-    if (sz_iw > INTERCONNECTED_UIO_SZ_IW || sz_w > INTERCONNECTED_UIO_SZ_W) return 1;
-    return 0;
+    casadi_int sz_arg = 0;
+    casadi_int sz_res = 0;
+    casadi_int sz_iw = 0;
+    casadi_int sz_w = 0;
+    int result;
+    if (interconnected_uio_kernel_work(&sz_arg, &sz_res, &sz_iw, &sz_w) != 0) {
+        result = -1;
+    } else if ((sz_arg > INTERCONNECTED_UIO_SZ_ARG) || (sz_res > INTERCONNECTED_UIO_SZ_RES) ||
+               (sz_iw > INTERCONNECTED_UIO_SZ_IW) || (sz_w > INTERCONNECTED_UIO_SZ_W)) {
+        result = 1;
+    } else {
+        result = 0;
+    }
+    return result;
 }
 
 /* Bit 63 of the result is set iff x is +-Inf or NaN (all exponent bits set: the masked exponent
@@ -86,7 +95,7 @@ int interconnected_uio_check_work(void)
 static uint64_t nonfinite_bit(const double *x)
 {
     uint64_t bits;
-    memcpy(&bits, x, sizeof bits);
+    (void)memcpy((void *)&bits, (const void *)x, sizeof bits);
     return (bits & UINT64_C(0x7ff0000000000000)) + UINT64_C(0x0010000000000000);
 }
 
@@ -107,44 +116,60 @@ void interconnected_uio_run_flat(double *state, const double *inputs, size_t n, 
     double warmup;
     const double *input;
     double *out;
-    int failed, i;
+    int failed;
+    int i;
     size_t k;
 
     /* The kernel writes nothing but next, excess and warmup: it runs first, and the checks after
      * it, off its critical path, decide what is kept (integer tests of the exponent bits, one
      * per vector). */
     for (k = 0; k < n; ++k) {
-        input = inputs + k * INTERCONNECTED_UIO_N_INPUT;
-        out = outputs + k * INTERCONNECTED_UIO_N_OUTPUT;
+        input = &inputs[k * (size_t)INTERCONNECTED_UIO_N_INPUT];
+        out = &outputs[k * (size_t)INTERCONNECTED_UIO_N_OUTPUT];
         arg[0] = state;
-        arg[1] = input + 0;
-        arg[2] = input + 0;
-        arg[3] = input + 8;
+        arg[1] = &input[0];
+        arg[2] = &input[0];
+        arg[3] = &input[8];
         res[0] = next;
         res[1] = &excess;
         excess = 0.0;
         res[2] = &warmup;
         warmup = 0.0;
-        failed = interconnected_uio_kernel(arg, res, iw, w, 0) != 0;
-        if (((nonfinite_bit(input + 0) | nonfinite_bit(input + 1) | nonfinite_bit(input + 2) | nonfinite_bit(input + 3) | nonfinite_bit(input + 4) | nonfinite_bit(input + 5) | nonfinite_bit(input + 6) | nonfinite_bit(input + 7)) >> 63) != 0) {
+        failed = interconnected_uio_kernel(arg, res, iw, w, 0);
+        if (((nonfinite_bit(&input[0]) | nonfinite_bit(&input[1]) | nonfinite_bit(&input[2]) | nonfinite_bit(&input[3]) | nonfinite_bit(&input[4]) | nonfinite_bit(&input[5]) | nonfinite_bit(&input[6]) | nonfinite_bit(&input[7])) >> 63) != 0u) {
             /* a NaN or infinite input: the state is held and the outputs repeat it */
-            for (i = 0; i < INTERCONNECTED_UIO_N_OUTPUT; ++i) out[i] = state[30 + i];
+            for (i = 0; i < INTERCONNECTED_UIO_N_OUTPUT; ++i) {
+                out[i] = state[i + 30];
+            }
             status[k] = INTERCONNECTED_UIO_NONFINITE_INPUT;
             continue;
         }
-        status[k] = (failed || ((nonfinite_bit(next + 0) | nonfinite_bit(next + 1) | nonfinite_bit(next + 2) | nonfinite_bit(next + 3) | nonfinite_bit(next + 4) | nonfinite_bit(next + 5) | nonfinite_bit(next + 6) | nonfinite_bit(next + 7) | nonfinite_bit(next + 8) | nonfinite_bit(next + 9) | nonfinite_bit(next + 10) | nonfinite_bit(next + 11) | nonfinite_bit(next + 12) | nonfinite_bit(next + 13) | nonfinite_bit(next + 14) | nonfinite_bit(next + 15) | nonfinite_bit(next + 16) | nonfinite_bit(next + 17) | nonfinite_bit(next + 18) | nonfinite_bit(next + 19) | nonfinite_bit(next + 20) | nonfinite_bit(next + 21) | nonfinite_bit(next + 22) | nonfinite_bit(next + 23) | nonfinite_bit(next + 24) | nonfinite_bit(next + 25) | nonfinite_bit(next + 26) | nonfinite_bit(next + 27) | nonfinite_bit(next + 28) | nonfinite_bit(next + 29) | nonfinite_bit(next + 30) | nonfinite_bit(next + 31) | nonfinite_bit(next + 32) | nonfinite_bit(next + 33) | nonfinite_bit(next + 34) | nonfinite_bit(next + 35) | nonfinite_bit(next + 36) | nonfinite_bit(next + 37) | nonfinite_bit(next + 38) | nonfinite_bit(next + 39) | nonfinite_bit(next + 40) | nonfinite_bit(next + 41) | nonfinite_bit(next + 42) | nonfinite_bit(next + 43) | nonfinite_bit(next + 44) | nonfinite_bit(next + 45) | nonfinite_bit(next + 46) | nonfinite_bit(next + 47) | nonfinite_bit(next + 48)) >> 63) != 0)
-            ? INTERCONNECTED_UIO_NUMERICAL_FAILURE : INTERCONNECTED_UIO_OK;
+        if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2]) | nonfinite_bit(&next[3]) | nonfinite_bit(&next[4]) | nonfinite_bit(&next[5]) | nonfinite_bit(&next[6]) | nonfinite_bit(&next[7]) | nonfinite_bit(&next[8]) | nonfinite_bit(&next[9]) | nonfinite_bit(&next[10]) | nonfinite_bit(&next[11]) | nonfinite_bit(&next[12]) | nonfinite_bit(&next[13]) | nonfinite_bit(&next[14]) | nonfinite_bit(&next[15]) | nonfinite_bit(&next[16]) | nonfinite_bit(&next[17]) | nonfinite_bit(&next[18]) | nonfinite_bit(&next[19]) | nonfinite_bit(&next[20]) | nonfinite_bit(&next[21]) | nonfinite_bit(&next[22]) | nonfinite_bit(&next[23]) | nonfinite_bit(&next[24]) | nonfinite_bit(&next[25]) | nonfinite_bit(&next[26]) | nonfinite_bit(&next[27]) | nonfinite_bit(&next[28]) | nonfinite_bit(&next[29]) | nonfinite_bit(&next[30]) | nonfinite_bit(&next[31]) | nonfinite_bit(&next[32]) | nonfinite_bit(&next[33]) | nonfinite_bit(&next[34]) | nonfinite_bit(&next[35]) | nonfinite_bit(&next[36]) | nonfinite_bit(&next[37]) | nonfinite_bit(&next[38]) | nonfinite_bit(&next[39]) | nonfinite_bit(&next[40]) | nonfinite_bit(&next[41]) | nonfinite_bit(&next[42]) | nonfinite_bit(&next[43]) | nonfinite_bit(&next[44]) | nonfinite_bit(&next[45]) | nonfinite_bit(&next[46]) | nonfinite_bit(&next[47]) | nonfinite_bit(&next[48])) >> 63) != 0u)) {
+            status[k] = INTERCONNECTED_UIO_NUMERICAL_FAILURE;
+        } else {
+            status[k] = INTERCONNECTED_UIO_OK;
+        }
         /* the kernel clamps the scheduling signals for the memberships and reports by how much */
-        if (excess > 0.0) status[k] |= INTERCONNECTED_UIO_SCHEDULING_CLAMPED;
-        if (warmup > 0.0) status[k] |= INTERCONNECTED_UIO_WARMING_UP;
+        if (excess > 0.0) {
+            status[k] |= INTERCONNECTED_UIO_SCHEDULING_CLAMPED;
+        }
+        if (warmup > 0.0) {
+            status[k] |= INTERCONNECTED_UIO_WARMING_UP;
+        }
         /* A non-finite result means the state had grown past what doubles hold (e.g. after
          * absurd but finite inputs such as 1e300): holding it would freeze the observer, so it
          * restarts from the initial estimate, which the certified step then drives back. */
-        if (status[k] & INTERCONNECTED_UIO_NUMERICAL_FAILURE) {
-            for (i = 0; i < INTERCONNECTED_UIO_N_STATE; ++i) next[i] = 0.0;
+        if ((status[k] & INTERCONNECTED_UIO_NUMERICAL_FAILURE) != 0) {
+            for (i = 0; i < INTERCONNECTED_UIO_N_STATE; ++i) {
+                next[i] = 0.0;
+            }
         }
-        for (i = 0; i < INTERCONNECTED_UIO_N_STATE; ++i) state[i] = next[i];
-        for (i = 0; i < INTERCONNECTED_UIO_N_OUTPUT; ++i) out[i] = state[30 + i];
+        for (i = 0; i < INTERCONNECTED_UIO_N_STATE; ++i) {
+            state[i] = next[i];
+        }
+        for (i = 0; i < INTERCONNECTED_UIO_N_OUTPUT; ++i) {
+            out[i] = state[i + 30];
+        }
     }
 }
 

@@ -34,11 +34,20 @@ void ts_fuzzy_uio_stanford_init(ts_fuzzy_uio_stanford_state *s)
 
 int ts_fuzzy_uio_stanford_check_work(void)
 {
-    casadi_int sz_arg = 0, sz_res = 0, sz_iw = 0, sz_w = 0;
-    if (ts_fuzzy_uio_stanford_kernel_work(&sz_arg, &sz_res, &sz_iw, &sz_w) != 0) return -1;
-    if (sz_arg > TS_FUZZY_UIO_STANFORD_SZ_ARG || sz_res > TS_FUZZY_UIO_STANFORD_SZ_RES) return 1;
-    if (sz_iw > TS_FUZZY_UIO_STANFORD_SZ_IW || sz_w > TS_FUZZY_UIO_STANFORD_SZ_W) return 1;
-    return 0;
+    casadi_int sz_arg = 0;
+    casadi_int sz_res = 0;
+    casadi_int sz_iw = 0;
+    casadi_int sz_w = 0;
+    int result;
+    if (ts_fuzzy_uio_stanford_kernel_work(&sz_arg, &sz_res, &sz_iw, &sz_w) != 0) {
+        result = -1;
+    } else if ((sz_arg > TS_FUZZY_UIO_STANFORD_SZ_ARG) || (sz_res > TS_FUZZY_UIO_STANFORD_SZ_RES) ||
+               (sz_iw > TS_FUZZY_UIO_STANFORD_SZ_IW) || (sz_w > TS_FUZZY_UIO_STANFORD_SZ_W)) {
+        result = 1;
+    } else {
+        result = 0;
+    }
+    return result;
 }
 
 /* Bit 63 of the result is set iff x is +-Inf or NaN (all exponent bits set: the masked exponent
@@ -48,7 +57,7 @@ int ts_fuzzy_uio_stanford_check_work(void)
 static uint64_t nonfinite_bit(const double *x)
 {
     uint64_t bits;
-    memcpy(&bits, x, sizeof bits);
+    (void)memcpy((void *)&bits, (const void *)x, sizeof bits);
     return (bits & UINT64_C(0x7ff0000000000000)) + UINT64_C(0x0010000000000000);
 }
 
@@ -69,44 +78,60 @@ void ts_fuzzy_uio_stanford_run_flat(double *state, const double *inputs, size_t 
     double warmup;
     const double *input;
     double *out;
-    int failed, i;
+    int failed;
+    int i;
     size_t k;
 
     /* The kernel writes nothing but next, excess and warmup: it runs first, and the checks after
      * it, off its critical path, decide what is kept (integer tests of the exponent bits, one
      * per vector). */
     for (k = 0; k < n; ++k) {
-        input = inputs + k * TS_FUZZY_UIO_STANFORD_N_INPUT;
-        out = outputs + k * TS_FUZZY_UIO_STANFORD_N_OUTPUT;
+        input = &inputs[k * (size_t)TS_FUZZY_UIO_STANFORD_N_INPUT];
+        out = &outputs[k * (size_t)TS_FUZZY_UIO_STANFORD_N_OUTPUT];
         arg[0] = state;
-        arg[1] = input + 0;
-        arg[2] = input + 0;
-        arg[3] = input + 2;
+        arg[1] = &input[0];
+        arg[2] = &input[0];
+        arg[3] = &input[2];
         res[0] = next;
         res[1] = &excess;
         excess = 0.0;
         res[2] = &warmup;
         warmup = 0.0;
-        failed = ts_fuzzy_uio_stanford_kernel(arg, res, iw, w, 0) != 0;
-        if (((nonfinite_bit(input + 0) | nonfinite_bit(input + 1)) >> 63) != 0) {
+        failed = ts_fuzzy_uio_stanford_kernel(arg, res, iw, w, 0);
+        if (((nonfinite_bit(&input[0]) | nonfinite_bit(&input[1])) >> 63) != 0u) {
             /* a NaN or infinite input: the state is held and the outputs repeat it */
-            for (i = 0; i < TS_FUZZY_UIO_STANFORD_N_OUTPUT; ++i) out[i] = state[6 + i];
+            for (i = 0; i < TS_FUZZY_UIO_STANFORD_N_OUTPUT; ++i) {
+                out[i] = state[i + 6];
+            }
             status[k] = TS_FUZZY_UIO_STANFORD_NONFINITE_INPUT;
             continue;
         }
-        status[k] = (failed || ((nonfinite_bit(next + 0) | nonfinite_bit(next + 1) | nonfinite_bit(next + 2) | nonfinite_bit(next + 3) | nonfinite_bit(next + 4) | nonfinite_bit(next + 5) | nonfinite_bit(next + 6) | nonfinite_bit(next + 7) | nonfinite_bit(next + 8) | nonfinite_bit(next + 9) | nonfinite_bit(next + 10)) >> 63) != 0)
-            ? TS_FUZZY_UIO_STANFORD_NUMERICAL_FAILURE : TS_FUZZY_UIO_STANFORD_OK;
+        if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2]) | nonfinite_bit(&next[3]) | nonfinite_bit(&next[4]) | nonfinite_bit(&next[5]) | nonfinite_bit(&next[6]) | nonfinite_bit(&next[7]) | nonfinite_bit(&next[8]) | nonfinite_bit(&next[9]) | nonfinite_bit(&next[10])) >> 63) != 0u)) {
+            status[k] = TS_FUZZY_UIO_STANFORD_NUMERICAL_FAILURE;
+        } else {
+            status[k] = TS_FUZZY_UIO_STANFORD_OK;
+        }
         /* the kernel clamps the scheduling signals for the memberships and reports by how much */
-        if (excess > 0.0) status[k] |= TS_FUZZY_UIO_STANFORD_SCHEDULING_CLAMPED;
-        if (warmup > 0.0) status[k] |= TS_FUZZY_UIO_STANFORD_WARMING_UP;
+        if (excess > 0.0) {
+            status[k] |= TS_FUZZY_UIO_STANFORD_SCHEDULING_CLAMPED;
+        }
+        if (warmup > 0.0) {
+            status[k] |= TS_FUZZY_UIO_STANFORD_WARMING_UP;
+        }
         /* A non-finite result means the state had grown past what doubles hold (e.g. after
          * absurd but finite inputs such as 1e300): holding it would freeze the observer, so it
          * restarts from the initial estimate, which the certified step then drives back. */
-        if (status[k] & TS_FUZZY_UIO_STANFORD_NUMERICAL_FAILURE) {
-            for (i = 0; i < TS_FUZZY_UIO_STANFORD_N_STATE; ++i) next[i] = 0.0;
+        if ((status[k] & TS_FUZZY_UIO_STANFORD_NUMERICAL_FAILURE) != 0) {
+            for (i = 0; i < TS_FUZZY_UIO_STANFORD_N_STATE; ++i) {
+                next[i] = 0.0;
+            }
         }
-        for (i = 0; i < TS_FUZZY_UIO_STANFORD_N_STATE; ++i) state[i] = next[i];
-        for (i = 0; i < TS_FUZZY_UIO_STANFORD_N_OUTPUT; ++i) out[i] = state[6 + i];
+        for (i = 0; i < TS_FUZZY_UIO_STANFORD_N_STATE; ++i) {
+            state[i] = next[i];
+        }
+        for (i = 0; i < TS_FUZZY_UIO_STANFORD_N_OUTPUT; ++i) {
+            out[i] = state[i + 6];
+        }
     }
 }
 

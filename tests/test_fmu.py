@@ -1,0 +1,96 @@
+"""uiogen export --format fmu: an FMI 2.0 co-simulation FMU, checked with FMPy (its model
+description validation, and a simulation over every validation scenario of the named observers
+whose outputs and status are bit-identical to the Python extension's)."""
+from __future__ import annotations
+
+import platform
+import zipfile
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from codegen import cli, fmu, validate
+from codegen.extension import build_extension, load
+
+fmpy = pytest.importorskip("fmpy", reason="FMPy is not installed (pip install -c constraints.txt '.[fmu]')")
+from fmpy.validation import validate_fmu  # noqa: E402
+
+pytestmark = pytest.mark.skipif(platform.system() != "Linux" or platform.machine() != "x86_64",
+                                reason="the FMU carries a linux64 binary only")
+
+NAMES = ("lpv_linf_driver_torque", "interconnected_uio")
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory):
+    out = {}
+    for name in NAMES:
+        build_extension(name)
+        path = tmp_path_factory.mktemp("fmu") / f"{name}.fmu"
+        assert cli.main(["export", name, "--format", "fmu", "--out", str(path)]) == 0
+        out[name] = path
+    return out
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_fmu_model_description_passes_fmpy_validation(fmus, name):
+    assert validate_fmu(str(fmus[name])) == []
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_fmu_holds_sources_binary_units_and_sample_time(fmus, name):
+    obs = load(name)
+    with zipfile.ZipFile(fmus[name]) as z:
+        names = set(z.namelist())
+        md = ET.fromstring(z.read("modelDescription.xml"))
+    assert f"binaries/linux64/{name}.so" in names
+    assert {f"sources/{name}.c", f"sources/{name}_kernel.c", f"sources/{name}_fmu.c",
+            "sources/fmi2Functions.h"} <= names
+    assert float(md.find("DefaultExperiment").get("stepSize")) == obs.sample_time
+    variables = {v.get("name"): v for v in md.iter("ScalarVariable")}
+    assert [n for n, v in variables.items() if v.get("causality") == "input"] == list(obs.input_names)
+    assert [n for n, v in variables.items() if v.get("causality") == "output"] == [*obs.output_names, "status"]
+    assert variables["status"].find("Integer") is not None
+    units = [v.find("Real").get("unit") for n, v in variables.items() if n != "status"]
+    assert any(units) and all(v.get("description") for v in variables.values())
+
+
+def _scenarios():
+    return [(n, s) for n in NAMES for s in validate.scenario_names(n)]
+
+
+@pytest.mark.parametrize("name,scenario", _scenarios())
+def test_fmu_outputs_bit_identical_to_extension(fmus, name, scenario):
+    obs = load(name)
+    inputs = validate.scenario_inputs(name, scenario)
+    out, status, _ = obs.run(inputs)
+    f_out, f_status = fmu.run_fmu(fmus[name], inputs, obs.input_names, obs.output_names)
+    assert f_out.shape == out.shape
+    assert np.array_equal(f_out.view(np.uint64), out.view(np.uint64))
+    assert np.array_equal(f_status, status)
+
+
+def test_fmu_refuses_a_step_that_is_not_whole_samples(fmus):
+    name = NAMES[0]
+    obs = load(name)
+    md = fmpy.read_model_description(str(fmus[name]))
+    unzipped = fmpy.extract(str(fmus[name]))
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi2 import FMU2Slave
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=name, instanceName="x")
+    slave.instantiate()
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    slave.doStep(currentCommunicationPoint=0.0, communicationStepSize=3 * obs.sample_time)
+    with pytest.raises(FMICallException):
+        slave.doStep(currentCommunicationPoint=3 * obs.sample_time, communicationStepSize=0.5 * obs.sample_time)
+    slave.terminate()
+    slave.freeInstance()
+
+
+def test_export_refuses_a_file_that_is_not_fmu(tmp_path, capsys):
+    assert cli.main(["export", NAMES[0], "--format", "fmu", "--out", str(tmp_path / "x.zip")]) == 2
+    err = capsys.readouterr().err
+    assert "ConfigurationError" in err and ".fmu" in err and "Traceback" not in err
