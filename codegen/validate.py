@@ -134,9 +134,53 @@ def run_data(name: str, path: str = "stanford") -> dict:
                 "vy": signal_stats(run.vx * np.tan(run.beta_true), run.vx * np.tan(b))}
 
     kf, ekf = stanford.linear_kf(run), stanford.ekf(run)
-    return {"observer": {**table(beta), **extra}, "baselines": {"linear_kf": table(kf.beta), "ekf": table(ekf.beta)},
-            "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)), "data": run.source,
-            "signals": {"t": t, "beta_true": run.beta_true, "beta": beta, "linear_kf": kf.beta, "ekf": ekf.beta}}
+    estimates = {"linear_kf": kf.beta, "ekf": ekf.beta}
+    if config.model == "single_track_nonlinear_tyre":
+        # peers of the same symbolic model and the same parameter file, in the same run
+        estimates.update({k: v.beta for k, v in stanford.nonlinear_tyre_peers(run, config.parameter_path).items()})
+    result = {"observer": {**table(beta), **extra}, "baselines": {k: table(b) for k, b in estimates.items()},
+              "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)), "data": run.source,
+              "signals": {"t": t, "beta_true": run.beta_true, "beta": beta, **estimates}}
+    split = _identification_split(config, t)
+    if split is not None:
+        def rms(b, m):
+            return float(np.degrees(np.sqrt(np.mean((b - run.beta_true)[m] ** 2))))
+        result["splits"] = {"t_split": split, "identification": {"samples": int((t < split).sum())},
+                            "evaluation": {"samples": int((t >= split).sum())}}
+        for part, m in (("identification", t < split), ("evaluation", t >= split)):
+            result["splits"][part].update({"observer": rms(beta, m), **{k: rms(b, m) for k, b in estimates.items()}})
+    result["peaks"] = peak_errors(t, run.beta_true, {"observer": beta, **estimates})
+    return result
+
+
+PEAK_TIMES = (110.0, 170.0, 207.0)
+"""Times [s from the log's start] of the three large-sideslip peaks of the shared Stanford half
+(the truth reaches about -5 deg there)."""
+PEAK_HALF_WIDTH = 5.0
+
+
+def peak_errors(t, truth, estimates: dict) -> list:
+    """Max |beta error| [deg] of each estimate within +-PEAK_HALF_WIDTH s of each peak inside the log."""
+    out = []
+    for tp in PEAK_TIMES:
+        m = np.abs(t - tp) <= PEAK_HALF_WIDTH
+        if not m.any():
+            continue
+        tm = truth[m]
+        out.append({"t": tp, "truth_peak_deg": float(np.degrees(tm[np.argmax(np.abs(tm))])),
+                    **{k: float(np.degrees(np.abs(b[m] - truth[m]).max())) for k, b in estimates.items()}})
+    return out
+
+
+def _identification_split(config, t):
+    """The identification split of the observer's parameter file ([meta] identification_t_end, s from the
+    log's start), when it has one and the log reaches past it."""
+    from .model import load_parameters
+    raw = load_parameters(config.parameter_path).meta.get("identification_t_end")
+    if raw is None:
+        return None
+    split = float(raw)
+    return split if t[-1] > split else None
 
 
 def plot_data(result: dict, path: str) -> None:
@@ -165,8 +209,16 @@ def plot_data(result: dict, path: str) -> None:
     ax[0].plot(sig["t"], sig["linear_kf"] * deg, "b", lw=0.6, alpha=0.6, label="linear KF")
     ax[0].set_ylabel("beta [deg]")
     ax[0].legend(loc="upper right", fontsize=8)
-    for key, color in (("beta", "r"), ("linear_kf", "b"), ("ekf", "g")):
-        ax[1].plot(sig["t"], (sig[key] - sig["beta_true"]) * deg, color, lw=0.6, label=key)
+    for key, color in (("beta", "r"), ("linear_kf", "b"), ("ekf", "g"), ("ekf_nonlinear_tyre", "m"),
+                       ("ukf_nonlinear_tyre", "c")):
+        if key in sig:
+            ax[1].plot(sig["t"], (sig[key] - sig["beta_true"]) * deg, color, lw=0.6, label=key)
+    for pk in result.get("peaks", ()):
+        for a in ax:
+            a.axvspan(pk["t"] - PEAK_HALF_WIDTH, pk["t"] + PEAK_HALF_WIDTH, color="0.85", zorder=0)
+    if "splits" in result:
+        for a in ax:
+            a.axvline(result["splits"]["t_split"], color="k", ls=":", lw=0.8)
     ax[1].set_ylabel("error [deg]")
     ax[1].set_xlabel("t [s]")
     ax[1].legend(loc="upper right", fontsize=8)
@@ -180,10 +232,21 @@ def format_data_table(result: dict) -> str:
         from .validation import logs
         return logs.format_table(result)
     rows = [("observer", result["observer"])] + list(result["baselines"].items())
-    lines = [f"{'estimator':12s} {'beta RMSE':>10s} {'beta max':>9s} {'beta MAE':>9s} {'vy RMSE':>9s}   [deg, m/s]"]
+    lines = [f"{'estimator':18s} {'beta RMSE':>10s} {'beta max':>9s} {'beta MAE':>9s} {'vy RMSE':>9s}   [deg, m/s]"]
     for name, t in rows:
-        lines.append(f"{name:12s} {t['beta']['rms']:10.4f} {t['beta']['max']:9.4f} {t['beta']['mae']:9.4f} "
+        lines.append(f"{name:18s} {t['beta']['rms']:10.4f} {t['beta']['max']:9.4f} {t['beta']['mae']:9.4f} "
                      f"{t['vy']['rms']:9.4f}")
+    if "splits" in result:
+        sp_ = result["splits"]
+        for part in ("identification", "evaluation"):
+            d = sp_[part]
+            lines.append(f"beta RMSE on the {part} part ({'t <' if part == 'identification' else 't >='} "
+                         f"{sp_['t_split']:g} s, {d['samples']} samples): "
+                         + ", ".join(f"{k} {v:.4f}" for k, v in d.items() if k != "samples"))
+    for pk in result.get("peaks", ()):
+        lines.append(f"peak t = {pk['t']:g} s (truth peak {pk['truth_peak_deg']:.2f} deg), max |beta error| within "
+                     f"+-{PEAK_HALF_WIDTH:g} s: " + ", ".join(f"{k} {v:.2f}" for k, v in pk.items()
+                                                           if k not in ("t", "truth_peak_deg")))
     if "delta" in result["observer"]:
         d = result["observer"]["delta"]
         lines.append(f"steering angle delta (an unknown input of this observer) vs the log's measured delta: "

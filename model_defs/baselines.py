@@ -26,6 +26,7 @@ import sympy as sp
 
 from codegen.model import ModelDefinition, SchedulingSignal
 from model_defs import single_track_saturating as _st
+from model_defs import tyres as _tyres
 
 beta, r, delta, v_x = _st.beta, _st.r, _st.delta, _st.v_x
 m, l_f, l_r, I_z, C_f, C_r, mu, g = _st.m, _st.l_f, _st.l_r, _st.I_z, _st.C_f, _st.C_r, _st.mu, _st.g
@@ -34,14 +35,13 @@ m, l_f, l_r, I_z, C_f, C_r, mu, g = _st.m, _st.l_f, _st.l_r, _st.I_z, _st.C_f, _
 def fiala_axle_force(alpha, c_alpha, mu_fz):
     """Fiala (brush, parabolic pressure) lateral axle force, sign convention F = +C alpha.
 
-    ``F = C t - C^2/(3 mu F_z) |t| t + C^3/(27 mu^2 F_z^2) t^3`` with ``t = tan(alpha)`` clamped to
-    the full-sliding value ``3 mu F_z / C``, where ``F = mu F_z sign(alpha)`` and dF/dalpha = 0;
-    Pacejka, *Tire and Vehicle Dynamics*, 3rd ed., Sec. 3.2 (brush model), as used by Hindiyeh &
-    Gerdes (2014). The clamp keeps the expression smooth at alpha = 0 (slope C there).
+    ``model_defs.tyres.fiala_slip_force`` at t = tan(alpha): ``F = C t - C^2/(3 mu F_z) |t| t +
+    C^3/(27 mu^2 F_z^2) t^3`` with t clamped to the full-sliding value ``3 mu F_z / C``, where
+    ``F = mu F_z sign(alpha)`` and dF/dalpha = 0; Pacejka, *Tire and Vehicle Dynamics*, 3rd ed.,
+    Sec. 3.2 (brush model), as used by Hindiyeh & Gerdes (2014). The clamp keeps the expression
+    smooth at alpha = 0 (slope C there).
     """
-    t_slide = 3 * mu_fz / c_alpha
-    t = sp.Min(sp.Max(sp.tan(alpha), -t_slide), t_slide)
-    return c_alpha * t - c_alpha ** 2 / (3 * mu_fz) * sp.Abs(t) * t + c_alpha ** 3 / (27 * mu_fz ** 2) * t ** 3
+    return _tyres.fiala_slip_force(sp.tan(alpha), c_alpha, mu_fz)
 
 
 # --- (a) linear KF model: the observer's single-track equations with linear tyres --------------

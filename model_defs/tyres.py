@@ -1,4 +1,4 @@
-"""Tyre force laws shared by the truth plants (validation only; observers use linear tyres)."""
+"""Tyre force laws written once: the truth plants, the Kalman peers and the nonlinear-tyre observer use them."""
 import sympy as sp
 
 
@@ -11,3 +11,24 @@ def magic_formula_axle(alpha, cornering_stiffness, fz, mu, C, E):
     D = mu * fz
     B = cornering_stiffness / (C * D)
     return D * sp.sin(C * sp.atan((1 - E) * B * alpha + E * sp.atan(B * alpha)))
+
+
+def fiala_slip_force(t, cornering_stiffness, mu_fz, clamp=True):
+    """Fiala (brush, parabolic pressure) lateral axle force in the slip variable t = tan(alpha).
+
+    ``F = C t - C^2/(3 mu F_z) |t| t + C^3/(27 mu^2 F_z^2) t^3`` for |t| <= t_sl = 3 mu F_z / C, and
+    ``mu F_z sign(t)`` beyond (full sliding, dF/dt = 0); Pacejka, *Tire and Vehicle Dynamics*, 3rd
+    ed., Sec. 3.2; Hindiyeh & Gerdes (2014). Its slope is dF/dt = C (1 - |t|/t_sl)^2: C at t = 0,
+    0 at full sliding. ``clamp=False`` gives the polynomial alone, equal to the clamped law on
+    |t| <= t_sl (used for Jacobian bounds over a set that stays inside that range).
+    """
+    t_slide = 3 * mu_fz / cornering_stiffness
+    if clamp:
+        t = sp.Min(sp.Max(t, -t_slide), t_slide)
+    c = cornering_stiffness
+    return c * t - c ** 2 / (3 * mu_fz) * sp.Abs(t) * t + c ** 3 / (27 * mu_fz ** 2) * t ** 3
+
+
+def fiala_sliding_slip(cornering_stiffness, mu_fz):
+    """t_sl = 3 mu F_z / C: the slip (tan alpha) at which the Fiala axle reaches full sliding."""
+    return 3 * mu_fz / cornering_stiffness

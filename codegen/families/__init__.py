@@ -22,7 +22,8 @@ from .base import Family, ObserverBuild
 __all__ = ["Family", "ObserverBuild", "BUILTIN", "register", "unregister", "get", "names"]
 
 #: the families that ship with uiogen, imported on first use (each module defines ``FAMILY``)
-BUILTIN = ("linf_uio", "ts_fuzzy_uio", "switched_pi", "algebraic_uio", "interconnected_uio")
+BUILTIN = ("linf_uio", "ts_fuzzy_uio", "switched_pi", "algebraic_uio", "interconnected_uio",
+           "nonlinear_tyre_observer")
 
 _REGISTRY: dict = {}
 _LOADED = False

@@ -36,6 +36,7 @@ from ..errors import ModelDefinitionError, SampleError
 from ..model import ModelDefinition
 
 __all__ = ["KalmanModel", "kalman_model", "FilterResult", "linear_kalman_filter", "extended_kalman_filter",
+           "unscented_kalman_filter",
            "to_casadi"]
 
 _CASADI_NAMESPACE = CASADI_FUNCTIONS     # the toolchain's one table (codegen.stepgen)
@@ -309,3 +310,68 @@ def extended_kalman_filter(model: KalmanModel, u, y, rho, dt: float, R, Sigma, x
     correction.
     """
     return _run(model, u, y, rho, dt, R, Sigma, x0, P0, heun=True, symmetrize=True)
+
+
+def unscented_kalman_filter(model: KalmanModel, u, y, rho, dt: float, R, Sigma, x0, P0) -> FilterResult:
+    """Unscented Kalman filter on a symbolic model (Julier & Uhlmann 2004; Wan & van der Merwe 2000).
+
+    Same arguments and errors as :func:`extended_kalman_filter`, no Jacobian of the dynamics or
+    the outputs in the update: 2 n + 1 sigma points of (x, P) with alpha = 1, beta = 0,
+    kappa = 3 - n (weights W_0 = (3 - n)/3, W_i = 1/6), each propagated by the same Heun step on
+    ``u[k-1], rho[k-1]`` -> ``u[k], rho[k]``; additive process noise ``dt^2 G Sigma G^T`` with
+    ``G`` at the mean; sigma points redrawn from the prediction for the correction with ``y[k]``.
+    One CasADi step run with ``mapaccum`` over the record.
+    """
+    y = np.asarray(y, dtype=float)
+    n = y.shape[0] if y.ndim else 0
+    if n < 2:
+        raise SampleError(f"a Kalman filter run needs at least 2 samples, got {n}")
+    nx, nu, ny, nw = model.nx, len(model.inputs), model.ny, len(model.noise)
+    u, y = _column(u, n, nu, "inputs"), _column(y, n, ny, "measurements")
+    rho = _column(rho, n, len(model.scheduling), "scheduling signals")
+    if not (np.isfinite(dt) and dt > 0):
+        raise SampleError(f"sample time must be > 0, got {dt!r}")
+    R, Sigma, P0 = _covariance(R, ny, "R"), _covariance(Sigma, nw, "Sigma"), _covariance(P0, nx, "P0")
+    x0 = _column(x0, 1, nx, "x0")[0]
+    lam = 3.0 - nx                                    # alpha = 1, kappa = 3 - n: n + lambda = 3
+    w0, wi = lam / (nx + lam), 1.0 / (2.0 * (nx + lam))
+    z = ca.SX.sym("z", nx + nx * nx)
+    nr = rho.shape[1]
+    u0, r0, u1, r1 = ca.SX.sym("u0", nu), ca.SX.sym("rho0", nr), ca.SX.sym("u1", nu), ca.SX.sym("rho1", nr)
+    yk = ca.SX.sym("y", ny)
+    x, P = z[:nx], ca.reshape(z[nx:], nx, nx)
+    zero_w = ca.DM.zeros(model.f.size1_in(2), 1)
+
+    def sigma_points(m, C):
+        Lc = ca.chol(0.5 * (C + C.T)).T * np.sqrt(nx + lam)     # lower factor: Lc Lc' = (n + lambda) C
+        return [m] + [m + Lc[:, i] for i in range(nx)] + [m - Lc[:, i] for i in range(nx)]
+
+    weights = [w0] + [wi] * (2 * nx)
+
+    def heun(s):
+        k1 = model.f(s, u0, zero_w, r0)
+        return s + 0.5 * dt * (k1 + model.f(s + dt * k1, u1, zero_w, r1))
+
+    X = [heun(s) for s in sigma_points(x, P)]
+    xp = sum((w * s for w, s in zip(weights, X)), ca.DM.zeros(nx, 1))
+    G = model.jacobians(x, u0, r0)[2]
+    Pp = sum((w * (s - xp) @ (s - xp).T for w, s in zip(weights, X)), ca.DM.zeros(nx, nx)) \
+        + (dt * G) @ ca.DM(Sigma) @ (dt * G).T
+    Xc = sigma_points(xp, Pp)
+    Y = [model.h(s, u1, r1) for s in Xc]
+    yp = sum((w * s for w, s in zip(weights, Y)), ca.DM.zeros(ny, 1))
+    S = sum((w * (s - yp) @ (s - yp).T for w, s in zip(weights, Y)), ca.DM(R))
+    Pxy = sum((w * (a - xp) @ (b - yp).T for w, a, b in zip(weights, Xc, Y)), ca.DM.zeros(nx, ny))
+    K = ca.solve(S.T, Pxy.T).T
+    xn = xp + K @ (yk - yp)
+    Pn = Pp - K @ S @ K.T
+    Pn = 0.5 * (Pn + Pn.T)
+    step = ca.Function("ukf_step", [z, ca.vertcat(u0, r0, u1, r1, yk)], [ca.vertcat(xn, ca.vec(Pn))])
+    columns = np.hstack([u[:-1], rho[:-1], u[1:], rho[1:], y[1:]]).T
+    z0 = np.concatenate([x0, P0.reshape(-1, order="F")])
+    zs = np.array(step.mapaccum(n - 1)(z0, columns).full()).T
+    xs = np.vstack([x0, zs[:, :nx]])
+    Ps = np.concatenate([P0[None], zs[:, nx:].reshape(n - 1, nx, nx).transpose(0, 2, 1)])
+    if not np.all(np.isfinite(xs)):
+        raise SampleError(f"unscented Kalman filter on {model.name!r} diverged (non-finite estimate)")
+    return FilterResult(x=xs, P=Ps)

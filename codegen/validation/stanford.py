@@ -570,3 +570,39 @@ def ekf(run: StanfordRun, car: VehicleParams = STANFORD_CAR, cfg: EKFConfig = EK
         r_rmse_deg=metrics.rms_error(run.yaw_rate, rh, degrees=True), name="ekf_fiala",
         settings={"mu": cfg.mu, "s_ay": s_ay, "s_r": s_r, "sigma_fy": cfg.sigma_fy, "dt": run.dt,
                   "p0": cfg.p0, "model": model.name})
+
+
+NONLINEAR_TYRE_PEER_NOISE = {"sigma_fy": 0.1, "sigma_ay": 0.3}
+"""Noise levels of the same-tyre EKF and UKF peers (:func:`nonlinear_tyre_peers`): process noise
+per axle as a fraction of its static load, a_y measurement noise (None: the high-pass std of the
+log's a_y). Chosen on samples 0-13749 of the shared half only (t - t_0 < 137.5 s), the
+identification split of ``stanford_race_car_nonlinear_tyre.toml``, from the grid sigma_fy in
+{0.02, 0.05, 0.1, 0.2} x sigma_ay in {high-pass std, 0.3, 1.0} m/s^2."""
+
+
+def nonlinear_tyre_peers(run: StanfordRun, parameter_path, noise: dict = NONLINEAR_TYRE_PEER_NOISE) -> dict:
+    """EKF and UKF on ``model_defs/single_track_nonlinear_tyre.MODEL`` with the numbers of
+    ``parameter_path`` (the observer's own parameter file: the same Fiala tyre, the same mu and
+    C per axle). States (v_y, r), measurements (a_y, r), process noise w_f, w_r ~ N(0, sigma_fy^2);
+    x_0 = 0, P_0 = diag(1, 0.01). Returns {"ekf_nonlinear_tyre": BaselineResult, "ukf_nonlinear_tyre": ...}."""
+    from ..model import load_parameters
+    _check_run(run)
+    params = load_parameters(parameter_path)
+    s_ay = noise["sigma_ay"] if noise["sigma_ay"] is not None else highpass_std(run.ay)
+    s_r = highpass_std(run.yaw_rate)
+    model = kalman.kalman_model(builtin_model("single_track_nonlinear_tyre").MODEL, dict(params.values),
+                                outputs=("a_y", "r"))
+    u, y, rho = _filter_inputs(run)
+    out = {}
+    for name, fn in (("ekf_nonlinear_tyre", kalman.extended_kalman_filter),
+                     ("ukf_nonlinear_tyre", kalman.unscented_kalman_filter)):
+        est = fn(model, u, y, rho, run.dt, R=np.diag([s_ay ** 2, s_r ** 2]),
+                 Sigma=noise["sigma_fy"] ** 2 * np.eye(len(model.noise)), x0=np.zeros(2), P0=np.diag([1.0, 0.01]))
+        vy, rh = est.x[:, 0], est.x[:, 1]
+        beta = np.arctan2(vy, run.vx)
+        out[name] = BaselineResult(
+            beta=beta, r=rh, beta_stats=metrics.error_stats(run.beta_true, beta, degrees=True),
+            r_rmse_deg=metrics.rms_error(run.yaw_rate, rh, degrees=True), name=name,
+            settings={**{k: (v if v is not None else s_ay) for k, v in noise.items()}, "s_r": s_r,
+                      "model": model.name, "parameters": str(parameter_path)})
+    return out

@@ -1,0 +1,98 @@
+"""Nonlinear single-track model with a Fiala (brush) tyre per axle, friction and stiffness per axle.
+
+One model for the observer ``stanford_sideslip_nonlinear_tyre`` (family
+``nonlinear_tyre_observer``), for its Kalman peers (EKF and UKF generated from ``MODEL`` by
+:mod:`codegen.validation.kalman`) and for any plant that simulates it: the tyre law is
+``model_defs.tyres.fiala_slip_force``, written once.
+
+States x = (v_y, r) (lateral speed at the CoG, yaw rate); known input delta (road-wheel angle);
+measured scheduling v_x; outputs a_y (lateral acceleration at the CoG) and r. Exact kinematics:
+the slip variable t = tan(alpha) of each axle in the wheel frame,
+
+    t_f = (v_x sin(delta) - (v_y + l_f r) cos(delta)) / (v_x cos(delta) + (v_y + l_f r) sin(delta))
+        = tan(delta - atan((v_y + l_f r) / v_x)),
+    t_r = -(v_y - l_r r) / v_x,
+
+static axle loads F_zf = m g l_r / l, F_zr = m g l_f / l, axle forces F_k = Fiala(t_k; C_k, mu_k F_zk),
+the front one projected by cos(delta). The unknown inputs w_f, w_r are *process noise* for the
+Kalman peers (the unmodelled lateral force per axle as a fraction of its static load); the
+observer does not estimate them (they are 0 in its step).
+
+``AXLES`` tells the observer family how each axle force depends on the unmeasured v_y: its slip
+variable, the inverse map v_y(t) (which turns the Jacobian of the force into a function of (t,
+delta) alone, so it can be bounded over a set of slip values) and its full-sliding slip.
+"""
+from dataclasses import dataclass
+
+import sympy as sp
+
+from codegen.model import ModelDefinition, SchedulingSignal
+from model_defs import tyres
+
+v_y, r = sp.symbols("v_y r")
+delta = sp.Symbol("delta")
+w_f, w_r = sp.symbols("w_f w_r")
+v_x = sp.Symbol("v_x", positive=True)
+m, l_f, l_r, I_z, C_f, C_r, mu_f, mu_r, g = sp.symbols("m l_f l_r I_z C_f C_r mu_f mu_r g", positive=True)
+t_sym = sp.Symbol("t", real=True)
+
+_l = l_f + l_r
+F_zf = m * g * l_r / _l
+F_zr = m * g * l_f / _l
+_wf = v_y + l_f * r
+t_f = (v_x * sp.sin(delta) - _wf * sp.cos(delta)) / (v_x * sp.cos(delta) + _wf * sp.sin(delta))
+t_r = -(v_y - l_r * r) / v_x
+F_yf = tyres.fiala_slip_force(t_f, C_f, mu_f * F_zf)          # axle forces in the wheel frame
+F_yr = tyres.fiala_slip_force(t_r, C_r, mu_r * F_zr)
+Phi_f = F_yf * sp.cos(delta) + F_zf * w_f                      # body-frame lateral forces
+Phi_r = F_yr + F_zr * w_r
+
+FORCES = sp.symbols("Phi_f Phi_r")
+"""Symbols of the body-frame axle forces in ``DYNAMICS_IN_FORCES`` and ``A_Y_IN_FORCES``."""
+A_Y_IN_FORCES = (FORCES[0] + FORCES[1]) / m
+DYNAMICS_IN_FORCES = sp.Matrix([A_Y_IN_FORCES - r * v_x, (l_f * FORCES[0] - l_r * FORCES[1]) / I_z])
+"""The single-track equations written in the axle forces (the observer family reads their
+coefficients d f/d Phi; ``MODEL`` is these with the Fiala forces substituted)."""
+_forces = {FORCES[0]: Phi_f, FORCES[1]: Phi_r}
+a_y = A_Y_IN_FORCES.subs(_forces)
+
+
+@dataclass(frozen=True)
+class Axle:
+    """How one body-frame axle force Phi = law(t) projection depends on the unmeasured state.
+
+    ``law``: the tyre law in ``t_sym`` *without* its sliding clamp (equal to the model's on
+    |t| <= t_sl); ``projection``: the factor from the wheel to the body frame; ``slip``: t in the
+    states; ``inverse``: v_y as a function of ``t_sym`` and the measured signals (so the slip's
+    derivative along v_y becomes a function of t, delta); ``sliding``: the full-sliding slip t_sl.
+    """
+
+    name: str
+    law: sp.Expr
+    projection: sp.Expr
+    slip: sp.Expr
+    inverse: sp.Expr
+    sliding: sp.Expr
+
+
+AXLES = (
+    Axle("front", tyres.fiala_slip_force(t_sym, C_f, mu_f * F_zf, clamp=False), sp.cos(delta), t_f,
+         v_x * (sp.sin(delta) - t_sym * sp.cos(delta)) / (sp.cos(delta) + t_sym * sp.sin(delta)) - l_f * r,
+         tyres.fiala_sliding_slip(C_f, mu_f * F_zf)),
+    Axle("rear", tyres.fiala_slip_force(t_sym, C_r, mu_r * F_zr, clamp=False), sp.Integer(1), t_r,
+         l_r * r - v_x * t_sym, tyres.fiala_sliding_slip(C_r, mu_r * F_zr)),
+)
+"""Front and rear axle, in the order of ``FORCES``."""
+
+MODEL = ModelDefinition(
+    name="single_track_nonlinear_tyre",
+    states=(v_y, r),
+    known_inputs=(delta,),
+    unknown_inputs=(w_f, w_r),
+    dynamics=DYNAMICS_IN_FORCES.subs(_forces),
+    outputs=(("a_y", a_y), ("r", r)),
+    scheduling=(SchedulingSignal(v_x, "m/s"),),
+    parameters=(m, l_f, l_r, I_z, C_f, C_r, mu_f, mu_r, g),
+    units={"v_y": "m/s", "r": "rad/s", "delta": "rad", "w_f": "-", "w_r": "-", "a_y": "m/s^2", "v_x": "m/s"},
+    doc=__doc__,
+)
