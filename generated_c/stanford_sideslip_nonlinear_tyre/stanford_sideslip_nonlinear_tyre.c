@@ -27,11 +27,20 @@ void stanford_sideslip_nonlinear_tyre_init(stanford_sideslip_nonlinear_tyre_stat
 
 int stanford_sideslip_nonlinear_tyre_check_work(void)
 {
-    casadi_int sz_arg = 0, sz_res = 0, sz_iw = 0, sz_w = 0;
-    if (stanford_sideslip_nonlinear_tyre_kernel_work(&sz_arg, &sz_res, &sz_iw, &sz_w) != 0) return -1;
-    if (sz_arg > STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_ARG || sz_res > STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_RES) return 1;
-    if (sz_iw > STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_IW || sz_w > STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_W) return 1;
-    return 0;
+    casadi_int sz_arg = 0;
+    casadi_int sz_res = 0;
+    casadi_int sz_iw = 0;
+    casadi_int sz_w = 0;
+    int result;
+    if (stanford_sideslip_nonlinear_tyre_kernel_work(&sz_arg, &sz_res, &sz_iw, &sz_w) != 0) {
+        result = -1;
+    } else if ((sz_arg > STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_ARG) || (sz_res > STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_RES) ||
+               (sz_iw > STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_IW) || (sz_w > STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_W)) {
+        result = 1;
+    } else {
+        result = 0;
+    }
+    return result;
 }
 
 /* Bit 63 of the result is set iff x is +-Inf or NaN (all exponent bits set: the masked exponent
@@ -41,7 +50,7 @@ int stanford_sideslip_nonlinear_tyre_check_work(void)
 static uint64_t nonfinite_bit(const double *x)
 {
     uint64_t bits;
-    memcpy(&bits, x, sizeof bits);
+    (void)memcpy((void *)&bits, (const void *)x, sizeof bits);
     return (bits & UINT64_C(0x7ff0000000000000)) + UINT64_C(0x0010000000000000);
 }
 
@@ -61,41 +70,55 @@ void stanford_sideslip_nonlinear_tyre_run_flat(double *state, const double *inpu
     double excess;
     const double *input;
     double *out;
-    int failed, i;
+    int failed;
+    int i;
     size_t k;
 
     /* The kernel writes nothing but next, excess: it runs first, and the checks after
      * it, off its critical path, decide what is kept (integer tests of the exponent bits, one
      * per vector). */
     for (k = 0; k < n; ++k) {
-        input = inputs + k * STANFORD_SIDESLIP_NONLINEAR_TYRE_N_INPUT;
-        out = outputs + k * STANFORD_SIDESLIP_NONLINEAR_TYRE_N_OUTPUT;
+        input = &inputs[k * (size_t)STANFORD_SIDESLIP_NONLINEAR_TYRE_N_INPUT];
+        out = &outputs[k * (size_t)STANFORD_SIDESLIP_NONLINEAR_TYRE_N_OUTPUT];
         arg[0] = state;
-        arg[1] = input + 0;
-        arg[2] = input + 1;
-        arg[3] = input + 3;
+        arg[1] = &input[0];
+        arg[2] = &input[1];
+        arg[3] = &input[3];
         res[0] = next;
         res[1] = &excess;
         excess = 0.0;
-        failed = stanford_sideslip_nonlinear_tyre_kernel(arg, res, iw, w, 0) != 0;
-        if (((nonfinite_bit(input + 0) | nonfinite_bit(input + 1) | nonfinite_bit(input + 2) | nonfinite_bit(input + 3)) >> 63) != 0) {
+        failed = stanford_sideslip_nonlinear_tyre_kernel(arg, res, iw, w, 0);
+        if (((nonfinite_bit(&input[0]) | nonfinite_bit(&input[1]) | nonfinite_bit(&input[2]) | nonfinite_bit(&input[3])) >> 63) != 0u) {
             /* a NaN or infinite input: the state is held and the outputs repeat it */
-            for (i = 0; i < STANFORD_SIDESLIP_NONLINEAR_TYRE_N_OUTPUT; ++i) out[i] = state[2 + i];
+            for (i = 0; i < STANFORD_SIDESLIP_NONLINEAR_TYRE_N_OUTPUT; ++i) {
+                out[i] = state[i + 2];
+            }
             status[k] = STANFORD_SIDESLIP_NONLINEAR_TYRE_NONFINITE_INPUT;
             continue;
         }
-        status[k] = (failed || ((nonfinite_bit(next + 0) | nonfinite_bit(next + 1) | nonfinite_bit(next + 2) | nonfinite_bit(next + 3)) >> 63) != 0)
-            ? STANFORD_SIDESLIP_NONLINEAR_TYRE_NUMERICAL_FAILURE : STANFORD_SIDESLIP_NONLINEAR_TYRE_OK;
+        if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2]) | nonfinite_bit(&next[3])) >> 63) != 0u)) {
+            status[k] = STANFORD_SIDESLIP_NONLINEAR_TYRE_NUMERICAL_FAILURE;
+        } else {
+            status[k] = STANFORD_SIDESLIP_NONLINEAR_TYRE_OK;
+        }
         /* the kernel clamps the scheduling signals for the memberships and reports by how much */
-        if (excess > 0.0) status[k] |= STANFORD_SIDESLIP_NONLINEAR_TYRE_SCHEDULING_CLAMPED;
+        if (excess > 0.0) {
+            status[k] |= STANFORD_SIDESLIP_NONLINEAR_TYRE_SCHEDULING_CLAMPED;
+        }
         /* A non-finite result means the state had grown past what doubles hold (e.g. after
          * absurd but finite inputs such as 1e300): holding it would freeze the observer, so it
          * restarts from the initial estimate, which the certified step then drives back. */
-        if (status[k] & STANFORD_SIDESLIP_NONLINEAR_TYRE_NUMERICAL_FAILURE) {
-            for (i = 0; i < STANFORD_SIDESLIP_NONLINEAR_TYRE_N_STATE; ++i) next[i] = 0.0;
+        if ((status[k] & STANFORD_SIDESLIP_NONLINEAR_TYRE_NUMERICAL_FAILURE) != 0) {
+            for (i = 0; i < STANFORD_SIDESLIP_NONLINEAR_TYRE_N_STATE; ++i) {
+                next[i] = 0.0;
+            }
         }
-        for (i = 0; i < STANFORD_SIDESLIP_NONLINEAR_TYRE_N_STATE; ++i) state[i] = next[i];
-        for (i = 0; i < STANFORD_SIDESLIP_NONLINEAR_TYRE_N_OUTPUT; ++i) out[i] = state[2 + i];
+        for (i = 0; i < STANFORD_SIDESLIP_NONLINEAR_TYRE_N_STATE; ++i) {
+            state[i] = next[i];
+        }
+        for (i = 0; i < STANFORD_SIDESLIP_NONLINEAR_TYRE_N_OUTPUT; ++i) {
+            out[i] = state[i + 2];
+        }
     }
 }
 
