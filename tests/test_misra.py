@@ -33,7 +33,9 @@ def test_a_new_finding_in_template_code_is_reported(tmp_path):
 
 
 def test_a_kernel_count_above_the_deviations_file_fails(tmp_path):
-    text = misra.DEVIATIONS.read_text().replace("count = 285", "count = 284")
+    listed = misra.deviations()["8.4"][0]
+    text = misra.DEVIATIONS.read_text().replace(f"count = {listed}", f"count = {listed - 1}")
+    assert text != misra.DEVIATIONS.read_text()
     path = tmp_path / "dev.toml"
     path.write_text(text)
     r = misra.run(log=lambda *_: None, deviations_path=path)

@@ -39,7 +39,9 @@ def test_cli_json_format(tmp_path):
                            "stanford", "--json"], capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr
     res = json.loads(proc.stdout)
-    assert set(res) == {"observer", "baselines", "status_flags", "samples"} and set(res["baselines"]) == {"linear_kf", "ekf"}
+    assert set(res) == {"observer", "baselines", "status_flags", "samples", "peaks"}
+    assert set(res["baselines"]) == {"linear_kf", "ekf"}
+    assert [round(p["t"]) for p in res["peaks"]] == [110, 170, 207]      # the three large-sideslip peaks
     assert res["samples"] > 20000 and res["status_flags"] >= 0
     for table in (res["observer"], *res["baselines"].values()):
         assert set(table) == {"beta", "vy"}
