@@ -247,13 +247,17 @@ def banked_road_inputs(spec: PlantSpec, scn, driver_gains: dict) -> tuple:
 KINDS = {"steering_torque": (steering_torque_spec, _steering_torque_step, steering_torque_inputs),
          "banked_road": (banked_road_spec, _banked_road_step, banked_road_inputs)}
 
-FAMILY_PLANT = {"linf_uio": "steering_torque", "switched_pi": "banked_road"}
+def families_with_plants() -> list:
+    """The registered families with a compiled campaign plant (``Family.campaign_plant``)."""
+    from .. import families
+    return [n for n in families.names() if families.get(n).campaign_plant]
 
 
 def plant_kind(config) -> str:
-    kind = FAMILY_PLANT.get(config.family)
+    from .. import families
+    kind = families.get(config.family).campaign_plant
     if kind is None:
-        raise UnsupportedError(f"campaigns have compiled plants for the families {', '.join(FAMILY_PLANT)}; "
+        raise UnsupportedError(f"campaigns have compiled plants for the families {', '.join(families_with_plants())}; "
                                f"observer {config.name!r} is of family {config.family!r}")
     return kind
 

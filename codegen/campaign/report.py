@@ -55,13 +55,12 @@ def sensitivity(spec, rows) -> dict:
 
 
 def summarize(spec, rows, wall_s: float, workers: int, scheduler: str) -> dict:
-    from .runner import CERTIFICATE
+    from .runner import certified_gain_norm
     ok = _ok(rows)
     gamma = ok[0]["gamma"] if ok else None
     ratios = [r["ratio"] for r in ok]
     from .. import observers
-    fam = observers.get(spec.observer).family
-    cert = CERTIFICATE.get(fam)
+    cert = certified_gain_norm(observers.get(spec.observer))
     s = {"observer": spec.observer, "spec": spec.source, "scenarios": list(spec.scenarios), "seed": spec.seed,
          "runs": len(rows), "runs_ok": len(ok), "runs_failed": {st: sum(r["status"] == st for r in rows)
                                                               for st in sorted({r["status"] for r in rows}) if st != "ok"},

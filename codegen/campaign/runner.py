@@ -15,10 +15,14 @@ from ..validation.common import SETTLE_TIME
 _CACHE: dict = {}
 SPIN_BETA = math.pi / 4      # |beta| above 45 deg: the plant car has spun (not an observer error)
 
-# The certified bound a run's empirical ratio is set beside, per family:
-# linf_uio: L-infinity, sup_t |x - x_hat|_2 (the model's states) / sup_t |d| (the unknown input);
-# switched_pi: L2 (H-infinity), |xi - xi_hat|_2 / |phi_r|_2 with xi the [switching] performance outputs.
-CERTIFICATE = {"linf_uio": "peak", "switched_pi": "l2"}
+
+
+def certified_gain_norm(config) -> str | None:
+    """The norm of the family's certified gain (``Family.certified_gain_norm``): "peak" (L-infinity,
+    sup_t |x - x_hat|_2 over the model's states / sup_t |d|), "l2" (H-infinity, |xi - xi_hat|_2 /
+    |w|_2 with xi the performance outputs), or None."""
+    from .. import families
+    return families.get(config.family).certified_gain_norm
 
 
 def _cached(key, make):
@@ -69,11 +73,8 @@ def _scenario(spec, name: str, seed: int | None):
 
 def default_noise(config) -> dict:
     """The sensor noise of the family's own validation (std per measured signal)."""
-    if config.family == "switched_pi":
-        from ..families.switched_pi.validation import SENSOR_NOISE
-    else:
-        from ..validation.common import SENSOR_NOISE
-    return dict(SENSOR_NOISE)
+    from .. import families
+    return families.get(config.family).sensor_noise()
 
 
 def draw(spec, run: int) -> dict:
@@ -174,7 +175,7 @@ def _sum(x) -> float:
 
 
 def _ratio(spec, config, truth, est, keep) -> float:
-    kind = CERTIFICATE.get(config.family)
+    kind = certified_gain_norm(config)
     if kind == "peak":
         model = config.load_model()
         states = [s for s in model.state_names if s in est]

@@ -150,7 +150,7 @@ def parse(data: dict, source: str) -> CampaignSpec:
     from .. import observers
     from ..errors import UnknownObserverError
     from ..validation import scenarios as scn_lib
-    from .plants import DRIVER_KEYS, BANKED_DRIVER_KEYS, FAMILY_PLANT
+    from .plants import DRIVER_KEYS, BANKED_DRIVER_KEYS, families_with_plants, plant_kind
     top = parse_table(data, TOP, source=source)
     name = top["observer"]
     try:
@@ -158,16 +158,16 @@ def parse(data: dict, source: str) -> CampaignSpec:
     except UnknownObserverError:
         raise config_error(source, None, "observer", name, "must be a built-in observer: "
                            + ", ".join(observers.names()), suggest(name, observers.names())) from None
-    if config.family not in FAMILY_PLANT:
+    if config.family not in families_with_plants():
         raise config_error(source, None, "observer", name, "must be an observer of a family with a compiled "
-                           f"campaign plant ({', '.join(FAMILY_PLANT)}); {name!r} is {config.family!r}")
+                           f"campaign plant ({', '.join(families_with_plants())}); {name!r} is {config.family!r}")
     if not top["scenarios"]:
         raise config_error(source, None, "scenarios", [], "must name at least one scenario")
     for i, s in enumerate(top["scenarios"]):
         if s not in scn_lib.names():
             raise config_error(source, None, f"scenarios[{i}]", s, "must be one of " + ", ".join(scn_lib.names()),
                                suggest(s, scn_lib.names()))
-    kind = FAMILY_PLANT[config.family]
+    kind = plant_kind(config)
     plant_params = _plant_parameters(config, kind)
     params = []
     for k, v in top.get("parameters", {}).items():

@@ -125,6 +125,17 @@ class Family(abc.ABC):
     demo_scenarios: tuple = ()
     #: the built-in observer ``uiogen new DIR --family NAME`` copies as a starter
     example: str = ""
+    #: robustness campaigns (:mod:`codegen.campaign`): the kind of compiled closed-loop plant of the
+    #: family's validation (a key of ``codegen.campaign.plants.KINDS``), None where it has none
+    campaign_plant: str | None = None
+    #: the norm of the certified gain a campaign run's empirical ratio is set beside: "peak"
+    #: (L-infinity: sup|x - x_hat| / sup|d|) or "l2" (|xi - xi_hat|_2 / |w|_2); None: no such gain
+    certified_gain_norm: str | None = None
+
+    def sensor_noise(self) -> dict:
+        """Standard deviation per measured signal of the family's validation runs."""
+        from ..validation.common import SENSOR_NOISE
+        return dict(SENSOR_NOISE)
 
     def check_config(self, config, data: dict) -> None:
         """Check the family's own tables of an observer file (``data``: the parsed TOML) beyond

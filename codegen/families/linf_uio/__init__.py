@@ -29,6 +29,8 @@ class LinfUIO(Family):
                      "ui_filter": Rule(dict)}
     demo_scenarios = ("track_varying_speed", "takeover_opposing_assist")
     example = "lpv_linf_driver_torque"
+    campaign_plant = "steering_torque"
+    certified_gain_norm = "peak"
 
     def check_config(self, config, data: dict) -> None:
         parse_table(data.get("ui_filter", {}), UI_FILTER_KEYS, source=config.source, section="ui_filter")

@@ -23,6 +23,12 @@ class SwitchedPI(Family):
     observer_keys = {"switching": Rule(dict)}
     demo_scenarios = ("banked_road_braking", "braking_on_bend")
     example = "switched_pi_bank_angle"
+    campaign_plant = "banked_road"
+    certified_gain_norm = "l2"
+
+    def sensor_noise(self) -> dict:
+        from .validation import SENSOR_NOISE
+        return dict(SENSOR_NOISE)
 
     def build(self, config, tol=None):
         from .build import build
