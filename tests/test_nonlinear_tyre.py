@@ -103,3 +103,20 @@ def test_bench_reports_the_observer_within_the_issue_target():
     peer = r["design"]["cvxpy_clarabel"]
     if "objective" in peer:        # CVXPY is an optional dependency ('.[bench]')
         assert r["design"]["ours_clarabel"]["objective"] == pytest.approx(peer["objective"], rel=1e-6)
+
+
+def test_demo_real_data_table_shows_the_observer_and_its_same_tyre_peers():
+    from codegen import demo, docs
+    real, others = demo.run_real_data()
+    j = demo.real_data_json(real, others)
+    assert {"stanford_sideslip_nonlinear_tyre", "ts_fuzzy_uio_stanford"} <= set(j["other_observers"])
+    assert set(j["baselines"]) == {"linear_kf", "ekf"}                   # today's observer's baselines
+    peers = {f"{p} ({NAME})" for p in ("ekf_nonlinear_tyre", "ukf_nonlinear_tyre")}
+    assert set(j["other_baselines"]) == peers
+    assert j["other_observers"][NAME]["beta"]["rms"] == pytest.approx(0.2908, abs=5e-4)
+    assert j["other_baselines"][f"ekf_nonlinear_tyre ({NAME})"]["beta"]["rms"] == pytest.approx(0.3024, abs=5e-4)
+    table = docs.real_data_table({"real_data": j})
+    for row in (f"`{NAME}`", *peers, "linear_kf", "ekf", "`stanford_sideslip`"):
+        assert row in table
+    text = "\n".join(demo.real_data_lines(real, others))
+    assert "ukf_nonlinear_tyre (peer of stanford_sideslip_nonlinear_tyre" in text
