@@ -101,6 +101,8 @@ def real_data_table(demo: dict) -> str:
     rows += [[name, t["beta"]["rms"], t["beta"]["max"], t["beta"]["mae"]] for name, t in sorted(real["baselines"].items())]
     rows += [[f"`{name}`", t["beta"]["rms"], t["beta"]["max"], t["beta"]["mae"]]
              for name, t in sorted(real.get("other_observers", {}).items())]
+    rows += [[name, t["beta"]["rms"], t["beta"]["max"], t["beta"]["mae"]]
+             for name, t in sorted(real.get("other_baselines", {}).items())]
     return _table(["estimator", "β RMSE [deg]", "β max [deg]", "β MAE [deg]"], rows)
 
 
