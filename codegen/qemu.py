@@ -253,17 +253,23 @@ def compare(name: str, precision: str = "double", inputs: np.ndarray | None = No
     same_bits = out_t.shape == out_h.shape and np.array_equal(out_t.view(itype), out_h.view(itype))
     diff = np.abs(out_t.astype(np.float64) - out_h.astype(np.float64))
     ulp = diff / np.spacing(np.abs(out_h)).astype(np.float64)
+    rms = np.sqrt(np.mean(out_h.astype(np.float64) ** 2, axis=0))
+    rel = diff / np.where(rms > 0, rms, 1.0)
+    differs = np.any(out_t.view(itype) != out_h.view(itype), axis=1)
     return {"observer": name, "precision": precision, "scenario": scenario, "samples": int(inputs.shape[0]),
             "bit_identical": bool(same_bits and np.array_equal(status_t, status_h)),
             "status_equal": bool(np.array_equal(status_t, status_h)),
             "max_abs_difference": float(np.nanmax(diff)) if diff.size else 0.0,
             "max_ulp_difference": float(np.nanmax(ulp)) if ulp.size else 0.0,
+            "max_difference_of_rms": float(np.nanmax(rel)) if rel.size else 0.0,
+            "first_differing_sample": int(np.argmax(differs)) if differs.any() else None,
             "differing_values": int(np.count_nonzero(out_t.view(itype) != out_h.view(itype)))}
 
 
 def format_row(r: dict) -> str:
     verdict = ("bit-identical" if r["bit_identical"] else
-               f"NOT bit-identical: {r['differing_values']} values differ, max |diff| {r['max_abs_difference']:.3g} "
+               f"NOT bit-identical: {r['differing_values']} values differ from sample {r['first_differing_sample']}, "
+               f"max |diff| {r['max_abs_difference']:.3g} = {r['max_difference_of_rms']:.2g} of the output RMS "
                f"({r['max_ulp_difference']:.3g} ulp), status {'equal' if r['status_equal'] else 'DIFFERS'}")
     return f"{r['observer']:32s} {r['precision']:8s} {r['scenario']:>22s} {r['samples']:5d} samples: {verdict}"
 
