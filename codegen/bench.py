@@ -375,9 +375,30 @@ def _print_hosmd(r: dict) -> None:
             print(f"     {name:22s} {cells[0]}   {cells[1]}   {row.get('params', '')}")
 
 
+def bench_cortexm() -> dict:
+    """Cortex-M4F figures per observer, double and float32 (:mod:`codegen.cortexm`): code and
+    rodata size of the step, worst-case stack along its call chain; skipped (``available``
+    false, with the reason) where arm-none-eabi-gcc is not installed."""
+    from . import cortexm
+    if not cortexm.available():
+        return {"available": False, "reason": f"{cortexm.CC} is not installed (scripts/install_embedded_tools.sh)",
+                "flags": " ".join(cortexm.FLAGS), "rows": []}
+    return {"available": True, "reason": None, "flags": " ".join(cortexm.FLAGS), "rows": cortexm.table()}
+
+
+def cortexm_lines(c: dict) -> list:
+    if not c["available"]:
+        return [f"skipped: {c['reason']}"]
+    lines = [f"{'observer':32s} {'precision':9s} {'code [B]':>9s} {'rodata [B]':>10s} {'stack [B]':>9s}"]
+    for r in c["rows"]:
+        lines.append(f"{r['observer']:32s} {r['precision']:9s} {r['code_bytes']:9d} {r['rodata_bytes']:10d} "
+                     f"{r['stack_bytes']:9d}" + (f"  unbounded: {', '.join(r['unbounded'])}" if r["unbounded"] else ""))
+    return lines
+
+
 def main(json_output: bool = False) -> int:
     res = {"observers": {name: bench_observer(name) for name in observers.names()},
-           "toolchain": bench_toolchain(), "hosmd": bench_hosmd()}
+           "toolchain": bench_toolchain(), "hosmd": bench_hosmd(), "cortex_m": bench_cortexm()}
     res["families"] = {name: rows for name in families.names() if (rows := families.get(name).bench_family())}
     if json_output:
         print(json.dumps(res, indent=1, sort_keys=True))
@@ -418,6 +439,9 @@ def main(json_output: bool = False) -> int:
     t = res["toolchain"]
     print(f"== toolchain: uiogen generate cold {t['generate_cold_s']:.2f} s, unchanged {t['generate_unchanged_s']:.2f} s")
     _print_hosmd(res["hosmd"])
+    print("== Cortex-M4F (arm-none-eabi-gcc -Os, hard float; step only: libgcc/libm not counted)")
+    for line in cortexm_lines(res["cortex_m"]):
+        print("   " + line)
     for name, rows in res["families"].items():
         print(f"== {name}")
         for line in families.get(name).bench_family_lines(rows):

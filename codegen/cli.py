@@ -155,7 +155,8 @@ def cmd_build(args) -> int:
         if report["passes"]:
             print(f"{name}: built {precision.FLOAT_DIR / name / f'lib{name}_f32.so'} (API {name}_f32_*)")
         else:
-            refused.append(name)
+            refused.append(f"{name} (margin 1-c = {report['margin']:.4g}, bound {report['bound']:.2g}, "
+                           f"max deviation {report['max_deviation']:.2g})")
     if refused:
         raise CertificateError(f"float32 build refused for {', '.join(refused)}: the contraction margin does not "
                                f"cover the rounding within {precision.TOLERANCE:g} of the signal RMS (figures above)")

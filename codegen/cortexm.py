@@ -1,7 +1,7 @@
 """Cortex-M4F cross build of the observer step (Debian's arm-none-eabi-gcc): code size
 (arm-none-eabi-size) and worst-case stack (-fstack-usage, summed along the step's call chain),
 double and float32 variants. ``python -m codegen.cortexm [NAME ...]`` prints the table.
-Not yet: the QEMU run (see docs/embedding.md)."""
+Executed under QEMU against the host build: codegen/qemu.py."""
 from __future__ import annotations
 
 import re

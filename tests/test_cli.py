@@ -61,3 +61,23 @@ def test_sweep_json_and_mistakes():
     assert "Traceback" not in proc.stderr and proc.stdout == ""
     proc = uiogen("sweep", "switched_pi_bank_angle", "--set", "design.pole_radius=[50,")
     assert proc.returncode == 2 and "not a TOML value" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_build_float32_accepted_and_refused():
+    """`uiogen build --float32`: an observer whose contraction margin covers the float rounding
+    is built (exit 0, its library on disk); one whose margin does not is refused with exit 2 and
+    a one-line typed error naming the measured margin, no traceback."""
+    from codegen import precision
+    ok = uiogen("build", "--float32", "lpv_linf_driver_torque_bmw320i")
+    assert ok.returncode == 0, ok.stderr
+    assert "lpv_linf_driver_torque_bmw320i: float32 accepted" in ok.stdout
+    lib = precision.FLOAT_DIR / "lpv_linf_driver_torque_bmw320i" / "liblpv_linf_driver_torque_bmw320i_f32.so"
+    assert lib.exists() and f"built {lib}" in ok.stdout
+    bad = uiogen("build", "--float32", "lpv_linf_driver_torque")
+    assert bad.returncode == 2
+    assert "Traceback" not in bad.stderr
+    lines = bad.stderr.strip().splitlines()
+    assert len(lines) == 1
+    assert lines[0].startswith("uiogen: error: CertificateError: float32 build refused for lpv_linf_driver_torque ")
+    assert "margin 1-c = 0.02317" in lines[0]
+    assert "lpv_linf_driver_torque: float32 REFUSED" in bad.stdout
