@@ -205,23 +205,30 @@ def realistic_inputs(name, obs):
 @pytest.mark.parametrize("name", NAMES)
 def test_long_run(name):
     """10^7 steps of a realistic trajectory: no flags (but the first sample's WARMING_UP of observers
-    that need a previous sample), no non-finite value, identical twice."""
+    that need a previous sample), no non-finite value, identical twice. Observers whose certified set
+    is also checked on their estimates (the nonlinear-tyre observer's slip: 5.8 % of the real log)
+    may raise SCHEDULING_CLAMPED there, and nothing else."""
     obs = load(name)
     base = realistic_inputs(name, obs)
+    _, exact = scheduling_boxes(name, obs)
+    clamped_bit = obs.status_bits["SCHEDULING_CLAMPED"]
+    allowed = 0 if exact else clamped_bit
     chunk = np.tile(base, (100_000 // len(base) + 1, 1))[:100_000]
     digests = []
     for _ in range(2):
         state = obs.initial_state()
         h = hashlib.sha256()
-        flagged = 0
+        flagged = clamped = 0
         for c in range(100):   # 100 x 10^5 = 10^7 steps
             out, status, state = obs.run(chunk, state)
             if c == 0:
                 status = status.copy()
                 status[0] &= ~obs.status_bits["WARMING_UP"]
-            flagged += int(np.count_nonzero(status))
+            flagged += int(np.count_nonzero(status & ~allowed))
+            clamped += int(np.count_nonzero(status & clamped_bit))
             assert np.all(np.isfinite(out))
             h.update(out.tobytes())
         assert flagged == 0
+        assert clamped <= 0.1 * 10 ** 7
         digests.append(h.hexdigest())
     assert digests[0] == digests[1]

@@ -321,7 +321,7 @@ def _build_class():
 
         def artifact(self):
             rep = self.rep
-            return {**artifact_head(self, ["v_x"]),
+            return {**artifact_head(self, ["v_x"], flags_from_inputs_only=False),
                     "representation": {"G_f": rep.G_f.tolist(), "G_a": rep.G_a.tolist(),
                                        "theta_bounds": [list(map(significant, b)) for b in rep.theta],
                                        "theta_attained": [list(map(significant, b)) for b in rep.theta_attained],
