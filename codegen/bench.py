@@ -30,6 +30,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from .errors import InaccurateSolveError
+
 from . import design_lock, differentiators, families, harness, observers, pipeline
 
 ARITHMETIC_OPS = ("OP_ADD", "OP_SUB", "OP_MUL", "OP_DIV", "OP_NEG", "OP_SQ", "OP_SQRT", "OP_FMIN",
@@ -128,7 +130,12 @@ def bench_design(b) -> dict:
         ours = []
         for _ in range(5):
             t0 = time.perf_counter()
-            sol = builder().solve(tol=settings.tol, reduce=reduce, unique=False)
+            try:
+                sol = builder().solve(tol=settings.tol, reduce=reduce, unique=False)
+            except InaccurateSolveError as exc:
+                # a single solve (no least-norm stage, which accepts an AlmostSolved start and
+                # refines it) that stops short: reported as measured, no comparison at equal objective
+                return {"status": f"single solve not comparable: {str(exc).splitlines()[0]}"}
             ours.append((time.perf_counter() - t0, sol.objective))
         out[key] = {"seconds": float(np.median([t for t, _ in ours])), "objective": ours[0][1],
                     "iterations": sol.iterations, "clarabel_solve_seconds": sol.solve_time_s}
@@ -419,11 +426,17 @@ def main(json_output: bool = False) -> int:
         print(f"   numpy implementation, same step   {r['numpy_step_ns']:9.0f} ns   "
               f"(C step {r['speedup_vs_numpy']:.0f}x faster)")
         d = r["design"]
+        if "ours_clarabel" not in d:
+            print(f"   LMI design: {d['status']}")
         for key, what in (("ours_clarabel", "as stated"), ("ours_clarabel_reduced", "exact reductions")):
+            if key not in d:
+                break
             o = d[key]
             print(f"   LMI design, build + solve: ours (Clarabel, {what}) {1e3 * o['seconds']:.1f} ms, "
                   f"objective {o['objective']:.6g}, {o['iterations']} iterations")
         for peer in ("cvxpy_clarabel", "cvxpy_clarabel_our_reduced_problem", "cvxpy_scs"):
+            if peer not in d:
+                break
             p = d[peer]
             if "seconds" not in p or p["objective"] is None:
                 print(f"     {peer}: {p['status']}")

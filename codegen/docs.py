@@ -110,10 +110,11 @@ def bench_table(bench: dict) -> str:
     rows = []
     for name, r in sorted(bench["observers"].items()):
         d = r["design"]
-        ours = d["ours_clarabel"]["seconds"]
+        ours = d.get("ours_clarabel", {}).get("seconds")     # absent: the single solve stopped short
         peer = d.get("cvxpy_clarabel", {}).get("seconds")
         rows.append([f"`{name}`", r["batch_ns_per_sample"], r["instructions_per_step"], r["flops_per_step"]["total"],
-                     r["step_python_ns"], r["casadi_function_call_ns"], r["numpy_step_ns"], 1e3 * ours,
+                     r["step_python_ns"], r["casadi_function_call_ns"], r["numpy_step_ns"],
+                     None if ours is None else 1e3 * ours,
                      None if peer is None else 1e3 * peer])
     return _table(["observer", "C batch [ns/sample]", "instructions/step", "flops/step", "Python step [ns]",
                    "CasADi call [ns]", "numpy step [ns]", "LMI ours [ms]", "LMI CVXPY+Clarabel [ms]"], rows)
