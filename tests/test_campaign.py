@@ -118,3 +118,48 @@ def test_campaign_file_mistakes_are_typed_errors_naming_file_and_key(tmp_path, t
     assert exc.value.key == key and str(path) in str(exc.value)
     res = cli("campaign", str(path))
     assert res.returncode == 2 and "Traceback" not in res.stderr and key in res.stderr
+
+
+def test_an_existing_distributed_cluster_by_address(tmp_path):
+    """--scheduler ADDRESS: a scheduler and a worker started as their own processes (`dask scheduler`,
+    `dask worker`, TCP on localhost), the same code path a remote cluster takes; rows equal the
+    in-process re-runs bit for bit."""
+    import os
+    import socket
+    import time
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    address = f"tcp://127.0.0.1:{port}"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    dask = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
+    sched = subprocess.Popen([*dask, "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+                             cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nworkers", "1",
+                               "--nthreads", "1", "--no-dashboard"],
+                              cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        from dask.distributed import Client
+        deadline = time.time() + 60
+        while True:
+            try:
+                with Client(address, timeout=5) as c:
+                    if c.scheduler_info()["workers"]:
+                        break
+            except OSError:
+                pass
+            assert time.time() < deadline, "the local distributed cluster did not start"
+            time.sleep(0.5)
+        out = tmp_path / "remote"
+        res = cli("campaign", str(LINF_SPEC), "--runs", "4", "--scheduler", address, "--out", str(out), "--json")
+        assert res.returncode == 0, res.stderr
+        summary = json.loads(res.stdout)
+        assert summary["runs"] == 4 and summary["scheduler"] == address
+        spec = campaign_spec.load(LINF_SPEC).with_runs(4)
+        rows = engine.read_rows(out / "runs.csv")
+        assert rows == [runner.run_one(spec, k) for k in range(4)]
+    finally:
+        for p in (worker, sched):
+            p.terminate()
+        for p in (worker, sched):
+            p.wait(timeout=30)
