@@ -43,9 +43,10 @@ def test_compiled_steering_torque_plant_matches_the_python_nominal_plant():
 
 
 def test_compiled_banked_road_plant_matches_the_python_banked_plant():
-    from codegen.families.switched_pi.validation import _truncate, banked_plant
+    from codegen.families.switched_pi.validation import banked_plant
+    from codegen.validation.common import truncate
     cfg = observers.get("switched_pi_bank_angle")
-    scn = _truncate(scenarios.make("banked_road_braking", sample_rate=1 / cfg.sample_time), 25.0)
+    scn = truncate(scenarios.make("banked_road_braking", sample_rate=1 / cfg.sample_time), 25.0)
     ref = banked_plant(cfg, load_parameters(cfg.parameter_path), scn)
     out = CompiledPlant(cfg, scn.t.size).simulate(scn)
     _close(out, ref, ("v_y", "beta", "r", "phi", "phi_dot", "delta", "a_y", "phi_r"))

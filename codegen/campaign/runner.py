@@ -6,11 +6,10 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import replace
 
 import numpy as np
 
-from ..validation.common import SETTLE_TIME
+from ..validation.common import SETTLE_TIME, truncate
 
 _CACHE: dict = {}
 SPIN_BETA = math.pi / 4      # |beta| above 45 deg: the plant car has spun (not an observer error)
@@ -51,24 +50,13 @@ def _plant(spec, n: int):
     return _cached(("plant", spec.observer, n), lambda: CompiledPlant(_config(spec), n))
 
 
-def _truncate(scn, duration):
-    if duration is None or duration >= scn.duration:
-        return scn
-    n = int(round(duration * scn.sample_rate)) + 1
-    cut = {k: getattr(scn, k)[:n] for k in ("t", "v_ref", "a_ref", "T_a", "T_d_open")}
-    for k in ("kappa_ref", "bank"):
-        if getattr(scn, k) is not None:
-            cut[k] = getattr(scn, k)[:n]
-    return replace(scn, **cut)
-
-
 def _scenario(spec, name: str, seed: int | None):
     from ..validation import scenarios
     rate = 1.0 / _config(spec).sample_time
     if seed is not None:       # drawn per run: not kept (10,000 of them would fill a worker's memory)
-        return _truncate(scenarios.make(name, seed=seed, sample_rate=rate), spec.duration)
+        return truncate(scenarios.make(name, seed=seed, sample_rate=rate), spec.duration)
     return _cached(("scn", name, rate, spec.duration),
-                   lambda: _truncate(scenarios.make(name, sample_rate=rate), spec.duration))
+                   lambda: truncate(scenarios.make(name, sample_rate=rate), spec.duration))
 
 
 def default_noise(config) -> dict:

@@ -30,12 +30,14 @@ def signal_stats(truth, est, t=None, angle: bool = False) -> dict:
 
 
 def truncate(scn, duration: float | None):
+    """The first ``duration`` seconds of a scenario (every time series cut; None: all of it)."""
     if duration is None or duration >= scn.duration:
         return scn
     n = int(round(duration * scn.sample_rate)) + 1
     cut = {k: getattr(scn, k)[:n] for k in ("t", "v_ref", "a_ref", "T_a", "T_d_open")}
-    if scn.kappa_ref is not None:
-        cut["kappa_ref"] = scn.kappa_ref[:n]
+    for k in ("kappa_ref", "bank"):            # optional series
+        if getattr(scn, k, None) is not None:
+            cut[k] = getattr(scn, k)[:n]
     return replace(scn, **cut)
 
 

@@ -19,7 +19,7 @@ import numpy as np
 import sympy as sp
 
 from ...errors import ModelDefinitionError, SampleError
-from ...validation.common import SETTLE_TIME, signal_stats
+from ...validation.common import SETTLE_TIME, signal_stats, truncate
 
 G = 9.81
 
@@ -217,18 +217,6 @@ PAPER_GAMMA = 2.1
 _TRUTH_CACHE: dict = {}
 
 
-def _truncate(scn, duration):
-    from dataclasses import replace
-    if duration is None or duration >= scn.duration:
-        return scn
-    n = int(round(duration * scn.sample_rate)) + 1
-    cut = {k: getattr(scn, k)[:n] for k in ("t", "v_ref", "a_ref", "T_a", "T_d_open")}
-    for k in ("kappa_ref", "bank"):
-        if getattr(scn, k) is not None:
-            cut[k] = getattr(scn, k)[:n]
-    return replace(scn, **cut)
-
-
 def truth(config, scenario: str, plant: str = "nominal", duration: float | None = None, progress=None) -> dict:
     """Truth of a scenario on a plant at the observer's rate (cached per parameter file and rate).
 
@@ -241,7 +229,7 @@ def truth(config, scenario: str, plant: str = "nominal", duration: float | None 
     if key in _TRUTH_CACHE:
         return _TRUTH_CACHE[key]
     params = load_parameters(config.parameter_path)
-    scn = _truncate(scenarios.make(scenario, sample_rate=1.0 / config.sample_time), duration)
+    scn = truncate(scenarios.make(scenario, sample_rate=1.0 / config.sample_time), duration)
     if plant in ("nominal", "model"):
         out = banked_plant(config, params, scn, progress=progress, exact_model=plant == "model")
         out["plant_model"] = ("roll_single_track (exact linear model, true speed)" if plant == "model"
