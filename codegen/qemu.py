@@ -169,6 +169,14 @@ def record_inputs(name: str, scenario: str | None = None, samples: int = SAMPLES
             return sc, np.ascontiguousarray(validate.scenario_inputs(name, sc)[:samples], dtype=np.float64)
         except ModelDefinitionError as exc:      # a scenario needing a plant this model lacks
             last = exc
+    # an observer of the real log (its validation is the shared Stanford run): the log's first rows
+    from .extension import load
+    columns = load(name).input_names
+    if not scenario and all(c in validate.DATA_COLUMNS for c in columns):
+        from .validation import stanford
+        run = stanford.load("stanford")            # DatasetError (typed) where ../shared is absent
+        log = np.column_stack([getattr(run, validate.DATA_COLUMNS[c]) for c in columns])
+        return "stanford log", np.ascontiguousarray(log[:samples], dtype=np.float64)
     raise last
 
 
