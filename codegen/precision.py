@@ -136,14 +136,17 @@ def compare(observer, scenarios=None, out_dir: Path | None = None) -> dict:
     while todo:
         scenario = todo.pop(0)
         try:
-            inputs = validate.scenario_inputs(config, scenario)
+            inputs = (validate.shared_log_inputs(obs.input_names) if scenario == validate.SHARED_LOG
+                      else validate.scenario_inputs(config, scenario))
         except ModelDefinitionError:
-            # the family's scenarios need a plant this model lacks (stanford_sideslip: the real
-            # log is its validation): the generic excitation scenario on its own equations
-            if scenarios is not None or scenario == "excitation":
+            # the family's scenarios need a plant this model lacks: an observer of the real log is
+            # validated on it; any other takes the generic excitation scenario on its own equations
+            fallbacks = ([validate.SHARED_LOG] if all(c in validate.DATA_COLUMNS for c in obs.input_names)
+                         else ["excitation"])
+            if scenarios is not None or scenario in fallbacks:
                 raise
             if not rows and not todo:
-                todo.append("excitation")
+                todo += fallbacks
             continue
         states, out_d, status_d = _double_states(obs, inputs)
         out_f, status_f, _ = fobs.run(inputs)

@@ -171,12 +171,9 @@ def record_inputs(name: str, scenario: str | None = None, samples: int = SAMPLES
             last = exc
     # an observer of the real log (its validation is the shared Stanford run): the log's first rows
     from .extension import load
-    columns = load(name).input_names
-    if not scenario and all(c in validate.DATA_COLUMNS for c in columns):
-        from .validation import stanford
-        run = stanford.load("stanford")            # DatasetError (typed) where ../shared is absent
-        log = np.column_stack([getattr(run, validate.DATA_COLUMNS[c]) for c in columns])
-        return "stanford log", np.ascontiguousarray(log[:samples], dtype=np.float64)
+    log = None if scenario else validate.shared_log_inputs(load(name).input_names)
+    if log is not None:
+        return validate.SHARED_LOG, np.ascontiguousarray(log[:samples])
     raise last
 
 

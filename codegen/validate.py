@@ -92,6 +92,22 @@ DATA_COLUMNS = {"delta": "delta", "y_r": "yaw_rate", "y_a_y": "ay", "v_x": "vx",
                 "y_v_x": "vx"}
 
 
+# the input sequence of an observer of the shared log, for tools that need one (codegen.qemu,
+# codegen.precision): its validation is the logged run, not a simulated scenario
+SHARED_LOG = "stanford log"
+
+
+def shared_log_inputs(input_names) -> np.ndarray | None:
+    """The shared Stanford log as the observer's input matrix, or None when the observer takes
+    other signals than the log's (DatasetError, typed, where ../shared is absent)."""
+    if not all(c in DATA_COLUMNS for c in input_names):
+        return None
+    from .validation import stanford
+    run = stanford.load("stanford")
+    return np.ascontiguousarray(np.column_stack([getattr(run, DATA_COLUMNS[c]) for c in input_names]),
+                                dtype=np.float64)
+
+
 def run_data(name: str, path: str = "stanford") -> dict:
     """Run the compiled step over a logged run, beside the baselines.
 
