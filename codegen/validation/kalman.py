@@ -216,7 +216,12 @@ def _covariance(m, k: int, what: str) -> np.ndarray:
     return m
 
 
-def _run(model: KalmanModel, u, y, rho, dt, R, Sigma, x0, P0, heun: bool, symmetrize: bool) -> FilterResult:
+def _filter(model: KalmanModel, u, y, rho, dt, R, Sigma, x0, P0, update, name: str, what: str) -> FilterResult:
+    """Check a record and run one symbolic filter step over it with ``mapaccum``.
+
+    ``update(x, P, u0, r0, u1, r1, yk, R, Sigma, dt)`` builds the CasADi expressions of the next
+    (x, P) from the previous sample's inputs (u0, r0), the current ones (u1, r1) and y[k]; the
+    filters differ only there."""
     y = np.asarray(y, dtype=float)
     n = y.shape[0] if y.ndim else 0
     if n < 2:
@@ -234,31 +239,46 @@ def _run(model: KalmanModel, u, y, rho, dt, R, Sigma, x0, P0, heun: bool, symmet
     u0, r0, u1, r1 = ca.SX.sym("u0", nu), ca.SX.sym("rho0", nr), ca.SX.sym("u1", nu), ca.SX.sym("rho1", nr)
     yk = ca.SX.sym("y", ny)
     x, P = z[:nx], ca.reshape(z[nx:], nx, nx)
-    zero_w = ca.DM.zeros(model.f.size1_in(2), 1)
-    A, B, G, _, _ = model.jacobians(x, u0, r0)
-    F = ca.DM.eye(nx) + dt * A
-    if heun:
-        k1 = model.f(x, u0, zero_w, r0)
-        xp = x + 0.5 * dt * (k1 + model.f(x + dt * k1, u1, zero_w, r1))
-    else:                                             # linear model: A_d x + B_d u (forward Euler)
-        xp = F @ x + (dt * B) @ u0
-    Pp = F @ P @ F.T + (dt * G) @ ca.DM(Sigma) @ (dt * G).T
-    H = model.jacobians(xp, u1, r1)[3]
-    S = H @ Pp @ H.T + ca.DM(R)
-    K = ca.solve(S.T, (Pp @ H.T).T).T
-    xn = xp + K @ (yk - model.h(xp, u1, r1))
-    Pn = (ca.DM.eye(nx) - K @ H) @ Pp
-    if symmetrize:
-        Pn = 0.5 * (Pn + Pn.T)
-    step = ca.Function("kalman_step", [z, ca.vertcat(u0, r0, u1, r1, yk)], [ca.vertcat(xn, ca.vec(Pn))])
+    xn, Pn = update(x, P, u0, r0, u1, r1, yk, R, Sigma, dt)
+    step = ca.Function(name, [z, ca.vertcat(u0, r0, u1, r1, yk)], [ca.vertcat(xn, ca.vec(Pn))])
     columns = np.hstack([u[:-1], rho[:-1], u[1:], rho[1:], y[1:]]).T
     z0 = np.concatenate([x0, P0.reshape(-1, order="F")])
     zs = np.array(step.mapaccum(n - 1)(z0, columns).full()).T
     xs = np.vstack([x0, zs[:, :nx]])
     Ps = np.concatenate([P0[None], zs[:, nx:].reshape(n - 1, nx, nx).transpose(0, 2, 1)])
     if not np.all(np.isfinite(xs)):
-        raise SampleError(f"Kalman filter on {model.name!r} diverged (non-finite estimate)")
+        raise SampleError(f"{what} on {model.name!r} diverged (non-finite estimate)")
     return FilterResult(x=xs, P=Ps)
+
+
+def _heun(model: KalmanModel, s, u0, r0, u1, r1, dt):
+    """The Heun (RK2) prediction from sample k-1 to k, without process noise."""
+    zero_w = ca.DM.zeros(model.f.size1_in(2), 1)
+    k1 = model.f(s, u0, zero_w, r0)
+    return s + 0.5 * dt * (k1 + model.f(s + dt * k1, u1, zero_w, r1))
+
+
+def _run(model: KalmanModel, u, y, rho, dt, R, Sigma, x0, P0, heun: bool, symmetrize: bool) -> FilterResult:
+    """The (extended) Kalman filter: Jacobians from CasADi, Euler covariance prediction."""
+    nx = model.nx
+
+    def update(x, P, u0, r0, u1, r1, yk, R, Sigma, dt):
+        A, B, G, _, _ = model.jacobians(x, u0, r0)
+        F = ca.DM.eye(nx) + dt * A
+        if heun:
+            xp = _heun(model, x, u0, r0, u1, r1, dt)
+        else:                                         # linear model: A_d x + B_d u (forward Euler)
+            xp = F @ x + (dt * B) @ u0
+        Pp = F @ P @ F.T + (dt * G) @ ca.DM(Sigma) @ (dt * G).T
+        H = model.jacobians(xp, u1, r1)[3]
+        S = H @ Pp @ H.T + ca.DM(R)
+        K = ca.solve(S.T, (Pp @ H.T).T).T
+        xn = xp + K @ (yk - model.h(xp, u1, r1))
+        Pn = (ca.DM.eye(nx) - K @ H) @ Pp
+        if symmetrize:
+            Pn = 0.5 * (Pn + Pn.T)
+        return xn, Pn
+    return _filter(model, u, y, rho, dt, R, Sigma, x0, P0, update, "kalman_step", "Kalman filter")
 
 
 def linear_kalman_filter(model: KalmanModel, u, y, rho, dt: float, R, Sigma, x0, P0) -> FilterResult:
@@ -322,56 +342,27 @@ def unscented_kalman_filter(model: KalmanModel, u, y, rho, dt: float, R, Sigma, 
     ``G`` at the mean; sigma points redrawn from the prediction for the correction with ``y[k]``.
     One CasADi step run with ``mapaccum`` over the record.
     """
-    y = np.asarray(y, dtype=float)
-    n = y.shape[0] if y.ndim else 0
-    if n < 2:
-        raise SampleError(f"a Kalman filter run needs at least 2 samples, got {n}")
-    nx, nu, ny, nw = model.nx, len(model.inputs), model.ny, len(model.noise)
-    u, y = _column(u, n, nu, "inputs"), _column(y, n, ny, "measurements")
-    rho = _column(rho, n, len(model.scheduling), "scheduling signals")
-    if not (np.isfinite(dt) and dt > 0):
-        raise SampleError(f"sample time must be > 0, got {dt!r}")
-    R, Sigma, P0 = _covariance(R, ny, "R"), _covariance(Sigma, nw, "Sigma"), _covariance(P0, nx, "P0")
-    x0 = _column(x0, 1, nx, "x0")[0]
+    nx, ny = model.nx, model.ny
     lam = 3.0 - nx                                    # alpha = 1, kappa = 3 - n: n + lambda = 3
     w0, wi = lam / (nx + lam), 1.0 / (2.0 * (nx + lam))
-    z = ca.SX.sym("z", nx + nx * nx)
-    nr = rho.shape[1]
-    u0, r0, u1, r1 = ca.SX.sym("u0", nu), ca.SX.sym("rho0", nr), ca.SX.sym("u1", nu), ca.SX.sym("rho1", nr)
-    yk = ca.SX.sym("y", ny)
-    x, P = z[:nx], ca.reshape(z[nx:], nx, nx)
-    zero_w = ca.DM.zeros(model.f.size1_in(2), 1)
+    weights = [w0] + [wi] * (2 * nx)
 
     def sigma_points(m, C):
         Lc = ca.chol(0.5 * (C + C.T)).T * np.sqrt(nx + lam)     # lower factor: Lc Lc' = (n + lambda) C
         return [m] + [m + Lc[:, i] for i in range(nx)] + [m - Lc[:, i] for i in range(nx)]
 
-    weights = [w0] + [wi] * (2 * nx)
-
-    def heun(s):
-        k1 = model.f(s, u0, zero_w, r0)
-        return s + 0.5 * dt * (k1 + model.f(s + dt * k1, u1, zero_w, r1))
-
-    X = [heun(s) for s in sigma_points(x, P)]
-    xp = sum((w * s for w, s in zip(weights, X)), ca.DM.zeros(nx, 1))
-    G = model.jacobians(x, u0, r0)[2]
-    Pp = sum((w * (s - xp) @ (s - xp).T for w, s in zip(weights, X)), ca.DM.zeros(nx, nx)) \
-        + (dt * G) @ ca.DM(Sigma) @ (dt * G).T
-    Xc = sigma_points(xp, Pp)
-    Y = [model.h(s, u1, r1) for s in Xc]
-    yp = sum((w * s for w, s in zip(weights, Y)), ca.DM.zeros(ny, 1))
-    S = sum((w * (s - yp) @ (s - yp).T for w, s in zip(weights, Y)), ca.DM(R))
-    Pxy = sum((w * (a - xp) @ (b - yp).T for w, a, b in zip(weights, Xc, Y)), ca.DM.zeros(nx, ny))
-    K = ca.solve(S.T, Pxy.T).T
-    xn = xp + K @ (yk - yp)
-    Pn = Pp - K @ S @ K.T
-    Pn = 0.5 * (Pn + Pn.T)
-    step = ca.Function("ukf_step", [z, ca.vertcat(u0, r0, u1, r1, yk)], [ca.vertcat(xn, ca.vec(Pn))])
-    columns = np.hstack([u[:-1], rho[:-1], u[1:], rho[1:], y[1:]]).T
-    z0 = np.concatenate([x0, P0.reshape(-1, order="F")])
-    zs = np.array(step.mapaccum(n - 1)(z0, columns).full()).T
-    xs = np.vstack([x0, zs[:, :nx]])
-    Ps = np.concatenate([P0[None], zs[:, nx:].reshape(n - 1, nx, nx).transpose(0, 2, 1)])
-    if not np.all(np.isfinite(xs)):
-        raise SampleError(f"unscented Kalman filter on {model.name!r} diverged (non-finite estimate)")
-    return FilterResult(x=xs, P=Ps)
+    def update(x, P, u0, r0, u1, r1, yk, R, Sigma, dt):
+        X = [_heun(model, s, u0, r0, u1, r1, dt) for s in sigma_points(x, P)]
+        xp = sum((w * s for w, s in zip(weights, X)), ca.DM.zeros(nx, 1))
+        G = model.jacobians(x, u0, r0)[2]
+        Pp = sum((w * (s - xp) @ (s - xp).T for w, s in zip(weights, X)), ca.DM.zeros(nx, nx)) \
+            + (dt * G) @ ca.DM(Sigma) @ (dt * G).T
+        Xc = sigma_points(xp, Pp)
+        Y = [model.h(s, u1, r1) for s in Xc]
+        yp = sum((w * s for w, s in zip(weights, Y)), ca.DM.zeros(ny, 1))
+        S = sum((w * (s - yp) @ (s - yp).T for w, s in zip(weights, Y)), ca.DM(R))
+        Pxy = sum((w * (a - xp) @ (b - yp).T for w, a, b in zip(weights, Xc, Y)), ca.DM.zeros(nx, ny))
+        K = ca.solve(S.T, Pxy.T).T
+        Pn = Pp - K @ S @ K.T
+        return xp + K @ (yk - yp), 0.5 * (Pn + Pn.T)
+    return _filter(model, u, y, rho, dt, R, Sigma, x0, P0, update, "ukf_step", "unscented Kalman filter")
