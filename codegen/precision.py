@@ -141,8 +141,7 @@ def compare(observer, scenarios=None, out_dir: Path | None = None) -> dict:
         except ModelDefinitionError:
             # the family's scenarios need a plant this model lacks: an observer of the real log is
             # validated on it; any other takes the generic excitation scenario on its own equations
-            fallbacks = ([validate.SHARED_LOG] if all(c in validate.DATA_COLUMNS for c in obs.input_names)
-                         else ["excitation"])
+            fallbacks = [validate.SHARED_LOG] if validate.reads_the_log(obs.input_names) else ["excitation"]
             if scenarios is not None or scenario in fallbacks:
                 raise
             if not rows and not todo:

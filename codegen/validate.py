@@ -97,10 +97,15 @@ DATA_COLUMNS = {"delta": "delta", "y_r": "yaw_rate", "y_a_y": "ay", "v_x": "vx",
 SHARED_LOG = "stanford log"
 
 
+def reads_the_log(input_names) -> bool:
+    """Whether every input of the observer is a column of the shared log (DATA_COLUMNS)."""
+    return all(c in DATA_COLUMNS for c in input_names)
+
+
 def shared_log_inputs(input_names) -> np.ndarray | None:
     """The shared Stanford log as the observer's input matrix, or None when the observer takes
     other signals than the log's (DatasetError, typed, where ../shared is absent)."""
-    if not all(c in DATA_COLUMNS for c in input_names):
+    if not reads_the_log(input_names):
         return None
     from .validation import stanford
     run = stanford.load("stanford")

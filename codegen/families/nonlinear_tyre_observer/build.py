@@ -30,6 +30,7 @@ the certificate does not cover them; the true slip cannot be checked (v_y is not
 """
 from __future__ import annotations
 
+import functools
 import itertools
 import time
 from dataclasses import dataclass
@@ -82,6 +83,14 @@ class TyreRepresentation:
     v_x_box: tuple
     delta_box: tuple
     symbols: tuple            # (v_y, r, delta, v_x)
+
+    @functools.cached_property
+    def numpy_functions(self) -> tuple:
+        """(f, a_y, slips) as plain-Python callables of ``symbols``, for the numpy reference step
+        (built once per representation: lambdify is slow)."""
+        mods = [{"Min": min, "Max": max, "Abs": abs}, "math"]
+        return ([sp.lambdify(self.symbols, e, mods) for e in self.f], sp.lambdify(self.symbols, self.a_y, mods),
+                [sp.lambdify(self.symbols, t, mods) for t in self.slips])
 
 
 def represent(module, params, settings: NonlinearTyreSettings, source: str) -> TyreRepresentation:
@@ -280,7 +289,7 @@ def _build_class():
         def reference_step(self, z, u, y, rho):
             z, u, y, rho = (np.asarray(a, float) for a in (z, u, y, rho))
             (vy_n, r_n), excess = step_parts(self.rep, self.L, self.config.sample_time, z, u, y, rho,
-                                             _numpy_fns(self.rep), xp=np)
+                                             self.rep.numpy_functions, xp=np)
             return np.array([vy_n, r_n, z[0], z[1]], dtype=float), float(excess)
 
         def lmi_problem(self):
@@ -352,19 +361,6 @@ def _build_class():
             return lines
 
     return Build
-
-
-_NUMPY_FNS = {}
-
-
-def _numpy_fns(rep):
-    key = id(rep)
-    if key not in _NUMPY_FNS:
-        mods = [{"Min": min, "Max": max, "Abs": abs}, "math"]
-        args = rep.symbols
-        _NUMPY_FNS[key] = ([sp.lambdify(args, e, mods) for e in rep.f], sp.lambdify(args, rep.a_y, mods),
-                           [sp.lambdify(args, t, mods) for t in rep.slips])
-    return _NUMPY_FNS[key]
 
 
 Build = _build_class()
