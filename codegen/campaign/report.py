@@ -109,6 +109,16 @@ def format_row(row: dict) -> str:
     return "\n".join(f"{k:22s} {v!r}" if isinstance(v, float) else f"{k:22s} {v}" for k, v in row.items())
 
 
+
+def _save(fig, out_dir, name: str) -> str:
+    """Lay out, write ``out_dir/NAME.png`` and close a figure; its path."""
+    import matplotlib.pyplot as plt
+    fig.tight_layout()
+    path = f"{out_dir}/{name}.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
 def plots(spec, rows, traces: dict, out_dir) -> list:
     """error_cdf.png (per signal, overall and by third of the most influential dispersion),
     sensitivity.png (Spearman heat map), worst_runs.png (errors over time of the worst runs)."""
@@ -137,11 +147,7 @@ def plots(spec, rows, traces: dict, out_dir) -> list:
         ax.set_ylabel("fraction of runs")
         ax.legend(fontsize=6, loc="lower right")
     fig.suptitle(f"{spec.observer}: error CDFs over {len(ok)} runs")
-    fig.tight_layout()
-    p = f"{out_dir}/error_cdf.png"
-    fig.savefig(p, dpi=100)
-    plt.close(fig)
-    paths.append(p)
+    paths.append(_save(fig, out_dir, "error_cdf"))
     cols = spec.dispersed()
     if sens and cols:
         m = np.array([[sens[s].get(c, 0.0) for c in cols] for s in sigs])
@@ -154,11 +160,7 @@ def plots(spec, rows, traces: dict, out_dir) -> list:
                 ax.text(j, i, f"{m[i, j]:+.2f}", ha="center", va="center", fontsize=6)
         fig.colorbar(im, ax=ax, label="Spearman rank correlation")
         ax.set_title("sensitivity of the error to each dispersion", fontsize=9)
-        fig.tight_layout()
-        p = f"{out_dir}/sensitivity.png"
-        fig.savefig(p, dpi=100)
-        plt.close(fig)
-        paths.append(p)
+        paths.append(_save(fig, out_dir, "sensitivity"))
     if traces:
         fig, axes = plt.subplots(len(sigs), 1, figsize=(9, 1.8 * len(sigs)), sharex=True, squeeze=False)
         for k, tr in traces.items():
@@ -168,9 +170,5 @@ def plots(spec, rows, traces: dict, out_dir) -> list:
         axes[0, 0].legend(fontsize=7, loc="upper right")
         axes[-1, 0].set_xlabel("t [s]")
         fig.suptitle(f"worst runs by RMS {spec.rank_by}")
-        fig.tight_layout()
-        p = f"{out_dir}/worst_runs.png"
-        fig.savefig(p, dpi=100)
-        plt.close(fig)
-        paths.append(p)
+        paths.append(_save(fig, out_dir, "worst_runs"))
     return paths
