@@ -109,7 +109,6 @@ def format_row(row: dict) -> str:
     return "\n".join(f"{k:22s} {v!r}" if isinstance(v, float) else f"{k:22s} {v}" for k, v in row.items())
 
 
-
 def _save(fig, out_dir, name: str) -> str:
     """Lay out, write ``out_dir/NAME.png`` and close a figure; its path."""
     import matplotlib.pyplot as plt
@@ -118,6 +117,7 @@ def _save(fig, out_dir, name: str) -> str:
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
 
 def plots(spec, rows, traces: dict, out_dir) -> list:
     """error_cdf.png (per signal, overall and by third of the most influential dispersion),
