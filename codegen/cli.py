@@ -196,6 +196,14 @@ def cmd_check_gains(args) -> int:
     return 0 if _feasible(res) else 1
 
 
+def _shown(path: Path) -> str:
+    """A path as a record shows it: relative to the working directory when inside it."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
 def cmd_fit(args) -> int:
     """Identify an observer's numbers on samples A..B-1 of a log (the family's ``fit``); print them,
     say whether the committed files hold them, and with --write put them there."""
@@ -209,7 +217,7 @@ def cmd_fit(args) -> int:
             if changed[path]:
                 path.write_text(text)
     if args.json:
-        _print_json({**result, "files": {str(p): ("written" if args.write and c else "differs" if c else "equal")
+        _print_json({**result, "files": {_shown(p): ("written" if args.write and c else "differs" if c else "equal")
                                          for p, c in changed.items()}})
     else:
         print("\n".join(family.fit_lines(result, changed)))

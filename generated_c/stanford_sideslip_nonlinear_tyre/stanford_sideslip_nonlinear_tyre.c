@@ -15,7 +15,7 @@
 #define STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_ARG 4
 #define STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_RES 2
 #define STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_IW 1
-#define STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_W 36
+#define STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_W 25
 
 void stanford_sideslip_nonlinear_tyre_init(stanford_sideslip_nonlinear_tyre_state *s)
 {

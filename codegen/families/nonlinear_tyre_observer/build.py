@@ -191,8 +191,10 @@ def _build_class():
             z, u, y, rho = ca.SX.sym("z", 4), ca.SX.sym("u", nu), ca.SX.sym("y", 2), ca.SX.sym("rho", 1)
             (vy_n, r_n), excess = step_parts(self.rep, self.L, self.config.sample_time, z, u, y, rho,
                                              _functions(self.rep, ca), xp=ca)
-            return ca.Function(f"{self.name}_kernel", [z, u, y, rho], [ca.vertcat(vy_n, r_n, z[0], z[1]), excess],
-                               ["z", "u", "y", "rho"], ["z_next", "excess"])
+            # the sympy expressions are put together unevaluated (representation.numeric): one cos(delta),
+            # one capacity per axle, ... instead of one per use
+            outs = ca.cse([ca.vertcat(vy_n, r_n, z[0], z[1]), excess])
+            return ca.Function(f"{self.name}_kernel", [z, u, y, rho], outs, ["z", "u", "y", "rho"], ["z_next", "excess"])
 
         def reference_step(self, z, u, y, rho):
             z, u, y, rho = (np.asarray(a, float) for a in (z, u, y, rho))

@@ -222,7 +222,7 @@ def fit(config, path="stanford", samples: str = "", folds: int = 0, peers: bool 
     fitted_params = _with_values(params, tyre)
     levels = {k: _round(v) for k, v in _levels(prob, _rounded(config, tyre), run, a, b, config.sample_time,
                                                full).items()}
-    out = {"observer": config.name, "data": run.source, "samples": [a, b],
+    out = {"observer": config.name, "data": str(path), "samples": [a, b],
            "t_range": [float(run.t[a] - run.t[0]), float(run.t[b - 1] - run.t[0])],
            "parameters": tyre, "design": levels, "start": prob.start.tolist()}
     if peers:
@@ -232,7 +232,15 @@ def fit(config, path="stanford", samples: str = "", folds: int = 0, peers: bool 
     beta = observer_beta(config, fitted_params, levels, run, a, b)
     out["observer_beta_rms_deg"] = float(np.degrees(np.sqrt(np.mean((beta - run.beta_true[a:b]) ** 2))))
     if folds:
-        out["cross_validation"] = _cross_validate(config, params, prob, run, a, b, folds)
+        cv = _cross_validate(config, params, prob, run, a, b, folds)
+        out["cross_validation"] = cv
+        out["cross_validated_rms_deg"] = float(np.sqrt(np.mean([r["held_out_rms_deg"] ** 2 for r in cv])))
+        names = list(tyre)
+        out["table"] = {"header": ["held-out fold (samples)", *names, "β RMSE on the fold [deg]", "on the rest [deg]"],
+                        "rows": [[f"{r['fold'][0]}–{r['fold'][1] - 1}", *[r["parameters"][k] for k in names],
+                                  r["held_out_rms_deg"], r["training_rms_deg"]] for r in cv]
+                        + [["pooled over the folds", *[None for _ in names], out["cross_validated_rms_deg"], None],
+                           [f"{a}–{b - 1} (the fit)", *[tyre[k] for k in names], None, out["observer_beta_rms_deg"]]]}
     return out
 
 
@@ -327,8 +335,7 @@ def lines(result: dict, changed: dict) -> list:
                    + f"; beta RMS on the fold {row['held_out_rms_deg']:.4f} deg (on the rest "
                    f"{row['training_rms_deg']:.4f})")
     if "cross_validation" in result:
-        cv = np.sqrt(np.mean([r["held_out_rms_deg"] ** 2 for r in result["cross_validation"]]))
-        out.append(f"  cross-validated beta RMS (folds pooled): {cv:.4f} deg")
+        out.append(f"  cross-validated beta RMS (folds pooled): {result['cross_validated_rms_deg']:.4f} deg")
     for path, differs in changed.items():
         out.append(f"  {path}: {'differs from the fit' if differs else 'equals the fit'}")
     return out

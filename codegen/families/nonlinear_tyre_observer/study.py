@@ -58,7 +58,7 @@ def parameter_range(name: str = "stanford_sideslip_nonlinear_tyre", path="stanfo
                         "whole half"],
              "rows": [[r["stiffness_factor"], r["friction_factor"], r["evaluation"], r["identification"], r["whole"]]
                       for r in rows]}
-    return {"observer": name, "data": run.source, "L": L, "stiffness_range": s_rng, "friction_range": f_rng,
+    return {"observer": name, "data": str(path), "L": L, "stiffness_range": s_rng, "friction_range": f_rng,
             "t_split": split, "points": rows, "table": table}
 
 
