@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import importlib.util
 import json
+import os
 import sys
 import sysconfig
 import tempfile
@@ -86,16 +87,56 @@ def observer_sources(observer) -> list:
     return [d / f"{name}_kernel.c", d / f"{name}.c"]
 
 
+def check_generated(config: observers.ObserverConfig) -> str:
+    """The lock text of ``config`` after checking that its generated folder is exactly what
+    ``uiogen generate`` wrote from the current design and toolchain (the stamp,
+    :func:`codegen.emit.stamp_matches`): an edited, truncated or stale C file is never compiled.
+
+    Raises
+    ------
+    UnknownObserverError
+        nothing generated yet.
+    GenerationError
+        the folder does not match its stamp (names the command that regenerates it).
+    """
+    from . import emit
+    from .errors import GenerationError
+    name = config.name
+    src_dir = generated_dir(config)
+    how = config.source if not config.builtin else name
+    if not (src_dir / f"{name}.h").is_file():
+        raise UnknownObserverError(f"observer {name!r} has not been generated (no {src_dir / (name + '.h')}); "
+                                   f"run `uiogen generate {how}`")
+    lock = design_lock.path(config)
+    try:
+        lock_text = lock.read_text()
+    except OSError:
+        raise UnknownObserverError(f"observer {name!r} has no design lock {lock}; run `uiogen generate {how}`") from None
+    if not emit.stamp_matches(src_dir, emit.emission_inputs(config, lock_text)):
+        raise GenerationError(f"{src_dir} does not match its stamp {emit.STAMP}: its C was edited, or the design, "
+                              f"model or toolchain changed since it was generated; run `uiogen generate {how}` "
+                              f"(the C is never compiled as found)")
+    return lock_text
+
+
 def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | None = None,
-                    suffix: str = "") -> Path:
-    """Compile observer ``observer`` (a name, an observer-file path or a config); returns the
-    path of the extension module."""
+                    suffix: str = "", log=None) -> Path:
+    """Compile observer ``observer`` (a name, an observer-file path or a config) and install the
+    extension module only if its step conforms to the model; returns the installed path.
+
+    1. The generated folder matches its stamp (:func:`check_generated`).
+    2. The C is compiled into a temporary folder beside the target.
+    3. The module is loaded from there and checked against independent evaluations of its model
+       (:func:`codegen.conformance.check`: signal layout, then numbers across every declared box).
+    4. Only then it replaces the installed module (one rename): a failed check leaves the previous
+       extension as it was and raises :class:`~codegen.errors.ConformanceError`.
+    """
+    import shutil
+    from . import conformance, pipeline
     config = _config(observer)
     name = config.name
     src_dir = generated_dir(config)
-    if not (src_dir / f"{name}.h").is_file():
-        raise UnknownObserverError(f"observer {name!r} has not been generated (no {src_dir / (name + '.h')}); "
-                                   f"run `uiogen generate {config.source if not config.builtin else name}`")
+    lock_text = check_generated(config)
     extra = SPEED_FLAGS + (LTO_FLAGS if lto_supported() else []) + list(extra_flags or [])
     ext_dir = Path(ext_dir) if ext_dir is not None else extension_dir(config)
     build_dir = BUILD_DIR if config.builtin else src_dir.parent / "_build" / name
@@ -107,10 +148,23 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
     glue.write_text(render_template("pymodule.c.j2", name=name, NAME=name.upper()))
     import numpy
     glue_flags = [*GLUE_FLAGS, "-I", sysconfig.get_paths()["include"], "-I", numpy.get_include()]
-    target = ext_dir / f"_{name}{sysconfig.get_config_var('EXT_SUFFIX')}"
-    sources = observer_sources(config) + [glue]
-    return compile_and_link(sources, target, include=[src_dir], flags=STRICT_FLAGS, extra_flags=extra,
-                            source_flags={glue: glue_flags}, shared=True, object_dir=build_dir, suffix=suffix)
+    module_file = f"_{name}{sysconfig.get_config_var('EXT_SUFFIX')}"
+    staging = Path(tempfile.mkdtemp(prefix=f".{name}.new-", dir=ext_dir))
+    try:
+        candidate = compile_and_link(observer_sources(config) + [glue], staging / module_file, include=[src_dir],
+                                     flags=STRICT_FLAGS, extra_flags=extra, source_flags={glue: glue_flags},
+                                     shared=True, object_dir=build_dir, suffix=suffix)
+        spec = importlib.util.spec_from_file_location(f"_{name}", candidate)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        report = conformance.check(pipeline.build(config), module, src_dir, json.loads(lock_text))
+        target = ext_dir / module_file
+        os.replace(candidate, target)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    if log is not None:
+        log(f"{name}: {report.line()}")
+    return target
 
 
 def generated_names() -> list:
@@ -237,7 +291,7 @@ def load(observer) -> CompiledObserver:
 def main(argv=None) -> int:
     names = (argv if argv is not None else sys.argv[1:]) or generated_names()
     for name in names:
-        path = build_extension(name)
+        path = build_extension(name, log=print)
         try:
             shown = path.relative_to(ROOT)
         except ValueError:
