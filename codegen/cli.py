@@ -22,7 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import design_lock, emit, families, observers, pipeline
+from .design import lock as design_lock
+from .emit import generate as emit
+from . import families, pipeline
+from .project import observer_file as observers
 from .errors import CertificateError, ConfigurationError, UiogenError
 
 
@@ -121,7 +124,7 @@ def _print_design(b, path, as_json: bool, compare: dict) -> int:
 
 
 def cmd_sweep(args) -> int:
-    from . import sweep
+    from .design import sweep
     grid = [sweep.parse_set(text) for text in args.sets]
     columns = [c.strip() for c in args.show.split(",") if c.strip()]
     if args.json:
@@ -144,10 +147,10 @@ def cmd_generate(args) -> int:
 
 
 def cmd_build(args) -> int:
-    from . import extension
+    from .extension import build as extension
     if not args.float32:
         return extension.main(args.names)
-    from . import precision
+    from .targets import float32 as precision
     refused = []
     for name in args.names or observers.names():
         report = precision.compare(name)
@@ -196,7 +199,7 @@ def cmd_check_gains(args) -> int:
 
 
 def cmd_validate(args) -> int:
-    from . import validate
+    from .validation import run as validate
     if args.data:
         result = validate.run_data(args.name, args.data)
         if args.plot:
@@ -227,7 +230,7 @@ def cmd_validate(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    from . import demo
+    from .validation import demo
     return demo.main(json_output=args.json)
 
 
@@ -261,18 +264,18 @@ def cmd_new(args) -> int:
 
 
 def cmd_docs(args) -> int:
-    from . import docs
+    from .tools import docs
     return docs.main(check=args.check)
 
 
 def cmd_export(args) -> int:
-    from . import fmu
+    from .targets import fmu
     fmu.export_fmu(args.name, args.out)
     return 0
 
 
 def cmd_bench(args) -> int:
-    from . import bench
+    from .tools import bench
     return bench.main(json_output=args.json)
 
 

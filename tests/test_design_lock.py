@@ -19,7 +19,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from codegen import canonical, cli, design_lock, emit, lmi, observers, pipeline, sources
+from codegen.design import canonical, lock as design_lock, lmi, sources
+from codegen import cli, pipeline
+from codegen.emit import generate as emit
+from codegen.project import observer_file as observers
 from codegen.errors import GenerationError
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -1,0 +1,247 @@
+"""The compiled step as a CPython extension: build it from the generated C, load it.
+
+The observer's C is compiled with the project's strict flags (:data:`codegen.emit.toolchain.STRICT_CFLAGS`,
+no fast-math, ``-ffp-contract=off`` so results do not depend on FMA availability) plus the speed
+flags below; the Python glue is rendered from ``codegen/emit/templates/pymodule.c.j2`` and
+linked with it. :mod:`python_bindings` is the user-facing name of :func:`load` and
+:class:`CompiledObserver`.
+
+Where things go: a built-in observer's extension in ``python_bindings/_ext/``, a user's observer
+(an observer file outside the package) beside its generated C in ``generated_c/NAME/`` next to
+its observer file.
+"""
+from __future__ import annotations
+
+import contextlib
+import importlib.util
+import json
+import sys
+import sysconfig
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..design import lock as design_lock
+from ..project import observer_file as observers
+from ..errors import SampleError, UnknownObserverError
+from ..design.sources import ROOT
+from ..emit.toolchain import GENERATED_DIR, STRICT_CFLAGS, compile_and_link, compiler, render_template, run
+
+BINDINGS = ROOT / "python_bindings"
+EXT_DIR = BINDINGS / "_ext"
+BUILD_DIR = BINDINGS / "_build"
+
+STRICT_FLAGS = list(STRICT_CFLAGS)
+# Python.h is not -pedantic/-Wconversion clean; the glue gets the same flags minus those two.
+GLUE_FLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-ffp-contract=off", "-O2"]
+# Speed flags of the extension (after the strict ones, so -O3 wins over -O2). Link-time
+# optimization makes the batch loop, the step and the CasADi kernel one function: no call, no
+# argument arrays, no null-pointer tests on them; hidden visibility lets it (only PyInit is
+# exported). Neither changes a result: -ffp-contract=off stays and nothing implies fast-math.
+SPEED_FLAGS = ["-O3"]
+LTO_FLAGS = ["-flto", "-fvisibility=hidden"]
+
+_LTO = None
+# Open recordings of the inputs given to CompiledObserver.run (see :func:`recording`).
+_RECORDINGS: list = []
+
+
+def lto_supported() -> bool:
+    """Whether the compiler and linker build a shared object with -flto (clang with a linker
+    lacking its LTO plugin does not); checked once per process."""
+    global _LTO
+    if _LTO is None:
+        with tempfile.TemporaryDirectory() as tmp:
+            src = Path(tmp, "probe.c")
+            src.write_text("int uiogen_probe(int x) { return x + 1; }\n")
+            try:
+                run([compiler(), *SPEED_FLAGS, *LTO_FLAGS, "-fPIC", "-shared", src, "-o", Path(tmp, "probe.so")])
+                _LTO = True
+            except Exception:
+                _LTO = False
+    return _LTO
+
+
+def _config(observer) -> observers.ObserverConfig:
+    return observer if isinstance(observer, observers.ObserverConfig) else observers.get(str(observer))
+
+
+def generated_dir(observer) -> Path:
+    """The folder with the observer's generated C and design lock."""
+    config = _config(observer)
+    return design_lock.path(config).parent
+
+
+def extension_dir(config: observers.ObserverConfig) -> Path:
+    """Where the compiled extension goes: python_bindings/_ext for the built-in observers, else
+    ``_ext/`` beside the observer's generated folder (never inside it: that folder holds exactly
+    the emitted files its stamp lists, and ``generate`` replaces it whole)."""
+    return EXT_DIR if config.builtin else generated_dir(config).parent / "_ext"
+
+
+def observer_sources(observer) -> list:
+    d = generated_dir(observer)
+    name = d.name
+    return [d / f"{name}_kernel.c", d / f"{name}.c"]
+
+
+def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | None = None,
+                    suffix: str = "") -> Path:
+    """Compile observer ``observer`` (a name, an observer-file path or a config); returns the
+    path of the extension module."""
+    config = _config(observer)
+    name = config.name
+    src_dir = generated_dir(config)
+    if not (src_dir / f"{name}.h").is_file():
+        raise UnknownObserverError(f"observer {name!r} has not been generated (no {src_dir / (name + '.h')}); "
+                                   f"run `uiogen generate {config.source if not config.builtin else name}`")
+    extra = SPEED_FLAGS + (LTO_FLAGS if lto_supported() else []) + list(extra_flags or [])
+    ext_dir = Path(ext_dir) if ext_dir is not None else extension_dir(config)
+    build_dir = BUILD_DIR if config.builtin else src_dir.parent / "_build" / name
+    build_dir.mkdir(parents=True, exist_ok=True)
+    ext_dir.mkdir(parents=True, exist_ok=True)
+    if ext_dir == EXT_DIR:
+        (ext_dir / "__init__.py").touch()
+    glue = build_dir / f"{name}_pymodule.c"
+    glue.write_text(render_template("pymodule.c.j2", name=name, NAME=name.upper()))
+    import numpy
+    glue_flags = [*GLUE_FLAGS, "-I", sysconfig.get_paths()["include"], "-I", numpy.get_include()]
+    target = ext_dir / f"_{name}{sysconfig.get_config_var('EXT_SUFFIX')}"
+    sources = observer_sources(config) + [glue]
+    return compile_and_link(sources, target, include=[src_dir], flags=STRICT_FLAGS, extra_flags=extra,
+                            source_flags={glue: glue_flags}, shared=True, object_dir=build_dir, suffix=suffix)
+
+
+def generated_names() -> list:
+    """Built-in observers that have been generated."""
+    return sorted(p.name for p in GENERATED_DIR.iterdir() if (p / f"{p.name}.h").is_file()) \
+        if GENERATED_DIR.is_dir() else []
+
+
+@dataclass(frozen=True)
+class CompiledObserver:
+    """A compiled observer step and the names of its vectors."""
+
+    name: str
+    module: object
+    state_names: tuple
+    input_names: tuple
+    sample_time: float
+    output_names: tuple = ()
+
+    @property
+    def step(self):
+        if not _RECORDINGS:
+            return self.module.step
+        step = self.module.step
+
+        def recorded(state, inputs, out):
+            for rec in _RECORDINGS:
+                rec.append((self.name, np.array(inputs, dtype=np.float64, copy=True), None))
+            return step(state, inputs, out)
+        return recorded
+
+    @property
+    def n_state(self) -> int:
+        return self.module.N_STATE
+
+    @property
+    def n_input(self) -> int:
+        return self.module.N_INPUT
+
+    @property
+    def n_output(self) -> int:
+        return self.module.N_OUTPUT
+
+    @property
+    def status_bits(self) -> dict:
+        return {k: getattr(self.module, k) for k in
+                ("OK", "SCHEDULING_CLAMPED", "NONFINITE_INPUT", "NUMERICAL_FAILURE", "WARMING_UP")}
+
+    def output_index(self, signal: str) -> int:
+        """Column of ``signal`` in the outputs."""
+        try:
+            return self.output_names.index(signal)
+        except ValueError:
+            raise UnknownObserverError(f"{self.name} has no output {signal!r}; outputs: "
+                                       f"{', '.join(self.output_names)}") from None
+
+    def initial_state(self) -> np.ndarray:
+        return np.zeros(self.n_state)
+
+    def run(self, inputs, state=None):
+        """Run over an (n, n_input) array; returns (outputs (n, n_output), status (n,), final state)."""
+        inputs = np.ascontiguousarray(inputs, dtype=np.float64)
+        if inputs.ndim != 2 or inputs.shape[1] != self.n_input:
+            raise SampleError(f"{self.name}: inputs must have shape (n, {self.n_input}) with columns "
+                              f"{', '.join(self.input_names)}; got {inputs.shape}")
+        state = self.initial_state() if state is None else np.array(state, dtype=np.float64)
+        if state.shape != (self.n_state,):
+            raise SampleError(f"{self.name}: state must have shape ({self.n_state},), got {state.shape}")
+        for rec in _RECORDINGS:
+            rec.append((self.name, inputs.copy(), state.copy()))
+        n = inputs.shape[0]
+        outputs = np.empty((n, self.n_output))
+        status = np.empty(n, dtype=np.int32)
+        self.module.run(state, inputs, outputs, status, n)
+        return outputs, status, state
+
+
+@contextlib.contextmanager
+def recording():
+    """Record what :meth:`CompiledObserver.run` (and ``step``) is given inside the block: yields
+    a list that fills with (observer name, inputs, initial state) per call (one input row and
+    None for a step), e.g. the input sequence of a
+    validation scenario, to replay it through the FMU or a cross-compiled build."""
+    rec: list = []
+    _RECORDINGS.append(rec)
+    try:
+        yield rec
+    finally:
+        _RECORDINGS.remove(rec)
+
+
+def load(observer) -> CompiledObserver:
+    """The compiled extension of an observer: a built-in name, the path of an observer file, or
+    an :class:`~codegen.project.observer_file.ObserverConfig` (built by ``make build`` / ``uiogen build``)."""
+    config = _config(observer)
+    name = config.name
+    design = design_lock.path(config)
+    if not design.is_file():
+        raise UnknownObserverError(f"observer {name!r} has not been generated (no {design}); run `uiogen generate`")
+    module_name = f"_{name}"
+    if config.builtin:
+        try:
+            module = importlib.import_module(f"python_bindings._ext.{module_name}")
+        except ModuleNotFoundError:
+            raise UnknownObserverError(f"observer {name!r} is generated but not compiled; run `make build`") from None
+    else:
+        path = extension_dir(config) / f"{module_name}{sysconfig.get_config_var('EXT_SUFFIX')}"
+        key = f"uiogen_ext_{abs(hash(str(path)))}_{module_name}"
+        module = sys.modules.get(key)
+        if module is None:
+            if not path.is_file():
+                raise UnknownObserverError(f"observer {name!r} is generated but not compiled; run "
+                                           f"`uiogen build {config.source}`")
+            spec = importlib.util.spec_from_file_location(module_name, path)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            sys.modules[key] = module
+    art = json.loads(design.read_text())
+    signals = art["signals"]
+    return CompiledObserver(name, module, tuple(signals["state"]), tuple(signals["input"]),
+                            float(art["config"]["sample_time"]), tuple(signals.get("output", signals["state"])))
+
+
+def main(argv=None) -> int:
+    names = (argv if argv is not None else sys.argv[1:]) or generated_names()
+    for name in names:
+        path = build_extension(name)
+        try:
+            shown = path.relative_to(ROOT)
+        except ValueError:
+            shown = path
+        print(f"{name}: built {shown}")
+    return 0
