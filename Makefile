@@ -84,5 +84,5 @@ lock:
 	rm -rf .venv-lock
 
 clean:
-	rm -rf python_bindings/_ext python_bindings/_build .pytest_cache
+	rm -rf build .pytest_cache
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -2,10 +2,10 @@
 (the same as ``uiogen build``; the build itself is :mod:`codegen.extension.build`)."""
 import sys
 
-from codegen.extension.build import (BUILD_DIR, GLUE_FLAGS, STRICT_FLAGS, build_extension, generated_names, main,
+from codegen.extension.build import (GLUE_FLAGS, STRICT_FLAGS, build_extension, generated_names, main,
                                      observer_sources)
 
-__all__ = ["BUILD_DIR", "GLUE_FLAGS", "STRICT_FLAGS", "build_extension", "generated_names", "main",
+__all__ = ["GLUE_FLAGS", "STRICT_FLAGS", "build_extension", "generated_names", "main",
            "observer_sources"]
 
 if __name__ == "__main__":

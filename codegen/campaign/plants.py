@@ -39,11 +39,13 @@ DRIVER_KEYS = ("wheelbase", "R_s", "k_e", "k_edot", "k_r", "k_ri", "k_p", "k_i",
 
 
 def cache_dir() -> Path:
-    """Where compiled plants live: ``$UIOGEN_PLANT_CACHE``, else ``python_bindings/_build/plants``."""
+    """Where compiled plants live: ``$UIOGEN_PLANT_CACHE``, else the built-in observers' project's
+    ``build/plants/`` (:mod:`codegen.project.workspace`; a campaign runs a built-in observer)."""
+    from ..project.workspace import Workspace, source_checkout
     env = os.environ.get(CACHE_ENV)
     if env:
         return Path(env)
-    return Path(__file__).resolve().parents[2] / "python_bindings" / "_build" / "plants"
+    return Workspace.of(source_checkout()).plants
 
 
 def _rk4(f, x, h, e0, em, e1):

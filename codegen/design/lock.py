@@ -27,20 +27,15 @@ from .lmi import SolveRecord
 from ..project.observer_file import ObserverConfig
 
 FORMAT = 1
-GENERATED_DIR = sources.ROOT / "generated_c"
 DESIGN_PACKAGES = ("numpy", "scipy", "sympy", "mpmath", "clarabel")
 
 
-def home(config: ObserverConfig) -> Path:
-    """The folder whose ``NAME/`` holds the observer's generated files: the package's generated_c/
-    for a built-in observer, ``generated_c/`` beside the observer file for a user's."""
-    return Path(config.home) if config.home else GENERATED_DIR
-
-
 def path(config: ObserverConfig, base: Path | None = None) -> Path:
-    """Where the design lock of ``config`` lives (``base/NAME/NAME_design.json``, base defaulting
-    to :func:`home`)."""
-    return Path(home(config) if base is None else base) / config.name / f"{config.name}_design.json"
+    """Where the design lock of ``config`` lives: ``base/NAME/NAME_design.json``, base defaulting
+    to its project's ``generated_c/`` (:mod:`codegen.project.workspace`)."""
+    if base is None:
+        return config.workspace.design_lock(config.name)
+    return Path(base) / config.name / f"{config.name}_design.json"
 
 
 def design_sources(config: ObserverConfig) -> list:

@@ -24,9 +24,6 @@ from ..errors import GenerationError, UiogenError
 from ..families import ObserverBuild
 from .toolchain import TEMPLATES, casadi_sources, render_template
 
-ROOT = sources.ROOT
-
-
 STAMP = "INPUTS.sha256"
 EMIT_PACKAGES = ("casadi", "jinja2")
 
@@ -162,11 +159,12 @@ def _write_atomically(target: Path, files: dict) -> None:
 
 
 def generate(names: list | None = None, out_dir: Path | None = None, force: bool = False,
-             log=print) -> list:
-    """Generate the C of the named observers (built-in names or observer-file paths; all built-in
-    ones if None); returns the builds that ran.
+             log=print, project: Path | None = None) -> list:
+    """Generate the C of the named observers (built-in names, observer-file paths or
+    configurations; all built-in ones if None); returns the builds that ran.
 
-    Each observer's files go to ``out_dir/NAME/`` (default: its home, :func:`design_lock.home`).
+    Each observer's files go to ``out_dir/NAME/`` (default: its project's ``generated_c/``,
+    :mod:`codegen.project.workspace`; ``project`` names another project folder).
     The design comes from the committed lock, replayed without solving; only a missing or stale
     lock is re-solved (and written with the C). An observer whose stamp matches its inputs and
     whose files are intact is skipped unless ``force``. One failing observer does not stop the
@@ -174,14 +172,15 @@ def generate(names: list | None = None, out_dir: Path | None = None, force: bool
     """
     done, failed = [], []
     for name in names or observers.names():
+        label = getattr(name, "name", name)
         try:
-            config = observers.get(name)
-            target_dir = Path(out_dir) if out_dir is not None else design_lock.home(config)
+            config = observers.get(name, project=project)
+            target_dir = Path(out_dir) if out_dir is not None else config.workspace.generated
             with _exclusive(target_dir):
                 b = _generate_one(config, target_dir, force, log)
         except UiogenError as exc:
-            log(f"{name}: FAILED: {type(exc).__name__}: {exc}")
-            failed.append(f"{name} ({type(exc).__name__})")
+            log(f"{label}: FAILED: {type(exc).__name__}: {exc}")
+            failed.append(f"{label} ({type(exc).__name__})")
             continue
         if b is not None:
             done.append(b)

@@ -1,4 +1,4 @@
-"""The C toolchain, in one place: where generated code lives, the flags every C file compiles
+"""The C toolchain, in one place: the flags every C file compiles
 with, CasADi's code-generation options and the fix-ups its output needs, templates, and one
 compile-and-link function used by the extension, the benchmark/check driver and the
 differentiator driver.
@@ -16,9 +16,7 @@ import casadi as ca
 import jinja2
 
 from ..errors import ToolchainError
-from ..design.sources import ROOT
 
-GENERATED_DIR = ROOT / "generated_c"
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 
 # Every emitted file must compile cleanly with these (gcc and clang); never -ffast-math, and

@@ -6,9 +6,8 @@ flags below; the Python glue is rendered from ``codegen/emit/templates/pymodule.
 linked with it. :mod:`python_bindings` is the user-facing name of :func:`load` and
 :class:`CompiledObserver`.
 
-Where things go: a built-in observer's extension in ``python_bindings/_ext/``, a user's observer
-(an observer file outside the package) beside its generated C in ``generated_c/NAME/`` next to
-its observer file.
+Where things go: the observer's project (:mod:`codegen.project.workspace`): the extension in
+``build/extensions/``, its objects in ``build/objects/NAME/``.
 """
 from __future__ import annotations
 
@@ -25,13 +24,9 @@ import numpy as np
 
 from ..design import lock as design_lock
 from ..project import observer_file as observers
+from ..project.workspace import Workspace, source_checkout
 from ..errors import SampleError, UnknownObserverError
-from ..design.sources import ROOT
-from ..emit.toolchain import GENERATED_DIR, STRICT_CFLAGS, compile_and_link, compiler, render_template, run
-
-BINDINGS = ROOT / "python_bindings"
-EXT_DIR = BINDINGS / "_ext"
-BUILD_DIR = BINDINGS / "_build"
+from ..emit.toolchain import STRICT_CFLAGS, compile_and_link, compiler, render_template, run
 
 STRICT_FLAGS = list(STRICT_CFLAGS)
 # Python.h is not -pedantic/-Wconversion clean; the glue gets the same flags minus those two.
@@ -65,20 +60,13 @@ def lto_supported() -> bool:
 
 
 def _config(observer) -> observers.ObserverConfig:
-    return observer if isinstance(observer, observers.ObserverConfig) else observers.get(str(observer))
+    return observers.get(observer if isinstance(observer, observers.ObserverConfig) else str(observer))
 
 
 def generated_dir(observer) -> Path:
     """The folder with the observer's generated C and design lock."""
     config = _config(observer)
     return design_lock.path(config).parent
-
-
-def extension_dir(config: observers.ObserverConfig) -> Path:
-    """Where the compiled extension goes: python_bindings/_ext for the built-in observers, else
-    ``_ext/`` beside the observer's generated folder (never inside it: that folder holds exactly
-    the emitted files its stamp lists, and ``generate`` replaces it whole)."""
-    return EXT_DIR if config.builtin else generated_dir(config).parent / "_ext"
 
 
 def observer_sources(observer) -> list:
@@ -98,12 +86,11 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
         raise UnknownObserverError(f"observer {name!r} has not been generated (no {src_dir / (name + '.h')}); "
                                    f"run `uiogen generate {config.source if not config.builtin else name}`")
     extra = SPEED_FLAGS + (LTO_FLAGS if lto_supported() else []) + list(extra_flags or [])
-    ext_dir = Path(ext_dir) if ext_dir is not None else extension_dir(config)
-    build_dir = BUILD_DIR if config.builtin else src_dir.parent / "_build" / name
+    workspace = config.workspace
+    ext_dir = Path(ext_dir) if ext_dir is not None else workspace.extensions
+    build_dir = workspace.objects(name)
     build_dir.mkdir(parents=True, exist_ok=True)
     ext_dir.mkdir(parents=True, exist_ok=True)
-    if ext_dir == EXT_DIR:
-        (ext_dir / "__init__.py").touch()
     glue = build_dir / f"{name}_pymodule.c"
     glue.write_text(render_template("pymodule.c.j2", name=name, NAME=name.upper()))
     import numpy
@@ -114,10 +101,12 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
                             source_flags={glue: glue_flags}, shared=True, object_dir=build_dir, suffix=suffix)
 
 
-def generated_names() -> list:
-    """Built-in observers that have been generated."""
-    return sorted(p.name for p in GENERATED_DIR.iterdir() if (p / f"{p.name}.h").is_file()) \
-        if GENERATED_DIR.is_dir() else []
+def generated_names(project: Path | None = None) -> list:
+    """Built-in observers that have been generated in ``project`` (default: the built-in
+    observers' project, :mod:`codegen.project.workspace`)."""
+    builtin = set(observers.names())
+    ws = Workspace.of(project if project is not None else source_checkout())
+    return [n for n in ws.generated_names() if n in builtin]
 
 
 @dataclass(frozen=True)
@@ -211,37 +200,33 @@ def load(observer) -> CompiledObserver:
     design = design_lock.path(config)
     if not design.is_file():
         raise UnknownObserverError(f"observer {name!r} has not been generated (no {design}); run `uiogen generate`")
-    module_name = f"_{name}"
-    if config.builtin:
-        try:
-            module = importlib.import_module(f"python_bindings._ext.{module_name}")
-        except ModuleNotFoundError:
-            raise UnknownObserverError(f"observer {name!r} is generated but not compiled; run `make build`") from None
-    else:
-        path = extension_dir(config) / f"{module_name}{sysconfig.get_config_var('EXT_SUFFIX')}"
-        key = f"uiogen_ext_{abs(hash(str(path)))}_{module_name}"
-        module = sys.modules.get(key)
-        if module is None:
-            if not path.is_file():
-                raise UnknownObserverError(f"observer {name!r} is generated but not compiled; run "
-                                           f"`uiogen build {config.source}`")
-            spec = importlib.util.spec_from_file_location(module_name, path)
-            module = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(module)
-            sys.modules[key] = module
+    path = config.workspace.extension(name)
+    key = f"uiogen_ext_{abs(hash(str(path)))}__{name}"
+    module = sys.modules.get(key)
+    if module is None:
+        if not path.is_file():
+            raise UnknownObserverError(f"observer {name!r} is generated but not compiled (no {path}); run "
+                                       f"`uiogen build {name if config.builtin else config.source}`")
+        spec = importlib.util.spec_from_file_location(f"_{name}", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        sys.modules[key] = module
     art = json.loads(design.read_text())
     signals = art["signals"]
     return CompiledObserver(name, module, tuple(signals["state"]), tuple(signals["input"]),
                             float(art["config"]["sample_time"]), tuple(signals.get("output", signals["state"])))
 
 
-def main(argv=None) -> int:
-    names = (argv if argv is not None else sys.argv[1:]) or generated_names()
+def main(argv=None, project: Path | None = None) -> int:
+    """``uiogen build [NAME ...]``: compile the named observers (default: every generated built-in
+    one) into their project's ``build/extensions/``, or ``project``'s."""
+    names = (argv if argv is not None else sys.argv[1:]) or generated_names(project)
     for name in names:
-        path = build_extension(name)
+        config = observers.get(name, project=project)
+        path = build_extension(config)
         try:
-            shown = path.relative_to(ROOT)
+            shown = path.relative_to(config.workspace.root)
         except ValueError:
             shown = path
-        print(f"{name}: built {shown}")
+        print(f"{config.name}: built {shown}")
     return 0

@@ -6,11 +6,13 @@ observer for another car is a new TOML file, not new code.
 
 A configuration outside the package (a user's project) may name its model and parameter file
 by paths relative to its own folder (``model = "my_car.py"``: a module defining
-``MODEL = ModelDefinition(...)``, exactly as in ``model_defs/``); its generated C, design lock
-and extension go to ``generated_c/NAME/`` beside it.
+``MODEL = ModelDefinition(...)``, exactly as in ``model_defs/``). Where its design lock, C and
+extension go is its project's (:mod:`codegen.project.workspace`): its own folder, or the
+``project`` given to :func:`get`.
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import importlib
 import importlib.util
@@ -23,9 +25,9 @@ from ..errors import ModelDefinitionError, UnknownObserverError
 from ..model import ModelDefinition
 from . import columns
 from .settings import Rule, config_error, parse_table, suggest
-from ..design.sources import ROOT
+from .workspace import PACKAGE_ROOT, Workspace
 
-MODELS_DIR = ROOT / "model_defs"
+MODELS_DIR = PACKAGE_ROOT / "model_defs"
 PARAMS_DIR = MODELS_DIR / "params"
 OBSERVERS_DIR = MODELS_DIR / "observers"
 
@@ -58,7 +60,7 @@ class ObserverConfig:
     source: str = ""
     switching: dict = field(default_factory=dict)     # switched families: the rule, as data
 
-    home: str = ""          # folder of its generated_c/NAME/ outputs; "" = the package's generated_c/
+    project: str = ""       # its project folder (codegen.project.workspace); "" = the default rule
     # [data]: how a logged run's columns map onto the observer's inputs. Not part of to_json (so
     # not of the design hash): editing the map of a log never re-solves the design.
     column_map: object = None
@@ -70,7 +72,15 @@ class ObserverConfig:
 
     @property
     def builtin(self) -> bool:
-        return not self.home
+        """A built-in observer (``model_defs/observers/NAME.toml``)."""
+        return not self.source or Path(self.source).resolve().parent == OBSERVERS_DIR
+
+    @property
+    def workspace(self) -> Workspace:
+        """The folders its generated files go to (:mod:`codegen.project.workspace`)."""
+        if self.project:
+            return Workspace(Path(self.project))
+        return Workspace.for_observer_file(self.source, builtin=self.builtin)
 
     @property
     def model_path(self) -> Path:
@@ -169,7 +179,7 @@ def apply_overrides(data: dict, overrides: dict, source: str) -> dict:
     return data
 
 
-def _parse(path: Path, overrides: dict | None = None) -> ObserverConfig:
+def _parse(path: Path, overrides: dict | None = None, project: str | Path | None = None) -> ObserverConfig:
     from .. import families
     path = Path(path)
     try:
@@ -214,7 +224,8 @@ def _parse(path: Path, overrides: dict | None = None) -> ObserverConfig:
     config = ObserverConfig(path.stem, data["family"], data["model"], data["parameters"], data.get("polytope", ""),
                             data.get("rate_bounds", "exact"), float(data["sample_time"]),
                             dict(data.get("design", {})), dict(data.get("ui_filter", {})), doc.strip(), str(path),
-                            dict(data.get("switching", {})), "" if builtin else str(folder / "generated_c"),
+                            dict(data.get("switching", {})),
+                            str(Workspace.for_observer_file(path, project, builtin).root),
                             columns.parse(data["data"], source) if "data" in data else None)
     family.check_config(config, data)
     return config
@@ -229,16 +240,23 @@ def is_path(name: str) -> bool:
     return name.endswith(".toml") or "/" in name
 
 
-def get(name: str, overrides: dict | None = None) -> ObserverConfig:
-    """A built-in observer by name, or an observer file by path (``.toml``, anywhere on disk).
+def get(name, overrides: dict | None = None, project: str | Path | None = None) -> ObserverConfig:
+    """A built-in observer by name, or an observer file by path (``.toml``, anywhere on disk); a
+    configuration is returned as it is.
 
     ``overrides`` (dotted key -> value, :func:`apply_overrides`) changes settings of the file as
-    read, for studies such as ``uiogen sweep``; the file on disk is not touched.
+    read, for studies such as ``uiogen sweep``; the file on disk is not touched. ``project``: the
+    project folder its generated files go to, instead of the default
+    (:meth:`codegen.project.workspace.Workspace.for_observer_file`).
     """
+    if isinstance(name, ObserverConfig):
+        if overrides:
+            raise TypeError("overrides apply to an observer file as read; got a configuration")
+        return name if project is None else dataclasses.replace(name, project=str(Workspace.of(project).root))
     if is_path(str(name)):
-        return _parse(Path(name), overrides)
+        return _parse(Path(name), overrides, project)
     path = OBSERVERS_DIR / f"{name}.toml"
     if not path.is_file():
         raise UnknownObserverError(f"no observer named {name!r}; known: {', '.join(names()) or 'none'} "
                                    f"(or give the path of an observer .toml file)")
-    return _parse(path, overrides)
+    return _parse(path, overrides, project)

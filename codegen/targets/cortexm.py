@@ -12,7 +12,7 @@ import tempfile
 from pathlib import Path
 
 from ..errors import UnsupportedError
-from ..emit.toolchain import GENERATED_DIR, STRICT_CFLAGS, run
+from ..emit.toolchain import STRICT_CFLAGS, run
 
 CC = "arm-none-eabi-gcc"
 SIZE = "arm-none-eabi-size"
@@ -64,12 +64,12 @@ def measure(name: str, src_dir: Path, out_dir: Path, precision: str = "double") 
 
 def table(names=None) -> list:
     from . import float32 as prec
-    from ..extension.build import generated_names
+    from ..extension.build import generated_dir, generated_names
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in names or generated_names():
             for p in ("double", "float32"):
-                src = GENERATED_DIR / name if p == "double" else prec.emit_float(name, Path(tmp) / "src")
+                src = generated_dir(name) if p == "double" else prec.emit_float(name, Path(tmp) / "src")
                 out = Path(tmp) / f"{name}_{p}"
                 out.mkdir()
                 rows.append(measure(name, src, out, p))

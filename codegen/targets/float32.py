@@ -30,17 +30,15 @@ from ..emit import generate as emit
 from ..project import observer_file as observers
 from .. import pipeline
 from ..errors import CertificateError, ModelDefinitionError
-from ..design.sources import ROOT
 from ..emit.toolchain import STRICT_CFLAGS, compile_and_link
 
-FLOAT_DIR = ROOT / "build" / "float32"
 TOLERANCE = 1e-4          # largest deviation from the double step, relative to each signal's RMS
 CONTRACTION_KEYS = ("contraction_per_step", "certified_contraction", "ui_loop_contraction_per_step",
                     "contraction_bound_per_step")
 
 
 def _config(observer) -> observers.ObserverConfig:
-    return observer if isinstance(observer, observers.ObserverConfig) else observers.get(str(observer))
+    return observers.get(observer if isinstance(observer, observers.ObserverConfig) else str(observer))
 
 
 def certified_contraction(art: dict) -> float:
@@ -62,10 +60,11 @@ def certified_contraction(art: dict) -> float:
 
 
 def emit_float(observer, out_dir: Path | None = None) -> Path:
-    """The float32 C of ``observer`` in ``out_dir/NAME/`` (default build/float32/NAME/)."""
+    """The float32 C of ``observer`` in ``out_dir/NAME/`` (default: its project's
+    ``build/float32/NAME/``, :mod:`codegen.project.workspace`)."""
     config = _config(observer)
     b = pipeline.build(config)
-    target = Path(out_dir or FLOAT_DIR) / config.name
+    target = Path(out_dir or config.workspace.float32) / config.name
     target.mkdir(parents=True, exist_ok=True)
     for fname, text in emit.render(b, "float32").items():
         (target / fname).write_text(text)

@@ -24,7 +24,6 @@ from pathlib import Path
 
 from ..errors import ToolchainError, UnsupportedError
 from ..design.sources import ROOT
-from ..emit.toolchain import GENERATED_DIR
 
 DEVIATIONS = ROOT / "misra" / "kernel_deviations.toml"
 _LINE = re.compile(r"^(?P<file>[^:]+):(?P<line>\d+):(?P<id>[\w.-]+)$")
@@ -71,7 +70,10 @@ int main(void)
 
 def analyse(name: str, src_dir: Path | None = None) -> list:
     """cppcheck's MISRA findings for one observer: [(file name, line, rule)]."""
-    src_dir = Path(src_dir or GENERATED_DIR / name)
+    if src_dir is None:
+        from ..extension.build import generated_dir
+        src_dir = generated_dir(name)
+    src_dir = Path(src_dir)
     with tempfile.TemporaryDirectory() as tmp:
         use = Path(tmp, f"{name}_api_use.c")
         use.write_text(api_use(name, (src_dir / f"{name}.h").read_text()))

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..targets import cortexm
 from ..errors import UiogenError, UnsupportedError
-from ..emit.toolchain import GENERATED_DIR, run
+from ..emit.toolchain import run
 
 QEMU = "qemu-system-arm"
 MACHINE = "mps2-an386"
@@ -240,13 +240,13 @@ def compare(name: str, precision: str = "double", inputs: np.ndarray | None = No
     with the host build of the same precision: bit-identical outputs and status, or the largest
     difference (absolute, and in units in the last place of the host value)."""
     from ..targets import float32 as prec
-    from ..extension.build import load
+    from ..extension.build import generated_dir, load
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(work or tmp)
         if inputs is None:
             scenario, inputs = record_inputs(name, scenario)
         obs = load(name)
-        src = GENERATED_DIR / name if precision == "double" else prec.emit_float(name, work / "src")
+        src = generated_dir(name) if precision == "double" else prec.emit_float(name, work / "src")
         target = work / f"m4f_{precision}"
         target.mkdir(parents=True, exist_ok=True)
         elf = build_elf(name, src, inputs, target, precision)

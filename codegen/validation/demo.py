@@ -14,14 +14,12 @@ from ..design import lock as design_lock
 from .. import families
 from ..project import observer_file as observers
 from . import run as validate
-from ..emit.toolchain import GENERATED_DIR
 
 REAL_DATA_OBSERVER = "stanford_sideslip"
 REAL_DATA_OTHERS = ("ts_fuzzy_uio_stanford", "stanford_sideslip_nonlinear_tyre")     # same log, other families
 # of these, the ones whose family's demo scenarios are not theirs (shown on the real data only);
 # stanford_sideslip_nonlinear_tyre has no scenarios but its design figures are reported
 REAL_DATA_ONLY = ("ts_fuzzy_uio_stanford",)
-REAL_DATA_PLOT = GENERATED_DIR.parent / "build" / "stanford_sideslip_real_data.png"
 
 
 def main(json_output: bool = False) -> int:
@@ -34,8 +32,9 @@ def main(json_output: bool = False) -> int:
         scen = {s: validate.run_scenario(config, s, plant) for s in family.demo_scenarios}
         report[name] = {"family": config.family, **family.demo_report(art), "scenarios": scen}
     real, others = run_real_data()
-    REAL_DATA_PLOT.parent.mkdir(exist_ok=True)
-    validate.plot_data(real, str(REAL_DATA_PLOT))
+    plot = observers.get(REAL_DATA_OBSERVER).workspace.plots / f"{REAL_DATA_OBSERVER}_real_data.png"
+    plot.parent.mkdir(parents=True, exist_ok=True)
+    validate.plot_data(real, str(plot))
     if json_output:
         print(json.dumps({"real_data": real_data_json(real, others), **{n: {**{k: v for k, v in e.items() if k != "scenarios"},
                               "scenarios": {s: json.loads(validate.to_json(r)) for s, r in e["scenarios"].items()}}
@@ -50,7 +49,7 @@ def main(json_output: bool = False) -> int:
             print("     " + validate.format_table(r).replace("\n", "\n     "))
     for line in real_data_lines(real, others):
         print(line)
-    print(f"   plot: {REAL_DATA_PLOT}")
+    print(f"   plot: {plot}")
     return 0
 
 

@@ -60,7 +60,7 @@ def run(config, path) -> dict:
     if cmap is None:
         raise ConfigurationError(f"{config.source}: logged runs of this observer need a [data] table mapping the log's "
                                  f"columns to its inputs (docs/validation.md, 'Your own logs')", source=config.source)
-    obs = load(config.source if not config.builtin else config.name)
+    obs = load(config)
     model = config.load_model()
     missing = [n for n in obs.input_names if n not in cmap.inputs]
     if missing:

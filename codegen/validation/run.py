@@ -114,7 +114,7 @@ def shared_log_inputs(input_names) -> np.ndarray | None:
                                 dtype=np.float64)
 
 
-def run_data(name: str, path: str = "stanford") -> dict:
+def run_data(name, path: str = "stanford") -> dict:
     """Run the compiled step over a logged run, beside the baselines.
 
     An observer file with a ``[data]`` table maps the log's own columns (:mod:`codegen.validation.logs`);
@@ -130,11 +130,11 @@ def run_data(name: str, path: str = "stanford") -> dict:
     if config.column_map is not None:
         from . import logs
         return logs.run(config, path)
-    obs = load(name)
+    obs = load(config)
     run = stanford.load(path, sample_time=obs.sample_time)   # a log at another rate is refused, not run
     missing = [c for c in obs.input_names if c not in DATA_COLUMNS]
     if missing:
-        raise SampleError(f"observer {name!r} needs {', '.join(missing)}, which the log does not record "
+        raise SampleError(f"observer {config.name!r} needs {', '.join(missing)}, which the log does not record "
                           f"(it has delta, r, a_y, v_x); use an observer designed for this data, e.g. "
                           f"stanford_sideslip")
     inputs = np.column_stack([getattr(run, DATA_COLUMNS[c]) for c in obs.input_names])
