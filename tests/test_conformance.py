@@ -17,9 +17,13 @@ import textwrap
 import numpy as np
 import pytest
 
-from codegen import cli, conformance, design_lock, emit, observers, pipeline
-from codegen.errors import ConformanceError, GenerationError
-from codegen.extension import extension_dir, load
+from codegen import cli, pipeline
+from codegen.design import lock as design_lock
+from codegen.emit import generate as emit
+from codegen.errors import ConformanceError
+from codegen.extension import conformance
+from codegen.extension.build import build_extension, load
+from codegen.project import observer_file as observers
 
 BUILTIN = observers.names()
 
@@ -118,7 +122,7 @@ def test_a_kernel_that_swaps_two_inputs_is_refused(known_input_project, capsys):
     config = observers.get(str(known_input_project))
     folder = design_lock.path(config).parent
     kernel = folder / "steered_kernel.c"
-    installed = next(extension_dir(config).glob("_steered.*"))
+    installed = next(config.workspace.extensions.glob("_steered.*"))
     before = installed.read_bytes()
     original = kernel.read_text()
     try:
@@ -133,7 +137,6 @@ def test_a_kernel_that_swaps_two_inputs_is_refused(known_input_project, capsys):
         assert "Traceback" not in err
         assert installed.read_bytes() == before          # the previous extension is left as it was
         with pytest.raises(ConformanceError, match="disagrees"):
-            from codegen.extension import build_extension
             build_extension(config)
     finally:
         kernel.write_text(original)

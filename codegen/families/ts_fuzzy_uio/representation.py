@@ -10,7 +10,7 @@ derives, with no hand-written split:
   of G_v;
 * the premise variables: the distinct non-constant factors of A_v and G_v in the measured
   signals (for Nguyen et al. 2021: 1/v_x and r), with ranges over the compact state set D_x (sound
-  interval bounds, :mod:`codegen.bounds`), 2^p sector vertices and product memberships;
+  interval bounds, :mod:`codegen.representation.bounds`), 2^p sector vertices and product memberships;
 * Euler discretization at T_s (eq. (9)): A = I + T_s A_v, D = T_s D_v, f = T_s f_v, G = T_s G_v;
 * sound bounds of the Jacobian of phi over D_x (Assumption 1, eq. (14)); entries of zero width
   collapse, so the DMVT vertex set V_phi has only the vertices that matter.
@@ -24,13 +24,13 @@ from functools import cached_property
 import numpy as np
 import sympy as sp
 
-from ... import canonical
-from ...bounds import RangeBound, range_bound
-from ...stepgen import CASADI_MODULES
+from ...design import canonical
+from ...representation.bounds import RangeBound, range_bound
+from ...emit.stepgen import CASADI_MODULES
 from ...errors import ModelDefinitionError, NotAffineError, SchedulingBoundsError
 from ...model import ModelDefinition, ParameterSet, parameter_substitution
-from ...polytope import (Premise, affine_decomposition, memberships, nonlinear_factors,
-                       sector_weights_product, vertex_matrices)
+from ...representation.polytope import (Premise, affine_decomposition, memberships, nonlinear_factors,
+                                        sector_weights_product, vertex_matrices)
 
 
 @dataclass(frozen=True)
