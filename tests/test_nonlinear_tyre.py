@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from codegen import cli, families, observers
+from codegen import cli, families
+from codegen.project import observer_file as observers
 from codegen.errors import CertificateError, ConfigurationError
 from codegen.families.nonlinear_tyre_observer import design as dsn
 from codegen.validation import stanford
@@ -27,6 +28,12 @@ FAMILY = families.get("nonlinear_tyre_observer")
 @pytest.fixture(scope="module")
 def built():
     return FAMILY.build(observers.get(NAME))
+
+
+def _lock() -> dict:
+    """The committed design lock of the observer."""
+    from codegen.design import lock
+    return json.loads(lock.path(observers.get(NAME)).read_text())
 
 
 def _run():
@@ -128,7 +135,7 @@ def test_gains_are_designed_and_certified_independently(built):
 
 def test_given_gains_are_certified_not_designed():
     cfg = observers.get(NAME)
-    art = json.loads((cfg.folder.parent.parent / "generated_c" / NAME / f"{NAME}_design.json").read_text())
+    art = _lock()
     L = np.array(art["L"])
     given = dict(zip(("gain_vy_ay", "gain_vy_r", "gain_r_ay", "gain_r_r"), L.ravel().tolist()))
     b = FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, **given}))
@@ -144,7 +151,7 @@ def test_given_gains_are_certified_not_designed():
 
 def test_check_gains_cli(tmp_path, capsys):
     cfg = observers.get(NAME)
-    art = json.loads((cfg.folder.parent.parent / "generated_c" / NAME / f"{NAME}_design.json").read_text())
+    art = _lock()
     good, bad, wrong = tmp_path / "good.json", tmp_path / "bad.json", tmp_path / "wrong.json"
     good.write_text(json.dumps({"L": art["L"]}))
     bad.write_text(json.dumps({"L": [[0.0, 0.0], [0.0, 0.0]]}))
@@ -168,7 +175,7 @@ def test_full_sliding_cannot_be_certified():
 
 
 def test_c_step_matches_reference_with_the_kinematic_fallback(built):
-    from codegen.extension import load
+    from codegen.extension.build import load
     obs = load(NAME)
     run = _run()
     inputs = np.column_stack([run.delta, run.ax, run.ay, run.yaw_rate, run.vx])[10500:11700]   # the 110 s peak
@@ -188,7 +195,7 @@ def test_c_step_matches_reference_with_the_kinematic_fallback(built):
 
 
 def test_real_log_figures_evaluation_part_first():
-    from codegen import validate
+    from codegen.validation import run as validate
     _run()
     res = validate.run_data(NAME, "stanford")
     sp_, base = res["splits"], res["baselines"]
@@ -259,13 +266,13 @@ def test_the_starter_designs_its_own_gains_for_another_car(tmp_path, capsys):
     assert cli.main(["design", str(toml), "--json"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["gains"] == "designed" and s["contraction_per_step"] < 1 and s["gamma_deg"] > 0
-    stanford_L = json.loads((observers.get(NAME).folder.parent.parent / "generated_c" / NAME
-                             / f"{NAME}_design.json").read_text())["L"]
+    stanford_L = _lock()["L"]
     assert not np.allclose(s["L"], stanford_L, rtol=0.05)     # its own gains, not the Stanford car's
 
 
 def test_demo_real_data_table_headlines_the_evaluation_part():
-    from codegen import demo, docs
+    from codegen.validation import demo
+    from codegen.tools import docs
     _run()
     real, others = demo.run_real_data()
     j = demo.real_data_json(real, others)
@@ -285,7 +292,7 @@ def test_bench_reports_the_observer_within_the_issue_target():
     # uiogen bench iterates observers.names(): the design benchmark reads this family's settings
     # from the build itself (it has no separate design record), and the batch loop of the C step
     # stays within the issue's 500 ns/sample
-    from codegen import bench
+    from codegen.tools import bench
     assert NAME in observers.names()
     r = bench.bench_observer(NAME)
     assert r["family"] == "nonlinear_tyre_observer"
@@ -298,13 +305,12 @@ def test_bench_reports_the_observer_within_the_issue_target():
 def test_parameter_range_record_reproduces():
     """docs/data/nonlinear_tyre_range.json (the accuracy across the certified parameter range) at its
     nominal point and one corner, re-run."""
-    from codegen import docs
+    from codegen.tools import docs
     from codegen.families.nonlinear_tyre_observer import fit
     _run()
     rec = json.loads((docs.DATA / "nonlinear_tyre_range.json").read_text())
     nominal = next(p for p in rec["points"] if p["stiffness_factor"] == 1.0 and p["friction_factor"] == 1.0)
     assert nominal["evaluation"] == pytest.approx(0.2691, abs=5e-4)
     assert all(p["evaluation"] >= nominal["evaluation"] - 0.03 for p in rec["points"])
-    art = json.loads((observers.get(NAME).folder.parent.parent / "generated_c" / NAME / f"{NAME}_design.json")
-                     .read_text())
+    art = _lock()
     assert rec["L"] == art["L"]

@@ -40,10 +40,10 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
-from ...artifact import artifact_head, significant, solver_certificate
+from ...certificate.artifact import artifact_head, significant, solver_certificate
 from ...model import load_parameters
-from ...settings import Rule, parse_settings, setting
-from ...stepgen import CASADI_MODULES
+from ...project.settings import Rule, parse_settings, setting
+from ...emit.stepgen import CASADI_MODULES
 from . import design as dsn
 from .representation import TyreRepresentation, represent
 

@@ -39,9 +39,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...canonical import decimal_round
+from ...design.canonical import decimal_round
 from ...errors import CertificateError, SolverError
-from ...lmi import LMIProblem, bmat, check_blocks, committed_data, objective_bound
+from ...design.lmi import LMIProblem, bmat, check_blocks, committed_data, objective_bound
 
 DEG = 180.0 / np.pi
 CHANNELS = ("force_front", "force_rear", "ay", "r", "euler_vy", "euler_r")

@@ -7,7 +7,7 @@ Phi_k with constant coefficients, and Phi_k depends on the unmeasured v_y only t
 axle's slip t_k (``AXLES``).
 
 The slope bound of an axle (theta_k = v_x dPhi_k/dv_y) on the set |t_k| <= rho t_sl,k is the
-product of two factors bounded soundly on their own (interval arithmetic, :mod:`codegen.bounds`):
+product of two factors bounded soundly on their own (interval arithmetic, :mod:`codegen.representation.bounds`):
 
 * the law's slope dF/dt written in the *normalized* slip tau = t / t_sl (so the set is the box
   |tau| <= rho whatever the capacity; the Fiala slope is C (1 - |tau|)^2), over tau and the
@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
-from ...bounds import range_bound
+from ...representation.bounds import range_bound
 from ...errors import CertificateError, ModelDefinitionError, SchedulingBoundsError
 from ...model import parameter_substitution
 

@@ -19,7 +19,8 @@ import sys
 
 import numpy as np
 
-from ... import design_lock, observers
+from ...design import lock as design_lock
+from ...project import observer_file as observers
 from ...model import load_parameters
 from ...validation import stanford
 
