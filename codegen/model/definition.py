@@ -179,6 +179,7 @@ class ParameterSet:
     plant: Mapping[str, float] = field(default_factory=dict)   # truth-plant-only values ([plant])
     state_bounds: Mapping[str, tuple] = field(default_factory=dict)   # [state_bounds] NAME = [min, max]
     inputs: Mapping[str, dict] = field(default_factory=dict)   # [inputs.NAME] min, max, bandwidth (excitation)
+    accepted: tuple = ()      # [plausibility] accept: values right although they look implausible
 
 
 @dataclass(frozen=True)
@@ -242,11 +243,13 @@ class LPVModel:
 # Tables of a parameter file and the keys of a [scheduling.NAME] table (derivative_bounds is read by
 # codegen.relative_degree.derivative_boxes; exogenous and premise_bounds by codegen.interconnected).
 PARAMETER_TABLES = ("parameters", "scheduling", "meta", "plant", "state_bounds", "exogenous", "premise_bounds",
-                    "inputs")
+                    "inputs", "plausibility")
 INPUT_KEYS = {"min": Rule(float, required=True), "max": Rule(float, required=True),
               "bandwidth": Rule(float, gt=0, doc="Hz, highest frequency of the excitation signal")}
 SCHEDULING_KEYS = {"min": Rule(float), "max": Rule(float), "rate_min": Rule(float), "rate_max": Rule(float),
                    "derivative_bounds": Rule(list, doc="[[min, max], ...] of the derivatives of order 2, 3, ...")}
+PLAUSIBILITY_KEYS = {"accept": Rule(list, items=Rule(str), doc="parameters whose values are right although "
+                                                               "they look implausible (codegen.model.dimensions)")}
 _NUMBER = Rule(float)
 _PAIR = Rule(list, items=Rule(float), allowed="[min, max], two finite numbers")
 
@@ -344,7 +347,14 @@ def load_parameters(path: str | Path) -> ParameterSet:
         if not table["min"] < table["max"]:
             raise config_error(str(path), f"inputs.{key}", "max", table["max"], f"must exceed min = {table['min']}")
         inputs[key] = table
-    return ParameterSet(str(path), values, boxes, meta, plant, state_bounds, inputs)
+    plausibility = parse_table(_table(data, "plausibility", path), PLAUSIBILITY_KEYS, source=str(path),
+                               section="plausibility")
+    accepted = tuple(plausibility.get("accept", ()))
+    stray = [a for a in accepted if a not in values]
+    if stray:
+        raise config_error(str(path), "plausibility", "accept", stray,
+                           f"names of [parameters] ({', '.join(values)})", suggest(stray[0], list(values)))
+    return ParameterSet(str(path), values, boxes, meta, plant, state_bounds, inputs, accepted)
 
 
 def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str) -> sp.Matrix:
@@ -456,6 +466,8 @@ def parameter_substitution(model: ModelDefinition, params: ParameterSet) -> dict
             f"parameter file {params.source} sets {', '.join(unknown)}, which model "
             f"{model.name!r} does not use (declared: {', '.join(needed)})")
     check_parameter_values(model, params.values, params.source)
+    from .dimensions import check_plausibility
+    check_plausibility(model, params.values, params.source, params.accepted)
     return {p: params.values[str(p)] for p in model.parameters}
 
 
