@@ -21,12 +21,18 @@ def build(config: ObserverConfig, tol: float | None = None, fresh: bool = False)
         if data is not None:
             where = str(design_lock.path(config))
             with lmi.replaying(design_lock.solutions(data, where), source=where):
-                return families.get(config.family).build(config, None)
-    return families.get(config.family).build(config, tol)
+                return _build(config, None)
+    return _build(config, tol)
+
+
+def _build(config: ObserverConfig, tol):
+    """The family's stages, and the unknown inputs of ``[substitute]`` recovered after its step."""
+    from .families.substituted import wrap
+    return wrap(families.get(config.family).build(config, tol))
 
 
 def solve(config: ObserverConfig, tol: float | None = None) -> tuple:
     """A fresh design of ``config`` and the LMI solutions it solved: (build, [SolveRecord])."""
     with lmi.recording() as ledger:
-        b = families.get(config.family).build(config, tol)
+        b = _build(config, tol)
     return b, list(ledger.records)

@@ -31,7 +31,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelDefinitionError, UnsupportedError
-from ..emit.stepgen import CASADI_MODULES
+from ..emit.stepgen import lambdify
 
 SUBSTEPS = 10
 CACHE_ENV = "UIOGEN_PLANT_CACHE"
@@ -66,7 +66,7 @@ def _casadi_rhs(definition, params: dict):
         raise UnsupportedError(f"campaign plants do not support derived inputs (model {definition.name!r})")
     args = [*definition.states, *definition.known_inputs, *definition.unknown_inputs,
             *(s.symbol for s in definition.scheduling), *definition.parameters]
-    fn = sp.lambdify(args, list(sp.Matrix(definition.dynamics)), CASADI_MODULES)
+    fn = lambdify(args, list(sp.Matrix(definition.dynamics)))
     return fn, names
 
 
@@ -203,7 +203,7 @@ def _banked_road_step(spec: PlantSpec) -> ca.Function:
     fn, pnames = _casadi_rhs(d, spec.params)
     np_ = len(pnames)
     args = [*d.states, *d.known_inputs, *d.unknown_inputs, *(s.symbol for s in d.scheduling), *d.parameters]
-    acc_fn = sp.lambdify(args, spec.extra, CASADI_MODULES)
+    acc_fn = lambdify(args, spec.extra)
     x = ca.SX.sym("x", 5)                  # v_y, r, phi, phi_dot, i_r
     p = ca.SX.sym("p", 7)
     theta = ca.SX.sym("theta", len(spec.param_names))

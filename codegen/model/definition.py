@@ -357,8 +357,9 @@ def load_parameters(path: str | Path) -> ParameterSet:
     return ParameterSet(str(path), values, boxes, meta, plant, state_bounds, inputs, accepted)
 
 
-def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str) -> sp.Matrix:
-    """Jacobian of ``expr_column`` w.r.t. ``symbols``, checked to be constant in them."""
+def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str, hint=None) -> sp.Matrix:
+    """Jacobian of ``expr_column`` w.r.t. ``symbols``, checked to be constant in them (``hint(symbol)``:
+    a sentence on how to make it so)."""
     if not symbols:
         return sp.zeros(expr_column.shape[0], 0)
     jac = expr_column.jacobian(sp.Matrix(symbols))
@@ -366,7 +367,8 @@ def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str) 
         if entry.free_symbols & set(symbols):
             raise NotAffineError(
                 f"model {model!r}: row {i} is not affine in {what} (d/d{symbols[j]} = {entry} "
-                f"still depends on {', '.join(sorted(map(str, entry.free_symbols & set(symbols))))})")
+                f"still depends on {', '.join(sorted(map(str, entry.free_symbols & set(symbols))))})"
+                + (f"; {hint(symbols[j])}" if hint is not None else ""))
     return jac
 
 
@@ -495,11 +497,12 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     A = _affine_part(f, x, "the states", model.name)
     B = _affine_part(f, u, "the known inputs", model.name)
     Bw = _affine_part(f, w, "the derived inputs", model.name)
-    D = _affine_part(f, d, "the unknown inputs", model.name)
+    from .substitution import offer
+    D = _affine_part(f, d, "the unknown inputs", model.name, hint=lambda s: offer(model, s))
     C = _affine_part(h, x, "the states", model.name)
     Du = _affine_part(h, u, "the known inputs", model.name)
     Duw = _affine_part(h, w, "the derived inputs", model.name)
-    Dd = _affine_part(h, d, "the unknown inputs", model.name)
+    Dd = _affine_part(h, d, "the unknown inputs", model.name, hint=lambda s: offer(model, s))
     col = lambda syms: sp.Matrix(len(syms), 1, list(syms))   # a (k, 1) column, also for k = 0
     rest = sp.simplify(f - A * col(x) - B * col(u) - D * col(d)
                        - (Bw * sp.Matrix(w) if w else sp.zeros(*f.shape))) if x else f

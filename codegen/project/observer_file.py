@@ -40,6 +40,8 @@ COMMON_KEYS = {
     "sample_time": Rule(float, gt=0, required=True, doc="s"),
     "design": Rule(dict),
     "data": Rule(dict, doc="the column map of a logged run (uiogen validate --data; codegen.project.columns)"),
+    "substitute": Rule(dict, doc="{UNKNOWN_INPUT = \"NEW_NAME\"}: design for the value of the one expression an "
+                                 "unknown input enters through (codegen.model.substitution)"),
 }
 
 
@@ -64,6 +66,8 @@ class ObserverConfig:
     # [data]: how a logged run's columns map onto the observer's inputs. Not part of to_json (so
     # not of the design hash): editing the map of a log never re-solves the design.
     column_map: object = None
+    # [substitute]: unknown inputs designed for through the value of their carrier expression
+    substitute: dict = field(default_factory=dict)
 
     @property
     def folder(self) -> Path:
@@ -105,6 +109,23 @@ class ObserverConfig:
             raise ModelDefinitionError(f"{self.model_path} does not define MODEL = ModelDefinition(...)")
         return model
 
+    def design_model(self) -> ModelDefinition:
+        """The model the family designs with: :meth:`load_model`, with the unknown inputs of the
+        ``[substitute]`` table replaced by the values of their carriers (:meth:`substitutions`)."""
+        return self._substituted()[0]
+
+    def substitutions(self) -> list:
+        """[:class:`~codegen.model.substitution.Substitution`] of the ``[substitute]`` table."""
+        return self._substituted()[1]
+
+    def _substituted(self) -> tuple:
+        model = self.load_model()
+        if not self.substitute:
+            return model, []
+        from ..model import load_parameters
+        from ..model.substitution import apply
+        return apply(model, load_parameters(self.parameter_path), self.substitute, self.source)
+
     @property
     def parameter_path(self) -> Path:
         return _parameter_file(self.parameters, self.folder)
@@ -114,7 +135,8 @@ class ObserverConfig:
                 "parameters": self.parameters, "polytope": self.polytope,
                 "rate_bounds": self.rate_bounds, "sample_time": self.sample_time,
                 "design": dict(self.design), "ui_filter": dict(self.ui_filter),
-                **({"switching": self.switching} if self.switching else {})}
+                **({"switching": self.switching} if self.switching else {}),
+                **({"substitute": dict(self.substitute)} if self.substitute else {})}
 
 
 def _model_file(model: str, folder: Path) -> Path:
@@ -226,7 +248,8 @@ def _parse(path: Path, overrides: dict | None = None, project: str | Path | None
                             dict(data.get("design", {})), dict(data.get("ui_filter", {})), doc.strip(), str(path),
                             dict(data.get("switching", {})),
                             str(Workspace.for_observer_file(path, project, builtin).root),
-                            columns.parse(data["data"], source) if "data" in data else None)
+                            columns.parse(data["data"], source) if "data" in data else None,
+                            dict(data.get("substitute", {})))
     family.check_config(config, data)
     return config
 

@@ -512,7 +512,7 @@ def build(config, tol: float | None = None, lpv: LPVModel | None = None) -> Alge
         settings = replace(settings, tol=tol)
     t0 = time.perf_counter()
     if lpv is None:
-        lpv = instantiate(config.load_model(), load_parameters(config.parameter_path))
+        lpv = instantiate(config.design_model(), load_parameters(config.parameter_path))
     if any(s.derived is not None for s in lpv.definition.scheduling):
         raise ModelDefinitionError(f"{config.source}: derived scheduling signals are not supported by this family")
     rdeg.check_structure(lpv)          # before anything evaluates the model's matrices

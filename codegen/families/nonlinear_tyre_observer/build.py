@@ -43,7 +43,7 @@ import sympy as sp
 from ...certificate.artifact import artifact_head, significant, solver_certificate
 from ...model import load_parameters
 from ...project.settings import Rule, parse_settings, setting
-from ...emit.stepgen import CASADI_MODULES
+from ...emit.stepgen import lambdify
 from . import design as dsn
 from .representation import TyreRepresentation, represent
 
@@ -112,10 +112,9 @@ class NonlinearTyreSettings:
 # --- the step ----------------------------------------------------------------------------------------
 
 def _functions(rep: TyreRepresentation, xp):
-    mods = CASADI_MODULES if xp is ca else "numpy"
     args = rep.symbols
-    return ([sp.lambdify(args, e, mods) for e in rep.f], sp.lambdify(args, rep.a_y, mods),
-            [sp.lambdify(args, rep.rho * e, mods) for e in rep.sliding], [sp.lambdify(args, t, mods) for t in rep.slips])
+    return ([lambdify(args, e, xp) for e in rep.f], lambdify(args, rep.a_y, xp),
+            [lambdify(args, rep.rho * e, xp) for e in rep.sliding], [lambdify(args, t, xp) for t in rep.slips])
 
 
 def step_parts(rep, L, Ts, z, u, y, rho, fns, xp=np):

@@ -26,7 +26,7 @@ import sympy as sp
 
 from ...design import canonical
 from ...representation.bounds import RangeBound, range_bound
-from ...emit.stepgen import CASADI_MODULES
+from ...emit.stepgen import lambdify
 from ...errors import ModelDefinitionError, NotAffineError, SchedulingBoundsError
 from ...model import ModelDefinition, ParameterSet, parameter_substitution
 from ...representation.polytope import (Premise, affine_decomposition, memberships, nonlinear_factors,
@@ -104,12 +104,11 @@ class TSFuzzyModel:
     def functions(self, xp) -> tuple:
         """(f, premises, phi) as callables of (measured..., u...) / (x..., u...) for numpy or CasADi."""
         import casadi as ca
-        mods = CASADI_MODULES if xp is ca else "numpy"
         meas_args = (*self.measured, *self.definition.known_inputs)
         state_args = (*self.definition.states, *self.definition.known_inputs)
-        return ([sp.lambdify(meas_args, e, mods) for e in self.f],
-                [sp.lambdify(meas_args, p.expr, mods) for p in self.premises],
-                [sp.lambdify(state_args, e, mods) for e in self.phi])
+        return ([lambdify(meas_args, e, xp) for e in self.f],
+                [lambdify(meas_args, p.expr, xp) for p in self.premises],
+                [lambdify(state_args, e, xp) for e in self.phi])
 
     @cached_property
     def numpy_functions(self) -> tuple:
@@ -168,8 +167,11 @@ def split_consequents(model: ModelDefinition, subs: dict) -> dict:
     F = sp.Matrix(model.dynamics).subs(subs)
     Dv = F.jacobian(sp.Matrix(d)) if d else sp.zeros(len(x), 0)
     if any(e.free_symbols for e in Dv):
+        from ...model.substitution import offer
+        nonlinear = [u for j, u in enumerate(d) if any(u in e.free_symbols for e in Dv[:, j])]
         raise NotAffineError(f"model {model.name!r}: the unknown inputs must enter with a constant matrix "
-                             f"(D_v depends on {sorted(map(str, set().union(*(e.free_symbols for e in Dv))))})")
+                             f"(D_v depends on {sorted(map(str, set().union(*(e.free_symbols for e in Dv))))})"
+                             + "".join(f"; {offer(model, u)}" for u in nonlinear))
     drift = sp.expand(F - Dv * sp.Matrix(d))
     Av = sp.zeros(len(x), len(x))
     fv = sp.zeros(len(x), 1)
