@@ -13,7 +13,7 @@
     uiogen export NAME --format fmu --out FILE.fmu [--project DIR]
 
 ``--project DIR``: the project folder whose ``generated_c/`` and ``build/`` the command reads and
-writes (:mod:`codegen.project.workspace`); default: the observer file's folder, or for a built-in
+writes (:mod:`python_bindings.workspace`); default: the observer file's folder, or for a built-in
 observer the source checkout (installed: the current directory).
 """
 from __future__ import annotations

@@ -146,8 +146,9 @@ class Family(abc.ABC):
         """model -> representation -> design -> certificates -> discrete step."""
 
     def validate(self, config, scenario, plant: str = "nominal", duration: float | None = None,
-                 seed: int = 0, progress=None) -> dict:
-        """Run the compiled step on a simulated plant: {"observer": {SIGNAL: stats}, "baselines", ...}."""
+                 seed: int = 0, progress=None, observer=None) -> dict:
+        """Run the compiled step (``observer``: a compiled observer of ``config``, default its
+        extension) on a simulated plant: {"observer": {SIGNAL: stats}, "baselines", ...}."""
         raise UnsupportedError(f"family {self.name!r} has no simulated validation scenarios")
 
     def format_validation(self, result: dict) -> str:

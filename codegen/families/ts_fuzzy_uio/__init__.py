@@ -26,9 +26,9 @@ class TSFuzzyUIO(Family):
         from .build import build
         return build(config, tol)
 
-    def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None) -> dict:
+    def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None, observer=None) -> dict:
         from .validation import run
-        return run(config, scenario, plant, duration, progress=progress)
+        return run(config, scenario, plant, duration, progress=progress, observer=observer)
 
     def demo_plant(self, config) -> str:
         """An observer designed for a CommonRoad car runs on the multi-body plant, the counterpart of
