@@ -134,3 +134,9 @@ class UnknownFamilyError(ConfigurationError):
 class RepresentationError(ModelDefinitionError):
     """A representation of the model (a reduced polytope, a TS form) is too far from the model,
     or too large, to be designed with; the message names the better choice."""
+
+
+class ConformanceError(UiogenError, RuntimeError):
+    """A compiled step disagrees with its model (signal layout, or numbers on samples across the
+    declared boxes): ``uiogen build`` does not install it; the message names the signal and the
+    sample (:mod:`codegen.conformance`)."""

@@ -128,7 +128,9 @@ def test_outputs_must_measure_states(tsb):
 def test_missing_state_bounds_is_a_clear_error(tsb):
     params = tsb.ts.parameters
     p = dataclasses.replace(params, state_bounds={"v_x": (5.0, 30.0)})
-    with pytest.raises(SchedulingBoundsError, match="v_y has no bound"):
+    # every missing bound in one run, each with the table that declares it
+    with pytest.raises(SchedulingBoundsError, match=r"v_y, r have no bound .* add v_y = \[min, max\] under "
+                                                    r"\[state_bounds\]; r = \[min, max\] under \[state_bounds\]"):
         ts_fuzzy.build(tsb.ts.definition, p, 0.01)
 
 

@@ -100,7 +100,7 @@ def render(b: ObserverBuild, precision: str = "double") -> dict:
     if fp["suffix"]:
         what = what[:-1] + f", {fp['real']} (casadi_real) variant."
     kernel_c, kernel_h = banner(b, what) + "\n" + kernel_c, banner(b, what) + "\n" + kernel_h
-    state, inputs, outputs = b.signal_docs()
+    state, inputs, outputs = signal_fields(b, f)
     nu, ny = b.nu, b.ny
     notes = b.emit_notes()
     api = f"C API of observer {b.name}." if not fp["suffix"] else f"C API of observer {b.name}, {fp['real']} variant."
@@ -125,6 +125,43 @@ def render(b: ObserverBuild, precision: str = "double") -> dict:
         f"{name}.h": render_template("observer.h.j2", **ctx),
         f"{name}.c": render_template("observer.c.j2", **ctx),
     }
+
+
+def _fields(b: ObserverBuild, what: str, names: list, docs: list) -> list:
+    """[{name, doc}] in the order of ``names`` (the one source of the signals' names and order);
+    ``docs`` only annotates them."""
+    by_name = {d["name"]: d["doc"] for d in docs}
+    stray = [n for n in by_name if n not in names]
+    if stray or len(set(names)) != len(names):
+        raise GenerationError(f"{b.name}: the {what} docs of family {b.config.family!r} name {stray or names}, which are not "
+                              f"(uniquely) among its {what} signals {list(names)}")
+    units = {}
+    try:
+        units = dict(b.config.load_model().units)
+    except UiogenError:
+        pass
+    return [{"name": n, "doc": by_name.get(n) or f"{what} {n} [{units.get(n, '-')}]"} for n in names]
+
+
+def signal_fields(b: ObserverBuild, f) -> tuple:
+    """(state, inputs, outputs) fields of the C API from the build's signal names, checked against
+    the step function's arguments: the flat input row [u, y, rho] must give each argument exactly
+    its entries, or the C would read past the row (or leave entries unread)."""
+    state_docs, input_docs, output_docs = b.signal_docs()
+    state = _fields(b, "state", list(b.state_names), state_docs)
+    inputs = _fields(b, "input", list(b.input_names), input_docs)
+    outputs = state if list(b.output_names) == list(b.state_names) else \
+        _fields(b, "output", list(b.output_names), output_docs)
+    expected = [len(state), b.nu, b.ny, len(inputs) - b.nu - b.ny]
+    got = [int(f.numel_in(i)) for i in range(4)]
+    if got != expected or min(expected) < 0:
+        raise GenerationError(f"{b.name}: the step's arguments (z, u, y, rho) have {got} entries, the signals give "
+                              f"{expected} (state {len(state)}, inputs {', '.join(b.input_names)} with nu = {b.nu}, "
+                              f"ny = {b.ny}): the family's signal names do not describe its step")
+    if list(b.output_names) != list(b.state_names)[len(state) - len(outputs):]:
+        raise GenerationError(f"{b.name}: the outputs {list(b.output_names)} are not the last entries of the state "
+                              f"{list(b.state_names)}")
+    return state, inputs, outputs
 
 
 @contextlib.contextmanager

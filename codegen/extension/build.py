@@ -13,6 +13,9 @@ Where things go: the observer's project (:mod:`python_bindings.workspace`): the 
 from __future__ import annotations
 
 import hashlib
+import importlib.util
+import json
+import os
 import sys
 import sysconfig
 import tempfile
@@ -72,16 +75,57 @@ def observer_sources(observer) -> list:
     return [d / f"{name}_kernel.c", d / f"{name}.c"]
 
 
+def check_generated(config: observers.ObserverConfig) -> str:
+    """The lock text of ``config`` after checking that its generated folder is exactly what
+    ``uiogen generate`` wrote from the current design and toolchain (the stamp,
+    :func:`codegen.emit.stamp_matches`): an edited, truncated or stale C file is never compiled.
+
+    Raises
+    ------
+    UnknownObserverError
+        nothing generated yet.
+    GenerationError
+        the folder does not match its stamp (names the command that regenerates it).
+    """
+    from ..emit import generate as emit
+    from ..errors import GenerationError
+    name = config.name
+    src_dir = generated_dir(config)
+    how = config.source if not config.builtin else name
+    if not (src_dir / f"{name}.h").is_file():
+        raise UnknownObserverError(f"observer {name!r} has not been generated (no {src_dir / (name + '.h')}); "
+                                   f"run `uiogen generate {how}`")
+    lock = design_lock.path(config)
+    try:
+        lock_text = lock.read_text()
+    except OSError:
+        raise UnknownObserverError(f"observer {name!r} has no design lock {lock}; run `uiogen generate {how}`") from None
+    if not emit.stamp_matches(src_dir, emit.emission_inputs(config, lock_text)):
+        raise GenerationError(f"{src_dir} does not match its stamp {emit.STAMP}: its C was edited, or the design, "
+                              f"model or toolchain changed since it was generated; run `uiogen generate {how}` "
+                              f"(the C is never compiled as found)")
+    return lock_text
+
+
 def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | None = None,
-                    suffix: str = "") -> Path:
-    """Compile observer ``observer`` (a name, an observer-file path or a config); returns the
-    path of the extension module."""
+                    suffix: str = "", log=None) -> Path:
+    """Compile observer ``observer`` (a name, an observer-file path or a config) and install the
+    extension module only if its step conforms to the model; returns the installed path.
+
+    1. The generated folder matches its stamp (:func:`check_generated`).
+    2. The C is compiled into a temporary folder beside the target.
+    3. The module is loaded from there and checked against independent evaluations of its model
+       (:func:`codegen.conformance.check`: signal layout, then numbers across every declared box).
+    4. Only then it replaces the installed module (one rename): a failed check leaves the previous
+       extension as it was and raises :class:`~codegen.errors.ConformanceError`.
+    """
+    import shutil
+    from .. import pipeline
+    from . import conformance
     config = _config(observer)
     name = config.name
     src_dir = generated_dir(config)
-    if not (src_dir / f"{name}.h").is_file():
-        raise UnknownObserverError(f"observer {name!r} has not been generated (no {src_dir / (name + '.h')}); "
-                                   f"run `uiogen generate {config.source if not config.builtin else name}`")
+    lock_text = check_generated(config)
     extra = SPEED_FLAGS + (LTO_FLAGS if lto_supported() else []) + list(extra_flags or [])
     workspace = config.workspace
     ext_dir = Path(ext_dir) if ext_dir is not None else workspace.extensions
@@ -95,10 +139,23 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
                                     c_string=c_string, design_sha256=hashlib.sha256(lock.read_bytes()).hexdigest()))
     import numpy
     glue_flags = [*GLUE_FLAGS, "-I", sysconfig.get_paths()["include"], "-I", numpy.get_include()]
-    target = ext_dir / workspace.extension(name).name
-    sources = observer_sources(config) + [glue]
-    return compile_and_link(sources, target, include=[src_dir], flags=STRICT_FLAGS, extra_flags=extra,
-                            source_flags={glue: glue_flags}, shared=True, object_dir=build_dir, suffix=suffix)
+    module_file = workspace.extension(name).name
+    staging = Path(tempfile.mkdtemp(prefix=f".{name}.new-", dir=ext_dir))
+    try:
+        candidate = compile_and_link(observer_sources(config) + [glue], staging / module_file, include=[src_dir],
+                                     flags=STRICT_FLAGS, extra_flags=extra, source_flags={glue: glue_flags},
+                                     shared=True, object_dir=build_dir, suffix=suffix)
+        spec = importlib.util.spec_from_file_location(f"_{name}", candidate)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        report = conformance.check(pipeline.build(config), module, src_dir, json.loads(lock_text))
+        target = ext_dir / module_file
+        os.replace(candidate, target)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    if log is not None:
+        log(f"{name}: {report.line()}")
+    return target
 
 
 def generated_names(project: Path | None = None) -> list:
@@ -136,7 +193,7 @@ def main(argv=None, project: Path | None = None) -> int:
     names = (argv if argv is not None else sys.argv[1:]) or generated_names(project)
     for name in names:
         config = observers.get(name, project=project)
-        path = build_extension(config)
+        path = build_extension(config, log=print)
         try:
             shown = path.relative_to(config.workspace.root)
         except ValueError:

@@ -99,7 +99,8 @@ class TSFuzzyBuild(ObserverBuild):
                  + [{"name": f"y_prev_{n}", "doc": f"previous measured {n} [{units.get(n, '-')}]"}
                     for n in d.output_names]
                  + [{"name": "primed", "doc": "1 once a previous output is stored, else 0"}] + outs)
-        inputs = [{"name": f"y_{n}", "doc": f"measured {n} [{units.get(n, '-')}]"} for n in d.output_names]
+        inputs = ([{"name": str(u), "doc": f"known input {u} [{units.get(str(u), '-')}]"} for u in d.known_inputs]
+                  + [{"name": f"y_{n}", "doc": f"measured {n} [{units.get(n, '-')}]"} for n in d.output_names])
         return state, inputs, outs
 
     def output_lags(self) -> dict:

@@ -213,11 +213,20 @@ def build(model: ModelDefinition, params: ParameterSet, sample_time: float,
     parts = split_consequents(model, subs)
     x = tuple(model.states)
     box = {}
+    missing = []
     for s in (*x, *model.known_inputs):
-        if str(s) not in params.state_bounds:
-            raise SchedulingBoundsError(f"model {model.name!r}: {s} has no bound in [state_bounds] of "
-                                        f"{params.source}; the TS form needs the compact set D_x (eq. (5))")
-        box[s] = params.state_bounds[str(s)]
+        if str(s) in params.state_bounds:
+            box[s] = params.state_bounds[str(s)]
+        elif s in model.known_inputs and str(s) in params.inputs:     # a known input's declared range
+            box[s] = (float(params.inputs[str(s)]["min"]), float(params.inputs[str(s)]["max"]))
+        else:
+            missing.append(str(s))
+    if missing:
+        raise SchedulingBoundsError(
+            f"model {model.name!r}: {', '.join(missing)} {'has' if len(missing) == 1 else 'have'} no bound in "
+            f"{params.source}; the TS form needs the compact set D_x (eq. (5)): add "
+            + "; ".join(f"{n} = [min, max] under [state_bounds]" if n not in map(str, model.known_inputs)
+                        else f"[inputs.{n}] with min and max (or {n} under [state_bounds])" for n in missing))
     premise_symbols = (*parts["measured"], *model.known_inputs)
     stray = set().union(*(e.free_symbols for e in (*parts["A"], *parts["G"]))) - set(premise_symbols)
     if stray:
