@@ -258,7 +258,6 @@ def observer_table(subject: Subject, app: Applicability, folder: Path, add_state
 def trial(subject: Subject, app: Applicability, folder: Path, add_states: tuple = ()) -> Trial:
     """Design ``app``'s family for ``subject`` through :func:`codegen.pipeline.solve` from an
     observer file written in ``folder`` (a temporary folder)."""
-    from .. import observers, pipeline
     if not app.applies:
         return Trial(app.family, "not tried", "", reason="does not apply")
     own = subject.config is not None and subject.config.family == app.family
@@ -268,7 +267,30 @@ def trial(subject: Subject, app: Applicability, folder: Path, add_states: tuple 
         return Trial(app.family, "not tried", "", reason=f"its design takes {app.design_cost}")
     table, label = observer_table(subject, app, folder, add_states)
     path = folder / f"{subject.name}_{app.family}.toml"
-    path.write_text("\n".join(toml_lines(table)) + "\n")
+    text = "\n".join(toml_lines(table)) + "\n"
+    path.write_text(text)
+    key = _trial_key(text, subject, add_states)
+    if key in _TRIALS:               # the same observer file on the same files: designed once per process
+        return _TRIALS[key]
+    _TRIALS[key] = result = _solve(path, app, label)
+    return result
+
+
+#: trial designs of this process, by observer file text and the digests of the files it reads
+_TRIALS: dict = {}
+
+
+def _trial_key(text: str, subject: Subject, add_states: tuple) -> str:
+    import hashlib
+    h = hashlib.sha256(text.encode())
+    for f in (subject.model_path, subject.parameter_path):
+        h.update(Path(f).read_bytes())
+    h.update(repr((subject.selected, add_states)).encode())
+    return h.hexdigest()
+
+
+def _solve(path: Path, app: Applicability, label: str) -> Trial:
+    from .. import observers, pipeline
     t0 = time.perf_counter()
     try:
         config = observers.get(str(path))

@@ -6,7 +6,7 @@ from __future__ import annotations
 from .ranking import GUARANTEES, Ranking, sort_key
 from .structure import BASIS
 
-_MARK = {True: "holds", False: "FAILS", None: "fact "}
+_MARK = {True: "holds", False: "FAILS", None: "info "}
 
 
 def _figures(figures: dict) -> str:

@@ -25,6 +25,7 @@ the linearization, a local fact). Proofs over the whole box come from the famili
 """
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import time
 from dataclasses import dataclass, field
@@ -304,25 +305,26 @@ def _is_affine(exprs, variables: set) -> bool:
     return True
 
 
-def _casadi_jacobian(args, F: sp.Matrix, xd: tuple):
-    """Numeric callable args -> dF/d(x, d) by CasADi's automatic differentiation of the model's own
-    expressions (a nonlinear model: sympy's symbolic Jacobian of a tyre law with Min/Max/|.| can be
-    too large to print); signals not in ``args`` are taken at 0."""
+def _casadi_jacobian(F: sp.Matrix, xd: tuple):
+    """(symbols the Jacobian depends on, callable (values of those symbols) -> dF/d(x, d)) by CasADi's
+    automatic differentiation of the model's own expressions (a nonlinear model: sympy's symbolic
+    Jacobian of a tyre law with Min/Max/|.| can take minutes to print)."""
     import casadi as ca
     from ..stepgen import CASADI_MODULES
-    syms = list(dict.fromkeys([*args, *xd, *sorted(F.free_symbols, key=str)]))
+    syms = list(dict.fromkeys([*xd, *sorted(F.free_symbols, key=str)]))
     Z = ca.SX.sym("z", len(syms))
     values = sp.lambdify(syms, list(F), CASADI_MODULES)(*[Z[i] for i in range(len(syms))])
-    Fv = ca.vertcat(*[ca.SX(v) if not isinstance(v, ca.SX) else v for v in values])
+    Fv = ca.vertcat(*[v if isinstance(v, ca.SX) else ca.SX(float(v)) for v in values])
     J = ca.jacobian(Fv, ca.vertcat(*[Z[syms.index(s)] for s in xd])) if xd else ca.SX(F.shape[0], 0)
+    used = [s for i, s in enumerate(syms) if ca.depends_on(J, Z[i])]
     fun = ca.Function("jacobian", [Z], [J])
-    at = [syms.index(s) for s in args]
+    at = [syms.index(s) for s in used]
 
     def evaluate(*vals):
         z = np.zeros(len(syms))
         z[at] = vals
         return np.array(fun(z), dtype=float)
-    return evaluate
+    return used, evaluate
 
 
 def linearize(subject: Subject, n_between: int = 400) -> Linearization:
@@ -347,13 +349,17 @@ def linearize(subject: Subject, n_between: int = 400) -> Linearization:
         free = set().union(*(e.free_symbols for e in J)) if len(J) else set()
         symbolic = {"A": J[:n, :n], "D": J[:n, n:], "C": J[n:, :n], "Dd": J[n:, n:]}
     else:
-        free = set(F.free_symbols)
+        free, numeric = _casadi_jacobian(F, xd)
     ordered = sorted(free, key=str)
     unbounded = tuple(s for s in ordered if s not in box)
     used = tuple(s for s in ordered if s in box)
     samples = _samples(box, used, n_between if len(used) <= 1 else max(200, n_between // 2))
     args = list(samples.symbols) + list(unbounded)
-    fn = sp.lambdify(args, J, "numpy") if affine else _casadi_jacobian(args, F, xd)
+    if affine:
+        fn = sp.lambdify(args, J, "numpy")
+    else:
+        where = [args.index(s) for s in free]            # the evaluator takes its own symbols' order
+        fn = lambda *vals: numeric(*[vals[k] for k in where])
     vals = []
     with np.errstate(all="ignore"):
         for row in samples.values:
@@ -405,8 +411,9 @@ class Structure:
     relative_degrees: dict        # {output: {unknown input: r or None}}
     hosmd_orders: dict            # {"y_<output>": order}
     estimable: dict
-    candidates: dict              # {fact key: [(sensor, what it achieves), ...]}
+    candidates: dict              # {fact key: [sensor text, ...]}: the measurements that make it hold
     seconds: float = 0.0
+    sensors: list = field(default_factory=list)   # every Sensor checked (when a fact failed)
 
     def fact(self, key: str) -> Fact | None:
         return next((f for f in self.facts if f.key == key), None)
@@ -448,7 +455,8 @@ class Structure:
                 "facts": [f.to_json() for f in self.facts],
                 "relative_degrees": self.relative_degrees, "hosmd_orders": self.hosmd_orders,
                 "estimable": self.estimable,
-                "candidates": {k: [{"sensor": s, "achieves": a} for s, a in v] for k, v in self.candidates.items()},
+                "candidates": self.candidates,
+                "sensors": [dataclasses.asdict(x) for x in self.sensors],
                 "seconds": self.seconds}
 
 
@@ -576,7 +584,7 @@ def analyze(subject: Subject, n_between: int = 400) -> Structure:
         bad = [k for k, p in enumerate(pts) if p.rank_D < nd]
         if not bad:
             facts.append(Fact("ui_rank", True, f"the unknown inputs {', '.join(ui)} act independently "
-                              f"(rank [D; Dd] = {nd}) at {where}{note}", basis))
+                              f"(rank [D; Dd] = {nd}) at every sample{note}", basis))
         else:
             k = bad[0]
             Dfull = np.vstack([lin.D[k], lin.Dd[k]])
@@ -591,7 +599,7 @@ def analyze(subject: Subject, n_between: int = 400) -> Structure:
     unobs_pts = [k for k, p in enumerate(pts) if p.unobservable.shape[1]]
     if not unobs_pts:
         facts.append(Fact("observability", True, f"every state ({', '.join(st)}) is observable from "
-                          f"{', '.join(out)} (PBH rank test) at {where}{note}", basis))
+                          f"{', '.join(out)} (PBH rank test) at every sample{note}", basis))
     else:
         states_along, worst, worst_k = set(), -np.inf, unobs_pts[0]
         for k in unobs_pts:
@@ -604,7 +612,7 @@ def analyze(subject: Subject, n_between: int = 400) -> Structure:
         along = sorted(states_along, key=st.index)
         cands = [c.text for c in sensors() if c.observable]
         candidates["observability"] = cands
-        fix = (f"{' or '.join(cands[:3])} (each makes every state observable at {where})" if cands
+        fix = (f"{' or '.join(cands[:3])} (each makes every state observable at every sample)" if cands
                else f"measure an output that sees {', '.join(along)}, or drop {'it' if len(along) == 1 else 'them'} "
                     f"from the states")
         statement = (f"{', '.join(along)} {'is' if len(along) == 1 else 'are'} not observable from "
@@ -670,7 +678,7 @@ def analyze(subject: Subject, n_between: int = 400) -> Structure:
         late = [u for u in ui if all(rel.get(o, {}).get(u) is None or rel[o][u] >= 2 for o in out)]
         if not bad:
             facts.append(Fact("matching", True, f"matching condition rank(C D) = rank(D) = {pts[0].rank_D}: every "
-                              f"unknown input reaches a measured output in its first derivative, at {where}", basis))
+                              f"unknown input reaches a measured output in its first derivative, at every sample", basis))
         else:
             k = bad[0]
             if late:
@@ -683,11 +691,12 @@ def analyze(subject: Subject, n_between: int = 400) -> Structure:
             drives = {u: [st[i] for i in range(n) if np.abs(lin.D[:, i, ui.index(u)]).max() > RTOL] for u in late}
             cands = [c.text for c in sensors() if c.matching]
             candidates["matching"] = cands
-            direct = "; ".join(f"{u} drives {', '.join(s)} directly" for u, s in drives.items() if s)
-            fix = ((f"{' or '.join(cands[:3])} (rank(C D) = rank(D) then holds at {where})" if cands
+            direct = "; ".join(f"{u} enters " + ", ".join(f"d{x}/dt = {subject.equation_text(x)}" for x in s)
+                               for u, s in drives.items() if s)
+            fix = ((f"{' or '.join(cands[:3])} (rank(C D) = rank(D) then holds at every sample)" if cands
                     else "measure more outputs")
-                   + (f"; {direct}: an output in which {'/'.join(drives)} appear{'s' if len(drives) == 1 else ''} "
-                      f"directly (relative degree 0, e.g. an accelerometer of those equations) serves too"
+                   + (f"; or an output in which {'/'.join(drives)} appear{'s' if len(drives) == 1 else ''} directly "
+                      f"(relative degree 0, e.g. an accelerometer measuring such a derivative: {direct})"
                       if direct else ""))
             facts.append(Fact("matching", False, f"matching condition fails: rank(C D) = {pts[k].rank_CD} != rank(D) "
                               f"= {pts[k].rank_D} at {S.at(k)} ({len(bad)} of {P} points): {why}", basis, fix,
@@ -699,7 +708,7 @@ def analyze(subject: Subject, n_between: int = 400) -> Structure:
         if not bad:
             facts.append(Fact("left_invertibility", True, f"left invertible: {', '.join(ui)} can be told apart from "
                               f"the outputs and their derivatives (normal rank of the system matrix n + n_d = "
-                              f"{n + nd}) at {where}", basis))
+                              f"{n + nd}) at every sample", basis))
         else:
             insep = sorted({j for k in bad for j in pts[k].inseparable})
             names = _names(ui, insep)
@@ -732,13 +741,13 @@ def analyze(subject: Subject, n_between: int = 400) -> Structure:
                               {"count": counts, "real_range": [float(re.min()), float(re.max())],
                                "least_stable": [z_at.real, z_at.imag], "at": S.at(k_at), "along": along}))
         elif any(p.zeros is not None for p in pts):
-            facts.append(Fact("invariant_zeros", None, f"no invariant zeros at {where}: the unknown inputs leave no "
+            facts.append(Fact("invariant_zeros", None, f"no invariant zeros at any sample: the unknown inputs leave no "
                               f"hidden dynamics (every state is reconstructible whatever they do)", basis))
         bad_lr = [k for k, p in enumerate(pts) if not p.left_invertible]
         bad_z = [k for k, p in enumerate(pts) if p.zeros is not None and p.zeros.size and p.zeros.real.max() >= -ZERO_TOL]
         if not bad_lr and not bad_z:
             facts.append(Fact("strong_detectability", True, f"strongly detectable: left invertible and every invariant "
-                              f"zero in Re s < 0 at {where}: an observer that decouples {', '.join(ui)} exists for "
+                              f"zero in Re s < 0 at every sample: an observer that decouples {', '.join(ui)} exists for "
                               f"frozen scheduling", basis))
         else:
             if bad_z:
@@ -759,7 +768,8 @@ def analyze(subject: Subject, n_between: int = 400) -> Structure:
 
     estimable = _estimable(subject, lin, pts)
     seconds = time.perf_counter() - t0
-    return Structure(subject, lin, pts, facts, rel, hosmd, estimable, candidates, seconds)
+    return Structure(subject, lin, pts, facts, rel, hosmd, estimable, candidates, seconds,
+                     found[0] if found else [])
 
 
 def _c(z: complex) -> str:

@@ -130,6 +130,14 @@ class Subject:
     def is_builtin_model(self) -> bool:
         return self.model_path.parent == observers.MODELS_DIR
 
+    def equation_text(self, state: str, limit: int = 160) -> str:
+        """The model's own right-hand side of d(state)/dt, as written (parameters by name)."""
+        names = self.states
+        rhs = (self.model.rhs[self.model.states[names.index(state)]] if hasattr(self.model, "rhs")
+               else self.model.dynamics[names.index(state)])
+        text = str(rhs)
+        return text if len(text) <= limit else text[:limit - 3] + "..."
+
     def unmeasured_declared_outputs(self) -> tuple:
         """Outputs the model declares that ``--outputs`` left out: sensors the car could add."""
         return tuple(n for n in self.declared_outputs if n not in self.outputs)
