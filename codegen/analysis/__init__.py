@@ -41,6 +41,9 @@ class Analysis:
         return text(self)
 
     def to_json(self) -> dict:
+        return _finite(self._json())
+
+    def _json(self) -> dict:
         s = self.subject
         return {"target": s.target, "model": s.name, "model_file": str(s.model_path),
                 "parameter_file": str(s.parameter_path),
@@ -50,6 +53,18 @@ class Analysis:
                 "selected": s.selected, "structure": self.structure.to_json(),
                 "ranking": self.ranking.to_json() if self.ranking is not None else None,
                 "seconds": self.seconds}
+
+
+def _finite(obj):
+    """JSON has no infinities or NaN: a non-finite number becomes null."""
+    import math
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
 
 
 def analyze(target, parameters: str | None = None, outputs=None, unknown_inputs=None, design: bool = True,

@@ -103,11 +103,12 @@ class Trial:
 
     family: str
     status: str                 # "certified" | "failed" | "not tried"
-    settings: str               # "the observer file's" | "the analysis's"
+    settings: str               # "the observer file's settings" | "the analysis's settings" | ...
     seconds: float = 0.0
     headline: str = ""
     figures: dict = field(default_factory=dict)
     reason: str = ""
+    error: type | None = None       # the exception class of a failed design
 
     def to_json(self) -> dict:
         return {"family": self.family, "status": self.status, "settings": self.settings, "seconds": self.seconds,
@@ -122,6 +123,12 @@ class Ranking:
     entries: list                # [(Applicability, Trial)]
     own_family: str | None       # the observer file's family, if one was named
     seconds: float = 0.0
+    what_if: dict | None = None  # the own family's design with the sensor the structure names
+    completed: dict | None = None  # the own family's design with the file's settings completed by the analysis
+
+    @property
+    def own_trial(self):
+        return next((t for a, t in self.entries if a.family == self.own_family), None)
 
     @property
     def best(self) -> Applicability | None:
@@ -133,6 +140,10 @@ class Ranking:
     def to_json(self) -> dict:
         return {"order": [a.family for a, _ in self.entries], "best": self.best.family if self.best else None,
                 "own_family": self.own_family, "seconds": self.seconds,
+                "what_if": None if self.what_if is None else {**self.what_if, "trial": self.what_if["trial"].to_json()},
+                "completed": None if self.completed is None else {
+                    **{k: v for k, v in self.completed.items() if k not in ("trial", "file_trial")},
+                    "trial": self.completed["trial"].to_json()},
                 "families": [{**a.to_json(), "trial": t.to_json()} for a, t in self.entries]}
 
 
@@ -177,6 +188,12 @@ def _inline(value) -> bool:
     return True
 
 
+def _key(key: str) -> str:
+    """A TOML key: bare when it may be, else quoted ("q_f*v_x")."""
+    import re
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else toml_repr(key, 10 ** 6)
+
+
 def toml_lines(table: dict, why: dict | None = None, prefix: str = "") -> list:
     """``table`` as TOML lines, each value followed by its reason from ``why`` ({dotted key: text})."""
     why = why or {}
@@ -189,10 +206,10 @@ def toml_lines(table: dict, why: dict | None = None, prefix: str = "") -> list:
         if _nested_array(value):
             later.append((key, value))
             continue
-        text = f"{key} = {toml_repr(value, 10 ** 9)}"
+        text = f"{_key(key)} = {toml_repr(value, 10 ** 9)}"
         lines.append(text + (f"    # {why[path]}" if path in why else ""))
     for key, value in later:
-        path = f"{prefix}{key}"
+        path = f"{prefix}{_key(key)}"
         if isinstance(value, dict):
             lines.append("")
             lines.append(f"[{path}]" + (f"    # {why[path]}" if path in why else ""))
@@ -207,7 +224,8 @@ def toml_lines(table: dict, why: dict | None = None, prefix: str = "") -> list:
 
 def wrapper_model(subject: Subject, add_states: tuple = ()) -> str:
     """A model file that imports the subject's model and applies --outputs/--unknown-inputs (and
-    measures ``add_states`` directly), so a trial design runs on exactly what was analyzed."""
+    measures ``add_states``: declared outputs or states, by name), so a trial design runs on exactly
+    what was analyzed."""
     from .. import observers
     path = subject.model_path
     if path.parent == observers.MODELS_DIR:
@@ -219,7 +237,10 @@ def wrapper_model(subject: Subject, add_states: tuple = ()) -> str:
              "import dataclasses", "from pathlib import Path", "", "from codegen import observers", "", load,
              "globals().update({k: v for k, v in vars(_base).items() if not k.startswith('__')})",
              "_m = _base.MODEL",
-             f"_extra = tuple((str(s), s) for s in _m.states if str(s) in {list(add_states)!r})",
+             f"_add = {list(add_states)!r}",
+             "_declared = [o for o in _m.outputs if o[0] in _add]",
+             "_extra = tuple(_declared) + tuple((str(s), s) for s in _m.states if str(s) in _add and str(s) not in "
+             "[o[0] for o in _declared])",
              f"_changes = {{'outputs': tuple(o for o in _m.outputs if o[0] in {outputs!r}) + _extra}}"]
     if subject.selected.get("unknown_inputs") is not None:
         unknown = list(subject.unknown_inputs)
@@ -230,6 +251,21 @@ def wrapper_model(subject: Subject, add_states: tuple = ()) -> str:
     return "\n".join(lines)
 
 
+def _merge(table: dict, proposal: dict, prefix: str = "") -> tuple:
+    """``table`` with the keys of ``proposal`` it lacks (recursively), and the dotted keys added."""
+    out, added = dict(table), []
+    for key, value in proposal.items():
+        if key in ("family", "model", "parameters"):
+            continue
+        if key not in out:
+            out[key] = value
+            added.append((f"{prefix}{key}", value))
+        elif isinstance(value, dict) and isinstance(out[key], dict):
+            out[key], more = _merge(out[key], value, f"{prefix}{key}.")
+            added += more
+    return out, added
+
+
 def observer_table(subject: Subject, app: Applicability, folder: Path, add_states: tuple = ()) -> tuple:
     """(table, settings label) of the trial of ``app``: the observer file's own table for its own
     family, else the family's proposal; model and parameters by absolute path (or a wrapper)."""
@@ -238,10 +274,10 @@ def observer_table(subject: Subject, app: Applicability, folder: Path, add_state
         with open(subject.config.source, "rb") as fh:
             table = tomllib.load(fh)
         table.pop("data", None)
-        label = "the observer file's"
+        label = "the observer file's settings"
     else:
         table = dict(app.observer)
-        label = "the analysis's"
+        label = "the analysis's settings"
     if subject.restricted or add_states:
         model = folder / f"{subject.name}_analyzed.py"
         model.write_text(wrapper_model(subject, add_states))
@@ -255,10 +291,12 @@ def observer_table(subject: Subject, app: Applicability, folder: Path, add_state
     return table, label
 
 
-def trial(subject: Subject, app: Applicability, folder: Path, add_states: tuple = ()) -> Trial:
+def trial(subject: Subject, app: Applicability, folder: Path, add_states: tuple = (), force: bool = False,
+          complete: bool = False) -> Trial:
     """Design ``app``'s family for ``subject`` through :func:`codegen.pipeline.solve` from an
-    observer file written in ``folder`` (a temporary folder)."""
-    if not app.applies:
+    observer file written in ``folder`` (a temporary folder); ``force``: even where the family
+    said it does not apply (with ``add_states`` measured, it may)."""
+    if not app.applies and not force:
         return Trial(app.family, "not tried", "", reason="does not apply")
     own = subject.config is not None and subject.config.family == app.family
     if app.observer is None and not own:
@@ -266,6 +304,9 @@ def trial(subject: Subject, app: Applicability, folder: Path, add_states: tuple 
     if app.design_cost != "seconds":
         return Trial(app.family, "not tried", "", reason=f"its design takes {app.design_cost}")
     table, label = observer_table(subject, app, folder, add_states)
+    if complete:
+        table, _ = _merge(table, app.observer or {})
+        label = "the observer file's settings, completed by the analysis"
     path = folder / f"{subject.name}_{app.family}.toml"
     text = "\n".join(toml_lines(table)) + "\n"
     path.write_text(text)
@@ -297,7 +338,7 @@ def _solve(path: Path, app: Applicability, label: str) -> Trial:
         b, _ = pipeline.solve(config)
     except UiogenError as exc:
         return Trial(app.family, "failed", label, time.perf_counter() - t0,
-                     reason=f"{type(exc).__name__}: {str(exc).replace(str(path), label + ' settings')}")
+                     reason=f"{type(exc).__name__}: {str(exc).replace(str(path), label)}", error=type(exc))
     figures = app.figures(b) if app.figures is not None else {}
     return Trial(app.family, "certified", label, time.perf_counter() - t0, b.emit_notes()["headline"], figures)
 
@@ -316,9 +357,51 @@ def rank(subject: Subject, structure, design: bool = True, progress=None) -> Ran
             else:
                 reason = "does not apply" if not app.applies else "no trial designs requested"
                 trials[app.family] = Trial(app.family, "not tried", "", reason=reason)
+        own = subject.config.family if subject.config is not None else None
+        what_if = completed = None
+        if design and own is not None and trials[own].status != "certified":
+            own_app = next(a for a in apps if a.family == own)
+            completed = _completed(subject, own_app, trials[own], Path(tmp), progress)
+            if completed is not None and completed["trial"].status == "certified":
+                trials[own] = completed["trial"]        # the family can: the file lacked settings
+            else:
+                what_if = _with_sensor(subject, structure, own_app, Path(tmp), progress)
     order = sorted(range(len(apps)), key=lambda k: sort_key(apps[k], trials[apps[k].family], k))
-    own = subject.config.family if subject.config is not None else None
-    return Ranking([(apps[k], trials[apps[k].family]) for k in order], own, time.perf_counter() - t0)
+    return Ranking([(apps[k], trials[apps[k].family]) for k in order], own, time.perf_counter() - t0, what_if,
+                   completed)
+
+
+def _completed(subject: Subject, app: Applicability, failed: Trial, folder: Path, progress=None) -> dict | None:
+    """The observer file's own design again, its settings completed with the keys of the family's
+    proposal it lacks, when it failed for a setting (a missing differentiator, ...): that fix, measured."""
+    from ..errors import ModelDefinitionError
+    if failed.status != "failed" or failed.error is None or not issubclass(failed.error, ModelDefinitionError) \
+            or not app.observer:
+        return None
+    table, _ = observer_table(subject, app, folder)
+    _, added = _merge(table, app.observer)
+    if not added:
+        return None
+    if progress is not None:
+        progress(f"designing {app.family} again with the settings the analysis completes ...")
+    return {"family": app.family, "added": {k: v for k, v in added},
+            "trial": trial(subject, app, folder, force=True, complete=True), "file_trial": failed}
+
+
+def _with_sensor(subject: Subject, structure, app: Applicability, folder: Path, progress=None) -> dict | None:
+    """The observer file's own design again with the first sensor the structure names for its first
+    failing fact (matching, observability, strong detectability, left invertibility): the fix,
+    measured."""
+    for key in ("matching", "observability", "strong_detectability", "left_invertibility"):
+        fact = structure.fact(key)
+        found = structure.candidates.get(key) or []
+        if fact is not None and fact.holds is False and found:
+            sensor = found[0]["sensor"]
+            if progress is not None:
+                progress(f"designing {app.family} again with {sensor} measured ...")
+            return {"family": app.family, "fact": key, "sensor": sensor,
+                    "trial": trial(subject, app, folder, add_states=(sensor,), force=True)}
+    return None
 
 
 def starter_text(subject: Subject, app: Applicability, folder: Path, structure=None) -> str:

@@ -3,6 +3,7 @@ structural facts with what each rests on, what is estimable, the families ranked
 designs side by side, and why the first one is first."""
 from __future__ import annotations
 
+from ..settings import toml_repr
 from .ranking import GUARANTEES, Ranking, sort_key
 from .structure import BASIS
 
@@ -84,10 +85,10 @@ def family_lines(ranking: Ranking) -> list:
         if not app.applies and app.fix:
             lines.append(f"       fix: {app.fix}")
         if trial.status == "certified":
-            lines.append(f"       trial design ({trial.settings} settings): certified in {trial.seconds:.1f} s: "
+            lines.append(f"       trial design ({trial.settings}): certified in {trial.seconds:.1f} s: "
                          f"{_figures(trial.figures) or trial.headline}")
         elif trial.status == "failed":
-            lines.append(f"       trial design ({trial.settings} settings): FAILED in {trial.seconds:.1f} s: "
+            lines.append(f"       trial design ({trial.settings}): FAILED in {trial.seconds:.1f} s: "
                          f"{trial.reason}")
         elif app.applies:
             lines.append(f"       trial design: not tried ({trial.reason})")
@@ -109,7 +110,9 @@ def explain(ranking: Ranking) -> str:
     text += f"; certified: {_figures(bt.figures)})" if bt.status == "certified" else ")"
     own = ranking.own_family
     if own is None or own == best.family:
-        return text + ("; it is the observer file's own family" if own == best.family else "")
+        done = ("" if ranking.completed is None or ranking.completed["trial"] is not bt else
+                " (with the settings the analysis completes, below)")
+        return text + (f"; it is the observer file's own family{done}" if own == best.family else "")
     k = ranking.position(own)
     app, trial = ranking.entries[k]
     kb, ko = sort_key(best, bt, 0), sort_key(app, trial, 0)
@@ -136,6 +139,21 @@ def lines(analysis) -> list:
         + estimable_lines(analysis.structure)
     if analysis.ranking is not None:
         out += [""] + family_lines(analysis.ranking) + ["", explain(analysis.ranking)]
+        c = analysis.ranking.completed
+        if c is not None:
+            t = c["trial"]
+            result = (f"certified in {t.seconds:.1f} s: {_figures(t.figures) or t.headline}" if t.status == "certified"
+                      else f"{t.status}: {t.reason}")
+            added = "; ".join(f"{k} = {toml_repr(v, 10 ** 6)}" for k, v in c["added"].items())
+            out.append(f"the fix, measured: the observer file's settings completed with {added}: the {c['family']} "
+                       f"design is {result}")
+        w = analysis.ranking.what_if
+        if w is not None:
+            t = w["trial"]
+            result = (f"certified in {t.seconds:.1f} s: {_figures(t.figures) or t.headline}" if t.status == "certified"
+                      else f"{t.status}: {t.reason}")
+            out.append(f"the fix, measured: with {w['sensor']} measured too ({w['fact']}), the observer file's "
+                       f"{w['family']} design is {result}")
     t = analysis.seconds
     out.append(f"time: structure {t['structure']:.2f} s, families {t.get('families', 0.0):.2f} s "
                f"(trial designs included), total {t['total']:.2f} s")

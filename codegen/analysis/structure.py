@@ -327,8 +327,9 @@ def _casadi_jacobian(F: sp.Matrix, xd: tuple):
     return used, evaluate
 
 
-def linearize(subject: Subject, n_between: int = 400) -> Linearization:
-    """The Jacobians of ``subject`` at the box corners and ``n_between`` points between them.
+def linearize(subject: Subject, n_between: int = 200, samples: Samples | None = None) -> Linearization:
+    """The Jacobians of ``subject`` at the box corners and ``n_between`` points between them (or at
+    given ``samples``: a signal they do not cover is taken at the middle of its box, else 0).
 
     An LPV model (affine in states and inputs) gives its matrices symbolically (sympy); a nonlinear
     one is differentiated numerically at each sample (CasADi automatic differentiation).
@@ -353,8 +354,14 @@ def linearize(subject: Subject, n_between: int = 400) -> Linearization:
     ordered = sorted(free, key=str)
     unbounded = tuple(s for s in ordered if s not in box)
     used = tuple(s for s in ordered if s in box)
-    samples = _samples(box, used, n_between if len(used) <= 1 else max(200, n_between // 2))
-    args = list(samples.symbols) + list(unbounded)
+    fixed = ()
+    if samples is None:
+        samples = _samples(box, used, n_between)
+    else:
+        fixed = tuple(s for s in used if s not in samples.symbols)
+        unbounded = tuple(s for s in unbounded if s not in samples.symbols)
+    args = list(samples.symbols) + list(fixed) + list(unbounded)
+    at_fixed = [0.5 * (box[s][0] + box[s][1]) for s in fixed]
     if affine:
         fn = sp.lambdify(args, J, "numpy")
     else:
@@ -363,7 +370,7 @@ def linearize(subject: Subject, n_between: int = 400) -> Linearization:
     vals = []
     with np.errstate(all="ignore"):
         for row in samples.values:
-            vals.append(np.array(fn(*row, *([0.0] * len(unbounded))), dtype=float).reshape(n + ny, n + nd))
+            vals.append(np.array(fn(*row, *at_fixed, *([0.0] * len(unbounded))), dtype=float).reshape(n + ny, n + nd))
     M = np.array(vals)
     if not np.all(np.isfinite(M)):
         bad = int(np.flatnonzero(~np.isfinite(M).all(axis=(1, 2)))[0])
@@ -417,14 +424,6 @@ class Structure:
 
     def fact(self, key: str) -> Fact | None:
         return next((f for f in self.facts if f.key == key), None)
-
-    def failing(self, *keys: str) -> Fact | None:
-        """The first of the facts ``keys`` that does not hold (None: all hold)."""
-        for key in keys:
-            f = self.fact(key)
-            if f is not None and f.holds is False:
-                return f
-        return None
 
     def fix(self, key: str, default: str = "") -> str:
         """The fix the structure found for fact ``key`` (sensor candidates), else ``default``."""
@@ -493,14 +492,14 @@ def _with_sensors(lin: Linearization, rows: np.ndarray) -> tuple:
     return C, Dd
 
 
-def _declared_rows(subject: Subject) -> dict:
+def _declared_rows(subject: Subject, samples: Samples) -> dict:
     """{name: (C row, Dd row) at every sample, scaled} of the declared outputs left out by
     ``--outputs`` (candidate sensors)."""
     extra = [o for o in subject.base_model.outputs if o[0] in subject.unmeasured_declared_outputs()]
     if not extra:
         return {}
     trial = subject.with_outputs(tuple(extra))
-    lin = linearize(trial)
+    lin = linearize(trial, samples=samples)
     ny0 = len(subject.outputs)
     return {name: (lin.C[:, ny0 + k], lin.Dd[:, ny0 + k]) for k, (name, _) in enumerate(extra)}
 
@@ -509,7 +508,8 @@ def _declared_rows(subject: Subject) -> dict:
 class Sensor:
     """What one more measurement would change, checked at every sample."""
 
-    text: str                   # "measure the state v_y", "measure the declared output a_y (...)"
+    text: str                   # "measure v_y", "measure a_y (an output the model declares, ...)"
+    name: str                   # the state or declared output it measures
     observable: bool
     matching: bool
     left_invertible: bool
@@ -520,7 +520,7 @@ class Sensor:
         return (not self.strongly_detectable, self.slowest_zero)
 
 
-def _sensor_effect(text, lin: Linearization, C: np.ndarray, Dd: np.ndarray, pts: list) -> Sensor:
+def _sensor_effect(text, name, lin: Linearization, C: np.ndarray, Dd: np.ndarray, pts: list) -> Sensor:
     P = C.shape[0]
     obs = match = left = True
     worst = -np.inf
@@ -532,7 +532,7 @@ def _sensor_effect(text, lin: Linearization, C: np.ndarray, Dd: np.ndarray, pts:
         if pf.zeros is not None and pf.zeros.size:
             worst = max(worst, float(pf.zeros.real.max()))
     strong = left and worst < -ZERO_TOL
-    return Sensor(text, bool(obs), bool(match), bool(left), bool(strong), worst)
+    return Sensor(text, name, bool(obs), bool(match), bool(left), bool(strong), worst)
 
 
 def candidate_sensors(subject: Subject, lin: Linearization, pts: list) -> list:
@@ -542,10 +542,10 @@ def candidate_sensors(subject: Subject, lin: Linearization, pts: list) -> list:
     measured = {str(sp.sympify(e)) for _, e in subject.model.outputs}
     found = []
     declared = {n: str(sp.sympify(e)) for n, e in subject.base_model.outputs}
-    for name, (crow, drow) in _declared_rows(subject).items():
+    for name, (crow, drow) in _declared_rows(subject, lin.samples).items():
         C = np.concatenate([lin.C, crow[:, None, :]], axis=1)
         Dd = np.concatenate([lin.Dd, drow[:, None, :]], axis=1)
-        found.append(_sensor_effect(f"measure {name} (an output the model declares, left out by --outputs)",
+        found.append(_sensor_effect(f"measure {name} (an output the model declares, left out by --outputs)", name,
                                     lin, C, Dd, pts))
     named = set(declared[n] for n in subject.unmeasured_declared_outputs())
     for k, s in enumerate(subject.states):
@@ -554,11 +554,11 @@ def candidate_sensors(subject: Subject, lin: Linearization, pts: list) -> list:
         row = np.zeros((1, lin.n))
         row[0, k] = 1.0
         C, Dd = _with_sensors(lin, row)
-        found.append(_sensor_effect(f"measure {s}", lin, C, Dd, pts))
+        found.append(_sensor_effect(f"measure {s}", s, lin, C, Dd, pts))
     return sorted(found, key=Sensor.key)
 
 
-def analyze(subject: Subject, n_between: int = 400) -> Structure:
+def analyze(subject: Subject, n_between: int = 200) -> Structure:
     """Every structural fact of ``subject`` (see the module docstring)."""
     t0 = time.perf_counter()
     lin = linearize(subject, n_between)
@@ -610,8 +610,9 @@ def analyze(subject: Subject, n_between: int = 400) -> Structure:
                     worst, worst_k = lam.real, k
         detectable = worst < 0
         along = sorted(states_along, key=st.index)
-        cands = [c.text for c in sensors() if c.observable]
-        candidates["observability"] = cands
+        found_ = [c for c in sensors() if c.observable]
+        cands = [c.text for c in found_]
+        candidates["observability"] = [{"sensor": c.name, "text": c.text} for c in found_]
         fix = (f"{' or '.join(cands[:3])} (each makes every state observable at every sample)" if cands
                else f"measure an output that sees {', '.join(along)}, or drop {'it' if len(along) == 1 else 'them'} "
                     f"from the states")
@@ -689,8 +690,9 @@ def analyze(subject: Subject, n_between: int = 400) -> Structure:
                 why = (f"{', '.join(ui)} reach the outputs in their first derivative only through the same "
                        f"combination")
             drives = {u: [st[i] for i in range(n) if np.abs(lin.D[:, i, ui.index(u)]).max() > RTOL] for u in late}
-            cands = [c.text for c in sensors() if c.matching]
-            candidates["matching"] = cands
+            found_ = [c for c in sensors() if c.matching]
+            cands = [c.text for c in found_]
+            candidates["matching"] = [{"sensor": c.name, "text": c.text} for c in found_]
             direct = "; ".join(f"{u} enters " + ", ".join(f"d{x}/dt = {subject.equation_text(x)}" for x in s)
                                for u, s in drives.items() if s)
             fix = ((f"{' or '.join(cands[:3])} (rank(C D) = rank(D) then holds at every sample)" if cands
@@ -712,8 +714,9 @@ def analyze(subject: Subject, n_between: int = 400) -> Structure:
         else:
             insep = sorted({j for k in bad for j in pts[k].inseparable})
             names = _names(ui, insep)
-            cands = [c.text for c in sensors() if c.left_invertible]
-            candidates["left_invertibility"] = cands
+            found_ = [c for c in sensors() if c.left_invertible]
+            cands = [c.text for c in found_]
+            candidates["left_invertibility"] = [{"sensor": c.name, "text": c.text} for c in found_]
             fix = (" or ".join(cands[:3]) if cands else
                    f"measure at least {nd} outputs the unknown inputs reach independently")
             fix += f", or treat {' or '.join(names.split(', '))} as known (uiogen analyze --unknown-inputs ...)"
@@ -753,8 +756,9 @@ def analyze(subject: Subject, n_between: int = 400) -> Structure:
             if bad_z:
                 k = bad_z[0]
                 z = pts[k].zeros[np.argmax(pts[k].zeros.real)]
-                cands = [c.text for c in sensors() if c.strongly_detectable]
-                candidates["strong_detectability"] = cands
+                found_ = [c for c in sensors() if c.strongly_detectable]
+                cands = [c.text for c in found_]
+                candidates["strong_detectability"] = [{"sensor": c.name, "text": c.text} for c in found_]
                 fix = (" or ".join(cands[:3]) if cands else
                        "measure a signal along the zero's direction") + " (removes the unstable zero)"
                 statement = (f"NOT strongly detectable: invariant zero s = {_c(z)} (Re >= 0) at {S.at(k)} "

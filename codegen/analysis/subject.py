@@ -144,6 +144,13 @@ class Subject:
 
     # -- the equations --------------------------------------------------------------------------------
     @cached_property
+    def lpv(self):
+        """:func:`codegen.model.instantiate` of the model, once for every family that asks (its typed
+        error, NotAffineError and the like, is raised again on every ask)."""
+        from ..model import instantiate
+        return instantiate(self.model, self.parameters)
+
+    @cached_property
     def equations(self) -> Equations:
         return equations_of(self.model, self.parameters)
 

@@ -33,7 +33,6 @@ def _lipschitz(subject, signal: str, order: int) -> tuple:
 
 def assess(family, subject, structure):
     from ...analysis.ranking import Applicability
-    from ...model import instantiate
     from . import design as alg
     from . import representation as rdeg
 
@@ -50,7 +49,7 @@ def assess(family, subject, structure):
                       f"algebraic UIO differentiates its scheduling signals, which must be measured inputs",
                       f"make {' and '.join(derived)} a measured input (a SchedulingSignal without derived=)")
     try:
-        lpv = instantiate(model, subject.parameters)
+        lpv = subject.lpv
         rdeg.check_structure(lpv)
     except UiogenError as exc:
         return refuse(f"{type(exc).__name__}: {exc}",

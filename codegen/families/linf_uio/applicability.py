@@ -14,7 +14,6 @@ from ...errors import ModelDefinitionError, NotAffineError, RankConditionError, 
 def assess(family, subject, structure):
     from ...analysis.ranking import Applicability
     from ... import polytope
-    from ...model import instantiate
     from . import design
 
     def refuse(condition: str, fix: str, checked=()):
@@ -25,7 +24,7 @@ def assess(family, subject, structure):
         return refuse(f"model {subject.name!r} is a {type(model).__name__}: Theorem 1 takes one system "
                       f"x' = A(rho) x + B u + D d (a ModelDefinition)", "write the model as a ModelDefinition")
     try:
-        lpv = instantiate(model, subject.parameters)
+        lpv = subject.lpv
     except NotAffineError as exc:
         return refuse(f"the model is not LPV: {exc}",
                       "write each nonlinearity through measured signals (a SchedulingSignal bounded in "

@@ -38,7 +38,6 @@ def proposed_rule(subject) -> dict | None:
 
 def assess(family, subject, structure):
     from ...analysis.ranking import Applicability
-    from ...model import instantiate
     from . import design as sw_design
     from . import representation
 
@@ -50,7 +49,7 @@ def assess(family, subject, structure):
         return refuse(f"model {subject.name!r} is a {type(model).__name__}: the modes are frozen LPV models "
                       f"(a ModelDefinition)", "write the model as a ModelDefinition")
     try:
-        lpv = instantiate(model, subject.parameters)
+        lpv = subject.lpv
         lpv.require_no_ui_feedthrough("switched H-infinity PI observer", "Menhour et al. 2014, eq. (2): y = C x")
     except UiogenError as exc:
         return refuse(f"{type(exc).__name__}: {exc}", "measure outputs the unknown inputs do not reach directly; "
