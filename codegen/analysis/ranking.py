@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Callable
 
 from ..errors import UiogenError
-from ..settings import toml_repr
+from ..project.settings import toml_repr
 from .subject import Subject
 
 #: guarantee classes, strongest first: (rank, what the certificate says)
@@ -226,7 +226,7 @@ def wrapper_model(subject: Subject, add_states: tuple = ()) -> str:
     """A model file that imports the subject's model and applies --outputs/--unknown-inputs (and
     measures ``add_states``: declared outputs or states, by name), so a trial design runs on exactly
     what was analyzed."""
-    from .. import observers
+    from ..project import observer_file as observers
     path = subject.model_path
     if path.parent == observers.MODELS_DIR:
         load = f"_base = observers.builtin_model({path.stem!r})"
@@ -234,7 +234,8 @@ def wrapper_model(subject: Subject, add_states: tuple = ()) -> str:
         load = f"_base = observers.load_module(Path({str(path)!r}), 'uiogen_analysis_base_' + {path.stem!r})"
     outputs = list(subject.outputs)
     lines = ['"""uiogen analyze: the model of ' + str(path) + ' with the sensors and unknown inputs analyzed."""',
-             "import dataclasses", "from pathlib import Path", "", "from codegen import observers", "", load,
+             "import dataclasses", "from pathlib import Path", "",
+             "from codegen.project import observer_file as observers", "", load,
              "globals().update({k: v for k, v in vars(_base).items() if not k.startswith('__')})",
              "_m = _base.MODEL",
              f"_add = {list(add_states)!r}",
@@ -331,7 +332,8 @@ def _trial_key(text: str, subject: Subject, add_states: tuple) -> str:
 
 
 def _solve(path: Path, app: Applicability, label: str) -> Trial:
-    from .. import observers, pipeline
+    from .. import pipeline
+    from ..project import observer_file as observers
     t0 = time.perf_counter()
     try:
         config = observers.get(str(path))

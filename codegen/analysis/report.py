@@ -3,7 +3,7 @@ structural facts with what each rests on, what is estimable, the families ranked
 designs side by side, and why the first one is first."""
 from __future__ import annotations
 
-from ..settings import toml_repr
+from ..project.settings import toml_repr
 from .ranking import GUARANTEES, Ranking, sort_key
 from .structure import BASIS
 

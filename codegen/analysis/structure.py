@@ -310,7 +310,7 @@ def _casadi_jacobian(F: sp.Matrix, xd: tuple):
     automatic differentiation of the model's own expressions (a nonlinear model: sympy's symbolic
     Jacobian of a tyre law with Min/Max/|.| can take minutes to print)."""
     import casadi as ca
-    from ..stepgen import CASADI_MODULES
+    from ..emit.stepgen import CASADI_MODULES
     syms = list(dict.fromkeys([*xd, *sorted(F.free_symbols, key=str)]))
     Z = ca.SX.sym("z", len(syms))
     values = sp.lambdify(syms, list(F), CASADI_MODULES)(*[Z[i] for i in range(len(syms))])

@@ -20,8 +20,8 @@ import sympy as sp
 
 from ..errors import ConfigurationError, ModelDefinitionError
 from ..model import ParameterSet, load_parameters, parameter_substitution
-from .. import observers
-from ..settings import suggest
+from ..project import observer_file as observers
+from ..project.settings import suggest
 
 #: sample time of the analysis (TS discretization, trial designs) when no observer file gives one
 DEFAULT_SAMPLE_TIME = 0.01

@@ -13,7 +13,7 @@ from ...errors import RankConditionError, UiogenError
 
 def assess(family, subject, structure):
     from ...analysis.ranking import Applicability
-    from ... import observers
+    from ...project import observer_file as observers
     from . import design as ic_design
     from . import representation as icm
 

@@ -13,7 +13,7 @@ from ...errors import ModelDefinitionError, NotAffineError, RankConditionError, 
 
 def assess(family, subject, structure):
     from ...analysis.ranking import Applicability
-    from ... import polytope
+    from ...representation import polytope
     from . import design
 
     def refuse(condition: str, fix: str, checked=()):
