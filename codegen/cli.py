@@ -109,7 +109,7 @@ def _analysis_of_failure(config, as_json: bool) -> None:
     from . import analysis
     try:
         result = analysis.analyze(config.source, design=False)
-    except UiogenError as exc:
+    except Exception as exc:        # the design's own error is the one that matters: it follows, one line
         print(f"(no analysis of {config.source}: {type(exc).__name__}: {exc})")
         return
     if as_json:

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from codegen import analysis, cli, families, observers, pipeline
+from codegen import analysis, cli, families, pipeline
+from codegen.project import observer_file as observers
 from codegen.analysis import ranking, structure, subject
 from codegen.errors import ConfigurationError
 

@@ -165,6 +165,9 @@ def assess(subject: Subject, structure) -> list:
             app = fam.applicability(subject, structure)
         except UiogenError as exc:          # the family's own refusal is its condition
             app = Applicability(name, False, "unknown", condition=f"{type(exc).__name__}: {exc}")
+        except Exception as exc:            # a model the family's check cannot read: say so, rank it last
+            app = Applicability(name, False, "unknown", condition=f"the family's check could not read this model "
+                                f"({type(exc).__name__}: {exc})")
         if app is None:
             app = Applicability(name, False, "unknown", condition="the family gives no applicability check "
                                 "(Family.applicability): design it to find out")
