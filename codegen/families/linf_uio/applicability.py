@@ -80,7 +80,7 @@ def assess(family, subject, structure):
                                       "certifies the loop if this one does not"}
 
     def figures(b) -> dict:
-        unit = ", ".join(subject.unit(u) for u in subject.unknown_inputs)
+        unit = ", ".join(subject.unit(u) for u in subject.unknown_inputs if subject.unit(u) != "-") or "unit"
         return {"gamma": (b.design.gamma, f"state error per {unit} of unknown-input error",
                           "certified L-infinity gain of Theorem 1 over the whole box"),
                 "contraction_per_step": (b.discrete_certificate.contraction, "-",
