@@ -15,14 +15,17 @@ from ...errors import UiogenError
 def assess(family, subject, structure):
     from ...analysis.ranking import Applicability
     from . import build as nt
-    from .representation import represent
+    from .representation import _check_structure, represent
 
     def refuse(condition: str, fix: str, checked=()):
         return Applicability(family.name, False, "states_only", condition, fix, tuple(checked))
 
     own = subject.config is not None and subject.config.family == family.name
     try:
-        settings = nt.parse(subject.config) if own else nt.NonlinearTyreSettings()
+        _check_structure(subject.model, str(subject.model_path))
+        # the noise levels do not enter the representation; the file's own, else unit levels for this check
+        settings = nt.parse(subject.config) if own else nt.NonlinearTyreSettings(sigma_force_front=1.0,
+                                                                                 sigma_force_rear=1.0)
         represent(subject.model_module, subject.parameters, settings, str(subject.model_path))
     except (UiogenError, AttributeError, TypeError) as exc:
         return refuse(str(exc).split(": ", 1)[-1] if isinstance(exc, UiogenError) else
@@ -31,12 +34,10 @@ def assess(family, subject, structure):
                       "model_defs/single_track_nonlinear_tyre.py does")
     checked = [(f"tyre slope bounded away from 0 on |t| <= {settings.sliding_fraction:g} t_sl per axle "
                 f"(sound interval bounds over the set)", "proof")]
-    notes = ["the unknown inputs (unmodelled axle forces) are not estimated; the noise levels sigma_* of the "
-             "proposal are the family's defaults: identify them on a log (`uiogen fit`)"]
-    observer = {"family": family.name, "sample_time": subject.sample_time,
-                "design": {"sliding_fraction": settings.sliding_fraction,
-                           "gain_sliding_fraction": settings.gain_sliding_fraction,
-                           "decay_fraction": settings.decay_fraction}}
+    notes = ["the unknown inputs (unmodelled axle forces) are not estimated; the design needs their levels "
+             "sigma_force_front/rear, identified on a log with a sideslip reference (`uiogen fit`): the analysis "
+             "proposes no settings without them"]
+    observer = None
     why = {"design.sliding_fraction": "the certified set: |tan alpha| <= this x the sliding slip per axle",
            "design.gain_sliding_fraction": "the set of the l2 gain bound",
            "design.decay_fraction": "the fraction of the largest certifiable decay rate the design requires"}
