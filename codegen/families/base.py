@@ -189,6 +189,15 @@ class Family(abc.ABC):
     def bench_family_lines(self, rows: list) -> list:
         return []
 
+    def applicability(self, subject, structure):
+        """Whether this family can take ``subject`` (a model with its sensors and unknown inputs,
+        :class:`codegen.analysis.subject.Subject`), given its ``structure``
+        (:class:`codegen.analysis.structure.Structure`): a
+        :class:`codegen.analysis.ranking.Applicability`, "applies" with the observer-file settings
+        the family would use, or the one condition that fails and the change that satisfies it.
+        ``uiogen analyze`` ranks the families by these answers; None: the family does not say."""
+        return None
+
     def check_gains(self, config, gains: dict) -> dict:
         """Check externally supplied decision variables against the family's LMIs, without a solver.
 

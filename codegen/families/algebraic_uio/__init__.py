@@ -23,6 +23,10 @@ class AlgebraicUIO(Family):
     demo_scenarios = ("paper",)
     example = "algebraic_uio_example2"
 
+    def applicability(self, subject, structure):
+        from .applicability import assess
+        return assess(self, subject, structure)
+
     def build(self, config, tol=None):
         from .build import build
         return build(config, tol)

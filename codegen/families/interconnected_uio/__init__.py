@@ -23,6 +23,10 @@ class InterconnectedUIO(Family):
     demo_scenarios = ("satory",)
     example = "interconnected_uio"
 
+    def applicability(self, subject, structure):
+        from .applicability import assess
+        return assess(self, subject, structure)
+
     def build(self, config, tol=None):
         from .build import build
         return build(config, tol)

@@ -35,6 +35,10 @@ class LinfUIO(Family):
     def check_config(self, config, data: dict) -> None:
         parse_table(data.get("ui_filter", {}), UI_FILTER_KEYS, source=config.source, section="ui_filter")
 
+    def applicability(self, subject, structure):
+        from .applicability import assess
+        return assess(self, subject, structure)
+
     def build(self, config, tol=None):
         from .build import build
         return build(config, tol)

@@ -30,6 +30,10 @@ class SwitchedPI(Family):
         from .validation import SENSOR_NOISE
         return dict(SENSOR_NOISE)
 
+    def applicability(self, subject, structure):
+        from .applicability import assess
+        return assess(self, subject, structure)
+
     def build(self, config, tol=None):
         from .build import build
         return build(config, tol)

@@ -22,6 +22,10 @@ class TSFuzzyUIO(Family):
     demo_scenarios = ("random_trajectory_accel", "circular_path_normal", "time_varying_grip_normal")
     example = "ts_fuzzy_uio"
 
+    def applicability(self, subject, structure):
+        from .applicability import assess
+        return assess(self, subject, structure)
+
     def build(self, config, tol=None):
         from .build import build
         return build(config, tol)
