@@ -40,7 +40,7 @@ import numpy as np
 import sympy as sp
 
 from ...artifact import artifact_head, significant, solver_certificate
-from ...bounds import range_bound
+from ...bounds import Interval, range_bound
 from ...canonical import decimal_round
 from ...errors import CertificateError, ModelDefinitionError, SchedulingBoundsError
 from ...lmi import LMIProblem, bmat, check_blocks, trace
@@ -151,13 +151,10 @@ def represent(module, params, settings: NonlinearTyreSettings, source: str) -> T
             raise CertificateError(f"{source}: axle {a.name}: the tyre slope reaches {rl.lower:.4g} N (or the "
                                    f"kinematic factor {rg.upper:.4g}) on |t| <= {limits[k]:.4g}: v_y is not "
                                    f"observable there; lower sliding_fraction")
-        from ...bounds import RangeBound
-        rb = RangeBound(rl.upper * rg.lower, rl.lower * rg.upper, rl.attained_max * rg.attained_min,
-                        rl.attained_min * rg.attained_max, rl.boxes_examined + rg.boxes_examined)
-        rb = RangeBound(min(rb.lower, rb.upper), max(rb.lower, rb.upper), rb.attained_min, rb.attained_max,
-                        rb.boxes_examined)
-        theta.append((rb.lower, rb.upper))
-        attained.append((rb.attained_min, rb.attained_max))
+        th = Interval(rl.lower, rl.upper) * Interval(rg.lower, rg.upper)     # the product rounded outward
+        theta.append((th.lo, th.hi))
+        # products of the factors' attained extremes (slope > 0, kinematic factor < 0), each taken at its own point
+        attained.append((rl.attained_max * rg.attained_min, rl.attained_min * rg.attained_max))
     # the model is the force form with the (clamped) Fiala forces: checked at random points of S
     model_forces = [sp.sympify(e).subs(subs).subs(zero_w) for e in (module.Phi_f, module.Phi_r)]
     rng = np.random.default_rng(0)
