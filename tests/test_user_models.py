@@ -184,6 +184,26 @@ def test_uiogen_new_writes_a_starter_that_designs_generates_and_builds(tmp_path,
     assert cli.main(["new", str(folder), "--family", family, "--name", "my_observer"]) == 2   # no overwrite
 
 
+def test_the_taylor_reduced_polytope_is_labelled_and_starters_are_exact(tmp_path, capsys):
+    """The paper's Taylor-reduced polytope is an approximation whose error is not in the LMI: said in the
+    summary (text and JSON), the design lock's polytope and check-gains; the L-infinity starter uses the
+    exact sector polytope."""
+    from codegen import polytope
+    assert cli.main(["new", str(tmp_path / "p"), "--family", "linf_uio", "--name", "mine"]) == 0
+    starter = (tmp_path / "p" / "mine.toml").read_text()
+    assert '\npolytope = "sector"' in starter and "taylor_reduced" not in starter.split("polytope =")[1].split("\n")[0]
+    b = linf_build.build(observers.get("lpv_linf_driver_torque"))
+    s = b.summary("x")
+    assert s["polytope_form"] == polytope.FORMS["taylor_reduced"]
+    assert s["polytope_form"].startswith("approximation, error not in the LMI")
+    text = "\n".join(b.summary_lines(s))
+    assert "taylor_reduced polytope (approximation, error not in the LMI), 2 vertices" in text
+    assert "(14.8% of the entry): approximation, error not in the LMI" in text
+    assert b.artifact()["polytope"]["form"] == polytope.FORMS["taylor_reduced"]
+    exact = linf_build.build(observers.get("lpv_linf_driver_torque_sector"))
+    assert "sector polytope (exact), 4 vertices" in exact.summary_lines(exact.summary("x"))[0]
+
+
 SIDESLIP_MODEL = '''
 """Single-track model in (beta, r): D = [1/(M v_x); 0] depends on the speed, and the
 disturbance force reaches the lateral acceleration (feedthrough)."""
