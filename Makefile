@@ -45,7 +45,7 @@ test: build embedded-tools
 	$(BIN)/python -m pytest -q tests
 
 misra: generate embedded-tools
-	$(BIN)/python -m codegen.misra
+	$(BIN)/python -m codegen.targets.misra
 
 check: build
 	$(BIN)/python -m pytest -q -m reliability tests
@@ -61,7 +61,7 @@ docs: build
 	mkdir -p docs/data
 	$(BIN)/uiogen demo --json > docs/data/demo.json.tmp && mv docs/data/demo.json.tmp docs/data/demo.json
 	$(BIN)/uiogen bench --json > docs/data/bench.json.tmp && mv docs/data/bench.json.tmp docs/data/bench.json
-	$(BIN)/python -m codegen.spread --out docs/data/spread.json
+	$(BIN)/python -m codegen.tools.spread --out docs/data/spread.json
 	mkdir -p docs/data/sweeps
 	$(BIN)/uiogen sweep switched_pi_bank_angle --set 'design.pole_radius=[29, 30, 30.5, 35, 50, 100, 300, 1000, 10000]' \
 	  --set 'design.decay_rate=[0, 1]' --show gamma,max_pole_modulus,max_pole_real_part,discrete_contraction_per_step \
@@ -84,5 +84,5 @@ lock:
 	rm -rf .venv-lock
 
 clean:
-	rm -rf python_bindings/_ext python_bindings/_build .pytest_cache
+	rm -rf build .pytest_cache
 	find . -name __pycache__ -type d -prune -exec rm -rf {} +

@@ -1,19 +1,22 @@
 """uiogen toolchain: model -> representation -> design -> certificate -> C -> extension.
 
-Modules, in pipeline order:
+Subpackages, in pipeline order:
 
-* :mod:`codegen.model`        symbolic model definitions and parameter files
-* :mod:`codegen.observers`    observer files (built-in or a user's, anywhere on disk)
-* :mod:`codegen.families`     one folder per observer family (representation, design, build,
-                              validation) and the registry the toolchain asks
-* :mod:`codegen.polytope`, :mod:`codegen.bounds`, :mod:`codegen.differentiators`
-                              representations and building blocks the families share
-* :mod:`codegen.lmi`          LMI layer compiled to Clarabel, with the numpy re-check
-* :mod:`codegen.design_lock`  the certified design, committed like a lock file
-* :mod:`codegen.pipeline`     runs the stages of an observer's family (replaying its lock)
-* :mod:`codegen.canonical`    machine-independent numbers for everything emitted
-* :mod:`codegen.emit`         C emission (CasADi kernel + Jinja2 API), :mod:`codegen.toolchain`
-* :mod:`codegen.extension`    the compiled step as a Python extension (:mod:`python_bindings`)
-* :mod:`codegen.cli`          the ``uiogen`` command
+* :mod:`codegen.project`         the inputs: observer files, settings tables, log column maps
+* :mod:`codegen.model`           1. symbolic model definitions and parameter files
+* :mod:`codegen.representation`  2. representations the families share (polytope, bounds, HOSMD)
+* :mod:`codegen.design`          3. LMI layer (Clarabel + numpy re-check), the design lock,
+                                 machine-independent numbers, source hashing, sweeps
+* :mod:`codegen.certificate`     4. the design artifact's certificate parts
+* :mod:`codegen.emit`            5. C emission (CasADi kernel + Jinja2 API) and the C toolchain
+* :mod:`codegen.extension`       6. the compiled step as a Python extension (:mod:`python_bindings`)
+* :mod:`codegen.families`        one folder per observer family (representation, design, build,
+                                 validation) and the registry the toolchain asks
+* :mod:`codegen.pipeline`        runs the stages of an observer's family (replaying its lock)
+* :mod:`codegen.cli`             the ``uiogen`` command; :mod:`codegen.errors` its typed errors
+
+Beside the pipeline: :mod:`codegen.validation` (scenarios, real logs, plants, the demo),
+:mod:`codegen.campaign` (dispersed runs on Dask), :mod:`codegen.targets` (FMU, float32,
+Cortex-M, MISRA) and :mod:`codegen.tools` (maintainer tools: bench, docs, spread, QEMU).
 """
 __version__ = "0.1.0"

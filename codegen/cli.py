@@ -1,16 +1,20 @@
 """The ``uiogen`` command line.
 
     uiogen list [--json]
-    uiogen design NAME [--json] [--out FILE] [--update]
-    uiogen generate [NAME ...] [--force] [--out DIR]
-    uiogen build [NAME ...] [--float32]
+    uiogen design NAME [--json] [--out FILE] [--update] [--project DIR]
+    uiogen generate [NAME ...] [--force] [--out DIR] [--project DIR]
+    uiogen build [NAME ...] [--float32] [--project DIR]
     uiogen check-gains NAME --gains FILE [--json]
-    uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png]
-    uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png]
+    uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png] [--project DIR]
+    uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png] [--project DIR]
     uiogen demo [--json]
     uiogen bench [--json]
     uiogen campaign SPEC.toml [--runs N] [--only K] [--json] [--scheduler ADDRESS] [--workers N] [--out DIR]
-    uiogen export NAME --format fmu --out FILE.fmu
+    uiogen export NAME --format fmu --out FILE.fmu [--project DIR]
+
+``--project DIR``: the project folder whose ``generated_c/`` and ``build/`` the command reads and
+writes (:mod:`codegen.project.workspace`); default: the observer file's folder, or for a built-in
+observer the source checkout (installed: the current directory).
 """
 from __future__ import annotations
 
@@ -22,7 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import design_lock, emit, families, observers, pipeline
+from .design import lock as design_lock
+from .emit import generate as emit
+from . import families, pipeline
+from .project import observer_file as observers
 from .errors import CertificateError, ConfigurationError, UiogenError
 
 
@@ -78,7 +85,7 @@ def _compare_with_committed(config, records) -> dict:
 
 
 def cmd_design(args) -> int:
-    config = observers.get(args.name)
+    config = observers.get(args.name, project=args.project)
     b, records = pipeline.solve(config)
     text = design_lock.dumps(design_lock.document(b, records))
     compare = _compare_with_committed(config, records)
@@ -121,7 +128,7 @@ def _print_design(b, path, as_json: bool, compare: dict) -> int:
 
 
 def cmd_sweep(args) -> int:
-    from . import sweep
+    from .design import sweep
     grid = [sweep.parse_set(text) for text in args.sets]
     columns = [c.strip() for c in args.show.split(",") if c.strip()]
     if args.json:
@@ -139,21 +146,24 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_generate(args) -> int:
-    emit.generate(args.names or None, Path(args.out) if args.out else None, force=args.force)
+    emit.generate(args.names or None, Path(args.out) if args.out else None, force=args.force,
+                  project=args.project)
     return 0
 
 
 def cmd_build(args) -> int:
-    from . import extension
+    from .extension import build as extension
     if not args.float32:
-        return extension.main(args.names)
-    from . import precision
+        return extension.main(args.names, project=args.project)
+    from .targets import float32 as precision
     refused = []
     for name in args.names or observers.names():
-        report = precision.compare(name)
+        config = observers.get(name, project=args.project)
+        name = config.name
+        report = precision.compare(config)
         print(precision.format_report(report))
         if report["passes"]:
-            print(f"{name}: built {precision.FLOAT_DIR / name / f'lib{name}_f32.so'} (API {name}_f32_*)")
+            print(f"{name}: built {config.workspace.float32 / name / f'lib{name}_f32.so'} (API {name}_f32_*)")
         else:
             refused.append(f"{name} (margin 1-c = {report['margin']:.4g}, bound {report['bound']:.2g}, "
                            f"max deviation {report['max_deviation']:.2g})")
@@ -196,9 +206,10 @@ def cmd_check_gains(args) -> int:
 
 
 def cmd_validate(args) -> int:
-    from . import validate
+    from .validation import run as validate
+    config = observers.get(args.name, project=args.project)
     if args.data:
-        result = validate.run_data(args.name, args.data)
+        result = validate.run_data(config, args.data)
         if args.plot:
             validate.plot_data(result, args.plot)
         if args.json:
@@ -212,7 +223,7 @@ def cmd_validate(args) -> int:
         return 0
     if not args.scenario:
         raise ConfigurationError("validate needs --scenario S (simulated plant) or --data PATH (logged run)")
-    result = validate.run_scenario(args.name, args.scenario, args.plant, duration=args.duration,
+    result = validate.run_scenario(config, args.scenario, args.plant, duration=args.duration,
                                    progress=validate.progress_bar(f"{args.scenario} on {args.plant}"))
     if args.plot:
         validate.plot(result, args.plot)
@@ -227,7 +238,7 @@ def cmd_validate(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    from . import demo
+    from .validation import demo
     return demo.main(json_output=args.json)
 
 
@@ -261,18 +272,18 @@ def cmd_new(args) -> int:
 
 
 def cmd_docs(args) -> int:
-    from . import docs
+    from .tools import docs
     return docs.main(check=args.check)
 
 
 def cmd_export(args) -> int:
-    from . import fmu
-    fmu.export_fmu(args.name, args.out)
+    from .targets import fmu
+    fmu.export_fmu(observers.get(args.name, project=args.project), args.out)
     return 0
 
 
 def cmd_bench(args) -> int:
-    from . import bench
+    from .tools import bench
     return bench.main(json_output=args.json)
 
 
@@ -290,7 +301,7 @@ def cmd_campaign(args) -> int:
         else:
             print(report.format_row(row))
         return 0
-    out = Path(args.out) if args.out else Path("build") / "campaigns" / Path(args.spec).stem
+    out = Path(args.out) if args.out else observers.get(spec.observer).workspace.campaigns / Path(args.spec).stem
     summary = engine.run(spec, out, scheduler=args.scheduler, workers=args.workers,
                          progress=None if args.json else engine.progress_bar())
     if args.json:
@@ -306,10 +317,17 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="uiogen", description="Certified unknown-input observers, "
                                      "from symbolic vehicle equations to embeddable C.")
     sub = parser.add_subparsers(dest="command", required=True)
+    # The commands that read or write an observer's generated files take its project folder.
+    project = argparse.ArgumentParser(add_help=False)
+    project.add_argument("--project", metavar="DIR",
+                         help="the project folder of the generated files (generated_c/, build/); default: the "
+                              "observer file's folder, for a built-in observer the source checkout (installed: "
+                              "the current directory)")
     p = sub.add_parser("list", help="list observer configurations")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_list)
-    p = sub.add_parser("design", help="solve and certify one observer's design (writes nothing unless --update/--out)")
+    p = sub.add_parser("design", parents=[project],
+                       help="solve and certify one observer's design (writes nothing unless --update/--out)")
     p.add_argument("name")
     p.add_argument("--json", action="store_true")
     p.add_argument("--out", help="also write the design (lock format) to this file")
@@ -324,12 +342,12 @@ def main(argv=None) -> int:
     p.add_argument("--show", default="gamma", help="comma-separated summary figures in the text table (default gamma)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_sweep)
-    p = sub.add_parser("generate", help="emit C for observers whose inputs changed")
+    p = sub.add_parser("generate", parents=[project], help="emit C for observers whose inputs changed")
     p.add_argument("names", nargs="*")
     p.add_argument("--force", action="store_true", help="regenerate even if the inputs hash is unchanged")
     p.add_argument("--out", help="output directory (default generated_c/)")
     p.set_defaults(func=cmd_generate)
-    p = sub.add_parser("build", help="compile the generated C into Python extensions")
+    p = sub.add_parser("build", parents=[project], help="compile the generated C into Python extensions")
     p.add_argument("names", nargs="*")
     p.add_argument("--float32", action="store_true",
                    help="emit and build the float (casadi_real) variant into build/float32/NAME/ instead, "
@@ -341,7 +359,8 @@ def main(argv=None) -> int:
     p.add_argument("--gains", required=True, help="JSON with P1, P2, X, L1, L2 (nested lists)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_check_gains)
-    p = sub.add_parser("validate", help="errors on an independent plant, beside the KF/EKF baselines")
+    p = sub.add_parser("validate", parents=[project],
+                       help="errors on an independent plant, beside the KF/EKF baselines")
     p.add_argument("name")
     p.add_argument("--scenario", help="excitation (any model: its own equations, swept and excited) or one of codegen.validation.scenarios.names()")
     p.add_argument("--data", help="a logged run (CSV, plain or .gz): the columns mapped by the observer file's [data] "
@@ -374,9 +393,10 @@ def main(argv=None) -> int:
     p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: a local cluster)")
     p.add_argument("--workers", type=int, help="local cluster size (default: the cores)")
     p.add_argument("--out", help="directory for runs.csv, summary.json, traces and plots "
-                                 "(default build/campaigns/SPEC_STEM)")
+                                 "(default: build/campaigns/SPEC_STEM of the observer's project)")
     p.set_defaults(func=cmd_campaign)
-    p = sub.add_parser("export", help="package a generated observer for another tool (fmu: FMI 2.0 co-simulation)")
+    p = sub.add_parser("export", parents=[project],
+                       help="package a generated observer for another tool (fmu: FMI 2.0 co-simulation)")
     p.add_argument("name")
     p.add_argument("--format", choices=("fmu",), required=True)
     p.add_argument("--out", required=True, help="the file to write (FILE.fmu)")

@@ -19,7 +19,7 @@ class ConfigurationError(ModelDefinitionError):
     """A key or value of an observer file, a parameter file or a design table is not allowed.
 
     The message reads ``FILE: [section] key = value: what is allowed`` (with a did-you-mean for a
-    misspelt key or choice); the parts are also attributes, for scripts. :mod:`codegen.settings`
+    misspelt key or choice); the parts are also attributes, for scripts. :mod:`codegen.project.settings`
     raises it.
     """
 
@@ -146,3 +146,9 @@ class UnknownFamilyError(ConfigurationError):
 class RepresentationError(ModelDefinitionError):
     """A representation of the model (a reduced polytope, a TS form) is too far from the model,
     or too large, to be designed with; the message names the better choice."""
+
+
+class ConformanceError(UiogenError, RuntimeError):
+    """A compiled step disagrees with its model (signal layout, or numbers on samples across the
+    declared boxes): ``uiogen build`` does not install it; the message names the signal and the
+    sample (:mod:`codegen.conformance`)."""

@@ -1,18 +1,19 @@
 """The pipeline, in order: model -> representation -> design -> certificate -> discrete step.
 
 :func:`build` runs every stage of the configuration's family (:mod:`codegen.families`) and
-returns its build; :mod:`codegen.emit` turns it into C and :mod:`codegen.extension` compiles
+returns its build; :mod:`codegen.emit` turns it into C and :mod:`codegen.extension.build` compiles
 that into a Python extension. The design comes from the committed lock when it is current
-(:mod:`codegen.design_lock`).
+(:mod:`codegen.design.lock`).
 """
 from __future__ import annotations
 
-from . import design_lock, families, lmi
-from .observers import ObserverConfig
+from .design import lock as design_lock, lmi
+from . import families
+from .project.observer_file import ObserverConfig
 
 
 def build(config: ObserverConfig, tol: float | None = None, fresh: bool = False):
-    """The observer of ``config``: its committed design (:mod:`codegen.design_lock`) when it is
+    """The observer of ``config``: its committed design (:mod:`codegen.design.lock`) when it is
     current, replayed and re-checked block by block; otherwise (or with ``fresh`` or a solver
     ``tol``) a new solve. Use :func:`solve` to also get the LMI solutions for a new lock."""
     if not fresh and tol is None:

@@ -9,9 +9,10 @@
 
 ``step`` is the C function itself (no Python wrapper on the hot path); it checks shapes,
 dtypes, byte order and alignment and raises TypeError/ValueError on bad arrays. The extensions
-are built by ``make build`` (:mod:`codegen.extension`, with its C glue template
-``codegen/templates/pymodule.c.j2``) into ``_ext/`` here.
+are built by ``make build`` (:mod:`codegen.extension.build`, with its C glue template
+``codegen/emit/templates/pymodule.c.j2``) into the observer's project's ``build/extensions/``
+(:mod:`codegen.project.workspace`).
 """
-from codegen.extension import CompiledObserver, load
+from codegen.extension.build import CompiledObserver, load
 
 __all__ = ["CompiledObserver", "load"]

@@ -1,11 +1,11 @@
 """``python -m python_bindings.build [NAME ...]``: compile generated observers into extensions
-(the same as ``uiogen build``; the build itself is :mod:`codegen.extension`)."""
+(the same as ``uiogen build``; the build itself is :mod:`codegen.extension.build`)."""
 import sys
 
-from codegen.extension import (BUILD_DIR, GLUE_FLAGS, STRICT_FLAGS, build_extension, generated_names, main,
-                               observer_sources)
+from codegen.extension.build import (GLUE_FLAGS, STRICT_FLAGS, build_extension, generated_names, main,
+                                     observer_sources)
 
-__all__ = ["BUILD_DIR", "GLUE_FLAGS", "STRICT_FLAGS", "build_extension", "generated_names", "main",
+__all__ = ["GLUE_FLAGS", "STRICT_FLAGS", "build_extension", "generated_names", "main",
            "observer_sources"]
 
 if __name__ == "__main__":

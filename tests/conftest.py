@@ -4,7 +4,8 @@ from pathlib import Path
 
 import pytest
 
-from codegen import observers, pipeline
+from codegen.project import observer_file as observers
+from codegen import pipeline
 from codegen.families.linf_uio import build as linf_build
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -7,14 +7,15 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from codegen import observers, pipeline
+from codegen.project import observer_file as observers
+from codegen import pipeline
 from codegen.families.algebraic_uio import build as algebraic_uio
 from codegen.families.algebraic_uio import representation as rdeg
 from codegen.families.algebraic_uio import design as alg
 from codegen.errors import (DiscretizationError, InfeasibleLMIError, ModelDefinitionError, RankConditionError,
                            SchedulingBoundsError)
 from codegen.model import ModelDefinition, SchedulingSignal, instantiate, load_parameters
-from codegen.observers import ObserverConfig
+from codegen.project.observer_file import ObserverConfig
 
 NAMES = ("algebraic_uio_example1", "algebraic_uio_example2", "algebraic_uio_lateral_force")
 
@@ -344,7 +345,7 @@ def test_c_step_status_behaviour():
 def test_noise_free_examples_reach_1e_6(name):
     """State and UI errors below 1e-6 of each signal's peak once the differentiators have converged and
     the certified decay has shrunk the initial error by 1e6 (t >= t_c + T_obs); compiled C step."""
-    from codegen import validate
+    from codegen.validation import run as validate
     res = validate.run_scenario(name, "paper")
     assert res["status_flags"] == 0
     conv = res["differentiator_convergence"]
@@ -356,7 +357,7 @@ def test_noise_free_examples_reach_1e_6(name):
 
 
 def test_lateral_force_with_noise_meets_5_percent():
-    from codegen import validate
+    from codegen.validation import run as validate
     res = validate.run_scenario("algebraic_uio_lateral_force", "paper")
     assert res["status_flags"] == 0 and res["noise"] == {"v_y": 0.01}
     assert res["observer"]["F_yr"]["rms_percent_after_5s"] <= 5.0

@@ -1,4 +1,4 @@
-"""Sound bounds for whatever a user writes (codegen/bounds.py), checked against mpmath.
+"""Sound bounds for whatever a user writes (codegen/representation/bounds.py), checked against mpmath.
 
 An enclosure must hold the *real* function's value at every point of its box, to the last bit:
 library calls widened by their error, constants that are not doubles widened, sin/cos/tan reduced
@@ -15,7 +15,7 @@ import sympy as sp
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from codegen import bounds
+from codegen.representation import bounds
 from codegen.errors import BoundsError
 from model_defs import tyres
 

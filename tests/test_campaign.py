@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from codegen import observers, simulate
+from codegen.project import observer_file as observers
+from codegen.validation import simulate
 from codegen.campaign import engine, runner
 from codegen.campaign import spec as campaign_spec
 from codegen.campaign.plants import CompiledPlant
@@ -72,7 +73,7 @@ def test_20_run_campaign_on_a_local_dask_cluster_rows_rerun_bit_for_bit(tmp_path
         again = runner.run_one(spec, k)
         assert again == rows[k]
     saved = json.loads((tmp_path / "summary.json").read_text())
-    from codegen import design_lock
+    from codegen.design import lock as design_lock
     committed = json.loads(design_lock.path(observers.get("lpv_linf_driver_torque")).read_text())["gamma"]
     assert saved["runs"] == 20 and saved["certificate"]["gamma"] == committed      # the certified gamma
     for p in saved["files"]["plots"]:

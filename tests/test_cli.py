@@ -67,11 +67,12 @@ def test_build_float32_accepted_and_refused():
     """`uiogen build --float32`: an observer whose contraction margin covers the float rounding
     is built (exit 0, its library on disk); one whose margin does not is refused with exit 2 and
     a one-line typed error naming the measured margin, no traceback."""
-    from codegen import precision
     ok = uiogen("build", "--float32", "lpv_linf_driver_torque_bmw320i")
     assert ok.returncode == 0, ok.stderr
     assert "lpv_linf_driver_torque_bmw320i: float32 accepted" in ok.stdout
-    lib = precision.FLOAT_DIR / "lpv_linf_driver_torque_bmw320i" / "liblpv_linf_driver_torque_bmw320i_f32.so"
+    from codegen.project import observer_file
+    lib = (observer_file.get("lpv_linf_driver_torque_bmw320i").workspace.float32 / "lpv_linf_driver_torque_bmw320i"
+           / "liblpv_linf_driver_torque_bmw320i_f32.so")
     assert lib.exists() and f"built {lib}" in ok.stdout
     bad = uiogen("build", "--float32", "lpv_linf_driver_torque")
     assert bad.returncode == 2

@@ -13,7 +13,9 @@ from pathlib import Path
 import pytest
 import sympy as sp
 
-from codegen import cli, observers, pipeline, polytope, settings
+from codegen import cli, pipeline
+from codegen.project import observer_file as observers, settings
+from codegen.representation import polytope
 from codegen.families.switched_pi import build as switched_pipeline
 from codegen.families.ts_fuzzy_uio import representation as ts_fuzzy
 from codegen.families.interconnected_uio import representation as icm
@@ -23,7 +25,7 @@ from codegen.families.interconnected_uio import design as du
 from codegen.families.linf_uio import design as linf_uio
 from codegen.families.switched_pi import design as switched_pi
 from codegen.families.ts_fuzzy_uio import design as ts_fuzzy_uio
-from codegen.differentiators import HosmdSpec
+from codegen.representation.differentiators import HosmdSpec
 from codegen.errors import ConfigurationError, ModelDefinitionError, SchedulingBoundsError, UiogenError
 from codegen.model import parameter_substitution, ModelDefinition, SchedulingSignal, instantiate, load_parameters
 from codegen.families.linf_uio import build as linf_build
@@ -437,7 +439,7 @@ def test_cli_list_refuses_a_bad_file(tmp_path, monkeypatch, capsys):
 # ---- nothing lost: committed files parse exactly as before --------------------------------------------
 
 def _old_parse(path: Path) -> observers.ObserverConfig:
-    """The parser before codegen.settings (commit 45597f5), for valid files."""
+    """The parser before codegen.project.settings (commit 45597f5), for valid files."""
     import tomllib
     data = tomllib.loads(path.read_text())
     doc = ""
@@ -564,7 +566,7 @@ def test_committed_parameter_files_load_and_pass():
             instantiate(cfg.load_model(), load_parameters(cfg.parameter_path))
 
 
-# ---- codegen.settings itself ---------------------------------------------------------------------------
+# ---- codegen.project.settings itself ---------------------------------------------------------------------------
 
 @dataclasses.dataclass(frozen=True)
 class _Toy:

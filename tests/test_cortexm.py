@@ -10,8 +10,9 @@ import os
 import numpy as np
 import pytest
 
-from codegen import cortexm, qemu
-from codegen.extension import build_extension
+from codegen.targets import cortexm
+from codegen.tools import qemu
+from codegen.extension.build import build_extension
 
 NAME = "lpv_linf_driver_torque"
 

@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from codegen import observers, pipeline, simulate
+from codegen.project import observer_file as observers
+from codegen import pipeline
+from codegen.validation import simulate
 from codegen.families.linf_uio import discrete
 from codegen.validation import common
 from codegen.errors import ModelDefinitionError, NotAffineError

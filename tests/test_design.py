@@ -2,7 +2,9 @@
 import numpy as np
 import pytest
 
-from codegen import lmi, pipeline, polytope
+from codegen.design import lmi
+from codegen import pipeline
+from codegen.representation import polytope
 from codegen.families.linf_uio import design as linf_uio
 from codegen.errors import ConfigurationError, RankConditionError
 

@@ -19,7 +19,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from codegen import canonical, cli, design_lock, emit, lmi, observers, pipeline, sources
+from codegen.design import canonical, lock as design_lock, lmi, sources
+from codegen import cli, pipeline
+from codegen.emit import generate as emit
+from codegen.project import observer_file as observers
 from codegen.errors import GenerationError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -70,30 +73,31 @@ def test_design_without_update_writes_nothing_under_generated_c(capsys):
     assert "not written" in capsys.readouterr().out
 
 
-def test_design_update_commits_a_current_lock(tmp_path, monkeypatch, capsys):
-    shutil.copytree(ROOT / "generated_c" / "ts_fuzzy_uio", tmp_path / "ts_fuzzy_uio")
-    lock = tmp_path / "ts_fuzzy_uio" / "ts_fuzzy_uio_design.json"
+def test_design_update_commits_a_current_lock(tmp_path, capsys):
+    shutil.copytree(ROOT / "generated_c" / "ts_fuzzy_uio", tmp_path / "generated_c" / "ts_fuzzy_uio")
+    lock = tmp_path / "generated_c" / "ts_fuzzy_uio" / "ts_fuzzy_uio_design.json"
     lock.write_text("{}")                                        # a stale lock
-    monkeypatch.setattr(design_lock, "GENERATED_DIR", tmp_path)
-    config = observers.get("ts_fuzzy_uio")
+    config = observers.get("ts_fuzzy_uio", project=tmp_path)
+    assert design_lock.path(config) == lock
     assert design_lock.status(config)[0] is None
-    assert cli.main(["design", "ts_fuzzy_uio", "--update"]) == 0
+    assert cli.main(["design", "ts_fuzzy_uio", "--update", "--project", str(tmp_path)]) == 0
     data, why = design_lock.status(config)
     assert data is not None, why
     assert data["lock"]["versions"]["clarabel"] == importlib.metadata.version("clarabel")
 
 
-def test_a_stale_lock_is_resolved_by_generate(tmp_path, monkeypatch):
-    shutil.copytree(ROOT / "generated_c" / "lpv_linf_driver_torque", tmp_path / "lpv_linf_driver_torque")
-    monkeypatch.setattr(design_lock, "GENERATED_DIR", tmp_path)
-    lock = tmp_path / "lpv_linf_driver_torque" / "lpv_linf_driver_torque_design.json"
+def test_a_stale_lock_is_resolved_by_generate(tmp_path):
+    generated = tmp_path / "generated_c"
+    shutil.copytree(ROOT / "generated_c" / "lpv_linf_driver_torque", generated / "lpv_linf_driver_torque")
+    lock = generated / "lpv_linf_driver_torque" / "lpv_linf_driver_torque_design.json"
     data = json.loads(lock.read_text())
     data["lock"]["design_inputs"] = "0" * 64
     lock.write_text(json.dumps(data))
     lines = []
-    emit.generate(["lpv_linf_driver_torque"], out_dir=tmp_path, log=lines.append)
+    emit.generate(["lpv_linf_driver_torque"], log=lines.append, project=tmp_path)
     assert "design inputs changed" in lines[0] and "design re-solved" in lines[-1]
-    assert design_lock.status(observers.get("lpv_linf_driver_torque"))[0] is not None
+    assert design_lock.status(observers.get("lpv_linf_driver_torque", project=tmp_path))[0] is not None
+    assert design_lock.status(observers.get("lpv_linf_driver_torque"))[0] is not None   # the checkout's untouched
 
 
 def test_package_versions_are_in_both_hashes(monkeypatch):

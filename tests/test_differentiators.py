@@ -8,7 +8,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from codegen import differentiators as D
+from codegen.representation import differentiators as D
 from codegen.errors import ModelDefinitionError, SampleError, UiogenError
 
 ORDERS = range(1, D.MAX_ORDER + 1)

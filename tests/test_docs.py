@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from codegen import docs
+from codegen.tools import docs
 
 ROOT = Path(__file__).resolve().parent.parent
 

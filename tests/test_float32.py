@@ -7,9 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from codegen import design_lock, emit, observers, pipeline, precision
+from codegen.design import lock as design_lock
+from codegen.emit import generate as emit
+from codegen.project import observer_file as observers
+from codegen import pipeline
+from codegen.targets import float32 as precision
 from codegen.errors import CertificateError
-from codegen.extension import build_extension, load
+from codegen.extension.build import build_extension, load
 
 NAME = "lpv_linf_driver_torque"
 

@@ -10,8 +10,10 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from codegen import cli, fmu, validate
-from codegen.extension import build_extension, load
+from codegen import cli
+from codegen.targets import fmu
+from codegen.validation import run as validate
+from codegen.extension.build import build_extension, load
 
 fmpy = pytest.importorskip("fmpy", reason="FMPy is not installed (pip install -c constraints.txt '.[fmu]')")
 from fmpy.validation import validate_fmu  # noqa: E402

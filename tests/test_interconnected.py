@@ -12,7 +12,8 @@ import pytest
 import sympy as sp
 
 from codegen.families.interconnected_uio import representation as icm
-from codegen import observers, pipeline
+from codegen.project import observer_file as observers
+from codegen import pipeline
 from codegen.families.interconnected_uio import design as du
 from codegen.families.interconnected_uio import build as dub
 from codegen.errors import (CertificateError, ModelDefinitionError, RankConditionError, SchedulingBoundsError)

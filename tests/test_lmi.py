@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from codegen.errors import CertificateError, InfeasibleLMIError, LMIShapeError, NonAffineLMIError
-from codegen.lmi import LMIProblem, bmat, svec, trace, unsvec
+from codegen.design.lmi import LMIProblem, bmat, svec, trace, unsvec
 
 
 def test_svec_roundtrip_and_order():

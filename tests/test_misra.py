@@ -6,8 +6,8 @@ import shutil
 
 import pytest
 
-from codegen import misra
-from codegen.toolchain import GENERATED_DIR
+from codegen.targets import misra
+from codegen.emit.toolchain import GENERATED_DIR
 
 pytestmark = pytest.mark.skipif(shutil.which("cppcheck") is None,
                                 reason="cppcheck is not installed (make embedded-tools / "

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from codegen import polytope as P
+from codegen.representation import polytope as P
 
 from test_model import paper_A_w
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from codegen import simulate
+from codegen.validation import simulate
 from codegen.errors import SampleError
 from codegen.validation import common
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from codegen import validate
+from codegen.validation import run as validate
 from codegen.errors import SampleError
 from codegen.validation import stanford
 

@@ -12,7 +12,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from codegen import harness, observers, pipeline, simulate, validate
+from codegen.tools import harness
+from codegen.project import observer_file as observers
+from codegen import pipeline
+from codegen.validation import simulate, run as validate
 from codegen.families.linf_uio import build as linf_build
 from codegen.validation import common
 from python_bindings import load

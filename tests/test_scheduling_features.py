@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from codegen import observers, pipeline
+from codegen.project import observer_file as observers
+from codegen import pipeline
 from codegen.errors import ModelDefinitionError
 from codegen.model import ModelDefinition, SchedulingSignal
 from codegen.families.linf_uio import build as linf_build

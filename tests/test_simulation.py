@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from codegen import observers, simulate, validate
+from codegen.project import observer_file as observers
+from codegen.validation import simulate, run as validate
 from codegen.validation import common
 
 

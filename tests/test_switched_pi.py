@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from codegen import observers, pipeline
+from codegen.project import observer_file as observers
+from codegen import pipeline
 from codegen.families.switched_pi import representation as switched
 from codegen.families.switched_pi import design as switched_pi
 from codegen.errors import CertificateError, ModelDefinitionError, RankConditionError
@@ -187,7 +188,7 @@ def test_design_certificates(builds, name):
     for i in range(sm.n_modes):                                 # Algorithm 1 step 3
         np.testing.assert_allclose(d.Pi[i], d.T @ sm.A[i] - d.K[i] @ sm.C[i], atol=1e-9)
         np.testing.assert_allclose(d.Kp[i], d.K[i] + d.Pi[i] @ d.N, atol=1e-9)
-        K = np.vstack([d.K[i], d.KI[i]])                         # exact (codegen.canonical) vs LAPACK
+        K = np.vstack([d.K[i], d.KI[i]])                         # exact (codegen.design.canonical) vs LAPACK
         np.testing.assert_allclose(-np.linalg.solve(d.P, d.Gamma[i]), K, rtol=1e-10, atol=1e-12 * np.abs(K).max())
 
 
@@ -202,7 +203,7 @@ POLE_RADIUS_CURVE = {(35.0, 1.0): (0.07765, 0.01), (50.0, 1.0): (0.022136, 0.01)
 def test_gamma_is_set_by_the_pole_radius():
     """gamma of Theorem 2 with the pole disk falls with the radius; the paper's 2.1 lies at the
     feasibility edge (r = 29 rad/s infeasible without decay region, 30.5 already gives 0.43)."""
-    from codegen import sweep
+    from codegen.design import sweep
     got = {}
     for (r, a), (gamma, rel) in POLE_RADIUS_CURVE.items():
         row = sweep.point(SPEED, {"design.pole_radius": r, "design.decay_rate": a})
@@ -218,7 +219,7 @@ def test_gamma_is_set_by_the_pole_radius():
 
 
 def test_sweep_refuses_a_misspelt_setting_by_name():
-    from codegen import sweep
+    from codegen.design import sweep
     from codegen.errors import ConfigurationError
     with pytest.raises(ConfigurationError, match="pole_radus"):
         sweep.point(SPEED, {"design.pole_radus": 50.0})
@@ -320,7 +321,7 @@ def test_slip_premise_from_the_estimate_switches_and_flags(builds, compiled):
 
 
 def test_whole_trajectory_equals_casadi_mapaccum(builds, compiled):
-    from codegen import simulate
+    from codegen.validation import simulate
     from codegen.families.switched_pi import validation as banked_road
     b, obs = builds[FINE], compiled[FINE]
     tr = banked_road.truth(b.config, "banked_road_braking", "nominal")
@@ -336,7 +337,7 @@ def test_whole_trajectory_equals_casadi_mapaccum(builds, compiled):
 # --- validation targets (issue 6) -------------------------------------------------------------------------
 
 def test_banked_road_targets_on_the_pacejka_plant():
-    from codegen import validate
+    from codegen.validation import run as validate
     res = validate.run_scenario(FINE, "banked_road_braking", "nominal")
     obs = res["observer"]
     assert obs["phi_r"]["rms"] <= 0.5 and obs["beta"]["rms"] <= 0.2
@@ -349,8 +350,8 @@ def test_bank_channel_within_gamma_and_the_rest_is_model_mismatch():
     """gamma bounds phi_r -> beta error on the model class; on the Pacejka plant the run's ratio
     (0.0151) exceeds it because a flat road (phi_r = 0) alone leaves a larger beta error (tyres,
     roll kinematics: outside the class). Noise-free runs of banked_road_braking, from t = 2 s."""
-    from codegen import simulate
-    from codegen.extension import load
+    from codegen.validation import simulate
+    from codegen.extension.build import load
     from codegen.families.switched_pi import validation as V
     from codegen.validation import scenarios
     c = observers.get(SPEED)
@@ -375,7 +376,7 @@ def test_bank_channel_within_gamma_and_the_rest_is_model_mismatch():
 
 
 def test_commonroad_flat_road_targets():
-    from codegen import validate
+    from codegen.validation import run as validate
     res = validate.run_scenario(FINE, "banked_road_braking", "commonroad")
     obs = res["observer"]
     assert obs["phi_r"]["rms"] <= 0.3 and obs["beta"]["rms"] <= 0.2 and obs["phi"]["rms"] <= 0.05

@@ -13,13 +13,16 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from codegen import cli, design_lock, emit, families, lmi, observers, pipeline
-from codegen.artifact import artifact_head, significant, solver_certificate
-from codegen.canonical import decimal_round, matmul, solve
+from codegen import cli, families, pipeline
+from codegen.design import lock as design_lock, lmi
+from codegen.emit import generate as emit
+from codegen.project import observer_file as observers
+from codegen.certificate.artifact import artifact_head, significant, solver_certificate
+from codegen.design.canonical import decimal_round, matmul, solve
 from codegen.errors import CertificateError
 from codegen.families import Family, ObserverBuild
 from codegen.model import instantiate, load_parameters
-from codegen.settings import parse_settings, setting
+from codegen.project.settings import parse_settings, setting
 
 
 @dataclasses.dataclass(frozen=True)

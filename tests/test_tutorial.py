@@ -44,7 +44,9 @@ def test_the_tutorial_runs_from_an_empty_folder(tutorial):
 
 
 def test_the_force_estimate_is_within_five_percent_and_unit_free(tutorial):
-    from codegen import emit, extension, validate
+    from codegen.emit import generate as emit
+    from codegen.extension import build as extension
+    from codegen.validation import run as validate
     res = validate.run_scenario(str(tutorial / "disturbance.toml"), "excitation")
     truth = res["signals"]["truth"]["F"]
     keep = res["signals"]["t"] >= 2.0
@@ -81,8 +83,9 @@ def test_the_force_estimate_is_within_five_percent_and_unit_free(tutorial):
 def test_a_log_in_its_own_units_gives_the_same_estimates(tutorial):
     """The [data] column map: ms, degrees, deg/s, g, km/h and kN converted to the model's units;
     the observer over the log gives what it gives over the simulated SI signals."""
-    from codegen import observers, validate
-    from codegen.extension import load
+    from codegen.project import observer_file as observers
+    from codegen.validation import run as validate
+    from codegen.extension.build import load
     from codegen.validation import excitation
     res = validate.run_data(str(tutorial / "disturbance.toml"), str(tutorial / "log.csv"))
     run = excitation.simulate(observers.get(str(tutorial / "disturbance.toml")), duration=20.0)
@@ -96,7 +99,7 @@ def test_a_log_in_its_own_units_gives_the_same_estimates(tutorial):
 
 
 def test_the_saturating_tyre_observer_tracks_its_model(tutorial):
-    from codegen import validate
+    from codegen.validation import run as validate
     res = validate.run_scenario(str(tutorial / "saturating.toml"), "excitation")
     obs = res["observer"]
     assert obs["v_y"]["rms"] < 0.01 and obs["T_eng"]["nmse_percent"] > 95 and obs["delta"]["nmse_percent"] > 95
@@ -106,7 +109,8 @@ def test_the_saturating_tyre_observer_tracks_its_model(tutorial):
 def mapped(tutorial):
     """A copy of the disturbance observer, built; its column map is then edited per case (the map
     is not part of the design: the build stays current)."""
-    from codegen import emit, extension
+    from codegen.emit import generate as emit
+    from codegen.extension import build as extension
     path = tutorial / "disturbance_map.toml"
     path.write_text((tutorial / "disturbance.toml").read_text())
     emit.generate([str(path)], log=lambda *_: None)
@@ -137,7 +141,8 @@ def test_column_map_mistakes_name_the_file_and_key(tutorial, mapped, capsys, old
 
 
 def test_editing_the_column_map_never_re_solves(tutorial, mapped):
-    from codegen import emit, validate
+    from codegen.emit import generate as emit
+    from codegen.validation import run as validate
     text = (tutorial / "disturbance.toml").read_text()
     mapped.write_text(text.replace('unit = "deg/s" }', 'unit = "rad/s", scale = 0.017453292519943295 }'))
     lines = []

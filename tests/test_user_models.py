@@ -12,7 +12,9 @@ import time
 import numpy as np
 import pytest
 
-from codegen import cli, emit, observers, pipeline
+from codegen import cli, pipeline
+from codegen.emit import generate as emit
+from codegen.project import observer_file as observers
 from codegen.errors import RepresentationError
 from codegen.families.linf_uio import build as linf_build
 from codegen.families.linf_uio import design as linf_design
@@ -188,7 +190,7 @@ def test_the_taylor_reduced_polytope_is_labelled_and_starters_are_exact(tmp_path
     """The paper's Taylor-reduced polytope is an approximation whose error is not in the LMI: said in the
     summary (text and JSON), the design lock's polytope and check-gains; the L-infinity starter uses the
     exact sector polytope."""
-    from codegen import polytope
+    from codegen.representation import polytope
     assert cli.main(["new", str(tmp_path / "p"), "--family", "linf_uio", "--name", "mine"]) == 0
     starter = (tmp_path / "p" / "mine.toml").read_text()
     assert '\npolytope = "sector"' in starter and "taylor_reduced" not in starter.split("polytope =")[1].split("\n")[0]
@@ -248,7 +250,8 @@ def test_scheduling_dependent_D_with_feedthrough_designs_and_tracks(tmp_path):
     """The L-infinity family beyond the paper's structure: D(v_x) (the UI filter's pseudo-inverse
     formed at run time) and the unknown input in an output (the full step system); the UI filter
     loop certified over the box; the force tracked on the model's own equations."""
-    from codegen import extension, validate
+    from codegen.extension import build as extension
+    from codegen.validation import run as validate
     (tmp_path / "car.py").write_text(SIDESLIP_MODEL)
     (tmp_path / "car.toml").write_text(SIDESLIP_PARAMS)
     obs = tmp_path / "obs.toml"

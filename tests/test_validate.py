@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from codegen import validate
+from codegen.validation import run as validate
 from codegen.errors import ModelDefinitionError
 
 ROOT = Path(__file__).resolve().parent.parent

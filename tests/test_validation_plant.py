@@ -68,7 +68,7 @@ def test_column_torque_balance(circle):
 
 
 def test_params_toml_format_and_slope(tmp_path):
-    from codegen import model
+    from codegen.model import definition as model
     from model_defs.steering_single_track_camber import MODEL
     text = C.params_toml(2)
     data = tomllib.loads(text)

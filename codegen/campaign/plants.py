@@ -2,7 +2,7 @@
 
 Each plant here is the same closed loop as a Python plant of the library, sample for sample:
 
-* ``steering_torque``: :func:`codegen.simulate.nominal_plant` (the observer model module's
+* ``steering_torque``: :func:`codegen.validation.simulate.nominal_plant` (the observer model module's
   ``PLANT``, e.g. Pacejka tyres with load transfer, with planar pose kinematics, closed by the
   scenario's handwheel-torque driver :class:`codegen.validation.scenarios._Driver`; inputs held
   over each sample, RK4 at Ts/10);
@@ -31,7 +31,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelDefinitionError, UnsupportedError
-from ..stepgen import CASADI_MODULES
+from ..emit.stepgen import CASADI_MODULES
 
 SUBSTEPS = 10
 CACHE_ENV = "UIOGEN_PLANT_CACHE"
@@ -39,11 +39,13 @@ DRIVER_KEYS = ("wheelbase", "R_s", "k_e", "k_edot", "k_r", "k_ri", "k_p", "k_i",
 
 
 def cache_dir() -> Path:
-    """Where compiled plants live: ``$UIOGEN_PLANT_CACHE``, else ``python_bindings/_build/plants``."""
+    """Where compiled plants live: ``$UIOGEN_PLANT_CACHE``, else the built-in observers' project's
+    ``build/plants/`` (:mod:`codegen.project.workspace`; a campaign runs a built-in observer)."""
+    from ..project.workspace import Workspace, source_checkout
     env = os.environ.get(CACHE_ENV)
     if env:
         return Path(env)
-    return Path(__file__).resolve().parents[2] / "python_bindings" / "_build" / "plants"
+    return Workspace.of(source_checkout()).plants
 
 
 def _rk4(f, x, h, e0, em, e1):
@@ -183,7 +185,7 @@ BANKED_DRIVER = {"k_r": 0.5, "k_ri": 0.3}
 
 def banked_road_spec(config) -> PlantSpec:
     from ..model import load_parameters
-    from ..observers import builtin_model
+    from ..project.observer_file import builtin_model
     params = load_parameters(config.parameter_path)
     mod = builtin_model("roll_single_track")
     d = mod.PLANT
@@ -318,7 +320,7 @@ class CompiledPlant:
 def _compile(f: ca.Function) -> Path:
     """The shared object of ``f``'s C, compiled once per source hash (atomic rename: safe for
     several worker processes compiling at once)."""
-    from ..toolchain import compiler, run
+    from ..emit.toolchain import compiler, run
     with tempfile.TemporaryDirectory() as tmp:
         cg = ca.CodeGenerator("plant_run.c", {"with_header": False})
         cg.add(f)

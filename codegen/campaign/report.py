@@ -59,7 +59,7 @@ def summarize(spec, rows, wall_s: float, workers: int, scheduler: str) -> dict:
     ok = _ok(rows)
     gamma = ok[0]["gamma"] if ok else None
     ratios = [r["ratio"] for r in ok]
-    from .. import observers
+    from ..project import observer_file as observers
     cert = certified_gain_norm(observers.get(spec.observer))
     s = {"observer": spec.observer, "spec": spec.source, "scenarios": list(spec.scenarios), "seed": spec.seed,
          "runs": len(rows), "runs_ok": len(ok), "runs_failed": {st: sum(r["status"] == st for r in rows)

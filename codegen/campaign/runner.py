@@ -31,17 +31,17 @@ def _cached(key, make):
 
 
 def _config(spec):
-    from .. import observers
+    from ..project import observer_file as observers
     return _cached(("config", spec.observer), lambda: observers.get(spec.observer))
 
 
 def _observer(spec):
-    from ..extension import load
+    from ..extension.build import load
     return _cached(("obs", spec.observer), lambda: load(spec.observer))
 
 
 def _artifact(spec) -> dict:
-    from .. import design_lock
+    from ..design import lock as design_lock
     return _cached(("art", spec.observer), lambda: json.loads(design_lock.path(_config(spec)).read_text()))
 
 
@@ -114,7 +114,7 @@ def _error_signals(spec) -> tuple:
 def run_one(spec, run: int, traces: bool = False):
     """The summary row of run ``run`` (a dict of numbers and strings); with ``traces``, also
     (row, signals) with the truth and the estimates of the error signals over time."""
-    from .. import simulate
+    from ..validation import simulate
     config, obs = _config(spec), _observer(spec)
     d = draw(spec, run)
     scn, plant, values = d["scn"], d["plant"], d["values"]

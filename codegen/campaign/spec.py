@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import ConfigurationError
-from ..settings import Rule, check_keys, config_error, parse_table, suggest
+from ..project.settings import Rule, check_keys, config_error, parse_table, suggest
 
 TOP = {
     "observer": Rule(str, required=True, doc="a built-in observer name"),
@@ -147,7 +147,7 @@ def load(path) -> CampaignSpec:
 
 
 def parse(data: dict, source: str) -> CampaignSpec:
-    from .. import observers
+    from ..project import observer_file as observers
     from ..errors import UnknownObserverError
     from ..validation import scenarios as scn_lib
     from .plants import DRIVER_KEYS, BANKED_DRIVER_KEYS, families_with_plants, plant_kind
@@ -215,14 +215,14 @@ def _plant_parameters(config, kind) -> tuple:
 
 def _measured_signals(config) -> tuple:
     import json
-    from .. import design_lock
+    from ..design import lock as design_lock
     art = json.loads(design_lock.path(config).read_text())
     return tuple(c[2:] if c.startswith("y_") else c for c in art["signals"]["input"])
 
 
 def _error_signals(config) -> tuple:
     import json
-    from .. import design_lock
+    from ..design import lock as design_lock
     from .plants import KINDS, plant_kind
     art = json.loads(design_lock.path(config).read_text())
     outputs = art["signals"].get("output", art["signals"]["state"])

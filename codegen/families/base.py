@@ -1,8 +1,8 @@
 """What an observer family provides: :class:`Family` (the registry's entry) and
 :class:`ObserverBuild` (what its pipeline returns). Nothing outside a family's own folder
 needs to know which family it handles: the toolchain (:mod:`codegen.pipeline`,
-:mod:`codegen.emit`, :mod:`codegen.cli`, :mod:`codegen.validate`, :mod:`codegen.demo`,
-:mod:`codegen.bench`) only calls these members.
+:mod:`codegen.emit`, :mod:`codegen.cli`, :mod:`codegen.validation.run`, :mod:`codegen.validation.demo`,
+:mod:`codegen.tools.bench`) only calls these members.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ class ObserverBuild(abc.ABC):
     """One designed, certified observer, ready for C: what ``Family.build`` returns.
 
     Concrete builds are frozen dataclasses with at least ``config`` (the
-    :class:`~codegen.observers.ObserverConfig`) and ``timings`` ({stage: seconds}).
+    :class:`~codegen.project.observer_file.ObserverConfig`) and ``timings`` ({stage: seconds}).
     """
 
     config: object
@@ -64,7 +64,7 @@ class ObserverBuild(abc.ABC):
 
     @abc.abstractmethod
     def lmi_problem(self):
-        """A fresh :class:`~codegen.lmi.LMIProblem` of the design (benchmark: our path vs CVXPY)."""
+        """A fresh :class:`~codegen.design.lmi.LMIProblem` of the design (benchmark: our path vs CVXPY)."""
 
     @abc.abstractmethod
     def input_boxes(self) -> dict:
@@ -119,7 +119,7 @@ class Family(abc.ABC):
     citation: str = ""
     #: the paper, short ("Nguyen et al. 2019"), for generated headers and reports
     short_citation: str = ""
-    #: top-level observer-file keys beyond the common ones: {key: codegen.settings.Rule}
+    #: top-level observer-file keys beyond the common ones: {key: codegen.project.settings.Rule}
     observer_keys: dict = {}
     #: the library scenarios ``uiogen demo`` runs
     demo_scenarios: tuple = ()
@@ -197,7 +197,7 @@ class Family(abc.ABC):
         committed design: every block is re-checked with numpy, and the discrete step certified.
         Families with a paper-specific form of their gains override this (and fall back to it).
         """
-        from .. import lmi
+        from ..design import lmi
         from ..errors import (CertificateError, ConfigurationError, DesignLockError, DiscretizationError,
                                InfeasibleLMIError)
         raw = gains.get("lmi_solutions")

@@ -1,7 +1,10 @@
-"""Validation groundwork: error metrics, real-data baselines, an independent plant, scenarios.
+"""Validation: an observer against scenarios and real logs, the plants that drive it, the demo.
 
 Modules:
 
+* :mod:`codegen.validation.run`               ``uiogen validate``: a scenario or a data log through an observer
+* :mod:`codegen.validation.simulate`          the nominal plant (the observer's own model, integrated exactly)
+* :mod:`codegen.validation.demo`              ``uiogen demo``: every observer on its scenarios and the real log
 * :mod:`codegen.validation.metrics`           per-signal error metrics of the paper papers
 * :mod:`codegen.validation.stanford`          Stanford sideslip data set loader, KF and EKF baselines
 * :mod:`codegen.validation.commonroad_plant`  CommonRoad multi-body plant driven by steering torques

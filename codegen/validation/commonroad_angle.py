@@ -4,7 +4,7 @@ The same independent 29-state ``vehicle_dynamics_mb`` with PAC2002 tyres as
 :mod:`codegen.validation.commonroad_plant`, closed differently: Nguyen et al. 2021 treats the steering angle
 and the engine torque as the (unknown) inputs, so an automated driver sets them directly:
 
-* steering: :class:`codegen.simulate.AngleDriver` commands δ; a steering servo turns it into the
+* steering: :class:`codegen.validation.simulate.AngleDriver` commands δ; a steering servo turns it into the
   plant's steering-velocity input, δ̇ = k_servo (δ_cmd − δ) (first order, 20 rad/s by default);
 * longitudinal: the driver's acceleration demand is the plant's a_x input, which the package
   itself converts into engine torque T_E = m R_w a_x (a_x > 0) or brake torque (a_x < 0).
@@ -32,7 +32,7 @@ import math
 import numpy as np
 
 from ..errors import SampleError
-from ..simulate import rk4_step
+from .simulate import rk4_step
 from .commonroad_plant import VEHICLE_NAMES, PlantError, _Plant, PlantConfig, _static_loads, \
     tyre_cornering_stiffness, vehicle_parameters
 
@@ -93,7 +93,7 @@ def simulate(scenario, vehicle: int = 2, sample_rate: float = 100.0, dt_internal
     SampleError, PlantError
     """
     from vehiclemodels.init_mb import init_mb
-    from ..simulate import AngleDriver
+    from .simulate import AngleDriver
     if abs(scenario.sample_rate - sample_rate) > 1e-9:
         raise SampleError(f"scenario sampled at {scenario.sample_rate} Hz, plant outputs at {sample_rate} Hz")
     if not roll_stiffness_scale > 0:

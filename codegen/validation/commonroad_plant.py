@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ModelDefinitionError, PlantError, SampleError
-from ..simulate import rk4_step
+from .simulate import rk4_step
 
 VEHICLE_NAMES = {1: "Ford Escort", 2: "BMW 320i", 3: "VW Vanagon"}   # CommonRoad parameter sets
 

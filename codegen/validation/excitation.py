@@ -22,7 +22,7 @@ import sympy as sp
 
 from ..errors import ModelDefinitionError
 from ..model import load_parameters, parameter_substitution
-from ..simulate import rk4_step
+from .simulate import rk4_step
 from .common import SETTLE_TIME, signal_stats
 
 DURATION = 30.0
@@ -130,7 +130,7 @@ def simulate(config, duration: float = DURATION, seed: int = 0, substeps: int = 
 def run(config, duration: float | None = None, seed: int = 0, progress=None) -> dict:
     """The compiled step over the excitation scenario; tables in the shape of every validation."""
     from .. import pipeline
-    from ..extension import load
+    from ..extension.build import load
     model = config.load_model()
     truth = simulate(config, duration or DURATION, seed)
     obs = load(config)

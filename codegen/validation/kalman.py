@@ -31,7 +31,7 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
-from ..stepgen import CASADI_FUNCTIONS
+from ..emit.stepgen import CASADI_FUNCTIONS
 from ..errors import ModelDefinitionError, SampleError
 from ..model import ModelDefinition
 
@@ -39,7 +39,7 @@ __all__ = ["KalmanModel", "kalman_model", "FilterResult", "linear_kalman_filter"
            "unscented_kalman_filter",
            "to_casadi"]
 
-_CASADI_NAMESPACE = CASADI_FUNCTIONS     # the toolchain's one table (codegen.stepgen)
+_CASADI_NAMESPACE = CASADI_FUNCTIONS     # the toolchain's one table (codegen.emit.stepgen)
 
 
 def to_casadi(exprs, symbols, values) -> list:

@@ -16,7 +16,7 @@ unit the model declares for that signal) or an explicit scale::
     [data.truth]                                          # optional: references of the estimates
     v_y = { column = "vy_ref", unit = "m/s" }
 
-A column's value in the model's unit is ``value * unit factor * scale`` (:mod:`codegen.columns`
+A column's value in the model's unit is ``value * unit factor * scale`` (:mod:`codegen.project.columns`
 parses the map with the observer file). The log is read by
 :mod:`codegen.validation.csvlog` (separator, decimal mark, finite values, the sample time of the
 observer, no gaps). Estimates with a reference get the error statistics of every validation
@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..columns import UNITS, ColumnMap, factor, model_unit, normalize_unit
+from ..project.columns import UNITS, ColumnMap, factor, model_unit, normalize_unit
 from ..errors import ConfigurationError, DatasetError
-from ..settings import config_error, suggest
+from ..project.settings import config_error, suggest
 from . import csvlog
 from .common import signal_stats
 
@@ -55,12 +55,12 @@ def run(config, path) -> dict:
     DatasetError
         the log (see :mod:`codegen.validation.csvlog`).
     """
-    from ..extension import load
+    from ..extension.build import load
     cmap = config.column_map
     if cmap is None:
         raise ConfigurationError(f"{config.source}: logged runs of this observer need a [data] table mapping the log's "
                                  f"columns to its inputs (docs/validation.md, 'Your own logs')", source=config.source)
-    obs = load(config.source if not config.builtin else config.name)
+    obs = load(config)
     model = config.load_model()
     missing = [n for n in obs.input_names if n not in cmap.inputs]
     if missing:

@@ -46,7 +46,7 @@ import numpy as np
 
 
 from ..errors import DatasetError, ModelDefinitionError, SampleError
-from ..observers import builtin_model
+from ..project.observer_file import builtin_model
 from . import csvlog, kalman, metrics
 from .csvlog import GAP_FACTOR, MAX_PERIOD, PERIOD_RTOL, SHORT_FACTOR  # noqa: F401 (documented here too)
 

@@ -10,7 +10,7 @@ HOSMD); ``validation``: the paper's examples, scenarios as data in the observer 
 """
 from __future__ import annotations
 
-from ...settings import Rule
+from ...project.settings import Rule
 from ..base import Family
 
 
@@ -44,8 +44,8 @@ class AlgebraicUIO(Family):
         return periodic_inputs(build)
 
     def bench_figures(self, build) -> dict:
-        from ... import differentiators
-        from ...bench import flop_count
+        from ...representation import differentiators
+        from ...tools.bench import flop_count
         specs = build.settings.differentiators
         return {"hosmd_flops_per_step": sum(flop_count(differentiators.hosmd_function(s))["total"]
                                             for s in specs.values()),

@@ -27,15 +27,15 @@ import numpy as np
 import sympy as sp
 from scipy.linalg import expm
 
-from ...artifact import artifact_head, significant, solver_certificate
+from ...certificate.artifact import artifact_head, significant, solver_certificate
 from ..base import ObserverBuild
 from . import representation as rdeg
 from . import design as alg
-from ...differentiators import HosmdSpec, hosmd_step_numpy, hosmd_step_sx
-from ...stepgen import solve_unpivoted
+from ...representation.differentiators import HosmdSpec, hosmd_step_numpy, hosmd_step_sx
+from ...emit.stepgen import solve_unpivoted
 from ...errors import ModelDefinitionError
 from ...model import LPVModel, instantiate, load_parameters
-from ...polytope import sector_weights_product
+from ...representation.polytope import sector_weights_product
 
 
 def _entry_functions(symbols, mat, xp):
@@ -402,7 +402,7 @@ def _shift_matrix(order: int, offset: float) -> np.ndarray:
 def step_numpy(b: AlgebraicUIOBuild, z, u, y, rho):
     """Independent numpy implementation of the same step: (z_next, excess, warmup).
 
-    Differentiators by :func:`codegen.differentiators.hosmd_step_numpy` (complex eigenvalues, expm),
+    Differentiators by :func:`codegen.representation.differentiators.hosmd_step_numpy` (complex eigenvalues, expm),
     Taylor evaluation by expm of the integrator chain, linear solves by LAPACK.
     """
     comp = b.__dict__.get("_numpy_compiled")

@@ -19,7 +19,7 @@ vertex with its own gain. The problem is homogeneous in (X, K): X >= I, and ||K_
 Discrete step (what the C runs), at the configured sample time h:
 
 * each output y_i (of y_z) and each scheduling signal has a Levant differentiator
-  (:mod:`codegen.differentiators`, state in the observer's state vector, update in the step);
+  (:mod:`codegen.representation.differentiators`, state in the observer's state vector, update in the step);
   after the update with the sample at t_j, its state is a Taylor polynomial at t_{j+1}, exact for
   polynomials, which gives Y, y, rho, rho', ... anywhere in [t_{j-1}, t_j];
 * the observer ODE is integrated over [t_{j-1}, t_j] by the 2-stage Gauss-Legendre method (order 4)
@@ -45,17 +45,18 @@ import sympy as sp
 from scipy.linalg import matrix_balance
 
 from . import representation as rdeg
-from ...bounds import range_bound
-from ...differentiators import MAX_ORDER, HosmdSpec
-from ...stepgen import CASADI_MODULES
+from ...representation.bounds import range_bound
+from ...representation.differentiators import MAX_ORDER, HosmdSpec
+from ...emit.stepgen import CASADI_MODULES
 from ...errors import (CertificateError, DiscretizationError, InfeasibleLMIError, ModelDefinitionError,
                       SolverError)
-from ...lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
+from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
 from ...model import LPVModel
-from ...polytope import Premise, affine_decomposition, nonlinear_factors, sector_weights_product, vertex_matrices
-from ...settings import Rule, number_matrix, parse_settings, parse_table, parse_value, setting
-from ... import canonical
-from ...canonical import decimal_round
+from ...representation.polytope import (Premise, affine_decomposition, nonlinear_factors, sector_weights_product,
+                                        vertex_matrices)
+from ...project.settings import Rule, number_matrix, parse_settings, parse_table, parse_value, setting
+from ...design import canonical
+from ...design.canonical import decimal_round
 
 # 2-stage Gauss-Legendre (order 4)
 _S3 = math.sqrt(3.0)
@@ -111,7 +112,7 @@ DIFFERENTIATOR_RULES = {"order": Rule(int, ge=1, le=MAX_ORDER, required=True, do
 
 
 def settings_from_config(config) -> AlgebraicSettings:
-    """The ``[design]`` table as :class:`AlgebraicSettings` (every key and value checked, see codegen.settings)."""
+    """The ``[design]`` table as :class:`AlgebraicSettings` (every key and value checked, see codegen.project.settings)."""
     d = dict(config.design)
     specs = {}
     diffs = parse_value(d.get("differentiators", {}), Rule(dict), source=config.source, section="design",
@@ -321,7 +322,7 @@ def design(dec: rdeg.Decoupling, settings: AlgebraicSettings) -> AlgebraicDesign
     prob, (form, gain_poly, factor_poly, blocks, S, Si, K, fixed) = build_problem(dec, settings)
     sol = prob.solve(tol=settings.tol)
     Xs = decimal_round(0.5 * (sol["X"] + sol["X"].T))
-    # emitted: solved exactly (codegen.canonical), the same on every machine
+    # emitted: solved exactly (codegen.design.canonical), the same on every machine
     Ls = [canonical.solve(Xs, np.atleast_2d(sol[f"K{j + 1}"]).reshape(n, ny)) for j in range(len(K))]
     # back to the model's coordinates: x = S x_s, L = S L_s, X = S^-1 X_s S^-1
     L = tuple(decimal_round(S[:, None] * l) for l in Ls)

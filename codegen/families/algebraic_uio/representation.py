@@ -10,7 +10,7 @@ time-varying, and derives, symbolically and with no hand-written matrix:
 * Definition 2 / Assumption 1: the relative degree r_i of output i w.r.t. the unknown inputs is the
   first j with M_{j-1} D not identically zero, and it must be *uniform*: that row may not vanish
   anywhere on the box Theta x Theta_1 x ... (the parameter box and its derivative bounds).  This is
-  proven with sound interval bounds (:mod:`codegen.bounds`), not sampled; a row that vanishes
+  proven with sound interval bounds (:mod:`codegen.representation.bounds`), not sampled; a row that vanishes
   somewhere (or cannot be proven not to) is a :class:`RelativeDegreeError`;
 * eqs. (84)-(86) (one or several outputs/UIs): the stacked output derivatives
   Y = M(rho) x + Gamma(rho) d, with M the rows M^i_{r_i} and Gamma the rows M^i_{r_i - 1} D;
@@ -34,7 +34,7 @@ from functools import cached_property
 
 import sympy as sp
 
-from ...bounds import BoundsError, range_bound
+from ...representation.bounds import BoundsError, range_bound
 from ...errors import ModelDefinitionError, RankConditionError, RelativeDegreeError, SchedulingBoundsError
 from ...model import LPVModel
 

@@ -201,7 +201,7 @@ def _rel_max(err, ref):
 def run(config, scenario_name: str, plant: str = "nominal", duration: float | None = None, seed: int = 0,
         progress=None) -> dict:
     """Simulate the scenario, run the compiled C step over it, and tabulate the errors."""
-    from ...extension import load
+    from ...extension.build import load
     from ... import pipeline
     if plant not in ("nominal", "model"):
         raise ModelDefinitionError(f"the Ichalal and Mammar 2015 observers run on their own plants: --plant nominal (or model), "

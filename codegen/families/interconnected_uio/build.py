@@ -11,14 +11,14 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
-from ...artifact import artifact_head, significant, solver_certificate
+from ...certificate.artifact import artifact_head, significant, solver_certificate
 from ..base import ObserverBuild
 from . import representation as icm
-from ...differentiators import MAX_ORDER, HosmdSpec, hosmd_step_numpy, hosmd_step_sx
-from ...stepgen import CASADI_MODULES, solve_unpivoted
+from ...representation.differentiators import MAX_ORDER, HosmdSpec, hosmd_step_numpy, hosmd_step_sx
+from ...emit.stepgen import CASADI_MODULES, solve_unpivoted
 from ...errors import ModelDefinitionError
-from ...polytope import sector_weights_product
-from ...settings import Rule, parse_settings, parse_table
+from ...representation.polytope import sector_weights_product
+from ...project.settings import Rule, parse_settings, parse_table
 
 from .design import (ICDesign, ICDesignSettings, StepSettings, affine_parts, build_problem, certify,
                      design, discrete_certificate)

@@ -12,7 +12,7 @@ Per subsystem (longitudinal bar, lateral check) of the T-S model (8) built by
   with y~ = y - E zeta_hat (output feedthrough of the coupling signals);
 * the unknown inputs by the algebraic inversion (30),
   u'_hat = (C B)^+ (y'_hat - C A(eta) x_hat - C D(eta) zeta_hat), y'_hat from Levant
-  differentiators (:mod:`codegen.differentiators`), kappa = kappa'/v_x.
+  differentiators (:mod:`codegen.representation.differentiators`), kappa = kappa'/v_x.
 
 Choices the paper leaves open (all here, and in the README's Sentouh et al. 2023 section):
 
@@ -76,10 +76,10 @@ import scipy.linalg
 
 from . import representation as icm
 from ...errors import CertificateError, DiscretizationError, ModelDefinitionError, RankConditionError
-from ...lmi import LMIProblem, LMISolution, bmat, check_blocks
-from ...settings import setting
-from ... import canonical
-from ...canonical import decimal_round
+from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks
+from ...project.settings import setting
+from ...design import canonical
+from ...design.canonical import decimal_round
 
 FAMILY = "interconnected_uio"
 
@@ -160,7 +160,7 @@ class SubsystemDesign:
     def M(self, Ts: float) -> tuple:
         """M_i = P (I - Ts S^-1 N_i S) of the backward-Euler step (scaled coordinates)."""
         S, Si = np.diag(self.S), np.diag(1.0 / self.S)
-        # emitted: exact arithmetic (codegen.canonical); S is diagonal, so S^-1 N S is exact as it is
+        # emitted: exact arithmetic (codegen.design.canonical); S is diagonal, so S^-1 N S is exact as it is
         return tuple(canonical.matmul(self.P, np.eye(len(self.S)) - Ts * (Si @ n @ S)) for n in self.N)
 
 
@@ -186,7 +186,7 @@ def decoupling(sub: icm.SubsystemTS, W: np.ndarray | None = None, rank_tol: floa
     RankConditionError
         naming the subsystem and the ranks.
     """
-    CB = canonical.matmul(sub.C, sub.B)      # (26)-(30) are emitted: exact arithmetic (codegen.canonical)
+    CB = canonical.matmul(sub.C, sub.B)      # (26)-(30) are emitted: exact arithmetic (codegen.design.canonical)
     r_cb = np.linalg.matrix_rank(CB, tol=rank_tol * max(np.abs(CB).max(), 1e-300))
     r_b = np.linalg.matrix_rank(sub.B, tol=rank_tol * max(np.abs(sub.B).max(), 1e-300))
     if r_cb != r_b:
@@ -243,7 +243,7 @@ def scaling(ts: icm.InterconnectedTS, sub: icm.SubsystemTS, T: np.ndarray | None
 
 def _blocks(sub, T, S, W, Z, P, Om, settings, xp):
     """(27b) per vertex, (27e); numbers (``xp`` numpy, the re-check) or Affine decision matrices of
-    :mod:`codegen.lmi` (the problem). (27d) and the gain bound are added by the caller."""
+    :mod:`codegen.design.lmi` (the problem). (27d) and the gain bound are added by the caller."""
     cat = np.block if xp is np else bmat
     Si = np.diag(1.0 / S)
     Cs = np.diag(1.0 / W) @ sub.C @ np.diag(S)
@@ -339,7 +339,7 @@ def affine_parts(sub: icm.SubsystemTS, mats) -> tuple:
 
 def _gains(sub, H, T, CBp, S, W, Z, P, Om, eta) -> SubsystemDesign:
     Sd = np.diag(S)
-    # the emitted gains (28): exact arithmetic (codegen.canonical), the same on every machine
+    # the emitted gains (28): exact arithmetic (codegen.design.canonical), the same on every machine
     K = tuple(canonical.matmul(Sd, canonical.solve(P, o), np.diag(1.0 / W)) for o in Om)
     N = tuple(canonical.matmul(T, sub.A[i]) - canonical.matmul(K[i], sub.C) for i in range(sub.n_vertices))
     L = tuple(K[i] - canonical.matmul(N[i], H) for i in range(sub.n_vertices))

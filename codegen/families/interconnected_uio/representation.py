@@ -20,7 +20,7 @@ the interconnection is typed in: :func:`build` finds, term by term,
   output terms that are a constant times an own state form C; the rest (exogenous forces in the
   accelerometer signals, c_a v_x^2) are coupling signals with an output feedthrough E;
 * the premise variables (11): the distinct non-constant factors of A, B, D in the scheduling
-  variables (:func:`codegen.polytope.nonlinear_factors`), with their ranges from the state box
+  variables (:func:`codegen.representation.polytope.nonlinear_factors`), with their ranges from the state box
   (sound interval bounds) or, for premises of the switched signals, from ``[premise_bounds]``;
 * the 2^q-vertex matrices of (9) (sector nonlinearity, product memberships, exact:
   sum_i eta_i A_i = A(theta)).
@@ -41,12 +41,12 @@ from typing import Mapping
 import numpy as np
 import sympy as sp
 
-from ...bounds import range_bound
+from ...representation.bounds import range_bound
 from ...errors import (MissingParameterError, ModelDefinitionError, NotAffineError, SchedulingBoundsError,
                      UnknownParameterError)
 from ...model import ParameterSet, load_parameters, parameter_substitution
-from ...polytope import Premise, affine_decomposition, nonlinear_factors, sector_weights_product, \
-    vertex_matrices
+from ...representation.polytope import (Premise, affine_decomposition, nonlinear_factors, sector_weights_product,
+                                        vertex_matrices)
 
 
 @dataclass(frozen=True)

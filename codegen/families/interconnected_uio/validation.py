@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import ModelDefinitionError, SampleError
-from ...simulate import rk4_step
+from ...validation.simulate import rk4_step
 from ...validation import metrics
 
 G = 9.81
@@ -572,8 +572,8 @@ def implied_std_over_max(rmse_percent: float, nmse_percent: float) -> float | No
 def run(name: str, mu: float = 1.0, plant: str = "commonroad", duration: float | None = None,
         progress=None, truth: dict | None = None) -> dict:
     """Drive the Satory-like track at friction ``mu`` on ``plant``, run the compiled observer, Table 1."""
-    from ...extension import load
-    from ... import observers
+    from ...extension.build import load
+    from ...project import observer_file as observers
     from . import representation as interconnected
     from ...model import load_parameters
     config = observers.get(name) if isinstance(name, str) else name
@@ -664,7 +664,7 @@ def run_scenario(name: str, scenario: str, plant: str = "commonroad", duration: 
     ``satory_table1`` (all three, Table 1 side by side); ``plant`` commonroad or model."""
     if scenario not in SCENARIOS:
         raise ModelDefinitionError(f"Sentouh et al. 2023 observers validate on {', '.join(SCENARIOS)}, not {scenario!r}")
-    from ... import observers
+    from ...project import observer_file as observers
     from ...model import load_parameters
     config = observers.get(name) if isinstance(name, str) else name
     if plant == "nominal":      # the independent plant where the observer was designed for its car
@@ -705,7 +705,7 @@ def periodic_lap(name: str, mu: float = 1.0) -> dict:
     """Truth of exactly one lap of :func:`oval_track` on the observer's own model, cut between two
     passes of the same point (the third lap of three), so tiling it gives a continuous input: the
     reliability suite's realistic input for Sentouh et al. 2023 observers."""
-    from ... import observers
+    from ...project import observer_file as observers
     from . import representation as interconnected
     from ...model import load_parameters
     config = observers.get(name) if isinstance(name, str) else name

@@ -4,7 +4,7 @@ Nguyen, Guerra, Sentouh, Zhang, "Unknown Input Observers for Simultaneous Estima
 Dynamics and Driver Torque: Theoretical Design and Hardware Experiments", IEEE/ASME
 Transactions on Mechatronics 24(6), 2019 (Theorem 1, eqs. (19)-(23); UI filter (47)).
 
-``representation``: :mod:`codegen.polytope` (sector or Taylor-reduced polytope); ``design``:
+``representation``: :mod:`codegen.representation.polytope` (sector or Taylor-reduced polytope); ``design``:
 Theorem 1; ``discrete``: the backward-Euler step and its certificate; ``build``: the pipeline;
 ``validation``: the paper's scenarios on the Pacejka, exact-model and CommonRoad plants.
 """
@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import ConfigurationError
-from ...settings import Rule, parse_table
+from ...project.settings import Rule, parse_table
 from ..base import Family
 
 UI_FILTER_KEYS = {"time_constant": Rule(float, gt=0, doc="T_f of the UI filter (47), s")}
@@ -71,7 +71,7 @@ class LinfUIO(Family):
         Taylor-reduced polytope; anything else in the design-lock form (``lmi_solutions``)."""
         if "lmi_solutions" in gains:
             return super().check_gains(config, gains)
-        from ... import polytope
+        from ...representation import polytope
         from .build import _settings, representation
         from .design import certify, performance_matrix
         lpv, poly, _ = representation(config)

@@ -13,7 +13,7 @@ observer's exact model (``uiogen validate NAME --plant model``), with the numpy 
 * the sample time (the step at T_s / 10 on a plant sampled at T_s / 10: the continuous limit),
 * the published matrices (Sec. V) in place of ours.
 
-Every re-design is a measurement (solved inside :func:`codegen.lmi.recording`, nothing committed).
+Every re-design is a measurement (solved inside :func:`codegen.design.lmi.recording`, nothing committed).
 Not part of the pipeline: ``build.py`` does not import it, so it is no design input.
 """
 from __future__ import annotations
@@ -24,8 +24,11 @@ import sys
 
 import numpy as np
 
-from ... import lmi, pipeline, polytope, simulate
-from ...observers import get as get_observer
+from ...design import lmi
+from ... import pipeline
+from ...representation import polytope
+from ...validation import simulate
+from ...project.observer_file import get as get_observer
 from ...validation.common import SENSOR_NOISE, scenario_for, signal_stats
 from . import discrete
 

@@ -9,10 +9,11 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ... import lmi, polytope
-from ...artifact import artifact_head, significant
+from ...design import lmi
+from ...representation import polytope
+from ...certificate.artifact import artifact_head, significant
 from ...model import LPVModel, instantiate, load_parameters
-from ...observers import ObserverConfig
+from ...project.observer_file import ObserverConfig
 from ...errors import ModelDefinitionError, RankConditionError, RepresentationError, UILoopError, UiogenError
 from ..base import ObserverBuild
 from . import design as linf_uio
@@ -164,13 +165,13 @@ class LinfBuild(ObserverBuild):
 
 
 def _settings(config: ObserverConfig, lyapunov: str | None = None) -> linf_uio.LinfDesignSettings:
-    """The ``[design]`` table, every key and value checked (codegen.settings).
+    """The ``[design]`` table, every key and value checked (codegen.project.settings).
 
     The TOML key ``gain_bound_times_sample_time`` (default 1.0) is the bound on ||M|| Ts: the field
     ``gain_bound`` is its value / sample_time (``gain_bound`` itself is not a key). ``lyapunov``
     overrides the table's.
     """
-    from ...settings import Alias, config_error, parse_settings, suggest
+    from ...project.settings import Alias, config_error, parse_settings, suggest
     settings = parse_settings(
         linf_uio.LinfDesignSettings, config.design, source=config.source, section="design",
         aliases={"gain_bound_times_sample_time": Alias("gain_bound", lambda v: v / config.sample_time, default=1.0)},

@@ -28,12 +28,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...canonical import decimal_round
+from ...design.canonical import decimal_round
 from ...errors import ConfigurationError, RankConditionError
 from ...errors import SolverError
-from ...lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks, committed_data
-from ...polytope import Polytope
-from ...settings import Rule, setting
+from ...design.lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks, committed_data
+from ...representation.polytope import Polytope
+from ...project.settings import Rule, setting
 
 
 @dataclass(frozen=True)
@@ -274,7 +274,7 @@ def ui_gain(poly: Polytope, settings: LinfDesignSettings, performance: np.ndarra
     solve in those units gives nu_0 and k_1 = 2^round(-log2(nu_0)/2); a second one at k_1 gives nu_1
     (now accurate) and k = k_1 2^floor(-log2(nu_1)/2), which puts the solver's nu in (1/4, 1]:
     there the least-norm stage's bound (the optimum rounded up to three significant digits,
-    codegen.lmi.objective_bound) gives up at most 0.4 % of nu. k is a power of two: exact, and the
+    codegen.design.lmi.objective_bound) gives up at most 0.4 % of nu. k is a power of two: exact, and the
     same on machines whose nu differ in the last digits; any k within 8x of it gives the same
     gamma to 3 digits (tests/test_design.py). Committed with the design (design lock) and read
     back on replay."""

@@ -36,11 +36,11 @@ import numpy as np
 import sympy as sp
 from scipy.linalg import eigh
 
-from ... import canonical, lmi
+from ...design import canonical, lmi
 from ...errors import CertificateError, ConfigurationError, DiscretizationError, SolverError, UILoopError
-from ...lmi import LMIProblem
-from ...polytope import Polytope, sector_weights_product
-from ...stepgen import CASADI_MODULES, TAIL, clamp, const_times, solve_unpivoted, sum_in_order
+from ...design.lmi import LMIProblem
+from ...representation.polytope import Polytope, sector_weights_product
+from ...emit.stepgen import CASADI_MODULES, TAIL, clamp, const_times, solve_unpivoted, sum_in_order
 from .design import ui_feedthrough, ui_scaling
 
 
@@ -86,7 +86,7 @@ class ObserverData:
 
     @cached_property
     def Dp(self):
-        """pinv(D) for a constant D (emitted: machine-independent, see codegen.canonical)."""
+        """pinv(D) for a constant D (emitted: machine-independent, see codegen.design.canonical)."""
         return canonical.pinv(self.poly.D[0])
 
     def Dp_at(self, eta) -> np.ndarray:
@@ -220,7 +220,7 @@ def gain_factorization(data: ObserverData):
     if parts is None:
         return None
     Q0, Q1, L0, L1 = parts
-    lam, V = canonical.eigh(Q1, Q0)     # emitted: machine-independent (see codegen.canonical)
+    lam, V = canonical.eigh(Q1, Q0)     # emitted: machine-independent (see codegen.design.canonical)
     return lam, V, canonical.matmul(V.T, L0), canonical.matmul(V.T, L1)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ... import simulate
+from ...validation import simulate
 from ...errors import ModelDefinitionError
 from ...validation.common import (SENSOR_NOISE, commonroad_vehicle, scenario_for, signal_stats,
                                   truth_plant)
@@ -49,7 +49,7 @@ def car(config):
 def run(config, scenario, plant: str = "nominal", duration: float | None = None, seed: int = 0,
         progress=None) -> dict:
     """Simulate, run the compiled observer and the baselines, return the tables and signals."""
-    from ...extension import load
+    from ...extension.build import load
     from .build import representation
     lpv = representation(config)[0]
     scn = scenario_for(config, scenario, duration)

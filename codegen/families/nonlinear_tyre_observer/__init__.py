@@ -3,7 +3,7 @@ differential mean-value theorem over slip angles up to a fraction of each axle's
 
 The DMVT treatment of unmeasured nonlinearities is that of Nguyen, Dinh, Guerra, Pan 2021 (the
 ``ts_fuzzy_uio`` family), applied here to the tyre force itself: its Jacobian along the
-unmeasured lateral speed is bounded soundly over a set of slip values (:mod:`codegen.bounds`),
+unmeasured lateral speed is bounded soundly over a set of slip values (:mod:`codegen.representation.bounds`),
 and one quadratic Lyapunov matrix certifies the fixed-gain error map at every vertex. See
 ``build.py`` for the equations, ``docs/validation.md`` for the real-data results.
 """

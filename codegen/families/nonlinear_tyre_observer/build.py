@@ -17,14 +17,14 @@ applied to each axle force along v_y alone,
 
 with s = 1/v_x, Theta = (theta_f, theta_r), theta_k = v_x dPhi_k/dv_y at an intermediate point,
 and G_f = d f/d Phi, G_a = d a_y/d Phi constant. theta_k is bounded *soundly* (interval
-arithmetic, :mod:`codegen.bounds`) over the certified set S: |t_k| <= rho t_sl,k (``sliding_fraction``
+arithmetic, :mod:`codegen.representation.bounds`) over the certified set S: |t_k| <= rho t_sl,k (``sliding_fraction``
 rho < 1 of each axle's sliding slip), |delta| within ``[state_bounds] delta``, v_x within
 ``[scheduling.v_x]``. There the Fiala slope is at least (1 - rho)^2 C_k; at full sliding it is 0
 and v_y is unobservable from (a_y, r), so no certificate over a set holding full sliding exists.
 
 A(s, Theta) is multi-affine in (s, theta_f, theta_r): one quadratic Lyapunov matrix P with
 A_v' P A_v < lambda^2 P at the 8 vertices certifies V(e_{k+1}) < lambda^2 V(e_k) for every
-sample inside S (LMIs on :mod:`codegen.lmi`, re-checked with numpy on the emitted P). Samples
+sample inside S (LMIs on :mod:`codegen.design.lmi`, re-checked with numpy on the emitted P). Samples
 whose estimated slip, delta or v_x lie outside S are flagged (excess > 0, SCHEDULING_CLAMPED):
 the certificate does not cover them; the true slip cannot be checked (v_y is not measured).
 """
@@ -39,14 +39,14 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
-from ...artifact import artifact_head, significant, solver_certificate
-from ...bounds import Interval, range_bound
-from ...canonical import decimal_round
+from ...certificate.artifact import artifact_head, significant, solver_certificate
+from ...representation.bounds import Interval, range_bound
+from ...design.canonical import decimal_round
 from ...errors import CertificateError, ModelDefinitionError, SchedulingBoundsError
-from ...lmi import LMIProblem, bmat, check_blocks, trace
+from ...design.lmi import LMIProblem, bmat, check_blocks, trace
 from ...model import load_parameters, parameter_substitution
-from ...settings import parse_settings, setting
-from ...stepgen import CASADI_MODULES
+from ...project.settings import parse_settings, setting
+from ...emit.stepgen import CASADI_MODULES
 
 
 @dataclass(frozen=True)

@@ -11,12 +11,12 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-from ...artifact import artifact_head, significant, solver_certificate
+from ...certificate.artifact import artifact_head, significant, solver_certificate
 from ..base import ObserverBuild
 from . import representation as switched
 from . import design as switched_pi
 from ...model import load_parameters
-from ...observers import ObserverConfig
+from ...project.observer_file import ObserverConfig
 
 
 # gamma* the paper reports for its design (Sec. V)
@@ -180,8 +180,8 @@ class SwitchedPIBuild(ObserverBuild):
 
 
 def settings_of(config: ObserverConfig, tol: float | None = None) -> switched_pi.SwitchedPIDesignSettings:
-    """The ``[design]`` table, every key and value checked (codegen.settings); ``tol`` overrides its tol."""
-    from ...settings import parse_settings
+    """The ``[design]`` table, every key and value checked (codegen.project.settings); ``tol`` overrides its tol."""
+    from ...project.settings import parse_settings
     return parse_settings(switched_pi.SwitchedPIDesignSettings, config.design, source=config.source,
                           section="design", **({"tol": tol} if tol is not None else {}))
 

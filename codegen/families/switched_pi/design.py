@@ -42,11 +42,11 @@ import casadi as ca
 import numpy as np
 
 from ...errors import CertificateError, ConfigurationError, DiscretizationError, RankConditionError
-from ...lmi import LMIProblem, LMISolution, bmat, check_blocks
-from ...settings import setting
+from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks
+from ...project.settings import setting
 from .representation import SwitchedModel
-from ... import canonical
-from ...canonical import decimal_round
+from ...design import canonical
+from ...design.canonical import decimal_round
 
 
 @dataclass(frozen=True)
@@ -82,7 +82,7 @@ class SwitchedPIDesignSettings:
 def decoupling_matrices(C: np.ndarray) -> tuple:
     """(T, N) with [T N] = [I; C]^+ (Algorithm 1 step 1); T + N C = I exactly up to round-off."""
     n = C.shape[1]
-    TN = canonical.pinv(np.vstack([np.eye(n), C]))     # emitted: machine-independent (codegen.canonical)
+    TN = canonical.pinv(np.vstack([np.eye(n), C]))     # emitted: machine-independent (codegen.design.canonical)
     T, N = TN[:, :n], TN[:, n:]
     residual = np.abs(T + N @ C - np.eye(n)).max()
     if residual > 1e-12:
@@ -143,7 +143,7 @@ def check_assumptions(sm: SwitchedModel, T: np.ndarray, tol: float = 1e-9) -> di
 
 def _blocks(sm: SwitchedModel, T, P, G, gamma2, r, a, xp):
     """The LMI blocks, each required <= 0: (20), the pole disk and the decay region per mode."""
-    # numpy numbers for the re-check; Affine decision matrices (codegen.lmi) for the problem
+    # numpy numbers for the re-check; Affine decision matrices (codegen.design.lmi) for the problem
     cat = np.block if xp is np else bmat
     nw, np_ = sm.nw, sm.L.shape[0]
     out = []
@@ -216,7 +216,7 @@ def design(sm: SwitchedModel, settings: SwitchedPIDesignSettings = SwitchedPIDes
     gamma = float(np.sqrt(decimal_round(sol["gamma2"])))
     K, KI, Pi, Kp = [], [], [], []
     for i in range(sm.n_modes):
-        # the emitted gains: exact arithmetic (codegen.canonical), the same on every machine
+        # the emitted gains: exact arithmetic (codegen.design.canonical), the same on every machine
         Ka = -canonical.solve(P, G[i])
         K.append(Ka[:sm.n])
         KI.append(Ka[sm.n:])

@@ -109,7 +109,7 @@ def _plant_function(params, exact_model: bool = False):
     ``exact_model``: the observer's own linear model (1)-(2) with the true, time-varying speed
     (v_y = v_x beta, so v_y' = v_x beta' + beta a_x): no tyre, roll or bank nonlinearity, only the
     switched model's fixed operating points differ from it."""
-    from ...observers import builtin_model
+    from ...project.observer_file import builtin_model
     mod = builtin_model("roll_single_track")
     values = {**params.values, **params.plant}
     if exact_model:
@@ -257,8 +257,8 @@ def _flat(scn):
 def run_scenario(config, scenario: str, plant: str = "nominal", duration: float | None = None,
                  seed: int = 0, progress=None) -> dict:
     """The compiled step on a scenario: tables (angles in degrees), eq. (26)/(28) ratio, mode occupancy."""
-    from ...extension import load
-    from ... import simulate
+    from ...extension.build import load
+    from ...validation import simulate
     tr = truth(config, scenario, plant, duration, progress)
     measured = simulate.add_sensor_noise(tr, SENSOR_NOISE, seed)
     obs = load(config)

@@ -7,9 +7,9 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-from ...artifact import artifact_head, significant, solver_certificate
+from ...certificate.artifact import artifact_head, significant, solver_certificate
 from ...model import load_parameters
-from ...observers import ObserverConfig
+from ...project.observer_file import ObserverConfig
 from ..base import ObserverBuild
 from . import design as ts_fuzzy_uio
 from . import representation as ts_fuzzy
@@ -99,7 +99,8 @@ class TSFuzzyBuild(ObserverBuild):
                  + [{"name": f"y_prev_{n}", "doc": f"previous measured {n} [{units.get(n, '-')}]"}
                     for n in d.output_names]
                  + [{"name": "primed", "doc": "1 once a previous output is stored, else 0"}] + outs)
-        inputs = [{"name": f"y_{n}", "doc": f"measured {n} [{units.get(n, '-')}]"} for n in d.output_names]
+        inputs = ([{"name": str(u), "doc": f"known input {u} [{units.get(str(u), '-')}]"} for u in d.known_inputs]
+                  + [{"name": f"y_{n}", "doc": f"measured {n} [{units.get(n, '-')}]"} for n in d.output_names])
         return state, inputs, outs
 
     def output_lags(self) -> dict:
@@ -151,7 +152,7 @@ class TSFuzzyBuild(ObserverBuild):
 
 def build(config: ObserverConfig, tol: float | None = None) -> TSFuzzyBuild:
     """Nguyen et al. 2021: model -> TS form + Jacobian bounds -> rank conditions, (30), LMIs (27) -> certificates."""
-    from ...settings import parse_settings
+    from ...project.settings import parse_settings
     settings = parse_settings(ts_fuzzy_uio.TSDesignSettings, config.design, source=config.source, section="design",
                               **({"tol": tol} if tol is not None else {}))
     t0 = time.perf_counter()

@@ -29,13 +29,13 @@ import casadi as ca
 import numpy as np
 
 from ...errors import CertificateError, ConfigurationError, RankConditionError, RepresentationError
-from ...stepgen import solve_unpivoted
-from ...lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
-from ...polytope import sector_weights_product
-from ...settings import setting
+from ...emit.stepgen import solve_unpivoted
+from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
+from ...representation.polytope import sector_weights_product
+from ...project.settings import setting
 from .representation import TSFuzzyModel
-from ... import canonical
-from ...canonical import decimal_round
+from ...design import canonical
+from ...design.canonical import decimal_round
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,7 @@ class TSDesignSettings:
         guard, else pairs.
     bounds_rel_tol, bounds_max_boxes : float, int
         Accuracy of the sound Jacobian bounds (relative to the attained values) and the budget of
-        boxes their branch-and-bound may split (:func:`codegen.bounds.range_bound`).
+        boxes their branch-and-bound may split (:func:`codegen.representation.bounds.range_bound`).
     max_lmi_blocks, max_memory_gb : int, float
         Size guards, checked before any LMI is built (:func:`size_guard`): the number of blocks
         of (27) and the memory their coefficients need.
@@ -148,7 +148,7 @@ def size_guard(n_rules: int, nx: int, ny: int, dmvt_vertices: int, settings: TSD
 
 def _blocks(ts: TSFuzzyModel, T, P, M, L, decay, xp, P_bar=None):
     """All blocks of (27a)-(27b) as (label, matrix): numbers (``xp`` numpy, the re-check) or
-    Affine decision matrices of :mod:`codegen.lmi` (the problem). With ``P_bar`` the pair
+    Affine decision matrices of :mod:`codegen.design.lmi` (the problem). With ``P_bar`` the pair
     relaxation: P_bar in place of every P_l, and P_bar >= P_l."""
     N = ts.n_rules
     cat = np.block if xp is np else bmat

@@ -10,7 +10,7 @@ derives, with no hand-written split:
   of G_v;
 * the premise variables: the distinct non-constant factors of A_v and G_v in the measured
   signals (for Nguyen et al. 2021: 1/v_x and r), with ranges over the compact state set D_x (sound
-  interval bounds, :mod:`codegen.bounds`), 2^p sector vertices and product memberships;
+  interval bounds, :mod:`codegen.representation.bounds`), 2^p sector vertices and product memberships;
 * Euler discretization at T_s (eq. (9)): A = I + T_s A_v, D = T_s D_v, f = T_s f_v, G = T_s G_v;
 * sound bounds of the Jacobian of phi over D_x (Assumption 1, eq. (14)); entries of zero width
   collapse, so the DMVT vertex set V_phi has only the vertices that matter.
@@ -24,13 +24,13 @@ from functools import cached_property
 import numpy as np
 import sympy as sp
 
-from ... import canonical
-from ...bounds import RangeBound, derivative, range_bound
-from ...stepgen import CASADI_MODULES
+from ...design import canonical
+from ...representation.bounds import RangeBound, derivative, range_bound
+from ...emit.stepgen import CASADI_MODULES
 from ...errors import ModelDefinitionError, NotAffineError, SchedulingBoundsError
 from ...model import ModelDefinition, ParameterSet, parameter_substitution
-from ...polytope import (Premise, affine_decomposition, memberships, nonlinear_factors,
-                       sector_weights_product, vertex_matrices)
+from ...representation.polytope import (Premise, affine_decomposition, memberships, nonlinear_factors,
+                                        sector_weights_product, vertex_matrices)
 
 
 @dataclass(frozen=True)
@@ -213,11 +213,20 @@ def build(model: ModelDefinition, params: ParameterSet, sample_time: float,
     parts = split_consequents(model, subs)
     x = tuple(model.states)
     box = {}
+    missing = []
     for s in (*x, *model.known_inputs):
-        if str(s) not in params.state_bounds:
-            raise SchedulingBoundsError(f"model {model.name!r}: {s} has no bound in [state_bounds] of "
-                                        f"{params.source}; the TS form needs the compact set D_x (eq. (5))")
-        box[s] = params.state_bounds[str(s)]
+        if str(s) in params.state_bounds:
+            box[s] = params.state_bounds[str(s)]
+        elif s in model.known_inputs and str(s) in params.inputs:     # a known input's declared range
+            box[s] = (float(params.inputs[str(s)]["min"]), float(params.inputs[str(s)]["max"]))
+        else:
+            missing.append(str(s))
+    if missing:
+        raise SchedulingBoundsError(
+            f"model {model.name!r}: {', '.join(missing)} {'has' if len(missing) == 1 else 'have'} no bound in "
+            f"{params.source}; the TS form needs the compact set D_x (eq. (5)): add "
+            + "; ".join(f"{n} = [min, max] under [state_bounds]" if n not in map(str, model.known_inputs)
+                        else f"[inputs.{n}] with min and max (or {n} under [state_bounds])" for n in missing))
     premise_symbols = (*parts["measured"], *model.known_inputs)
     stray = set().union(*(e.free_symbols for e in (*parts["A"], *parts["G"]))) - set(premise_symbols)
     if stray:

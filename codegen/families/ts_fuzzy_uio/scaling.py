@@ -19,7 +19,7 @@ import textwrap
 import time
 from pathlib import Path
 
-from ...sources import ROOT
+from ...design.sources import ROOT
 
 RULES = (2, 4, 8, 16, 32)
 
@@ -80,7 +80,8 @@ def write_project(rules: int, relaxation: str, folder: Path) -> Path:
 def run_point(rules: int, relaxation: str, folder: Path) -> dict:
     """Design one point in this process: counts, the pipeline's time (model to certificate, or to
     the refusal), peak memory, outcome."""
-    from ... import observers, pipeline
+    from ...project import observer_file as observers
+    from ... import pipeline
     from ...errors import UiogenError
     from ...model import load_parameters
     from . import design as ts_design

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ... import simulate
+from ...validation import simulate
 from ...errors import ModelDefinitionError
 from ...validation.common import commonroad_vehicle, scenario_for, signal_stats, truth_plant
 
@@ -41,7 +41,7 @@ def run(config, scenario, plant: str = "nominal", duration: float | None = None,
     (one-sample lag of (16c)); the unknown inputs are compared with the truth of the sample they
     estimate. Noise-free, as the paper's Table II.
     """
-    from ...extension import load
+    from ...extension.build import load
     from ...model import load_parameters
     params = load_parameters(config.parameter_path)
     model_def = config.load_model()

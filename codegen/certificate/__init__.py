@@ -1,0 +1,1 @@
+"""Stage 4, the certificate: the design artifact's shared parts (:mod:`.artifact`)."""

@@ -1,0 +1,141 @@
+"""The certified design as a committed artifact, like a lock file.
+
+An LMI solve is not reproducible bit for bit across machines: Clarabel's PSD algebra runs
+through the BLAS kernel of the CPU it runs on. So the design is solved once, certified, and
+committed as ``NAME_design.json`` (the design lock); everything after it, C generation
+included, is a pure function of (model, parameters, configuration, design lock, templates,
+pinned tool versions) and never solves an LMI again.
+
+The lock records, beside the design report of the family (gains, certificates), the exact
+decision variables of every LMI problem the design solved (:class:`codegen.design.lmi.SolveRecord`)
+and the hash of the design's inputs (:func:`design_inputs`: the observer file, the parameter
+file, the model and every toolchain module the design imports, the numeric packages'
+versions). A lock whose hash matches is *current*: :func:`codegen.pipeline.build` replays it
+(:func:`codegen.design.lmi.replaying`), re-checking every block with numpy. A stale or missing lock
+is re-solved by ``uiogen generate`` (and on request by ``uiogen design NAME --update``).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from . import sources
+from ..errors import DesignLockError
+from .lmi import SolveRecord
+from ..project.observer_file import ObserverConfig
+
+FORMAT = 1
+DESIGN_PACKAGES = ("numpy", "scipy", "sympy", "mpmath", "clarabel")
+
+
+def path(config: ObserverConfig, base: Path | None = None) -> Path:
+    """Where the design lock of ``config`` lives: ``base/NAME/NAME_design.json``, base defaulting
+    to its project's ``generated_c/`` (:mod:`codegen.project.workspace`)."""
+    if base is None:
+        return config.workspace.design_lock(config.name)
+    return Path(base) / config.name / f"{config.name}_design.json"
+
+
+def design_sources(config: ObserverConfig) -> list:
+    """Every file the design of ``config`` derives from, in a fixed order: the parameter file, the
+    model and every project module the family and the model import (a family or model defined
+    outside the project by its own file). The observer file enters as parsed
+    (:func:`observer_file_digest`)."""
+    import inspect
+    from .. import families
+    family = type(families.get(config.family))
+    extra = [config.model_path]
+    if family.__module__.split(".")[0] not in sources.PACKAGES:      # a family registered by a user's code
+        extra.append(Path(inspect.getsourcefile(family)))
+    pipeline_module = f"{family.__module__}.build"      # a family package's pipeline (README of families/)
+    entry = pipeline_module if sources._module_file(pipeline_module) is not None else family.__module__
+    code = sources.closure("codegen.pipeline", entry, files=extra)
+    return [config.parameter_path, *code]
+
+
+def observer_file_digest(config: ObserverConfig) -> str:
+    """Hash of the observer file as parsed, less its ``[data]`` table (the column map of logs,
+    which no design or C derives from), with its leading comment (the C's description): editing a
+    log's map or a comment inside the file never re-solves a design."""
+    import hashlib
+    import tomllib
+    with open(config.source, "rb") as fh:
+        table = tomllib.load(fh)
+    table.pop("data", None)
+    text = json.dumps({"table": table, "doc": config.doc}, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def design_inputs(config: ObserverConfig) -> str:
+    """Hash of the design's inputs: files (:func:`design_sources`) and numeric package versions."""
+    v = sources.versions()
+    # the parsed configuration too: a configuration changed in memory (dataclasses.replace) is
+    # another design even though its file is the same
+    return sources.digest(design_sources(config), {"configuration": json.dumps(config.to_json(), sort_keys=True),
+                                                   "observer_file": observer_file_digest(config),
+                                                   **{k: v[k] for k in DESIGN_PACKAGES}})
+
+
+def read(config: ObserverConfig, base: Path | None = None) -> tuple:
+    """(parsed lock or None, reason) of the file at :func:`path`."""
+    p = path(config, base)
+    if not p.is_file():
+        return None, "no committed design"
+    try:
+        data = json.loads(p.read_text())
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        return None, f"the committed design is unreadable ({type(exc).__name__})"
+    if not isinstance(data, dict) or not isinstance(data.get("lock"), dict):
+        return None, "the committed design has no lock record"
+    return data, ""
+
+
+def status(config: ObserverConfig, base: Path | None = None) -> tuple:
+    """(lock or None, reason): the lock when it is current, else None and why not."""
+    data, why = read(config, base)
+    if data is None:
+        return None, why
+    lock = data["lock"]
+    if lock.get("format") != FORMAT:
+        return None, f"lock format {lock.get('format')!r}, this toolchain writes {FORMAT}"
+    if lock.get("design_inputs") != design_inputs(config):
+        return None, "design inputs changed (model, parameters, configuration, toolchain or package versions)"
+    return data, "current"
+
+
+def solutions(data: dict, source: str = "") -> list:
+    """The committed LMI solutions of a lock, in solve order."""
+    raw = data["lock"].get("lmi_solutions")
+    if not isinstance(raw, list):
+        raise DesignLockError(f"{source}: the lock has no list 'lmi_solutions'")
+    return [SolveRecord.from_json(r, source) for r in raw]
+
+
+def document(build, records: list) -> dict:
+    """The lock of a freshly solved design: the family's report plus the solutions and the hash."""
+    v = sources.versions()
+    return {**build.artifact(),
+            "lock": {"format": FORMAT, "design_inputs": design_inputs(build.config),
+                     "versions": {k: v[k] for k in DESIGN_PACKAGES},
+                     "lmi_solutions": [r.to_json() for r in records]}}
+
+
+def dumps(doc: dict) -> str:
+    return json.dumps(doc, indent=1, sort_keys=True) + "\n"
+
+
+def variable_spread(reference: dict, other: dict) -> dict:
+    """{variable: max |difference| / its size}: each decision matrix against its largest entry,
+    or a thousandth of the design's largest entry if it is smaller (a matrix the design leaves
+    near zero is not 'different' for an absolute difference of 1e-9)."""
+    big = max((np.abs(np.asarray(v, float)).max(initial=0.0) for v in reference.values()), default=0.0)
+    out = {}
+    for key, value in reference.items():
+        if key in other:
+            a, b = np.asarray(other[key], float), np.asarray(value, float)
+            if a.shape == b.shape:
+                size = max(np.abs(b).max(initial=0.0), 1e-3 * big, 1e-300)
+                out[key] = float(np.abs(a - b).max(initial=0.0) / size)
+    return out

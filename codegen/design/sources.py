@@ -1,0 +1,119 @@
+"""The source files an output depends on, derived from the imports (not kept by hand).
+
+:func:`closure` follows the ``import`` statements (module level and inside functions) of the
+project's own packages with :mod:`ast`, so a design or a generated file is stamped with every
+module that can change it, and a module added to a family is covered without anyone listing it.
+:func:`digest` hashes files by their path relative to the checkout and their bytes.
+"""
+from __future__ import annotations
+
+import ast
+import functools
+import hashlib
+import importlib.metadata
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+PACKAGES = ("codegen", "model_defs", "python_bindings")
+
+# Third-party packages whose arithmetic or output format reaches a design or the generated C;
+# their exact versions are part of every stamp (pinned in constraints.txt).
+NUMERIC_PACKAGES = ("numpy", "scipy", "sympy", "mpmath", "clarabel", "casadi", "jinja2")
+
+
+def _module_file(module: str) -> Path | None:
+    """File of a module of the project's packages, or None for anything else."""
+    parts = module.split(".")
+    if parts[0] not in PACKAGES:
+        return None
+    base = ROOT.joinpath(*parts)
+    if (base / "__init__.py").is_file():
+        return base / "__init__.py"
+    if base.with_suffix(".py").is_file():
+        return base.with_suffix(".py")
+    return None
+
+
+@functools.lru_cache(maxsize=None)
+def _imports(path: Path, module_level: bool = False) -> tuple:
+    """Project modules imported in ``path`` (absolute names): anywhere, or with ``module_level``
+    only the statements that run when the module is imported."""
+    tree = ast.parse(path.read_text(), str(path))
+    try:
+        rel = path.relative_to(ROOT).with_suffix("")
+        package = list(rel.parts[:-1])      # the package a relative import starts from
+    except ValueError:                      # a file outside the project: no relative imports
+        package = []
+    found = []
+    nodes = tree.body if module_level else ast.walk(tree)
+    for node in nodes:
+        if isinstance(node, ast.Import):
+            found += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[:len(package) - node.level + 1]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            for a in node.names:     # "from pkg import module" imports the module, else pkg's names
+                found.append(f"{mod}.{a.name}" if _module_file(f"{mod}.{a.name}") is not None else mod)
+    return tuple(m for m in found if m and m.split(".")[0] in PACKAGES)
+
+
+def closure(*modules: str, files=()) -> list:
+    """Sorted files of ``modules`` and of every project module they import, transitively.
+
+    A module counts with every import it makes (those inside functions run when its code
+    runs); the packages above a module count with the imports their ``__init__`` makes when
+    imported (a family's package wires its validation lazily: designs do not depend on it).
+    ``files``: more source files, e.g. a user's model outside the project, followed the same way.
+    """
+    seen, todo = set(), [(m, False) for m in modules]
+    for f in files:
+        f = Path(f).resolve()
+        if f not in seen:
+            seen.add(f)
+            todo += [(m, False) for m in _imports(f)]
+    done = set()
+    while todo:
+        mod, parent_only = todo.pop()
+        if (mod, parent_only) in done:
+            continue
+        done.add((mod, parent_only))
+        parts = mod.split(".")
+        for k in range(1, len(parts) + 1):     # a module's packages run their __init__ first
+            f = _module_file(".".join(parts[:k]))
+            if f is None:
+                continue
+            seen.add(f)
+            module_level = parent_only or k < len(parts)
+            todo += [(m, False) for m in _imports(f, module_level) if (m, False) not in done]
+    return sorted(seen)
+
+
+def versions() -> dict:
+    """{package: installed version} of :data:`NUMERIC_PACKAGES`."""
+    out = {}
+    for name in NUMERIC_PACKAGES:
+        try:
+            out[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def digest(files, extra: dict | None = None) -> str:
+    """SHA-256 over (path relative to the checkout, bytes) of ``files`` in the given order, then
+    ``extra`` items (e.g. versions) in key order."""
+    h = hashlib.sha256()
+    for f in files:
+        f = Path(f)
+        try:
+            label = str(f.resolve().relative_to(ROOT))
+        except ValueError:      # a user's file outside the checkout: its name is enough
+            label = f.name
+        h.update(label.encode() + b"\0")
+        h.update(f.read_bytes() + b"\0")
+    for k, v in sorted((extra or {}).items()):
+        h.update(f"{k}={v}\0".encode())
+    return h.hexdigest()

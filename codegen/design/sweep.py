@@ -1,0 +1,93 @@
+"""Design studies: one observer designed over a grid of its settings (``uiogen sweep``).
+
+A figure such as a guaranteed gain is only meaningful beside the settings that produce it: the
+switched H∞ PI observer's γ is set by its pole radius, the L∞ observer's by its gain bound. A
+sweep designs the observer at every point of a grid of overrides of its observer file
+(``design.pole_radius = [30, 50, 100]`` …), each with the full pipeline (model, representation,
+LMI solve, independent re-check, discrete step), and reports per point the figures of the
+family's design summary, or the typed refusal (infeasible, not certified). It writes nothing:
+the committed designs are untouched.
+"""
+from __future__ import annotations
+
+import itertools
+import time
+import tomllib
+
+from ..project import observer_file as observers
+from .. import pipeline
+from ..errors import (CertificateError, ConfigurationError, DiscretizationError, RankConditionError,
+                      RepresentationError, SolverError)
+
+# A point of the grid that the method refuses is a result of the study, not a failure of it.
+# Anything else (a misspelt key, a value out of range: ConfigurationError) stops the sweep.
+REFUSALS = (SolverError, CertificateError, DiscretizationError, RankConditionError, RepresentationError)
+
+
+def parse_set(text: str, source: str = "--set") -> tuple:
+    """``KEY=[v1, v2, ...]`` (a TOML array of the values to try) as ``(KEY, [v1, v2, ...])``.
+
+    A single TOML value (``design.alpha=5``) is a grid of one point. An array-valued setting is
+    given as an array of arrays (``design.performance=[["beta"], ["beta", "r"]]``).
+    """
+    key, sep, rhs = text.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise ConfigurationError(f"{source} {text!r}: expected KEY=[VALUE, ...] (a dotted key of the observer "
+                                 f"file, e.g. design.pole_radius=[50, 100])", source=source, key=text)
+    try:
+        value = tomllib.loads(f"v = {rhs.strip()}")["v"]
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigurationError(f"{source} {key}: {rhs.strip()!r} is not a TOML value or array ({exc})",
+                                 source=source, key=key, value=rhs) from None
+    values = value if isinstance(value, list) else [value]
+    if not values:
+        raise ConfigurationError(f"{source} {key}: an empty list of values", source=source, key=key, value=rhs)
+    return key, values
+
+
+def _scalars(summary: dict) -> dict:
+    """The numeric and text scalars of a design summary (tables and arrays left out)."""
+    return {k: v for k, v in summary.items()
+            if isinstance(v, (int, float, str, bool)) and k not in ("artifact", "observer")}
+
+
+def point(name: str, overrides: dict) -> dict:
+    """Design ``name`` with ``overrides``: its summary's scalars, or the refusal."""
+    config = observers.get(name, overrides)
+    t0 = time.perf_counter()
+    try:
+        b, _records = pipeline.solve(config)
+    except REFUSALS as exc:
+        return {"settings": overrides, "outcome": type(exc).__name__, "message": str(exc).splitlines()[0],
+                "seconds": time.perf_counter() - t0}
+    summary = b.summary(None)
+    return {"settings": overrides, "outcome": "certified", **_scalars(summary),
+            "seconds": time.perf_counter() - t0}
+
+
+def run(name: str, grid: list, log=None) -> dict:
+    """Every point of the product of ``grid`` (``[(key, values), ...]``), in order."""
+    keys = [k for k, _ in grid]
+    if len(set(keys)) != len(keys):
+        raise ConfigurationError(f"--set: a key given twice in {keys}", source="--set", key=keys)
+    observers.get(name)                     # the observer itself first: an unknown name is one error
+    rows = []
+    for values in itertools.product(*(v for _, v in grid)):
+        row = point(name, dict(zip(keys, values)))
+        rows.append(row)
+        if log:
+            log(row)
+    return {"observer": name, "grid": {k: v for k, v in grid}, "points": rows}
+
+
+def lines(result: dict, columns=("gamma",)) -> list:
+    """A text table of a sweep: the settings, the outcome and the chosen summary figures."""
+    keys = list(result["grid"])
+    present = list(columns)
+    head = keys + ["outcome"] + present
+    out = ["  ".join(f"{h:>14}" for h in head)]
+    for r in result["points"]:
+        cells = [r["settings"][k] for k in keys] + [r["outcome"]] + [r.get(c, "") for c in present]
+        out.append("  ".join(f"{(f'{c:.4g}' if isinstance(c, float) else str(c)):>14}" for c in cells))
+    return out

@@ -1,0 +1,516 @@
+"""Symbolic model definitions and their instantiation with a parameter file.
+
+A model is written once, with sympy, as ``x_dot = f(x, u, d; rho, p)`` and
+``y = h(x; rho, p)`` where ``rho`` are measured scheduling signals and ``p``
+named physical parameters. Numbers live in a TOML parameter file, so a user with
+another car edits that file, not code. :func:`instantiate` checks the definition
+and the file against each other and returns the LPV matrices A(rho), B(rho),
+D(rho), C(rho) as sympy matrices in the scheduling symbols only.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping
+
+import sympy as sp
+
+from ..errors import (MissingParameterError, ModelDefinitionError, NotAffineError, SchedulingBoundsError,
+                      UnknownParameterError)
+from ..project.settings import Rule, check_keys, config_error, parse_table, parse_value, suggest
+
+
+@dataclass(frozen=True)
+class SchedulingSignal:
+    """A measured signal the model depends on non-affinely (e.g. the speed v_x).
+
+    Bounds and rate bounds are read from the parameter file's
+    ``[scheduling.NAME]`` table: ``min``, ``max``, ``rate_min``, ``rate_max``.
+    ``derived`` makes the signal a function of measured outputs (symbols ``y_<output>``)
+    and parameters, computed inside the observer step instead of being an input.
+    """
+
+    symbol: sp.Symbol
+    unit: str = ""
+    derived: sp.Expr | None = None
+
+
+@dataclass(frozen=True)
+class DerivedInput:
+    """A known input computed inside the observer step from the measurements.
+
+    A nonlinear term of the model that depends only on measured signals (Nguyen et al. 2021's
+    "measured nonlinear consequents") enters the dynamics affinely as a known input whose
+    value ``expr`` is a function of measured outputs (symbols ``y_<output>``), input
+    scheduling signals and parameters. It is not an input of the generated step: the step
+    evaluates it from the same measurements it receives.
+    """
+
+    symbol: sp.Symbol
+    expr: sp.Expr
+    unit: str = ""
+
+
+@dataclass(frozen=True)
+class SchedulingBox:
+    """Numeric range of one scheduling signal and of its time derivative."""
+
+    name: str
+    lower: float
+    upper: float
+    rate_lower: float
+    rate_upper: float
+
+
+@dataclass(frozen=True)
+class ModelDefinition:
+    """A vehicle model written once, symbolically.
+
+    Attributes
+    ----------
+    name : str
+        Identifier of the model.
+    states, known_inputs, unknown_inputs : tuple of sympy.Symbol
+        Named signals; the order is the order of the vectors x, u, d.
+    dynamics : sympy.Matrix
+        Column of time derivatives of ``states``.
+    outputs : tuple of (str, sympy.Expr)
+        Measured outputs, each a named expression of the states.
+    scheduling : tuple of SchedulingSignal
+        Measured signals entering the matrices non-affinely.
+    parameters : tuple of sympy.Symbol
+        Physical parameters; each needs a value in the parameter file.
+    units : mapping of str to str
+        Units of states/inputs/outputs, for reports.
+    derived_inputs : tuple of DerivedInput
+        Known inputs computed inside the step from the measurements (not step inputs).
+    parameter_ranges : mapping of str to tuple
+        Admissible values of parameters beyond their sympy assumptions (``positive=True``: > 0,
+        ``nonnegative=True``: >= 0, ``negative``, ``nonpositive``, ``nonzero``): ``NAME: (min, max)``,
+        closed bounds, either None for no bound; a third element ``"()"``, ``"(]"`` or ``"[)"``
+        opens them (``"mu": (0, 2, "(]")`` is 0 < mu <= 2). :func:`parameter_substitution` refuses
+        a parameter file's value outside its range, before any design.
+    """
+
+    name: str
+    states: tuple
+    known_inputs: tuple
+    unknown_inputs: tuple
+    dynamics: sp.Matrix
+    outputs: tuple
+    scheduling: tuple
+    parameters: tuple
+    units: Mapping[str, str] = field(default_factory=dict)
+    doc: str = ""
+    derived_inputs: tuple = ()
+    parameter_ranges: Mapping[str, tuple] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        _check_parameter_ranges(self)
+        for w in self.derived_inputs:
+            if not isinstance(w, DerivedInput):
+                raise ModelDefinitionError(f"model {self.name!r}: derived_inputs must hold DerivedInput, got {w!r}")
+        names = [str(s) for s in (*self.states, *self.known_inputs, *self.unknown_inputs,
+                                  *(g.symbol for g in self.scheduling), *self.parameters,
+                                  *(w.symbol for w in self.derived_inputs))]
+        allowed_derived = ({str(p) for p in self.parameters} | {f"y_{n}" for n, _ in self.outputs}
+                           | {str(g.symbol) for g in self.scheduling if g.derived is None})
+        for g in self.scheduling:
+            if g.derived is not None:
+                stray = {str(x) for x in sp.sympify(g.derived).free_symbols} - allowed_derived
+                if stray:
+                    raise ModelDefinitionError(
+                        f"model {self.name!r}: derived scheduling signal {g.symbol} uses {', '.join(sorted(stray))}; "
+                        f"it may only use parameters, measured outputs y_<name> and input scheduling signals")
+        for w in self.derived_inputs:
+            stray = {str(x) for x in sp.sympify(w.expr).free_symbols} - allowed_derived
+            if stray:
+                raise ModelDefinitionError(
+                    f"model {self.name!r}: derived input {w.symbol} uses {', '.join(sorted(stray))}; "
+                    f"it may only use parameters, measured outputs y_<name> and input scheduling signals")
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ModelDefinitionError(f"model {self.name!r}: symbol(s) declared twice: {', '.join(dup)}")
+        if not isinstance(self.dynamics, sp.MatrixBase) or self.dynamics.shape != (len(self.states), 1):
+            shape = getattr(self.dynamics, "shape", None)
+            raise ModelDefinitionError(
+                f"model {self.name!r}: dynamics must be a column of {len(self.states)} expressions "
+                f"(one per state), got shape {shape}")
+        if not self.outputs:
+            raise ModelDefinitionError(f"model {self.name!r}: no measured outputs declared")
+        declared = set(names)
+        for i, expr in enumerate(self.dynamics):
+            stray = {str(s) for s in sp.sympify(expr).free_symbols} - declared
+            if stray:
+                raise ModelDefinitionError(
+                    f"model {self.name!r}: d{self.states[i]}/dt uses undeclared symbol(s) "
+                    f"{', '.join(sorted(stray))}")
+        for out_name, expr in self.outputs:
+            stray = {str(s) for s in sp.sympify(expr).free_symbols} - declared
+            if stray:
+                raise ModelDefinitionError(
+                    f"model {self.name!r}: output {out_name!r} uses undeclared symbol(s) "
+                    f"{', '.join(sorted(stray))}")
+
+    @property
+    def state_names(self) -> tuple:
+        return tuple(str(s) for s in self.states)
+
+    @property
+    def output_names(self) -> tuple:
+        return tuple(n for n, _ in self.outputs)
+
+    @property
+    def output_symbols(self) -> tuple:
+        """Symbols ``y_<output>`` that derived scheduling signals may use."""
+        return tuple(sp.Symbol(f"y_{n}") for n in self.output_names)
+
+
+@dataclass(frozen=True)
+class ParameterSet:
+    """Values read from a parameter file."""
+
+    source: str
+    values: Mapping[str, float]
+    scheduling: Mapping[str, SchedulingBox]
+    meta: Mapping[str, str]
+    plant: Mapping[str, float] = field(default_factory=dict)   # truth-plant-only values ([plant])
+    state_bounds: Mapping[str, tuple] = field(default_factory=dict)   # [state_bounds] NAME = [min, max]
+    inputs: Mapping[str, dict] = field(default_factory=dict)   # [inputs.NAME] min, max, bandwidth (excitation)
+
+
+@dataclass(frozen=True)
+class LPVModel:
+    """A model with its parameters substituted: matrices in the scheduling symbols only."""
+
+    definition: ModelDefinition
+    parameters: ParameterSet
+    A: sp.Matrix
+    B: sp.Matrix
+    D: sp.Matrix
+    C: sp.Matrix
+    scheduling_symbols: tuple
+    boxes: tuple
+    Du: sp.Matrix = None        # output feedthrough of the known inputs: y = C x + Du u
+    derived: tuple = ()         # (symbol, expression in y_<output>) with parameters substituted
+    Bw: sp.Matrix = None        # dynamics of the derived inputs w: x' = A x + B u + Bw w + D d
+    Duw: sp.Matrix = None       # output feedthrough of the derived inputs
+    derived_inputs: tuple = ()  # (symbol, expression in y_<output>) with parameters substituted
+    Dd: sp.Matrix = None        # unknown inputs reaching the outputs: y = C x + Du u + Dd d
+
+    @property
+    def has_ui_feedthrough(self) -> bool:
+        return self.Dd is not None and any(e != 0 for e in self.Dd)
+
+    def require_no_ui_feedthrough(self, family: str, reason: str) -> None:
+        """Refuse unknown inputs in the outputs for a family whose theory needs y = C x (+ Du u).
+
+        Raises
+        ------
+        NotAffineError
+            naming the outputs and unknown inputs, and the family that takes the structure.
+        """
+        if not self.has_ui_feedthrough:
+            return
+        names = [n for n, _ in self.definition.outputs]
+        hits = [f"{names[i]} <- {self.definition.unknown_inputs[j]}" for i in range(self.Dd.shape[0])
+                for j in range(self.Dd.shape[1]) if self.Dd[i, j] != 0]
+        raise NotAffineError(
+            f"model {self.definition.name!r}: unknown inputs reach the outputs ({', '.join(hits)}); the {family} "
+            f"needs y = C x + Du u ({reason}). The L-infinity UIO (family linf_uio) takes this feedthrough; "
+            f"or measure an output the unknown input does not reach")
+
+    @property
+    def nx(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def ny(self) -> int:
+        return self.C.shape[0]
+
+    @property
+    def nu(self) -> int:
+        return self.B.shape[1]
+
+    @property
+    def nd(self) -> int:
+        return self.D.shape[1]
+
+
+# Tables of a parameter file and the keys of a [scheduling.NAME] table (derivative_bounds is read by
+# codegen.relative_degree.derivative_boxes; exogenous and premise_bounds by codegen.interconnected).
+PARAMETER_TABLES = ("parameters", "scheduling", "meta", "plant", "state_bounds", "exogenous", "premise_bounds",
+                    "inputs")
+INPUT_KEYS = {"min": Rule(float, required=True), "max": Rule(float, required=True),
+              "bandwidth": Rule(float, gt=0, doc="Hz, highest frequency of the excitation signal")}
+SCHEDULING_KEYS = {"min": Rule(float), "max": Rule(float), "rate_min": Rule(float), "rate_max": Rule(float),
+                   "derivative_bounds": Rule(list, doc="[[min, max], ...] of the derivatives of order 2, 3, ...")}
+_NUMBER = Rule(float)
+_PAIR = Rule(list, items=Rule(float), allowed="[min, max], two finite numbers")
+
+
+def _pair(value, path, section, key) -> tuple:
+    """[min, max] of finite numbers (min < max is checked by the caller)."""
+    pair = parse_value(value, _PAIR, source=str(path), section=section, key=key)
+    if len(pair) != 2:
+        raise config_error(str(path), section, key, value, "must be " + _PAIR.allowed)
+    return pair[0], pair[1]
+
+
+def _table(data, name, path) -> dict:
+    table = data.get(name, {})
+    if not isinstance(table, dict):
+        raise config_error(str(path), None, name, table, "must be a table")
+    return table
+
+
+def load_parameters(path: str | Path) -> ParameterSet:
+    """Read a TOML parameter file.
+
+    The file has a ``[parameters]`` table of name = number, a ``[scheduling.NAME]``
+    table per scheduling signal with ``min``, ``max``, ``rate_min``, ``rate_max`` (and optionally
+    ``derivative_bounds``), and an optional ``[meta]`` table of strings (source, car), an optional
+    ``[plant]`` table of truth-plant-only numbers and an optional ``[state_bounds]`` table
+    ``NAME = [min, max]`` (the compact state set of designs that bound unmeasured nonlinearities);
+    ``[exogenous]`` and ``[premise_bounds]`` are read by the interconnected family; ``[inputs.NAME]``
+    (``min``, ``max``, optional ``bandwidth`` in Hz) bounds a known or unknown input for the generic
+    excitation scenario (:mod:`codegen.validation.excitation`).
+
+    Raises
+    ------
+    ConfigurationError
+        An unknown table or ``[scheduling.NAME]`` key (with a did-you-mean), or a value that is
+        not a finite number (booleans, strings, nan and inf are refused).
+    ModelDefinitionError, SchedulingBoundsError
+        No file, not TOML, no ``[parameters]``, missing or inverted bounds.
+    """
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ModelDefinitionError(f"parameter file not found: {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ModelDefinitionError(f"parameter file {path} is not valid TOML: {exc}") from None
+    check_keys(data, PARAMETER_TABLES, source=str(path), what="tables")
+    raw = data.get("parameters")
+    if not isinstance(raw, dict):
+        raise ModelDefinitionError(f"parameter file {path} has no [parameters] table")
+    values = {key: parse_value(value, _NUMBER, source=str(path), section="parameters", key=key)
+              for key, value in raw.items()}
+    boxes = {}
+    for key, table in _table(data, "scheduling", path).items():
+        section = f"scheduling.{key}"
+        if not isinstance(table, dict):
+            raise config_error(str(path), "scheduling", key, table, "must be a table [scheduling.NAME] with min, "
+                               "max, rate_min, rate_max")
+        missing = [k for k in ("min", "max", "rate_min", "rate_max") if k not in table]
+        if missing:
+            raise SchedulingBoundsError(
+                f"{path}: scheduling signal {key!r} lacks {', '.join(missing)}")
+        table = parse_table(table, SCHEDULING_KEYS, source=str(path), section=section)
+        for m, pair in enumerate(table.get("derivative_bounds", ()), start=2):
+            _pair(pair, path, section, f"derivative_bounds[{m - 2}]")
+        box = SchedulingBox(key, table["min"], table["max"], table["rate_min"], table["rate_max"])
+        if not box.lower < box.upper:
+            raise SchedulingBoundsError(f"{path}: scheduling {key!r} needs min < max, got "
+                                        f"[{box.lower}, {box.upper}]")
+        if not box.rate_lower <= box.rate_upper:
+            raise SchedulingBoundsError(f"{path}: scheduling {key!r} needs rate_min <= rate_max")
+        boxes[key] = box
+    meta = {k: str(v) for k, v in _table(data, "meta", path).items()}
+    plant = {key: parse_value(value, _NUMBER, source=str(path), section="plant", key=key)
+             for key, value in _table(data, "plant", path).items()}
+    for key, value in _table(data, "exogenous", path).items():
+        parse_value(value, _NUMBER, source=str(path), section="exogenous", key=key)
+    for key, value in _table(data, "premise_bounds", path).items():
+        _pair(value, path, "premise_bounds", key)
+    state_bounds = {}
+    for key, value in _table(data, "state_bounds", path).items():
+        if (not isinstance(value, list) or len(value) != 2
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+            raise SchedulingBoundsError(f"{path}: state bound {key!r} must be [min, max], got {value!r}")
+        lo, hi = _pair(value, path, "state_bounds", key)
+        if not lo < hi:
+            raise SchedulingBoundsError(f"{path}: state bound {key!r} needs min < max, got [{lo}, {hi}]")
+        state_bounds[key] = (lo, hi)
+    inputs = {}
+    for key, table in _table(data, "inputs", path).items():
+        if not isinstance(table, dict):
+            raise config_error(str(path), "inputs", key, table, "must be a table [inputs.NAME] with min, max")
+        table = parse_table(table, INPUT_KEYS, source=str(path), section=f"inputs.{key}")
+        if not table["min"] < table["max"]:
+            raise config_error(str(path), f"inputs.{key}", "max", table["max"], f"must exceed min = {table['min']}")
+        inputs[key] = table
+    return ParameterSet(str(path), values, boxes, meta, plant, state_bounds, inputs)
+
+
+def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str) -> sp.Matrix:
+    """Jacobian of ``expr_column`` w.r.t. ``symbols``, checked to be constant in them."""
+    if not symbols:
+        return sp.zeros(expr_column.shape[0], 0)
+    jac = expr_column.jacobian(sp.Matrix(symbols))
+    for (i, j), entry in zip(((i, j) for i in range(jac.shape[0]) for j in range(jac.shape[1])), jac):
+        if entry.free_symbols & set(symbols):
+            raise NotAffineError(
+                f"model {model!r}: row {i} is not affine in {what} (d/d{symbols[j]} = {entry} "
+                f"still depends on {', '.join(sorted(map(str, entry.free_symbols & set(symbols))))})")
+    return jac
+
+
+_BRACKETS = ("[]", "[)", "(]", "()")
+_OPS = {">": lambda v, b: v > b, ">=": lambda v, b: v >= b, "<": lambda v, b: v < b, "<=": lambda v, b: v <= b,
+        "!=": lambda v, b: v != b}
+
+
+def _check_parameter_ranges(model) -> None:
+    """``model.parameter_ranges`` names parameters of the model, with (min, max[, brackets]) ranges."""
+    names = [str(p) for p in model.parameters]
+    for name, rng in (getattr(model, "parameter_ranges", None) or {}).items():
+        if name not in names:
+            raise ModelDefinitionError(f"model {model.name!r}: parameter_ranges names {name!r}, which is not a "
+                                       f"parameter (declared: {', '.join(names)})"
+                                       + (f"; did you mean {suggest(name, names)!r}?" if suggest(name, names) else ""))
+        bounds = rng[:2] if isinstance(rng, tuple) else ()
+        if (len(bounds) != 2 or len(rng) > 3 or (len(rng) == 3 and rng[2] not in _BRACKETS)
+                or not all(b is None or (isinstance(b, (int, float)) and not isinstance(b, bool) and math.isfinite(b))
+                           for b in bounds)
+                or (None not in bounds and not bounds[0] <= bounds[1])):
+            raise ModelDefinitionError(f"model {model.name!r}: parameter_ranges[{name!r}] must be (min, max) or "
+                                       f"(min, max, one of {', '.join(_BRACKETS)}) with finite min <= max or None, "
+                                       f"got {rng!r}")
+
+
+def parameter_conditions(model, symbol) -> list:
+    """[(op, bound, reason)] every value of parameter ``symbol`` must satisfy (op in >, >=, <, <=, !=).
+
+    From the symbol's sympy assumptions and the model's ``parameter_ranges``.
+    """
+    conds = []
+    if symbol.is_positive:
+        conds.append((">", 0.0, "positive=True"))
+    elif symbol.is_negative:
+        conds.append(("<", 0.0, "negative=True"))
+    else:
+        if symbol.is_nonnegative:
+            conds.append((">=", 0.0, "nonnegative=True"))
+        elif symbol.is_nonpositive:
+            conds.append(("<=", 0.0, "nonpositive=True"))
+        if symbol.is_nonzero:
+            conds.append(("!=", 0.0, "nonzero=True"))
+    rng = (getattr(model, "parameter_ranges", None) or {}).get(str(symbol))
+    if rng:
+        brackets = rng[2] if len(rng) == 3 else "[]"
+        why = f"parameter_ranges {rng[:2]!r}" + (f" {brackets}" if len(rng) == 3 else "")
+        if rng[0] is not None:
+            conds.append((">" if brackets[0] == "(" else ">=", float(rng[0]), why))
+        if rng[1] is not None:
+            conds.append(("<" if brackets[1] == ")" else "<=", float(rng[1]), why))
+    return conds
+
+
+def check_parameter_values(model, values: Mapping[str, float], source: str, section: str = "parameters") -> None:
+    """Refuse a value of ``values`` outside the admissible range of its model parameter.
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the file, the parameter, its value and the allowed range (and where it is declared).
+    """
+    for p in model.parameters:
+        value = values[str(p)]
+        conds = parameter_conditions(model, p)
+        if not math.isfinite(value) or not all(_OPS[op](value, b) for op, b, _ in conds):
+            allowed = " and ".join(f"{op} {b:g}" for op, b, _ in conds)
+            reasons = "; ".join(dict.fromkeys(why for _, _, why in conds))
+            raise config_error(source, section, str(p), value,
+                               f"must be a finite number{(' ' + allowed) if allowed else ''}"
+                               + (f" (model {model.name!r} declares {p}: {reasons})" if reasons else ""))
+
+
+def parameter_substitution(model: ModelDefinition, params: ParameterSet) -> dict:
+    """{parameter symbol: value}, after checking the file sets exactly the model's parameters.
+
+    Every value must lie in the parameter's admissible range (:func:`parameter_conditions`: its
+    sympy assumptions and the model's ``parameter_ranges``); this is the one parameter check of
+    every family, so a negative mass or a zero inertia is refused before any design.
+
+    Raises
+    ------
+    MissingParameterError, UnknownParameterError, ConfigurationError
+    """
+    needed = [str(p) for p in model.parameters]
+    missing = [n for n in needed if n not in params.values]
+    unknown = sorted(set(params.values) - set(needed))
+    if missing:
+        import difflib
+        hints = [f"{u} (did you mean {m[0]}?)" for u in unknown
+                 for m in [difflib.get_close_matches(u, missing, n=1)] if m]
+        raise MissingParameterError(
+            f"model {model.name!r}: parameter file {params.source} lacks {', '.join(missing)}"
+            + (f"; it sets {', '.join(hints)}" if hints else ""))
+    if unknown:
+        raise UnknownParameterError(
+            f"parameter file {params.source} sets {', '.join(unknown)}, which model "
+            f"{model.name!r} does not use (declared: {', '.join(needed)})")
+    check_parameter_values(model, params.values, params.source)
+    return {p: params.values[str(p)] for p in model.parameters}
+
+
+def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
+    """Substitute a parameter set into a model and extract its LPV matrices.
+
+    Raises
+    ------
+    MissingParameterError, UnknownParameterError, SchedulingBoundsError, NotAffineError
+    """
+    subs = parameter_substitution(model, params)
+    boxes = []
+    for sig in model.scheduling:
+        box = params.scheduling.get(str(sig.symbol))
+        if box is None:
+            raise SchedulingBoundsError(
+                f"model {model.name!r}: scheduling signal {sig.symbol} has no "
+                f"[scheduling.{sig.symbol}] bounds in {params.source}")
+        boxes.append(box)
+    # structure is checked exactly, with the parameters still symbolic; numbers come after
+    f = sp.Matrix(model.dynamics)
+    h = sp.Matrix([expr for _, expr in model.outputs])
+    x, u, d = tuple(model.states), tuple(model.known_inputs), tuple(model.unknown_inputs)
+    w = tuple(g.symbol for g in model.derived_inputs)
+    A = _affine_part(f, x, "the states", model.name)
+    B = _affine_part(f, u, "the known inputs", model.name)
+    Bw = _affine_part(f, w, "the derived inputs", model.name)
+    D = _affine_part(f, d, "the unknown inputs", model.name)
+    C = _affine_part(h, x, "the states", model.name)
+    Du = _affine_part(h, u, "the known inputs", model.name)
+    Duw = _affine_part(h, w, "the derived inputs", model.name)
+    Dd = _affine_part(h, d, "the unknown inputs", model.name)
+    col = lambda syms: sp.Matrix(len(syms), 1, list(syms))   # a (k, 1) column, also for k = 0
+    rest = sp.simplify(f - A * col(x) - B * col(u) - D * col(d)
+                       - (Bw * sp.Matrix(w) if w else sp.zeros(*f.shape))) if x else f
+    if any(sp.simplify(e) != 0 for e in rest):
+        raise NotAffineError(f"model {model.name!r}: dynamics have a drift term independent of "
+                             f"states and inputs: {list(rest)}")
+    h_rest = sp.simplify(h - C * col(x) - Du * col(u) - Dd * col(d)
+                         - (Duw * sp.Matrix(w) if w else sp.zeros(*h.shape)))
+    if any(sp.simplify(e) != 0 for e in h_rest):
+        raise NotAffineError(f"model {model.name!r}: outputs must be C(rho) x + Du(rho) u + Dd(rho) d; left over: "
+                             f"{list(h_rest)} (a term independent of states and inputs)")
+    for mat, label in ((B, "B"), (D, "D"), (C, "C"), (Du, "Du"), (Bw, "Bw"), (Duw, "Duw"), (Dd, "Dd")):
+        if any(e.free_symbols & set(x + u + d + w) for e in mat):
+            raise NotAffineError(f"model {model.name!r}: {label} depends on states or inputs")
+    A, B, D, C, Du, Bw, Duw, Dd = (m.subs(subs) for m in (A, B, D, C, Du, Bw, Duw, Dd))
+    sched = tuple(sig.symbol for sig in model.scheduling)
+    allowed = set(sched)
+    for mat, label in ((A, "A"), (B, "B"), (D, "D"), (C, "C"), (Du, "Du"), (Bw, "Bw"), (Duw, "Duw"), (Dd, "Dd")):
+        stray = set().union(*(e.free_symbols for e in mat)) - allowed if len(mat) else set()
+        if stray:
+            raise ModelDefinitionError(
+                f"model {model.name!r}: {label} depends on {', '.join(sorted(map(str, stray)))}, "
+                f"which is neither a parameter nor a scheduling signal")
+    derived = tuple((g.symbol, sp.sympify(g.derived).subs(subs)) for g in model.scheduling if g.derived is not None)
+    derived_inputs = tuple((g.symbol, sp.sympify(g.expr).subs(subs)) for g in model.derived_inputs)
+    return LPVModel(model, params, A, B, D, C, sched, tuple(boxes), Du, derived, Bw, Duw, derived_inputs, Dd)

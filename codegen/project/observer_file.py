@@ -1,0 +1,262 @@
+"""Observer configurations: data files, built-in (``model_defs/observers/*.toml``) or anywhere on disk.
+
+A configuration names the model, the parameter file, the family (:mod:`codegen.families`) and
+the design settings of one observer; ``uiogen list`` shows the built-in ones. Adding an
+observer for another car is a new TOML file, not new code.
+
+A configuration outside the package (a user's project) may name its model and parameter file
+by paths relative to its own folder (``model = "my_car.py"``: a module defining
+``MODEL = ModelDefinition(...)``, exactly as in ``model_defs/``). Where its design lock, C and
+extension go is its project's (:mod:`codegen.project.workspace`): its own folder, or the
+``project`` given to :func:`get`.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import importlib
+import importlib.util
+import sys
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import ModelDefinitionError, UnknownObserverError
+from ..model import ModelDefinition
+from . import columns
+from .settings import Rule, config_error, parse_table, suggest
+from .workspace import PACKAGE_ROOT, Workspace
+
+MODELS_DIR = PACKAGE_ROOT / "model_defs"
+PARAMS_DIR = MODELS_DIR / "params"
+OBSERVERS_DIR = MODELS_DIR / "observers"
+
+# Top level of an observer file: the keys every family reads; each family adds its own
+# (Family.observer_keys). The [design] and [switching] tables are checked by the family's parser.
+COMMON_KEYS = {
+    "family": Rule(str, required=True, doc="an observer family (codegen.families)"),
+    "model": Rule(str, required=True, doc="model_defs/MODEL.py, or a .py path relative to this file"),
+    "parameters": Rule(str, required=True, doc="a file in model_defs/params, or a path relative to this file"),
+    "sample_time": Rule(float, gt=0, required=True, doc="s"),
+    "design": Rule(dict),
+    "data": Rule(dict, doc="the column map of a logged run (uiogen validate --data; codegen.project.columns)"),
+}
+
+
+@dataclass(frozen=True)
+class ObserverConfig:
+    """One observer: model + parameters + representation + design settings."""
+
+    name: str
+    family: str
+    model: str
+    parameters: str
+    polytope: str
+    rate_bounds: str
+    sample_time: float
+    design: dict = field(default_factory=dict)
+    ui_filter: dict = field(default_factory=dict)
+    doc: str = ""
+    source: str = ""
+    switching: dict = field(default_factory=dict)     # switched families: the rule, as data
+
+    project: str = ""       # its project folder (codegen.project.workspace); "" = the default rule
+    # [data]: how a logged run's columns map onto the observer's inputs. Not part of to_json (so
+    # not of the design hash): editing the map of a log never re-solves the design.
+    column_map: object = None
+
+    @property
+    def folder(self) -> Path:
+        """The folder of the observer file (relative model and parameter paths start there)."""
+        return Path(self.source).resolve().parent if self.source else OBSERVERS_DIR
+
+    @property
+    def builtin(self) -> bool:
+        """A built-in observer (``model_defs/observers/NAME.toml``)."""
+        return not self.source or Path(self.source).resolve().parent == OBSERVERS_DIR
+
+    @property
+    def workspace(self) -> Workspace:
+        """The folders its generated files go to (:mod:`codegen.project.workspace`)."""
+        if self.project:
+            return Workspace(Path(self.project))
+        return Workspace.for_observer_file(self.source, builtin=self.builtin)
+
+    @property
+    def model_path(self) -> Path:
+        """The model's source file."""
+        return _model_file(self.model, self.folder)
+
+    @property
+    def model_module(self) -> str:
+        """Importable name of the model module (``model_defs.NAME`` for the built-in models)."""
+        f = self.model_path
+        if f.parent == MODELS_DIR:
+            return f"model_defs.{f.stem}"
+        return f"uiogen_user_model_{hashlib.sha256(str(f).encode()).hexdigest()[:12]}_{f.stem}"
+
+    def load_model_module(self):
+        return load_module(self.model_path, self.model_module)
+
+    def load_model(self) -> ModelDefinition:
+        module = self.load_model_module()
+        model = getattr(module, "MODEL", None)
+        if not isinstance(model, ModelDefinition):
+            raise ModelDefinitionError(f"{self.model_path} does not define MODEL = ModelDefinition(...)")
+        return model
+
+    @property
+    def parameter_path(self) -> Path:
+        return _parameter_file(self.parameters, self.folder)
+
+    def to_json(self) -> dict:
+        return {"name": self.name, "family": self.family, "model": self.model,
+                "parameters": self.parameters, "polytope": self.polytope,
+                "rate_bounds": self.rate_bounds, "sample_time": self.sample_time,
+                "design": dict(self.design), "ui_filter": dict(self.ui_filter),
+                **({"switching": self.switching} if self.switching else {})}
+
+
+def _model_file(model: str, folder: Path) -> Path:
+    """``model``: a built-in module name (model_defs/NAME.py) or a .py path relative to ``folder``."""
+    if model.endswith(".py") or "/" in model:
+        return (folder / model).resolve()
+    return MODELS_DIR / f"{model}.py"
+
+
+def _parameter_file(parameters: str, folder: Path) -> Path:
+    local = (folder / parameters).resolve()
+    return local if folder != OBSERVERS_DIR and ("/" in parameters or local.is_file()) else PARAMS_DIR / parameters
+
+
+def builtin_model(name: str):
+    """A module of the built-in model library (``model_defs/NAME.py``), imported by name: the
+    toolchain reads the library as data, as it reads a user's model from its file."""
+    return load_module(MODELS_DIR / f"{name}.py", f"model_defs.{name}")
+
+
+def load_module(path: Path, name: str):
+    """Import a model module from its file (once per process; built-in models by their package name)."""
+    if name in sys.modules:
+        return sys.modules[name]
+    if name.startswith("model_defs."):
+        return importlib.import_module(name)
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:
+        raise ModelDefinitionError(f"cannot import a model from {path}")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except ModelDefinitionError:
+        del sys.modules[name]
+        raise
+    except Exception as exc:       # a user's module that does not run: say where, keep the cause
+        del sys.modules[name]
+        raise ModelDefinitionError(f"{path}: importing the model failed: {type(exc).__name__}: {exc}") from exc
+    return module
+
+
+def apply_overrides(data: dict, overrides: dict, source: str) -> dict:
+    """A copy of an observer file's table with ``{"design.pole_radius": 50.0, ...}`` set in it.
+
+    The dotted key names a table path inside the file; a missing table is created. The result
+    goes through the same checks as the file itself, so a misspelt key or a value out of range is
+    the same typed error, naming the file and the key.
+    """
+    import copy
+    data = copy.deepcopy(data)
+    for key, value in overrides.items():
+        parts = key.split(".")
+        if not all(parts):
+            raise config_error(source, None, key, value, "a dotted key such as design.alpha")
+        table = data
+        for i, part in enumerate(parts[:-1]):
+            table = table.setdefault(part, {})
+            if not isinstance(table, dict):
+                raise config_error(source, None, key, value, f"{'.'.join(parts[:i + 1])} is not a table")
+        table[parts[-1]] = value
+    return data
+
+
+def _parse(path: Path, overrides: dict | None = None, project: str | Path | None = None) -> ObserverConfig:
+    from .. import families
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise UnknownObserverError(f"no observer file {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ModelDefinitionError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ModelDefinitionError(f"{path}: not UTF-8 text: {exc}") from None
+    source = str(path)
+    if overrides:
+        data = apply_overrides(data, overrides, source)
+    known = families.names()
+    if "family" not in data:
+        raise config_error(source, None, "family", None, f"missing; one of {', '.join(known)}")
+    parse_table({"family": data["family"]}, {"family": Rule(str, choices=known, required=True)}, source=source)
+    family = families.get(data["family"])
+    parse_table(data, {**COMMON_KEYS, **family.observer_keys}, source=source, what=f"for family {family.name}")
+    builtin = path.resolve().parent == OBSERVERS_DIR
+    folder = path.resolve().parent
+    model_file = _model_file(data["model"], folder)
+    if not model_file.is_file():
+        models = sorted(p.stem for p in MODELS_DIR.glob("*.py") if not p.stem.startswith("_"))
+        raise config_error(source, None, "model", data["model"],
+                           f"no model file {model_file}; built-in models: {', '.join(models)} (or a .py path "
+                           f"relative to {folder})", suggest(data["model"], models))
+    param_file = _parameter_file(data["parameters"], folder)
+    if not param_file.is_file():
+        files = sorted(p.name for p in PARAMS_DIR.glob("*.toml"))
+        raise config_error(source, None, "parameters", data["parameters"],
+                           f"no file {param_file}; built-in parameter files: {', '.join(files)} (or a path "
+                           f"relative to {folder})", suggest(data["parameters"], files))
+    doc = ""
+    with path.open() as fh:
+        for line in fh:
+            if line.startswith("#"):
+                doc += line.lstrip("# ").rstrip() + " "
+            else:
+                break
+    config = ObserverConfig(path.stem, data["family"], data["model"], data["parameters"], data.get("polytope", ""),
+                            data.get("rate_bounds", "exact"), float(data["sample_time"]),
+                            dict(data.get("design", {})), dict(data.get("ui_filter", {})), doc.strip(), str(path),
+                            dict(data.get("switching", {})),
+                            str(Workspace.for_observer_file(path, project, builtin).root),
+                            columns.parse(data["data"], source) if "data" in data else None)
+    family.check_config(config, data)
+    return config
+
+
+def names() -> list:
+    """The built-in observers (``model_defs/observers/*.toml``)."""
+    return sorted(p.stem for p in OBSERVERS_DIR.glob("*.toml"))
+
+
+def is_path(name: str) -> bool:
+    return name.endswith(".toml") or "/" in name
+
+
+def get(name, overrides: dict | None = None, project: str | Path | None = None) -> ObserverConfig:
+    """A built-in observer by name, or an observer file by path (``.toml``, anywhere on disk); a
+    configuration is returned as it is.
+
+    ``overrides`` (dotted key -> value, :func:`apply_overrides`) changes settings of the file as
+    read, for studies such as ``uiogen sweep``; the file on disk is not touched. ``project``: the
+    project folder its generated files go to, instead of the default
+    (:meth:`codegen.project.workspace.Workspace.for_observer_file`).
+    """
+    if isinstance(name, ObserverConfig):
+        if overrides:
+            raise TypeError("overrides apply to an observer file as read; got a configuration")
+        return name if project is None else dataclasses.replace(name, project=str(Workspace.of(project).root))
+    if is_path(str(name)):
+        return _parse(Path(name), overrides, project)
+    path = OBSERVERS_DIR / f"{name}.toml"
+    if not path.is_file():
+        raise UnknownObserverError(f"no observer named {name!r}; known: {', '.join(names()) or 'none'} "
+                                   f"(or give the path of an observer .toml file)")
+    return _parse(path, overrides, project)

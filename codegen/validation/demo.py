@@ -1,0 +1,96 @@
+"""``uiogen demo``: the README's main job, after design + generate + build.
+
+For every built-in observer: its design figures (from the design lock, ``Family.demo_report``),
+then the compiled C step on its family's demo scenarios (``Family.demo_scenarios``) against the
+plant its family names for it (an optional ``demo_plant(config)`` of the family, else the nominal
+one), beside the baselines, in the table format of its paper; then the real-data table
+(the shared Stanford log).
+"""
+from __future__ import annotations
+
+import json
+
+from ..design import lock as design_lock
+from .. import families
+from ..project import observer_file as observers
+from . import run as validate
+
+REAL_DATA_OBSERVER = "stanford_sideslip"
+REAL_DATA_OTHERS = ("ts_fuzzy_uio_stanford", "stanford_sideslip_nonlinear_tyre")     # same log, other families
+# of these, the ones whose family's demo scenarios are not theirs (shown on the real data only);
+# stanford_sideslip_nonlinear_tyre has no scenarios but its design figures are reported
+REAL_DATA_ONLY = ("ts_fuzzy_uio_stanford",)
+
+
+def main(json_output: bool = False) -> int:
+    report = {}
+    for name in [n for n in observers.names() if n not in (REAL_DATA_OBSERVER, *REAL_DATA_ONLY)]:
+        config = observers.get(name)
+        family = families.get(config.family)
+        art = json.loads(design_lock.path(config).read_text())
+        plant = getattr(family, "demo_plant", lambda _config: "nominal")(config)
+        scen = {s: validate.run_scenario(config, s, plant) for s in family.demo_scenarios}
+        report[name] = {"family": config.family, **family.demo_report(art), "scenarios": scen}
+    real, others = run_real_data()
+    plot = observers.get(REAL_DATA_OBSERVER).workspace.plots / f"{REAL_DATA_OBSERVER}_real_data.png"
+    plot.parent.mkdir(parents=True, exist_ok=True)
+    validate.plot_data(real, str(plot))
+    if json_output:
+        print(json.dumps({"real_data": real_data_json(real, others), **{n: {**{k: v for k, v in e.items() if k != "scenarios"},
+                              "scenarios": {s: json.loads(validate.to_json(r)) for s, r in e["scenarios"].items()}}
+                          for n, e in report.items()}}, indent=1, sort_keys=True))
+        return 0
+    for name, e in report.items():
+        print(f"== {name}")
+        for line in families.get(e["family"]).demo_lines(e):
+            print("   " + line)
+        for r in e["scenarios"].values():
+            print("   " + validate.header(name, r))
+            print("     " + validate.format_table(r).replace("\n", "\n     "))
+    for line in real_data_lines(real, others):
+        print(line)
+    print(f"   plot: {plot}")
+    return 0
+
+
+def run_real_data() -> tuple:
+    """The real-data part of the demo: (run of REAL_DATA_OBSERVER, {other observer: its run}) on the
+    shared log, each run with its own baselines (an observer of the nonlinear-tyre model brings its
+    same-tyre EKF and UKF peers, :func:`codegen.validation.run.run_data`)."""
+    real = validate.run_data(REAL_DATA_OBSERVER, "stanford")
+    others = {n: validate.run_data(n, "stanford") for n in REAL_DATA_OTHERS if n in observers.names()}
+    return real, others
+
+
+def real_data_json(real: dict, others: dict) -> dict:
+    """The demo JSON's ``real_data``: the main run's observer and baselines, every other observer,
+    and the baselines only another observer's run has (``other_baselines``, named 'PEER (OBSERVER)')."""
+    extra = {f"{peer} ({n})": t for n, r in others.items() for peer, t in r["baselines"].items()
+             if peer not in real["baselines"]}
+    return {**{k: real[k] for k in ("observer", "baselines")},
+            "other_observers": {n: r["observer"] for n, r in others.items()}, "other_baselines": extra}
+
+
+def _note(name: str) -> str:
+    config = observers.get(name)
+    return families.get(config.family).title
+
+
+def real_data_lines(real: dict, others: dict) -> list:
+    """The real-data table of ``uiogen demo`` as text: the main observer with the source repository's
+    baselines, then each other observer on the same log with the peers only its run has."""
+    lines = [f"== real data: {REAL_DATA_OBSERVER} on {real['data']} ({real['samples']} samples at 100 Hz, "
+             f"optical-sensor sideslip truth; {real['status_flags']} flagged)",
+             "   " + validate.format_data_table(real).replace("\n", "\n   ")]
+    for n, r in others.items():
+        t = r["observer"]
+        line = (f"   {n} (same log; {_note(n)}; {r['status_flags']} flagged): beta RMSE {t['beta']['rms']:.4f} deg, "
+                f"max {t['beta']['max']:.4f} deg, MAE {t['beta']['mae']:.4f} deg")
+        if "delta" in t:
+            line += f"; delta (an unknown input) RMSE {t['delta']['rms']:.4f} deg"
+        lines.append(line)
+        for peer, b in r["baselines"].items():
+            if peer not in real["baselines"]:
+                lines.append(f"     {peer} (peer of {n}, same model and parameter file): beta RMSE "
+                             f"{b['beta']['rms']:.4f} deg, max {b['beta']['max']:.4f} deg, MAE {b['beta']['mae']:.4f} deg")
+    return lines
