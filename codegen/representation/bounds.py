@@ -64,7 +64,7 @@ by its mean-value form f(c) + sum_j (d f/d x_j)(B) (B_j - c_j) (each case of its
 continuous function: the same Lipschitz form of the theorem), which is far tighter than the
 natural form where the function is flat (a tyre's slope fading into sliding); the mean-value form
 is skipped for a while after it stops paying. The attained values come from the pieces' centres
-and a few local searches (Nelder-Mead in double precision), and are evaluated in mpmath at 128 bits
+and a few local searches (compass search in double precision), and are evaluated in mpmath at 128 bits
 (rounded to the nearest double): ``lower <= attained_min <= attained_max <= upper`` holds as a
 consequence of soundness, and the gap measures how tight the bounds are.
 """
@@ -78,7 +78,6 @@ from fractions import Fraction
 from functools import lru_cache
 
 import mpmath
-import numpy as np
 import sympy as sp
 
 from ..errors import BoundsError
@@ -89,6 +88,7 @@ _LIBM_REL = 2.0 ** -48       # >= 16 ulps of a result: |v| 2^-48 >= 16 ulp(v)
 _LIBM_ABS = 8 * 2.0 ** -1074  # 8 subnormal ulps, for results near 0
 _POINT_PREC = 128             # bits of the mpmath evaluation of attained values
 _GUIDE = 1e-9                 # a double-precision value this close to an attained one is checked in mpmath
+_SEARCH_EVALUATIONS = 400     # double-precision evaluations of one local search
 
 
 def _down(x: float) -> float:
@@ -908,21 +908,28 @@ def _nan_to_inf(v: float) -> float:
 
 
 def _local_search(rough, b: dict, used: list, start: tuple, sign: float) -> tuple:
-    """A point of box ``b`` where sign * expr is small (Nelder-Mead from ``start``): a better attained
-    value closes the gap sooner where the extremes lie along a curve (a kink of |t| inside a box)."""
-    from scipy.optimize import minimize
+    """A point of box ``b`` where sign * expr is small: a compass search from ``start`` (steps of a
+    quarter of each side, halved when no step along any axis improves), in double precision. A better
+    attained value closes the gap sooner where the extremes lie along a curve (a kink of |t|)."""
     sides = [b[s] for s in used]
-    x0 = np.array(start, dtype=float)
-    simplex = [x0]
-    for j, (lo, hi) in enumerate(sides):
-        step = 0.25 * (hi - lo) * (1.0 if x0[j] - lo <= hi - x0[j] else -1.0)
-        simplex.append(x0 + step * np.eye(len(sides))[j])
-    if any(hi <= lo for lo, hi in sides):
-        return start
-    res = minimize(lambda p: _nan_to_inf(sign * rough(p)), x0, method="Nelder-Mead", bounds=sides,
-                   options={"initial_simplex": np.array(simplex), "maxfev": 80 * (len(sides) + 1),
-                            "xatol": 0.0, "fatol": 0.0})
-    return tuple(min(max(float(v), lo), hi) for v, (lo, hi) in zip(res.x, sides))
+    x = [min(max(float(v), lo), hi) for v, (lo, hi) in zip(start, sides)]
+    fx = _nan_to_inf(sign * rough(x))
+    steps = [0.25 * (hi - lo) for lo, hi in sides]
+    for _ in range(_SEARCH_EVALUATIONS // (2 * len(sides))):
+        moved = False
+        for j, (lo, hi) in enumerate(sides):
+            for direction in (1.0, -1.0):
+                y = list(x)
+                y[j] = min(max(x[j] + direction * steps[j], lo), hi)
+                fy = _nan_to_inf(sign * rough(y))
+                if fy < fx:
+                    x, fx, moved = y, fy, True
+                    break
+        if not moved:
+            steps = [0.5 * h for h in steps]
+            if all(x[j] + h == x[j] for j, h in enumerate(steps)):
+                break
+    return tuple(x)
 
 
 def range_bound(expr: sp.Expr, box: dict, rel_tol: float = 1e-3, max_boxes: int = 20000) -> RangeBound:
