@@ -868,9 +868,11 @@ class RangeBound:
         return self.lower == self.upper
 
 
-def _bisect(box: dict):
-    """The two halves of ``box`` across its widest side, or None when no side can be split further."""
-    sym = max(box, key=lambda s: box[s][1] - box[s][0])
+def _bisect(box: dict, scale: dict | None = None):
+    """The two halves of ``box`` across its widest side, or None when no side can be split further:
+    widest in absolute terms, or relative to ``scale`` (the root box's widths) when given, so that a
+    variable in large units (a stiffness in N/rad beside a slip) does not take every cut."""
+    sym = max(box, key=lambda s: (box[s][1] - box[s][0]) / (scale[s] if scale else 1.0))
     lo, hi = box[sym]
     mid = 0.5 * (lo + hi)
     if not lo < mid < hi:
@@ -932,8 +934,12 @@ def _local_search(rough, b: dict, used: list, start: tuple, sign: float) -> tupl
     return tuple(x)
 
 
-def range_bound(expr: sp.Expr, box: dict, rel_tol: float = 1e-3, max_boxes: int = 20000) -> RangeBound:
+def range_bound(expr: sp.Expr, box: dict, rel_tol: float = 1e-3, max_boxes: int = 20000,
+                relative_cuts: bool = False) -> RangeBound:
     """Guaranteed [lower, upper] of ``expr`` over ``box``, within ``rel_tol`` of attained values.
+
+    ``relative_cuts``: bisect the side widest relative to the root box (variables of very different
+    units); default: the widest in absolute terms.
 
     The bounds hold for the exact real function (:func:`evaluate`); ``attained_min`` and
     ``attained_max`` are values it takes at points of the box, so they lie inside the bounds.
@@ -957,6 +963,7 @@ def range_bound(expr: sp.Expr, box: dict, rel_tol: float = 1e-3, max_boxes: int 
     switches = _switches(expr)
     whole = _enclose(expr, sub, switches)
     value, rough = _point_function(expr, used)
+    widths = {s: (sub[s][1] - sub[s][0]) or 1.0 for s in used} if relative_cuts else None
 
     def mid(b):
         return tuple(0.5 * (b[s][0] + b[s][1]) for s in used)
@@ -1004,7 +1011,7 @@ def range_bound(expr: sp.Expr, box: dict, rel_tol: float = 1e-3, max_boxes: int 
                 continue
             wait = max(0, wait - 1) if not tightened else wait
             pops += 1
-            halves = _bisect(b)
+            halves = _bisect(b, widths)
             if halves is None:
                 raise BoundsError(f"bounding {expr}: gap {best - lb:.3g} (tolerance {rel_tol * scale:.3g}) on a box "
                                   f"piece doubles cannot split, {dict(zip(map(str, used), mid(b)))}: the gap is "
