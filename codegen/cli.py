@@ -213,10 +213,12 @@ def cmd_validate(args) -> int:
         if args.plot:
             validate.plot_data(result, args.plot)
         if args.json:
-            keys = ("observer", "baselines", "estimates", "status_flags", "samples", "splits", "peaks")
+            keys = ("observer", "baselines", "estimates", "status_flags", "samples", "splits", "peaks", "warnings",
+                    "log_checks", "baselines_skipped")
             print(json.dumps({k: result[k] for k in keys if k in result}, indent=1, sort_keys=True))
             return 0
-        print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} flagged")
+        warned = f", {len(result['warnings'])} warning(s) below" if result.get("warnings") else ""
+        print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} flagged{warned}")
         print(validate.format_data_table(result))
         if args.plot:
             print(f"plot: {args.plot}")
