@@ -25,6 +25,7 @@ import numpy as np
 
 from ..design import lock as design_lock
 from ..project import observer_file as observers
+from ..project import outputs
 from ..project.workspace import Workspace, source_checkout
 from ..errors import SampleError, UnknownObserverError
 from ..emit.toolchain import STRICT_CFLAGS, compile_and_link, compiler, render_template, run
@@ -130,15 +131,14 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
     extra = SPEED_FLAGS + (LTO_FLAGS if lto_supported() else []) + list(extra_flags or [])
     workspace = config.workspace
     ext_dir = Path(ext_dir) if ext_dir is not None else workspace.extensions
-    build_dir = workspace.objects(name)
-    build_dir.mkdir(parents=True, exist_ok=True)
-    ext_dir.mkdir(parents=True, exist_ok=True)
-    glue = build_dir / f"{name}_pymodule.c"
-    glue.write_text(render_template("pymodule.c.j2", name=name, NAME=name.upper()))
+    build_dir = outputs.make_folder(workspace.objects(name))
+    outputs.make_folder(ext_dir)
+    glue = outputs.write_atomic(build_dir / f"{name}_pymodule.c",
+                                render_template("pymodule.c.j2", name=name, NAME=name.upper()))
     import numpy
     glue_flags = [*GLUE_FLAGS, "-I", sysconfig.get_paths()["include"], "-I", numpy.get_include()]
     module_file = f"_{name}{sysconfig.get_config_var('EXT_SUFFIX')}"
-    staging = Path(tempfile.mkdtemp(prefix=f".{name}.new-", dir=ext_dir))
+    staging = outputs.make_temp_folder(f".{name}.new-", ext_dir)
     try:
         candidate = compile_and_link(observer_sources(config) + [glue], staging / module_file, include=[src_dir],
                                      flags=STRICT_FLAGS, extra_flags=extra, source_flags={glue: glue_flags},
@@ -148,7 +148,8 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
         spec.loader.exec_module(module)
         report = conformance.check(pipeline.build(config), module, src_dir, json.loads(lock_text))
         target = ext_dir / module_file
-        os.replace(candidate, target)
+        with outputs.writing(target):
+            os.replace(candidate, target)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     if log is not None:
@@ -216,12 +217,18 @@ class CompiledObserver:
         return np.zeros(self.n_state)
 
     def run(self, inputs, state=None):
-        """Run over an (n, n_input) array; returns (outputs (n, n_output), status (n,), final state)."""
-        inputs = np.ascontiguousarray(inputs, dtype=np.float64)
+        """Run over an (n, n_input) array; returns (outputs (n, n_output), status (n,), final state).
+
+        ``inputs`` and ``state`` must hold real numbers (float or integer dtypes): complex, string,
+        boolean or object arrays are refused, not converted (a complex part would be dropped, a
+        string parsed). One state must not be run by two threads at once: the compiled module
+        refuses a state (or an output) another thread's run is writing (RuntimeError)."""
+        inputs = np.ascontiguousarray(_real(inputs, self.name, "inputs"), dtype=np.float64)
         if inputs.ndim != 2 or inputs.shape[1] != self.n_input:
             raise SampleError(f"{self.name}: inputs must have shape (n, {self.n_input}) with columns "
                               f"{', '.join(self.input_names)}; got {inputs.shape}")
-        state = self.initial_state() if state is None else np.array(state, dtype=np.float64)
+        state = (self.initial_state() if state is None
+                 else np.array(_real(state, self.name, "state"), dtype=np.float64))
         if state.shape != (self.n_state,):
             raise SampleError(f"{self.name}: state must have shape ({self.n_state},), got {state.shape}")
         for rec in _RECORDINGS:
@@ -231,6 +238,17 @@ class CompiledObserver:
         status = np.empty(n, dtype=np.int32)
         self.module.run(state, inputs, outputs, status, n)
         return outputs, status, state
+
+
+def _real(a, name: str, what: str) -> np.ndarray:
+    """``a`` as an array of real numbers, or a SampleError: numpy would drop a complex part
+    (ComplexWarning) and parse strings ('1.5') where the caller meant numbers."""
+    arr = np.asarray(a)
+    if arr.dtype.kind not in "fiu":
+        why = "a complex part would be dropped" if arr.dtype.kind == "c" else "not numbers"
+        raise SampleError(f"{name}: {what} must be real numbers (a float or integer array), got dtype {arr.dtype} "
+                          f"({why})")
+    return arr
 
 
 @contextlib.contextmanager
