@@ -32,6 +32,7 @@ from .design import lock as design_lock
 from .emit import generate as emit
 from . import families, pipeline
 from .project import observer_file as observers
+from .project import outputs
 from .errors import (CertificateError, ConfigurationError, DesignLockError, MissingParameterError,
                      SchedulingBoundsError, UiogenError, UnknownObserverError, UnknownParameterError)
 
@@ -134,14 +135,12 @@ def cmd_design(args) -> int:
     path = None
     if args.update:
         path = design_lock.path(config)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(text)
-        tmp.replace(path)
+        outputs.make_folder(path.parent)
+        outputs.write_atomic(path, text)
     if args.out:
         path = Path(args.out)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text)
+        outputs.make_folder(path.parent)
+        outputs.write_atomic(path, text)
     shown = path if path is not None else "not written (--update commits it as the design lock, --out FILE writes a copy)"
     code = _print_design(b, shown, args.json, compare)
     if not args.json:
@@ -283,12 +282,15 @@ def cmd_validate(args) -> int:
     if args.data:
         result = validate.run_data(config, args.data)
         if args.plot:
-            validate.plot_data(result, args.plot)
+            with outputs.writing(args.plot):
+                validate.plot_data(result, args.plot)
         if args.json:
-            keys = ("observer", "baselines", "estimates", "status_flags", "samples", "splits", "peaks")
+            keys = ("observer", "baselines", "estimates", "status_flags", "samples", "splits", "peaks", "warnings",
+                    "log_checks", "baselines_skipped")
             print(json.dumps({k: result[k] for k in keys if k in result}, indent=1, sort_keys=True))
             return 0
-        print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} flagged")
+        warned = f", {len(result['warnings'])} warning(s) below" if result.get("warnings") else ""
+        print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} flagged{warned}")
         print(validate.format_data_table(result))
         if args.plot:
             print(f"plot: {args.plot}")
@@ -298,7 +300,8 @@ def cmd_validate(args) -> int:
     result = validate.run_scenario(config, args.scenario, args.plant, duration=args.duration,
                                    progress=validate.progress_bar(f"{args.scenario} on {args.plant}"))
     if args.plot:
-        validate.plot(result, args.plot)
+        with outputs.writing(args.plot):
+            validate.plot(result, args.plot)
     if args.json:
         print(validate.to_json(result))
         return 0
@@ -333,21 +336,22 @@ def cmd_new(args) -> int:
     folder = Path(args.dir)
     example = observers.get(family.example)
     name = args.name or family.example
-    files = {folder / "model.py": example.model_path, folder / "parameters.toml": example.parameter_path}
     target = folder / f"{name}.toml"
+    observers.check_name(name, f"uiogen new --name {name}")
+    files = {folder / "model.py": example.model_path, folder / "parameters.toml": example.parameter_path}
     existing = [str(p) for p in [*files, target] if p.exists()]
     if existing:
         raise ConfigurationError(f"uiogen new {folder}: would overwrite {', '.join(existing)}; choose an empty folder")
-    folder.mkdir(parents=True, exist_ok=True)
+    outputs.make_folder(folder)
     for dst, src in files.items():
-        dst.write_text(src.read_text())
+        outputs.write_atomic(dst, src.read_text())
     text = Path(example.source).read_text()
     text = re.sub(r'^model = "[^"]*"', 'model = "model.py"      ', text, count=1, flags=re.M)
     text = re.sub(r'^parameters = "[^"]*"', 'parameters = "parameters.toml"', text, count=1, flags=re.M)
     head = (f"# Starter for your own {family.title} ({family.citation}), copied from the built-in\n"
             f"# observer {family.example}: edit model.py (your equations, sympy) and parameters.toml (your car),\n"
             f"# then:  uiogen design {target} --update && uiogen generate {target} && uiogen build {target}\n#\n")
-    target.write_text(head + text)
+    outputs.write_atomic(target, head + text)
     print(f"wrote {target}, {folder / 'model.py'}, {folder / 'parameters.toml'}")
     print(f"next: uiogen design {target} --update; uiogen generate {target}; uiogen build {target}")
     return 0
@@ -548,6 +552,12 @@ def main(argv=None) -> int:
         return args.func(args)
     except UiogenError as exc:
         print(f"uiogen: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:        # a disk that does not take an output the command writes: one line, no traceback
+        if exc.errno not in outputs.DISK_ERRORS:
+            raise
+        err = outputs.error(exc.filename or "an output", exc)
+        print(f"uiogen: error: {type(err).__name__}: {err}", file=sys.stderr)
         return 2
 
 

@@ -40,8 +40,10 @@ def test_cli_json_format(tmp_path):
                            "stanford", "--json"], capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr
     res = json.loads(proc.stdout)
-    assert set(res) == {"observer", "baselines", "status_flags", "samples", "peaks", "splits"}
+    assert set(res) == {"observer", "baselines", "status_flags", "samples", "peaks", "splits", "warnings",
+                        "log_checks"}
     assert res["splits"]["t_split"] == 137.5 and res["splits"]["evaluation"]["samples"] == 13750
+    assert res["warnings"] == [] and {c["verdict"] for c in res["log_checks"]} == {"ok"}
     assert set(res["baselines"]) == {"linear_kf", "ekf"}
     assert [round(p["t"]) for p in res["peaks"]] == [110, 170, 207]      # the three large-sideslip peaks
     assert res["samples"] > 20000 and res["status_flags"] >= 0

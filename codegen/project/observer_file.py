@@ -16,12 +16,13 @@ import dataclasses
 import hashlib
 import importlib
 import importlib.util
+import re
 import sys
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import ModelDefinitionError, UnknownObserverError
+from ..errors import ConfigurationError, ModelDefinitionError, UnknownObserverError
 from ..model import ModelDefinition
 from . import columns
 from .settings import Rule, config_error, parse_table, suggest
@@ -176,6 +177,10 @@ def load_module(path: Path, name: str):
     except Exception as exc:       # a user's module that does not run: say where, keep the cause
         del sys.modules[name]
         raise ModelDefinitionError(f"{path}: importing the model failed: {type(exc).__name__}: {exc}") from exc
+    except SystemExit as exc:      # sys.exit() in a model file must not end (or succeed) the command
+        del sys.modules[name]
+        raise ModelDefinitionError(f"{path}: importing the model called sys.exit({exc.code!r}); a model file "
+                                   f"defines MODEL = ModelDefinition(...) and returns") from None
     return module
 
 
@@ -201,6 +206,50 @@ def apply_overrides(data: dict, overrides: dict, source: str) -> dict:
     return data
 
 
+MAX_NAME_LENGTH = 64
+"""Longest observer name: the name prefixes every identifier of its C API and names its
+extension module (``_NAME``); C99 guarantees 63 significant characters of an identifier, and
+names of up to 64 characters build and load (a 200-character one did not)."""
+_C_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_C_KEYWORDS = frozenset(
+    "auto break case char const continue default do double else enum extern float for goto if inline int long "
+    "register restrict return short signed sizeof static struct switch typedef union unsigned void volatile "
+    "while _Bool _Complex _Imaginary".split())
+
+
+def check_name(name: str, source: str) -> str:
+    """The observer's name (its file's stem) as the C identifier that prefixes its C API and
+    names its extension, checked before anything is designed.
+
+    Raises
+    ------
+    ConfigurationError
+        not a C identifier (``my obs``, ``1abc``, ``my-obs``), a C keyword, or longer than
+        :data:`MAX_NAME_LENGTH`.
+    """
+    why = None
+    if not _C_IDENTIFIER.fullmatch(name):
+        why = "is not a C identifier"
+    elif name in _C_KEYWORDS:
+        why = "is a C keyword"
+    elif len(name) > MAX_NAME_LENGTH:
+        why = f"has {len(name)} characters"
+    if why is None:
+        return name
+    raise ConfigurationError(
+        f"{source}: the observer's name {name!r} (the file's name) {why}; allowed: ASCII letters, digits and '_', "
+        f"not starting with a digit, not a C keyword, at most {MAX_NAME_LENGTH} characters (it prefixes the "
+        f"observer's C functions and names its extension): rename the file, e.g. "
+        f"{_suggest_name(name)}.toml", source=source, key="name", value=name,
+        allowed=f"a C identifier of at most {MAX_NAME_LENGTH} characters")
+
+
+def _suggest_name(name: str) -> str:
+    s = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    s = s if s and not s[0].isdigit() else f"obs_{s}"
+    return (s + "_obs" if s in _C_KEYWORDS else s)[:MAX_NAME_LENGTH]
+
+
 def _parse(path: Path, overrides: dict | None = None, project: str | Path | None = None) -> ObserverConfig:
     from .. import families
     path = Path(path)
@@ -214,6 +263,7 @@ def _parse(path: Path, overrides: dict | None = None, project: str | Path | None
     except UnicodeDecodeError as exc:
         raise ModelDefinitionError(f"{path}: not UTF-8 text: {exc}") from None
     source = str(path)
+    check_name(path.stem, source)
     if overrides:
         data = apply_overrides(data, overrides, source)
     known = families.names()
