@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 from pathlib import Path
 
@@ -113,7 +112,7 @@ def cmd_design(args) -> int:
                 print(f"committed design: {row['problem']}: objective {row['committed']:.8g}, fresh "
                       f"{row['fresh']:.8g} (relative difference {row['relative_difference']:.2e}){var}")
         if args.update:
-            print(f"design lock updated: {design_lock.path(config)}; `uiogen generate {b.name}` emits its C")
+            print(f"design lock updated: {design_lock.path(config)}; `uiogen generate {config.command_name}` emits its C")
     return code
 
 
@@ -244,30 +243,12 @@ def cmd_demo(args) -> int:
 
 def cmd_new(args) -> int:
     """A starter project: the family's example observer, its model and its parameters, copied
-    into DIR and wired to each other by paths, ready to design, generate and build as written."""
-    family = families.get(args.family)
-    if not family.example:
-        raise ConfigurationError(f"family {family.name!r} has no example observer to start from")
-    folder = Path(args.dir)
-    example = observers.get(family.example)
-    name = args.name or family.example
-    files = {folder / "model.py": example.model_path, folder / "parameters.toml": example.parameter_path}
-    target = folder / f"{name}.toml"
-    existing = [str(p) for p in [*files, target] if p.exists()]
-    if existing:
-        raise ConfigurationError(f"uiogen new {folder}: would overwrite {', '.join(existing)}; choose an empty folder")
-    folder.mkdir(parents=True, exist_ok=True)
-    for dst, src in files.items():
-        dst.write_text(src.read_text())
-    text = Path(example.source).read_text()
-    text = re.sub(r'^model = "[^"]*"', 'model = "model.py"      ', text, count=1, flags=re.M)
-    text = re.sub(r'^parameters = "[^"]*"', 'parameters = "parameters.toml"', text, count=1, flags=re.M)
-    head = (f"# Starter for your own {family.title} ({family.citation}), copied from the built-in\n"
-            f"# observer {family.example}: edit model.py (your equations, sympy) and parameters.toml (your car),\n"
-            f"# then:  uiogen design {target} --update && uiogen generate {target} && uiogen build {target}\n#\n")
-    target.write_text(head + text)
-    print(f"wrote {target}, {folder / 'model.py'}, {folder / 'parameters.toml'}")
-    print(f"next: uiogen design {target} --update; uiogen generate {target}; uiogen build {target}")
+    into DIR and wired to each other by paths, ready to design, generate, build and validate as
+    written (:mod:`codegen.project.starter`)."""
+    from .project import starter
+    target = starter.write(Path(args.dir), families.get(args.family), args.name)
+    print(f"wrote {target}, {target.parent / 'model.py'}, {target.parent / 'parameters.toml'}")
+    print("next: " + "; ".join(starter.next_steps(target)))
     return 0
 
 
@@ -377,7 +358,7 @@ def main(argv=None) -> int:
     p = sub.add_parser("new", help="a starter project (model, parameters, observer file) in DIR")
     p.add_argument("dir")
     p.add_argument("--family", required=True, help="an observer family (uiogen list shows them in use)")
-    p.add_argument("--name", help="the observer's name (default: the family's example)")
+    p.add_argument("--name", help="the observer's name, the file's stem (default: my_FAMILY; never a built-in's)")
     p.set_defaults(func=cmd_new)
     p = sub.add_parser("docs", help="the docs' tables of figures from docs/data/{demo,bench}.json")
     p.add_argument("--check", action="store_true", help="only compare; exit 1 if a page differs")

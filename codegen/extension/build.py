@@ -254,7 +254,8 @@ def load(observer) -> CompiledObserver:
     name = config.name
     design = design_lock.path(config)
     if not design.is_file():
-        raise UnknownObserverError(f"observer {name!r} has not been generated (no {design}); run `uiogen generate`")
+        raise UnknownObserverError(f"observer {name!r} has not been generated (no {design}); run "
+                                   f"`uiogen generate {config.command_name}`")
     path = config.workspace.extension(name)
     key = f"uiogen_ext_{abs(hash(str(path)))}__{name}"
     module = sys.modules.get(key)

@@ -276,7 +276,7 @@ def load_parameters(path: str | Path) -> ParameterSet:
     ``NAME = [min, max]`` (the compact state set of designs that bound unmeasured nonlinearities);
     ``[exogenous]`` and ``[premise_bounds]`` are read by the interconnected family; ``[inputs.NAME]``
     (``min``, ``max``, optional ``bandwidth`` in Hz) bounds a known or unknown input for the generic
-    excitation scenario (:mod:`codegen.validation.excitation`).
+    excitation scenario (:mod:`codegen.validation.excitation`; ``min = max`` holds it at that value).
 
     Raises
     ------
@@ -341,8 +341,8 @@ def load_parameters(path: str | Path) -> ParameterSet:
         if not isinstance(table, dict):
             raise config_error(str(path), "inputs", key, table, "must be a table [inputs.NAME] with min, max")
         table = parse_table(table, INPUT_KEYS, source=str(path), section=f"inputs.{key}")
-        if not table["min"] < table["max"]:
-            raise config_error(str(path), f"inputs.{key}", "max", table["max"], f"must exceed min = {table['min']}")
+        if not table["min"] <= table["max"]:      # min = max: the input held at that value
+            raise config_error(str(path), f"inputs.{key}", "max", table["max"], f"must be >= min = {table['min']}")
         inputs[key] = table
     return ParameterSet(str(path), values, boxes, meta, plant, state_bounds, inputs)
 

@@ -6,9 +6,11 @@ inputs evaluated continuously between the samples, as a real car's are) with
 
 * every input scheduling signal swept inside its box: a sine of 0.9 of the half-range about the
   box's centre whose slope stays within the box's rate bounds (at its centre when it has none);
+  an ``[inputs.NAME]`` table of the signal narrows the swept range (a car the open-loop scenario
+  would spin at the top of its speed box);
 * every known and unknown input a seeded, smooth random signal (a sum of sinusoids below its
   ``bandwidth``, 1 Hz by default) filling the range ``[inputs.NAME] min, max`` of the parameter
-  file;
+  file (or, without that table, the input's ``[state_bounds]`` entry: the set a design certifies);
 * the state starting at the centre of its ``[state_bounds]`` box (or at 0).
 
 The compiled step runs over the sampled outputs (noise-free), and its estimates are compared
@@ -21,6 +23,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelDefinitionError
+from ..project.settings import config_error
 from ..model import load_parameters, parameter_substitution
 from .simulate import rk4_step
 from .common import SETTLE_TIME, signal_stats
@@ -39,36 +42,66 @@ def _smooth(t: np.ndarray, rng, lo: float, hi: float, bandwidth: float):
     return lambda tt: lo + (0.05 + 0.9 * (raw(tt) - x_min) / width) * (hi - lo)
 
 
-def _sweep(box):
-    mid, half = 0.5 * (box.lower + box.upper), 0.45 * (box.upper - box.lower)
+def _sweep(box, lower: float, upper: float):
+    mid, half = 0.5 * (lower + upper), 0.45 * (upper - lower)
     rate = min(abs(box.rate_lower), abs(box.rate_upper))
+    if half <= 0:
+        return lambda tt: np.full(np.shape(np.atleast_1d(tt)), mid)
     if rate <= 0:
         return lambda tt: np.full(np.shape(np.atleast_1d(tt)), mid)
     omega = 0.9 * rate / half                  # |d/dt half sin(omega t)| <= 0.9 rate
     return lambda tt: mid - half * np.cos(omega * np.atleast_1d(tt))
 
 
+def input_range(params, name: str):
+    """(min, max, bandwidth Hz) of input ``name`` in the excitation scenario: its ``[inputs.NAME]``
+    table, else its ``[state_bounds]`` entry (the set a design certifies, at 1 Hz), else None."""
+    spec = params.inputs.get(name)
+    if spec is not None:
+        return spec["min"], spec["max"], spec.get("bandwidth", 1.0)
+    if name in params.state_bounds:
+        return (*params.state_bounds[name], 1.0)
+    return None
+
+
 def signal_functions(config, duration: float = DURATION, seed: int = 0) -> tuple:
-    """(sample times, {name: function of time}) of the scenario's raw scheduling signals and inputs."""
+    """(sample times, {name: function of time}) of the scenario's raw scheduling signals and inputs.
+
+    Raises
+    ------
+    ModelDefinitionError
+        naming every scheduling box and input range the parameter file lacks, in one message.
+    """
     model = config.load_model()
     params = load_parameters(config.parameter_path)
     t = np.arange(0.0, duration + 0.5 * config.sample_time, config.sample_time)
     rng = np.random.default_rng(seed)
-    out = {}
+    out, missing = {}, []
     for sig in model.scheduling:
         if sig.derived is None:
-            box = params.scheduling.get(str(sig.symbol))
+            name = str(sig.symbol)
+            box = params.scheduling.get(name)
             if box is None:
-                raise ModelDefinitionError(f"{params.source}: the excitation scenario sweeps {sig.symbol} inside "
-                                           f"[scheduling.{sig.symbol}], which is missing")
-            out[str(sig.symbol)] = _sweep(box)
+                missing.append(f"[scheduling.{name}] (min, max, rate_min, rate_max: the sweep of {name})")
+                continue
+            lower, upper = box.lower, box.upper
+            if name in params.inputs:           # a narrower sweep (a car unstable at the top of the box)
+                lower, upper = params.inputs[name]["min"], params.inputs[name]["max"]
+                if not box.lower <= lower <= upper <= box.upper:
+                    raise config_error(params.source, f"inputs.{name}", "min", lower,
+                                       f"min and max inside [scheduling.{name}] = [{box.lower:g}, {box.upper:g}] "
+                                       f"(the sweep of the excitation scenario narrows the box, never widens it)")
+            out[name] = _sweep(box, lower, upper)
     for u in (*model.known_inputs, *model.unknown_inputs):
-        spec = params.inputs.get(str(u))
+        spec = input_range(params, str(u))
         if spec is None:
-            raise ModelDefinitionError(
-                f"{params.source}: the excitation scenario needs the range of input {u}: add a table "
-                f"[inputs.{u}] with min = ..., max = ... (and optionally bandwidth = ... Hz)")
-        out[str(u)] = _smooth(t, rng, spec["min"], spec["max"], spec.get("bandwidth", 1.0))
+            missing.append(f"[inputs.{u}] (min, max, optionally bandwidth in Hz: the range of "
+                           f"{'known' if u in model.known_inputs else 'unknown'} input {u})")
+        else:
+            out[str(u)] = _smooth(t, rng, *spec)
+    if missing:
+        raise ModelDefinitionError(f"{params.source}: the excitation scenario needs {len(missing)} table(s) the file "
+                                   f"lacks: {'; '.join(missing)}")
     return t, out
 
 

@@ -488,19 +488,27 @@ def step_numpy(b: AlgebraicUIOBuild, z, u, y, rho):
 # ---- build -----------------------------------------------------------------------------------------------
 
 def _check_differentiators(lpv: LPVModel, dec: rdeg.Decoupling, settings: alg.AlgebraicSettings, config):
+    """Every differentiator the observer needs is declared, of a high enough order, and none is
+    declared for another signal: all the mistakes in one error."""
     need = {f"y_{o}": r for o, r in zip(lpv.definition.output_names, dec.relative_degrees)}
     need.update({str(s): max(dec.derivative_orders[s], 1) for s in dec.base})
+    problems = []
     for name, order in need.items():
         spec = settings.differentiators.get(name)
         if spec is None:
-            raise ModelDefinitionError(f"{config.source}: [design.differentiators.{name}] is missing (the observer "
-                                       f"needs derivatives of {name} up to order {order})")
-        if spec.order < order:
-            raise ModelDefinitionError(f"{config.source}: differentiator {name} has order {spec.order}, but the observer "
-                                       f"needs derivative {order} (relative degree / parameter derivatives)")
-    extra = set(settings.differentiators) - set(need)
+            problems.append(f"[design.differentiators.{name}] is missing (the observer needs derivatives of {name} up "
+                            f"to order {order}: {name} = {{ order = {order}, lipschitz = ... }}, the bound of its "
+                            f"derivative {order + 1})")
+        elif spec.order < order:
+            problems.append(f"[design.differentiators.{name}] order = {spec.order}, but the observer needs derivative "
+                            f"{order} (relative degree / parameter derivatives)")
+    extra = sorted(set(settings.differentiators) - set(need))
     if extra:
-        raise ModelDefinitionError(f"{config.source}: differentiators for unknown signals {sorted(extra)}")
+        problems.append(f"differentiators for signals the observer does not differentiate: "
+                        f"{', '.join(f'[design.differentiators.{k}]' for k in extra)} (it needs {', '.join(need)})")
+    if problems:
+        raise ModelDefinitionError(f"{config.source}: {len(problems)} differentiator setting(s) to fix: "
+                                   + "; ".join(problems))
 
 
 def build(config, tol: float | None = None, lpv: LPVModel | None = None) -> AlgebraicUIOBuild:
@@ -578,9 +586,9 @@ def summary_lines(b: AlgebraicUIOBuild, s: dict) -> list:
     """:func:`design_summary` as the lines `uiogen design` prints."""
     out = []
     out.append(f"observer {b.name}: algebraic LPV UIO (Ichalal and Mammar 2015), relative degree(s) {s['relative_degrees']} (uniform on the box)")
-    for out, rows in s["M"].items():
+    for output, rows in s["M"].items():
         for j, row in enumerate(rows):
-            out.append(f"  M_{j} ({out}) = {row}")
+            out.append(f"  M_{j} ({output}) = {row}")
     for c in s["uniformity"]["uniform_relative_degree"]:
         out.append(f"  M_(r-1) D = {c['M_D']} in [{c['bound'][0]:.6g}, {c['bound'][1]:.6g}] (sound bound: never 0)")
     rc = s["uniformity"]["rank_condition_64"]
