@@ -5,6 +5,7 @@
     uiogen generate [NAME ...] [--force] [--out DIR] [--project DIR]
     uiogen build [NAME ...] [--float32] [--project DIR]
     uiogen check-gains NAME --gains FILE [--json]
+    uiogen fit NAME --data PATH|stanford --samples A:B [--folds K] [--write] [--json]
     uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png] [--project DIR]
     uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png] [--project DIR]
     uiogen demo [--json]
@@ -204,6 +205,36 @@ def cmd_check_gains(args) -> int:
     return 0 if _feasible(res) else 1
 
 
+def _shown(path: Path) -> str:
+    """A path as a record shows it: relative to the working directory when inside it."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
+def cmd_fit(args) -> int:
+    """Identify an observer's numbers on samples A..B-1 of a log (the family's ``fit``); print them,
+    say whether the committed files hold them, and with --write put them there."""
+    cfg = observers.get(args.name)
+    family = families.get(cfg.family)
+    result = family.fit(cfg, args.data, args.samples, folds=args.folds)
+    texts = family.fit_files(cfg, result)
+    changed = {path: path.read_text() != text for path, text in texts.items()}
+    if args.write:
+        for path, text in texts.items():
+            if changed[path]:
+                path.write_text(text)
+    if args.json:
+        _print_json({**result, "files": {_shown(p): ("written" if args.write and c else "differs" if c else "equal")
+                                         for p, c in changed.items()}})
+    else:
+        print("\n".join(family.fit_lines(result, changed)))
+        if args.write and any(changed.values()):
+            print("written: " + ", ".join(str(p) for p, c in changed.items() if c))
+    return 0
+
+
 def cmd_validate(args) -> int:
     from .validation import run as validate
     config = observers.get(args.name, project=args.project)
@@ -340,6 +371,15 @@ def main(argv=None) -> int:
     p.add_argument("--gains", required=True, help="JSON with P1, P2, X, L1, L2 (nested lists)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_check_gains)
+    p = sub.add_parser("fit", help="identify an observer's numbers (tyre, noise levels) on a sample range of a log")
+    p.add_argument("name")
+    p.add_argument("--data", required=True, help="a logged run in the shared format (CSV, plain or .gz) with a "
+                                                 "sideslip reference; 'stanford' = the shared log")
+    p.add_argument("--samples", required=True, metavar="A:B", help="the samples A..B-1 the fit may read (e.g. 0:13750)")
+    p.add_argument("--folds", type=int, default=0, help="cross-validate inside the range with K contiguous folds")
+    p.add_argument("--write", action="store_true", help="write the fitted values into the parameter and observer files")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_fit)
     p = sub.add_parser("validate", parents=[project],
                        help="errors on an independent plant, beside the KF/EKF baselines")
     p.add_argument("name")

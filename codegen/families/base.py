@@ -223,6 +223,19 @@ class Family(abc.ABC):
         out["feasible"] = True
         return out
 
+    def fit(self, config, path, samples: str, folds: int = 0) -> dict:
+        """Identify the observer's numbers on samples A..B-1 (``samples`` = "A:B") of a log
+        (``uiogen fit``); families without an identification refuse."""
+        raise UnsupportedError(f"family {self.name!r} has no identification (uiogen fit): its numbers come from its "
+                               f"paper or its parameter file")
+
+    def fit_files(self, config, result: dict) -> dict:
+        """{path: text} of the files that hold the fitted numbers."""
+        return {}
+
+    def fit_lines(self, result: dict, changed: dict) -> list:
+        return []
+
     def format_check_gains(self, result: dict, source: str) -> list:
         lines = [f"{self.title} ({self.short_citation}): check of {source} on observer {result['observer']}"]
         for p in result.get("problems", []):

@@ -120,6 +120,11 @@ def evaluate(expr: sp.Expr, box: dict) -> Interval:
             return b.monotone(lambda t: t ** e, increasing=e > 0)
         raise BoundsError(f"{expr}: only constant exponents are supported")
     fn = expr.func
+    if fn in (sp.Max, sp.Min):
+        # both monotone in every argument: the extreme of the ends (exact, no rounding)
+        ivs = [evaluate(a, box) for a in args]
+        pick = max if fn is sp.Max else min
+        return Interval(pick(iv.lo for iv in ivs), pick(iv.hi for iv in ivs))
     if len(args) == 1:
         a = evaluate(args[0], box)
         if fn is sp.sin:
@@ -158,15 +163,22 @@ class RangeBound:
         return self.lower == self.upper
 
 
-def _bisect(box: dict) -> tuple:
-    sym = max(box, key=lambda s: box[s][1] - box[s][0])
+def _bisect(box: dict, scale: dict | None = None) -> tuple:
+    """The box halved along its widest side: absolute width, or relative to ``scale`` (the root box's
+    widths) when given, so that a variable in large units (a stiffness in N/rad beside a slip) does
+    not take every cut."""
+    sym = max(box, key=lambda s: (box[s][1] - box[s][0]) / (scale[s] if scale else 1.0))
     lo, hi = box[sym]
     mid = 0.5 * (lo + hi)
     return {**box, sym: (lo, mid)}, {**box, sym: (mid, hi)}
 
 
-def range_bound(expr: sp.Expr, box: dict, rel_tol: float = 1e-3, max_boxes: int = 20000) -> RangeBound:
+def range_bound(expr: sp.Expr, box: dict, rel_tol: float = 1e-3, max_boxes: int = 20000,
+                relative_cuts: bool = False) -> RangeBound:
     """Guaranteed [lower, upper] of ``expr`` over ``box``, within ``rel_tol`` of attained values.
+
+    ``relative_cuts``: bisect the side widest relative to the root box (variables of very
+    different units); default: the widest in absolute terms.
 
     Raises
     ------
@@ -194,6 +206,7 @@ def range_bound(expr: sp.Expr, box: dict, rel_tol: float = 1e-3, max_boxes: int 
             vals.append(float(fn(*[b[s][(bits >> k) & 1] for k, s in enumerate(used)])))
         return vals
 
+    widths = {s: (sub[s][1] - sub[s][0]) or 1.0 for s in used} if relative_cuts else None
     vals = corners_and_mid(sub)
     att_min, att_max = min(vals), max(vals)
     examined = 1
@@ -214,7 +227,7 @@ def range_bound(expr: sp.Expr, box: dict, rel_tol: float = 1e-3, max_boxes: int 
                 raise BoundsError(f"bounding {expr}: gap {best - lb:.3g} after {examined} boxes "
                                   f"(tolerance {rel_tol * scale:.3g}); widen rel_tol or split the box")
             heapq.heappop(heap)
-            for half in _bisect(b):
+            for half in _bisect(b, widths):
                 examined += 1
                 v = point(half)
                 att_min, att_max = min(att_min, v), max(att_max, v)
