@@ -9,7 +9,19 @@ from __future__ import annotations
 
 from .design import lock as design_lock, lmi
 from . import families
+from .errors import BoundsError
 from .project.observer_file import ObserverConfig
+
+
+def _family_build(config: ObserverConfig, tol: float | None):
+    """The family's pipeline; an expression it cannot bound is reported with the file whose boxes it
+    was bounded over (the bound's own tolerance is not a setting: the boxes are)."""
+    try:
+        return families.get(config.family).build(config, tol)
+    except BoundsError as exc:
+        raise BoundsError(f"{config.parameter_path}: {exc}; the expression is bounded over the boxes this file "
+                          f"declares ([scheduling.NAME], [state_bounds]): narrow those of the variables it ranges "
+                          f"over (observer {config.command_name})") from exc
 
 
 def build(config: ObserverConfig, tol: float | None = None, fresh: bool = False):
@@ -21,12 +33,12 @@ def build(config: ObserverConfig, tol: float | None = None, fresh: bool = False)
         if data is not None:
             where = str(design_lock.path(config))
             with lmi.replaying(design_lock.solutions(data, where), source=where):
-                return families.get(config.family).build(config, None)
-    return families.get(config.family).build(config, tol)
+                return _family_build(config, None)
+    return _family_build(config, tol)
 
 
 def solve(config: ObserverConfig, tol: float | None = None) -> tuple:
     """A fresh design of ``config`` and the LMI solutions it solved: (build, [SolveRecord])."""
     with lmi.recording() as ledger:
-        b = families.get(config.family).build(config, tol)
+        b = _family_build(config, tol)
     return b, list(ledger.records)

@@ -160,6 +160,12 @@ class Family(abc.ABC):
                 f"({result.get('plant_model', result['plant'])}), {result['samples']} samples, "
                 f"{result['status_flags']} flagged samples")
 
+    def log_peers(self, config, run) -> dict:
+        """{name: sideslip estimate [rad] per sample} of estimators the family runs beside the
+        observer on a logged run in the shared format (``uiogen validate --data``), e.g. Kalman
+        filters of the observer's own model and parameter file; {} for none."""
+        return {}
+
     def demo_report(self, artifact: dict) -> dict:
         """Design figures for ``uiogen demo`` from the committed design report."""
         return {}
@@ -193,7 +199,7 @@ class Family(abc.ABC):
 
         The generic form is the design lock's: ``{"lmi_solutions": [{"problem", "variables",
         "objective", "iterations"}, ...]}``, one record per LMI problem of the design, in order
-        (as in ``generated_c/NAME/NAME_design.json``). The family's pipeline runs on them as on a
+        (as in ``generated_c/NAME/NAME_design.json``, which may be given as it is). The family's pipeline runs on them as on a
         committed design: every block is re-checked with numpy, and the discrete step certified.
         Families with a paper-specific form of their gains override this (and fall back to it).
         """
@@ -201,6 +207,8 @@ class Family(abc.ABC):
         from ..errors import (CertificateError, ConfigurationError, DesignLockError, DiscretizationError,
                                InfeasibleLMIError)
         raw = gains.get("lmi_solutions")
+        if raw is None and isinstance(gains.get("lock"), dict):      # a design lock file, as committed
+            raw = gains["lock"].get("lmi_solutions")
         if not isinstance(raw, list):
             raise ConfigurationError(
                 f"gains: family {self.name!r} checks gains given as the design lock gives them: "

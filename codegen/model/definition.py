@@ -467,14 +467,13 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     MissingParameterError, UnknownParameterError, SchedulingBoundsError, NotAffineError
     """
     subs = parameter_substitution(model, params)
-    boxes = []
-    for sig in model.scheduling:
-        box = params.scheduling.get(str(sig.symbol))
-        if box is None:
-            raise SchedulingBoundsError(
-                f"model {model.name!r}: scheduling signal {sig.symbol} has no "
-                f"[scheduling.{sig.symbol}] bounds in {params.source}")
-        boxes.append(box)
+    missing = [str(sig.symbol) for sig in model.scheduling if str(sig.symbol) not in params.scheduling]
+    if missing:
+        raise SchedulingBoundsError(
+            f"model {model.name!r}: scheduling signal(s) {', '.join(missing)} {'has' if len(missing) == 1 else 'have'} "
+            f"no bounds in {params.source}: add " + "; ".join(f"[scheduling.{n}] with min, max, rate_min, rate_max"
+                                                            for n in missing))
+    boxes = [params.scheduling[str(sig.symbol)] for sig in model.scheduling]
     # structure is checked exactly, with the parameters still symbolic; numbers come after
     f = sp.Matrix(model.dynamics)
     h = sp.Matrix([expr for _, expr in model.outputs])

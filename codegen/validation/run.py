@@ -157,9 +157,8 @@ def run_data(name, path: str = "stanford") -> dict:
 
     kf, ekf = stanford.linear_kf(run), stanford.ekf(run)
     estimates = {"linear_kf": kf.beta, "ekf": ekf.beta}
-    if config.model == "single_track_nonlinear_tyre":
-        # peers of the same symbolic model and the same parameter file, in the same run
-        estimates.update({k: v.beta for k, v in stanford.nonlinear_tyre_peers(run, config.parameter_path).items()})
+    # the family's peers of the observer's own model and parameter file, in the same run (Family.log_peers)
+    estimates.update(families.get(config.family).log_peers(config, run))
     result = {"observer": {**table(beta), **extra}, "baselines": {k: table(b) for k, b in estimates.items()},
               "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)), "data": run.source,
               "signals": {"t": t, "beta_true": run.beta_true, "beta": beta, **estimates}}
@@ -171,20 +170,18 @@ def run_data(name, path: str = "stanford") -> dict:
                             "evaluation": {"samples": int((t >= split).sum())}}
         for part, m in (("identification", t < split), ("evaluation", t >= split)):
             result["splits"][part].update({"observer": rms(beta, m), **{k: rms(b, m) for k, b in estimates.items()}})
-    result["peaks"] = peak_errors(t, run.beta_true, {"observer": beta, **estimates})
+    result["peaks"] = peak_errors(t, run.beta_true, {"observer": beta, **estimates}, stanford.peak_times(run.source))
     return result
 
 
-PEAK_TIMES = (110.0, 170.0, 207.0)
-"""Times [s from the log's start] of the three large-sideslip peaks of the shared Stanford half
-(the truth reaches about -5 deg there)."""
 PEAK_HALF_WIDTH = 5.0
 
 
-def peak_errors(t, truth, estimates: dict) -> list:
-    """Max |beta error| [deg] of each estimate within +-PEAK_HALF_WIDTH s of each peak inside the log."""
+def peak_errors(t, truth, estimates: dict, peak_times=()) -> list:
+    """Max |beta error| [deg] of each estimate within +-PEAK_HALF_WIDTH s of each of the log's
+    ``peak_times`` (its own description: :func:`codegen.validation.stanford.peak_times`) inside the log."""
     out = []
-    for tp in PEAK_TIMES:
+    for tp in peak_times:
         m = np.abs(t - tp) <= PEAK_HALF_WIDTH
         if not m.any():
             continue
@@ -290,10 +287,12 @@ def format_data_table(result: dict) -> str:
 
 
 def scenario_names(name) -> tuple:
-    """The validation scenarios of an observer that ``uiogen demo`` runs (its family's
-    ``demo_scenarios``), or the generic excitation scenario for a family without its own."""
+    """The validation scenarios of an observer: for a built-in one those ``uiogen demo`` runs (its
+    family's ``demo_scenarios``, the papers' on the library's plants), for a project's observer
+    and a family without its own the generic excitation scenario on the model's own equations
+    (the library's plants are of the built-in models)."""
     config = observers.get(name) if isinstance(name, str) else name
-    return tuple(families.get(config.family).demo_scenarios) or ("excitation",)
+    return (tuple(families.get(config.family).demo_scenarios) if config.builtin else ()) or ("excitation",)
 
 
 def scenario_inputs(name, scenario, plant: str = "nominal", duration: float | None = None) -> np.ndarray:

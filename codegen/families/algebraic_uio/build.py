@@ -522,7 +522,12 @@ def build(config, tol: float | None = None, lpv: LPVModel | None = None) -> Alge
     if lpv is None:
         lpv = instantiate(config.load_model(), load_parameters(config.parameter_path))
     if any(s.derived is not None for s in lpv.definition.scheduling):
-        raise ModelDefinitionError(f"{config.source}: derived scheduling signals are not supported by this family")
+        derived = [str(s.symbol) for s in lpv.definition.scheduling if s.derived is not None]
+        raise ModelDefinitionError(f"{config.source}: derived scheduling signal(s) {', '.join(derived)}: the algebraic "
+                                   f"UIO differentiates its scheduling signals as measured inputs (HOSMD of each); "
+                                   f"make each an input of the step (SchedulingSignal without derived=). The "
+                                   f"L-infinity UIO (family linf_uio) and the TS fuzzy UIO (ts_fuzzy_uio) take "
+                                   f"scheduling derived from the outputs")
     rdeg.check_structure(lpv)          # before anything evaluates the model's matrices
     boxes = rdeg.derivative_boxes(lpv)
     aux = alg.aux_design(lpv, boxes, settings.auxiliary, settings.auxiliary_alpha, settings.tol)

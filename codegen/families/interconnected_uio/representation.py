@@ -414,7 +414,9 @@ def build(model: InterconnectedModelDefinition, params: ParameterSet) -> Interco
                 if term == 0:
                     continue
                 if any(u in term.free_symbols for u in model.unknown_inputs):
-                    raise NotAffineError(f"output {nm!r}: unknown inputs may not reach the outputs (term {term})")
+                    raise NotAffineError(f"output {nm!r}: unknown inputs may not reach the outputs of the interconnected "
+                                         f"UIO (term {term}); the L-infinity UIO (family linf_uio) takes that "
+                                         f"feedthrough")
                 lin = [s for s in own if s in term.free_symbols]
                 if len(lin) == 1 and not (term / lin[0]).free_symbols:
                     C[k, own.index(lin[0])] += float(term / lin[0])
@@ -479,6 +481,11 @@ def _premise(name, g, model, state_box, switched, premise_bounds, source) -> Pre
     return Premise(name, g, rb.lower, rb.upper)
 
 
+def _families() -> tuple:
+    from ... import families
+    return families.names()
+
+
 def load(config) -> InterconnectedTS:
     """The representation of an observer file's model (``model = "NAME"`` of ``model_defs/`` or a
     ``.py`` path beside the file), which must define ``MODEL = InterconnectedModelDefinition(...)``."""
@@ -488,7 +495,7 @@ def load(config) -> InterconnectedTS:
             f"{config.model_path}: the interconnected UIO (family interconnected_uio) needs the states partitioned "
             f"into subsystems: MODEL = InterconnectedModelDefinition(subsystems=..., ...) "
             f"(codegen.families.interconnected_uio.representation); MODEL is a {type(model).__name__}, one system "
-            f"of equations, which the families linf_uio, ts_fuzzy_uio, switched_pi, algebraic_uio take")
+            f"of equations, which the other families take ({', '.join(f for f in _families() if f != 'interconnected_uio')})")
     return build(model, load_parameters(config.parameter_path))
 
 

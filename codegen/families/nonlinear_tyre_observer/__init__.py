@@ -38,6 +38,16 @@ class NonlinearTyreObserver(Family):
                 f"l2 gain {e['gamma_deg']:.4g} deg, RMS beta error <= {e['bound_deg_at_levels']:.4g} deg at the noise "
                 f"levels"]
 
+    def log_peers(self, config, run) -> dict:
+        """The EKF and UKF of the same symbolic model and parameter file
+        (:func:`codegen.validation.stanford.nonlinear_tyre_peers`), for an observer of that model
+        (``model_defs/single_track_nonlinear_tyre.py`` or an unedited copy of it)."""
+        from ...project.observer_file import builtin_model
+        from ...validation import stanford
+        if config.load_model() != builtin_model("single_track_nonlinear_tyre").MODEL:
+            return {}
+        return {k: v.beta for k, v in stanford.nonlinear_tyre_peers(run, config.parameter_path).items()}
+
     def fit(self, config, path, samples: str, folds: int = 0) -> dict:
         from .fit import fit
         return fit(config, path, samples, folds)
