@@ -1,6 +1,7 @@
 """The ``uiogen`` command line.
 
     uiogen list [--json]
+    uiogen analyze MODEL_OR_OBSERVER [--parameters FILE] [--outputs ...] [--unknown-inputs ...] [--json] [--no-design]
     uiogen design NAME [--json] [--out FILE] [--update] [--project DIR]
     uiogen generate [NAME ...] [--force] [--out DIR] [--project DIR]
     uiogen build [NAME ...] [--float32] [--project DIR]
@@ -14,7 +15,7 @@
     uiogen export NAME --format fmu --out FILE.fmu [--project DIR]
 
 ``--project DIR``: the project folder whose ``generated_c/`` and ``build/`` the command reads and
-writes (:mod:`codegen.project.workspace`); default: the observer file's folder, or for a built-in
+writes (:mod:`python_bindings.workspace`); default: the observer file's folder, or for a built-in
 observer the source checkout (installed: the current directory).
 """
 from __future__ import annotations
@@ -30,7 +31,8 @@ from .design import lock as design_lock
 from .emit import generate as emit
 from . import families, pipeline
 from .project import observer_file as observers
-from .errors import CertificateError, ConfigurationError, UiogenError
+from .errors import (CertificateError, ConfigurationError, DesignLockError, MissingParameterError,
+                     SchedulingBoundsError, UiogenError, UnknownObserverError, UnknownParameterError)
 
 
 def _print_json(obj) -> None:
@@ -84,9 +86,48 @@ def _compare_with_committed(config, records) -> dict:
     return {"committed": rows, "current": status is not None}
 
 
+def cmd_analyze(args) -> int:
+    from . import analysis
+    progress = None if args.json else (lambda msg: print(f"  ... {msg}", file=sys.stderr, flush=True))
+    result = analysis.analyze(args.target, args.parameters, args.outputs, args.unknown_inputs,
+                              design=not args.no_design, progress=progress)
+    if args.json:
+        _print_json(result.to_json())
+    else:
+        print(result.text())
+    return 0
+
+
+# Errors that are a mistake in a file (a key, a value, a path): the analysis has nothing to add
+_FILE_MISTAKES = (ConfigurationError, UnknownObserverError, MissingParameterError, UnknownParameterError,
+                  SchedulingBoundsError, DesignLockError)
+
+
+def _analysis_of_failure(config, as_json: bool) -> None:
+    """The analysis facts at the top of a failed design (stdout; the error stays one line on
+    stderr): the structure and every family's verdict, without trial designs."""
+    from . import analysis
+    try:
+        result = analysis.analyze(config.source, design=False)
+    except Exception as exc:        # the design's own error is the one that matters: it follows, one line
+        print(f"(no analysis of {config.source}: {type(exc).__name__}: {exc})")
+        return
+    if as_json:
+        _print_json({"analysis": result.to_json()})
+        return
+    print(f"uiogen design {config.name} failed; uiogen analyze {config.source}:")
+    print("\n".join("  " + line if line else "" for line in result.text().splitlines()))
+
+
 def cmd_design(args) -> int:
     config = observers.get(args.name, project=args.project)
-    b, records = pipeline.solve(config)
+    try:
+        b, records = pipeline.solve(config)
+    except _FILE_MISTAKES:
+        raise
+    except UiogenError:
+        _analysis_of_failure(config, args.json)
+        raise
     text = design_lock.dumps(design_lock.document(b, records))
     compare = _compare_with_committed(config, records)
     path = None
@@ -275,11 +316,52 @@ def cmd_demo(args) -> int:
 def cmd_new(args) -> int:
     """A starter project: the family's example observer, its model and its parameters, copied
     into DIR and wired to each other by paths, ready to design, generate, build and validate as
-    written (:mod:`codegen.project.starter`)."""
+    written (:mod:`codegen.project.starter`). With ``--from-model FILE`` instead: the observer file
+    of the family ``uiogen analyze`` ranks first for that model, with the settings the analysis
+    chose and comments that say why."""
     from .project import starter
+    if (args.family is None) == (args.from_model is None):
+        raise ConfigurationError("uiogen new DIR: give either --family F (a starter copied from the family's example) "
+                                 "or --from-model FILE [--parameters FILE] (the observer the analysis chooses)",
+                                 key="--family")
+    if args.from_model is not None:
+        return _new_from_model(args)
+    if args.parameters is not None:
+        raise ConfigurationError("uiogen new --parameters goes with --from-model", key="--parameters")
     target = starter.write(Path(args.dir), families.get(args.family), args.name)
     print(f"wrote {target}, {target.parent / 'model.py'}, {target.parent / 'parameters.toml'}")
     print("next: " + "; ".join(starter.next_steps(target)))
+    return 0
+
+
+def _new_from_model(args) -> int:
+    from . import analysis
+    from .project import starter
+    from .analysis.ranking import starter_text
+    folder = Path(args.dir)
+    result = analysis.analyze(args.from_model, args.parameters, design=True,
+                              progress=lambda msg: print(f"  ... {msg}", file=sys.stderr, flush=True))
+    best = result.ranking.best
+    if best is None:
+        print(result.text())
+        raise ConfigurationError(f"uiogen new --from-model {args.from_model}: no observer family applies to these "
+                                 f"sensors (the report above gives each family's condition and fix)",
+                                 key="--from-model")
+    if best.observer is None:
+        raise ConfigurationError(f"uiogen new --from-model {args.from_model}: {best.family} ranks first but proposes "
+                                 f"no settings for this model; start from uiogen new DIR --family {best.family}",
+                                 key="--from-model")
+    name = args.name or f"{result.subject.name}_{best.family}"
+    starter.check_name(name)
+    target = folder / f"{name}.toml"
+    if target.exists():
+        raise ConfigurationError(f"uiogen new {folder}: would overwrite {target}; choose an empty folder or --name",
+                                 key="dir")
+    folder.mkdir(parents=True, exist_ok=True)
+    target.write_text(starter_text(result.subject, best, folder.resolve()).replace("THIS_FILE", str(target)))
+    print(result.text())
+    print(f"wrote {target} ({best.family}, ranked first)")
+    print(f"next: uiogen design {target} --update; uiogen generate {target}; uiogen build {target}")
     return 0
 
 
@@ -338,6 +420,18 @@ def main(argv=None) -> int:
     p = sub.add_parser("list", help="list observer configurations")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_list)
+    p = sub.add_parser("analyze", help="what a model's sensors allow and which observer family to use (families "
+                                       "ranked, cheap designs tried)")
+    p.add_argument("target", help="a built-in observer, an observer file (.toml) or a model file (.py)")
+    p.add_argument("--parameters", help="the parameter file (required for a model file; for an observer file it "
+                                        "replaces the one the file names)")
+    p.add_argument("--outputs", nargs="+", metavar="OUTPUT",
+                   help="the measured outputs, among those the model declares (default: all of them)")
+    p.add_argument("--unknown-inputs", nargs="+", metavar="INPUT",
+                   help="the unknown inputs, among the model's known and unknown inputs (default: as declared)")
+    p.add_argument("--no-design", action="store_true", help="no trial designs (the structure and the conditions only)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_analyze)
     p = sub.add_parser("design", parents=[project],
                        help="solve and certify one observer's design (writes nothing unless --update/--out)")
     p.add_argument("name")
@@ -395,10 +489,14 @@ def main(argv=None) -> int:
     p = sub.add_parser("demo", help="simulate every observer on its nonlinear model and summarize")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_demo)
-    p = sub.add_parser("new", help="a starter project (model, parameters, observer file) in DIR")
+    p = sub.add_parser("new", help="a starter project (model, parameters, observer file) in DIR, or the observer "
+                                   "file of the family the analysis ranks first for your model (--from-model)")
     p.add_argument("dir")
-    p.add_argument("--family", required=True, help="an observer family (uiogen list shows them in use)")
-    p.add_argument("--name", help="the observer's name, the file's stem (default: my_FAMILY; never a built-in's)")
+    p.add_argument("--family", help="an observer family (uiogen list shows them in use)")
+    p.add_argument("--from-model", help="your model file (.py): the observer file of the best-ranked family")
+    p.add_argument("--parameters", help="the model's parameter file (with --from-model)")
+    p.add_argument("--name", help="the observer's name, the file's stem (default: my_FAMILY, or MODEL_FAMILY with "
+                                  "--from-model; never a built-in's)")
     p.set_defaults(func=cmd_new)
     p = sub.add_parser("docs", help="the docs' tables of figures from docs/data/{demo,bench}.json")
     p.add_argument("--check", action="store_true", help="only compare; exit 1 if a page differs")

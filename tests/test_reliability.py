@@ -19,7 +19,7 @@ from codegen.validation import simulate, run as validate
 from codegen.families.linf_uio import build as linf_build
 from codegen.validation import common
 from python_bindings import load
-from python_bindings.build import generated_names
+from codegen.extension.build import generated_names
 
 ROOT = Path(__file__).resolve().parent.parent
 NAMES = generated_names()

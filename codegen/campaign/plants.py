@@ -44,8 +44,8 @@ DRIVER_KEYS = ("wheelbase", "R_s", "k_e", "k_edot", "k_r", "k_ri", "k_p", "k_i",
 
 def cache_dir(config=None) -> Path:
     """Where compiled plants live: ``$UIOGEN_PLANT_CACHE``, else the observer's project's
-    ``build/plants/`` (:mod:`codegen.project.workspace`; without an observer, the built-in observers')."""
-    from ..project.workspace import Workspace, source_checkout
+    ``build/plants/`` (:mod:`python_bindings.workspace`; without an observer, the built-in observers')."""
+    from python_bindings.workspace import Workspace, source_checkout
     env = os.environ.get(CACHE_ENV)
     if env:
         return Path(env)

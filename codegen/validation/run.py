@@ -37,14 +37,18 @@ def progress_bar(label: str):
 
 
 def run_scenario(name, scenario, plant: str = "nominal", duration: float | None = None,
-                 seed: int = 0, progress=None) -> dict:
+                 seed: int = 0, progress=None, observer=None) -> dict:
     """Simulate the observer's family plant, run the compiled step and the baselines; returns the
-    tables (``observer``, ``baselines``), the signals and ``family`` (which formats the table)."""
+    tables (``observer``, ``baselines``), the signals and ``family`` (which formats the table).
+    ``observer``: the compiled observer to run (default: the observer's extension), e.g. a
+    :class:`python_bindings.Recorder` of it."""
     config = observers.get(name) if isinstance(name, str) else name
     if scenario == "excitation":            # every model: its own equations, swept and excited
         from . import excitation
-        return {"family": config.family, **excitation.run(config, duration, seed, progress=progress)}
-    result = families.get(config.family).validate(config, scenario, plant, duration, seed, progress=progress)
+        return {"family": config.family, **excitation.run(config, duration, seed, progress=progress,
+                                                          observer=observer)}
+    result = families.get(config.family).validate(config, scenario, plant, duration, seed, progress=progress,
+                                                  observer=observer)
     return {"family": config.family, **result}
 
 
@@ -298,11 +302,12 @@ def scenario_names(name) -> tuple:
 def scenario_inputs(name, scenario, plant: str = "nominal", duration: float | None = None) -> np.ndarray:
     """The (n, n_input) input sequence the compiled observer is given on a validation scenario
     (recorded from the run itself: the noisy measurements, the derived scheduling signals)."""
-    from ..extension.build import recording
+    from python_bindings import Recorder
+    from ..extension.build import load
     config = observers.get(name) if isinstance(name, str) else name
-    with recording() as rec:
-        run_scenario(config, scenario, plant, duration=duration)
-    runs = [inputs for who, inputs, _ in rec if who == config.name]
+    recorder = Recorder(load(config))
+    run_scenario(config, scenario, plant, duration=duration, observer=recorder)
+    runs = [inputs for inputs, _ in recorder.calls]
     if not runs:
         raise SampleError(f"{config.name}: scenario {scenario!r} did not run the compiled observer")
     if runs[0].ndim == 1:           # sample by sample (step): the consecutive rows of the first run

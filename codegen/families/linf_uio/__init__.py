@@ -35,13 +35,17 @@ class LinfUIO(Family):
     def check_config(self, config, data: dict) -> None:
         parse_table(data.get("ui_filter", {}), UI_FILTER_KEYS, source=config.source, section="ui_filter")
 
+    def applicability(self, subject, structure):
+        from .applicability import assess
+        return assess(self, subject, structure)
+
     def build(self, config, tol=None):
         from .build import build
         return build(config, tol)
 
-    def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None) -> dict:
+    def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None, observer=None) -> dict:
         from .validation import run
-        return run(config, scenario, plant, duration, seed, progress=progress)
+        return run(config, scenario, plant, duration, seed, progress=progress, observer=observer)
 
     def format_validation(self, result: dict) -> str:
         from .validation import format_table

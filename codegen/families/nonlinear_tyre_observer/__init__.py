@@ -21,6 +21,10 @@ class NonlinearTyreObserver(Family):
     demo_scenarios = ()
     example = "stanford_sideslip_nonlinear_tyre"
 
+    def applicability(self, subject, structure):
+        from .applicability import assess
+        return assess(self, subject, structure)
+
     def build(self, config, tol=None):
         from .build import build
         return build(config, tol)
