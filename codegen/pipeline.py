@@ -14,14 +14,18 @@ from .project.observer_file import ObserverConfig
 
 
 def _family_build(config: ObserverConfig, tol: float | None):
-    """The family's pipeline; an expression it cannot bound is reported with the file whose boxes it
-    was bounded over (the bound's own tolerance is not a setting: the boxes are)."""
+    """The family's pipeline; an expression it cannot bound is reported with what the user can change:
+    the boxes of the parameter file it was bounded over, and the family's bounds settings
+    (``Family.bounds_settings``) where it has them."""
+    family = families.get(config.family)
     try:
-        return families.get(config.family).build(config, tol)
+        return family.build(config, tol)
     except BoundsError as exc:
-        raise BoundsError(f"{config.parameter_path}: {exc}; the expression is bounded over the boxes this file "
+        keys = " or ".join(f"[design] {k}" for k in family.bounds_settings)
+        raise BoundsError(f"{config.parameter_path}: {exc}. The expression is bounded over the boxes this file "
                           f"declares ([scheduling.NAME], [state_bounds]): narrow those of the variables it ranges "
-                          f"over (observer {config.command_name})") from exc
+                          f"over" + (f", or loosen {keys} of {config.source}" if keys else "")
+                          + f" (observer {config.command_name})") from exc
 
 
 def build(config: ObserverConfig, tol: float | None = None, fresh: bool = False):

@@ -128,6 +128,9 @@ class Family(abc.ABC):
     #: robustness campaigns (:mod:`codegen.campaign`): the kind of compiled closed-loop plant of the
     #: family's validation (a key of ``codegen.campaign.plants.KINDS``), None where it has none
     campaign_plant: str | None = None
+    #: ``[design]`` keys that set how hard :mod:`codegen.representation.bounds` tries to bound the
+    #: model's expressions (its tolerance, its box budget), named when a bound cannot be reached
+    bounds_settings: tuple = ()
     #: the norm of the certified gain a campaign run's empirical ratio is set beside: "peak"
     #: (L-infinity: sup|x - x_hat| / sup|d|) or "l2" (|xi - xi_hat|_2 / |w|_2); None: no such gain
     certified_gain_norm: str | None = None

@@ -18,6 +18,7 @@ class NonlinearTyreObserver(Family):
     citation = "DMVT certificate after Nguyen, Dinh, Guerra, Pan, IEEE/ASME T-Mech 26(3), 2021; Fiala tyre (Pacejka 2012, Sec. 3.2)"
     short_citation = "nonlinear-tyre DMVT"
     observer_keys = {}
+    bounds_settings = ("bounds_rel_tol",)
     demo_scenarios = ()
     example = "stanford_sideslip_nonlinear_tyre"
 
