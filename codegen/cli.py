@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 from pathlib import Path
 
@@ -154,7 +153,7 @@ def cmd_design(args) -> int:
                 print(f"committed design: {row['problem']}: objective {row['committed']:.8g}, fresh "
                       f"{row['fresh']:.8g} (relative difference {row['relative_difference']:.2e}){var}")
         if args.update:
-            print(f"design lock updated: {design_lock.path(config)}; `uiogen generate {b.name}` emits its C")
+            print(f"design lock updated: {design_lock.path(config)}; `uiogen generate {config.command_name}` emits its C")
     return code
 
 
@@ -319,9 +318,11 @@ def cmd_demo(args) -> int:
 
 def cmd_new(args) -> int:
     """A starter project: the family's example observer, its model and its parameters, copied
-    into DIR and wired to each other by paths, ready to design, generate and build as written.
-    With ``--from-model FILE`` instead: the observer file of the family ``uiogen analyze`` ranks
-    first for that model, with the settings the analysis chose and comments that say why."""
+    into DIR and wired to each other by paths, ready to design, generate, build and validate as
+    written (:mod:`codegen.project.starter`). With ``--from-model FILE`` instead: the observer file
+    of the family ``uiogen analyze`` ranks first for that model, with the settings the analysis
+    chose and comments that say why."""
+    from .project import starter
     if (args.family is None) == (args.from_model is None):
         raise ConfigurationError("uiogen new DIR: give either --family F (a starter copied from the family's example) "
                                  "or --from-model FILE [--parameters FILE] (the observer the analysis chooses)",
@@ -330,35 +331,15 @@ def cmd_new(args) -> int:
         return _new_from_model(args)
     if args.parameters is not None:
         raise ConfigurationError("uiogen new --parameters goes with --from-model", key="--parameters")
-    family = families.get(args.family)
-    if not family.example:
-        raise ConfigurationError(f"family {family.name!r} has no example observer to start from")
-    folder = Path(args.dir)
-    example = observers.get(family.example)
-    name = args.name or family.example
-    target = folder / f"{name}.toml"
-    observers.check_name(name, f"uiogen new --name {name}")
-    files = {folder / "model.py": example.model_path, folder / "parameters.toml": example.parameter_path}
-    existing = [str(p) for p in [*files, target] if p.exists()]
-    if existing:
-        raise ConfigurationError(f"uiogen new {folder}: would overwrite {', '.join(existing)}; choose an empty folder")
-    outputs.make_folder(folder)
-    for dst, src in files.items():
-        outputs.write_atomic(dst, src.read_text())
-    text = Path(example.source).read_text()
-    text = re.sub(r'^model = "[^"]*"', 'model = "model.py"      ', text, count=1, flags=re.M)
-    text = re.sub(r'^parameters = "[^"]*"', 'parameters = "parameters.toml"', text, count=1, flags=re.M)
-    head = (f"# Starter for your own {family.title} ({family.citation}), copied from the built-in\n"
-            f"# observer {family.example}: edit model.py (your equations, sympy) and parameters.toml (your car),\n"
-            f"# then:  uiogen design {target} --update && uiogen generate {target} && uiogen build {target}\n#\n")
-    outputs.write_atomic(target, head + text)
-    print(f"wrote {target}, {folder / 'model.py'}, {folder / 'parameters.toml'}")
-    print(f"next: uiogen design {target} --update; uiogen generate {target}; uiogen build {target}")
+    target = starter.write(Path(args.dir), families.get(args.family), args.name)
+    print(f"wrote {target}, {target.parent / 'model.py'}, {target.parent / 'parameters.toml'}")
+    print("next: " + "; ".join(starter.next_steps(target)))
     return 0
 
 
 def _new_from_model(args) -> int:
     from . import analysis
+    from .project import starter
     from .analysis.ranking import starter_text
     folder = Path(args.dir)
     result = analysis.analyze(args.from_model, args.parameters, design=True,
@@ -374,9 +355,7 @@ def _new_from_model(args) -> int:
                                  f"no settings for this model; start from uiogen new DIR --family {best.family}",
                                  key="--from-model")
     name = args.name or f"{result.subject.name}_{best.family}"
-    if name in observers.names():
-        raise ConfigurationError(f"uiogen new: the name {name!r} is a built-in observer; choose another with --name",
-                                 key="--name", value=name)
+    starter.check_name(name)
     target = folder / f"{name}.toml"
     if target.exists():
         raise ConfigurationError(f"uiogen new {folder}: would overwrite {target}; choose an empty folder or --name",
@@ -519,7 +498,8 @@ def main(argv=None) -> int:
     p.add_argument("--family", help="an observer family (uiogen list shows them in use)")
     p.add_argument("--from-model", help="your model file (.py): the observer file of the best-ranked family")
     p.add_argument("--parameters", help="the model's parameter file (with --from-model)")
-    p.add_argument("--name", help="the observer's name (default: the family's example)")
+    p.add_argument("--name", help="the observer's name, the file's stem (default: my_FAMILY, or MODEL_FAMILY with "
+                                  "--from-model; never a built-in's)")
     p.set_defaults(func=cmd_new)
     p = sub.add_parser("docs", help="the docs' tables of figures from docs/data/{demo,bench}.json")
     p.add_argument("--check", action="store_true", help="only compare; exit 1 if a page differs")

@@ -279,7 +279,7 @@ def load_parameters(path: str | Path) -> ParameterSet:
     ``NAME = [min, max]`` (the compact state set of designs that bound unmeasured nonlinearities);
     ``[exogenous]`` and ``[premise_bounds]`` are read by the interconnected family; ``[inputs.NAME]``
     (``min``, ``max``, optional ``bandwidth`` in Hz) bounds a known or unknown input for the generic
-    excitation scenario (:mod:`codegen.validation.excitation`).
+    excitation scenario (:mod:`codegen.validation.excitation`; ``min = max`` holds it at that value).
 
     Raises
     ------
@@ -344,8 +344,8 @@ def load_parameters(path: str | Path) -> ParameterSet:
         if not isinstance(table, dict):
             raise config_error(str(path), "inputs", key, table, "must be a table [inputs.NAME] with min, max")
         table = parse_table(table, INPUT_KEYS, source=str(path), section=f"inputs.{key}")
-        if not table["min"] < table["max"]:
-            raise config_error(str(path), f"inputs.{key}", "max", table["max"], f"must exceed min = {table['min']}")
+        if not table["min"] <= table["max"]:      # min = max: the input held at that value
+            raise config_error(str(path), f"inputs.{key}", "max", table["max"], f"must be >= min = {table['min']}")
         inputs[key] = table
     plausibility = parse_table(_table(data, "plausibility", path), PLAUSIBILITY_KEYS, source=str(path),
                                section="plausibility")
@@ -481,14 +481,13 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     MissingParameterError, UnknownParameterError, SchedulingBoundsError, NotAffineError
     """
     subs = parameter_substitution(model, params)
-    boxes = []
-    for sig in model.scheduling:
-        box = params.scheduling.get(str(sig.symbol))
-        if box is None:
-            raise SchedulingBoundsError(
-                f"model {model.name!r}: scheduling signal {sig.symbol} has no "
-                f"[scheduling.{sig.symbol}] bounds in {params.source}")
-        boxes.append(box)
+    missing = [str(sig.symbol) for sig in model.scheduling if str(sig.symbol) not in params.scheduling]
+    if missing:
+        raise SchedulingBoundsError(
+            f"model {model.name!r}: scheduling signal(s) {', '.join(missing)} {'has' if len(missing) == 1 else 'have'} "
+            f"no bounds in {params.source}: add " + "; ".join(f"[scheduling.{n}] with min, max, rate_min, rate_max"
+                                                            for n in missing))
+    boxes = [params.scheduling[str(sig.symbol)] for sig in model.scheduling]
     # structure is checked exactly, with the parameters still symbolic; numbers come after
     f = sp.Matrix(model.dynamics)
     h = sp.Matrix([expr for _, expr in model.outputs])

@@ -81,6 +81,12 @@ class ObserverConfig:
         return not self.source or Path(self.source).resolve().parent == OBSERVERS_DIR
 
     @property
+    def command_name(self) -> str:
+        """What a ``uiogen`` command takes to find this observer again: a built-in's name, else
+        its file's path (a name resolves to the built-ins first)."""
+        return self.name if self.builtin else self.source
+
+    @property
     def workspace(self) -> Workspace:
         """The folders its generated files go to (:mod:`python_bindings.workspace`)."""
         if self.project:
@@ -103,12 +109,27 @@ class ObserverConfig:
     def load_model_module(self):
         return load_module(self.model_path, self.model_module)
 
-    def load_model(self) -> ModelDefinition:
+    def load_definition(self):
+        """The model file's ``MODEL`` as written: a :class:`~codegen.model.ModelDefinition`, or the
+        definition of a family that needs more structure (an ``InterconnectedModelDefinition``:
+        the states partitioned into subsystems). A family's ``build`` checks the class it takes."""
         module = self.load_model_module()
         model = getattr(module, "MODEL", None)
-        if not isinstance(model, ModelDefinition):
-            raise ModelDefinitionError(f"{self.model_path} does not define MODEL = ModelDefinition(...)")
+        if model is None:
+            raise ModelDefinitionError(f"{self.model_path} does not define MODEL = ModelDefinition(...) (model of "
+                                       f"observer file {self.source or self.name})")
+        if not (isinstance(model, ModelDefinition) or callable(getattr(model, "as_model_definition", None))):
+            raise ModelDefinitionError(f"{self.model_path}: MODEL is a {type(model).__name__}, not a "
+                                       f"ModelDefinition(...) (codegen.model)")
         return model
+
+    def load_model(self) -> ModelDefinition:
+        """The model as one system of equations (:class:`~codegen.model.ModelDefinition`), the form
+        every family-independent path reads (the excitation scenario, campaign plants, logs,
+        conformance): ``MODEL`` itself, or ``MODEL.as_model_definition()`` for a family's richer
+        definition (the same equations, its extra structure dropped)."""
+        model = self.load_definition()
+        return model if isinstance(model, ModelDefinition) else model.as_model_definition()
 
     def design_model(self) -> ModelDefinition:
         """The model the family designs with: :meth:`load_model`, with the unknown inputs of the

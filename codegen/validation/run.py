@@ -118,9 +118,6 @@ def shared_log_inputs(input_names) -> np.ndarray | None:
                                 dtype=np.float64)
 
 
-PEAK_TIMES = (110.0, 170.0, 207.0)
-"""Times [s from the log's start] of the three large-sideslip peaks of the shared Stanford half
-(the truth reaches about -5 deg there)."""
 PEAK_HALF_WIDTH = 5.0
 
 BASELINE_MAX_SAMPLES = 300_000
@@ -171,7 +168,7 @@ def run_data(name, path: str = "stanford", block_bytes: int | None = None) -> di
     delta_stats, prev_delta = streaming.ErrorStats(angle=True), None
     split = _identification_split(config, stanford._resolve(path))
     parts = {"identification": _Rms(), "evaluation": _Rms()}
-    peaks = {tp: _Peak() for tp in PEAK_TIMES}
+    peaks = {tp: _Peak() for tp in stanford.peak_times(path)}
     kept, whole = streaming.Decimated(), {c: [] for c in stanford.COLUMNS}
     state, flags, n, t0, t_end = obs.initial_state(), 0, 0, None, None
     for cols in stanford.chunks(path, sample_time=obs.sample_time, block_bytes=block_bytes):
@@ -261,9 +258,8 @@ def _baselines(config, run) -> dict:
     from . import stanford
     kf, ekf = stanford.linear_kf(run), stanford.ekf(run)
     estimates = {"linear_kf": kf.beta, "ekf": ekf.beta}
-    if config.model == "single_track_nonlinear_tyre":
-        # peers of the same symbolic model and the same parameter file, in the same run
-        estimates.update({k: v.beta for k, v in stanford.nonlinear_tyre_peers(run, config.parameter_path).items()})
+    # the family's peers of the observer's own model and parameter file, in the same run (Family.log_peers)
+    estimates.update(families.get(config.family).log_peers(config, run))
     return estimates
 
 
@@ -402,10 +398,12 @@ def format_data_table(result: dict) -> str:
 
 
 def scenario_names(name) -> tuple:
-    """The validation scenarios of an observer that ``uiogen demo`` runs (its family's
-    ``demo_scenarios``), or the generic excitation scenario for a family without its own."""
+    """The validation scenarios of an observer: for a built-in one those ``uiogen demo`` runs (its
+    family's ``demo_scenarios``, the papers' on the library's plants), for a project's observer
+    and a family without its own the generic excitation scenario on the model's own equations
+    (the library's plants are of the built-in models)."""
     config = observers.get(name) if isinstance(name, str) else name
-    return tuple(families.get(config.family).demo_scenarios) or ("excitation",)
+    return (tuple(families.get(config.family).demo_scenarios) if config.builtin else ()) or ("excitation",)
 
 
 def scenario_inputs(name, scenario, plant: str = "nominal", duration: float | None = None) -> np.ndarray:

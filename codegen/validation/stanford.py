@@ -66,6 +66,18 @@ identification part (samples 0-13749) is the only one any number of an estimator
 chosen on; the evaluation part is reported, never fitted (``uiogen validate --data`` splits every
 estimator's error there)."""
 
+PEAK_TIMES = (110.0, 170.0, 207.0)
+"""[s from the log's start] The three large-sideslip peaks of the shared half (its reference reaches
+about -5 deg there): ``uiogen validate --data stanford`` reports each estimator's largest error
+around them. A property of this log (:func:`peak_times`), not of any observer."""
+
+
+def peak_times(path) -> tuple:
+    """The sideslip peaks [s from the start] of a log in the shared format: :data:`PEAK_TIMES` for the
+    shared log, none known for any other."""
+    return PEAK_TIMES if str(_resolve(path)) == str(STANFORD_PATH) else ()
+
+
 COLUMNS = ("t", "vx", "vy", "beta_true", "ax", "ay", "yaw_rate", "yaw_acc",
            "delta", "delta_fl", "delta_fr")
 """Required CSV columns, SI units (s, m/s, rad, m/s², rad/s, rad/s²); see :data:`UNITS`."""

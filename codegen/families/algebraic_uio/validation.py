@@ -22,7 +22,6 @@ With noise: RMS errors in % of each signal's RMS after ``eval_after``.
 """
 from __future__ import annotations
 
-import importlib
 import math
 import tomllib
 
@@ -81,7 +80,7 @@ def simulate(b, scn: dict, duration: float | None = None, seed: int = 0) -> dict
     h = b.config.sample_time
     T = float(duration if duration is not None else scn.get("duration", 20.0))
     t = np.arange(int(round(T / h)) + 1) * h
-    module = importlib.import_module(f"model_defs.{b.config.model}")
+    module = b.config.load_model_module()
     d = b.lpv.definition
     out = {"t": t}
     sched = {}

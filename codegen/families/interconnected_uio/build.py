@@ -539,7 +539,7 @@ def build(config, tol: float | None = None) -> InterconnectedBuild:
     settings = parse_settings(ICDesignSettings, table, source=config.source, section="design", extra=STEP_KEYS,
                               **({"tol": tol} if tol is not None else {}))
     t0 = time.perf_counter()
-    ts = icm.load(config.model, config.parameter_path)
+    ts = icm.load(config)
     step = step_settings(ts, table, config.sample_time, config.source)
     layout = StepLayout(ts, step)
     t1 = time.perf_counter()

@@ -588,7 +588,7 @@ def run(name: str, mu: float = 1.0, plant: str = "commonroad", duration: float |
             truth = simulate_commonroad(track, mu, int(vehicle), _l_s(config), duration, 1.0 / config.sample_time,
                                         progress=progress)
         elif plant == "model":
-            ts = interconnected.load(config.model, config.parameter_path)
+            ts = interconnected.load(config)
             meta = load_parameters(config.parameter_path).meta
             vehicle = meta.get("commonroad_vehicle")
             if vehicle in ("1", "2", "3"):
@@ -709,7 +709,7 @@ def periodic_lap(name: str, mu: float = 1.0) -> dict:
     from . import representation as interconnected
     from ...model import load_parameters
     config = observers.get(name) if isinstance(name, str) else name
-    ts = interconnected.load(config.model, config.parameter_path)
+    ts = interconnected.load(config)
     vehicle = load_parameters(config.parameter_path).meta.get("commonroad_vehicle")
     if vehicle in ("1", "2", "3"):
         from ...validation.commonroad_plant import vehicle_parameters

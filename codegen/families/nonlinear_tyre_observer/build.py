@@ -90,10 +90,11 @@ class NonlinearTyreSettings:
             if len(rng) != 2 or not rng[0] <= 1.0 <= rng[1]:
                 raise ValueError(f"{key} = {list(rng)} must be [lo, hi] with lo <= 1 <= hi (factors on the "
                                  f"parameter file's value)")
-        for key in ("sigma_force_front", "sigma_force_rear"):
-            if getattr(self, key) is None:
-                raise ValueError(f"{key} is required: the level of the axle force the tyre model misses [N] "
-                                 f"(`uiogen fit` identifies it from a log with a sideslip reference)")
+        missing = [key for key in ("sigma_force_front", "sigma_force_rear") if getattr(self, key) is None]
+        if missing:
+            raise ValueError(f"{' and '.join(missing)} {'is' if len(missing) == 1 else 'are'} required: the level of "
+                             f"the axle force the tyre model misses [N] (`uiogen fit` identifies it from a log with a "
+                             f"sideslip reference)")
 
     @property
     def given_gains(self) -> bool:
