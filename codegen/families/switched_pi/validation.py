@@ -65,7 +65,7 @@ def roll_params_toml(vehicle: int = 2) -> str:
     cf, cr = tyre_cornering_stiffness(p, fzf), tyre_cornering_stiffness(p, fzr)
     eq = roll_equivalents(p)
     return f"""# Roll-augmented single-track model (Menhour et al. 2014) of CommonRoad parameter set {vehicle} ({VEHICLE_NAMES[vehicle]}),
-# derived number by number by codegen.validation.banked_road.roll_params_toml (a test re-derives it).
+# derived number by number by codegen.families.switched_pi.validation.roll_params_toml (a test re-derives it).
 
 [meta]
 source = "commonroad-vehicle-models parameters_vehicle{vehicle} (vehicle_dynamics_mb), linear roll equivalents"
