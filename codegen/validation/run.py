@@ -166,7 +166,7 @@ def run_data(name, path: str = "stanford") -> dict:
         estimates.update({k: v.beta for k, v in stanford.nonlinear_tyre_peers(run, config.parameter_path).items()})
     result = {"observer": {**table(beta), **extra}, "baselines": {k: table(b) for k, b in estimates.items()},
               "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)), "data": run.source,
-              "signals": {"t": t, "beta_true": run.beta_true, "beta": beta, **estimates}}
+              "signals": {"t": t, "beta_true": run.beta_true, "beta": beta, **estimates, "status": status}}
     split = _identification_split(config, t, run.source)
     if split is not None:
         def rms(b, m):

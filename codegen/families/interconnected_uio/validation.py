@@ -613,7 +613,8 @@ def run(name: str, mu: float = 1.0, plant: str = "commonroad", duration: float |
             "max_abs_ax": float(np.abs(truth["a_x"]).max()), "min_ax": float(truth["a_x"].min()),
             "max_abs_ay": float(np.abs(truth["a_y"]).max()),
             "speed_range": [float(truth["v_x"].min()), float(truth["v_x"].max())],
-            "duration_s": float(truth["t"][-1]), "signals": {"t": truth["t"], "truth": truth, "estimate": est}}
+            "duration_s": float(truth["t"][-1]),
+            "signals": {"t": truth["t"], "truth": truth, "estimate": est, "status": status}}
 
 
 def format_table(results: list) -> str:

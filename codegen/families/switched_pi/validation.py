@@ -279,7 +279,7 @@ def run_scenario(config, scenario: str, plant: str = "nominal", duration: float 
             "max_abs_ax": float(np.abs(tr["a_x"]).max()), "plant": plant, "plant_model": tr["plant_model"],
             "scenario": scenario, "ratio_beta_to_bank": ratio, "paper_ratio": PAPER_RATIO[rule],
             "mode_occupancy": occupancy, "Menhour et al. 2014": True,
-            "signals": {"t": tr["t"], "truth": tr, "estimate": est}, "units": units}
+            "signals": {"t": tr["t"], "truth": tr, "estimate": est, "status": status}, "units": units}
 
 
 def format_table(result: dict) -> str:
