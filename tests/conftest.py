@@ -50,3 +50,15 @@ def compiled():
 @pytest.fixture(scope="session")
 def published():
     return json.loads(require_shared(PUBLISHED, "shared reference file").read_text())
+
+
+# --- lanes -----------------------------------------------------------------------------------------
+# `make test-fast` runs `pytest -m "not slow"`: no generate, no build, no compiler, QEMU, Dask, mkdocs
+# or browser. A test that needs one of them (a compiled extension above all) carries
+# @pytest.mark.slow, or its module `pytestmark = pytest.mark.slow`, with the reason beside it.
+# The reliability suite (make check) is slow by definition.
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.get_closest_marker("reliability") is not None and item.get_closest_marker("slow") is None:
+            item.add_marker(pytest.mark.slow)

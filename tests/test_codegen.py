@@ -13,6 +13,7 @@ ROOT = Path(__file__).resolve().parent.parent
 NAMES = generated_names()
 
 
+@pytest.mark.slow          # CasADi generation of every observer
 @pytest.mark.parametrize("NAME", NAMES)
 def test_regeneration_is_byte_identical(tmp_path, NAME):
     emit.generate([NAME], out_dir=tmp_path, force=True, log=lambda *_: None)
@@ -38,6 +39,7 @@ def test_generated_files_have_banner_and_no_timestamp(NAME):
         assert not re.search(r"20\d\d-\d\d-\d\d|\d\d:\d\d:\d\d", text), f"{f.name} carries a timestamp"
 
 
+@pytest.mark.slow          # gcc and clang over every observer
 @pytest.mark.parametrize("NAME", NAMES)
 @pytest.mark.parametrize("cc", ["gcc", "clang"])
 def test_strict_flags_compile(cc, tmp_path, NAME):
@@ -52,6 +54,7 @@ def test_strict_flags_compile(cc, tmp_path, NAME):
         assert not {"malloc", "calloc", "realloc", "free"} & set(syms), syms
 
 
+@pytest.mark.slow          # the compiled extensions
 @pytest.mark.parametrize("NAME", NAMES)
 def test_work_query_fits_fixed_arrays(NAME):
     from python_bindings import load

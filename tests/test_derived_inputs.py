@@ -60,6 +60,7 @@ def test_bmw_twin_inputs_are_the_seeds(bmw):
     assert bmw.discrete_certificate.kappa > 1
 
 
+@pytest.mark.slow          # the compiled extension
 def test_compiled_step_equals_numpy_step_with_derived_inputs(bmw):
     from python_bindings import load
     obs = load(NAME)

@@ -215,6 +215,7 @@ def _random_state(rng, icb):
     return z
 
 
+@pytest.mark.slow          # the compiled observer
 def test_c_step_matches_numpy_and_casadi(icb, compiled):
     rng = np.random.default_rng(3)
     f = icb.step_function()
@@ -237,6 +238,7 @@ def test_c_step_matches_numpy_and_casadi(icb, compiled):
     assert worst <= 1e-12
 
 
+@pytest.mark.slow          # the compiled observer
 def test_c_step_status_behaviour(compiled):
     bits = compiled.status_bits
     s, out = compiled.initial_state(), np.empty(compiled.n_output)
@@ -252,6 +254,7 @@ def test_c_step_status_behaviour(compiled):
     assert np.isfinite(s).all()
 
 
+@pytest.mark.slow          # the compiled observer
 def test_straight_driving_is_reproduced_exactly(compiled):
     """Steady straight driving at 20 m/s, consistent measurements: every estimate converges to the
     truth, the unknown inputs to the steady torques (rolling resistance and drag on the front axle)."""

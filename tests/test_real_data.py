@@ -14,6 +14,8 @@ from codegen.validation import stanford
 
 from conftest import require_shared
 
+pytestmark = pytest.mark.slow          # the compiled observers on the shared log
+
 ROOT = Path(__file__).resolve().parent.parent
 
 

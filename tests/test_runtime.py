@@ -18,6 +18,8 @@ from codegen.extension.build import generated_names
 from python_bindings import Recorder, StaleExtensionError, UnknownObserverError, load
 from python_bindings.workspace import Workspace
 
+pytestmark = pytest.mark.slow          # the compiled extensions
+
 ROOT = Path(__file__).resolve().parent.parent
 NAME = "lpv_linf_driver_torque"
 TOOLCHAIN = ("codegen", "sympy", "casadi", "clarabel", "scipy", "jinja2")
