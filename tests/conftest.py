@@ -32,8 +32,22 @@ def config():
 
 
 @pytest.fixture(scope="session")
-def build(config):
-    return pipeline.build(config)
+def built():
+    """``built(NAME)``: the pipeline's build of a built-in observer (its committed design replayed and
+    re-checked), made once per test session and shared by every test module that reads it. Tests
+    read these builds; a test that changes a design makes its own (``dataclasses.replace``)."""
+    cache = {}
+
+    def get(name: str):
+        if name not in cache:
+            cache[name] = pipeline.build(observers.get(name))
+        return cache[name]
+    return get
+
+
+@pytest.fixture(scope="session")
+def build(built):
+    return built(NAME)
 
 
 @pytest.fixture(scope="session")

@@ -21,8 +21,8 @@ NAMES = ("algebraic_uio_example1", "algebraic_uio_example2", "algebraic_uio_late
 
 
 @pytest.fixture(scope="module")
-def builds():
-    return {n: pipeline.build(observers.get(n)) for n in NAMES}
+def builds(built):
+    return {n: built(n) for n in NAMES}
 
 
 def _lpv(name):

@@ -30,10 +30,10 @@ BUILTIN = observers.names()
 
 @pytest.mark.slow          # builds
 @pytest.mark.parametrize("name", BUILTIN)
-def test_every_builtin_extension_conforms(name):
+def test_every_builtin_extension_conforms(name, built):
     config = observers.get(name)
     lock_path = design_lock.path(config)
-    report = conformance.check(pipeline.build(config), load(config).module, lock_path.parent,
+    report = conformance.check(built(name), load(config).module, lock_path.parent,
                                json.loads(lock_path.read_text()))
     assert report.samples == conformance.SAMPLES
     assert report.worst["numpy"][0] <= conformance.TOLERANCE

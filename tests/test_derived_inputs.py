@@ -7,8 +7,6 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from codegen.project import observer_file as observers
-from codegen import pipeline
 from codegen.validation import simulate
 from codegen.families.linf_uio import discrete
 from codegen.validation import common
@@ -48,8 +46,8 @@ def test_derived_input_matrices_and_step():
 
 
 @pytest.fixture(scope="module")
-def bmw():
-    return pipeline.build(observers.get(NAME))
+def bmw(built):
+    return built(NAME)
 
 
 def test_bmw_twin_inputs_are_the_seeds(bmw):

@@ -13,7 +13,6 @@ import sympy as sp
 
 from codegen.families.interconnected_uio import representation as icm
 from codegen.project import observer_file as observers
-from codegen import pipeline
 from codegen.families.interconnected_uio import design as du
 from codegen.families.interconnected_uio import build as dub
 from codegen.errors import (CertificateError, ModelDefinitionError, RankConditionError, SchedulingBoundsError)
@@ -26,8 +25,8 @@ TWIN = "interconnected_uio_ford_escort"
 
 
 @pytest.fixture(scope="module")
-def icb():
-    return pipeline.build(observers.get(NAME))
+def icb(built):
+    return built(NAME)
 
 
 @pytest.fixture(scope="module")

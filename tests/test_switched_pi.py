@@ -7,7 +7,6 @@ import pytest
 import sympy as sp
 
 from codegen.project import observer_file as observers
-from codegen import pipeline
 from codegen.families.switched_pi import representation as switched
 from codegen.families.switched_pi import design as switched_pi
 from codegen.errors import CertificateError, ModelDefinitionError, RankConditionError
@@ -19,8 +18,8 @@ SPEED, SLIP, FINE = NAMES
 
 
 @pytest.fixture(scope="module")
-def builds():
-    return {n: pipeline.build(observers.get(n)) for n in NAMES}
+def builds(built):
+    return {n: built(n) for n in NAMES}
 
 
 @pytest.fixture(scope="module")

@@ -19,8 +19,8 @@ NAME = "ts_fuzzy_uio"
 
 
 @pytest.fixture(scope="module")
-def tsb():
-    return pipeline.build(observers.get(NAME))
+def tsb(built):
+    return built(NAME)
 
 
 @pytest.fixture(scope="module")
