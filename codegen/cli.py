@@ -7,9 +7,9 @@
     uiogen build [NAME ...] [--float32] [--project DIR]
     uiogen check-gains NAME --gains FILE [--json]
     uiogen fit NAME --data PATH|stanford --samples A:B [--folds K] [--write] [--json]
-    uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png] [--project DIR]
-    uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png] [--project DIR]
-    uiogen demo [--json]
+    uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png] [--report DIR] [--project DIR]
+    uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png] [--report DIR] [--project DIR]
+    uiogen demo [--json] [--report DIR]
     uiogen bench [--json]
     uiogen campaign SPEC.toml [--runs N] [--only K] [--json] [--scheduler ADDRESS] [--workers N] [--out DIR]
     uiogen export NAME --format fmu --out FILE.fmu [--project DIR]
@@ -283,6 +283,10 @@ def cmd_validate(args) -> int:
         if args.plot:
             with outputs.writing(args.plot):
                 validate.plot_data(result, args.plot)
+        if args.report:
+            from .validation import report
+            with outputs.writing(args.report):
+                page = report.write_validation(args.name, result, args.report, data=True)
         if args.json:
             keys = ("observer", "baselines", "estimates", "status_flags", "samples", "splits", "peaks", "warnings",
                     "log_checks", "baselines_skipped")
@@ -293,6 +297,8 @@ def cmd_validate(args) -> int:
         print(validate.format_data_table(result))
         if args.plot:
             print(f"plot: {args.plot}")
+        if args.report:
+            print(f"report: {page.resolve()}")
         return 0
     if not args.scenario:
         raise ConfigurationError("validate needs --scenario S (simulated plant) or --data PATH (logged run)")
@@ -301,6 +307,10 @@ def cmd_validate(args) -> int:
     if args.plot:
         with outputs.writing(args.plot):
             validate.plot(result, args.plot)
+    if args.report:
+        from .validation import report
+        with outputs.writing(args.report):
+            page = report.write_validation(args.name, result, args.report, data=False)
     if args.json:
         print(validate.to_json(result))
         return 0
@@ -308,12 +318,14 @@ def cmd_validate(args) -> int:
     print(validate.format_table(result))
     if args.plot:
         print(f"plot: {args.plot}")
+    if args.report:
+        print(f"report: {page.resolve()}")
     return 0
 
 
 def cmd_demo(args) -> int:
     from .validation import demo
-    return demo.main(json_output=args.json)
+    return demo.main(json_output=args.json, report_dir=args.report)
 
 
 def cmd_new(args) -> int:
@@ -488,9 +500,12 @@ def main(argv=None) -> int:
     p.add_argument("--duration", type=float, default=None, help="truncate the scenario [s]")
     p.add_argument("--json", action="store_true")
     p.add_argument("--plot", help="write estimates vs truth to this PNG")
+    p.add_argument("--report", metavar="DIR", help="write an HTML page (DIR/index.html) with the figures and the tables")
     p.set_defaults(func=cmd_validate)
     p = sub.add_parser("demo", help="simulate every observer on its nonlinear model and summarize")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--report", metavar="DIR", help="write an HTML page (DIR/index.html) of every observer, the best "
+                                                   "real-data observer first, and print a summary pointing at it")
     p.set_defaults(func=cmd_demo)
     p = sub.add_parser("new", help="a starter project (model, parameters, observer file) in DIR, or the observer "
                                    "file of the family the analysis ranks first for your model (--from-model)")

@@ -18,6 +18,8 @@ from codegen.model import load_parameters
 from codegen.validation import scenarios
 from codegen.validation.common import scenario_for, truth_plant
 
+pytestmark = pytest.mark.slow          # compiled plants, Dask
+
 ROOT = Path(__file__).resolve().parent.parent
 LINF_SPEC = ROOT / "docs" / "campaigns" / "lpv_linf_driver_torque.toml"
 BANK_SPEC = ROOT / "docs" / "campaigns" / "switched_pi_bank_angle.toml"

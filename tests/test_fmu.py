@@ -18,8 +18,9 @@ from codegen.extension.build import build_extension, load
 fmpy = pytest.importorskip("fmpy", reason="FMPy is not installed (pip install -c constraints.txt '.[fmu]')")
 from fmpy.validation import validate_fmu  # noqa: E402
 
-pytestmark = pytest.mark.skipif(platform.system() != "Linux" or platform.machine() != "x86_64",
-                                reason="the FMU carries a linux64 binary only")
+pytestmark = [pytest.mark.slow,          # compiles FMU binaries
+              pytest.mark.skipif(platform.system() != "Linux" or platform.machine() != "x86_64",
+                                 reason="the FMU carries a linux64 binary only")]
 
 NAMES = ("lpv_linf_driver_torque", "interconnected_uio")
 

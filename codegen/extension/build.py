@@ -79,7 +79,7 @@ def observer_sources(observer) -> list:
 def check_generated(config: observers.ObserverConfig) -> str:
     """The lock text of ``config`` after checking that its generated folder is exactly what
     ``uiogen generate`` wrote from the current design and toolchain (the stamp,
-    :func:`codegen.emit.stamp_matches`): an edited, truncated or stale C file is never compiled.
+    :func:`codegen.emit.generate.stamp_matches`): an edited, truncated or stale C file is never compiled.
 
     Raises
     ------
@@ -116,7 +116,7 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
     1. The generated folder matches its stamp (:func:`check_generated`).
     2. The C is compiled into a temporary folder beside the target.
     3. The module is loaded from there and checked against independent evaluations of its model
-       (:func:`codegen.conformance.check`: signal layout, then numbers across every declared box).
+       (:func:`codegen.extension.conformance.check`: signal layout, then numbers across every declared box).
     4. Only then it replaces the installed module (one rename): a failed check leaves the previous
        extension as it was and raises :class:`~codegen.errors.ConformanceError`.
     """

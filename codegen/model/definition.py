@@ -241,7 +241,8 @@ class LPVModel:
 
 
 # Tables of a parameter file and the keys of a [scheduling.NAME] table (derivative_bounds is read by
-# codegen.relative_degree.derivative_boxes; exogenous and premise_bounds by codegen.interconnected).
+# codegen.families.algebraic_uio.representation.derivative_boxes; exogenous and premise_bounds by
+# codegen.families.interconnected_uio.representation).
 PARAMETER_TABLES = ("parameters", "scheduling", "meta", "plant", "state_bounds", "exogenous", "premise_bounds",
                     "inputs", "plausibility")
 INPUT_KEYS = {"min": Rule(float, required=True), "max": Rule(float, required=True),

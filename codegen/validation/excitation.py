@@ -189,7 +189,7 @@ def run(config, duration: float | None = None, seed: int = 0, progress=None, obs
             "samples": int(len(status)), "max_abs_ay": float(np.abs(truth.get("a_y", np.zeros(1))).max()),
             "plant": "model", "plant_model": f"{model.name} (its own equations, excitation)",
             "scenario": "excitation", "table_format": "generic", "units": units,
-            "signals": {"t": truth["t"], "truth": truth, "estimate": estimates}}
+            "signals": {"t": truth["t"], "truth": truth, "estimate": estimates, "status": status}}
 
 
 def format_table(result: dict) -> str:

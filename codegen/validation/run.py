@@ -199,7 +199,7 @@ def run_data(name, path: str = "stanford", block_bytes: int | None = None) -> di
             parts["evaluation"].add(beta, truth, t >= split)
         for tp, pk in peaks.items():
             pk.add(t, truth, beta, tp)
-        kept.add({"t": t, "beta_true": truth, "beta": beta})
+        kept.add({"t": t, "beta_true": truth, "beta": beta, "status": status})
         if whole is not None:
             for c in stanford.COLUMNS:
                 whole[c].append(cols[c])

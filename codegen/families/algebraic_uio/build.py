@@ -1,6 +1,6 @@
 """The ``algebraic_uio`` family (Ichalal and Mammar 2015) in the pipeline: build, discrete step (CasADi and numpy), C API.
 
-:func:`build` runs model -> relative degrees and decoupling (:mod:`codegen.relative_degree`) ->
+:func:`build` runs model -> relative degrees and decoupling (:mod:`codegen.families.algebraic_uio.representation`) ->
 classical-UIO check -> LMI (39) -> certificates (numpy re-check, dense check, Gauss-Legendre
 B-stability, auxiliary system) and returns an :class:`AlgebraicUIOBuild`, which offers the interface
 :mod:`codegen.emit` needs (``step_function`` etc.).

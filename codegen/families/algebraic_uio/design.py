@@ -1,6 +1,6 @@
 """Algebraic LPV unknown-input observers of arbitrary relative degree (Ichalal and Mammar 2015, Ichalal & Mammar 2015).
 
-Continuous observer (59)/(85)/(86), with everything derived by :mod:`codegen.relative_degree`::
+Continuous observer (59)/(85)/(86), with everything derived by :mod:`codegen.families.algebraic_uio.representation`::
 
     x_hat' = (A - L C - Q Mcal) x_hat + Q Y + L y,      d_hat = Gamma^-1 (Y - Mcal x_hat)   (or Gamma^+)
 

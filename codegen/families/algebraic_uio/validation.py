@@ -224,7 +224,7 @@ def run(config, scenario_name: str, plant: str = "nominal", duration: float | No
               "max_abs_ay": float(np.abs(truth["a_y"]).max()) if "a_y" in truth else None,
               "noise": dict(scn.get("noise", {})), "units": dict(d.units),
               "relative_degrees": list(b.dec.relative_degrees), "alpha": b.settings.alpha,
-              "signals": {"t": t, "truth": {n: truth[n] for n in b.output_names}, "estimate": est}}
+              "signals": {"t": t, "truth": {n: truth[n] for n in b.output_names}, "estimate": est, "status": status}}
     # differentiator convergence (noise free runs): derivative estimates at t_j from the state history
     conv = {}
     for k_in, name in enumerate(b.input_names):

@@ -2,7 +2,7 @@
 
 :func:`build_switched_pi` is what :func:`codegen.pipeline.build` runs for a configuration of this
 family; :class:`SwitchedPIBuild` offers the interface :mod:`codegen.emit` and the validation use
-(the same as :class:`codegen.pipeline.TSFuzzyBuild`).
+(the same as :class:`codegen.families.ts_fuzzy_uio.build.TSFuzzyBuild`).
 """
 from __future__ import annotations
 
