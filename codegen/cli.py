@@ -30,7 +30,7 @@ from .design import lock as design_lock
 from .emit import generate as emit
 from . import families, pipeline
 from .project import observer_file as observers
-from .errors import CertificateError, ConfigurationError, UiogenError
+from .errors import CertificateError, ConfigurationError, DesignLockError, UiogenError
 
 
 def _print_json(obj) -> None:
@@ -71,7 +71,10 @@ def _compare_with_committed(config, records) -> dict:
     data, why = design_lock.read(config)
     if data is None:
         return {"committed": None, "reason": why}
-    committed = design_lock.solutions(data, str(design_lock.path(config)))
+    try:
+        committed = design_lock.solutions(data, str(design_lock.path(config)))
+    except DesignLockError as exc:          # a damaged lock: nothing to compare, --update replaces it
+        return {"committed": None, "reason": str(exc)}
     rows = []
     for fresh, old in zip(records, committed):
         rel = abs(fresh.objective - old.objective) / max(abs(old.objective), 1e-300)
@@ -80,7 +83,10 @@ def _compare_with_committed(config, records) -> dict:
         rows.append({"problem": fresh.problem, "fresh": fresh.objective, "committed": old.objective,
                      "relative_difference": rel, "variables_relative_difference": spread,
                      "worst_variable": worst})
-    status, _ = design_lock.status(config)
+    try:
+        status, _ = design_lock.status(config)
+    except DesignLockError as exc:          # edited by hand: shown, and --update replaces it
+        return {"committed": rows, "current": False, "edited": str(exc)}
     return {"committed": rows, "current": status is not None}
 
 
@@ -91,11 +97,7 @@ def cmd_design(args) -> int:
     compare = _compare_with_committed(config, records)
     path = None
     if args.update:
-        path = design_lock.path(config)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(text)
-        tmp.replace(path)
+        path = emit.commit_lock(config, text)
     if args.out:
         path = Path(args.out)
         path.parent.mkdir(parents=True, exist_ok=True)

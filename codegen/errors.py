@@ -152,3 +152,14 @@ class ConformanceError(UiogenError, RuntimeError):
     """A compiled step disagrees with its model (signal layout, or numbers on samples across the
     declared boxes): ``uiogen build`` does not install it; the message names the signal and the
     sample (:mod:`codegen.conformance`)."""
+
+
+class StaleExtensionError(UiogenError, RuntimeError):
+    """A compiled observer (the Python extension, or the generated C an export compiles) was built
+    from another design than the committed design lock beside it; the message names the command
+    that rebuilds it (``uiogen build NAME``, or ``uiogen generate NAME`` first)."""
+
+
+class CampaignError(UiogenError, RuntimeError):
+    """A campaign could not finish or continue: its workers were lost, or ``--resume`` found the
+    results of another campaign; the runs already finished are kept (the message says where)."""

@@ -26,7 +26,7 @@ import numpy as np
 from ..design import lock as design_lock
 from ..project import observer_file as observers
 from ..project.workspace import Workspace, source_checkout
-from ..errors import SampleError, UnknownObserverError
+from ..errors import DesignLockError, SampleError, StaleExtensionError, UnknownObserverError
 from ..emit.toolchain import STRICT_CFLAGS, compile_and_link, compiler, render_template, run
 
 STRICT_FLAGS = list(STRICT_CFLAGS)
@@ -134,7 +134,9 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
     build_dir.mkdir(parents=True, exist_ok=True)
     ext_dir.mkdir(parents=True, exist_ok=True)
     glue = build_dir / f"{name}_pymodule.c"
-    glue.write_text(render_template("pymodule.c.j2", name=name, NAME=name.upper()))
+    # the design hash of the lock the C was generated from: load() refuses the module beside another lock
+    design_hash = json.loads(lock_text)["lock"]["sha256"]
+    glue.write_text(render_template("pymodule.c.j2", name=name, NAME=name.upper(), design_hash=design_hash))
     import numpy
     glue_flags = [*GLUE_FLAGS, "-I", sysconfig.get_paths()["include"], "-I", numpy.get_include()]
     module_file = f"_{name}{sysconfig.get_config_var('EXT_SUFFIX')}"
@@ -252,6 +254,7 @@ def load(observer) -> CompiledObserver:
     an :class:`~codegen.project.observer_file.ObserverConfig` (built by ``make build`` / ``uiogen build``)."""
     config = _config(observer)
     name = config.name
+    how = name if config.builtin else config.source
     design = design_lock.path(config)
     if not design.is_file():
         raise UnknownObserverError(f"observer {name!r} has not been generated (no {design}); run `uiogen generate`")
@@ -266,10 +269,39 @@ def load(observer) -> CompiledObserver:
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
         sys.modules[key] = module
-    art = json.loads(design.read_text())
+    try:
+        art = json.loads(design.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DesignLockError(f"{design}: unreadable design lock ({type(exc).__name__}); run `uiogen generate {how}`") \
+            from None
+    lock_hash = design_lock.verify(art, str(design), how)
+    built = getattr(module, "DESIGN_HASH", None)
+    if built != lock_hash:
+        raise StaleExtensionError(f"{path} was built from another design than the lock {design} (design hash "
+                                  f"{(built or 'none')[:12]} in the extension, {lock_hash[:12]} in the lock): run "
+                                  f"`uiogen build {how}`")
     signals = art["signals"]
     return CompiledObserver(name, module, tuple(signals["state"]), tuple(signals["input"]),
                             float(art["config"]["sample_time"]), tuple(signals.get("output", signals["state"])))
+
+
+def require_current(config: observers.ObserverConfig) -> None:
+    """Refuse to run an observer whose committed design is not the one its files describe now
+    (the observer file, parameters or model changed since ``uiogen generate``): its C and its
+    extension are of the old design. :func:`load` refuses an extension of another lock; this is
+    the check before it, for the commands that run a compiled observer (validate, export, campaign).
+
+    Raises
+    ------
+    DesignLockError
+        The lock is missing or stale (names the commands that bring it up to date), or edited.
+    """
+    how = config.name if config.builtin else config.source
+    data, why = design_lock.status(config)
+    if data is None:
+        raise DesignLockError(f"{config.name}: the committed design {design_lock.path(config)} is not the current one "
+                              f"({why}), so neither is its C or its extension: run `uiogen generate {how}` and "
+                              f"`uiogen build {how}`")
 
 
 def main(argv=None, project: Path | None = None) -> int:

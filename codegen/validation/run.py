@@ -40,7 +40,9 @@ def run_scenario(name, scenario, plant: str = "nominal", duration: float | None 
                  seed: int = 0, progress=None) -> dict:
     """Simulate the observer's family plant, run the compiled step and the baselines; returns the
     tables (``observer``, ``baselines``), the signals and ``family`` (which formats the table)."""
+    from ..extension.build import require_current
     config = observers.get(name) if isinstance(name, str) else name
+    require_current(config)                 # never the compiled step of an older design
     if scenario == "excitation":            # every model: its own equations, swept and excited
         from . import excitation
         return {"family": config.family, **excitation.run(config, duration, seed, progress=progress)}
@@ -123,10 +125,11 @@ def run_data(name, path: str = "stanford") -> dict:
     Returns ``{"observer": {SIGNAL: {"rms", "mae", "max", "std"}}, "baselines": {...}}`` with
     SIGNAL ``beta`` [deg] and ``vy`` [m/s] (v_y = v_x tan(beta)), plus the signals for plots.
     """
-    from ..extension.build import load
+    from ..extension.build import load, require_current
     from ..project.observer_file import get
     from . import stanford
     config = get(name)
+    require_current(config)                 # never the compiled step of an older design
     if config.column_map is not None:
         from . import logs
         return logs.run(config, path)
