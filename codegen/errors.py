@@ -6,9 +6,8 @@ precisely what they expect and the message names the cause.
 """
 from __future__ import annotations
 
-
-class UiogenError(Exception):
-    """Base class of every uiogen error."""
+# The runtime's errors (python_bindings needs no toolchain to raise them), re-exported here.
+from python_bindings.errors import SampleError, StaleExtensionError, UiogenError, UnknownObserverError  # noqa: F401
 
 
 class ModelDefinitionError(UiogenError, ValueError):
@@ -85,17 +84,6 @@ class UILoopError(DiscretizationError):
     """The observer's error with its unknown-input filter loop closed cannot be certified."""
 
 
-class UnknownObserverError(UiogenError, KeyError):
-    """No observer configuration is registered under that name."""
-
-    def __str__(self) -> str:  # KeyError quotes its argument; keep the message readable
-        return str(self.args[0]) if self.args else ""
-
-
-class SampleError(UiogenError, ValueError):
-    """An input sample or array passed to an observer has the wrong shape, type or values."""
-
-
 class DesignLockError(UiogenError, ValueError):
     """A committed design (``NAME_design.json``) is missing, unreadable, stale or does not fit
     the problem it is replayed into; ``uiogen design NAME --update`` re-solves it."""
@@ -152,12 +140,6 @@ class ConformanceError(UiogenError, RuntimeError):
     """A compiled step disagrees with its model (signal layout, or numbers on samples across the
     declared boxes): ``uiogen build`` does not install it; the message names the signal and the
     sample (:mod:`codegen.conformance`)."""
-
-
-class StaleExtensionError(UiogenError, RuntimeError):
-    """A compiled observer (the Python extension, or the generated C an export compiles) was built
-    from another design than the committed design lock beside it; the message names the command
-    that rebuilds it (``uiogen build NAME``, or ``uiogen generate NAME`` first)."""
 
 
 class CampaignError(UiogenError, RuntimeError):

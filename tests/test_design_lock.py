@@ -301,7 +301,7 @@ def test_an_edited_lock_is_refused_naming_the_entry(tmp_path, capsys, entry):
     assert "Traceback" not in err and "DesignLockError" in err
 
 
-def test_every_committed_lock_verifies_and_names_its_design_hash():
+def test_every_committed_lock_verifies_against_its_checksums():
     for name in NAMES:
         config = observers.get(name)
         data = json.loads(design_lock.path(config).read_text())

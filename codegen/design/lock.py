@@ -18,8 +18,8 @@ Nothing in a lock is taken on trust: ``design_inputs`` is re-derived and compare
 other entry is covered by a checksum (``lock.sections``: the SHA-256 of each entry's JSON;
 ``lock.sha256``: of those) that :func:`status` verifies, so a lock edited by hand (two signal
 names swapped, a gain or gamma changed) is refused, naming the entries, instead of compiled.
-``lock.sha256`` is the *design hash*: the extension built from a lock carries it, and ``load``
-refuses an extension whose hash is not the lock's.
+(The extension built from a lock carries the SHA-256 of its file, and ``load`` refuses it beside
+another lock: :mod:`python_bindings.runtime`.)
 """
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ DESIGN_PACKAGES = ("numpy", "scipy", "sympy", "mpmath", "clarabel")
 
 def path(config: ObserverConfig, base: Path | None = None) -> Path:
     """Where the design lock of ``config`` lives: ``base/NAME/NAME_design.json``, base defaulting
-    to its project's ``generated_c/`` (:mod:`codegen.project.workspace`)."""
+    to its project's ``generated_c/`` (:mod:`python_bindings.workspace`)."""
     if base is None:
         return config.workspace.design_lock(config.name)
     return Path(base) / config.name / f"{config.name}_design.json"
@@ -148,7 +148,7 @@ def seal(doc: dict) -> dict:
 
 
 def verify(data: dict, source: str, how: str = "NAME") -> str:
-    """The design hash (``lock.sha256``) of a parsed lock after checking every entry against its
+    """The checksum (``lock.sha256``) of a parsed lock after checking every entry against its
     checksum.
 
     Raises
