@@ -362,3 +362,24 @@ def test_a_run_that_raises_is_reported_and_the_others_kept(tmp_path):
     assert summary["runs_ok"] == 0 and summary["runs_failed"] == {"error": 4}
     rows = engine.read_rows(tmp_path / "runs.csv")
     assert all(r["status"] == "error" and "ZeroDivisionError" in r["error"] for r in rows)
+
+
+def test_the_journal_cuts_a_torn_last_line_and_refuses_damage(tmp_path):
+    """A process killed while appending leaves a line without its newline: cut on --resume, the
+    rows before it kept. A damaged line elsewhere, or another campaign's header, is refused."""
+    from codegen.errors import CampaignError
+    header = {"format": engine.JOURNAL_FORMAT, "observer": "x", "design": "d", "spec_sha256": "s"}
+    path = tmp_path / engine.JOURNAL
+    rows = [{"run": 0, "status": "ok", "rms.beta": 0.1}, {"run": 2, "status": "plant_spun", "rms.beta": float("nan")}]
+    good = "".join(json.dumps(e) + "\n" for e in [header, *rows])
+    path.write_text(good + '{"run": 1, "sta')
+    with pytest.raises(CampaignError, match="interrupted"):          # not overwritten without --resume
+        engine.Journal(path, header, resume=False)
+    journal = engine.Journal(path, header, resume=True)
+    journal.close()
+    assert sorted(journal.rows) == [0, 2] and path.read_text() == good
+    with pytest.raises(CampaignError, match="another campaign"):
+        engine.Journal(path, {**header, "design": "e"}, resume=True)
+    path.write_text(good.replace('"run": 0', '"run: 0', 1))
+    with pytest.raises(CampaignError, match="line 2"):
+        engine.Journal(path, header, resume=True)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
+import logging
 import math
 import os
 import sys
@@ -157,6 +158,23 @@ def _failed_rows(spec, runs, status: str, error: str) -> list:
              "error": error} for k in runs]
 
 
+class _OrphanedGather(logging.Filter):
+    """Drops one log record: a gather that timed out (the rows of a task whose worker died, waited
+    for again as a pending task's) leaves a helper task in distributed that fails with AllExit
+    when the client closes, which asyncio logs as a "Task exception was never retrieved"
+    traceback. Nothing failed: the task was re-run or is reported among the unfinished runs."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        return type(exc).__name__ != "AllExit"
+
+
+def _quiet_orphaned_gathers() -> None:
+    log = logging.getLogger("asyncio")
+    if not any(isinstance(f, _OrphanedGather) for f in log.filters):
+        log.addFilter(_OrphanedGather())
+
+
 def _execute(client, spec, todo: list, n_workers: int, journal: Journal, progress, done_before: int,
              log) -> list:
     """Run the runs ``todo`` on the cluster, appending each finished task's rows to the journal;
@@ -164,6 +182,7 @@ def _execute(client, spec, todo: list, n_workers: int, journal: Journal, progres
     finished within the per-run timeout)."""
     from dask.distributed import TimeoutError as DaskTimeoutError, as_completed
     from distributed import KilledWorker
+    _quiet_orphaned_gathers()
     chunks = _chunks(spec, todo, n_workers)
     futures = client.map(runner.run_chunk, [spec] * len(chunks), chunks, pure=False)
     pending = dict(zip(futures, chunks))
@@ -213,8 +232,8 @@ def _execute(client, spec, todo: list, n_workers: int, journal: Journal, progres
             break
         stall = spec.run_timeout * max(len(c) for c in pending.values())
         if now - last_progress > stall:
-            log(f"campaign: no task finished for {stall:g} s ({spec.run_timeout:g} s per run of a task): "
-                f"its workers hang")
+            log(f"campaign: no task finished for {stall:g} s ({spec.run_timeout:g} s per run of a task) with "
+                f"{workers} worker(s): they were lost or hang")
             break
     left = sorted(k for chunk in pending.values() for k in chunk)
     for fut in pending:
