@@ -368,8 +368,8 @@ def test_design_update_during_a_running_generate_is_kept(tmp_path):
     project = tmp_path / "project"
     run = lambda *a: subprocess.run([sys.executable, "-m", "codegen.cli", *a], cwd=ROOT, env=_env(),  # noqa: E731
                                     capture_output=True, text=True, timeout=600)
-    assert run("new", str(project), "--family", "linf_uio").returncode == 0
-    source = project / f"{LINF}.toml"
+    assert run("new", str(project), "--family", "linf_uio", "--name", "probe").returncode == 0
+    source = project / "probe.toml"
     res = run("generate", str(source))
     assert res.returncode == 0, res.stderr
     generate = subprocess.Popen([strace, "-f", "-qq", "-o", os.devnull, "-e", "trace=/^rename",
@@ -379,7 +379,7 @@ def test_design_update_during_a_running_generate_is_kept(tmp_path):
     try:
         generated = project / "generated_c"
         deadline = time.time() + 300
-        while not any((p / emit.STAMP).is_file() for p in generated.glob(f".{LINF}.new-*")):
+        while not any((p / emit.STAMP).is_file() for p in generated.glob(".probe.new-*")):
             assert generate.poll() is None and time.time() < deadline, "generate did not reach its rename"
             time.sleep(0.2)
         source.write_text(re.sub(r"^alpha = 5\.0", "alpha = 4.0", source.read_text(), count=1, flags=re.M))
@@ -392,7 +392,7 @@ def test_design_update_during_a_running_generate_is_kept(tmp_path):
     config = observers.get(str(source))
     data, why = design_lock.status(config)
     assert data is not None, why
-    assert data["config"]["design"]["alpha"] == 4.0
+    assert data["config"]["design"]["alpha"] == 4.0              # the update's, not the paused generate's
     res = run("generate", str(source))          # its C follows the committed lock, without a solve
     assert res.returncode == 0 and "solving" not in res.stdout and "committed design" in res.stdout, res.stdout
 
@@ -403,8 +403,8 @@ def test_validate_and_export_refuse_what_is_not_built_from_the_current_design(tm
     project = tmp_path / "project"
     run = lambda *a: subprocess.run([sys.executable, "-m", "codegen.cli", *a], cwd=ROOT, env=_env(),  # noqa: E731
                                     capture_output=True, text=True, timeout=900)
-    assert run("new", str(project), "--family", "linf_uio").returncode == 0
-    source = project / f"{LINF}.toml"
+    assert run("new", str(project), "--family", "linf_uio", "--name", "probe").returncode == 0
+    source = project / "probe.toml"
     for step in ("generate", "build"):
         res = run(step, str(source))
         assert res.returncode == 0, res.stderr
@@ -424,7 +424,7 @@ def test_validate_and_export_refuse_what_is_not_built_from_the_current_design(tm
             f"try:\n    load({str(source)!r})\nexcept StaleExtensionError as e:\n    print('refused:', e)\n")
     assert "refused:" in subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
                                         text=True).stdout
-    c_file = project / "generated_c" / LINF / f"{LINF}.c"
+    c_file = project / "generated_c" / "probe" / "probe.c"
     c_file.write_text(c_file.read_text() + "/* edited */\n")
     res = run("export", str(source), "--format", "fmu", "--out", fmu)
     assert res.returncode == 2 and "does not match its stamp" in res.stderr, res.stderr
