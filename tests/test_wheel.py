@@ -18,6 +18,8 @@ import pytest
 
 from codegen.design import lock as design_lock
 
+pytestmark = pytest.mark.slow          # builds the wheel and installs it into a fresh venv
+
 ROOT = Path(__file__).resolve().parent.parent
 SOURCE_IGNORE = shutil.ignore_patterns(".git", ".venv*", "build", "generated_c", "__pycache__", "*.egg-info",
                                        ".pytest_cache", "site", "*.so", "*.o")

@@ -20,6 +20,7 @@ from pathlib import Path
 from ..design import lock as design_lock, sources
 from .. import families, pipeline
 from ..project import observer_file as observers
+from ..project import outputs
 from ..errors import GenerationError, UiogenError
 from ..families import ObserverBuild
 from .toolchain import TEMPLATES, casadi_sources, render_template
@@ -168,8 +169,10 @@ def signal_fields(b: ObserverBuild, f) -> tuple:
 def _exclusive(out_dir: Path):
     """One writer at a time per output folder: ``generate`` and ``design --update`` (a second one
     waits for the first, so neither loses the other's design lock)."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    with open(out_dir / ".generate.lock", "w") as fh:
+    outputs.make_folder(out_dir)
+    with outputs.writing(out_dir / ".generate.lock"):
+        fh = open(out_dir / ".generate.lock", "w")
+    with fh:
         fcntl.flock(fh, fcntl.LOCK_EX)
         try:
             yield
@@ -215,19 +218,20 @@ def _write_atomically(target: Path, files: dict) -> None:
     """Write every file into a fresh sibling folder (each synced to disk), then swap it in: a
     reader sees the old complete set or the new complete set, never a mixture; a process killed
     at any point leaves the old set, the new set, or the old set aside for :func:`recover`."""
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.new-", dir=target.parent))
+    tmp = outputs.make_temp_folder(f".{target.name}.new-", target.parent)     # the user's mode, not 0700
     old = None
     try:
-        for fname, text in files.items():
-            _write_synced(tmp / fname, text)
-        _fsync_dir(tmp)
-        if target.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
-            os.replace(target, old / target.name)
-        os.replace(tmp, target)
-        _fsync_dir(target.parent)
-        if old is not None:
-            shutil.rmtree(old)
+        with outputs.writing(target):
+            for fname, text in files.items():
+                _write_synced(tmp / fname, text)
+            _fsync_dir(tmp)
+            if target.exists():
+                old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
+                os.replace(target, old / target.name)
+            os.replace(tmp, target)
+            _fsync_dir(target.parent)
+            if old is not None:
+                shutil.rmtree(old)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         if old is not None and not target.exists():        # failed between the renames: the old set back
@@ -244,15 +248,16 @@ def commit_lock(config: observers.ObserverConfig, text: str, log=print) -> Path:
     path = design_lock.path(config)
     with _exclusive(path.parent.parent):
         recover(path.parent, log)
-        path.parent.mkdir(parents=True, exist_ok=True)
+        outputs.make_folder(path.parent)
         tmp = path.with_name(f".{path.name}.tmp")
         try:
-            _write_synced(tmp, text)
-            os.replace(tmp, path)
+            with outputs.writing(path):
+                _write_synced(tmp, text)
+                os.replace(tmp, path)
+                _fsync_dir(path.parent)
         except BaseException:
             tmp.unlink(missing_ok=True)
             raise
-        _fsync_dir(path.parent)
     return path
 
 
