@@ -269,6 +269,14 @@ def load(target: str, parameters: str | None = None, outputs=None, unknown_input
                                  key="--parameters")
     module, base = _load_model(model_path)
     params = load_parameters(param_path)
+    if config is not None and config.substitute and parameters is None:
+        # the observer file's [substitute] is part of what is designed: analyse the model the family
+        # sees (each unknown input replaced by its carrier's value, over the range the carrier takes)
+        base, subs = config.design_model(), config.substitutions()
+        inputs = dict(params.inputs)
+        for sub in subs:
+            inputs[str(sub.symbol)] = {**inputs.get(str(sub.unknown), {}), "min": sub.lower, "max": sub.upper}
+        params = dataclasses.replace(params, inputs=inputs)
     model = base
     selected = {"outputs": None, "unknown_inputs": None}
     declared = tuple(n for n, _ in base.outputs)

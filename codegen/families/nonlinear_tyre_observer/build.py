@@ -299,12 +299,12 @@ def _build_class():
                 ranges = (f"; every axle stiffness x[{s['stiffness_range'][0]:g}, {s['stiffness_range'][1]:g}] and "
                           f"friction x[{s['friction_range'][0]:g}, {s['friction_range'][1]:g}] of the parameter file")
             lv = s["noise_levels"]
-            lines = [f"observer {s['observer']}: nonlinear single-track observer, Fiala tyre per axle, gains "
-                     f"{s['gains']} (LMIs, Lyapunov matrix and gains jointly)",
+            lines = [f"observer {s['observer']}: nonlinear single-track observer, the model's tyre law per axle "
+                     f"(AXLES), gains {s['gains']} (LMIs, Lyapunov matrix and gains jointly)",
                      f"  plant class: the model Euler-discretized at T_s = {s['sample_time']:g} s, v_x in "
                      f"[{s['v_x_box'][0]:g}, {s['v_x_box'][1]:g}] m/s, {boxes}{ranges}",
-                     f"  certified set S: |t_k| <= {s['sliding_fraction']:g} t_sl,k on each axle (t_sl from the capacity "
-                     f"at the measured a_x), for the true AND the estimated state"]
+                     f"  certified set S: |t_k| <= {s['sliding_fraction']:g} t_sl,k on each axle (t_sl from each "
+                     f"axle's capacity at the measured signals), for the true AND the estimated state"]
             for name, b, tmax in zip(("front", "rear"), s["theta_bounds"], s["slip_max"]):
                 lines.append(f"    v_x dPhi_{name}/dv_y in [{b[0]:.6g}, {b[1]:.6g}] N on S (|t| <= {tmax:.4g}; sound, "
                              f"interval arithmetic)")

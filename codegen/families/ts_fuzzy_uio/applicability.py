@@ -37,12 +37,17 @@ def assess(family, subject, structure):
     except UiogenError as exc:
         return refuse(str(exc).split(": ", 1)[-1], "measure states directly (y = the state), or take a family whose "
                       "outputs may be functions of the states")
-    missing = [str(s) for s in (*model.states, *model.known_inputs) if str(s) not in subject.parameters.state_bounds]
+    # the same bounds representation.build takes: [state_bounds], or a known input's [inputs.NAME] range
+    bounds, inputs = subject.parameters.state_bounds, subject.parameters.inputs
+    missing = [str(s) for s in model.states if str(s) not in bounds]
+    missing += [str(u) for u in model.known_inputs if str(u) not in bounds and str(u) not in inputs]
     if missing:
-        return refuse(f"{subject.parameter_path.name} has no [state_bounds] for {', '.join(missing)}: the TS form "
+        known = set(map(str, model.known_inputs))
+        return refuse(f"{subject.parameter_path.name} has no bound for {', '.join(missing)}: the TS form "
                       f"needs the compact set D_x (eq. (5))",
-                      f"add [state_bounds] {' and '.join(f'{m} = [min, max]' for m in missing)} to "
-                      f"{subject.parameter_path.name}")
+                      "add " + " and ".join(f"[inputs.{m}] with min and max (or {m} under [state_bounds])" if m in known
+                                            else f"[state_bounds] {m} = [min, max]" for m in missing)
+                      + f" to {subject.parameter_path.name}")
     settings = ts_design.TSDesignSettings()
     size = {}
 
