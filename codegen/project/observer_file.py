@@ -145,8 +145,10 @@ class ObserverConfig:
         if not self.substitute:
             return model, []
         from ..model import load_parameters
+        from ..model.definition import parameter_substitution
         from ..model.substitution import apply
-        return apply(model, load_parameters(self.parameter_path), self.substitute, self.source)
+        params = load_parameters(self.parameter_path)
+        return apply(model, params, parameter_substitution(model, params), self.substitute, self.source)
 
     @property
     def parameter_path(self) -> Path:

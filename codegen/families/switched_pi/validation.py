@@ -98,6 +98,12 @@ mu = {p.tire.p_dy1!r}        # -, peak lateral friction coefficient (p_dy1)
 h_cg = {p.h_cg!r}        # m, CoG height for the longitudinal load transfer (p.h_cg)
 C_pac = {p.tire.p_cy1!r}        # -, magic-formula shape factor (p_cy1)
 E_pac = {p.tire.p_ey1!r}        # -, curvature factor (p_ey1)
+
+[inputs]
+# Ranges of the generic excitation scenario (uiogen validate NAME --scenario excitation), not of the design:
+v_x = {{ min = 8.0, max = 27.0 }}                       # m/s, the sweep: the span of the three modes' bands
+delta = {{ min = -0.02, max = 0.02, bandwidth = 0.5 }}   # rad, road-wheel angle
+phi_r = {{ min = -0.1, max = 0.1, bandwidth = 0.2 }}     # rad, road bank angle (about +-6 deg, slowly varying)
 """
 
 
