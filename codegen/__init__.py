@@ -12,7 +12,7 @@ Subpackages, in pipeline order:
 * :mod:`codegen.extension`       6. the compiled step as a Python extension (:mod:`python_bindings`)
 * :mod:`codegen.families`        one folder per observer family (representation, design, build,
                                  validation) and the registry the toolchain asks
-* :mod:`codegen.pipeline`        runs the stages of an observer's family (replaying its lock)
+* :mod:`codegen.pipeline`        runs the stages of an observer's family with a solver (fresh, or its lock replayed)
 * :mod:`codegen.cli`             the ``uiogen`` command; :mod:`codegen.errors` its typed errors
 
 Beside the pipeline: :mod:`codegen.validation` (scenarios, real logs, plants, the demo),

@@ -18,6 +18,7 @@ from codegen.families.interconnected_uio import design as du
 from codegen.families.interconnected_uio import build as dub
 from codegen.errors import (CertificateError, ModelDefinitionError, RankConditionError, SchedulingBoundsError)
 from codegen.model import load_parameters
+from codegen.design.solver import FreshSolver
 from python_bindings import load
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -177,7 +178,7 @@ def test_design_time_and_vertex_gain_option(icb):
     assert icb.timings["representation_s"] + icb.timings["design_s"] < 30.0
     # the printed free Omega_i are also solvable and certified (the step then blends 2^q vertices)
     ts = icb.ts
-    d = du.design(ts, dataclasses.replace(icb.design.settings, gain_structure="vertex"))
+    d = du.design(ts, dataclasses.replace(icb.design.settings, gain_structure="vertex"), FreshSolver())
     assert du.certify(ts, d)["worst_min_eig"] > 0
 
 

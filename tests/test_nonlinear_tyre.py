@@ -18,6 +18,7 @@ from codegen.project import observer_file as observers
 from codegen.errors import CertificateError, ConfigurationError
 from codegen.families.nonlinear_tyre_observer import design as dsn
 from codegen.validation import stanford
+from codegen.design.solver import FreshSolver
 
 from conftest import require_shared
 
@@ -27,7 +28,7 @@ FAMILY = families.get("nonlinear_tyre_observer")
 
 @pytest.fixture(scope="module")
 def built():
-    return FAMILY.build(observers.get(NAME))
+    return FAMILY.build(observers.get(NAME), FreshSolver())
 
 
 def _lock() -> dict:
@@ -138,15 +139,15 @@ def test_given_gains_are_certified_not_designed():
     art = _lock()
     L = np.array(art["L"])
     given = dict(zip(("gain_vy_ay", "gain_vy_r", "gain_r_ay", "gain_r_r"), L.ravel().tolist()))
-    b = FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, **given}))
+    b = FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, **given}), FreshSolver())
     assert b.synthesis.given and np.array_equal(b.L, L)
     # the designed gains certify at the rate the design required; fixed gains leave P alone to search
     assert b.certificate["best_decay_rate"] == pytest.approx(art["certificate"]["recheck"]["decay_rate"], rel=0.02)
     zero = dict.fromkeys(given, 0.0)                          # r_hat is never corrected: no decay
     with pytest.raises(CertificateError, match="no common Lyapunov matrix"):
-        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, **zero}))
+        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, **zero}), FreshSolver())
     with pytest.raises(ConfigurationError, match="all four"):
-        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, "gain_vy_ay": 0.01}))
+        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, "gain_vy_ay": 0.01}), FreshSolver())
 
 
 def test_check_gains_cli(tmp_path, capsys):
@@ -169,9 +170,9 @@ def test_full_sliding_cannot_be_certified():
     cfg = observers.get(NAME)
     bad = dataclasses.replace(cfg, design={**cfg.design, "sliding_fraction": 0.999999})
     with pytest.raises(CertificateError, match="not observable"):
-        FAMILY.build(bad)
+        FAMILY.build(bad, FreshSolver())
     with pytest.raises(ConfigurationError, match="gain_sliding_fraction"):
-        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, "gain_sliding_fraction": 0.95}))
+        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, "gain_sliding_fraction": 0.95}), FreshSolver())
 
 
 def test_c_step_matches_reference_with_the_kinematic_fallback(built):

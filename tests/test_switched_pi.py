@@ -12,6 +12,7 @@ from codegen.families.switched_pi import representation as switched
 from codegen.families.switched_pi import design as switched_pi
 from codegen.errors import CertificateError, ModelDefinitionError, RankConditionError
 from codegen.model import load_parameters
+from codegen.design.solver import FreshSolver
 from model_defs import roll_single_track as mod
 
 NAMES = ("switched_pi_bank_angle", "switched_pi_bank_angle_slip", "switched_pi_bank_angle_fine")
@@ -235,7 +236,7 @@ def test_without_decay_region_the_bank_estimate_does_not_converge(builds):
     """The module's claim: minimizing gamma alone leaves the integral pole at the origin (time
     constant of tens of seconds; with decay_rate = 1 every pole is at Re <= -1)."""
     sm = builds[SPEED].model
-    d = switched_pi.design(sm, switched_pi.SwitchedPIDesignSettings(pole_radius=100.0, decay_rate=0.0))
+    d = switched_pi.design(sm, switched_pi.SwitchedPIDesignSettings(pole_radius=100.0, decay_rate=0.0), FreshSolver())
     slowest = max(np.linalg.eigvals(d.closed_loop(sm, i)).real.max() for i in range(sm.n_modes))
     assert -0.05 < slowest < 0
 

@@ -118,11 +118,11 @@ class ToyLuenberger(Family):
     citation = "a test of the family protocol"
     short_citation = "toy"
 
-    def build(self, config, tol=None):
+    def build(self, config, solver):
         settings = parse_settings(ToySettings, config.design, source=config.source, section="design")
         lpv = instantiate(config.load_model(), load_parameters(config.parameter_path))
         A, B, C = (np.array(m.evalf(), dtype=float) for m in (lpv.A, lpv.B, lpv.C))
-        sol = _problem(A, C, settings.alpha).solve(tol=settings.tol)
+        sol = solver.solve(_problem(A, C, settings.alpha), tol=solver.tol or settings.tol)
         P = decimal_round(0.5 * (sol["P"] + sol["P"].T))
         Y = decimal_round(np.atleast_2d(sol["Y"]).reshape(A.shape[0], C.shape[0]))
         L = solve(P, Y)

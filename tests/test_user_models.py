@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from codegen import cli, pipeline
+from codegen.design.solver import FreshSolver
 from codegen.emit import generate as emit
 from codegen.project import observer_file as observers
 from codegen.errors import RepresentationError
@@ -142,7 +143,7 @@ def test_the_pair_relaxation_certifies_what_it_designs(name):
     """relaxation = "pairs" on the paper's models: feasible, re-checked (P_bar >= P_l and the pair
     blocks), and the Lyapunov function decreases on random samples."""
     cfg = observers.get(name)
-    b = pipeline.build(dataclasses.replace(cfg, design={**cfg.design, "relaxation": "pairs"}), fresh=True)
+    b = pipeline.build(dataclasses.replace(cfg, design={**cfg.design, "relaxation": "pairs"}), FreshSolver())
     assert b.design.relaxation == "pairs" and b.certificate["worst_min_eig"] > 0
     assert b.certificate["blocks"] < 60 and b.decrease["max_ratio"] < 1.0
 
@@ -151,7 +152,7 @@ def test_taylor_reduced_polytope_refused_beyond_its_limit():
     cfg = observers.get("lpv_linf_driver_torque")          # 14.8 % Taylor error on a_12
     strict = dataclasses.replace(cfg, design={**cfg.design, "taylor_error_limit": 0.1})
     with pytest.raises(RepresentationError, match=r'14\.8 %.*polytope = "sector"'):
-        pipeline.build(strict, fresh=True)
+        pipeline.build(strict, FreshSolver())
 
 
 def test_pdlf_never_worse_than_the_quadratic_design_it_contains(monkeypatch):

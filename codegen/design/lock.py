@@ -11,7 +11,8 @@ decision variables of every LMI problem the design solved (:class:`codegen.desig
 and the hash of the design's inputs (:func:`design_inputs`: the observer file, the parameter
 file, the model and every toolchain module the design imports, the numeric packages'
 versions). A lock whose hash matches is *current*: :func:`codegen.pipeline.build` replays it
-(:func:`codegen.design.lmi.replaying`), re-checking every block with numpy. A stale or missing lock
+(:func:`replay`, a :class:`codegen.design.solver.LockReplay` handed to the family's build),
+re-checking every block with numpy; its solutions are matched to the design's problems by name. A stale or missing lock
 is re-solved by ``uiogen generate`` (and on request by ``uiogen design NAME --update``).
 """
 from __future__ import annotations
@@ -24,6 +25,7 @@ import numpy as np
 from . import sources
 from ..errors import DesignLockError
 from .lmi import SolveRecord
+from .solver import LockReplay
 from ..project.observer_file import ObserverConfig
 
 FORMAT = 1
@@ -106,11 +108,16 @@ def status(config: ObserverConfig, base: Path | None = None) -> tuple:
 
 
 def solutions(data: dict, source: str = "") -> list:
-    """The committed LMI solutions of a lock, in solve order."""
+    """The committed LMI solutions of a lock, in solve order (each names its problem)."""
     raw = data["lock"].get("lmi_solutions")
     if not isinstance(raw, list):
         raise DesignLockError(f"{source}: the lock has no list 'lmi_solutions'")
     return [SolveRecord.from_json(r, source) for r in raw]
+
+
+def replay(data: dict, source: str = ""):
+    """A :class:`~codegen.design.solver.LockReplay` of the lock ``data`` (read from ``source``)."""
+    return LockReplay(solutions(data, source), source)
 
 
 def document(build, records: list) -> dict:

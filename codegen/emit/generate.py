@@ -242,8 +242,8 @@ def _generate_one(config: observers.ObserverConfig, out_dir: Path, force: bool, 
     if records is None and not force and target.is_dir() and stamp_matches(target, digest):
         log(f"{name}: unchanged (inputs hash {digest[:12]}), skipped")
         return None
-    if records is None:
-        b = pipeline.build(config)     # the committed design, replayed and re-checked
+    if records is None:        # the committed design, replayed and re-checked
+        b = pipeline.build(config, design_lock.replay(data, str(design_lock.path(config))))
     files = render(b)
     files[design_lock.path(config).name] = lock_text
     files[STAMP] = _stamp_text(digest, files)

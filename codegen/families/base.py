@@ -142,8 +142,9 @@ class Family(abc.ABC):
         :attr:`observer_keys`; raise :class:`~codegen.errors.ConfigurationError`."""
 
     @abc.abstractmethod
-    def build(self, config, tol: float | None = None) -> ObserverBuild:
-        """model -> representation -> design -> certificates -> discrete step."""
+    def build(self, config, solver) -> ObserverBuild:
+        """model -> representation -> design -> certificates -> discrete step; every design LMI
+        problem answered by ``solver`` (:mod:`codegen.design.solver`: a fresh solve or a replay)."""
 
     def validate(self, config, scenario, plant: str = "nominal", duration: float | None = None,
                  seed: int = 0, progress=None, observer=None) -> dict:
@@ -202,12 +203,14 @@ class Family(abc.ABC):
         """Check externally supplied decision variables against the family's LMIs, without a solver.
 
         The generic form is the design lock's: ``{"lmi_solutions": [{"problem", "variables",
-        "objective", "iterations"}, ...]}``, one record per LMI problem of the design, in order
-        (as in ``generated_c/NAME/NAME_design.json``). The family's pipeline runs on them as on a
-        committed design: every block is re-checked with numpy, and the discrete step certified.
+        "objective", "iterations"}, ...]}``, one record per LMI problem of the design, each naming
+        its problem (as in ``generated_c/NAME/NAME_design.json``). The family's pipeline runs on them
+        as on a committed design (a :class:`~codegen.design.solver.LockReplay`): every block is
+        re-checked with numpy, and the discrete step certified.
         Families with a paper-specific form of their gains override this (and fall back to it).
         """
         from ..design import lmi
+        from ..design.solver import LockReplay
         from ..errors import (CertificateError, ConfigurationError, DesignLockError, DiscretizationError,
                                InfeasibleLMIError)
         raw = gains.get("lmi_solutions")
@@ -219,14 +222,15 @@ class Family(abc.ABC):
         records = [lmi.SolveRecord.from_json(r, "gains") for r in raw]
         out = {"observer": config.name, "form": "lmi_solutions", "problems": []}
         try:
-            with lmi.replaying(records, source="gains") as ledger:
-                self.build(config)
+            replay = LockReplay(records, source="gains")
+            self.build(config, replay)
+            replay.check_complete()
         except (CertificateError, DiscretizationError, InfeasibleLMIError) as exc:
             out.update(feasible=False, reason=f"{type(exc).__name__}: {exc}")
             return out
         except DesignLockError as exc:
-            raise ConfigurationError(f"gains: {exc}") from None
-        for rec, sol in zip(ledger.records, ledger.solutions):
+            raise ConfigurationError(str(exc)) from None
+        for rec, sol in zip(replay.records, replay.solutions.values()):
             worst = sol.worst
             out["problems"].append({"problem": rec.problem, "objective": rec.objective, "blocks": len(sol.checks),
                                     "worst_block": worst.label, "worst_min_eig": worst.min_eig})

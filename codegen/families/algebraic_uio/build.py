@@ -503,13 +503,14 @@ def _check_differentiators(lpv: LPVModel, dec: rdeg.Decoupling, settings: alg.Al
         raise ModelDefinitionError(f"{config.source}: differentiators for unknown signals {sorted(extra)}")
 
 
-def build(config, tol: float | None = None, lpv: LPVModel | None = None) -> AlgebraicUIOBuild:
-    """Ichalal and Mammar 2015: model -> relative degree, M, Q, P, Gamma -> classical check -> LMI (39) -> certificates.
+def build(config, solver, lpv: LPVModel | None = None) -> AlgebraicUIOBuild:
+    """Ichalal and Mammar 2015: model -> relative degree, M, Q, P, Gamma -> classical check -> LMI (39) -> certificates;
+    the LMIs answered by ``solver`` (:mod:`codegen.design.solver`).
 
     ``lpv`` overrides the configuration's model and parameter file (tests build models in memory)."""
     settings = alg.settings_from_config(config)
-    if tol is not None:
-        settings = replace(settings, tol=tol)
+    if solver.tol is not None:
+        settings = replace(settings, tol=solver.tol)
     t0 = time.perf_counter()
     if lpv is None:
         lpv = instantiate(config.load_model(), load_parameters(config.parameter_path))
@@ -517,7 +518,7 @@ def build(config, tol: float | None = None, lpv: LPVModel | None = None) -> Alge
         raise ModelDefinitionError(f"{config.source}: derived scheduling signals are not supported by this family")
     rdeg.check_structure(lpv)          # before anything evaluates the model's matrices
     boxes = rdeg.derivative_boxes(lpv)
-    aux = alg.aux_design(lpv, boxes, settings.auxiliary, settings.auxiliary_alpha, settings.tol)
+    aux = alg.aux_design(lpv, boxes, settings.auxiliary, settings.auxiliary_alpha, solver, settings.tol)
     lpv_obs = lpv
     if aux is not None and aux["K_s"] is not None:
         # z = x - s obeys z' = (A - K_s C) z + D d: the observer is derived for that system
@@ -527,7 +528,7 @@ def build(config, tol: float | None = None, lpv: LPVModel | None = None) -> Alge
     _check_differentiators(lpv, dec, settings, config)
     classical = alg.classical_uio(lpv, dec.boxes)
     t1 = time.perf_counter()
-    design = alg.design(dec, settings)
+    design = alg.design(dec, settings, solver)
     t2 = time.perf_counter()
     cert = alg.certify(design)
     dense = alg.dense_check(dec, design)

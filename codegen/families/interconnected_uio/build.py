@@ -534,17 +534,17 @@ class InterconnectedBuild(ObserverBuild):
         }
 
 
-def build(config, tol: float | None = None) -> InterconnectedBuild:
+def build(config, solver) -> InterconnectedBuild:
     """Sentouh et al. 2023: model -> interconnected T-S form -> (16), (26), LMIs (27), (28) -> certificates -> step."""
     table = dict(config.design)
     settings = parse_settings(ICDesignSettings, table, source=config.source, section="design", extra=STEP_KEYS,
-                              **({"tol": tol} if tol is not None else {}))
+                              **({"tol": solver.tol} if solver.tol is not None else {}))
     t0 = time.perf_counter()
     ts = icm.load(config.model, config.parameter_path)
     step = step_settings(ts, table, config.sample_time, config.source)
     layout = StepLayout(ts, step)
     t1 = time.perf_counter()
-    d = design(ts, settings)
+    d = design(ts, settings, solver)
     _needed_derivatives(ts, d, layout)
     t2 = time.perf_counter()
     cert = certify(ts, d)

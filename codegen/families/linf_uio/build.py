@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ...design import lmi
+from ...design.solver import FreshSolver
 from ...representation import polytope
 from ...certificate.artifact import artifact_head, significant
 from ...model import LPVModel, instantiate, load_parameters
@@ -199,14 +199,15 @@ def representation(config: ObserverConfig):
     return lpv, poly, err
 
 
-def build(config: ObserverConfig, tol: float | None = None) -> LinfBuild:
-    """Run model -> polytope -> LMI design -> certificate -> discrete certificate."""
+def build(config: ObserverConfig, solver) -> LinfBuild:
+    """Run model -> polytope -> LMI design -> certificate -> discrete certificate, the design
+    problems answered by ``solver`` (:mod:`codegen.design.solver`)."""
     t0 = time.perf_counter()
     lpv, poly, err = representation(config)
     t1 = time.perf_counter()
     settings = _settings(config)
-    if tol is not None:
-        settings = dataclasses.replace(settings, tol=tol)
+    if solver.tol is not None:
+        settings = dataclasses.replace(settings, tol=solver.tol)
     if err is not None and err["relative_error_there"] > settings.taylor_error_limit:
         raise RepresentationError(
             f"{config.source}: the Taylor-reduced polytope misses A(rho) by {100 * err['relative_error_there']:.1f} % "
@@ -214,11 +215,11 @@ def build(config: ObserverConfig, tol: float | None = None) -> LinfBuild:
             f"[design] taylor_error_limit = {settings.taylor_error_limit:g}; use the exact form, polytope = \"sector\" "
             f"({2 ** len(polytope.scheduling_nonlinearities(lpv))} vertices), or narrow the scheduling box")
     try:
-        design = linf_uio.design(poly, settings, lpv.definition.states)
+        design = linf_uio.design(poly, settings, solver, lpv.definition.states)
     except RankConditionError as exc:
         raise RankConditionError(f"{config.source}: {exc}") from None
     quadratic = design if settings.lyapunov == "quadratic" else \
-        linf_uio.design(poly, dataclasses.replace(settings, lyapunov="quadratic"), lpv.definition.states)
+        linf_uio.design(poly, dataclasses.replace(settings, lyapunov="quadratic"), solver, lpv.definition.states)
     if design.gamma > quadratic.gamma:
         # the quadratic design is a point of the PDLF problem (P_i = P, X = 0, the rate terms
         # cancel): PDLF never returns worse than what it contains
@@ -229,7 +230,7 @@ def build(config: ObserverConfig, tol: float | None = None) -> LinfBuild:
                                  float(config.ui_filter.get("time_constant", 0.005)), config.sample_time,
                                  lpv.derived, lpv.definition.output_symbols, lpv.derived_inputs)
     try:
-        dcert = discrete.certify_step(data, settings.alpha)
+        dcert = discrete.certify_step(data, settings.alpha, solver)
     except UILoopError as exc:
         raise UILoopError(f"{config.source}: {exc}"
                           f"{_measured_remedies(poly, settings, data, config.sample_time, lpv.definition.states)}") from None
@@ -248,11 +249,10 @@ def _measured_remedies(poly, settings, data, sample_time: float, states: tuple =
              ("both", dataclasses.replace(settings, alpha=settings.alpha / 2, gain_bound=settings.gain_bound / 2)))
     works = []
     for label, s in tries:
-        with lmi.recording():          # a measurement: its solves stay out of the design lock
-            try:
-                d = linf_uio.design(poly, s, states)
-            except UiogenError:
-                continue
+        try:        # a measurement: its own solver, nothing goes to the design lock
+            d = linf_uio.design(poly, s, FreshSolver(), states)
+        except UiogenError:
+            continue
         if discrete.loop_is_certifiable(dataclasses.replace(data, Q=d.Q, L=d.L)):
             works.append({"alpha": f"alpha = {s.alpha:g}",
                           "gain_bound_times_sample_time": f"gain_bound_times_sample_time = {s.gain_bound * sample_time:g}",

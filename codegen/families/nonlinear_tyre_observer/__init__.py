@@ -25,9 +25,9 @@ class NonlinearTyreObserver(Family):
         from .applicability import assess
         return assess(self, subject, structure)
 
-    def build(self, config, tol=None):
+    def build(self, config, solver):
         from .build import build
-        return build(config, tol)
+        return build(config, solver)
 
     def demo_report(self, art: dict) -> dict:
         c = art["certificate"]["recheck"]
@@ -65,6 +65,7 @@ class NonlinearTyreObserver(Family):
 
         import numpy as np
 
+        from ...design.solver import FreshSolver
         from ...errors import CertificateError, ConfigurationError, SolverError
         L = gains.get("L")
         try:
@@ -79,7 +80,7 @@ class NonlinearTyreObserver(Family):
         cfg = dataclasses.replace(config, design={**{k: v for k, v in config.design.items() if k != "decay"}, **given})
         out = {"observer": config.name, "form": "L", "L": L.tolist()}
         try:
-            b = self.build(cfg)
+            b = self.build(cfg, FreshSolver())
         except (CertificateError, SolverError) as exc:
             out.update(feasible=False, reason=f"{type(exc).__name__}: {exc}")
             return out

@@ -339,11 +339,11 @@ def parse(config, tol=None) -> NonlinearTyreSettings:
                           **({"tol": tol} if tol is not None else {}))
 
 
-def build(config, tol: float | None = None, params=None):
-    """model -> force form + sound axle Jacobian bounds on the sets -> vertex LMIs (gains and P) ->
-    numpy re-check -> step. ``params``: a :class:`~codegen.model.ParameterSet` instead of the
+def build(config, solver, params=None):
+    """model -> force form + sound axle Jacobian bounds on the sets -> vertex LMIs (gains and P,
+    answered by ``solver``: :mod:`codegen.design.solver`) -> numpy re-check -> step. ``params``: a :class:`~codegen.model.ParameterSet` instead of the
     observer's parameter file (identification: :mod:`.fit`)."""
-    settings = parse(config, tol)
+    settings = parse(config, solver.tol)
     t0 = time.perf_counter()
     params = load_parameters(config.parameter_path) if params is None else params
     rep = represent(config.load_model_module(), params, settings, config.source)
@@ -352,7 +352,7 @@ def build(config, tol: float | None = None, params=None):
     plant = dsn.Plant(config.sample_time, rep.G_f, rep.G_a, np.array(rep.lever), settings.sigma, np.diag([1.0, d]))
     decay_verts = tuple(dsn.vertices(rep, rep.decay_set, with_speed=False))
     gain_verts = tuple(dsn.vertices(rep, rep.gain_set, with_speed=True))
-    design = dsn.synthesize(plant, decay_verts, gain_verts, settings)
+    design = dsn.synthesize(plant, decay_verts, gain_verts, settings, solver)
     t2 = time.perf_counter()
     cert = dsn.certify(plant, decay_verts, gain_verts, design)
     t3 = time.perf_counter()

@@ -186,13 +186,14 @@ def settings_of(config: ObserverConfig, tol: float | None = None) -> switched_pi
                           section="design", **({"tol": tol} if tol is not None else {}))
 
 
-def build(config: ObserverConfig, tol: float | None = None) -> SwitchedPIBuild:
-    """Menhour et al. 2014: modes from the model and the rule -> A1/A2 -> LMIs (20) -> re-check, H-inf check -> ZOH step."""
-    settings = settings_of(config, tol)
+def build(config: ObserverConfig, solver) -> SwitchedPIBuild:
+    """Menhour et al. 2014: modes from the model and the rule -> A1/A2 -> LMIs (20) -> re-check, H-inf check -> ZOH step;
+    the LMIs answered by ``solver`` (:mod:`codegen.design.solver`)."""
+    settings = settings_of(config, solver.tol)
     t0 = time.perf_counter()
     sm = switched.build(config.load_model(), load_parameters(config.parameter_path), config.switching, config.source)
     t1 = time.perf_counter()
-    design = switched_pi.design(sm, settings)
+    design = switched_pi.design(sm, settings, solver)
     t2 = time.perf_counter()
     assumptions = switched_pi.check_assumptions(sm, design.T)
     cert = switched_pi.certify(sm, design)

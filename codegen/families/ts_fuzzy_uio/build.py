@@ -150,18 +150,19 @@ class TSFuzzyBuild(ObserverBuild):
         }
 
 
-def build(config: ObserverConfig, tol: float | None = None) -> TSFuzzyBuild:
-    """Nguyen et al. 2021: model -> TS form + Jacobian bounds -> rank conditions, (30), LMIs (27) -> certificates."""
+def build(config: ObserverConfig, solver) -> TSFuzzyBuild:
+    """Nguyen et al. 2021: model -> TS form + Jacobian bounds -> rank conditions, (30), LMIs (27) -> certificates;
+    the LMIs answered by ``solver`` (:mod:`codegen.design.solver`)."""
     from ...project.settings import parse_settings
     settings = parse_settings(ts_fuzzy_uio.TSDesignSettings, config.design, source=config.source, section="design",
-                              **({"tol": tol} if tol is not None else {}))
+                              **({"tol": solver.tol} if solver.tol is not None else {}))
     t0 = time.perf_counter()
     ts = ts_fuzzy.build(config.load_model(), load_parameters(config.parameter_path), config.sample_time,
                         rel_tol=settings.bounds_rel_tol, max_boxes=settings.bounds_max_boxes,
                         before_bounds=lambda n, nx, ny, nphi: ts_fuzzy_uio.size_guard(n, nx, ny, 1, settings,
                                                                                       config.source))
     t1 = time.perf_counter()
-    design = ts_fuzzy_uio.design(ts, settings)
+    design = ts_fuzzy_uio.design(ts, settings, solver)
     t2 = time.perf_counter()
     cert = ts_fuzzy_uio.certify(ts, design)
     decrease = ts_fuzzy_uio.lyapunov_decrease(ts, design)
