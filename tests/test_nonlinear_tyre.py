@@ -129,8 +129,8 @@ def test_gains_are_designed_and_certified_independently(built):
             worst = max(worst, float(np.linalg.svd(H, compute_uv=False)[0]))
     assert worst <= gamma and worst >= 0.2 * gamma          # certified, and not absurdly loose
     c = built.certificate
-    assert c["best_decay_rate"] == pytest.approx(0.648, abs=1e-3) and c["decay_rate"] == pytest.approx(0.129, abs=1e-3)
-    assert c["time_constant_s"] == pytest.approx(15.5, abs=0.1)
+    assert c["best_decay_rate"] == pytest.approx(0.670, abs=1e-3) and c["decay_rate"] == pytest.approx(0.134, abs=1e-3)
+    assert c["time_constant_s"] == pytest.approx(14.9, abs=0.1)
     assert gamma == pytest.approx(0.5206, abs=2e-3) and c["bound_deg_at_levels"] == pytest.approx(1.275, abs=5e-3)
 
 
