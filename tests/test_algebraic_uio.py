@@ -240,7 +240,7 @@ def test_classical_uio_exists_when_D_has_a_fixed_direction(tmp_path):
 
 def test_lmi_and_discrete_certificates(builds):
     for name, b in builds.items():
-        assert b.certificate["worst_min_eig"] > 0 and b.dense["max_eig"] < 0
+        assert b.recheck["worst_min_eig"] > 0 and b.dense["max_eig"] < 0
         dc = b.discrete
         assert dc["h_a_f"] < 1 and dc["contraction_bound_per_step"] < 1
         assert dc["sampled_amplification_X_norm_max"] <= dc["contraction_bound_per_step"] + 1e-12

@@ -17,9 +17,9 @@ def test_design_certified_and_rechecked(build):
     assert d.settings.margin == 1e-5
     assert min(c.min_eig for c in sol.checks) == pytest.approx(d.settings.margin, rel=1e-2)
     # independent numpy re-check of the rounded matrices certifies (at most) the design gamma
-    assert build.certificate["feasible"]
-    assert build.certificate["gamma"] <= d.gamma * (1 + 1e-6)
-    assert build.certificate["gamma"] == pytest.approx(d.gamma, rel=2e-3)
+    assert build.recheck["feasible"]
+    assert build.recheck["gamma"] <= d.gamma * (1 + 1e-6)
+    assert build.recheck["gamma"] == pytest.approx(d.gamma, rel=2e-3)
 
 
 def test_pdlf_never_worse_than_quadratic(build):

@@ -161,7 +161,7 @@ def test_minimum_norm_decoupling_is_26(icb):
 
 
 def test_certificates(icb):
-    cert, disc = icb.certificate, icb.discrete
+    cert, disc = icb.recheck, icb.discrete
     assert cert["worst_min_eig"] > 0
     for name in ("longitudinal", "lateral"):
         assert cert[name]["max_scaled_gain_norm"] <= icb.design.settings.gain_bound * (1 + 1e-6)

@@ -250,14 +250,17 @@ KINDS = {"steering_torque": (steering_torque_spec, _steering_torque_step, steeri
          "banked_road": (banked_road_spec, _banked_road_step, banked_road_inputs)}
 
 def families_with_plants() -> list:
-    """The registered families with a compiled campaign plant (``Family.campaign_plant``)."""
+    """The registered families with a compiled campaign plant (the ``Campaigns`` capability)."""
     from .. import families
-    return [n for n in families.names() if families.get(n).campaign_plant]
+    from ..families.capabilities import Campaigns
+    return [n for n in families.names() if isinstance(families.get(n), Campaigns)]
 
 
 def plant_kind(config) -> str:
     from .. import families
-    kind = families.get(config.family).campaign_plant
+    from ..families.capabilities import Campaigns
+    family = families.get(config.family)
+    kind = family.campaign_plant if isinstance(family, Campaigns) else None
     if kind is None:
         raise UnsupportedError(f"campaigns have compiled plants for the families {', '.join(families_with_plants())}; "
                                f"observer {config.name!r} is of family {config.family!r}")

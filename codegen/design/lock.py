@@ -6,7 +6,8 @@ committed as ``NAME_design.json`` (the design lock); everything after it, C gene
 included, is a pure function of (model, parameters, configuration, design lock, templates,
 pinned tool versions) and never solves an LMI again.
 
-The lock records, beside the design report of the family (gains, certificates), the exact
+The lock records, beside the design data of the family (gains) and its certificate (one typed
+record for every family, :mod:`codegen.certificate.certificate`), the exact
 decision variables of every LMI problem the design solved (:class:`codegen.design.lmi.SolveRecord`)
 and the hash of the design's inputs (:func:`design_inputs`: the observer file, the parameter
 file, the model and every toolchain module the design imports, the numeric packages'
@@ -121,9 +122,11 @@ def replay(data: dict, source: str = ""):
 
 
 def document(build, records: list) -> dict:
-    """The lock of a freshly solved design: the family's report plus the solutions and the hash."""
+    """The lock of a freshly solved design: the family's design data, its typed certificate
+    (:class:`~codegen.certificate.certificate.Certificate`, the same keys for every family), the
+    solutions and the hash."""
     v = sources.versions()
-    return {**build.artifact(),
+    return {**build.artifact(), "certificate": build.certificate.to_json(),
             "lock": {"format": FORMAT, "design_inputs": design_inputs(build.config),
                      "versions": {k: v[k] for k in DESIGN_PACKAGES},
                      "lmi_solutions": [r.to_json() for r in records]}}

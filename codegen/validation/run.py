@@ -47,8 +47,9 @@ def run_scenario(name, scenario, plant: str = "nominal", duration: float | None 
         from . import excitation
         return {"family": config.family, **excitation.run(config, duration, seed, progress=progress,
                                                           observer=observer)}
-    result = families.get(config.family).validate(config, scenario, plant, duration, seed, progress=progress,
-                                                  observer=observer)
+    from ..families.capabilities import Scenarios, require
+    family = require(families.get(config.family), Scenarios)
+    result = family.validate(config, scenario, plant, duration, seed, progress=progress, observer=observer)
     return {"family": config.family, **result}
 
 
@@ -58,14 +59,14 @@ def format_table(result: dict) -> str:
     if result.get("table_format") == "generic":
         from . import excitation
         return excitation.format_table(result)
-    return families.get(result["family"]).format_validation(result)
+    return families.get(result["family"]).validation_table(result)
 
 
 def header(name: str, result: dict) -> str:
-    """The line above the table: scenario, plant, samples, flagged samples."""
-    if result.get("table_format") == "generic":
-        return families.Family.validation_header(families.get(result["family"]), name, result)
-    return families.get(result["family"]).validation_header(name, result)
+    """The line above the table: scenario, plant, samples, flagged samples (:mod:`codegen.certificate.text`)."""
+    from ..certificate.text import validation_header
+    from .common import SETTLE_TIME
+    return validation_header(families.get(result["family"]), name, result, SETTLE_TIME)
 
 
 def plot(result: dict, path: str) -> None:
@@ -296,8 +297,10 @@ def format_data_table(result: dict) -> str:
 def scenario_names(name) -> tuple:
     """The validation scenarios of an observer that ``uiogen demo`` runs (its family's
     ``demo_scenarios``), or the generic excitation scenario for a family without its own."""
+    from ..families.capabilities import Scenarios
     config = observers.get(name) if isinstance(name, str) else name
-    return tuple(families.get(config.family).demo_scenarios) or ("excitation",)
+    family = families.get(config.family)
+    return tuple(family.demo_scenarios if isinstance(family, Scenarios) else ()) or ("excitation",)
 
 
 def scenario_inputs(name, scenario, plant: str = "nominal", duration: float | None = None) -> np.ndarray:
