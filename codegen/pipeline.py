@@ -10,6 +10,7 @@ from __future__ import annotations
 from .design import lock as design_lock
 from .design.solver import FreshSolver, LockReplay
 from . import families
+from .errors import BoundsError
 from .project.observer_file import ObserverConfig
 
 
@@ -22,13 +23,30 @@ def committed(config: ObserverConfig):
     return design_lock.replay(data, str(design_lock.path(config)))
 
 
+def _family_build(config: ObserverConfig, solver):
+    """The family's pipeline; an expression it cannot bound is reported with what the user can change:
+    the boxes of the parameter file it was bounded over, and the family's bounds settings
+    (``Family.bounds_settings``) where it has them."""
+    family = families.get(config.family)
+    try:
+        return family.build(config, solver)
+    except BoundsError as exc:
+        keys = " or ".join(f"[design] {k}" for k in family.bounds_settings)
+        raise BoundsError(f"{config.parameter_path}: {exc}. The expression is bounded over the boxes this file "
+                          f"declares ([scheduling.NAME], [state_bounds]): narrow those of the variables it ranges "
+                          f"over" + (f", or loosen {keys} of {config.source}" if keys else "")
+                          + f" (observer {config.command_name})") from exc
+
+
 def build(config: ObserverConfig, solver=None):
     """The observer of ``config``, its design problems answered by ``solver``
     (:class:`~codegen.design.solver.FreshSolver` or :class:`~codegen.design.solver.LockReplay`);
-    default :func:`committed`. A replay must use every committed solution. Use :func:`solve` to
-    also get the LMI solutions of a fresh design."""
+    default :func:`committed`. A replay must use every committed solution. The unknown inputs of
+    ``[substitute]`` are recovered after the family's step. Use :func:`solve` to also get the LMI
+    solutions of a fresh design."""
+    from .families.substituted import wrap
     solver = committed(config) if solver is None else solver
-    b = families.get(config.family).build(config, solver)
+    b = wrap(_family_build(config, solver))
     if isinstance(solver, LockReplay):
         solver.check_complete()
     return b

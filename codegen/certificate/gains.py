@@ -1,7 +1,7 @@
 """``uiogen check-gains``: externally supplied gains against a family's LMIs, without a solver.
 
 The generic form is the design lock's, ``{"lmi_solutions": [{"problem", "variables", "objective",
-"iterations"}, ...]}``: the family's pipeline runs on them as on a committed design (a
+"iterations"}, ...]}`` (or a design lock file as committed, its ``lock.lmi_solutions``): the family's pipeline runs on them as on a committed design (a
 :class:`~codegen.design.solver.LockReplay`, matched by problem name), every block is re-checked
 with numpy and the discrete step certified; the result carries the build's
 :class:`~codegen.certificate.certificate.Certificate`. A family with a printed form of its gains
@@ -65,7 +65,7 @@ def check(family, config, gains: dict, source: str) -> GainsCheck:
         the problem and the variable).
     """
     from ..families.capabilities import GainForms
-    if isinstance(family, GainForms) and "lmi_solutions" not in gains:
+    if isinstance(family, GainForms) and "lmi_solutions" not in gains and not isinstance(gains.get("lock"), dict):
         return family.check_gain_form(config, gains, source)
     return check_lock_form(family, config, gains, source)
 
@@ -75,6 +75,8 @@ def check_lock_form(family, config, gains: dict, source: str) -> GainsCheck:
     from ..design.lmi import SolveRecord
     from ..design.solver import LockReplay
     raw = gains.get("lmi_solutions")
+    if raw is None and isinstance(gains.get("lock"), dict):      # a design lock file, as committed
+        raw = gains["lock"].get("lmi_solutions")
     if not isinstance(raw, list):
         raise ConfigurationError(
             f"gains: family {family.name!r} checks gains given as the design lock gives them: "

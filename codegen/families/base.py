@@ -152,6 +152,9 @@ class Family(abc.ABC):
     observer_keys: dict = {}
     #: the built-in observer ``uiogen new DIR --family NAME`` copies as a starter ("": none)
     example: str = ""
+    #: ``[design]`` keys that set how hard :mod:`codegen.representation.bounds` tries to bound the
+    #: model's expressions (its tolerance, its box budget), named when a bound cannot be reached
+    bounds_settings: tuple = ()
 
     def check_config(self, config, data: dict) -> None:
         """Check the family's own tables of an observer file (``data``: the parsed TOML) beyond

@@ -17,6 +17,7 @@ protocol                  used by
 :class:`Campaigns`        ``uiogen campaign``: the compiled closed-loop plant, noise, gain norm
 :class:`Applicability`    ``uiogen analyze``: whether the family takes a model
 :class:`GainForms`        ``uiogen check-gains``: the paper's printed form of the gains
+:class:`LogPeers`         ``uiogen validate --data``: estimators run beside the observer on a log
 :class:`Identification`   ``uiogen fit``: identify the observer's numbers on a log
 ========================  =====================================================================
 """
@@ -117,6 +118,15 @@ class GainForms(Protocol):
 
 
 @runtime_checkable
+class LogPeers(Protocol):
+    """Estimators the family runs beside the observer on a logged run in the shared format."""
+
+    def log_peers(self, config, run) -> dict:
+        """{name: sideslip estimate [rad] per sample} of the peers (e.g. Kalman filters of the
+        observer's own model and parameter file) on ``run``; {} for none."""
+
+
+@runtime_checkable
 class Identification(Protocol):
     """``uiogen fit``: the observer's numbers identified on part of a log."""
 
@@ -131,7 +141,7 @@ class Identification(Protocol):
 
 
 CAPABILITIES = (Scenarios, DemoPlant, DemoFigures, BenchFigures, BenchStudy, Campaigns, Applicability, GainForms,
-                Identification)
+                LogPeers, Identification)
 
 # what each capability is called in an error
 _WHAT = {Scenarios: "simulated validation scenarios (uiogen validate --scenario, uiogen demo)",
@@ -139,6 +149,7 @@ _WHAT = {Scenarios: "simulated validation scenarios (uiogen validate --scenario,
          BenchStudy: "family-wide bench study", Campaigns: "compiled campaign plant (uiogen campaign)",
          Applicability: "applicability check (uiogen analyze)",
          GainForms: "printed form of its gains (uiogen check-gains takes the design lock's lmi_solutions)",
+         LogPeers: "estimators run beside the observer on a log",
          Identification: "identification (uiogen fit): its numbers come from its paper or its parameter file"}
 
 

@@ -18,7 +18,9 @@ class NonlinearTyreObserver(Family):
     citation = "DMVT certificate after Nguyen, Dinh, Guerra, Pan, IEEE/ASME T-Mech 26(3), 2021; Fiala tyre (Pacejka 2012, Sec. 3.2)"
     short_citation = "nonlinear-tyre DMVT"
     observer_keys = {}
-    # capabilities (codegen.families.capabilities): DemoFigures, Applicability, GainForms, Identification
+    bounds_settings = ("bounds_rel_tol",)
+    # capabilities (codegen.families.capabilities): DemoFigures, Applicability, GainForms, LogPeers,
+    # Identification
     example = "stanford_sideslip_nonlinear_tyre"
 
     def applicability(self, subject, structure):
@@ -35,6 +37,16 @@ class NonlinearTyreObserver(Family):
                 "contraction_per_step": c["contraction_per_step"], "time_constant_s": c["time_constant_s"],
                 "decay_rate": c["decay_rate"], "best_decay_rate": c["best_decay_rate"], "gamma_deg": c["gamma_deg"],
                 "bound_deg_at_levels": c["bound_deg_at_levels"], "gains": art["gains"]}
+
+    def log_peers(self, config, run) -> dict:
+        """The EKF and UKF of the same symbolic model and parameter file
+        (:func:`codegen.validation.stanford.nonlinear_tyre_peers`), for an observer of that model
+        (``model_defs/single_track_nonlinear_tyre.py`` or an unedited copy of it)."""
+        from ...project.observer_file import builtin_model
+        from ...validation import stanford
+        if config.load_model() != builtin_model("single_track_nonlinear_tyre").MODEL:
+            return {}
+        return {k: v.beta for k, v in stanford.nonlinear_tyre_peers(run, config.parameter_path).items()}
 
     def fit(self, config, path, samples: str, folds: int = 0) -> dict:
         from .fit import fit
