@@ -65,7 +65,7 @@ def check(family, config, gains: dict, source: str) -> GainsCheck:
         the problem and the variable).
     """
     from ..families.capabilities import GainForms
-    if isinstance(family, GainForms) and "lmi_solutions" not in gains and not isinstance(gains.get("lock"), dict):
+    if isinstance(family, GainForms) and "lmi_solutions" not in gains:
         return family.check_gain_form(config, gains, source)
     return check_lock_form(family, config, gains, source)
 
