@@ -162,12 +162,13 @@ def cmd_design(args) -> int:
 
 
 def _print_design(b, path, as_json: bool, compare: dict) -> int:
-    """The family's design summary (text, or JSON with the comparison to the committed design)."""
-    summary = b.summary(path)
+    """The design's certificate and figures (text, or JSON with the comparison to the committed design)."""
+    from .certificate import text
     if as_json:
-        _print_json({**summary, "committed_design": compare})
+        _print_json({"observer": b.name, "artifact": str(path), **b.figures(), "certificate": b.certificate.to_json(),
+                     "committed_design": compare})
         return 0
-    print("\n".join(b.summary_lines(summary)))
+    print("\n".join(text.design_lines(families.get(b.config.family), b, path)))
     return 0
 
 
@@ -229,24 +230,23 @@ def _load_gains(path: Path) -> dict:
     return data
 
 
-def check_gains(name: str, gains: dict) -> dict:
-    """Check externally supplied gains against the observer family's LMIs (no solver)."""
+def check_gains(name: str, gains: dict, source: str = "gains"):
+    """Check externally supplied gains against the observer family's LMIs (no solver): a
+    :class:`~codegen.certificate.gains.GainsCheck`."""
+    from .certificate import gains as gains_check
     cfg = observers.get(name)
-    return families.get(cfg.family).check_gains(cfg, gains)
-
-
-def _feasible(res: dict) -> bool:
-    return res["feasible"] if "feasible" in res else all(r["feasible"] for r in res["results"].values())
+    return gains_check.check(families.get(cfg.family), cfg, gains, source)
 
 
 def cmd_check_gains(args) -> int:
+    from .certificate import text
     cfg = observers.get(args.name)
-    res = families.get(cfg.family).check_gains(cfg, _load_gains(args.gains))
+    res = check_gains(args.name, _load_gains(args.gains), args.gains)
     if args.json:
-        _print_json(res)
+        _print_json(res.to_json())
     else:
-        print("\n".join(families.get(cfg.family).format_check_gains(res, args.gains)))
-    return 0 if _feasible(res) else 1
+        print("\n".join(text.check_gains_lines(families.get(cfg.family), res)))
+    return 0 if res.feasible else 1
 
 
 def _shown(path: Path) -> str:
@@ -260,8 +260,10 @@ def _shown(path: Path) -> str:
 def cmd_fit(args) -> int:
     """Identify an observer's numbers on samples A..B-1 of a log (the family's ``fit``); print them,
     say whether the committed files hold them, and with --write put them there."""
+    from .certificate import text
+    from .families.capabilities import Identification, require
     cfg = observers.get(args.name)
-    family = families.get(cfg.family)
+    family = require(families.get(cfg.family), Identification)
     result = family.fit(cfg, args.data, args.samples, folds=args.folds)
     texts = family.fit_files(cfg, result)
     changed = {path: path.read_text() != text for path, text in texts.items()}
@@ -273,7 +275,7 @@ def cmd_fit(args) -> int:
         _print_json({**result, "files": {_shown(p): ("written" if args.write and c else "differs" if c else "equal")
                                          for p, c in changed.items()}})
     else:
-        print("\n".join(family.fit_lines(result, changed)))
+        print("\n".join(text.fit_lines(family, result, changed)))
         if args.write and any(changed.values()):
             print("written: " + ", ".join(str(p) for p, c in changed.items() if c))
     return 0

@@ -16,6 +16,7 @@ from codegen.errors import (DiscretizationError, InfeasibleLMIError, ModelDefini
                            SchedulingBoundsError)
 from codegen.model import ModelDefinition, SchedulingSignal, instantiate, load_parameters
 from codegen.project.observer_file import ObserverConfig
+from codegen.design.solver import FreshSolver
 
 NAMES = ("algebraic_uio_example1", "algebraic_uio_example2", "algebraic_uio_lateral_force")
 
@@ -177,7 +178,7 @@ def _mimo_build(tmp_path, outputs):
                          {"lmi": "direct", "alpha": 3.0, "margin": 1e-4,
                           "differentiators": {**{f"y_{o}": spec for o in outputs}, "rho": {"order": 5, "lipschitz": 50.0}}},
                          {}, "", str(tmp_path / "mimo.toml"))
-    return algebraic_uio.build(cfg, lpv=lpv), lpv
+    return algebraic_uio.build(cfg, FreshSolver(), lpv=lpv), lpv
 
 
 @pytest.mark.parametrize("outputs", [("x1", "x3"), ("x1", "x3", "x2")])
@@ -239,7 +240,7 @@ def test_classical_uio_exists_when_D_has_a_fixed_direction(tmp_path):
 
 def test_lmi_and_discrete_certificates(builds):
     for name, b in builds.items():
-        assert b.certificate["worst_min_eig"] > 0 and b.dense["max_eig"] < 0
+        assert b.recheck["worst_min_eig"] > 0 and b.dense["max_eig"] < 0
         dc = b.discrete
         assert dc["h_a_f"] < 1 and dc["contraction_bound_per_step"] < 1
         assert dc["sampled_amplification_X_norm_max"] <= dc["contraction_bound_per_step"] + 1e-12
@@ -268,7 +269,7 @@ def test_fixed_modes_are_the_invariant_zeros(builds):
 def test_decay_rate_beyond_the_fixed_modes_is_refused(builds):
     b = builds["algebraic_uio_example1"]
     with pytest.raises(InfeasibleLMIError, match=r"invariant zeros.*alpha < 6"):
-        alg.design(b.dec, dataclasses.replace(b.settings, alpha=6.5))
+        alg.design(b.dec, dataclasses.replace(b.settings, alpha=6.5), FreshSolver())
 
 
 def test_gauss_step_is_b_stable_at_large_steps(builds):

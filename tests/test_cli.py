@@ -33,7 +33,7 @@ def test_design_json_and_artifact(tmp_path):
     proc = uiogen("check-gains", "lpv_linf_driver_torque", "--gains", str(out), "--json")
     assert proc.returncode == 0, proc.stderr
     res = json.loads(proc.stdout)
-    assert res["results"]["exact"]["gamma"] <= art["gamma"] * (1 + 1e-6)
+    assert res["cases"]["exact"]["gamma"] <= art["gamma"] * (1 + 1e-6)
 
 
 def test_check_gains_published(published):

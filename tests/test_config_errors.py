@@ -14,6 +14,7 @@ import pytest
 import sympy as sp
 
 from codegen import cli, pipeline
+from codegen.design.solver import FreshSolver
 from codegen.project import observer_file as observers, settings
 from codegen.representation import polytope
 from codegen.families.switched_pi import build as switched_pipeline
@@ -508,7 +509,7 @@ def new_settings(config, monkeypatch, tol=None):
     monkeypatch.setattr(settings, "parse_settings", spy)       # build_ts_fuzzy imports it at call time
     monkeypatch.setattr(dub, "parse_settings", spy)
     with pytest.raises(_Stop):
-        pipeline.build(config, tol)
+        pipeline.build(config, FreshSolver(tol))
     monkeypatch.undo()
     return seen[0]
 

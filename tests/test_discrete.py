@@ -5,6 +5,7 @@ import pytest
 from codegen.families.linf_uio import discrete
 from codegen.families.linf_uio import design as linf_uio
 from codegen.errors import DiscretizationError
+from codegen.design.solver import FreshSolver
 
 
 def test_certificate_contracts(build):
@@ -86,8 +87,8 @@ def test_unstable_step_refused(build):
     high bound alone no longer provokes this."""
     data = discrete.ObserverData(build.poly, build.design.Q, tuple(-l for l in build.design.L), 0.005, 0.01)
     with pytest.raises(DiscretizationError, match="no common Lyapunov function.*unstable at v_x") as err:
-        discrete.certify_step(data, 5.0)
+        discrete.certify_step(data, 5.0, FreshSolver())
     assert "no filter constant up to" in str(err.value)      # measured: no Tf helps
     for gb in (1000.0, 10000.0):      # certify_step raises unless the step is certified
-        fast = linf_uio.design(build.poly, linf_uio.LinfDesignSettings(gain_bound=gb))
-        discrete.certify_step(discrete.ObserverData(build.poly, fast.Q, fast.L, 0.005, 0.01), 5.0)
+        fast = linf_uio.design(build.poly, linf_uio.LinfDesignSettings(gain_bound=gb), FreshSolver())
+        discrete.certify_step(discrete.ObserverData(build.poly, fast.Q, fast.L, 0.005, 0.01), 5.0, FreshSolver())

@@ -17,6 +17,7 @@ from codegen.families.interconnected_uio import design as du
 from codegen.families.interconnected_uio import build as dub
 from codegen.errors import (CertificateError, ModelDefinitionError, RankConditionError, SchedulingBoundsError)
 from codegen.model import load_parameters
+from codegen.design.solver import FreshSolver
 from python_bindings import load
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -136,7 +137,7 @@ def test_force_split_is_the_unobservable_mode(icb, mode):
     F_yf - F_yr with the measured-rows H, whose zero r row of T gives up the yaw equation."""
     sigma = icb.ts.parameters.values["sigma"]
     design = icb.design if mode == "measured_rows" else \
-        du.design(icb.ts, dataclasses.replace(icb.design.settings, decoupling=mode))
+        du.design(icb.ts, dataclasses.replace(icb.design.settings, decoupling=mode), FreshSolver())
     for sub, sd in zip(icb.ts.subsystems, design.subsystems):
         S = np.diag(sd.S)
         for i, theta in enumerate(du.vertex_premises(sub)):
@@ -159,7 +160,7 @@ def test_minimum_norm_decoupling_is_26(icb):
 
 
 def test_certificates(icb):
-    cert, disc = icb.certificate, icb.discrete
+    cert, disc = icb.recheck, icb.discrete
     assert cert["worst_min_eig"] > 0
     for name in ("longitudinal", "lateral"):
         assert cert[name]["max_scaled_gain_norm"] <= icb.design.settings.gain_bound * (1 + 1e-6)
@@ -176,7 +177,7 @@ def test_design_time_and_vertex_gain_option(icb):
     assert icb.timings["representation_s"] + icb.timings["design_s"] < 30.0
     # the printed free Omega_i are also solvable and certified (the step then blends 2^q vertices)
     ts = icb.ts
-    d = du.design(ts, dataclasses.replace(icb.design.settings, gain_structure="vertex"))
+    d = du.design(ts, dataclasses.replace(icb.design.settings, gain_structure="vertex"), FreshSolver())
     assert du.certify(ts, d)["worst_min_eig"] > 0
 
 
@@ -185,13 +186,13 @@ def test_differentiator_configuration_errors(icb):
     table = dict(cfg.design)
     table["differentiators"] = {k: v for k, v in table["differentiators"].items() if k != "psi_L"}
     with pytest.raises(ModelDefinitionError, match="d/dt psi_L"):
-        dub.build(dataclasses.replace(cfg, design=table))
+        dub.build(dataclasses.replace(cfg, design=table), FreshSolver())
     table = dict(cfg.design)
     table["differentiators"] = {**table["differentiators"], "delta": {"order": 1, "lipschitz": 10.0}}
     with pytest.raises(ModelDefinitionError, match="order >= 2"):
-        dub.build(dataclasses.replace(cfg, design=table))
+        dub.build(dataclasses.replace(cfg, design=table), FreshSolver())
     with pytest.raises(ModelDefinitionError, match="unknown \\[design\\] keys"):
-        dub.build(dataclasses.replace(cfg, design={**cfg.design, "alhpa": 1.0}))
+        dub.build(dataclasses.replace(cfg, design={**cfg.design, "alhpa": 1.0}), FreshSolver())
 
 
 SCALE = {"v_x": 20.0, "omega_f": 60.0, "omega_r": 60.0, "F_xf": 500.0, "F_xr": 300.0, "v_y": 0.1, "r": 0.1,

@@ -10,6 +10,7 @@ import pytest
 import sympy as sp
 
 from codegen import cli, families, pipeline
+from codegen.certificate import gains
 from codegen.errors import ConfigurationError, ModelDefinitionError
 from codegen.model import load_parameters, parameter_substitution
 from codegen.project import observer_file as observers
@@ -296,8 +297,8 @@ def test_check_gains_takes_a_design_lock_as_committed():
     config = observers.get("switched_pi_bank_angle")
     lock = json.loads(config.workspace.design_lock(config.name).read_text())
     assert "lmi_solutions" not in lock and "lmi_solutions" in lock["lock"]
-    res = families.get(config.family).check_gains(config, lock)
-    assert res["feasible"] and res["problems"]
+    res = gains.check(families.get(config.family), config, lock, "lock")
+    assert res.feasible and res.form == "lmi_solutions" and res.cases and res.certificate is not None
 
 
 def test_the_shared_logs_peaks_are_the_logs_not_the_observers():

@@ -18,6 +18,7 @@ from codegen.project import observer_file as observers
 from codegen.errors import CertificateError, ConfigurationError
 from codegen.families.nonlinear_tyre_observer import design as dsn
 from codegen.validation import stanford
+from codegen.design.solver import FreshSolver
 
 from conftest import require_shared
 
@@ -27,7 +28,7 @@ FAMILY = families.get("nonlinear_tyre_observer")
 
 @pytest.fixture(scope="module")
 def built():
-    return FAMILY.build(observers.get(NAME))
+    return FAMILY.build(observers.get(NAME), FreshSolver())
 
 
 def _lock() -> dict:
@@ -110,7 +111,7 @@ def _frozen(plant, vertex, L):
 
 
 def test_gains_are_designed_and_certified_independently(built):
-    assert built.synthesis.given is False and built.certificate["blocks"] == 1 + 8 + 16
+    assert built.synthesis.given is False and built.recheck["blocks"] == 1 + 8 + 16
     L, plant = built.L, built.plant
     P = plant.D.T @ built.P @ plant.D                         # back to physical coordinates
     lam2 = 1.0 - plant.Ts * built.synthesis.rate
@@ -119,7 +120,7 @@ def test_gains_are_designed_and_certified_independently(built):
         A = _frozen(plant, x, L)[0]
         assert np.linalg.eigvalsh(A.T @ P @ A - lam2 * P).max() <= 1e-9 * np.abs(P).max()
     # the l2 gain bounds the frequency response of every frozen vertex system (a common P bounds each)
-    gamma = built.certificate["gamma_deg"]
+    gamma = built.recheck["gamma_deg"]
     worst = 0.0
     for x in built.gain_verts:
         A, B, C = _frozen(plant, x, L)
@@ -127,7 +128,7 @@ def test_gains_are_designed_and_certified_independently(built):
             H = C @ np.linalg.solve(np.exp(1j * w) * np.eye(2) - A, B)
             worst = max(worst, float(np.linalg.svd(H, compute_uv=False)[0]))
     assert worst <= gamma and worst >= 0.2 * gamma          # certified, and not absurdly loose
-    c = built.certificate
+    c = built.recheck
     assert c["best_decay_rate"] == pytest.approx(0.670, abs=1e-3) and c["decay_rate"] == pytest.approx(0.134, abs=1e-3)
     assert c["time_constant_s"] == pytest.approx(14.9, abs=0.1)
     assert gamma == pytest.approx(0.5206, abs=2e-3) and c["bound_deg_at_levels"] == pytest.approx(1.275, abs=5e-3)
@@ -138,15 +139,15 @@ def test_given_gains_are_certified_not_designed():
     art = _lock()
     L = np.array(art["L"])
     given = dict(zip(("gain_vy_ay", "gain_vy_r", "gain_r_ay", "gain_r_r"), L.ravel().tolist()))
-    b = FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, **given}))
+    b = FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, **given}), FreshSolver())
     assert b.synthesis.given and np.array_equal(b.L, L)
     # the designed gains certify at the rate the design required; fixed gains leave P alone to search
-    assert b.certificate["best_decay_rate"] == pytest.approx(art["certificate"]["recheck"]["decay_rate"], rel=0.02)
+    assert b.recheck["best_decay_rate"] == pytest.approx(art["certificate"]["extras"]["recheck"]["decay_rate"], rel=0.02)
     zero = dict.fromkeys(given, 0.0)                          # r_hat is never corrected: no decay
     with pytest.raises(CertificateError, match="no common Lyapunov matrix"):
-        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, **zero}))
+        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, **zero}), FreshSolver())
     with pytest.raises(ConfigurationError, match="all four"):
-        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, "gain_vy_ay": 0.01}))
+        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, "gain_vy_ay": 0.01}), FreshSolver())
 
 
 def test_check_gains_cli(tmp_path, capsys):
@@ -169,9 +170,9 @@ def test_full_sliding_cannot_be_certified():
     cfg = observers.get(NAME)
     bad = dataclasses.replace(cfg, design={**cfg.design, "sliding_fraction": 0.999999})
     with pytest.raises(CertificateError, match="not observable"):
-        FAMILY.build(bad)
+        FAMILY.build(bad, FreshSolver())
     with pytest.raises(ConfigurationError, match="gain_sliding_fraction"):
-        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, "gain_sliding_fraction": 0.95}))
+        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, "gain_sliding_fraction": 0.95}), FreshSolver())
 
 
 @pytest.mark.slow          # the compiled observer

@@ -1,5 +1,8 @@
-"""A sixth family is one folder and one line: a toy family defined and registered here, in the
+"""A new family is one folder and one line: a toy family defined and registered here, in the
 test itself, goes through design -> certificate -> C -> extension without touching any other file.
+It implements the required protocol only (codegen.families.base): build(config, solver) and an
+ObserverBuild with its signals, step, reference step, certificate and artifact; no optional
+capability (codegen.families.capabilities), and uiogen refuses what needs one, by name.
 
 The toy is a Luenberger observer of an LTI model (x' = A x + B u, y = C x) with a decay-rate
 LMI: find P > 0, Y with He(P A - Y C) + 2 alpha P < 0, gain L = P^-1 Y; the step is backward
@@ -18,8 +21,9 @@ from codegen.design import lock as design_lock, lmi
 from codegen.emit import generate as emit
 from codegen.project import observer_file as observers
 from codegen.certificate.artifact import artifact_head, significant, solver_certificate
+from codegen.certificate.certificate import Certificate, Recheck, Step
 from codegen.design.canonical import decimal_round, matmul, solve
-from codegen.errors import CertificateError
+from codegen.errors import CertificateError, UnsupportedError
 from codegen.families import Family, ObserverBuild
 from codegen.model import instantiate, load_parameters
 from codegen.project.settings import parse_settings, setting
@@ -52,7 +56,8 @@ class ToyBuild(ObserverBuild):
     P: np.ndarray
     L: np.ndarray
     settings: ToySettings
-    certificate: dict
+    slowest_pole: float
+    contraction: float
     solution: object
     names: tuple
     timings: dict
@@ -81,35 +86,24 @@ class ToyBuild(ObserverBuild):
         G = np.eye(self.A.shape[0]) - Ts * (self.A - self.L @ self.C)
         return np.linalg.solve(G, z + Ts * (self.B @ u + self.L @ y)), 0.0
 
-    def lmi_problem(self):
-        return _problem(self.A, self.C, self.settings.alpha)
-
     def input_boxes(self):
         return {}
 
     def scheduling_boxes(self):
         return []
 
-    def signal_docs(self):
-        state = [{"name": n, "doc": f"estimate of {n}"} for n in self.names[0]]
-        inputs = ([{"name": n, "doc": "known input"} for n in self.names[1]]
-                  + [{"name": f"y_{n}", "doc": f"measured {n}"} for n in self.names[2]])
-        return state, inputs, state
-
-    def emit_notes(self):
-        return {"headline": f"decay rate {self.settings.alpha:g}", "stability": "backward Euler of a certified decay",
-                "step_notes": [], "clamp_doc": "never set (no scheduling).", "warmup_doc": "never set.",
-                "has_warmup": False}
+    @property
+    def certificate(self):
+        return Certificate(
+            family="toy_luenberger",
+            claim=f"He(P (A - L C)) + 2 alpha P < 0: the estimation error decays at alpha = {self.settings.alpha:g} 1/s",
+            plant_class="the LTI model of the observer file", noise="noise-free measurements, no unknown input",
+            region={}, region_note="", recheck=Recheck.of(self.solution.checks),
+            step=Step(self.config.sample_time, "backward Euler", self.contraction),
+            extras=solver_certificate(self.solution, slowest_pole=self.slowest_pole))
 
     def artifact(self):
-        return {**artifact_head(self, []), "P": self.P.tolist(), "L": self.L.tolist(),
-                "certificate": solver_certificate(self.solution, recheck=self.certificate)}
-
-    def summary(self, path):
-        return {"observer": self.name, "artifact": str(path), "P": self.P.tolist(), "L": self.L.tolist()}
-
-    def summary_lines(self, s):
-        return [f"observer {s['observer']}: toy Luenberger observer, L = {s['L']}", f"artifact: {s['artifact']}"]
+        return {**artifact_head(self, []), "P": self.P.tolist(), "L": self.L.tolist()}
 
 
 class ToyLuenberger(Family):
@@ -118,11 +112,12 @@ class ToyLuenberger(Family):
     citation = "a test of the family protocol"
     short_citation = "toy"
 
-    def build(self, config, tol=None):
-        settings = parse_settings(ToySettings, config.design, source=config.source, section="design")
+    def build(self, config, solver):
+        settings = parse_settings(ToySettings, config.design, source=config.source, section="design",
+                                  **({"tol": solver.tol} if solver.tol is not None else {}))
         lpv = instantiate(config.load_model(), load_parameters(config.parameter_path))
         A, B, C = (np.array(m.evalf(), dtype=float) for m in (lpv.A, lpv.B, lpv.C))
-        sol = _problem(A, C, settings.alpha).solve(tol=settings.tol)
+        sol = solver.solve(_problem(A, C, settings.alpha), tol=settings.tol)
         P = decimal_round(0.5 * (sol["P"] + sol["P"].T))
         Y = decimal_round(np.atleast_2d(sol["Y"]).reshape(A.shape[0], C.shape[0]))
         L = solve(P, Y)
@@ -130,9 +125,16 @@ class ToyLuenberger(Family):
         worst = float(np.linalg.eigvals(Acl).real.max())
         if worst >= -settings.alpha + 1e-9:
             raise CertificateError(f"closed loop decays at {-worst:.4g} < alpha")
+        # backward Euler: e+ = G^-1 e with G = I - Ts Acl; in the P norm |G^-1|_P <= 1/sqrt(1 + 2 alpha Ts)
+        Ts = config.sample_time
+        Gi = np.linalg.inv(np.eye(A.shape[0]) - Ts * Acl)
+        Lc = np.linalg.cholesky(P)
+        ratio = float(np.linalg.eigvalsh(np.linalg.solve(Lc, Gi.T @ P @ Gi) @ np.linalg.inv(Lc).T).max())
+        if ratio >= 1.0:
+            raise CertificateError(f"the backward-Euler step does not contract in the P norm ({ratio:.6f})")
         d = lpv.definition
         names = ([str(s) for s in d.states], [str(s) for s in d.known_inputs], list(d.output_names))
-        return ToyBuild(config, A, B, C, P, L, settings, {"slowest_pole": significant(worst)}, sol, tuple(names),
+        return ToyBuild(config, A, B, C, P, L, settings, significant(worst), float(np.sqrt(ratio)), sol, tuple(names),
                         {"total_s": sol.solve_time_s})
 
 
@@ -170,11 +172,13 @@ def toy(tmp_path):
 
 @pytest.mark.slow          # builds
 def test_a_family_registered_from_outside_goes_to_a_compiled_step(toy, capsys):
-    path, _ = toy
+    path, family = toy
+    assert family.capabilities() == ()
     config = observers.get(str(path))
     assert config.family == "toy_luenberger" and not config.builtin
     assert cli.main(["design", str(path), "--update"]) == 0
-    assert "toy Luenberger observer" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "toy Luenberger observer" in out and "certified: He(P (A - L C))" in out
     lock = design_lock.path(config)
     assert lock.is_file() and lock.parent == path.parent / "generated_c" / "toy_msd"
     emit.generate([str(path)], log=lambda *_: None)
@@ -197,6 +201,13 @@ def test_a_family_registered_from_outside_goes_to_a_compiled_step(toy, capsys):
     assert "toy Luenberger observer: a test of the family protocol" in header
     data = json.loads(lock.read_text())
     assert data["lock"]["lmi_solutions"][0]["problem"] == "toy decay-rate LMI"
+    assert Certificate.from_json(data["certificate"]) == b.certificate and b.certificate.step.contraction < 1
+    # what needs a capability the family does not have is refused by name
+    with pytest.raises(UnsupportedError, match="toy_luenberger.*no simulated validation scenarios"):
+        from codegen.validation import run as validate
+        validate.run_scenario(config, "track_varying_speed")
+    assert cli.main(["fit", str(path), "--data", "stanford", "--samples", "0:10"]) == 2
+    assert "'toy_luenberger' has no identification (uiogen fit)" in capsys.readouterr().err
 
 
 def test_the_registry_refuses_what_is_not_a_family():

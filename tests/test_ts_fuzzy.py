@@ -138,8 +138,8 @@ def test_design_certificate_and_decoupling(tsb):
     d, ts = tsb.design, tsb.ts
     np.testing.assert_allclose(d.T @ ts.D, 0.0, atol=1e-15)
     np.testing.assert_allclose(d.T + d.N @ ts.C, np.eye(3), atol=1e-15)
-    assert tsb.certificate["worst_min_eig"] > 0
-    assert tsb.certificate["blocks"] == 4 + 2 * 4 * (4 + 12)      # P_i, and (27a)+(27b) per theta_p, l
+    assert tsb.recheck["worst_min_eig"] > 0
+    assert tsb.recheck["blocks"] == 4 + 2 * 4 * (4 + 12)      # P_i, and (27a)+(27b) per theta_p, l
     assert tsb.decrease["max_ratio"] < 1.0
     assert tsb.timings["representation_s"] + tsb.timings["design_s"] < 5.0
     # other sample times are derived, not hard-coded

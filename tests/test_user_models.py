@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from codegen import cli, pipeline
+from codegen.design.solver import FreshSolver
 from codegen.emit import generate as emit
 from codegen.project import observer_file as observers
 from codegen.errors import RepresentationError
@@ -74,7 +75,7 @@ def test_a_saturating_tanh_tyre_designs_fast(tmp_path):
     t0 = time.perf_counter()
     b = pipeline.build(observers.get(str(path)))
     assert time.perf_counter() - t0 < 30                     # issue target: bounds + LMIs <= 30 s
-    assert b.certificate["worst_min_eig"] > 0 and b.decrease["max_ratio"] < 1
+    assert b.recheck["worst_min_eig"] > 0 and b.decrease["max_ratio"] < 1
     # d(phi)/d v_x is not bounded: v_x is measured and phi is evaluated with the measurement
     for phi, row in zip(b.ts.phi, b.ts.jacobian_bounds):
         for s, bound in zip(b.ts.definition.states, row):
@@ -146,28 +147,28 @@ def test_the_pair_relaxation_certifies_what_it_designs(name):
     """relaxation = "pairs" on the paper's models: feasible, re-checked (P_bar >= P_l and the pair
     blocks), and the Lyapunov function decreases on random samples."""
     cfg = observers.get(name)
-    b = pipeline.build(dataclasses.replace(cfg, design={**cfg.design, "relaxation": "pairs"}), fresh=True)
-    assert b.design.relaxation == "pairs" and b.certificate["worst_min_eig"] > 0
-    assert b.certificate["blocks"] < 60 and b.decrease["max_ratio"] < 1.0
+    b = pipeline.build(dataclasses.replace(cfg, design={**cfg.design, "relaxation": "pairs"}), FreshSolver())
+    assert b.design.relaxation == "pairs" and b.recheck["worst_min_eig"] > 0
+    assert b.recheck["blocks"] < 60 and b.decrease["max_ratio"] < 1.0
 
 
 def test_taylor_reduced_polytope_refused_beyond_its_limit():
     cfg = observers.get("lpv_linf_driver_torque")          # 14.8 % Taylor error on a_12
     strict = dataclasses.replace(cfg, design={**cfg.design, "taylor_error_limit": 0.1})
     with pytest.raises(RepresentationError, match=r'14\.8 %.*polytope = "sector"'):
-        pipeline.build(strict, fresh=True)
+        pipeline.build(strict, FreshSolver())
 
 
 def test_pdlf_never_worse_than_the_quadratic_design_it_contains(monkeypatch):
     real = linf_design.design
 
-    def worse_pdlf(poly, settings, states=()):
-        d = real(poly, settings, states)
+    def worse_pdlf(poly, settings, solver, states=()):
+        d = real(poly, settings, solver, states)
         return dataclasses.replace(d, nu=4 * d.nu) if settings.lyapunov == "pdlf" else d
     monkeypatch.setattr(linf_design, "design", worse_pdlf)
-    b = linf_build.build(observers.get("lpv_linf_driver_torque"))
+    b = linf_build.build(observers.get("lpv_linf_driver_torque"), FreshSolver())
     assert b.design.gamma == b.quadratic.gamma and b.design.fallback
-    assert b.certificate["feasible"] and b.certificate["gamma"] <= b.quadratic.gamma * (1 + 1e-6)
+    assert b.recheck["feasible"] and b.recheck["gamma"] <= b.quadratic.gamma * (1 + 1e-6)
 
 
 @pytest.mark.slow          # builds
@@ -195,16 +196,19 @@ def test_the_taylor_reduced_polytope_is_labelled_and_starters_are_exact(tmp_path
     assert cli.main(["new", str(tmp_path / "p"), "--family", "linf_uio", "--name", "mine"]) == 0
     starter = (tmp_path / "p" / "mine.toml").read_text()
     assert '\npolytope = "sector"' in starter and "taylor_reduced" not in starter.split("polytope =")[1].split("\n")[0]
-    b = linf_build.build(observers.get("lpv_linf_driver_torque"))
-    s = b.summary("x")
+    from codegen import families
+    from codegen.certificate import text
+    b = pipeline.build(observers.get("lpv_linf_driver_torque"))
+    s = b.figures()
     assert s["polytope_form"] == polytope.FORMS["taylor_reduced"]
     assert s["polytope_form"].startswith("approximation, error not in the LMI")
-    text = "\n".join(b.summary_lines(s))
-    assert "taylor_reduced polytope (approximation, error not in the LMI), 2 vertices" in text
-    assert "(14.8% of the entry): approximation, error not in the LMI" in text
+    assert s["taylor_error"]["relative_error_there"] == pytest.approx(0.148, abs=5e-4)
+    lines = "\n".join(text.design_lines(families.get("linf_uio"), b, "x"))
+    assert "taylor_reduced polytope of 2 vertices (approximation, error not in the LMI" in lines
+    assert "taylor_reduced polytope of 2 vertices (approximation" in b.certificate.plant_class
     assert b.artifact()["polytope"]["form"] == polytope.FORMS["taylor_reduced"]
-    exact = linf_build.build(observers.get("lpv_linf_driver_torque_sector"))
-    assert "sector polytope (exact), 4 vertices" in exact.summary_lines(exact.summary("x"))[0]
+    exact = pipeline.build(observers.get("lpv_linf_driver_torque_sector"))
+    assert "sector polytope of 4 vertices (exact:" in exact.certificate.plant_class
 
 
 SIDESLIP_MODEL = '''

@@ -33,8 +33,6 @@ from ..errors import CertificateError, ModelDefinitionError
 from ..emit.toolchain import STRICT_CFLAGS, compile_and_link
 
 TOLERANCE = 1e-4          # largest deviation from the double step, relative to each signal's RMS
-CONTRACTION_KEYS = ("contraction_per_step", "certified_contraction", "ui_loop_contraction_per_step",
-                    "contraction_bound_per_step")
 
 
 def _config(observer) -> observers.ObserverConfig:
@@ -42,21 +40,11 @@ def _config(observer) -> observers.ObserverConfig:
 
 
 def certified_contraction(art: dict) -> float:
-    """The slowest certified contraction per step in a design artifact (every
-    ``*contraction*_per_step`` figure of the certificate; the largest is the margin's)."""
-    found = []
-
-    def walk(d):
-        if isinstance(d, dict):
-            for k, v in d.items():
-                if k in CONTRACTION_KEYS and isinstance(v, (int, float)):
-                    found.append(float(v))
-                else:
-                    walk(v)
-    walk(art)
-    if not found:
-        raise CertificateError("the design artifact holds no certified contraction per step")
-    return max(found)
+    """The certified contraction per step of a design lock's typed certificate (the step's slowest,
+    :class:`~codegen.certificate.certificate.Step`); 1 where the family proves a strict decrease
+    but no rate (then the margin is 0 and no float build is accepted)."""
+    from ..certificate.certificate import of_lock
+    return of_lock(art, "design lock").step.contraction
 
 
 def emit_float(observer, out_dir: Path | None = None) -> Path:

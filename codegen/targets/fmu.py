@@ -34,7 +34,8 @@ ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 
 def variables(b) -> list:
     """The FMI variables: (name, value reference, causality, type, unit, description)."""
-    _, inputs, outputs = b.signal_docs()
+    from ..emit.generate import signal_fields
+    _, inputs, outputs = signal_fields(b, b.step_function())      # every signal documented, as in the C header
     rows = [(s["name"], k, "input", "Real", unit_of(s["doc"]), s["doc"]) for k, s in enumerate(inputs)]
     rows += [(s["name"], len(inputs) + k, "output", "Real", unit_of(s["doc"]), s["doc"])
              for k, s in enumerate(outputs)]

@@ -34,9 +34,11 @@ import numpy as np
 
 from ..errors import InaccurateSolveError
 
+from ..certificate import text
 from ..design import lock as design_lock
 from ..representation import differentiators
 from .. import families, pipeline
+from ..families.capabilities import BenchFigures, BenchStudy
 from . import harness
 from ..project import observer_file as observers
 
@@ -131,6 +133,8 @@ def bench_design(b) -> dict:
     # single-problem builds (nonlinear_tyre_observer) on the build itself
     settings = b.design.settings if hasattr(b, "design") else b.settings
     builder = b.lmi_problem
+    if builder() is None:
+        return {"status": "the family gives no LMI problem to compare (ObserverBuild.lmi_problem)"}
     out = {}
     for key, reduce in (("ours_clarabel", False), ("ours_clarabel_reduced", True)):
         ours = []
@@ -167,7 +171,7 @@ def bench_observer(name: str) -> dict:
     """Step cost (Python call, batch loop, instructions, flops) and design time of any observer.
 
     The sample is mid-box for the inputs that schedule the step (design lock), small elsewhere,
-    unless the family gives a realistic input sequence (``Family.bench_inputs``, e.g. a periodic
+    unless the family gives a realistic input sequence (``BenchFigures.bench_inputs``, e.g. a periodic
     scenario for steps with differentiators); the state is the one after 50 such samples."""
     from ..extension.build import load
     config = observers.get(name)
@@ -178,7 +182,7 @@ def bench_observer(name: str) -> dict:
     art = json.loads(design_lock.path(config).read_text())
     boxes = {obs.input_names.index(k): v for k, v in art["signals"]["input_boxes"].items()}
     n = 200000
-    sequence = family.bench_inputs(b)
+    sequence = family.bench_inputs(b) if isinstance(family, BenchFigures) else None
     if sequence is None:
         rng = np.random.default_rng(0)
         inp = rng.standard_normal(obs.n_input) * 0.01
@@ -228,7 +232,7 @@ def bench_observer(name: str) -> dict:
         "instructions_per_step": instr,
         "instructions_per_flop": (instr / flops["total"]) if instr else None,
         "design": bench_design(b),
-        "family_figures": family.bench_figures(b),
+        "family_figures": family.bench_figures(b) if isinstance(family, BenchFigures) else {},
     }
 
 
@@ -457,7 +461,8 @@ def main(json_output: bool = False) -> int:
     res = {"observers": {name: bench_observer(name) for name in observers.names()},
            "runtime": bench_runtime(),
            "toolchain": bench_toolchain(), "hosmd": bench_hosmd(), "cortex_m": bench_cortexm()}
-    res["families"] = {name: rows for name in families.names() if (rows := families.get(name).bench_family())}
+    res["families"] = {name: rows for name in families.names()
+                       if isinstance(families.get(name), BenchStudy) and (rows := families.get(name).bench_family())}
     if json_output:
         print(json.dumps(res, indent=1, sort_keys=True))
         return 0
@@ -500,7 +505,7 @@ def main(json_output: bool = False) -> int:
                   f"{p['objective']:.6g}"
                   + ("" if diff is None else f" (objective differs by {100 * diff:.2f} %; vs reduced "
                                              f"{100 * p['objective_rel_diff_reduced']:.2f} %)"))
-        for line in families.get(observers.get(name).family).bench_lines(r["family_figures"]):
+        for line in text.bench_lines(r["family_figures"]):
             print("   " + line)
     r = res["runtime"]
     print(f"== runtime: import + load + first step {r['import_load_first_step_ms']:.1f} ms in a fresh interpreter "
@@ -514,6 +519,6 @@ def main(json_output: bool = False) -> int:
         print("   " + line)
     for name, rows in res["families"].items():
         print(f"== {name}")
-        for line in families.get(name).bench_family_lines(rows):
+        for line in text.bench_study_lines(families.get(name), rows)[1:]:
             print("   " + line)
     return 0

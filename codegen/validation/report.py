@@ -219,6 +219,7 @@ def write_demo(report: dict, runs: dict, out_dir) -> Path:
     :func:`codegen.validation.demo.run_all`; ``runs``: {observer: its run on the shared log}, the
     demo's main real-data observer first."""
     from .. import families
+    from .demo import entry_lines
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     ranking = rank_real_data(runs)
@@ -240,14 +241,14 @@ def write_demo(report: dict, runs: dict, out_dir) -> Path:
         body.append(f'<h2 id="{_slug(n)}">{html.escape(n)} (real data)</h2>')
         body += data_section(n, runs[n], out_dir)
         if n in report:
-            body.append(_pre("\n".join(families.get(report[n]["family"]).demo_lines(report[n]))))
+            body.append(_pre("\n".join(entry_lines(report[n]))))
     for n, e in report.items():
         if n in order:
             continue
         family = families.get(e["family"])
         body.append(f'<h2 id="{_slug(n)}">{html.escape(n)}</h2>')
         body.append(f'<p class="note">{html.escape(family.title)}</p>')
-        body.append(_pre("\n".join(family.demo_lines(e))))
+        body.append(_pre("\n".join(entry_lines(e))))
         for r in e["scenarios"].values():
             body += scenario_section(n, r, out_dir)
     page = out_dir / PAGE

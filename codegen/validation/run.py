@@ -1,6 +1,6 @@
 """``uiogen validate``: an observer's errors on a plant it was not derived from, beside baselines.
 
-Simulated runs (``--scenario``) belong to the observer's family (``Family.validate``: its
+Simulated runs (``--scenario``) belong to the observer's family (``Scenarios.validate``: its
 plants, its paper's table format); logged runs (``--data``) are common to every observer that
 reads the log's signals. Measurements carry seeded white sensor noise where the family's paper
 does (:data:`codegen.validation.common.SENSOR_NOISE`); baselines see the same measurements, so
@@ -49,8 +49,9 @@ def run_scenario(name, scenario, plant: str = "nominal", duration: float | None 
         from . import excitation
         return {"family": config.family, **excitation.run(config, duration, seed, progress=progress,
                                                           observer=observer)}
-    result = families.get(config.family).validate(config, scenario, plant, duration, seed, progress=progress,
-                                                  observer=observer)
+    from ..families.capabilities import Scenarios, require
+    family = require(families.get(config.family), Scenarios)
+    result = family.validate(config, scenario, plant, duration, seed, progress=progress, observer=observer)
     return {"family": config.family, **result}
 
 
@@ -60,14 +61,14 @@ def format_table(result: dict) -> str:
     if result.get("table_format") == "generic":
         from . import excitation
         return excitation.format_table(result)
-    return families.get(result["family"]).format_validation(result)
+    return families.get(result["family"]).validation_table(result)
 
 
 def header(name: str, result: dict) -> str:
-    """The line above the table: scenario, plant, samples, flagged samples."""
-    if result.get("table_format") == "generic":
-        return families.Family.validation_header(families.get(result["family"]), name, result)
-    return families.get(result["family"]).validation_header(name, result)
+    """The line above the table: scenario, plant, samples, flagged samples (:mod:`codegen.certificate.text`)."""
+    from ..certificate.text import validation_header
+    from .common import SETTLE_TIME
+    return validation_header(families.get(result["family"]), name, result, SETTLE_TIME)
 
 
 def plot(result: dict, path: str) -> None:
@@ -261,8 +262,11 @@ def _baselines(config, run) -> dict:
     from . import stanford
     kf, ekf = stanford.linear_kf(run), stanford.ekf(run)
     estimates = {"linear_kf": kf.beta, "ekf": ekf.beta}
-    # the family's peers of the observer's own model and parameter file, in the same run (Family.log_peers)
-    estimates.update(families.get(config.family).log_peers(config, run))
+    # the family's peers of the observer's own model and parameter file, in the same run (LogPeers)
+    from ..families.capabilities import LogPeers
+    family = families.get(config.family)
+    if isinstance(family, LogPeers):
+        estimates.update(family.log_peers(config, run))
     return estimates
 
 
@@ -402,11 +406,14 @@ def format_data_table(result: dict) -> str:
 
 def scenario_names(name) -> tuple:
     """The validation scenarios of an observer: for a built-in one those ``uiogen demo`` runs (its
-    family's ``demo_scenarios``, the papers' on the library's plants), for a project's observer
-    and a family without its own the generic excitation scenario on the model's own equations
-    (the library's plants are of the built-in models)."""
+    family's ``Scenarios.demo_scenarios``, the papers' on the library's plants), for a project's
+    observer and a family without its own the generic excitation scenario on the model's own
+    equations (the library's plants are of the built-in models)."""
+    from ..families.capabilities import Scenarios
     config = observers.get(name) if isinstance(name, str) else name
-    return (tuple(families.get(config.family).demo_scenarios) if config.builtin else ()) or ("excitation",)
+    family = families.get(config.family)
+    own = tuple(family.demo_scenarios) if isinstance(family, Scenarios) and config.builtin else ()
+    return own or ("excitation",)
 
 
 def scenario_inputs(name, scenario, plant: str = "nominal", duration: float | None = None) -> np.ndarray:

@@ -314,13 +314,14 @@ def build_problem(dec: rdeg.Decoupling, settings: AlgebraicSettings) -> tuple:
     return prob, (form, gain_poly, factor_poly, blocks, S, Si, K, fixed)
 
 
-def design(dec: rdeg.Decoupling, settings: AlgebraicSettings) -> AlgebraicDesign:
-    """LMI (39) on Clarabel in balanced coordinates; rounded gains re-certified with numpy."""
+def design(dec: rdeg.Decoupling, settings: AlgebraicSettings, solver) -> AlgebraicDesign:
+    """LMI (39) in balanced coordinates, answered by ``solver`` (:mod:`codegen.design.solver`); rounded
+    gains re-certified with numpy."""
     lpv = dec.lpv
     n, ny = lpv.nx, lpv.ny
     C = np.array(lpv.C.evalf(), dtype=float)
     prob, (form, gain_poly, factor_poly, blocks, S, Si, K, fixed) = build_problem(dec, settings)
-    sol = prob.solve(tol=settings.tol)
+    sol = solver.solve(prob, tol=settings.tol)
     Xs = decimal_round(0.5 * (sol["X"] + sol["X"].T))
     # emitted: solved exactly (codegen.design.canonical), the same on every machine
     Ls = [canonical.solve(Xs, np.atleast_2d(sol[f"K{j + 1}"]).reshape(n, ny)) for j in range(len(K))]
@@ -506,7 +507,7 @@ def amplification(F_stages, h: float) -> np.ndarray:
     return I + h * (GL_B[0] * K[:n] + GL_B[1] * K[n:])
 
 
-def aux_design(lpv: LPVModel, boxes: dict, mode: str, alpha: float, tol: float = 1e-9) -> dict | None:
+def aux_design(lpv: LPVModel, boxes: dict, mode: str, alpha: float, solver, tol: float = 1e-9) -> dict | None:
     """The auxiliary system of the known inputs, integrated by the same Gauss method as the observer.
 
     ``mode = "open_loop"`` is the paper's (20), s' = A s + B u: it is non-expansive (B-stable) if A(rho) has a
@@ -549,7 +550,7 @@ def aux_design(lpv: LPVModel, boxes: dict, mode: str, alpha: float, tol: float =
     else:
         prob.minimize(trace(X))
     try:
-        sol = prob.solve(tol=tol)
+        sol = solver.solve(prob, tol=tol)
     except InfeasibleLMIError as exc:
         if inject:
             raise

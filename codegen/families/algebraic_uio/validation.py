@@ -283,9 +283,3 @@ def format_table(result: dict) -> str:
         lines.append(f"(white output noise, std {result['noise']}; max |a_y| {result['max_abs_ay']:.2f} m/s^2)")
     return "\n".join(lines)
 
-
-def header(name: str, result: dict) -> str:
-    noise = f"white output noise {result['noise']}" if result["noise"] else "noise free"
-    return (f"{name}: scenario {result['scenario']} on {result['plant_model']}, {result['samples']} samples, "
-            f"relative degree {result['relative_degrees']}, {noise}, compiled C step, "
-            f"{result['status_flags']} flagged samples after the first")

@@ -299,10 +299,10 @@ def build_problem(ts: icm.InterconnectedTS, settings: ICDesignSettings):
     return prob, parts
 
 
-def design(ts: icm.InterconnectedTS, settings: ICDesignSettings = ICDesignSettings()) -> ICDesign:
-    """Theorem 1: (26), LMIs (27) on Clarabel, rounded, gains (28)."""
+def design(ts: icm.InterconnectedTS, settings: ICDesignSettings, solver) -> ICDesign:
+    """Theorem 1: (26), LMIs (27) by ``solver`` (:mod:`codegen.design.solver`), rounded, gains (28)."""
     prob, parts = build_problem(ts, settings)
-    sol = prob.solve(tol=settings.tol)
+    sol = solver.solve(prob, tol=settings.tol)
     designs = []
     for sub, H, T, CBp, S, W, Z in parts:
         P = decimal_round(0.5 * (sol[f"P_{sub.name}"] + sol[f"P_{sub.name}"].T))

@@ -13,7 +13,7 @@ observer's exact model (``uiogen validate NAME --plant model``), with the numpy 
 * the sample time (the step at T_s / 10 on a plant sampled at T_s / 10: the continuous limit),
 * the published matrices (Sec. V) in place of ours.
 
-Every re-design is a measurement (solved inside :func:`codegen.design.lmi.recording`, nothing committed).
+Every re-design is a measurement (a fresh solve, nothing committed).
 Not part of the pipeline: ``build.py`` does not import it, so it is no design input.
 """
 from __future__ import annotations
@@ -24,8 +24,8 @@ import sys
 
 import numpy as np
 
-from ...design import lmi
 from ... import pipeline
+from ...design.solver import FreshSolver
 from ...representation import polytope
 from ...validation import simulate
 from ...project.observer_file import get as get_observer
@@ -50,8 +50,7 @@ def _variant(config, polytope_kind=None, gain_bound=None, performance=None, samp
 
 
 def _build(config):
-    with lmi.recording():          # a measurement: nothing goes to a design lock
-        return pipeline.build(config, fresh=True)
+    return pipeline.build(config, FreshSolver())       # a measurement: nothing goes to a design lock
 
 
 def _exact_data(data, lpv):

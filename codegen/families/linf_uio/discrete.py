@@ -36,7 +36,7 @@ import numpy as np
 import sympy as sp
 from scipy.linalg import eigh
 
-from ...design import canonical, lmi
+from ...design import canonical
 from ...errors import CertificateError, ConfigurationError, DiscretizationError, SolverError, UILoopError
 from ...design.lmi import LMIProblem
 from ...representation.polytope import Polytope, sector_weights_product
@@ -502,14 +502,14 @@ def slowest_grid_decay(data: ObserverData, Tf: float | None = None, n_grid: int 
     return worst, at
 
 
-def certify_ui_loop(data: ObserverData) -> UILoopCertificate:
+def certify_ui_loop(data: ObserverData, solver) -> UILoopCertificate:
     """Prove that the observer's full error, UI filter loop closed, contracts over the whole box.
 
     At design time the largest decay rate beta a common Lyapunov function certifies is found by
     bisection (analysis solves below the dense grid's slowest decay, the ceiling), rounded down
     to two significant digits, and solved once more as a design problem: that solution goes to
     the design lock with its beta and Tf, and every later ``generate`` re-checks the committed
-    matrices block by block (numpy) instead of solving.
+    matrices block by block (numpy) instead of solving (``solver``: :mod:`codegen.design.solver`).
 
     Raises
     ------
@@ -517,7 +517,7 @@ def certify_ui_loop(data: ObserverData) -> UILoopCertificate:
         when no common Lyapunov function exists at this filter constant: the message gives what
         was measured (the dense-grid decay, the filter constants that do certify).
     """
-    committed = lmi.committed_data(UI_LOOP_PROBLEM)
+    committed = solver.committed_data(UI_LOOP_PROBLEM)
     if committed is not None:
         beta = float(committed["beta"])
     else:
@@ -531,7 +531,7 @@ def certify_ui_loop(data: ObserverData) -> UILoopCertificate:
         # committed inside the feasible set, not on its edge: the re-check keeps a margin
         beta = _round_down(UI_LOOP_BACKOFF * lo)
     try:
-        sol = _ui_loop_problem(data, beta, data.Tf, design=True).solve(tol=1e-9)
+        sol = solver.solve(_ui_loop_problem(data, beta, data.Tf, design=True), tol=1e-9)
     except (SolverError, CertificateError) as exc:
         raise DiscretizationError(f"the UI filter loop's certificate at decay {beta:g} 1/s failed: {exc}") from None
     return UILoopCertificate(beta, data.Ts, len(sol.checks), float(sol.worst.relative_margin))
@@ -588,7 +588,7 @@ class DiscreteCertificate:
                 "ui_loop_lmi_blocks": self.ui_loop.blocks}
 
 
-def certify_step(data: ObserverData, alpha: float, n_grid: int = 2001) -> DiscreteCertificate:
+def certify_step(data: ObserverData, alpha: float, solver, n_grid: int = 2001) -> DiscreteCertificate:
     """Prove the backward-Euler error dynamics contract over the whole scheduling box.
 
     With V = e' Q(th) e, Q(th) = sum eta_i (P_i + X), the continuous certificate (the
@@ -630,7 +630,7 @@ def certify_step(data: ObserverData, alpha: float, n_grid: int = 2001) -> Discre
             f"cannot certify the Ts={Ts:g} s step: kappa = 1 + 2 alpha Ts - {worst:.4g} = {kappa:.6f} <= 1 "
             f"(the Lyapunov matrix varies too fast between samples); lower Ts, raise alpha, or use "
             f"the quadratic design")
-    ui_loop = certify_ui_loop(data)
+    ui_loop = certify_ui_loop(data, solver)
     # the proof implies the evidence (He(P Aa) < 0 makes every backward-Euler step contract)
     if max(err_r) >= 1.0 or aug_r[k] >= 1.0:
         raise CertificateError(f"the certified Ts={Ts:g} s step has a dense-grid spectral radius "

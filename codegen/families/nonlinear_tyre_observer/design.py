@@ -41,7 +41,7 @@ import numpy as np
 
 from ...design.canonical import decimal_round
 from ...errors import CertificateError, SolverError
-from ...design.lmi import LMIProblem, bmat, check_blocks, committed_data, objective_bound
+from ...design.lmi import LMIProblem, bmat, check_blocks, objective_bound
 
 DEG = 180.0 / np.pi
 CHANNELS = ("force_front", "force_rear", "ay", "r", "euler_vy", "euler_r")
@@ -195,13 +195,13 @@ class Design:
     solution: object
 
 
-def synthesize(plant, decay_verts, gain_verts, settings) -> Design:
-    """Bisection for a*, then the design problem (see the module docstring); replays the committed
-    constants from a design lock instead of searching again."""
+def synthesize(plant, decay_verts, gain_verts, settings, solver) -> Design:
+    """Bisection for a*, then the design problem (see the module docstring), answered by ``solver``
+    (:mod:`codegen.design.solver`); a replay's committed constants stand in for the search."""
     given = settings.given_gains
     D = plant.D
     L_scaled = None if not given else D @ settings.gain @ np.linalg.inv(D)
-    committed = committed_data(problem_name(given))
+    committed = solver.committed_data(problem_name(given))
     if committed is not None:
         best, rate = float(committed["best_decay_rate"]), float(committed["decay_rate"])
     else:
@@ -219,7 +219,7 @@ def synthesize(plant, decay_verts, gain_verts, settings) -> Design:
                                        f"{best:.4g} 1/s (decay {np.sqrt(1 - plant.Ts * best):.6f})")
         else:
             rate = _round_down(settings.decay_fraction * best)
-    sol = lmi_problem(plant, decay_verts, gain_verts, settings, rate, best, L_scaled).solve(tol=settings.tol)
+    sol = solver.solve(lmi_problem(plant, decay_verts, gain_verts, settings, rate, best, L_scaled), tol=settings.tol)
     P = decimal_round(0.5 * (sol["P"] + sol["P"].T))
     if given:
         L = settings.gain

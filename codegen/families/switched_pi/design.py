@@ -204,12 +204,13 @@ def build_problem(sm: SwitchedModel, T: np.ndarray, settings: SwitchedPIDesignSe
     return prob
 
 
-def design(sm: SwitchedModel, settings: SwitchedPIDesignSettings = SwitchedPIDesignSettings()) -> SwitchedPIDesign:
-    """Algorithm 1 on Clarabel; P, Gamma_ai and gamma^2 rounded to 12 digits before anything else."""
+def design(sm: SwitchedModel, settings: SwitchedPIDesignSettings, solver) -> SwitchedPIDesign:
+    """Algorithm 1, the LMIs answered by ``solver`` (:mod:`codegen.design.solver`); P, Gamma_ai and
+    gamma^2 rounded to 12 digits before anything else."""
     T, N = decoupling_matrices(sm.C[0])
     check_assumptions(sm, T)
     prob = build_problem(sm, T, settings)
-    sol = prob.solve(tol=settings.tol)
+    sol = solver.solve(prob, tol=settings.tol)
     P = decimal_round(0.5 * (sol["P"] + sol["P"].T))
     n_a, m = sm.n + sm.nw, sm.m
     G = tuple(decimal_round(np.asarray(sol[f"Gamma_a{i + 1}"]).reshape(n_a, m)) for i in range(sm.n_modes))

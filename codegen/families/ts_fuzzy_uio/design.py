@@ -232,12 +232,13 @@ def build_problem(ts: TSFuzzyModel, T: np.ndarray, settings: TSDesignSettings, r
     return prob
 
 
-def design(ts: TSFuzzyModel, settings: TSDesignSettings = TSDesignSettings()) -> TSDesign:
-    """Algorithm 1: rank conditions, (30), LMIs (27) on Clarabel, rounded and re-certified."""
+def design(ts: TSFuzzyModel, settings: TSDesignSettings, solver) -> TSDesign:
+    """Algorithm 1: rank conditions, (30), LMIs (27) by ``solver`` (:mod:`codegen.design.solver`),
+    rounded and re-certified."""
     T, N = decoupling_matrices(ts)
     size = size_guard(ts.n_rules, ts.nx, ts.ny, int(ts.theta_vertices.shape[0]), settings, ts.definition.name)
     prob = build_problem(ts, T, settings, size["relaxation"])
-    sol = prob.solve(tol=settings.tol)
+    sol = solver.solve(prob, tol=settings.tol)
     n = ts.n_rules
     P = tuple(decimal_round(0.5 * (sol[f"P{i + 1}"] + sol[f"P{i + 1}"].T)) for i in range(n))
     M = tuple(decimal_round(sol[f"M{i + 1}"]) for i in range(n))
