@@ -285,8 +285,10 @@ def cmd_validate(args) -> int:
         if args.plot:
             validate.plot_data(result, args.plot)
         if args.json:
+            from .validation.metrics import DEFINITIONS
             keys = ("observer", "baselines", "estimates", "status_flags", "samples", "splits", "peaks")
-            print(json.dumps({k: result[k] for k in keys if k in result}, indent=1, sort_keys=True))
+            print(json.dumps({**{k: result[k] for k in keys if k in result}, "definitions": DEFINITIONS},
+                             indent=1, sort_keys=True))
             return 0
         print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} flagged")
         print(validate.format_data_table(result))

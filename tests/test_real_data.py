@@ -40,11 +40,13 @@ def test_cli_json_format(tmp_path):
                            "stanford", "--json"], capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr
     res = json.loads(proc.stdout)
-    assert set(res) == {"observer", "baselines", "status_flags", "samples", "peaks", "splits"}
+    assert set(res) == {"observer", "baselines", "status_flags", "samples", "peaks", "splits", "definitions"}
     assert res["splits"]["t_split"] == 137.5 and res["splits"]["evaluation"]["samples"] == 13750
     assert set(res["baselines"]) == {"linear_kf", "ekf"}
     assert [round(p["t"]) for p in res["peaks"]] == [110, 170, 207]      # the three large-sideslip peaks
     assert res["samples"] > 20000 and res["status_flags"] >= 0
     for table in (res["observer"], *res["baselines"].values()):
         assert set(table) == {"beta", "vy"}
-        assert {"rms", "mae", "max"} <= set(table["beta"])
+        assert {"rms", "mae", "max", "truth_rms", "rms_percent"} <= set(table["beta"])
+        assert (table["beta"]["unit"], table["beta"]["converted_from"], table["vy"]["unit"]) == ("deg", "rad", "m/s")
+    assert res["splits"]["unit"] == "deg"

@@ -20,7 +20,9 @@ A column's value in the model's unit is ``value * unit factor * scale`` (:mod:`c
 parses the map with the observer file). The log is read by
 :mod:`codegen.validation.csvlog` (separator, decimal mark, finite values, the sample time of the
 observer, no gaps). Estimates with a reference get the error statistics of every validation
-(``observer.SIGNAL.rms`` ...); the others a summary (``estimates.SIGNAL.mean`` ...).
+(``observer.SIGNAL.rms``, ``unit``, ``truth_rms``, ``rms_percent`` ...:
+:func:`codegen.validation.metrics.signal_report`); the others a summary in the same unit
+(``estimates.SIGNAL.mean``, ``unit`` ...).
 """
 from __future__ import annotations
 
@@ -32,7 +34,8 @@ from ..project.columns import UNITS, ColumnMap, factor, model_unit, normalize_un
 from ..errors import ConfigurationError, DatasetError
 from ..project.settings import config_error, suggest
 from . import csvlog
-from .common import signal_stats
+from . import metrics
+from .common import format_stats, signal_stats
 
 def _read(path, cmap: ColumnMap, names: dict, sample_time: float) -> tuple:
     p = Path(path)
@@ -80,7 +83,7 @@ def run(config, path) -> dict:
     inputs = np.column_stack([cols[n] * scale[n] for n in obs.input_names])
     out, status, _ = obs.run(inputs)
     t = t - t[0]
-    angle = {n: normalize_unit(model_unit(model, n) or "") == "rad" for n in obs.output_names}
+    units = {n: model_unit(model, n) for n in obs.output_names}
     compared, summary, signals = {}, {}, {"t": t}
     for j, name in enumerate(obs.output_names):
         est = out[:, j]
@@ -88,11 +91,14 @@ def run(config, path) -> dict:
         if name in cmap.truth:
             ref = cols[f"truth:{name}"] * scale[f"truth:{name}"]
             signals[f"{name}_truth"] = ref
-            compared[name] = signal_stats(ref, est, t, angle=angle[name])
+            compared[name] = signal_stats(ref, est, t, unit=units[name])
         else:
-            shown = np.degrees(est) if angle[name] else est
-            summary[name] = {"mean": float(shown.mean()), "std": float(shown.std()), "min": float(shown.min()),
-                             "max": float(shown.max())}
+            unit, scale, converted = metrics.reported_unit(units[name])
+            shown = est * scale
+            summary[name] = {"unit": unit, "mean": float(shown.mean()), "std": float(shown.std()),
+                             "min": float(shown.min()), "max": float(shown.max())}
+            if converted is not None:
+                summary[name]["converted_from"] = converted
     if not len(t):
         raise DatasetError(f"{path}: no samples")
     return {"kind": "column_map", "observer": compared, "estimates": summary, "baselines": {},
@@ -103,12 +109,11 @@ def run(config, path) -> dict:
 def format_table(result: dict) -> str:
     lines = []
     if result["observer"]:
-        lines.append(f"{'signal':12s} {'RMS':>10s} {'max':>10s} {'MAE':>10s} {'NMSE %':>8s}   (angles in degrees)")
-        for name, s in result["observer"].items():
-            nmse = "-" if s.get("nmse_percent") is None else f"{s['nmse_percent']:.2f}"
-            lines.append(f"{name:12s} {s['rms']:10.4g} {s['max']:10.4g} {s['mae']:10.4g} {nmse:>8s}")
+        lines.append(format_stats(result["observer"]))
     if result["estimates"]:
-        lines.append(f"{'estimate':12s} {'mean':>10s} {'std':>10s} {'min':>10s} {'max':>10s}   (no reference column)")
+        lines.append(f"{'estimate':12s} {'unit':>7s} {'mean':>10s} {'std':>10s} {'min':>10s} {'max':>10s}   "
+                     f"(no reference column)")
         for name, s in result["estimates"].items():
-            lines.append(f"{name:12s} {s['mean']:10.4g} {s['std']:10.4g} {s['min']:10.4g} {s['max']:10.4g}")
+            unit = (s.get("unit") or "–") + ("*" if s.get("converted_from") else "")
+            lines.append(f"{name:12s} {unit:>7s} {s['mean']:10.4g} {s['std']:10.4g} {s['min']:10.4g} {s['max']:10.4g}")
     return "\n".join(lines)

@@ -15,6 +15,7 @@ import numpy as np
 from .. import families
 from ..project import observer_file as observers
 from ..errors import SampleError
+from . import metrics
 from .common import SETTLE_TIME, signal_stats
 
 __all__ = ["SETTLE_TIME", "run_scenario", "format_table", "header", "plot", "to_json", "run_data",
@@ -76,10 +77,10 @@ def plot(result: dict, path: str) -> None:
     names = [n for n in sig["estimate"] if n in sig["truth"]]
     fig, axes = plt.subplots(len(names), 1, figsize=(9, 2.2 * len(names)), sharex=True)
     for ax, n in zip(np.atleast_1d(axes), names):
-        scale = 180 / np.pi if result["units"].get(n, "").startswith("rad") else 1.0
+        unit, scale, _ = metrics.reported_unit(result["units"].get(n))
         ax.plot(sig["t"], sig["truth"][n] * scale, "k", lw=1.0, label="truth")
         ax.plot(sig["t"], sig["estimate"][n] * scale, "r--", lw=1.0, label="observer")
-        ax.set_ylabel(n + (" [deg]" if scale != 1.0 else ""))
+        ax.set_ylabel(n + (f" [{unit}]" if unit else ""))
     np.atleast_1d(axes)[0].legend(loc="upper right")
     np.atleast_1d(axes)[-1].set_xlabel("t [s]")
     fig.suptitle(f"{result['scenario']} on the {result['plant']} plant")
@@ -89,8 +90,12 @@ def plot(result: dict, path: str) -> None:
 
 
 def to_json(result: dict) -> str:
-    return json.dumps({k: result[k] for k in ("observer", "baselines", "plant", "plant_model", "scenario",
-                                              "status_flags", "samples", "max_abs_ay")}, indent=1, sort_keys=True)
+    """``uiogen validate --json``: every row in the one definition (``definitions`` says what each
+    key means and in which unit), and the family's paper format beside it (``paper_format``)."""
+    keys = ("observer", "baselines", "plant", "plant_model", "scenario", "status_flags", "samples", "max_abs_ay",
+            "paper_format")
+    return json.dumps({**{k: result[k] for k in keys if k in result}, "definitions": metrics.DEFINITIONS},
+                      indent=1, sort_keys=True)
 
 
 DATA_COLUMNS = {"delta": "delta", "y_r": "yaw_rate", "y_a_y": "ay", "v_x": "vx", "y_delta": "delta",
@@ -124,8 +129,11 @@ def run_data(name, path: str = "stanford") -> dict:
     An observer file with a ``[data]`` table maps the log's own columns (:mod:`codegen.validation.logs`);
     otherwise the log is in the shared (Stanford) CSV format.
 
-    Returns ``{"observer": {SIGNAL: {"rms", "mae", "max", "std"}}, "baselines": {...}}`` with
-    SIGNAL ``beta`` [deg] and ``vy`` [m/s] (v_y = v_x tan(beta)), plus the signals for plots.
+    Returns ``{"observer": {SIGNAL: row}, "baselines": {...}}``, rows in the one definition of
+    :func:`codegen.validation.metrics.signal_report` over the whole log, with SIGNAL ``beta`` (in
+    deg, converted from the log's rad) and ``vy`` [m/s] (v_y = v_x tan(beta)), plus the signals for
+    plots; ``splits`` (sideslip RMS per part of the log, in ``splits.unit``) where the log has an
+    evaluation part.
     """
     from ..extension.build import load
     from ..project.observer_file import get
@@ -152,12 +160,12 @@ def run_data(name, path: str = "stanford") -> dict:
     if "delta" in outputs and "y_delta" not in obs.input_names and "delta" not in obs.input_names:
         # delta is an unknown input of the observer (one sample late): the log's measured delta checks it
         delta_hat = np.concatenate([out[1:, outputs.index("delta")], [np.nan]])
-        extra["delta"] = signal_stats(run.delta[:-1], delta_hat[:-1], angle=True)
+        extra["delta"] = signal_stats(run.delta[:-1], delta_hat[:-1], unit="rad")
     t = run.t - run.t[0]
 
     def table(b):
-        return {"beta": signal_stats(run.beta_true, b, angle=True),
-                "vy": signal_stats(run.vx * np.tan(run.beta_true), run.vx * np.tan(b))}
+        return {"beta": signal_stats(run.beta_true, b, unit="rad"),
+                "vy": signal_stats(run.vx * np.tan(run.beta_true), run.vx * np.tan(b), unit="m/s")}
 
     kf, ekf = stanford.linear_kf(run), stanford.ekf(run)
     estimates = {"linear_kf": kf.beta, "ekf": ekf.beta}
@@ -171,7 +179,7 @@ def run_data(name, path: str = "stanford") -> dict:
     if split is not None:
         def rms(b, m):
             return float(np.degrees(np.sqrt(np.mean((b - run.beta_true)[m] ** 2))))
-        result["splits"] = {"t_split": split, "identification": {"samples": int((t < split).sum())},
+        result["splits"] = {"t_split": split, "unit": "deg", "identification": {"samples": int((t < split).sum())},
                             "evaluation": {"samples": int((t >= split).sum())}}
         for part, m in (("identification", t < split), ("evaluation", t >= split)):
             result["splits"][part].update({"observer": rms(beta, m), **{k: rms(b, m) for k, b in estimates.items()}})
@@ -282,6 +290,10 @@ def format_data_table(result: dict) -> str:
         for name, t in rows:
             lines.append(f"{name:18s} {t['beta']['rms']:10.4f} {t['beta']['max']:9.4f} {t['beta']['mae']:9.4f} "
                          f"{t['vy']['rms']:9.4f}")
+    truth = result["observer"]["beta"]
+    if truth.get("truth_rms"):
+        lines.append(f"beta truth RMS {truth['truth_rms']:.4f} deg on the whole log; its RMSE in % of it: "
+                     + ", ".join(f"{name} {t['beta']['rms_percent']:.1f} %" for name, t in rows))
     for pk in result.get("peaks", ()):
         lines.append(f"peak t = {pk['t']:g} s (truth peak {pk['truth_peak_deg']:.2f} deg), max |beta error| within "
                      f"+-{PEAK_HALF_WIDTH:g} s: " + ", ".join(f"{k} {v:.2f}" for k, v in pk.items()

@@ -55,7 +55,7 @@ class LinfUIO(Family):
         from ...validation.common import SETTLE_TIME
         return (f"{name}: scenario {result['scenario']} on the {result['plant']} plant ({result['plant_model']}), "
                 f"{result['samples']} samples, max |a_y| {result['max_abs_ay']:.2f} m/s^2, {result['status_flags']} "
-                f"flagged samples; errors after {SETTLE_TIME:g} s (angles in degrees)")
+                f"flagged samples; errors after {SETTLE_TIME:g} s")
 
     def demo_report(self, art: dict) -> dict:
         return {"gamma": art["gamma"], "gamma_quadratic": art["quadratic"]["gamma"],

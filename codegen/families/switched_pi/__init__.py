@@ -50,7 +50,7 @@ class SwitchedPI(Family):
         from ...validation.common import SETTLE_TIME
         return (f"{name}: scenario {result['scenario']} on the {result['plant']} plant ({result['plant_model']}), "
                 f"{result['samples']} samples, max |a_y| {result['max_abs_ay']:.2f} m/s^2, {result['status_flags']} "
-                f"flagged samples; errors after {SETTLE_TIME:g} s (angles in degrees)")
+                f"flagged samples; errors after {SETTLE_TIME:g} s")
 
     def demo_report(self, art: dict) -> dict:
         return {"gamma": art["gamma"], "hinf": art["certificate"]["hinf"],

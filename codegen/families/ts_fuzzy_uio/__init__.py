@@ -49,7 +49,7 @@ class TSFuzzyUIO(Family):
         from ...validation.common import SETTLE_TIME
         return (f"{name}: scenario {result['scenario']} on the {result['plant']} plant ({result['plant_model']}), "
                 f"{result['samples']} samples, max |a_y| {result['max_abs_ay']:.2f} m/s^2, {result['status_flags']} "
-                f"flagged samples; errors after {SETTLE_TIME:g} s (SI units, the paper's Table II format)")
+                f"flagged samples; errors after {SETTLE_TIME:g} s (the paper's Table II format, then every figure)")
 
     def demo_report(self, art: dict) -> dict:
         cert = art["certificate"]["recheck"]
