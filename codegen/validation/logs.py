@@ -93,8 +93,8 @@ def run(config, path) -> dict:
             signals[f"{name}_truth"] = ref
             compared[name] = signal_stats(ref, est, t, unit=units[name])
         else:
-            unit, scale, converted = metrics.reported_unit(units[name])
-            shown = est * scale
+            unit, to_shown, converted = metrics.reported_unit(units[name])
+            shown = est * to_shown
             summary[name] = {"unit": unit, "mean": float(shown.mean()), "std": float(shown.std()),
                              "min": float(shown.min()), "max": float(shown.max())}
             if converted is not None:
