@@ -14,7 +14,7 @@ extern "C" {
 
 /* stanford_sideslip_nonlinear_tyre: Sideslip at the limit of adhesion for Stanford's Ferrari 250 LM (real data in ../shared/data): a nonlinear single-track observer with a Fiala (brush) tyre per axle and combined slip from the measured a_x; its gains are designed by LMIs jointly with the Lyapunov matrix over the slip set it certifies. Measured delta, a_x, a_y, r, v_x. The tyre parameters and the noise levels below were identified on samples 0-13749 of the shared half only (`uiogen fit`, see the parameter file).
  *
- * Discrete-time step at Ts = 0.01 s (common quadratic Lyapunov matrix over the vertices of (1/v_x, theta_f, theta_r): sqrt(V) contracts by 0.999355 per step while the true and the estimated state stay in the certified set; l2 gain 0.521 deg from the normalized disturbances to the sideslip error on the gain set). One call = one sample.
+ * Discrete-time step at Ts = 0.01 s (common quadratic Lyapunov matrix over the vertices of (1/v_x, theta_f, theta_r): sqrt(V) contracts by 0.999330 per step while the true and the estimated state stay in the certified set; l2 gain 0.521 deg from the normalized disturbances to the sideslip error on the gain set). One call = one sample.
  * Each call takes the measurements of sample k and returns the estimate of sample k made
  * from the samples before it; the state's head is the prediction for sample k+1.
  * A flagged sample integrates the kinematics v_y' = a_y - r v_x (no tyre correction).

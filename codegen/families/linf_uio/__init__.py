@@ -28,7 +28,7 @@ class LinfUIO(Family):
                      "rate_bounds": Rule(str, choices=("exact", "at_expansion_point", "none")),
                      "ui_filter": Rule(dict)}
     demo_scenarios = ("track_varying_speed", "takeover_opposing_assist")
-    example = "lpv_linf_driver_torque"
+    example = "lpv_linf_driver_torque_sector"      # starters use the exact polytope (the paper's is an approximation)
     campaign_plant = "steering_torque"
     certified_gain_norm = "peak"
 
@@ -100,6 +100,7 @@ class LinfUIO(Family):
                 raise ConfigurationError(f"gains: {label} has shape {m.shape}, expected {shape}", key=label)
         make = polytope.taylor_reduced_polytope if poly.kind == "taylor_reduced" else polytope.sector_polytope
         out = {"observer": config.name, "alpha": alpha, "form": "theorem_1", "results": {},
+               "polytope": poly.kind, "polytope_form": polytope.FORMS[poly.kind],
                "performance": list(performance) or [str(x) for x in lpv.definition.states]}
         for mode in ("exact", "at_expansion_point") if poly.kind == "taylor_reduced" else ("exact",):
             p = make(lpv, mode)

@@ -123,7 +123,8 @@ class LinfBuild(ObserverBuild):
         return {
             "observer": self.name, "artifact": str(path),
             "gamma": self.design.gamma, "gamma_quadratic": self.quadratic.gamma,
-            "vertices": self.poly.n_vertices, "polytope": self.poly.kind, "lyapunov": self.design.settings.lyapunov,
+            "vertices": self.poly.n_vertices, "polytope": self.poly.kind, "polytope_form": polytope.FORMS[self.poly.kind],
+            "lyapunov": self.design.settings.lyapunov,
             "solve_time_s": sol.solve_time_s, "build_time_s": sol.build_time_s,
             "total_design_time_s": sum(self.timings.values()),
             "solver_iterations": sol.iterations,
@@ -140,7 +141,9 @@ class LinfBuild(ObserverBuild):
         }
 
     def summary_lines(self, s: dict) -> list:
-        lines = [f"observer {self.name}: {FAMILY_TITLE}, {s['polytope']} polytope, {s['vertices']} vertices",
+        exact = s["polytope"] == "sector"
+        lines = [f"observer {self.name}: {FAMILY_TITLE}, {s['polytope']} polytope "
+                 f"({'exact' if exact else polytope.APPROXIMATION}), {s['vertices']} vertices",
                  f"  gamma ({s['lyapunov']:9s})      {s['gamma']:.6g}   (quadratic: {s['gamma_quadratic']:.6g})",
                  f"  re-checked gamma        {s['recheck_gamma']:.6g}   (numpy, no solver)",
                  f"  solve / build time      {1e3 * s['solve_time_s']:.1f} ms / {1e3 * s['build_time_s']:.1f} ms "
@@ -155,7 +158,8 @@ class LinfBuild(ObserverBuild):
         if s["taylor_error"]:
             te = s["taylor_error"]
             lines.append(f"  Taylor-reduction error  {te['max_abs_error']:.4g} on A{tuple(te['entry'])} at "
-                         f"{self.poly.signal}={te['at']:g} ({100 * te['relative_error_there']:.1f}% of the entry)")
+                         f"{self.poly.signal}={te['at']:g} ({100 * te['relative_error_there']:.1f}% of the entry): "
+                         f"{polytope.APPROXIMATION}; polytope = \"sector\" is the exact form")
         lines.append(f"artifact: {s['artifact']}")
         return lines
 
@@ -172,7 +176,7 @@ def _settings(config: ObserverConfig, lyapunov: str | None = None) -> linf_uio.L
         linf_uio.LinfDesignSettings, config.design, source=config.source, section="design",
         aliases={"gain_bound_times_sample_time": Alias("gain_bound", lambda v: v / config.sample_time, default=1.0)},
         **({"lyapunov": lyapunov} if lyapunov else {}))
-    states = [str(x) for x in config.load_model().states]
+    states = [str(x) for x in config.design_model().states]
     try:
         linf_uio.performance_matrix(states, settings.performance)
     except ValueError as exc:
@@ -187,7 +191,7 @@ def _settings(config: ObserverConfig, lyapunov: str | None = None) -> linf_uio.L
 
 
 def representation(config: ObserverConfig):
-    lpv = instantiate(config.load_model(), load_parameters(config.parameter_path))
+    lpv = instantiate(config.design_model(), load_parameters(config.parameter_path))
     if config.polytope == "taylor_reduced":
         poly = polytope.taylor_reduced_polytope(lpv, config.rate_bounds)
         err = polytope.taylor_error(lpv, poly)

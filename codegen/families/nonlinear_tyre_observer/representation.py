@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
-from ...representation.bounds import range_bound
+from ...representation.bounds import Interval, range_bound
 from ...errors import CertificateError, ModelDefinitionError, SchedulingBoundsError
 from ...model import parameter_substitution
 
@@ -92,7 +92,9 @@ def _check_structure(model, source):
             or [n for n, _ in model.outputs] != ["a_y", str(model.states[1])]:
         raise ModelDefinitionError(f"{source}: model {model.name!r}: the nonlinear-tyre observer needs states "
                                    f"(v_y, r), known inputs (delta first, then any measured signal the tyre laws "
-                                   f"read, e.g. a_x), one scheduling signal (v_x) and outputs (a_y, r)")
+                                   f"read, e.g. a_x), one scheduling signal (v_x) and outputs (a_y, r). Another "
+                                   f"structure: the L-infinity UIO (family linf_uio) takes outputs C(rho) x + "
+                                   f"Du(rho) u, the TS fuzzy UIO (ts_fuzzy_uio) tyre laws of measured states")
 
 
 def _axle_bounds(k, a, subs, measured_boxes, rho, delta, d_box, t_sym, vx, vy, stiffness_range, friction_range,
@@ -135,12 +137,12 @@ def _axle_bounds(k, a, subs, measured_boxes, rho, delta, d_box, t_sym, vx, vy, s
     rl = range_bound(slope_b, {s: v for s, v in slope_box.items() if s in slope_b.free_symbols}, rel_tol=rel_tol,
                      relative_cuts=True)
     if factor != (1.0, 1.0) or slope_b is not slope:
-        ends_ = [rl.lower * factor[0], rl.lower * factor[1], rl.upper * factor[0], rl.upper * factor[1]]
-        rl = type(rl)(min(ends_), max(ends_), rl.attained_min * factor[0], rl.attained_max * factor[1],
+        scaled = Interval(rl.lower, rl.upper) * Interval(*factor)          # rounded outward
+        rl = type(rl)(scaled.lo, scaled.hi, rl.attained_min * factor[0], rl.attained_max * factor[1],
                       rl.boxes_examined)
     t_sl_max = range_bound(sliding, {s: v for s, v in {F: (pk.lower, pk.upper), **ranged}.items()
                                      if s in sliding.free_symbols}, rel_tol=rel_tol, relative_cuts=True).upper
-    t_lim = rho * t_sl_max
+    t_lim = (Interval(rho, rho) * Interval(t_sl_max, t_sl_max)).hi       # rounded up: the set is covered
     kin = sp.factor(sp.trigsimp(sp.cancel((vx * sp.diff(sp.sympify(a.slip).subs(subs), vy)).subs(
         vy, sp.sympify(a.inverse).subs(subs)))))
     geo = sp.sympify(a.projection).subs(subs) * kin
@@ -153,8 +155,8 @@ def _axle_bounds(k, a, subs, measured_boxes, rho, delta, d_box, t_sym, vx, vy, s
         raise CertificateError(f"{source}: axle {a.name}: on |t| <= {rho:g} t_sl the tyre slope's sound lower bound is "
                                f"{rl.lower:.4g} N (the kinematic factor's upper bound {rg.upper:.4g}), not > 0 (< 0): "
                                f"near full sliding v_y is not observable from (a_y, r); lower the sliding fraction")
-    ends = [rl.lower * rg.lower, rl.lower * rg.upper, rl.upper * rg.lower, rl.upper * rg.upper]
-    theta = (min(ends), max(ends))
+    product = Interval(rl.lower, rl.upper) * Interval(rg.lower, rg.upper)   # rounded outward
+    theta = (product.lo, product.hi)
     # attained: the product evaluated jointly on a grid of the set (tau, the ranged parameters, the
     # capacity's range, delta); every value lies inside the sound bounds
     slope_fn = sp.lambdify([tau, F, *ranged], slope, "math")

@@ -156,7 +156,7 @@ def build(config: ObserverConfig, tol: float | None = None) -> TSFuzzyBuild:
     settings = parse_settings(ts_fuzzy_uio.TSDesignSettings, config.design, source=config.source, section="design",
                               **({"tol": tol} if tol is not None else {}))
     t0 = time.perf_counter()
-    ts = ts_fuzzy.build(config.load_model(), load_parameters(config.parameter_path), config.sample_time,
+    ts = ts_fuzzy.build(config.design_model(), load_parameters(config.parameter_path), config.sample_time,
                         rel_tol=settings.bounds_rel_tol, max_boxes=settings.bounds_max_boxes,
                         before_bounds=lambda n, nx, ny, nphi: ts_fuzzy_uio.size_guard(n, nx, ny, 1, settings,
                                                                                       config.source))
