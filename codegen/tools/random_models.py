@@ -509,6 +509,79 @@ def draw_ts(rng) -> RandomModel:
                        {"model.py": model, "parameters.toml": _params_toml(values, tables), f"{name}.toml": observer})
 
 
+# -- interconnected_uio, nonlinear_tyre_observer: their built-in model, its parameters dispersed ------
+
+#: {family: (built-in observer file, {parameter: relative half-width of its dispersion}, parameters drawn
+#: with the same factor as another (mu_r as mu_f))}: the physical parameters of the car; a gravity,
+#: a force share or a floor is no property of another car
+DISPERSED = {
+    "interconnected_uio": ("interconnected_uio", dict.fromkeys(
+        ("m", "I_z", "C_f", "C_r", "C_lf", "C_lr", "I_wf", "I_wr", "I_s", "B_s", "t_sb", "c_a", "sigma", "l_w"), 0.2)
+        | dict.fromkeys(("l_f", "l_r", "R", "l_s", "R_s"), 0.1), {}),
+    "nonlinear_tyre_observer": ("stanford_sideslip_nonlinear_tyre", dict.fromkeys(
+        ("m", "I_z", "C_f", "C_r"), 0.2) | {"l_f": 0.1, "l_r": 0.1, "mu_f": 0.15}, {"mu_r": "mu_f"}),
+}
+
+
+def _disperse(text: str, rng, spread: dict, tied: dict) -> tuple:
+    """The parameter file ``text`` with each ``[parameters]`` value named in ``spread`` multiplied
+    by a factor drawn uniformly in 1 +- its half-width (``tied``: parameters taking another's
+    factor); comments and every other table kept. Returns (text, {parameter: factor})."""
+    out, section, factors = [], None, {}
+    for line in text.splitlines():
+        head = line.strip()
+        if head.startswith("[") and head.endswith("]") or head.startswith("[") and "#" in head:
+            section = head.split("#")[0].strip()
+        key, _, rest = line.partition("=")
+        key = key.strip()
+        if section == "[parameters]" and (key in spread or key in tied) and rest:
+            value, _, comment = rest.partition("#")
+            k = factors.get(tied[key]) if key in tied else None
+            if k is None:
+                k = float(rng.uniform(1.0 - spread[key], 1.0 + spread[key]))
+            factors[key] = k
+            line = f"{key} = {_fmt(float(value) * k)}" + (f"  # {comment.strip()} (x {k:.3f})" if comment else "")
+        out.append(line)
+    missing = sorted(set(spread) - set(factors))
+    if missing:
+        raise KeyError(f"not in the [parameters] of the built-in file: {missing}")
+    return "\n".join(out) + "\n", factors
+
+
+def _draw_dispersed(family: str, rng) -> RandomModel:
+    """The family's built-in observer on a car whose physical parameters are drawn around the
+    built-in car's (:data:`DISPERSED`); the model and every design setting are the built-in ones."""
+    from ..project import observer_file as observers
+    builtin, spread, tied = DISPERSED[family]
+    config = observers.get(builtin)
+    params, factors = _disperse(Path(config.parameter_path).read_text(), rng, spread, tied)
+    if family == "nonlinear_tyre_observer":
+        # the braking share is the static front load share l_r / (l_f + l_r) of the drawn car
+        vals = {}
+        for line in params.splitlines():
+            key, _, rest = line.partition("=")
+            if key.strip() in ("l_f", "l_r") and rest:
+                vals[key.strip()] = float(rest.split("#")[0])
+        share = vals["l_r"] / (vals["l_f"] + vals["l_r"])
+        params = "\n".join(f"brake_front = {_fmt(share)}  # l_r / (l_f + l_r) of the drawn car"
+                           if ln.startswith("brake_front") else ln for ln in params.splitlines()) + "\n"
+    lines = Path(config.source).read_text().splitlines()
+    observer = "\n".join(f'parameters = "parameters.toml"' if ln.startswith("parameters =") else ln for ln in lines)
+    structure = {"states": None, "dispersed": {k: round(v, 4) for k, v in factors.items()}}
+    name = f"{builtin}_dispersed_{int(rng.integers(10 ** 6)):06d}"
+    return RandomModel(family, name, structure, {"parameters.toml": params, f"{name}.toml": observer + "\n"})
+
+
+def draw_interconnected(rng) -> RandomModel:
+    """Sentouh et al. 2023's interconnected model (fixed by its theory) on a drawn car."""
+    return _draw_dispersed("interconnected_uio", rng)
+
+
+def draw_nonlinear_tyre(rng) -> RandomModel:
+    """The nonlinear-tyre single-track observer (fixed model) on a drawn car."""
+    return _draw_dispersed("nonlinear_tyre_observer", rng)
+
+
 def _name(prefix: str, s: dict) -> str:
     parts = [prefix, f"{s['states']}x", f"{s['outputs']}y", f"{s['known_inputs']}u", f"{s['unknown_inputs']}d"]
     parts += [tag for key, tag in (("output_combinations", "mix"), ("ui_feedthrough", "ff"),
@@ -532,7 +605,8 @@ def _describe(s: dict) -> str:
 # -- running a draw ----------------------------------------------------------------------------------
 
 DRAWERS = {"linf_uio": draw_linf, "ts_fuzzy_uio": draw_ts, "switched_pi": draw_switched,
-           "algebraic_uio": draw_algebraic}
+           "algebraic_uio": draw_algebraic, "interconnected_uio": draw_interconnected,
+           "nonlinear_tyre_observer": draw_nonlinear_tyre}
 
 
 def draw(family: str, seed: int) -> RandomModel:
