@@ -101,8 +101,8 @@ def test_a_drawn_model_is_designed_built_and_conforms(family, what, want, tmp_pa
     _conforms(outcome)
 
 
-# draws per family of the long run: fewer where one design takes minutes (the interconnected UIO's
-# two-stage LMIs: about 10 min on a shared 2-core machine; the others 10-90 s)
+# draws per family of the long run: fewer where a draw takes longer (the interconnected UIO about 70 s
+# alone, ten minutes on a loaded 2-core machine; the algebraic chain about 90 s; the others 4-35 s)
 LONG_DRAWS = {"linf_uio": 6, "ts_fuzzy_uio": 6, "switched_pi": 6, "algebraic_uio": 3, "nonlinear_tyre_observer": 2,
               "interconnected_uio": 1}
 
