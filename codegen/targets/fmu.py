@@ -100,7 +100,7 @@ def _zip(out: Path, files: dict) -> None:
 
 def export_fmu(observer, out, log=print) -> Path:
     """Write the FMU of ``observer`` (a built-in name, an observer file or a config) to ``out``."""
-    from ..extension.build import generated_dir
+    from ..extension.build import check_generated, generated_dir, require_current
     config = observer if isinstance(observer, observers.ObserverConfig) else observers.get(str(observer))
     out = Path(out)
     if out.suffix != ".fmu":
@@ -115,6 +115,8 @@ def export_fmu(observer, out, log=print) -> Path:
     if missing:
         raise UnknownObserverError(f"observer {name!r} has not been generated (no {src_dir / missing[0]}); "
                                    f"run `uiogen generate {name if config.builtin else config.source}`")
+    require_current(config)        # the committed design is the current one,
+    check_generated(config)        # and the C is what generate wrote from it (its stamp), never as found
     b = pipeline.build(config)
     sources = {f: (src_dir / f).read_text() for f in c_files}
     digest = hashlib.sha256("".join(f + sources[f] for f in c_files).encode())
