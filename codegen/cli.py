@@ -294,9 +294,11 @@ def cmd_validate(args) -> int:
             with outputs.writing(args.report):
                 page = report.write_validation(args.name, result, args.report, data=True)
         if args.json:
+            from .validation.metrics import DEFINITIONS
             keys = ("observer", "baselines", "estimates", "status_flags", "samples", "splits", "peaks", "warnings",
                     "log_checks", "baselines_skipped")
-            print(json.dumps({k: result[k] for k in keys if k in result}, indent=1, sort_keys=True))
+            print(json.dumps({**{k: result[k] for k in keys if k in result}, "definitions": DEFINITIONS},
+                             indent=1, sort_keys=True))
             return 0
         warned = f", {len(result['warnings'])} warning(s) below" if result.get("warnings") else ""
         print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} flagged{warned}")

@@ -354,10 +354,13 @@ def test_noise_free_examples_reach_1e_6(name):
     assert res["status_flags"] == 0
     conv = res["differentiator_convergence"]
     assert conv["t_c"] < 3.0
-    for sig, row in res["observer"].items():
+    windows = res["paper_format"]["rows"]
+    for sig, row in windows.items():
         assert row["max_rel_after_t_c_plus_T_obs"] < 1e-6, (sig, row)
+        # the one definition of every validation beside the family's windows (dimensionless signals)
+        assert res["observer"][sig]["unit"] == "1" and res["observer"][sig]["samples"] > 0
     if name == "algebraic_uio_example2":       # here already right after t_c
-        assert all(row["max_rel_after_t_c"] < 1e-6 for row in res["observer"].values())
+        assert all(row["max_rel_after_t_c"] < 1e-6 for row in windows.values())
 
 
 @pytest.mark.slow          # the compiled observers
@@ -365,5 +368,6 @@ def test_lateral_force_with_noise_meets_5_percent():
     from codegen.validation import run as validate
     res = validate.run_scenario("algebraic_uio_lateral_force", "paper")
     assert res["status_flags"] == 0 and res["noise"] == {"v_y": 0.01}
-    assert res["observer"]["F_yr"]["rms_percent_after_5s"] <= 5.0
+    assert res["paper_format"]["rows"]["F_yr"]["rms_percent_after_5s"] <= 5.0
+    assert res["observer"]["F_yr"]["unit"] == "N" and res["observer"]["F_yr"]["rms_percent"] <= 5.0
     assert res["max_abs_ay"] > 5.0          # the tyres are in their nonlinear range (xi != 0)

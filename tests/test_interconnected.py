@@ -282,11 +282,11 @@ def test_model_plant_run_is_nearly_exact():
     t = r["table"]
     assert r["flagged_after_settle"] == 0
     for s in ("r", "omega_f", "omega_r", "delta", "v_x", "v_y", "a_y"):
-        assert t[s]["rmse_percent"] < 0.1, s
+        assert t[s]["rmse_percent_of_max"] < 0.1, s
     for s in ("kappa", "T_s", "a_x"):
-        assert t[s]["rmse_percent"] < 1.0, s
+        assert t[s]["rmse_percent_of_max"] < 1.0, s
     for s in ("T_Bf", "B_r"):
-        assert t[s]["rmse_percent"] < 6.0, s
+        assert t[s]["rmse_percent_of_max"] < 6.0, s
 
 
 # Our Table 1 on the CommonRoad plant (whole Satory-like track, every sample after 2 s), (RMSE%, NMSE%)
@@ -312,15 +312,15 @@ def test_commonroad_table1_at_each_friction(mu):
     for s in satory.TABLE1_SIGNALS:
         rm, nm = OURS_TABLE1[mu][s]
         row = r["table"][s]
-        assert row["rmse_percent"] == pytest.approx(rm, rel=0.05, abs=0.005), s
+        assert row["rmse_percent_of_max"] == pytest.approx(rm, rel=0.05, abs=0.005), s
         assert row["nmse_percent"] == pytest.approx(nm, abs=0.3), s
     below = {s for s in satory.TABLE1_SIGNALS if r["table"][s]["nmse_percent"] < paper[s][1]}
     assert below == ({"T_Bf", "B_r", "a_y"} if mu == 0.6 else {"T_Bf", "B_r"})
     if mu == 1.0:
-        assert all(r["table"][s]["rmse_percent"] <= 1.5 * paper[s][0] for s in satory.TABLE1_SIGNALS)
+        assert all(r["table"][s]["rmse_percent_of_max"] <= 1.5 * paper[s][0] for s in satory.TABLE1_SIGNALS)
         assert r["min_ax"] < -5.0 and r["max_abs_ay"] > 4.0
     if mu == 0.4:
-        over = {s for s in satory.TABLE1_SIGNALS if r["table"][s]["rmse_percent"] > 9.2}
+        over = {s for s in satory.TABLE1_SIGNALS if r["table"][s]["rmse_percent_of_max"] > 9.2}
         assert over == {"B_r"}
 
 
@@ -333,7 +333,7 @@ def test_paper_rmse_nmse_pairs_are_not_one_reading():
     t = np.arange(0.0, 20.0, 0.01)
     y = np.sin(t)
     m = satory.table1_metrics(y, y + 0.05 * np.cos(3 * t), t)
-    assert satory.implied_std_over_max(m["rmse_percent"], m["nmse_percent"]) == pytest.approx(
+    assert satory.implied_std_over_max(m["rmse_percent_of_max"], m["nmse_percent"]) == pytest.approx(
         m["std_over_max_truth"], rel=1e-9)
 
 
@@ -342,7 +342,7 @@ def test_table1_metrics():
     t = np.arange(0, 10, 0.01)
     y = np.sin(t)
     m = satory.table1_metrics(y, y + 0.01, t)
-    assert m["rmse_percent"] == pytest.approx(100 * 0.01 / np.abs(y[t >= 2]).max())
+    assert m["rmse_percent_of_max"] == pytest.approx(100 * 0.01 / np.abs(y[t >= 2]).max())
     assert m["rmse_percent_literal"] == pytest.approx(1.0)
     assert m["nmse_percent"] == pytest.approx(100 - 100 * 0.01 ** 2 / np.var(y[t >= 2]), rel=1e-9)
 

@@ -79,7 +79,8 @@ def test_validation_does_not_depend_on_the_chunking(tmp_path):
     parts = validate.run_data("stanford_sideslip", str(p), block_bytes=SMALL)
     for k in ("beta", "vy"):
         for stat, v in whole["observer"][k].items():
-            assert parts["observer"][k][stat] == pytest.approx(v, rel=1e-9, abs=1e-12), (k, stat)
+            got = parts["observer"][k][stat]
+            assert got == (v if isinstance(v, str) or v is None else pytest.approx(v, rel=1e-9, abs=1e-12)), (k, stat)
     assert parts["status_flags"] == whole["status_flags"] and parts["samples"] == whole["samples"] == 3000
     assert np.array_equal(parts["signals"]["beta"], whole["signals"]["beta"])      # the state carried over
     assert [c["verdict"] for c in parts["log_checks"]] == [c["verdict"] for c in whole["log_checks"]]
@@ -102,12 +103,16 @@ def test_streamed_statistics_equal_whole_arrays():
     from codegen.validation.common import signal_stats
     rng = np.random.default_rng(4)
     y, e, t = rng.standard_normal(5000), 0.1 * rng.standard_normal(5000), 0.01 * np.arange(5000)
-    ref = signal_stats(y, y + e, t, angle=True)
-    acc = streaming.ErrorStats(angle=True, settle=2.0)
-    for i in range(0, 5000, 333):
-        acc.add(y[i:i + 333], (y + e)[i:i + 333], t[i:i + 333])
-    for k, v in ref.items():
-        assert acc.result()[k] == pytest.approx(v, rel=1e-10), k
+    for unit in ("rad", "rad/s", "N"):          # an angle reported in deg (and marked so), the others as declared
+        ref = signal_stats(y, y + e, t, unit=unit)
+        acc = streaming.ErrorStats(unit, settle=2.0)
+        for i in range(0, 5000, 333):
+            acc.add(y[i:i + 333], (y + e)[i:i + 333], t[i:i + 333])
+        assert set(acc.result()) == set(ref)
+        for k, v in ref.items():
+            got = acc.result()[k]
+            assert got == (v if isinstance(v, str) or v is None else pytest.approx(v, rel=1e-10)), (unit, k)
+    assert ref["unit"] == "N" and ref["truth_rms"] > 0 and ref["after_s"] == 2.0
 
 
 # --- file problems ----------------------------------------------------------------------------------

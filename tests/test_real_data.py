@@ -44,7 +44,7 @@ def test_cli_json_is_the_run_the_library_makes():
     assert proc.returncode == 0, proc.stderr
     res = json.loads(proc.stdout)
     assert set(res) == {"observer", "baselines", "status_flags", "samples", "peaks", "splits", "warnings",
-                        "log_checks"}
+                        "log_checks", "definitions"}
     assert res["warnings"] == [] and {c["verdict"] for c in res["log_checks"]} == {"ok"}
     # the same numbers as the run made in this process (the CLI formats, it does not compute)
     ref = validate.run_data("stanford_sideslip", "stanford")
@@ -66,4 +66,6 @@ def test_cli_json_is_the_run_the_library_makes():
         assert pk["observer"] == pytest.approx(np.degrees(np.abs(ref["signals"]["beta"] - log.beta_true)[m].max()))
     for table in (res["observer"], *res["baselines"].values()):
         assert set(table) == {"beta", "vy"}
-        assert {"rms", "mae", "max"} <= set(table["beta"])
+        assert {"rms", "mae", "max", "truth_rms", "rms_percent"} <= set(table["beta"])
+        assert (table["beta"]["unit"], table["beta"]["converted_from"], table["vy"]["unit"]) == ("deg", "rad", "m/s")
+    assert res["splits"]["unit"] == "deg"

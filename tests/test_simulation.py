@@ -19,7 +19,8 @@ def test_converges_on_track_scenario_with_noise():
     # 0.0087 deg / 0.27 N m; docs/families/linf_uio.md), see test_sector_polytope_reaches_table_ii
     assert t["beta"]["rms"] == pytest.approx(0.1047, rel=0.05)
     assert t["T_d"]["rms"] == pytest.approx(0.981, rel=0.05) and t["T_d"]["max"] < 3.2
-    assert t["r"]["rms"] == pytest.approx(0.0314, rel=0.05)
+    assert t["r"]["unit"] == "rad/s" and np.degrees(t["r"]["rms"]) == pytest.approx(0.0314, rel=0.05)
+    assert r["paper_format"]["rows"]["r"]["RMS"] == pytest.approx(0.0314, rel=0.05)      # Table II: deg/s
 
 
 def test_sector_polytope_reaches_table_ii():

@@ -200,12 +200,12 @@ def test_seed004_targets_on_the_pacejka_plant(scenario):
     from codegen.validation import run as validate
     res = validate.run_scenario(NAME, scenario, "nominal")
     seed = ts_validation.PAPER_TABLE_II[scenario]
-    obs = res["observer"]
+    obs = res["paper_format"]["rows"]        # Table II: SI units, delta in rad
     for sig, (mae, rmsd) in PACEJKA_MEASURED[scenario].items():
-        assert obs[sig]["mae"] <= 1.15 * mae, sig
-        assert obs[sig]["std"] <= 1.15 * rmsd, sig
-        assert obs[sig]["mae"] <= seed[sig][0], sig          # the paper's MAE met
-    assert obs["T_eng"]["std"] <= seed["T_eng"][1]
+        assert obs[sig]["MAE"] <= 1.15 * mae, sig
+        assert obs[sig]["RMSD"] <= 1.15 * rmsd, sig
+        assert obs[sig]["MAE"] <= seed[sig][0], sig          # the paper's MAE met
+    assert obs["T_eng"]["RMSD"] <= seed["T_eng"][1]
     assert res["status_flags"] == 0
 
 
@@ -219,12 +219,12 @@ def test_seed004_scenario3_on_the_pacejka_plant():
     cfg = observers.get(NAME)
     res = validate.run_scenario(NAME, "time_varying_grip_normal", "nominal")
     seed = ts_validation.PAPER_TABLE_II["time_varying_grip_normal"]
-    obs, truth = res["observer"], res["signals"]["truth"]
+    obs, truth = res["paper_format"]["rows"], res["signals"]["truth"]
     assert res["status_flags"] == 0
     assert truth["v_x"].max() <= 9.01 and res["max_abs_ay"] < 4.0          # normal driving on the path
     assert truth["mu"].min() == pytest.approx(0.05) and truth["mu"].max() > 1.19   # the law's full range
-    assert obs["delta"]["mae"] <= 2 * seed["delta"][0]
-    assert obs["v_y"]["mae"] <= 1.15 * 0.0245 and obs["T_eng"]["mae"] <= 1.15 * 1.78  # measured + 15 %
+    assert obs["delta"]["MAE"] <= 2 * seed["delta"][0]
+    assert obs["v_y"]["MAE"] <= 1.15 * 0.0245 and obs["T_eng"]["MAE"] <= 1.15 * 1.78  # measured + 15 %
     # where the v_y error comes from: samples with grip < 0.4 (a third of them) carry most of it
     keep = truth["t"] >= common.SETTLE_TIME
     err = np.abs(res["signals"]["estimate"]["v_y"] - truth["v_y"])[keep]
@@ -233,9 +233,9 @@ def test_seed004_scenario3_on_the_pacejka_plant():
     # the same drive at constant grip 0.6 (the law's mean): every target of the issue
     const = dataclasses.replace(common.scenario_for(cfg, "time_varying_grip_normal"),
                                 name="time_varying_grip_normal_constant", grip=None, mu=0.6)
-    obs = ts_validation.run(cfg, const)["observer"]
-    assert obs["v_y"]["mae"] <= 2 * seed["v_y"][0] and obs["delta"]["mae"] <= 2 * seed["delta"][0]
-    assert obs["T_eng"]["mae"] <= 1.0
+    obs = ts_validation.run(cfg, const)["paper_format"]["rows"]
+    assert obs["v_y"]["MAE"] <= 2 * seed["v_y"][0] and obs["delta"]["MAE"] <= 2 * seed["delta"][0]
+    assert obs["T_eng"]["MAE"] <= 1.0
 
 
 def test_the_innovation_gain_never_acts(tsb):
@@ -286,13 +286,13 @@ def test_commonroad_angle_steered_run():
     (drive torque m R_w a_x) the T_eng MAE is 20.6 N m, 19.3 of it the steered-wheel projection."""
     from codegen.validation import run as validate
     res = validate.run_scenario("ts_fuzzy_uio_bmw320i", "circular_path_normal", "commonroad")
-    obs = res["observer"]
+    obs = res["paper_format"]["rows"]        # Table II: SI units, delta in rad
     seed = ts_validation.PAPER_TABLE_II["circular_path_normal"]
     assert res["status_flags"] == 0
     for sig, (mae, rmsd) in COMMONROAD_MEASURED.items():
-        assert obs[sig]["mae"] <= 1.15 * mae, sig
-        assert obs[sig]["std"] <= 1.15 * rmsd, sig
-    assert obs["T_eng"]["std"] <= seed["T_eng"][1]
+        assert obs[sig]["MAE"] <= 1.15 * mae, sig
+        assert obs[sig]["RMSD"] <= 1.15 * rmsd, sig
+    assert obs["T_eng"]["RMSD"] <= seed["T_eng"][1]
     truths = {k.split(" (")[0]: v["mae"] for k, v in res["torque_truths"].items()}
     assert truths["drive torque m R_w a_x"] == pytest.approx(20.6, rel=0.1)
     assert truths["drive torque less wheel spin-up"] == pytest.approx(19.0, rel=0.1)
@@ -305,13 +305,13 @@ def test_commonroad_without_camber_force_meets_the_paper():
     the same run with the camber terms off meets the paper's scenario-2 MAE of v_y and T_eng."""
     cfg = observers.get("ts_fuzzy_uio_bmw320i")
     res = ts_validation.run(cfg, "circular_path_normal", "commonroad", camber_force=False)
-    obs = res["observer"]
+    obs = res["paper_format"]["rows"]        # Table II: SI units, delta in rad
     seed = ts_validation.PAPER_TABLE_II["circular_path_normal"]
     assert res["status_flags"] == 0
-    assert obs["v_y"]["mae"] <= seed["v_y"][0]                   # 4.1e-4 (paper 5.66e-4)
-    assert obs["T_eng"]["mae"] <= seed["T_eng"][0]               # 0.033 (paper 0.733)
-    assert obs["delta"]["mae"] <= 1.15 * 1.03e-4                 # 1.03e-4 (paper 9.71e-5)
-    assert obs["v_y"]["mae"] < 0.05 * COMMONROAD_MEASURED["v_y"][0]
+    assert obs["v_y"]["MAE"] <= seed["v_y"][0]                   # 4.1e-4 (paper 5.66e-4)
+    assert obs["T_eng"]["MAE"] <= seed["T_eng"][0]               # 0.033 (paper 0.733)
+    assert obs["delta"]["MAE"] <= 1.15 * 1.03e-4                 # 1.03e-4 (paper 9.71e-5)
+    assert obs["v_y"]["MAE"] < 0.05 * COMMONROAD_MEASURED["v_y"][0]
 
 
 def test_commonroad_ablation_knobs_are_checked():
@@ -331,5 +331,5 @@ def test_real_data_with_delta_as_unknown_input():
     beta, delta = res["observer"]["beta"], res["observer"]["delta"]
     kf = res["baselines"]["linear_kf"]["beta"]
     assert beta["rms"] <= 1.02 * kf["rms"]          # the same linear tyre model as the KF
-    assert delta["rms"] < 1.5                        # degrees; delta is reconstructed, not measured
+    assert delta["unit"] == "deg" and delta["rms"] < 1.5     # delta is reconstructed, not measured
     assert res["status_flags"] <= 1                  # the warm-up sample

@@ -21,13 +21,23 @@ def test_nominal_plant_short_run():
     assert r["status_flags"] == 0 and r["samples"] == 801
     assert ticks[-1] == 1.0 and len(ticks) > 10 and ticks == sorted(ticks)
     assert r["plant_model"] == "steering_single_track_pacejka_plant"
-    # Sentouh et al. 2023 eq. (32) figures beside Nguyen et al. 2019's
-    assert {"rmse_percent", "nmse_percent"} <= set(r["observer"]["beta"])
-    assert 0 < r["observer"]["beta"]["nmse_percent"] <= 100
+    # one definition: every figure in the row's unit (a plane angle in deg, converted from the declared
+    # rad and marked so; rates as declared), the truth's RMS and the error in % of it, NMSE % of eq. (32)
     obs = r["observer"]
     assert set(obs) == {"beta", "r", "delta", "delta_dot", "T_d"}
+    assert obs["beta"]["unit"] == "deg" and obs["beta"]["converted_from"] == "rad"
+    assert obs["r"]["unit"] == "rad/s" and "converted_from" not in obs["r"]
+    assert obs["T_d"]["unit"] == "N m" and obs["T_d"]["after_s"] == 2.0
+    for row in obs.values():
+        assert row["rms_percent"] == pytest.approx(100 * row["rms"] / row["truth_rms"])
+        assert "rmse_percent" not in row
+    assert 0 < obs["beta"]["nmse_percent"] <= 100
+    # the paper's Table II format beside it: E_mean, E_max, Std, RMS, rates in deg/s
+    table2 = r["paper_format"]["rows"]
+    assert table2["r"]["unit"] == "deg/s" and table2["r"]["RMS"] == pytest.approx(np.degrees(obs["r"]["rms"]))
+    assert table2["beta"]["E_mean"] == obs["beta"]["mae"] and "beta linear_kf" in table2
     # exact-model plant at 15 m/s: the observer must track sideslip closely
-    assert obs["beta"]["rms"] < 0.1 and obs["r"]["rms"] < 0.1
+    assert obs["beta"]["rms"] < 0.1 and table2["r"]["RMS"] < 0.1
     assert set(r["baselines"]) == {"linear_kf", "ekf"}
     assert all(np.isfinite(v["beta"]["rms"]) for v in r["baselines"].values())
 
@@ -50,7 +60,9 @@ def test_commonroad_cli_json_and_plot(tmp_path):
     res = json.loads(proc.stdout)
     assert set(res) >= {"observer", "baselines"}
     for sig in ("beta", "T_d"):
-        assert set(res["observer"][sig]) >= {"rms", "mae", "max"}
+        assert set(res["observer"][sig]) >= {"unit", "rms", "truth_rms", "rms_percent", "mae", "max", "nmse_percent"}
+    assert res["observer"]["beta"]["unit"] == "deg" and res["observer"]["T_d"]["unit"] == "N m"
+    assert "truth_rms" in res["definitions"] and "paper_format" in res
     # 6 s of the circle (a_y up to 4.7 m/s^2): 0.009 deg and 0.28 N m with the camber/remainder
     # model; the paper's linear model gave 0.088 deg and 1.45 N m
     assert res["observer"]["beta"]["rms"] < 0.03

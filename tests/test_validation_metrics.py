@@ -68,3 +68,54 @@ def test_stats_frozen():
     with pytest.raises(AttributeError):
         s.rms = 0.0
     assert s.as_dict()["n"] == 4
+
+
+def test_one_definition_by_hand():
+    """signal_report: the figures of every validation table, with the unit they are in."""
+    row = M.signal_report(Y, YH, unit="N")
+    assert row["unit"] == "N" and "converted_from" not in row
+    assert row["rms"] == pytest.approx(math.sqrt(5.25 / 4)) and row["mae"] == pytest.approx(0.875)
+    assert row["max"] == 2.0 and row["bias"] == pytest.approx(1.5 / 4)
+    assert row["std"] == pytest.approx(M.std_error(Y, YH))
+    assert row["truth_rms"] == pytest.approx(math.sqrt(30 / 4))
+    assert row["rms_percent"] == pytest.approx(100 * math.sqrt(5.25 / 30))
+    assert row["nmse_percent"] == pytest.approx(-5.0) and row["samples"] == 4
+    assert set(row) <= set(M.DEFINITIONS)
+
+
+def test_only_plane_angles_are_converted_and_say_so():
+    angle = M.signal_report(Y, YH, unit="rad")
+    assert angle["unit"] == "deg" and angle["converted_from"] == "rad"
+    assert angle["rms"] == pytest.approx(math.degrees(math.sqrt(5.25 / 4)))
+    assert angle["rms_percent"] == pytest.approx(M.signal_report(Y, YH, unit="N")["rms_percent"])
+    wheel = M.signal_report(Y, YH, unit="rad/s")            # a wheel speed (or a yaw rate) is no angle
+    assert wheel["unit"] == "rad/s" and "converted_from" not in wheel
+    assert wheel["rms"] == pytest.approx(math.sqrt(5.25 / 4))
+    assert M.signal_report(Y, YH, unit=None)["unit"] is None
+    assert M.signal_report(Y, YH, unit="-")["unit"] == "1"
+    # a paper's table in the paper's units, from the same row
+    assert M.convert(wheel, "deg/s")["rms"] == pytest.approx(math.degrees(wheel["rms"]))
+    back = M.convert(angle, "rad")
+    assert back["unit"] == "rad" and "converted_from" not in back and back["rms"] == pytest.approx(wheel["rms"])
+    with pytest.raises(M.MetricInputError, match="do not convert"):
+        M.convert(wheel, "m/s")
+
+
+def test_a_zero_truth_has_no_percentages():
+    row = M.signal_report(np.zeros(4), YH, unit="m")
+    assert row["truth_rms"] == 0.0 and row["rms_percent"] is None and row["nmse_percent"] is None
+
+
+def test_the_sums_of_a_stream_give_the_same_row():
+    e, y = YH - Y, Y
+    halves = [(e[:2], y[:2]), (e[2:], y[2:])]
+    n = sum(a.size for a, _ in halves)
+    mean = sum(a.sum() for a, _ in halves) / n
+    row = M.report_from_sums("rad", n=n, abs_sum=sum(np.abs(a).sum() for a, _ in halves),
+                             abs_max=max(np.abs(a).max() for a, _ in halves), sq_sum=sum((a * a).sum() for a, _ in halves),
+                             mean=mean, m2=sum(((a - mean) ** 2).sum() for a, _ in halves),
+                             truth_sq_sum=sum((b * b).sum() for _, b in halves),
+                             truth_m2=float(((y - y.mean()) ** 2).sum()))
+    whole = M.signal_report(Y, YH, unit="rad")
+    assert row.keys() == whole.keys()
+    assert all(row[k] == pytest.approx(whole[k]) for k in row if k not in ("unit", "converted_from"))

@@ -56,9 +56,14 @@ def main(json_output: bool = False, report_dir=None) -> int:
     report = run_all()
     real, others = run_real_data()
     if json_output:
-        print(json.dumps({"real_data": real_data_json(real, others), **{n: {**{k: v for k, v in e.items() if k != "scenarios"},
-                              "scenarios": {s: json.loads(validate.to_json(r)) for s, r in e["scenarios"].items()}}
-                          for n, e in report.items()}}, indent=1, sort_keys=True))
+        from .metrics import DEFINITIONS
+
+        def scenario_json(r):       # the metrics' definitions once, at the top
+            return {k: v for k, v in json.loads(validate.to_json(r)).items() if k != "definitions"}
+        print(json.dumps({"definitions": DEFINITIONS, "real_data": real_data_json(real, others),
+                          **{n: {**{k: v for k, v in e.items() if k != "scenarios"},
+                                 "scenarios": {s: scenario_json(r) for s, r in e["scenarios"].items()}}
+                             for n, e in report.items()}}, indent=1, sort_keys=True))
         return 0
     if report_dir is not None:
         from . import report as html_report

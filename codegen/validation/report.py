@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import metrics
 from . import run as validate
 
 PAGE = "index.html"
@@ -73,10 +74,6 @@ def _plt():
     return plt
 
 
-def _angle(units: dict, name: str) -> bool:
-    return str(units.get(name, "")).startswith("rad")
-
-
 def scenario_figure(result: dict, path: Path) -> Path:
     """Truth and estimates (and the peers' traces a family keeps in ``signals["baselines"]``),
     the errors below, flagged samples shaded; one row per signal that has a truth."""
@@ -88,8 +85,7 @@ def scenario_figure(result: dict, path: Path) -> Path:
     peers = sig.get("baselines", {})
     fig, axes = plt.subplots(len(names), 2, figsize=(12, 2.1 * len(names) + 0.8), sharex=True, squeeze=False)
     for row, n in zip(axes, names):
-        scale = 180 / np.pi if _angle(units, n) else 1.0
-        unit = str(units.get(n, "")).replace("rad", "deg", 1) if scale != 1.0 else units.get(n, "")
+        unit, scale, _ = metrics.reported_unit(units.get(n))      # the unit of the tables' rows
         truth, est = np.asarray(sig["truth"][n]) * scale, np.asarray(sig["estimate"][n]) * scale
         row[0].plot(t, truth, "k", lw=1.0, label="truth")
         row[0].plot(t, est, "r--", lw=1.0, label="observer (C step)", zorder=3)

@@ -27,7 +27,7 @@ import numpy as np
 from ... import pipeline
 from ...design.solver import FreshSolver
 from ...representation import polytope
-from ...validation import simulate
+from ...validation import metrics, simulate
 from ...project.observer_file import get as get_observer
 from ...validation.common import SENSOR_NOISE, scenario_for, signal_stats
 from . import discrete
@@ -84,7 +84,8 @@ def _run(b, truth, measured, step=None):
         z, _ = step(z, row[:nu], row[nu:nu + ny], row[nu + ny:])
         out[k] = z
     states = b.state_names
-    return {s: signal_stats(truth[s], out[:, i], truth["t"], angle=s != "T_d")
+    units = b.lpv.definition.units
+    return {s: signal_stats(truth[s], out[:, i], truth["t"], unit=units.get(s))
             for i, s in enumerate(states) if s in truth}
 
 
@@ -105,7 +106,7 @@ def run(name: str = "lpv_linf_driver_torque", published: dict | None = None) -> 
     def add(label, b, stats, note=""):
         gains = [np.linalg.norm(np.linalg.solve(q, l), 2) for q, l in zip(b.data.Q, b.data.L)]
         rows.append({"variant": label, "note": note, "beta_rms_deg": stats["beta"]["rms"],
-                     "T_d_rms_Nm": stats["T_d"]["rms"], "r_rms_degps": stats["r"]["rms"],
+                     "T_d_rms_Nm": stats["T_d"]["rms"], "r_rms_degps": metrics.convert(stats["r"], "deg/s")["rms"],
                      "gamma": getattr(b, "gamma_override", None) or b.design.gamma,
                      "gain_norm_max": float(max(gains))})
 

@@ -23,7 +23,7 @@ class TSFuzzyUIO(Family):
     example = "ts_fuzzy_uio"
     # capabilities (codegen.families.capabilities): Scenarios, DemoPlant, DemoFigures, BenchStudy, Applicability
     demo_scenarios = ("random_trajectory_accel", "circular_path_normal", "time_varying_grip_normal")
-    table_note = "SI units, the paper's Table II format"
+    table_note = "the paper's Table II format, then every figure in its unit"
 
     def applicability(self, subject, structure):
         from .applicability import assess
