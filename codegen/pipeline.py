@@ -7,7 +7,7 @@ that into a Python extension. The design comes from the committed lock when it i
 """
 from __future__ import annotations
 
-from .design import lock as design_lock, lmi
+from .design import lock as design_lock, lmi, precision
 from . import families
 from .project.observer_file import ObserverConfig
 
@@ -21,12 +21,19 @@ def build(config: ObserverConfig, tol: float | None = None, fresh: bool = False)
         if data is not None:
             where = str(design_lock.path(config))
             with lmi.replaying(design_lock.solutions(data, where), source=where):
-                return families.get(config.family).build(config, None)
-    return families.get(config.family).build(config, tol)
+                return _checked(families.get(config.family).build(config, None))
+    return _checked(families.get(config.family).build(config, tol))
 
 
 def solve(config: ObserverConfig, tol: float | None = None) -> tuple:
     """A fresh design of ``config`` and the LMI solutions it solved: (build, [SolveRecord])."""
     with lmi.recording() as ledger:
-        b = families.get(config.family).build(config, tol)
+        b = _checked(families.get(config.family).build(config, tol))
     return b, list(ledger.records)
+
+
+def _checked(b):
+    """``b``, refused when its ``[design] precision = "float32"`` margin is not certified
+    (:mod:`codegen.design.precision`)."""
+    precision.check(b)
+    return b

@@ -33,7 +33,7 @@ from __future__ import annotations
 import functools
 import itertools
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -46,6 +46,7 @@ from ...errors import CertificateError, ModelDefinitionError, SchedulingBoundsEr
 from ...design.lmi import LMIProblem, bmat, check_blocks, trace
 from ...model import load_parameters, parameter_substitution
 from ...project.settings import parse_settings, setting
+from ...design.precision import margin_field, precision_field, required_margin
 from ...emit.stepgen import CASADI_MODULES
 
 
@@ -62,6 +63,8 @@ class NonlinearTyreSettings:
     margin: float = setting(1e-9, gt=0, doc="smallest eigenvalue imposed on every LMI block")
     tol: float = setting(1e-9, gt=0, doc="solver tolerance")
     bounds_rel_tol: float = setting(1e-3, gt=0, doc="tightness of the Jacobian bounds")
+    precision: str = precision_field()
+    float32_margin: float = margin_field()
 
     @property
     def gain(self) -> np.ndarray:
@@ -295,6 +298,13 @@ def _build_class():
         def lmi_problem(self):
             return lmi_problem(self.verts, self.settings)
 
+        def contraction_metrics(self):
+            """The common P over the DMVT vertices: the prediction (v_y, r) for the next sample."""
+            from ...certificate.contraction import ContractionMetric
+            return [ContractionMetric(float(self.certificate["contraction_per_step"]), (self.P,), ("v_y_next", "r_next"),
+                                      "common P over the DMVT vertices: A' P A <= c^2 P, on the certified slip set",
+                                      knob="[design] decay (lambda imposed by the LMIs), a lower sliding_fraction or another gain")]
+
         def input_boxes(self):
             return {"v_x": list(self.rep.v_x_box), "delta": list(self.rep.delta_box)}
 
@@ -370,6 +380,8 @@ def build(config, tol: float | None = None):
     """model -> force form + sound axle Jacobian bounds on S -> vertex LMIs -> numpy re-check -> step."""
     settings = parse_settings(NonlinearTyreSettings, config.design, source=config.source, section="design",
                               **({"tol": tol} if tol is not None else {}))
+    if required_margin(settings):       # precision = "float32": the LMIs impose lambda <= 1 - float32_margin
+        settings = replace(settings, decay=min(settings.decay, 1.0 - required_margin(settings)))
     t0 = time.perf_counter()
     rep = represent(config.load_model_module(), load_parameters(config.parameter_path), settings, config.source)
     t1 = time.perf_counter()
