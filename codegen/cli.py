@@ -1,10 +1,12 @@
 """The ``uiogen`` command line.
 
     uiogen list [--json]
+    uiogen analyze MODEL_OR_OBSERVER [--parameters FILE] [--outputs ...] [--unknown-inputs ...] [--json] [--no-design]
     uiogen design NAME [--json] [--out FILE] [--update] [--project DIR]
     uiogen generate [NAME ...] [--force] [--out DIR] [--project DIR]
     uiogen build [NAME ...] [--float32] [--project DIR]
     uiogen check-gains NAME --gains FILE [--json]
+    uiogen fit NAME --data PATH|stanford --samples A:B [--folds K] [--write] [--json]
     uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png] [--project DIR]
     uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png] [--project DIR]
     uiogen demo [--json]
@@ -13,7 +15,7 @@
     uiogen export NAME --format fmu|fmu3 --out FILE.fmu [--project DIR]
 
 ``--project DIR``: the project folder whose ``generated_c/`` and ``build/`` the command reads and
-writes (:mod:`codegen.project.workspace`); default: the observer file's folder, or for a built-in
+writes (:mod:`python_bindings.workspace`); default: the observer file's folder, or for a built-in
 observer the source checkout (installed: the current directory).
 """
 from __future__ import annotations
@@ -30,7 +32,8 @@ from .design import lock as design_lock
 from .emit import generate as emit
 from . import families, pipeline
 from .project import observer_file as observers
-from .errors import CertificateError, ConfigurationError, UiogenError
+from .errors import (CertificateError, ConfigurationError, DesignLockError, MissingParameterError,
+                     SchedulingBoundsError, UiogenError, UnknownObserverError, UnknownParameterError)
 
 
 def _print_json(obj) -> None:
@@ -84,9 +87,48 @@ def _compare_with_committed(config, records) -> dict:
     return {"committed": rows, "current": status is not None}
 
 
+def cmd_analyze(args) -> int:
+    from . import analysis
+    progress = None if args.json else (lambda msg: print(f"  ... {msg}", file=sys.stderr, flush=True))
+    result = analysis.analyze(args.target, args.parameters, args.outputs, args.unknown_inputs,
+                              design=not args.no_design, progress=progress)
+    if args.json:
+        _print_json(result.to_json())
+    else:
+        print(result.text())
+    return 0
+
+
+# Errors that are a mistake in a file (a key, a value, a path): the analysis has nothing to add
+_FILE_MISTAKES = (ConfigurationError, UnknownObserverError, MissingParameterError, UnknownParameterError,
+                  SchedulingBoundsError, DesignLockError)
+
+
+def _analysis_of_failure(config, as_json: bool) -> None:
+    """The analysis facts at the top of a failed design (stdout; the error stays one line on
+    stderr): the structure and every family's verdict, without trial designs."""
+    from . import analysis
+    try:
+        result = analysis.analyze(config.source, design=False)
+    except Exception as exc:        # the design's own error is the one that matters: it follows, one line
+        print(f"(no analysis of {config.source}: {type(exc).__name__}: {exc})")
+        return
+    if as_json:
+        _print_json({"analysis": result.to_json()})
+        return
+    print(f"uiogen design {config.name} failed; uiogen analyze {config.source}:")
+    print("\n".join("  " + line if line else "" for line in result.text().splitlines()))
+
+
 def cmd_design(args) -> int:
     config = observers.get(args.name, project=args.project)
-    b, records = pipeline.solve(config)
+    try:
+        b, records = pipeline.solve(config)
+    except _FILE_MISTAKES:
+        raise
+    except UiogenError:
+        _analysis_of_failure(config, args.json)
+        raise
     text = design_lock.dumps(design_lock.document(b, records))
     compare = _compare_with_committed(config, records)
     path = None
@@ -204,6 +246,36 @@ def cmd_check_gains(args) -> int:
     return 0 if _feasible(res) else 1
 
 
+def _shown(path: Path) -> str:
+    """A path as a record shows it: relative to the working directory when inside it."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
+def cmd_fit(args) -> int:
+    """Identify an observer's numbers on samples A..B-1 of a log (the family's ``fit``); print them,
+    say whether the committed files hold them, and with --write put them there."""
+    cfg = observers.get(args.name)
+    family = families.get(cfg.family)
+    result = family.fit(cfg, args.data, args.samples, folds=args.folds)
+    texts = family.fit_files(cfg, result)
+    changed = {path: path.read_text() != text for path, text in texts.items()}
+    if args.write:
+        for path, text in texts.items():
+            if changed[path]:
+                path.write_text(text)
+    if args.json:
+        _print_json({**result, "files": {_shown(p): ("written" if args.write and c else "differs" if c else "equal")
+                                         for p, c in changed.items()}})
+    else:
+        print("\n".join(family.fit_lines(result, changed)))
+        if args.write and any(changed.values()):
+            print("written: " + ", ".join(str(p) for p, c in changed.items() if c))
+    return 0
+
+
 def cmd_validate(args) -> int:
     from .validation import run as validate
     config = observers.get(args.name, project=args.project)
@@ -243,7 +315,17 @@ def cmd_demo(args) -> int:
 
 def cmd_new(args) -> int:
     """A starter project: the family's example observer, its model and its parameters, copied
-    into DIR and wired to each other by paths, ready to design, generate and build as written."""
+    into DIR and wired to each other by paths, ready to design, generate and build as written.
+    With ``--from-model FILE`` instead: the observer file of the family ``uiogen analyze`` ranks
+    first for that model, with the settings the analysis chose and comments that say why."""
+    if (args.family is None) == (args.from_model is None):
+        raise ConfigurationError("uiogen new DIR: give either --family F (a starter copied from the family's example) "
+                                 "or --from-model FILE [--parameters FILE] (the observer the analysis chooses)",
+                                 key="--family")
+    if args.from_model is not None:
+        return _new_from_model(args)
+    if args.parameters is not None:
+        raise ConfigurationError("uiogen new --parameters goes with --from-model", key="--parameters")
     family = families.get(args.family)
     if not family.example:
         raise ConfigurationError(f"family {family.name!r} has no example observer to start from")
@@ -266,6 +348,38 @@ def cmd_new(args) -> int:
             f"# then:  uiogen design {target} --update && uiogen generate {target} && uiogen build {target}\n#\n")
     target.write_text(head + text)
     print(f"wrote {target}, {folder / 'model.py'}, {folder / 'parameters.toml'}")
+    print(f"next: uiogen design {target} --update; uiogen generate {target}; uiogen build {target}")
+    return 0
+
+
+def _new_from_model(args) -> int:
+    from . import analysis
+    from .analysis.ranking import starter_text
+    folder = Path(args.dir)
+    result = analysis.analyze(args.from_model, args.parameters, design=True,
+                              progress=lambda msg: print(f"  ... {msg}", file=sys.stderr, flush=True))
+    best = result.ranking.best
+    if best is None:
+        print(result.text())
+        raise ConfigurationError(f"uiogen new --from-model {args.from_model}: no observer family applies to these "
+                                 f"sensors (the report above gives each family's condition and fix)",
+                                 key="--from-model")
+    if best.observer is None:
+        raise ConfigurationError(f"uiogen new --from-model {args.from_model}: {best.family} ranks first but proposes "
+                                 f"no settings for this model; start from uiogen new DIR --family {best.family}",
+                                 key="--from-model")
+    name = args.name or f"{result.subject.name}_{best.family}"
+    if name in observers.names():
+        raise ConfigurationError(f"uiogen new: the name {name!r} is a built-in observer; choose another with --name",
+                                 key="--name", value=name)
+    target = folder / f"{name}.toml"
+    if target.exists():
+        raise ConfigurationError(f"uiogen new {folder}: would overwrite {target}; choose an empty folder or --name",
+                                 key="dir")
+    folder.mkdir(parents=True, exist_ok=True)
+    target.write_text(starter_text(result.subject, best, folder.resolve()).replace("THIS_FILE", str(target)))
+    print(result.text())
+    print(f"wrote {target} ({best.family}, ranked first)")
     print(f"next: uiogen design {target} --update; uiogen generate {target}; uiogen build {target}")
     return 0
 
@@ -325,6 +439,18 @@ def main(argv=None) -> int:
     p = sub.add_parser("list", help="list observer configurations")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_list)
+    p = sub.add_parser("analyze", help="what a model's sensors allow and which observer family to use (families "
+                                       "ranked, cheap designs tried)")
+    p.add_argument("target", help="a built-in observer, an observer file (.toml) or a model file (.py)")
+    p.add_argument("--parameters", help="the parameter file (required for a model file; for an observer file it "
+                                        "replaces the one the file names)")
+    p.add_argument("--outputs", nargs="+", metavar="OUTPUT",
+                   help="the measured outputs, among those the model declares (default: all of them)")
+    p.add_argument("--unknown-inputs", nargs="+", metavar="INPUT",
+                   help="the unknown inputs, among the model's known and unknown inputs (default: as declared)")
+    p.add_argument("--no-design", action="store_true", help="no trial designs (the structure and the conditions only)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_analyze)
     p = sub.add_parser("design", parents=[project],
                        help="solve and certify one observer's design (writes nothing unless --update/--out)")
     p.add_argument("name")
@@ -358,6 +484,15 @@ def main(argv=None) -> int:
     p.add_argument("--gains", required=True, help="JSON with P1, P2, X, L1, L2 (nested lists)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_check_gains)
+    p = sub.add_parser("fit", help="identify an observer's numbers (tyre, noise levels) on a sample range of a log")
+    p.add_argument("name")
+    p.add_argument("--data", required=True, help="a logged run in the shared format (CSV, plain or .gz) with a "
+                                                 "sideslip reference; 'stanford' = the shared log")
+    p.add_argument("--samples", required=True, metavar="A:B", help="the samples A..B-1 the fit may read (e.g. 0:13750)")
+    p.add_argument("--folds", type=int, default=0, help="cross-validate inside the range with K contiguous folds")
+    p.add_argument("--write", action="store_true", help="write the fitted values into the parameter and observer files")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_fit)
     p = sub.add_parser("validate", parents=[project],
                        help="errors on an independent plant, beside the KF/EKF baselines")
     p.add_argument("name")
@@ -373,9 +508,12 @@ def main(argv=None) -> int:
     p = sub.add_parser("demo", help="simulate every observer on its nonlinear model and summarize")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_demo)
-    p = sub.add_parser("new", help="a starter project (model, parameters, observer file) in DIR")
+    p = sub.add_parser("new", help="a starter project (model, parameters, observer file) in DIR, or the observer "
+                                   "file of the family the analysis ranks first for your model (--from-model)")
     p.add_argument("dir")
-    p.add_argument("--family", required=True, help="an observer family (uiogen list shows them in use)")
+    p.add_argument("--family", help="an observer family (uiogen list shows them in use)")
+    p.add_argument("--from-model", help="your model file (.py): the observer file of the best-ranked family")
+    p.add_argument("--parameters", help="the model's parameter file (with --from-model)")
     p.add_argument("--name", help="the observer's name (default: the family's example)")
     p.set_defaults(func=cmd_new)
     p = sub.add_parser("docs", help="the docs' tables of figures from docs/data/{demo,bench}.json")

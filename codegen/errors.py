@@ -6,9 +6,8 @@ precisely what they expect and the message names the cause.
 """
 from __future__ import annotations
 
-
-class UiogenError(Exception):
-    """Base class of every uiogen error."""
+# The runtime's errors (python_bindings needs no toolchain to raise them), re-exported here.
+from python_bindings.errors import SampleError, StaleExtensionError, UiogenError, UnknownObserverError  # noqa: F401
 
 
 class ModelDefinitionError(UiogenError, ValueError):
@@ -83,17 +82,6 @@ class DiscretizationError(UiogenError, RuntimeError):
 
 class UILoopError(DiscretizationError):
     """The observer's error with its unknown-input filter loop closed cannot be certified."""
-
-
-class UnknownObserverError(UiogenError, KeyError):
-    """No observer configuration is registered under that name."""
-
-    def __str__(self) -> str:  # KeyError quotes its argument; keep the message readable
-        return str(self.args[0]) if self.args else ""
-
-
-class SampleError(UiogenError, ValueError):
-    """An input sample or array passed to an observer has the wrong shape, type or values."""
 
 
 class DesignLockError(UiogenError, ValueError):

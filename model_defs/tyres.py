@@ -20,7 +20,9 @@ def fiala_slip_force(t, cornering_stiffness, mu_fz, clamp=True):
     ``mu F_z sign(t)`` beyond (full sliding, dF/dt = 0); Pacejka, *Tire and Vehicle Dynamics*, 3rd
     ed., Sec. 3.2; Hindiyeh & Gerdes (2014). Its slope is dF/dt = C (1 - |t|/t_sl)^2: C at t = 0,
     0 at full sliding. ``clamp=False`` gives the polynomial alone, equal to the clamped law on
-    |t| <= t_sl (used for Jacobian bounds over a set that stays inside that range).
+    |t| <= t_sl (used for Jacobian bounds over a set that stays inside that range). ``mu_fz`` is
+    the axle's lateral force capacity: mu F_z for pure cornering, less when the axle also
+    carries a longitudinal force (:func:`friction_circle_capacity`).
     """
     t_slide = 3 * mu_fz / cornering_stiffness
     if clamp:
@@ -32,3 +34,15 @@ def fiala_slip_force(t, cornering_stiffness, mu_fz, clamp=True):
 def fiala_sliding_slip(cornering_stiffness, mu_fz):
     """t_sl = 3 mu F_z / C: the slip (tan alpha) at which the Fiala axle reaches full sliding."""
     return 3 * mu_fz / cornering_stiffness
+
+
+def friction_circle_capacity(mu_fz, f_x, floor):
+    """Lateral force capacity of an axle that also carries the longitudinal force ``f_x``.
+
+    The friction circle (combined slip, Pacejka 2012 Sec. 3.3; Hindiyeh & Gerdes 2014 use the
+    same reduction): sqrt((mu F_z)^2 - F_x^2). ``floor`` (a fraction of mu F_z) is what the
+    lateral capacity never drops below: a longitudinal force estimated from a_x with static loads
+    can exceed mu F_z on one axle (hard braking moves load forward), and a capacity of 0 would
+    make the sliding slip 0. Pure cornering (f_x = 0) gives mu F_z exactly.
+    """
+    return sp.sqrt(sp.Max(mu_fz ** 2 - f_x ** 2, (floor * mu_fz) ** 2))

@@ -1,4 +1,4 @@
-"""Thin Python API over the compiled observer steps.
+"""The runtime: a compiled observer step, loaded and run with numpy and the extension only.
 
 >>> from python_bindings import load
 >>> obs = load("lpv_linf_driver_torque")        # a built-in observer, or the path of an observer file
@@ -8,11 +8,14 @@
 >>> outputs, status, final = obs.run(inputs_2d)  # whole array, loop in C
 
 ``step`` is the C function itself (no Python wrapper on the hot path); it checks shapes,
-dtypes, byte order and alignment and raises TypeError/ValueError on bad arrays. The extensions
-are built by ``make build`` (:mod:`codegen.extension.build`, with its C glue template
+dtypes, byte order and alignment and raises TypeError/ValueError on bad arrays. Nothing of the
+toolchain (:mod:`codegen`: sympy, CasADi, Clarabel, SciPy, Jinja2) is imported. The extensions
+are built by ``uiogen build`` (:mod:`codegen.extension.build`, C glue
 ``codegen/emit/templates/pymodule.c.j2``) into the observer's project's ``build/extensions/``
-(:mod:`codegen.project.workspace`).
+(:mod:`python_bindings.workspace`); errors are :mod:`python_bindings.errors`.
 """
-from codegen.extension.build import CompiledObserver, load
+from .errors import SampleError, StaleExtensionError, UiogenError, UnknownObserverError
+from .runtime import CompiledObserver, Recorder, load
 
-__all__ = ["CompiledObserver", "load"]
+__all__ = ["CompiledObserver", "Recorder", "SampleError", "StaleExtensionError", "UiogenError",
+           "UnknownObserverError", "load"]

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from codegen.emit import generate as emit
-from python_bindings.build import STRICT_FLAGS, generated_names, observer_sources
+from codegen.extension.build import STRICT_FLAGS, generated_names, observer_sources
 
 ROOT = Path(__file__).resolve().parent.parent
 NAMES = generated_names()
@@ -59,6 +59,8 @@ def test_work_query_fits_fixed_arrays(NAME):
 
 
 def test_no_fast_math_anywhere():
-    for f in [ROOT / "Makefile", ROOT / "python_bindings" / "build.py"]:
-        assert "-ffast-math" not in f.read_text()
-    assert "-ffp-contract=off" in STRICT_FLAGS
+    from codegen.extension.build import GLUE_FLAGS, LTO_FLAGS, SPEED_FLAGS
+    assert "-ffast-math" not in ROOT.joinpath("Makefile").read_text()
+    flags = [*STRICT_FLAGS, *GLUE_FLAGS, *SPEED_FLAGS, *LTO_FLAGS]
+    assert not [f for f in flags if "fast-math" in f and f != "-fno-fast-math" or f.startswith("-Ofast")]
+    assert "-ffp-contract=off" in STRICT_FLAGS and "-ffp-contract=off" in GLUE_FLAGS

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from python_bindings import build, load
+from codegen.extension import build
+from python_bindings import load
 
 ROOT = Path(__file__).resolve().parent.parent
 # lpv: N_STATE = N_INPUT = N_OUTPUT = 5; stanford: 3 states, 4 inputs, 3 outputs (a mix-up of

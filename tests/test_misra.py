@@ -7,7 +7,9 @@ import shutil
 import pytest
 
 from codegen.targets import misra
-from codegen.emit.toolchain import GENERATED_DIR
+from python_bindings.workspace import Workspace, source_checkout
+
+GENERATED_DIR = Workspace.of(source_checkout()).generated
 
 pytestmark = pytest.mark.skipif(shutil.which("cppcheck") is None,
                                 reason="cppcheck is not installed (make embedded-tools / "

@@ -1,4 +1,5 @@
-"""Real vehicle data (shared Stanford log): the compiled observer against the optical-sensor truth."""
+"""Real vehicle data (shared Stanford log): the compiled observer against the log's sideslip reference
+(beta_true = atan2(vy, vx) of the log's own velocities)."""
 import json
 import subprocess
 import sys
@@ -39,7 +40,8 @@ def test_cli_json_format(tmp_path):
                            "stanford", "--json"], capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr
     res = json.loads(proc.stdout)
-    assert set(res) == {"observer", "baselines", "status_flags", "samples", "peaks"}
+    assert set(res) == {"observer", "baselines", "status_flags", "samples", "peaks", "splits"}
+    assert res["splits"]["t_split"] == 137.5 and res["splits"]["evaluation"]["samples"] == 13750
     assert set(res["baselines"]) == {"linear_kf", "ekf"}
     assert [round(p["t"]) for p in res["peaks"]] == [110, 170, 207]      # the three large-sideslip peaks
     assert res["samples"] > 20000 and res["status_flags"] >= 0

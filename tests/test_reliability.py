@@ -19,7 +19,7 @@ from codegen.validation import simulate, run as validate
 from codegen.families.linf_uio import build as linf_build
 from codegen.validation import common
 from python_bindings import load
-from python_bindings.build import generated_names
+from codegen.extension.build import generated_names
 
 ROOT = Path(__file__).resolve().parent.parent
 NAMES = generated_names()
@@ -209,7 +209,7 @@ def realistic_inputs(name, obs):
 def test_long_run(name):
     """10^7 steps of a realistic trajectory: no flags (but the first sample's WARMING_UP of observers
     that need a previous sample), no non-finite value, identical twice. Observers whose certified set
-    is also checked on their estimates (the nonlinear-tyre observer's slip: 5.8 % of the real log)
+    is also checked on their estimates (the nonlinear-tyre observer's slip: 1.1 % of the real log)
     may raise SCHEDULING_CLAMPED there, and nothing else."""
     obs = load(name)
     base = realistic_inputs(name, obs)

@@ -40,8 +40,8 @@ DRIVER_KEYS = ("wheelbase", "R_s", "k_e", "k_edot", "k_r", "k_ri", "k_p", "k_i",
 
 def cache_dir() -> Path:
     """Where compiled plants live: ``$UIOGEN_PLANT_CACHE``, else the built-in observers' project's
-    ``build/plants/`` (:mod:`codegen.project.workspace`; a campaign runs a built-in observer)."""
-    from ..project.workspace import Workspace, source_checkout
+    ``build/plants/`` (:mod:`python_bindings.workspace`; a campaign runs a built-in observer)."""
+    from python_bindings.workspace import Workspace, source_checkout
     env = os.environ.get(CACHE_ENV)
     if env:
         return Path(env)

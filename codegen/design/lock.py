@@ -32,7 +32,7 @@ DESIGN_PACKAGES = ("numpy", "scipy", "sympy", "mpmath", "clarabel")
 
 def path(config: ObserverConfig, base: Path | None = None) -> Path:
     """Where the design lock of ``config`` lives: ``base/NAME/NAME_design.json``, base defaulting
-    to its project's ``generated_c/`` (:mod:`codegen.project.workspace`)."""
+    to its project's ``generated_c/`` (:mod:`python_bindings.workspace`)."""
     if base is None:
         return config.workspace.design_lock(config.name)
     return Path(base) / config.name / f"{config.name}_design.json"

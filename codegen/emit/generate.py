@@ -222,7 +222,7 @@ def generate(names: list | None = None, out_dir: Path | None = None, force: bool
     configurations; all built-in ones if None); returns the builds that ran.
 
     Each observer's files go to ``out_dir/NAME/`` (default: its project's ``generated_c/``,
-    :mod:`codegen.project.workspace`; ``project`` names another project folder).
+    :mod:`python_bindings.workspace`; ``project`` names another project folder).
     The design comes from the committed lock, replayed without solving; only a missing or stale
     lock is re-solved (and written with the C). An observer whose stamp matches its inputs and
     whose files are intact is skipped unless ``force``. One failing observer does not stop the

@@ -1,33 +1,34 @@
-"""The compiled step as a CPython extension: build it from the generated C, load it.
+"""Stage 6: the compiled step as a CPython extension, built from the generated C.
 
 The observer's C is compiled with the project's strict flags (:data:`codegen.emit.toolchain.STRICT_CFLAGS`,
 no fast-math, ``-ffp-contract=off`` so results do not depend on FMA availability) plus the speed
 flags below; the Python glue is rendered from ``codegen/emit/templates/pymodule.c.j2`` and
-linked with it. :mod:`python_bindings` is the user-facing name of :func:`load` and
-:class:`CompiledObserver`.
+linked with it. The glue compiles in what the runtime shows (:mod:`python_bindings`): the signal
+names and units of the header's structs, the sample time, and the SHA-256 of the design lock the
+C was generated from, so that :func:`python_bindings.load` refuses an extension older than its lock.
 
-Where things go: the observer's project (:mod:`codegen.project.workspace`): the extension in
+Where things go: the observer's project (:mod:`python_bindings.workspace`): the extension in
 ``build/extensions/``, its objects in ``build/objects/NAME/``.
 """
 from __future__ import annotations
 
-import contextlib
+import hashlib
 import importlib.util
 import json
 import os
 import sys
 import sysconfig
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
+from python_bindings.runtime import CompiledObserver, open_observer
+from python_bindings.workspace import Workspace, source_checkout
 
 from ..design import lock as design_lock
-from ..project import observer_file as observers
-from ..project.workspace import Workspace, source_checkout
-from ..errors import SampleError, UnknownObserverError
+from ..emit.header import signals as header_signals
 from ..emit.toolchain import STRICT_CFLAGS, compile_and_link, compiler, render_template, run
+from ..errors import UnknownObserverError
+from ..project import observer_file as observers
 
 STRICT_FLAGS = list(STRICT_CFLAGS)
 # Python.h is not -pedantic/-Wconversion clean; the glue gets the same flags minus those two.
@@ -40,8 +41,6 @@ SPEED_FLAGS = ["-O3"]
 LTO_FLAGS = ["-flto", "-fvisibility=hidden"]
 
 _LTO = None
-# Open recordings of the inputs given to CompiledObserver.run (see :func:`recording`).
-_RECORDINGS: list = []
 
 
 def lto_supported() -> bool:
@@ -134,10 +133,13 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
     build_dir.mkdir(parents=True, exist_ok=True)
     ext_dir.mkdir(parents=True, exist_ok=True)
     glue = build_dir / f"{name}_pymodule.c"
-    glue.write_text(render_template("pymodule.c.j2", name=name, NAME=name.upper()))
+    signals = header_signals((src_dir / f"{name}.h").read_text(), name)
+    lock = design_lock.path(config)
+    glue.write_text(render_template("pymodule.c.j2", name=name, NAME=name.upper(), signals=signals,
+                                    c_string=c_string, design_sha256=hashlib.sha256(lock.read_bytes()).hexdigest()))
     import numpy
     glue_flags = [*GLUE_FLAGS, "-I", sysconfig.get_paths()["include"], "-I", numpy.get_include()]
-    module_file = f"_{name}{sysconfig.get_config_var('EXT_SUFFIX')}"
+    module_file = workspace.extension(name).name
     staging = Path(tempfile.mkdtemp(prefix=f".{name}.new-", dir=ext_dir))
     try:
         candidate = compile_and_link(observer_sources(config) + [glue], staging / module_file, include=[src_dir],
@@ -158,118 +160,31 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
 
 def generated_names(project: Path | None = None) -> list:
     """Built-in observers that have been generated in ``project`` (default: the built-in
-    observers' project, :mod:`codegen.project.workspace`)."""
+    observers' project, :mod:`python_bindings.workspace`)."""
     builtin = set(observers.names())
     ws = Workspace.of(project if project is not None else source_checkout())
     return [n for n in ws.generated_names() if n in builtin]
 
 
-@dataclass(frozen=True)
-class CompiledObserver:
-    """A compiled observer step and the names of its vectors."""
-
-    name: str
-    module: object
-    state_names: tuple
-    input_names: tuple
-    sample_time: float
-    output_names: tuple = ()
-
-    @property
-    def step(self):
-        if not _RECORDINGS:
-            return self.module.step
-        step = self.module.step
-
-        def recorded(state, inputs, out):
-            for rec in _RECORDINGS:
-                rec.append((self.name, np.array(inputs, dtype=np.float64, copy=True), None))
-            return step(state, inputs, out)
-        return recorded
-
-    @property
-    def n_state(self) -> int:
-        return self.module.N_STATE
-
-    @property
-    def n_input(self) -> int:
-        return self.module.N_INPUT
-
-    @property
-    def n_output(self) -> int:
-        return self.module.N_OUTPUT
-
-    @property
-    def status_bits(self) -> dict:
-        return {k: getattr(self.module, k) for k in
-                ("OK", "SCHEDULING_CLAMPED", "NONFINITE_INPUT", "NUMERICAL_FAILURE", "WARMING_UP")}
-
-    def output_index(self, signal: str) -> int:
-        """Column of ``signal`` in the outputs."""
-        try:
-            return self.output_names.index(signal)
-        except ValueError:
-            raise UnknownObserverError(f"{self.name} has no output {signal!r}; outputs: "
-                                       f"{', '.join(self.output_names)}") from None
-
-    def initial_state(self) -> np.ndarray:
-        return np.zeros(self.n_state)
-
-    def run(self, inputs, state=None):
-        """Run over an (n, n_input) array; returns (outputs (n, n_output), status (n,), final state)."""
-        inputs = np.ascontiguousarray(inputs, dtype=np.float64)
-        if inputs.ndim != 2 or inputs.shape[1] != self.n_input:
-            raise SampleError(f"{self.name}: inputs must have shape (n, {self.n_input}) with columns "
-                              f"{', '.join(self.input_names)}; got {inputs.shape}")
-        state = self.initial_state() if state is None else np.array(state, dtype=np.float64)
-        if state.shape != (self.n_state,):
-            raise SampleError(f"{self.name}: state must have shape ({self.n_state},), got {state.shape}")
-        for rec in _RECORDINGS:
-            rec.append((self.name, inputs.copy(), state.copy()))
-        n = inputs.shape[0]
-        outputs = np.empty((n, self.n_output))
-        status = np.empty(n, dtype=np.int32)
-        self.module.run(state, inputs, outputs, status, n)
-        return outputs, status, state
-
-
-@contextlib.contextmanager
-def recording():
-    """Record what :meth:`CompiledObserver.run` (and ``step``) is given inside the block: yields
-    a list that fills with (observer name, inputs, initial state) per call (one input row and
-    None for a step), e.g. the input sequence of a
-    validation scenario, to replay it through the FMU or a cross-compiled build."""
-    rec: list = []
-    _RECORDINGS.append(rec)
-    try:
-        yield rec
-    finally:
-        _RECORDINGS.remove(rec)
+def c_string(text: str) -> str:
+    """``text`` as a C string literal: printable ASCII as is, anything else (quotes, backslashes,
+    UTF-8 bytes) as octal escapes."""
+    out = []
+    for byte in text.encode():
+        ch = chr(byte)
+        out.append(ch if 32 <= byte < 127 and ch not in '"\\?' else f"\\{byte:03o}")
+    return '"' + "".join(out) + '"'
 
 
 def load(observer) -> CompiledObserver:
-    """The compiled extension of an observer: a built-in name, the path of an observer file, or
-    an :class:`~codegen.project.observer_file.ObserverConfig` (built by ``make build`` / ``uiogen build``)."""
+    """The compiled extension of an observer (:func:`python_bindings.load`): a built-in name, the
+    path of an observer file, or an :class:`~codegen.project.observer_file.ObserverConfig`, from
+    its project (built by ``make build`` / ``uiogen build``)."""
     config = _config(observer)
-    name = config.name
-    design = design_lock.path(config)
-    if not design.is_file():
-        raise UnknownObserverError(f"observer {name!r} has not been generated (no {design}); run `uiogen generate`")
-    path = config.workspace.extension(name)
-    key = f"uiogen_ext_{abs(hash(str(path)))}__{name}"
-    module = sys.modules.get(key)
-    if module is None:
-        if not path.is_file():
-            raise UnknownObserverError(f"observer {name!r} is generated but not compiled (no {path}); run "
-                                       f"`uiogen build {name if config.builtin else config.source}`")
-        spec = importlib.util.spec_from_file_location(f"_{name}", path)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        sys.modules[key] = module
-    art = json.loads(design.read_text())
-    signals = art["signals"]
-    return CompiledObserver(name, module, tuple(signals["state"]), tuple(signals["input"]),
-                            float(art["config"]["sample_time"]), tuple(signals.get("output", signals["state"])))
+    argument = config.name if config.builtin else config.source
+    if config.workspace != Workspace.locate(argument)[0]:
+        argument += f" --project {config.workspace.root}"
+    return open_observer(config.workspace, config.name, argument)
 
 
 def main(argv=None, project: Path | None = None) -> int:

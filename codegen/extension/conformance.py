@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..emit.header import struct_fields
 from ..errors import ConformanceError
 
 #: largest |C - numpy| relative to the entry's rounding scale |f| + |df/dargs| |args|: the numpy
@@ -89,13 +90,8 @@ def header_layout(header: str, name: str) -> dict:
     for key in ("N_STATE", "N_INPUT", "N_OUTPUT"):
         m = re.search(rf"^#define {NAME}_{key} (\d+)$", header, re.M)
         out[key] = int(m.group(1)) if m else None
-    structs = {m.group(2): [f for f in re.findall(r"^\s+\w+ (\w+);", m.group(1), re.M)]
-               for m in re.finditer(r"typedef struct \{\n(.*?)\n\} (\w+);", header, re.S)}
-    out["state"] = structs.get(f"{name}_state")
-    out["input"] = structs.get(f"{name}_input")
-    out["output"] = structs.get(f"{name}_output")
-    if out["output"] is None and re.search(rf"typedef {name}_state {name}_output;", header):
-        out["output"] = out["state"]
+    for part, fields in struct_fields(header, name).items():
+        out[part] = None if fields is None else [f[0] for f in fields]
     return out
 
 

@@ -152,8 +152,9 @@ class Family(abc.ABC):
         """model -> representation -> design -> certificates -> discrete step."""
 
     def validate(self, config, scenario, plant: str = "nominal", duration: float | None = None,
-                 seed: int = 0, progress=None) -> dict:
-        """Run the compiled step on a simulated plant: {"observer": {SIGNAL: stats}, "baselines", ...}."""
+                 seed: int = 0, progress=None, observer=None) -> dict:
+        """Run the compiled step (``observer``: a compiled observer of ``config``, default its
+        extension) on a simulated plant: {"observer": {SIGNAL: stats}, "baselines", ...}."""
         raise UnsupportedError(f"family {self.name!r} has no simulated validation scenarios")
 
     def format_validation(self, result: dict) -> str:
@@ -194,6 +195,15 @@ class Family(abc.ABC):
     def bench_family_lines(self, rows: list) -> list:
         return []
 
+    def applicability(self, subject, structure):
+        """Whether this family can take ``subject`` (a model with its sensors and unknown inputs,
+        :class:`codegen.analysis.subject.Subject`), given its ``structure``
+        (:class:`codegen.analysis.structure.Structure`): a
+        :class:`codegen.analysis.ranking.Applicability`, "applies" with the observer-file settings
+        the family would use, or the one condition that fails and the change that satisfies it.
+        ``uiogen analyze`` ranks the families by these answers; None: the family does not say."""
+        return None
+
     def check_gains(self, config, gains: dict) -> dict:
         """Check externally supplied decision variables against the family's LMIs, without a solver.
 
@@ -228,6 +238,19 @@ class Family(abc.ABC):
                                     "worst_block": worst.label, "worst_min_eig": worst.min_eig})
         out["feasible"] = True
         return out
+
+    def fit(self, config, path, samples: str, folds: int = 0) -> dict:
+        """Identify the observer's numbers on samples A..B-1 (``samples`` = "A:B") of a log
+        (``uiogen fit``); families without an identification refuse."""
+        raise UnsupportedError(f"family {self.name!r} has no identification (uiogen fit): its numbers come from its "
+                               f"paper or its parameter file")
+
+    def fit_files(self, config, result: dict) -> dict:
+        """{path: text} of the files that hold the fitted numbers."""
+        return {}
+
+    def fit_lines(self, result: dict, changed: dict) -> list:
+        return []
 
     def format_check_gains(self, result: dict, source: str) -> list:
         lines = [f"{self.title} ({self.short_citation}): check of {source} on observer {result['observer']}"]

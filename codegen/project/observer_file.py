@@ -7,7 +7,7 @@ observer for another car is a new TOML file, not new code.
 A configuration outside the package (a user's project) may name its model and parameter file
 by paths relative to its own folder (``model = "my_car.py"``: a module defining
 ``MODEL = ModelDefinition(...)``, exactly as in ``model_defs/``). Where its design lock, C and
-extension go is its project's (:mod:`codegen.project.workspace`): its own folder, or the
+extension go is its project's (:mod:`python_bindings.workspace`): its own folder, or the
 ``project`` given to :func:`get`.
 """
 from __future__ import annotations
@@ -25,7 +25,7 @@ from ..errors import ModelDefinitionError, UnknownObserverError
 from ..model import ModelDefinition
 from . import columns, precision
 from .settings import Rule, config_error, parse_table, suggest
-from .workspace import PACKAGE_ROOT, Workspace
+from python_bindings.workspace import PACKAGE_ROOT, Workspace
 
 MODELS_DIR = PACKAGE_ROOT / "model_defs"
 PARAMS_DIR = MODELS_DIR / "params"
@@ -61,7 +61,7 @@ class ObserverConfig:
     source: str = ""
     switching: dict = field(default_factory=dict)     # switched families: the rule, as data
 
-    project: str = ""       # its project folder (codegen.project.workspace); "" = the default rule
+    project: str = ""       # its project folder (python_bindings.workspace); "" = the default rule
     # [data]: how a logged run's columns map onto the observer's inputs. Not part of to_json (so
     # not of the design hash): editing the map of a log never re-solves the design.
     column_map: object = None
@@ -81,7 +81,7 @@ class ObserverConfig:
 
     @property
     def workspace(self) -> Workspace:
-        """The folders its generated files go to (:mod:`codegen.project.workspace`)."""
+        """The folders its generated files go to (:mod:`python_bindings.workspace`)."""
         if self.project:
             return Workspace(Path(self.project))
         return Workspace.for_observer_file(self.source, builtin=self.builtin)
@@ -252,7 +252,7 @@ def get(name, overrides: dict | None = None, project: str | Path | None = None) 
     ``overrides`` (dotted key -> value, :func:`apply_overrides`) changes settings of the file as
     read, for studies such as ``uiogen sweep``; the file on disk is not touched. ``project``: the
     project folder its generated files go to, instead of the default
-    (:meth:`codegen.project.workspace.Workspace.for_observer_file`).
+    (:meth:`python_bindings.workspace.Workspace.for_observer_file`).
     """
     if isinstance(name, ObserverConfig):
         if overrides:

@@ -9,7 +9,8 @@ matrix entries, e.g. 1/v_x and 1/v_x**2), and builds
 * the Taylor-reduced form of Nguyen et al. 2019 eqs. (6)-(9): the first nonlinearity is
   normalized to theta in [-1, 1] and the others are replaced by their first-order
   Taylor expansion in theta at theta = 0; 2 vertices for one signal, with the
-  approximation error reported by :func:`taylor_error`.
+  approximation error reported by :func:`taylor_error`. An *approximation, error not in
+  the LMI*: its certificate holds for the 2-vertex polytope, not for A(rho) (:data:`FORMS`).
 
 Membership functions are products of sector weights; their time-derivative
 bounds phi_kl (Nguyen et al. 2019 eq. (14)) come from the scheduling rate bounds, either
@@ -28,6 +29,16 @@ import sympy as sp
 
 from ..errors import ModelDefinitionError, SchedulingBoundsError
 from ..model import LPVModel
+
+APPROXIMATION = "approximation, error not in the LMI"
+FORMS = {
+    "sector": "exact: sum_i eta_i A_i = A(rho) on the whole scheduling box, which the certificate covers",
+    "taylor_reduced": f"{APPROXIMATION}: the first-order Taylor reduction of Nguyen et al. 2019 eqs. (6)-(9) "
+                      f"misses A(rho) by its reported Taylor error; the certificate holds for the 2-vertex "
+                      f"polytope only",
+}
+"""What each polytope kind's certificate covers, in the words the summaries, the design lock and the
+docs use (``polytope = "sector"`` is the exact form; ``"taylor_reduced"`` reproduces the paper)."""
 
 
 @dataclass(frozen=True)
@@ -127,6 +138,7 @@ class Polytope:
     def to_json(self) -> dict:
         return {
             "kind": self.kind,
+            "form": FORMS[self.kind],
             "signals": [str(x) for x in self.signals],
             "signal_ranges": [[lo, hi] for lo, hi in zip(self.lowers, self.uppers)],
             "nonlinearities": [str(g) for g in self.nonlinearities],

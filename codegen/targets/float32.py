@@ -60,7 +60,7 @@ def _config(observer) -> observers.ObserverConfig:
 
 def emit_float(observer, out_dir: Path | None = None, build=None) -> Path:
     """The float32 C of ``observer`` in ``out_dir/NAME/`` (default: its project's
-    ``build/float32/NAME/``, :mod:`codegen.project.workspace`)."""
+    ``build/float32/NAME/``, :mod:`python_bindings.workspace`)."""
     config = _config(observer)
     b = build or pipeline.build(config)
     target = Path(out_dir or config.workspace.float32) / config.name

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import platform
-import re
 import tempfile
 import uuid
 import zipfile
@@ -23,6 +22,7 @@ from .. import __version__ as UIOGEN_VERSION
 from ..project import observer_file as observers
 from .. import pipeline
 from ..errors import ConfigurationError, UnknownObserverError, UnsupportedError
+from ..emit.header import unit_of
 from ..emit.toolchain import STRICT_CFLAGS, compile_and_link, render_template
 
 FMI2_HEADERS = Path(__file__).resolve().parent / "fmi2"
@@ -30,12 +30,6 @@ FMI3_HEADERS = Path(__file__).resolve().parent / "fmi3"
 FORMATS = {"fmu": "2.0", "fmu3": "3.0"}
 # Fixed entry time of every file in the archive: the same sources give the same zip entries.
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)
-
-
-def unit_of(doc: str) -> str:
-    """The unit in a signal's doc, ``estimate of beta [rad]`` -> ``rad``; '' for none or ``[-]``."""
-    m = re.search(r"\[([^\]]+)\]", doc)
-    return "" if m is None or m.group(1).strip() in ("-", "") else m.group(1).strip()
 
 
 def variables(b) -> list:

@@ -10,6 +10,8 @@ Per observer:
   numpy implementation of the same step; batch ``run`` throughput;
 * design time: our LMI path (build + Clarabel solve) vs the same LMIs through CVXPY with
   Clarabel and with SCS at the same tolerance, and the objective each reaches;
+* the runtime: import + load + first step of a compiled observer in a fresh interpreter, as a
+  ratio to ``import numpy`` alone (and the toolchain modules it imported: none);
 * toolchain: ``uiogen generate`` cold (forced) and with nothing changed;
 * HOSMD (``codegen/representation/differentiators.py``): compiled-C cost per sample per differentiator order, and
   accuracy against ``AlgDiff`` (algebraic differentiators) and a backward difference on the same
@@ -181,6 +183,11 @@ def bench_observer(name: str) -> dict:
     step = obs.step
     s = state.copy()
     t_c = _per_call(lambda: step(s, inp, out), number=20000)
+    # as the README writes it (the attribute looked up per call) against the extension's own
+    # function bound once: CompiledObserver.step is that function, so only the lookup differs
+    bare = obs.module.step
+    t_bare = _per_call(lambda: bare(s, inp, out), number=20000)
+    t_attr = _per_call(lambda: obs.step(s, inp, out), number=20000)
     t_casadi = _per_call(lambda: f(state, u, y, rho), number=2000)
     t_numpy = _per_call(lambda: b.reference_step(state, u, y, rho), number=500)
     runs = []
@@ -195,7 +202,9 @@ def bench_observer(name: str) -> dict:
     instr = callgrind_instructions_per_step(name)
     return {
         "family": b.config.family,
-        "step_python_ns": 1e9 * t_c, "casadi_function_call_ns": 1e9 * t_casadi,
+        "step_python_ns": 1e9 * t_c, "step_bare_extension_ns": 1e9 * t_bare,
+        "step_obs_attribute_ns": 1e9 * t_attr, "step_obs_attribute_over_bare": t_attr / t_bare,
+        "casadi_function_call_ns": 1e9 * t_casadi,
         "numpy_step_ns": 1e9 * t_numpy, "speedup_vs_casadi": t_casadi / t_c,
         "speedup_vs_numpy": t_numpy / t_c, "batch_ns_per_sample": 1e9 * t_batch,
         "batch_samples_per_s": 1.0 / t_batch, "batch_ns_per_sample_min": 1e9 * min(runs),
@@ -408,8 +417,46 @@ def cortexm_lines(c: dict) -> list:
     return lines
 
 
+# A fresh interpreter timing its own imports: the runtime's import + load + first step, against
+# `import numpy` alone (the floor: the runtime needs numpy). Printed: seconds, then whether any
+# toolchain package was imported.
+_RUNTIME_PROBE = """
+import sys, time
+t0 = time.perf_counter()
+{body}
+t = time.perf_counter() - t0
+heavy = sorted(m for m in ("codegen", "sympy", "casadi", "clarabel", "scipy", "jinja2") if m in sys.modules)
+print(t, ",".join(heavy))
+"""
+_LOAD_BODY = """
+import numpy as np
+from python_bindings import load
+obs = load({name!r})
+obs.step(obs.initial_state(), np.zeros(obs.n_input), np.empty(obs.n_output))
+"""
+
+
+def bench_runtime(name: str = "lpv_linf_driver_torque", repeats: int = 9) -> dict:
+    """Import + load + first step of a compiled observer in a fresh interpreter, and ``import
+    numpy`` alone, median of ``repeats`` processes each; their ratio; the toolchain packages the
+    runtime imported (none expected)."""
+    def probe(body):
+        times, heavy = [], ""
+        for _ in range(repeats):
+            proc = subprocess.run([sys.executable, "-c", _RUNTIME_PROBE.format(body=body)], check=True,
+                                  capture_output=True, text=True, cwd=Path(__file__).resolve().parents[2])
+            t, _, heavy = proc.stdout.strip().partition(" ")
+            times.append(float(t))
+        return float(np.median(times)), heavy
+    t_numpy, _ = probe("import numpy")
+    t_load, heavy = probe(_LOAD_BODY.format(name=name))
+    return {"observer": name, "import_numpy_ms": 1e3 * t_numpy, "import_load_first_step_ms": 1e3 * t_load,
+            "ratio_to_import_numpy": t_load / t_numpy, "toolchain_modules_imported": heavy.split(",") if heavy else []}
+
+
 def main(json_output: bool = False) -> int:
     res = {"observers": {name: bench_observer(name) for name in observers.names()},
+           "runtime": bench_runtime(),
            "toolchain": bench_toolchain(), "hosmd": bench_hosmd(), "cortex_m": bench_cortexm()}
     res["families"] = {name: rows for name in families.names() if (rows := families.get(name).bench_family())}
     if json_output:
@@ -425,7 +472,9 @@ def main(json_output: bool = False) -> int:
               f"flops per step {r['flops_per_step']['total']} "
               f"(div {r['flops_per_step'].get('OP_DIV', 0)})   "
               f"ratio {r['instructions_per_flop'] and round(r['instructions_per_flop'], 2)}")
-        print(f"   one-sample step from Python (C)   {r['step_python_ns']:9.0f} ns")
+        print(f"   one-sample step from Python (C)   {r['step_python_ns']:9.0f} ns   (obs.step(...) as written "
+              f"{r['step_obs_attribute_ns']:.0f} ns = {r['step_obs_attribute_over_bare']:.2f} x the bare "
+              f"extension call {r['step_bare_extension_ns']:.0f} ns)")
         print(f"   CasADi Function call, same step   {r['casadi_function_call_ns']:9.0f} ns   "
               f"(C step {r['speedup_vs_casadi']:.0f}x faster)")
         print(f"   numpy implementation, same step   {r['numpy_step_ns']:9.0f} ns   "
@@ -454,6 +503,10 @@ def main(json_output: bool = False) -> int:
                                              f"{100 * p['objective_rel_diff_reduced']:.2f} %)"))
         for line in families.get(observers.get(name).family).bench_lines(r["family_figures"]):
             print("   " + line)
+    r = res["runtime"]
+    print(f"== runtime: import + load + first step {r['import_load_first_step_ms']:.1f} ms in a fresh interpreter "
+          f"= {r['ratio_to_import_numpy']:.2f} x `import numpy` ({r['import_numpy_ms']:.1f} ms); toolchain modules "
+          f"imported: {', '.join(r['toolchain_modules_imported']) or 'none'}")
     t = res["toolchain"]
     print(f"== toolchain: uiogen generate cold {t['generate_cold_s']:.2f} s, unchanged {t['generate_unchanged_s']:.2f} s")
     _print_hosmd(res["hosmd"])

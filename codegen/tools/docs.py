@@ -16,7 +16,9 @@ kind and an argument:
 * ``validation FAMILY``: the validation errors of its demo scenarios (observer and baselines);
 * ``real_data -``: the shared Stanford log, every estimator's sideslip error;
 * ``bench -``: the step cost and design time of every observer (``make bench``);
-* ``spread -``: how far a re-solve moves (``python -m codegen.tools.spread``).
+* ``spread -``: how far a re-solve moves (``python -m codegen.tools.spread``);
+* ``record NAME``: the ``table`` ({"header", "rows"}) of a study's record ``docs/data/NAME.json``
+  (the command that writes it is named where the region sits).
 """
 from __future__ import annotations
 
@@ -95,15 +97,18 @@ def validation_table(demo: dict, family: str) -> str:
 
 
 def real_data_table(demo: dict) -> str:
+    """The shared log: every estimator's sideslip RMS on the evaluation part (the headline: no number
+    of any estimator was chosen on it), on the identification part and on the whole half."""
     real = demo["real_data"]
-    rows = [["observer (`stanford_sideslip`)", real["observer"]["beta"]["rms"], real["observer"]["beta"]["max"],
-             real["observer"]["beta"]["mae"]]]
-    rows += [[name, t["beta"]["rms"], t["beta"]["max"], t["beta"]["mae"]] for name, t in sorted(real["baselines"].items())]
-    rows += [[f"`{name}`", t["beta"]["rms"], t["beta"]["max"], t["beta"]["mae"]]
-             for name, t in sorted(real.get("other_observers", {}).items())]
-    rows += [[name, t["beta"]["rms"], t["beta"]["max"], t["beta"]["mae"]]
-             for name, t in sorted(real.get("other_baselines", {}).items())]
-    return _table(["estimator", "β RMSE [deg]", "β max [deg]", "β MAE [deg]"], rows)
+    parts = real.get("parts", {})
+    entries = [("observer", "observer (`stanford_sideslip`)", real["observer"])]
+    entries += [(name, name, t) for name, t in sorted(real["baselines"].items())]
+    entries += [(name, f"`{name}`", t) for name, t in sorted(real.get("other_observers", {}).items())]
+    entries += [(name, name, t) for name, t in sorted(real.get("other_baselines", {}).items())]
+    rows = [[label, parts.get(key, {}).get("evaluation"), parts.get(key, {}).get("identification"), t["beta"]["rms"],
+             t["beta"]["max"], t["beta"]["mae"]] for key, label, t in entries]
+    return _table(["estimator", "β RMSE evaluation part [deg]", "identification part", "whole half", "β max [deg]",
+                   "β MAE [deg]"], rows)
 
 
 def bench_table(bench: dict) -> str:
@@ -158,6 +163,9 @@ def _render(kind: str, arg: str, demo: dict | None, bench: dict | None, spread: 
     if kind == "sweep":
         record = _load(DATA / "sweeps" / f"{arg}.json")
         return None if record is None else sweep_table(record)
+    if kind == "record":
+        record = _load(DATA / f"{arg}.json")
+        return None if record is None else _table(record["table"]["header"], record["table"]["rows"])
     if kind == "family_bench":
         return None if bench is None else family_bench_table(bench, arg)
     if kind == "spread":
@@ -175,7 +183,7 @@ def _render(kind: str, arg: str, demo: dict | None, bench: dict | None, spread: 
     if kind == "bench":
         return bench_table(bench)
     raise ConfigurationError(f"unknown docs table kind {kind!r} (design, validation, real_data, bench, spread, "
-                             f"family_bench, sweep)")
+                             f"family_bench, sweep, record)")
 
 
 def _load(path: Path) -> dict | None:

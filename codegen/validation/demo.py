@@ -64,11 +64,25 @@ def run_real_data() -> tuple:
 
 def real_data_json(real: dict, others: dict) -> dict:
     """The demo JSON's ``real_data``: the main run's observer and baselines, every other observer,
-    and the baselines only another observer's run has (``other_baselines``, named 'PEER (OBSERVER)')."""
+    the baselines only another observer's run has (``other_baselines``, named 'PEER (OBSERVER)'), and
+    each estimator's sideslip RMS on the evaluation and identification parts of the log (``parts``,
+    the same keys: "observer", a baseline, an other observer's name, 'PEER (OBSERVER)')."""
     extra = {f"{peer} ({n})": t for n, r in others.items() for peer, t in r["baselines"].items()
              if peer not in real["baselines"]}
-    return {**{k: real[k] for k in ("observer", "baselines")},
-            "other_observers": {n: r["observer"] for n, r in others.items()}, "other_baselines": extra}
+    parts = {}
+    for key, run, row in [("observer", real, "observer"), *[(b, real, b) for b in real["baselines"]],
+                          *[(n, r, "observer") for n, r in others.items()],
+                          *[(f"{peer} ({n})", r, peer) for n, r in others.items() for peer in r["baselines"]
+                            if peer not in real["baselines"]]]:
+        sp_ = run.get("splits")
+        if sp_:
+            parts[key] = {"evaluation": sp_["evaluation"][row], "identification": sp_["identification"][row]}
+    out = {**{k: real[k] for k in ("observer", "baselines")},
+           "other_observers": {n: r["observer"] for n, r in others.items()}, "other_baselines": extra}
+    if parts:
+        out["parts"] = parts
+        out["t_split"] = real["splits"]["t_split"]
+    return out
 
 
 def _note(name: str) -> str:
@@ -80,7 +94,7 @@ def real_data_lines(real: dict, others: dict) -> list:
     """The real-data table of ``uiogen demo`` as text: the main observer with the source repository's
     baselines, then each other observer on the same log with the peers only its run has."""
     lines = [f"== real data: {REAL_DATA_OBSERVER} on {real['data']} ({real['samples']} samples at 100 Hz, "
-             f"optical-sensor sideslip truth; {real['status_flags']} flagged)",
+             f"sideslip reference atan2(vy, vx) of the log's velocities; {real['status_flags']} flagged)",
              "   " + validate.format_data_table(real).replace("\n", "\n   ")]
     for n, r in others.items():
         t = r["observer"]

@@ -127,13 +127,14 @@ def simulate(config, duration: float = DURATION, seed: int = 0, substeps: int = 
     return truth
 
 
-def run(config, duration: float | None = None, seed: int = 0, progress=None) -> dict:
-    """The compiled step over the excitation scenario; tables in the shape of every validation."""
+def run(config, duration: float | None = None, seed: int = 0, progress=None, observer=None) -> dict:
+    """The compiled step (``observer``, default the observer's extension) over the excitation
+    scenario; tables in the shape of every validation."""
     from .. import pipeline
     from ..extension.build import load
     model = config.load_model()
     truth = simulate(config, duration or DURATION, seed)
-    obs = load(config)
+    obs = observer if observer is not None else load(config)
     missing = [c for c in obs.input_names if c not in truth]
     if missing:
         raise ModelDefinitionError(f"observer {config.name!r}: its inputs {missing} are not signals of the model")

@@ -37,14 +37,18 @@ def progress_bar(label: str):
 
 
 def run_scenario(name, scenario, plant: str = "nominal", duration: float | None = None,
-                 seed: int = 0, progress=None) -> dict:
+                 seed: int = 0, progress=None, observer=None) -> dict:
     """Simulate the observer's family plant, run the compiled step and the baselines; returns the
-    tables (``observer``, ``baselines``), the signals and ``family`` (which formats the table)."""
+    tables (``observer``, ``baselines``), the signals and ``family`` (which formats the table).
+    ``observer``: the compiled observer to run (default: the observer's extension), e.g. a
+    :class:`python_bindings.Recorder` of it."""
     config = observers.get(name) if isinstance(name, str) else name
     if scenario == "excitation":            # every model: its own equations, swept and excited
         from . import excitation
-        return {"family": config.family, **excitation.run(config, duration, seed, progress=progress)}
-    result = families.get(config.family).validate(config, scenario, plant, duration, seed, progress=progress)
+        return {"family": config.family, **excitation.run(config, duration, seed, progress=progress,
+                                                          observer=observer)}
+    result = families.get(config.family).validate(config, scenario, plant, duration, seed, progress=progress,
+                                                  observer=observer)
     return {"family": config.family, **result}
 
 
@@ -90,7 +94,7 @@ def to_json(result: dict) -> str:
 
 
 DATA_COLUMNS = {"delta": "delta", "y_r": "yaw_rate", "y_a_y": "ay", "v_x": "vx", "y_delta": "delta",
-                "y_v_x": "vx"}
+                "y_v_x": "vx", "a_x": "ax"}
 
 
 # the input sequence of an observer of the shared log, for tools that need one (codegen.tools.qemu,
@@ -163,7 +167,7 @@ def run_data(name, path: str = "stanford") -> dict:
     result = {"observer": {**table(beta), **extra}, "baselines": {k: table(b) for k, b in estimates.items()},
               "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)), "data": run.source,
               "signals": {"t": t, "beta_true": run.beta_true, "beta": beta, **estimates}}
-    split = _identification_split(config, t)
+    split = _identification_split(config, t, run.source)
     if split is not None:
         def rms(b, m):
             return float(np.degrees(np.sqrt(np.mean((b - run.beta_true)[m] ** 2))))
@@ -194,14 +198,20 @@ def peak_errors(t, truth, estimates: dict) -> list:
     return out
 
 
-def _identification_split(config, t):
-    """The identification split of the observer's parameter file ([meta] identification_t_end, s from the
-    log's start), when it has one and the log reaches past it."""
+def _identification_split(config, t, path=None):
+    """Where the evaluation part of a log starts [s from its start]: the observer's parameter file's
+    ``[meta] identification_t_end`` (its numbers were chosen before it), else, on the shared Stanford
+    log, :data:`codegen.validation.stanford.EVALUATION_T_START` (the same protocol for every estimator
+    of that log); None when the log does not reach past it."""
     from ..model import load_parameters
+    from . import stanford
     raw = load_parameters(config.parameter_path).meta.get("identification_t_end")
-    if raw is None:
+    if raw is not None:
+        split = float(raw)
+    elif path is not None and str(path) == str(stanford.STANFORD_PATH):
+        split = stanford.EVALUATION_T_START
+    else:
         return None
-    split = float(raw)
     return split if t[-1] > split else None
 
 
@@ -226,7 +236,7 @@ def plot_data(result: dict, path: str) -> None:
         return
     fig, ax = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
     deg = 180 / np.pi
-    ax[0].plot(sig["t"], sig["beta_true"] * deg, "k", lw=0.8, label="optical sensor (truth)")
+    ax[0].plot(sig["t"], sig["beta_true"] * deg, "k", lw=0.8, label="reference atan2(vy, vx) of the log")
     ax[0].plot(sig["t"], sig["beta"] * deg, "r", lw=0.8, label="observer (C step)")
     ax[0].plot(sig["t"], sig["linear_kf"] * deg, "b", lw=0.6, alpha=0.6, label="linear KF")
     ax[0].set_ylabel("beta [deg]")
@@ -250,21 +260,28 @@ def plot_data(result: dict, path: str) -> None:
 
 
 def format_data_table(result: dict) -> str:
+    """The real-data table. With an identification split, the evaluation part (samples no choice
+    was made on) is the headline column, the identification part and the whole log beside it."""
     if result.get("kind") == "column_map":
         from . import logs
         return logs.format_table(result)
     rows = [("observer", result["observer"])] + list(result["baselines"].items())
-    lines = [f"{'estimator':18s} {'beta RMSE':>10s} {'beta max':>9s} {'beta MAE':>9s} {'vy RMSE':>9s}   [deg, m/s]"]
-    for name, t in rows:
-        lines.append(f"{name:18s} {t['beta']['rms']:10.4f} {t['beta']['max']:9.4f} {t['beta']['mae']:9.4f} "
-                     f"{t['vy']['rms']:9.4f}")
-    if "splits" in result:
-        sp_ = result["splits"]
-        for part in ("identification", "evaluation"):
-            d = sp_[part]
-            lines.append(f"beta RMSE on the {part} part ({'t <' if part == 'identification' else 't >='} "
-                         f"{sp_['t_split']:g} s, {d['samples']} samples): "
-                         + ", ".join(f"{k} {v:.4f}" for k, v in d.items() if k != "samples"))
+    sp_ = result.get("splits")
+    if sp_:
+        ev, idn = sp_["evaluation"], sp_["identification"]
+        lines = [f"beta RMSE [deg] on the evaluation part (t >= {sp_['t_split']:g} s, {ev['samples']} samples; the "
+                 f"headline), the identification part (t < {sp_['t_split']:g} s, {idn['samples']} samples) and the "
+                 f"whole log; max, MAE [deg] and vy RMSE [m/s] on the whole log",
+                 f"{'estimator':18s} {'evaluation':>10s} {'identif.':>9s} {'whole':>9s} {'beta max':>9s} {'beta MAE':>9s} "
+                 f"{'vy RMSE':>9s}"]
+        for name, t in rows:
+            lines.append(f"{name:18s} {ev[name]:10.4f} {idn[name]:9.4f} {t['beta']['rms']:9.4f} {t['beta']['max']:9.4f} "
+                         f"{t['beta']['mae']:9.4f} {t['vy']['rms']:9.4f}")
+    else:
+        lines = [f"{'estimator':18s} {'beta RMSE':>10s} {'beta max':>9s} {'beta MAE':>9s} {'vy RMSE':>9s}   [deg, m/s]"]
+        for name, t in rows:
+            lines.append(f"{name:18s} {t['beta']['rms']:10.4f} {t['beta']['max']:9.4f} {t['beta']['mae']:9.4f} "
+                         f"{t['vy']['rms']:9.4f}")
     for pk in result.get("peaks", ()):
         lines.append(f"peak t = {pk['t']:g} s (truth peak {pk['truth_peak_deg']:.2f} deg), max |beta error| within "
                      f"+-{PEAK_HALF_WIDTH:g} s: " + ", ".join(f"{k} {v:.2f}" for k, v in pk.items()
@@ -286,11 +303,12 @@ def scenario_names(name) -> tuple:
 def scenario_inputs(name, scenario, plant: str = "nominal", duration: float | None = None) -> np.ndarray:
     """The (n, n_input) input sequence the compiled observer is given on a validation scenario
     (recorded from the run itself: the noisy measurements, the derived scheduling signals)."""
-    from ..extension.build import recording
+    from python_bindings import Recorder
+    from ..extension.build import load
     config = observers.get(name) if isinstance(name, str) else name
-    with recording() as rec:
-        run_scenario(config, scenario, plant, duration=duration)
-    runs = [inputs for who, inputs, _ in rec if who == config.name]
+    recorder = Recorder(load(config))
+    run_scenario(config, scenario, plant, duration=duration, observer=recorder)
+    runs = [inputs for inputs, _ in recorder.calls]
     if not runs:
         raise SampleError(f"{config.name}: scenario {scenario!r} did not run the compiled observer")
     if runs[0].ndim == 1:           # sample by sample (step): the consecutive rows of the first run

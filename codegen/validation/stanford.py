@@ -3,7 +3,8 @@
 Data
 ----
 ``../shared/data/stanford_sideslip/run_20140222_part1.csv.gz`` (beside the checkout) (see that folder's README):
-100 Hz, 27,500 samples of run 20140222_01_01_03_250lm with optical-sensor ground-truth sideslip,
+100 Hz, 27,500 samples of run 20140222_01_01_03_250lm (Stanford's Ferrari 250 LM, 982 kg) with a
+sideslip reference ``beta_true`` = atan2(vy, vx) of the log's own velocities (to 4e-9; not a separate sensor),
 from MBDS/sideslip-angle-vehicle-estimation (MIT, (c) 2021 J. L. Blanco-Claraco), used in Leanza,
 Reina, Blanco-Claraco, Sensors 21(16) 5409, 2021. :func:`load` accepts that path, any plain or
 gzip CSV with the same columns, or the shorthand ``"stanford"``.
@@ -59,6 +60,12 @@ STANFORD_PATH = (Path(__file__).resolve().parents[3] / "shared" / "data" / "stan
                  / "run_20140222_part1.csv.gz")
 """Location of the converted first half of run 20140222_01_01_03_250lm."""
 
+EVALUATION_T_START = 137.5
+"""[s from the log's start] The shared half's evaluation part starts here (sample 13750 of 27500): the
+identification part (samples 0-13749) is the only one any number of an estimator of this log may be
+chosen on; the evaluation part is reported, never fitted (``uiogen validate --data`` splits every
+estimator's error there)."""
+
 COLUMNS = ("t", "vx", "vy", "beta_true", "ax", "ay", "yaw_rate", "yaw_acc",
            "delta", "delta_fl", "delta_fr")
 """Required CSV columns, SI units (s, m/s, rad, m/s², rad/s, rad/s²); see :data:`UNITS`."""
@@ -113,7 +120,7 @@ class StanfordRun:
     vx, vy : ndarray
         Longitudinal and lateral speed at the CoG [m/s].
     beta_true : ndarray
-        Ground-truth sideslip angle from the optical sensor [rad].
+        Sideslip reference [rad]: atan2(vy, vx) of the log's own velocities (to 4e-9), not a separate sensor.
     ax, ay : ndarray
         Longitudinal and lateral acceleration at the CoG [m/s²].
     yaw_rate : ndarray
@@ -452,6 +459,9 @@ def _check_run(run: StanfordRun) -> None:
         raise SampleError("the single-track baselines need |v_x| >= 1 m/s on every sample")
 
 
+_RUN_COLUMNS = {"delta": "delta", "a_x": "ax"}     # known inputs of the nonlinear-tyre model -> log columns
+
+
 def _filter_inputs(run: StanfordRun):
     """Inputs u = delta, measurements y = (a_y, r), scheduling rho = v_x of a run."""
     return run.delta, np.column_stack([run.ay, run.yaw_rate]), run.vx
@@ -573,31 +583,56 @@ def ekf(run: StanfordRun, car: VehicleParams = STANFORD_CAR, cfg: EKFConfig = EK
 
 
 NONLINEAR_TYRE_PEER_NOISE = {"sigma_fy": 0.1, "sigma_ay": 0.3}
-"""Noise levels of the same-tyre EKF and UKF peers (:func:`nonlinear_tyre_peers`): process noise
-per axle as a fraction of its static load, a_y measurement noise (None: the high-pass std of the
-log's a_y). Chosen on samples 0-13749 of the shared half only (t - t_0 < 137.5 s), the
-identification split of ``stanford_race_car_nonlinear_tyre.toml``, from the grid sigma_fy in
-{0.02, 0.05, 0.1, 0.2} x sigma_ay in {high-pass std, 0.3, 1.0} m/s^2."""
+"""Noise levels of the same-tyre EKF and UKF peers (:func:`nonlinear_tyre_peers`) when the parameter
+file does not give them (``[meta] peer_sigma_fy``, ``peer_sigma_ay``, which ``uiogen fit`` identifies):
+process noise per axle as a fraction of its static load, a_y measurement noise in m/s^2 ("highpass":
+the high-pass std of the log's a_y)."""
 
 
-def nonlinear_tyre_peers(run: StanfordRun, parameter_path, noise: dict = NONLINEAR_TYRE_PEER_NOISE) -> dict:
+def peer_noise(parameter_path) -> dict:
+    """The peers' noise levels of a parameter file (``[meta] peer_sigma_fy``, ``peer_sigma_ay``), else
+    :data:`NONLINEAR_TYRE_PEER_NOISE`."""
+    from ..model import load_parameters
+    meta = load_parameters(parameter_path).meta
+    out = dict(NONLINEAR_TYRE_PEER_NOISE)
+    for key in out:
+        raw = meta.get(f"peer_{key}")
+        if raw is None:
+            continue
+        if raw == "highpass":
+            out[key] = None
+            continue
+        try:
+            out[key] = float(raw)
+        except ValueError:
+            raise ModelDefinitionError(f"{parameter_path}: [meta] peer_{key} = {raw!r}: must be a number in a string "
+                                       f"(\"0.1\") or \"highpass\"") from None
+    return out
+
+
+def nonlinear_tyre_peers(run: StanfordRun, parameter_path, noise: dict | None = None,
+                         which=("ekf_nonlinear_tyre", "ukf_nonlinear_tyre")) -> dict:
     """EKF and UKF on ``model_defs/single_track_nonlinear_tyre.MODEL`` with the numbers of
-    ``parameter_path`` (the observer's own parameter file: the same Fiala tyre, the same mu and
-    C per axle). States (v_y, r), measurements (a_y, r), process noise w_f, w_r ~ N(0, sigma_fy^2);
-    x_0 = 0, P_0 = diag(1, 0.01). Returns {"ekf_nonlinear_tyre": BaselineResult, "ukf_nonlinear_tyre": ...}."""
+    ``parameter_path`` (the observer's own parameter file: the same Fiala tyre, combined slip, the
+    same mu and C per axle). States (v_y, r), known inputs (delta, a_x), measurements (a_y, r),
+    process noise w_f, w_r ~ N(0, sigma_fy^2); x_0 = 0, P_0 = diag(1, 0.01). ``noise``: None reads
+    :func:`peer_noise`. Returns {"ekf_nonlinear_tyre": BaselineResult, "ukf_nonlinear_tyre": ...}."""
     from ..model import load_parameters
     _check_run(run)
+    noise = peer_noise(parameter_path) if noise is None else noise
     params = load_parameters(parameter_path)
     s_ay = noise["sigma_ay"] if noise["sigma_ay"] is not None else highpass_std(run.ay)
     s_r = highpass_std(run.yaw_rate)
-    model = kalman.kalman_model(builtin_model("single_track_nonlinear_tyre").MODEL, dict(params.values),
-                                outputs=("a_y", "r"))
-    u, y, rho = _filter_inputs(run)
+    definition = builtin_model("single_track_nonlinear_tyre").MODEL
+    model = kalman.kalman_model(definition, dict(params.values), outputs=("a_y", "r"))
+    _, y, rho = _filter_inputs(run)
+    u = np.column_stack([getattr(run, _RUN_COLUMNS[str(s)]) for s in definition.known_inputs])
     out = {}
-    for name, fn in (("ekf_nonlinear_tyre", kalman.extended_kalman_filter),
-                     ("ukf_nonlinear_tyre", kalman.unscented_kalman_filter)):
-        est = fn(model, u, y, rho, run.dt, R=np.diag([s_ay ** 2, s_r ** 2]),
-                 Sigma=noise["sigma_fy"] ** 2 * np.eye(len(model.noise)), x0=np.zeros(2), P0=np.diag([1.0, 0.01]))
+    filters = {"ekf_nonlinear_tyre": kalman.extended_kalman_filter, "ukf_nonlinear_tyre": kalman.unscented_kalman_filter}
+    for name in which:
+        est = filters[name](model, u, y, rho, run.dt, R=np.diag([s_ay ** 2, s_r ** 2]),
+                            Sigma=noise["sigma_fy"] ** 2 * np.eye(len(model.noise)), x0=np.zeros(2),
+                            P0=np.diag([1.0, 0.01]))
         vy, rh = est.x[:, 0], est.x[:, 1]
         beta = np.arctan2(vy, run.vx)
         out[name] = BaselineResult(

@@ -23,13 +23,17 @@ class AlgebraicUIO(Family):
     demo_scenarios = ("paper",)
     example = "algebraic_uio_example2"
 
+    def applicability(self, subject, structure):
+        from .applicability import assess
+        return assess(self, subject, structure)
+
     def build(self, config, tol=None):
         from .build import build
         return build(config, tol)
 
-    def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None) -> dict:
+    def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None, observer=None) -> dict:
         from .validation import run
-        return run(config, scenario, plant, duration, seed, progress=progress)
+        return run(config, scenario, plant, duration, seed, progress=progress, observer=observer)
 
     def format_validation(self, result: dict) -> str:
         from .validation import format_table

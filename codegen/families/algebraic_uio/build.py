@@ -587,9 +587,9 @@ def summary_lines(b: AlgebraicUIOBuild, s: dict) -> list:
     """:func:`design_summary` as the lines `uiogen design` prints."""
     out = []
     out.append(f"observer {b.name}: algebraic LPV UIO (Ichalal and Mammar 2015), relative degree(s) {s['relative_degrees']} (uniform on the box)")
-    for out, rows in s["M"].items():
+    for output, rows in s["M"].items():
         for j, row in enumerate(rows):
-            out.append(f"  M_{j} ({out}) = {row}")
+            out.append(f"  M_{j} ({output}) = {row}")
     for c in s["uniformity"]["uniform_relative_degree"]:
         out.append(f"  M_(r-1) D = {c['M_D']} in [{c['bound'][0]:.6g}, {c['bound'][1]:.6g}] (sound bound: never 0)")
     rc = s["uniformity"]["rank_condition_64"]

@@ -199,7 +199,7 @@ def _rel_max(err, ref):
 
 
 def run(config, scenario_name: str, plant: str = "nominal", duration: float | None = None, seed: int = 0,
-        progress=None) -> dict:
+        progress=None, observer=None) -> dict:
     """Simulate the scenario, run the compiled C step over it, and tabulate the errors."""
     from ...extension.build import load
     from ... import pipeline
@@ -211,7 +211,7 @@ def run(config, scenario_name: str, plant: str = "nominal", duration: float | No
     truth = simulate(b, scn, duration, seed)
     if progress is not None:
         progress(0.5)
-    obs = load(config)
+    obs = observer if observer is not None else load(config)
     inputs = input_matrix(b, truth)
     out, status, states = _history(obs, inputs)
     if progress is not None:

@@ -570,7 +570,7 @@ def implied_std_over_max(rmse_percent: float, nmse_percent: float) -> float | No
 
 
 def run(name: str, mu: float = 1.0, plant: str = "commonroad", duration: float | None = None,
-        progress=None, truth: dict | None = None) -> dict:
+        progress=None, truth: dict | None = None, observer=None) -> dict:
     """Drive the Satory-like track at friction ``mu`` on ``plant``, run the compiled observer, Table 1."""
     from ...extension.build import load
     from ...project import observer_file as observers
@@ -601,7 +601,7 @@ def run(name: str, mu: float = 1.0, plant: str = "commonroad", duration: float |
                                    progress=progress)
         else:
             raise ModelDefinitionError(f"plant must be 'commonroad' or 'model', got {plant!r}")
-    obs = load(config)
+    obs = observer if observer is not None else load(config)
     inputs = np.column_stack([truth[c[2:]] for c in obs.input_names])
     out, status, _ = obs.run(inputs)
     est = {n: out[:, obs.output_index(n)] for n in obs.output_names}
@@ -659,7 +659,7 @@ SCENARIOS = {"satory": (1.0,), "satory_mu0.6": (0.6,), "satory_mu0.4": (0.4,), "
 
 
 def run_scenario(name: str, scenario: str, plant: str = "commonroad", duration: float | None = None,
-                 progress=None) -> dict:
+                 progress=None, observer=None) -> dict:
     """`uiogen validate` for Sentouh et al. 2023 observers: ``satory`` (mu = 1), ``satory_mu0.6``, ``satory_mu0.4`` or
     ``satory_table1`` (all three, Table 1 side by side); ``plant`` commonroad or model."""
     if scenario not in SCENARIOS:
@@ -670,7 +670,7 @@ def run_scenario(name: str, scenario: str, plant: str = "commonroad", duration: 
     if plant == "nominal":      # the independent plant where the observer was designed for its car
         twin = load_parameters(config.parameter_path).meta.get("commonroad_vehicle") in ("1", "2", "3")
         plant = "commonroad" if twin else "model"
-    runs = [run(config, mu, plant, duration, progress=progress) for mu in SCENARIOS[scenario]]
+    runs = [run(config, mu, plant, duration, progress=progress, observer=observer) for mu in SCENARIOS[scenario]]
     last = runs[0]
     observer = {s: last["table"][s] for s in TABLE1_SIGNALS}
     for row in observer.values():

@@ -28,20 +28,24 @@ class LinfUIO(Family):
                      "rate_bounds": Rule(str, choices=("exact", "at_expansion_point", "none")),
                      "ui_filter": Rule(dict)}
     demo_scenarios = ("track_varying_speed", "takeover_opposing_assist")
-    example = "lpv_linf_driver_torque"
+    example = "lpv_linf_driver_torque_sector"      # starters use the exact polytope (the paper's is an approximation)
     campaign_plant = "steering_torque"
     certified_gain_norm = "peak"
 
     def check_config(self, config, data: dict) -> None:
         parse_table(data.get("ui_filter", {}), UI_FILTER_KEYS, source=config.source, section="ui_filter")
 
+    def applicability(self, subject, structure):
+        from .applicability import assess
+        return assess(self, subject, structure)
+
     def build(self, config, tol=None):
         from .build import build
         return build(config, tol)
 
-    def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None) -> dict:
+    def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None, observer=None) -> dict:
         from .validation import run
-        return run(config, scenario, plant, duration, seed, progress=progress)
+        return run(config, scenario, plant, duration, seed, progress=progress, observer=observer)
 
     def format_validation(self, result: dict) -> str:
         from .validation import format_table
@@ -96,6 +100,7 @@ class LinfUIO(Family):
                 raise ConfigurationError(f"gains: {label} has shape {m.shape}, expected {shape}", key=label)
         make = polytope.taylor_reduced_polytope if poly.kind == "taylor_reduced" else polytope.sector_polytope
         out = {"observer": config.name, "alpha": alpha, "form": "theorem_1", "results": {},
+               "polytope": poly.kind, "polytope_form": polytope.FORMS[poly.kind],
                "performance": list(performance) or [str(x) for x in lpv.definition.states]}
         for mode in ("exact", "at_expansion_point") if poly.kind == "taylor_reduced" else ("exact",):
             p = make(lpv, mode)

@@ -133,7 +133,8 @@ class LinfBuild(ObserverBuild):
         return {
             "observer": self.name, "artifact": str(path),
             "gamma": self.design.gamma, "gamma_quadratic": self.quadratic.gamma,
-            "vertices": self.poly.n_vertices, "polytope": self.poly.kind, "lyapunov": self.design.settings.lyapunov,
+            "vertices": self.poly.n_vertices, "polytope": self.poly.kind, "polytope_form": polytope.FORMS[self.poly.kind],
+            "lyapunov": self.design.settings.lyapunov,
             "solve_time_s": sol.solve_time_s, "build_time_s": sol.build_time_s,
             "total_design_time_s": sum(self.timings.values()),
             "solver_iterations": sol.iterations,
@@ -150,7 +151,9 @@ class LinfBuild(ObserverBuild):
         }
 
     def summary_lines(self, s: dict) -> list:
-        lines = [f"observer {self.name}: {FAMILY_TITLE}, {s['polytope']} polytope, {s['vertices']} vertices",
+        exact = s["polytope"] == "sector"
+        lines = [f"observer {self.name}: {FAMILY_TITLE}, {s['polytope']} polytope "
+                 f"({'exact' if exact else polytope.APPROXIMATION}), {s['vertices']} vertices",
                  f"  gamma ({s['lyapunov']:9s})      {s['gamma']:.6g}   (quadratic: {s['gamma_quadratic']:.6g})",
                  f"  re-checked gamma        {s['recheck_gamma']:.6g}   (numpy, no solver)",
                  f"  solve / build time      {1e3 * s['solve_time_s']:.1f} ms / {1e3 * s['build_time_s']:.1f} ms "
@@ -165,7 +168,8 @@ class LinfBuild(ObserverBuild):
         if s["taylor_error"]:
             te = s["taylor_error"]
             lines.append(f"  Taylor-reduction error  {te['max_abs_error']:.4g} on A{tuple(te['entry'])} at "
-                         f"{self.poly.signal}={te['at']:g} ({100 * te['relative_error_there']:.1f}% of the entry)")
+                         f"{self.poly.signal}={te['at']:g} ({100 * te['relative_error_there']:.1f}% of the entry): "
+                         f"{polytope.APPROXIMATION}; polytope = \"sector\" is the exact form")
         lines.append(f"artifact: {s['artifact']}")
         return lines
 

@@ -47,7 +47,7 @@ def car(config):
 
 
 def run(config, scenario, plant: str = "nominal", duration: float | None = None, seed: int = 0,
-        progress=None) -> dict:
+        progress=None, observer=None) -> dict:
     """Simulate, run the compiled observer and the baselines, return the tables and signals."""
     from ...extension.build import load
     from .build import representation
@@ -63,7 +63,7 @@ def run(config, scenario, plant: str = "nominal", duration: float | None = None,
     else:
         raise ModelDefinitionError(f"plant must be 'nominal', 'model' or 'commonroad', got {plant!r}")
     noisy = simulate.add_sensor_noise(truth, SENSOR_NOISE, seed)
-    obs = load(config)
+    obs = observer if observer is not None else load(config)
     d = lpv.definition
     inputs = simulate.observer_input_matrix(obs.input_names, truth, noisy)
     out, status, _ = obs.run(inputs)

@@ -21,6 +21,10 @@ class NonlinearTyreObserver(Family):
     demo_scenarios = ()
     example = "stanford_sideslip_nonlinear_tyre"
 
+    def applicability(self, subject, structure):
+        from .applicability import assess
+        return assess(self, subject, structure)
+
     def build(self, config, tol=None):
         from .build import build
         return build(config, tol)
@@ -28,11 +32,78 @@ class NonlinearTyreObserver(Family):
     def demo_report(self, art: dict) -> dict:
         c = art["certificate"]["recheck"]
         return {"worst_lmi_margin": c["worst_min_eig"], "worst_lmi_block": c["worst_block"],
-                "contraction_per_step": c["contraction_per_step"]}
+                "contraction_per_step": c["contraction_per_step"], "time_constant_s": c["time_constant_s"],
+                "decay_rate": c["decay_rate"], "best_decay_rate": c["best_decay_rate"], "gamma_deg": c["gamma_deg"],
+                "bound_deg_at_levels": c["bound_deg_at_levels"], "gains": art["gains"]}
 
     def demo_lines(self, e: dict) -> list:
-        return [f"vertex LMIs: worst margin {e['worst_lmi_margin']:.3g} in {e['worst_lmi_block']}; sqrt(V) contracts "
-                f"by {e['contraction_per_step']:.6f}/step"]
+        return [f"gains {e['gains']}; vertex LMIs: worst margin {e['worst_lmi_margin']:.3g} in {e['worst_lmi_block']}; "
+                f"sqrt(V) contracts by {e['contraction_per_step']:.6f}/step (time constant {e['time_constant_s']:.3g} s); "
+                f"l2 gain {e['gamma_deg']:.4g} deg, RMS beta error <= {e['bound_deg_at_levels']:.4g} deg at the noise "
+                f"levels"]
+
+    def fit(self, config, path, samples: str, folds: int = 0) -> dict:
+        from .fit import fit
+        return fit(config, path, samples, folds)
+
+    def fit_files(self, config, result: dict) -> dict:
+        from .fit import files
+        return files(config, result)
+
+    def fit_lines(self, result: dict, changed: dict) -> list:
+        from .fit import lines
+        return lines(result, changed)
+
+    def check_gains(self, config, gains: dict) -> dict:
+        """Gains given as ``{"L": [[L_vy_ay, L_vy_r], [L_r_ay, L_r_r]]}`` (rows v_y, r; columns a_y, r),
+        certified like the observer file's given gains: the largest decay rate a common Lyapunov
+        matrix certifies, the l2 gain at the decay the design requires; anything else in the design
+        lock's form (``lmi_solutions``)."""
+        if "lmi_solutions" in gains:
+            return super().check_gains(config, gains)
+        import dataclasses
+
+        import numpy as np
+
+        from ...errors import CertificateError, ConfigurationError, SolverError
+        L = gains.get("L")
+        try:
+            L = np.array(L, dtype=float)
+        except (TypeError, ValueError):
+            L = None
+        if L is None or L.shape != (2, 2) or not np.all(np.isfinite(L)):
+            raise ConfigurationError(f"gains: expected {{\"L\": [[L_vy_ay, L_vy_r], [L_r_ay, L_r_r]]}} (finite numbers; "
+                                     f"rows v_y, r; columns a_y, r) or the design lock's lmi_solutions, got "
+                                     f"{gains.get('L')!r}", key="L")
+        given = dict(zip(("gain_vy_ay", "gain_vy_r", "gain_r_ay", "gain_r_r"), L.ravel().tolist()))
+        cfg = dataclasses.replace(config, design={**{k: v for k, v in config.design.items() if k != "decay"}, **given})
+        out = {"observer": config.name, "form": "L", "L": L.tolist()}
+        try:
+            b = self.build(cfg)
+        except (CertificateError, SolverError) as exc:
+            out.update(feasible=False, reason=f"{type(exc).__name__}: {exc}")
+            return out
+        c = b.certificate
+        out.update(feasible=True, **{k: c[k] for k in ("blocks", "worst_block", "worst_min_eig", "contraction_per_step",
+                                                       "time_constant_s", "slowest_vertex", "best_decay_rate",
+                                                       "decay_rate", "gamma_deg", "bound_deg_at_levels")})
+        return out
+
+    def format_check_gains(self, res: dict, source: str) -> list:
+        if res.get("form") != "L":
+            return super().format_check_gains(res, source)
+        lines = [f"{self.title}: check of the gains L = {res['L']} ({source}) on observer {res['observer']}"]
+        if res["feasible"]:
+            lines += [f"  decay: largest certifiable rate {res['best_decay_rate']:.4g} 1/s; at {res['decay_rate']:.4g} 1/s "
+                      f"sqrt(V) contracts by {res['contraction_per_step']:.6f} per step at the slowest vertex "
+                      f"({res['slowest_vertex']}), time constant {res['time_constant_s']:.3g} s",
+                      f"  l2 gain {res['gamma_deg']:.4g} deg (RMS beta error <= {res['bound_deg_at_levels']:.4g} deg at "
+                      f"the noise levels); {res['blocks']} blocks re-checked with numpy, worst {res['worst_min_eig']:.3g} "
+                      f"in {res['worst_block']}",
+                      "  PASS: certified on the observer's sets"]
+        else:
+            lines.append(f"  FAIL: {res['reason']}")
+        return lines
 
 
 FAMILY = NonlinearTyreObserver()

@@ -1,228 +1,115 @@
 """Nonlinear single-track observer with saturating axle tyres, certified by the DMVT over slip sets.
 
-Model (``model_defs/single_track_nonlinear_tyre.py``): x = (v_y, r), known input delta, measured
-v_x, outputs a_y and r; the dynamics and a_y are *affine in the body-frame axle forces* Phi_k,
-and Phi_k depends on the unmeasured v_y only through the axle's slip t_k (``AXLES``).
+Model (``model_defs/single_track_nonlinear_tyre.py``, :mod:`.representation`): x = (v_y, r), known
+inputs delta and a_x, measured v_x, outputs a_y and r; the dynamics and a_y are affine in the
+body-frame axle forces Phi_k, and Phi_k depends on the unmeasured v_y only through the axle's slip.
 
-Step (discrete, sample time T_s; r_m, a_y, delta, v_x measured at sample k)::
+Step (discrete, sample time T_s; r_m, a_y, delta, a_x, v_x measured at sample k)::
 
-    x_hat_{k+1} = x_hat_k + T_s f(v_hat_y, r_m, delta, v_x) + L (y_k - [a_y(v_hat_y, r_m, delta, v_x); r_hat])
+    inside S:   x_hat_{k+1} = x_hat_k + T_s f(v_hat_y, r_m, u, v_x) + L (y_k - [a_y(v_hat_y, r_m, u, v_x); r_hat])
+    flagged:    v_hat_y,k+1 = v_hat_y + T_s (a_y,m - r_m v_x),  r_hat_{k+1} = r_m + T_s f_r
 
-with the fixed gain L of the ``[design]`` table (identified, see the parameter file). The
-measured r stands in for the state r inside the tyre forces (as the TS fuzzy UIO does with its
-measured premises), so the estimation error e = x - x_hat obeys, by the mean-value theorem
-applied to each axle force along v_y alone,
+The gain L is designed by LMIs jointly with the Lyapunov matrix (:mod:`.design`), or given in the
+observer file and certified. The measured r stands in for the state r inside the tyre forces, so
+the error e = x - x_hat obeys, by the mean-value theorem applied to each axle force along its
+slip (the true and the estimated slips lie on one segment),
 
-    e_{k+1} = (I + T_s G_f Theta s e_1^T - L [G_a Theta s e_1^T; e_2^T]) e_k =: A(s, Theta) e_k,
+    e_{k+1} = A(s, Theta) e_k + (B_x - L B_y) w_k,   A = I + T_s [G_f Theta s, 0] - L [[G_a Theta s, 0], [0, 1]],
 
-with s = 1/v_x, Theta = (theta_f, theta_r), theta_k = v_x dPhi_k/dv_y at an intermediate point,
-and G_f = d f/d Phi, G_a = d a_y/d Phi constant. theta_k is bounded *soundly* (interval
-arithmetic, :mod:`codegen.representation.bounds`) over the certified set S: |t_k| <= rho t_sl,k (``sliding_fraction``
-rho < 1 of each axle's sliding slip), |delta| within ``[state_bounds] delta``, v_x within
-``[scheduling.v_x]``. There the Fiala slope is at least (1 - rho)^2 C_k; at full sliding it is 0
-and v_y is unobservable from (a_y, r), so no certificate over a set holding full sliding exists.
+with s = 1/v_x, theta_k = v_x dPhi_k/dv_y at an intermediate point and w the disturbances of
+:mod:`.design`. theta_k is bounded soundly over the certified set S: |t_k| <= rho t_sl,k
+(``sliding_fraction`` rho < 1 of each axle's sliding slip, which the measured a_x lowers through
+the friction circle), delta and a_x within ``[state_bounds]``, v_x within ``[scheduling.v_x]``,
+and the declared ranges of each axle's stiffness and friction. There the Fiala slope is at least
+(1 - rho)^2 C_k; at full sliding it is 0 and v_y is unobservable from (a_y, r), so no certificate
+over a set holding full sliding exists.
 
-A(s, Theta) is multi-affine in (s, theta_f, theta_r): one quadratic Lyapunov matrix P with
-A_v' P A_v < lambda^2 P at the 8 vertices certifies V(e_{k+1}) < lambda^2 V(e_k) for every
-sample inside S (LMIs on :mod:`codegen.design.lmi`, re-checked with numpy on the emitted P). Samples
-whose estimated slip, delta or v_x lie outside S are flagged (excess > 0, SCHEDULING_CLAMPED):
-the certificate does not cover them; the true slip cannot be checked (v_y is not measured).
+Samples whose estimated slip, delta, a_x or v_x lie outside S are flagged (excess > 0,
+SCHEDULING_CLAMPED): the certificate does not cover them, the tyre model carries (almost) no
+information on v_y there, and the step integrates the exact kinematics v_y' = a_y - r v_x with
+the measured a_y instead (a tyre model whose friction is a little low would otherwise drive the
+estimate along a saturated force without end). The true slip cannot be checked (v_y is not
+measured).
 """
 from __future__ import annotations
 
-import functools
-import itertools
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 import sympy as sp
 
 from ...certificate.artifact import artifact_head, significant, solver_certificate
-from ...representation.bounds import range_bound
-from ...design.canonical import decimal_round
-from ...errors import CertificateError, ModelDefinitionError, SchedulingBoundsError
-from ...design.lmi import LMIProblem, bmat, check_blocks, trace
-from ...model import load_parameters, parameter_substitution
-from ...project.settings import parse_settings, setting
-from ...design.precision import margin_field, precision_field, required_margin
+from ...model import load_parameters
+from ...project.settings import Rule, parse_settings, setting
+from ...design.precision import margin_field, precision_field
 from ...emit.stepgen import CASADI_MODULES
+from . import design as dsn
+from .representation import TyreRepresentation, represent
 
 
 @dataclass(frozen=True)
 class NonlinearTyreSettings:
-    """``[design]`` of a nonlinear-tyre observer: its gain L (rows v_y, r; columns a_y, r) and the set S."""
+    """``[design]`` of a nonlinear-tyre observer: the sets, the decay required, the noise levels the
+    gain is designed for, and optionally given gains (rows v_y, r; columns a_y, r)."""
 
-    gain_vy_ay: float = setting(0.0, doc="L[v_y, a_y] [s]")
-    gain_vy_r: float = setting(0.0, doc="L[v_y, r] [m/rad]")
-    gain_r_ay: float = setting(0.0, doc="L[r, a_y] [s/m]")
-    gain_r_r: float = setting(0.0, doc="L[r, r] [-]")
-    sliding_fraction: float = setting(0.9, gt=0, lt=1, doc="rho: certified |t| <= rho t_sl per axle")
-    decay: float = setting(1.0, gt=0, le=1, doc="lambda: V(e+) <= lambda^2 V(e) is certified")
-    margin: float = setting(1e-9, gt=0, doc="smallest eigenvalue imposed on every LMI block")
-    tol: float = setting(1e-9, gt=0, doc="solver tolerance")
+    gain_vy_ay: float | None = setting(None, doc="given L[v_y, a_y] [s]; absent: designed")
+    gain_vy_r: float | None = setting(None, doc="given L[v_y, r] [m/rad]")
+    gain_r_ay: float | None = setting(None, doc="given L[r, a_y] [s/m]")
+    gain_r_r: float | None = setting(None, doc="given L[r, r] [-]")
+    sliding_fraction: float = setting(0.9, gt=0, lt=1, doc="rho: the certified set |t| <= rho t_sl per axle "
+                                                            "(decay, status bit, kinematic fallback)")
+    gain_sliding_fraction: float = setting(0.3, gt=0, lt=1, doc="the set of the l2 gain bound, <= sliding_fraction")
+    decay: float | None = setting(None, gt=0, lt=1, doc="lambda: V(e+) <= lambda^2 V(e) required; absent: "
+                                                        "decay_fraction of the largest certifiable rate")
+    decay_fraction: float = setting(0.2, gt=0, le=1, doc="fraction of the largest certifiable decay rate required")
+    stiffness_range: tuple = setting((1.0, 1.0), items=Rule(float, gt=0),
+                                     doc="[lo, hi]: factors on each axle's cornering stiffness the certificate covers")
+    friction_range: tuple = setting((1.0, 1.0), items=Rule(float, gt=0),
+                                    doc="[lo, hi]: factors on each axle's friction coefficient the certificate covers")
+    sigma_force_front: float | None = setting(None, gt=0, doc="unmodelled front axle force level [N]")
+    sigma_force_rear: float | None = setting(None, gt=0, doc="unmodelled rear axle force level [N]")
+    sigma_ay: float = setting(1.0, gt=0, doc="a_y sensor error level [m/s^2]")
+    sigma_r: float = setting(0.005, gt=0, doc="yaw-rate sensor error level [rad/s]")
+    sigma_euler_vy: float = setting(0.02, gt=0, doc="Euler residual of v_y' [m/s^2]")
+    sigma_euler_r: float = setting(0.01, gt=0, doc="Euler residual of r' [rad/s^2]")
+    margin: float = setting(1e-6, gt=0, doc="smallest eigenvalue imposed on every LMI block")
+    tol: float = setting(1e-8, gt=0, doc="solver tolerance")
     bounds_rel_tol: float = setting(1e-3, gt=0, doc="tightness of the Jacobian bounds")
     precision: str = precision_field()
     float32_margin: float = margin_field()
 
+    def __post_init__(self):
+        gains = [self.gain_vy_ay, self.gain_vy_r, self.gain_r_ay, self.gain_r_r]
+        if any(g is not None for g in gains) and any(g is None for g in gains):
+            raise ValueError("gain_vy_ay, gain_vy_r, gain_r_ay and gain_r_r are given all four (the gains are then "
+                             "certified, not designed) or none (designed)")
+        if self.gain_sliding_fraction > self.sliding_fraction:
+            raise ValueError(f"gain_sliding_fraction = {self.gain_sliding_fraction:g} must not exceed "
+                             f"sliding_fraction = {self.sliding_fraction:g} (the gain set lies in the certified set)")
+        for key in ("stiffness_range", "friction_range"):
+            rng = getattr(self, key)
+            if len(rng) != 2 or not rng[0] <= 1.0 <= rng[1]:
+                raise ValueError(f"{key} = {list(rng)} must be [lo, hi] with lo <= 1 <= hi (factors on the "
+                                 f"parameter file's value)")
+        for key in ("sigma_force_front", "sigma_force_rear"):
+            if getattr(self, key) is None:
+                raise ValueError(f"{key} is required: the level of the axle force the tyre model misses [N] "
+                                 f"(`uiogen fit` identifies it from a log with a sideslip reference)")
+
+    @property
+    def given_gains(self) -> bool:
+        return self.gain_vy_ay is not None
+
     @property
     def gain(self) -> np.ndarray:
-        return np.array([[self.gain_vy_ay, self.gain_vy_r], [self.gain_r_ay, self.gain_r_r]])
+        return np.array([[self.gain_vy_ay, self.gain_vy_r], [self.gain_r_ay, self.gain_r_r]], dtype=float)
 
-
-@dataclass(frozen=True)
-class TyreRepresentation:
-    """The model's numbers: force-affine dynamics, axle Jacobian bounds, the set S."""
-
-    f: tuple                  # sympy x_dot (w = 0), in (v_y, r, delta, v_x)
-    a_y: sp.Expr              # sympy a_y (w = 0)
-    G_f: np.ndarray           # (2, 2) d f / d Phi
-    G_a: np.ndarray           # (2,)  d a_y / d Phi
-    theta: tuple              # ((lo, hi) of v_x dPhi_k/dv_y) per axle
-    theta_attained: tuple
-    slips: tuple              # sympy t_k in (v_y, r, delta, v_x)
-    slip_limits: tuple        # rho t_sl,k
-    v_x_box: tuple
-    delta_box: tuple
-    symbols: tuple            # (v_y, r, delta, v_x)
-
-    @functools.cached_property
-    def numpy_functions(self) -> tuple:
-        """(f, a_y, slips) as plain-Python callables of ``symbols``, for the numpy reference step
-        (built once per representation: lambdify is slow)."""
-        mods = [{"Min": min, "Max": max, "Abs": abs}, "math"]
-        return ([sp.lambdify(self.symbols, e, mods) for e in self.f], sp.lambdify(self.symbols, self.a_y, mods),
-                [sp.lambdify(self.symbols, t, mods) for t in self.slips])
-
-
-def represent(module, params, settings: NonlinearTyreSettings, source: str) -> TyreRepresentation:
-    model = module.MODEL
-    if len(model.states) != 2 or len(model.known_inputs) != 1 or len(model.scheduling) != 1 \
-            or [n for n, _ in model.outputs] != ["a_y", str(model.states[1])]:
-        raise ModelDefinitionError(f"{source}: model {model.name!r}: the nonlinear-tyre observer needs states "
-                                   f"(v_y, r), one known input (delta), one scheduling signal (v_x) and outputs "
-                                   f"(a_y, r)")
-    axles = getattr(module, "AXLES", None)
-    if not axles:
-        raise ModelDefinitionError(f"{source}: model module of {model.name!r} has no AXLES (how each axle force "
-                                   f"depends on v_y; see model_defs/single_track_nonlinear_tyre.py)")
-    vy, r = model.states
-    delta, vx = model.known_inputs[0], model.scheduling[0].symbol
-    subs = parameter_substitution(model, params)
-    zero_w = {w: 0 for w in model.unknown_inputs}
-    f = tuple(sp.sympify(e).subs(subs).subs(zero_w) for e in model.dynamics)
-    a_y = sp.sympify(dict(model.outputs)["a_y"]).subs(subs).subs(zero_w)
-    tyre_t = [sp.sympify(a.slip).subs(subs) for a in axles]
-    sliding = [float(sp.sympify(a.sliding).subs(subs)) for a in axles]
-    if "v_x" not in params.scheduling:
-        raise SchedulingBoundsError(f"{params.source}: no [scheduling.v_x] box")
-    if "delta" not in params.state_bounds:
-        raise SchedulingBoundsError(f"{params.source}: no [state_bounds] delta = [min, max] (the certified set)")
-    v_box = (params.scheduling["v_x"].lower, params.scheduling["v_x"].upper)
-    d_box = tuple(params.state_bounds["delta"])
-    if not v_box[0] > 0:
-        raise SchedulingBoundsError(f"{params.source}: [scheduling.v_x] min must be > 0, got {v_box[0]}")
-    limits = [settings.sliding_fraction * s for s in sliding]
-    if not hasattr(module, "FORCES") or not hasattr(module, "DYNAMICS_IN_FORCES"):
-        raise ModelDefinitionError(f"{source}: model module of {model.name!r} needs FORCES, DYNAMICS_IN_FORCES and "
-                                   f"A_Y_IN_FORCES (the equations written in the axle forces)")
-    Phi = tuple(module.FORCES)
-    in_forces = [sp.sympify(e).subs(subs) for e in (*module.DYNAMICS_IN_FORCES, module.A_Y_IN_FORCES)]
-    G = sp.Matrix(in_forces).jacobian(sp.Matrix(Phi))
-    if any(e.free_symbols for e in G) or any(sp.diff(e, vy) != 0 for e in in_forces):
-        raise ModelDefinitionError(f"{source}: the equations in the axle forces must be affine in them with constant "
-                                   f"coefficients and free of v_y elsewhere")
-    G = np.array(G.tolist(), dtype=float)
-    theta, attained = [], []
-    for k, a in enumerate(axles):
-        # chain rule: v_x dPhi/dv_y = law'(t) projection (v_x dt/dv_y), the last factor in slip coordinates
-        t = module.t_sym
-        law = sp.sympify(a.law).subs(subs)
-        kin = sp.factor(sp.trigsimp(sp.cancel((vx * sp.diff(sp.sympify(a.slip).subs(subs), vy)).subs(
-            vy, sp.sympify(a.inverse).subs(subs)))))
-        dlaw = sp.expand(sp.diff(law, t).subs(sp.sign(t), sp.Abs(t) / t))   # t sign(t) = |t|
-        geo = sp.sympify(a.projection).subs(subs) * kin
-        stray = (dlaw.free_symbols - {t}) | (geo.free_symbols - {t, delta})
-        if stray:
-            raise ModelDefinitionError(f"{source}: axle {a.name}: v_x dPhi/dv_y in slip coordinates still depends on "
-                                       f"{sorted(map(str, stray))} (AXLES[{k}].inverse is not v_y(t))")
-        # each factor bounded soundly on its own; their product encloses theta (sound, a little wider)
-        rl = range_bound(dlaw, {t: (-limits[k], limits[k])}, rel_tol=settings.bounds_rel_tol)
-        rg = range_bound(geo, {t: (-limits[k], limits[k]), delta: d_box}, rel_tol=settings.bounds_rel_tol)
-        if not (rl.lower > 0 and rg.upper < 0):
-            raise CertificateError(f"{source}: axle {a.name}: the tyre slope reaches {rl.lower:.4g} N (or the "
-                                   f"kinematic factor {rg.upper:.4g}) on |t| <= {limits[k]:.4g}: v_y is not "
-                                   f"observable there; lower sliding_fraction")
-        from ...representation.bounds import RangeBound
-        rb = RangeBound(rl.upper * rg.lower, rl.lower * rg.upper, rl.attained_max * rg.attained_min,
-                        rl.attained_min * rg.attained_max, rl.boxes_examined + rg.boxes_examined)
-        rb = RangeBound(min(rb.lower, rb.upper), max(rb.lower, rb.upper), rb.attained_min, rb.attained_max,
-                        rb.boxes_examined)
-        theta.append((rb.lower, rb.upper))
-        attained.append((rb.attained_min, rb.attained_max))
-    # the model is the force form with the (clamped) Fiala forces: checked at random points of S
-    model_forces = [sp.sympify(e).subs(subs).subs(zero_w) for e in (module.Phi_f, module.Phi_r)]
-    rng = np.random.default_rng(0)
-    for _ in range(5):
-        pt = {vy: rng.uniform(-1, 1), r: rng.uniform(-0.5, 0.5), delta: rng.uniform(*d_box), vx: rng.uniform(*v_box)}
-        fp = {P_: float(F.subs(pt)) for P_, F in zip(Phi, model_forces)}
-        for e_model, e_force in zip((*f, a_y), in_forces):
-            a_, b_ = float(e_model.subs(pt)), float(e_force.subs({**pt, **fp}))
-            if not abs(a_ - b_) <= 1e-9 * max(1.0, abs(a_)):
-                raise ModelDefinitionError(f"{source}: MODEL is not DYNAMICS_IN_FORCES with the axle forces substituted")
-    G_f, G_a = G[:2], G[2]
-    return TyreRepresentation(f, a_y, G_f, G_a, tuple(theta), tuple(attained), tuple(tyre_t), tuple(limits),
-                              v_box, d_box, (vy, r, delta, vx))
-
-
-# --- certificate -------------------------------------------------------------------------------------
-
-def vertices(rep: TyreRepresentation, Ts: float, L: np.ndarray) -> list:
-    """(label, A_v) of the error map at the 8 vertices of (s, theta_f, theta_r)."""
-    out = []
-    s_box = (1.0 / rep.v_x_box[1], 1.0 / rep.v_x_box[0])
-    for (si, s), *ths in itertools.product(enumerate(s_box), *[list(enumerate(b)) for b in rep.theta]):
-        theta = np.array([t for _, t in ths])
-        col_f = Ts * (rep.G_f @ theta) * s              # T_s d f/dv_y
-        col_a = (rep.G_a @ theta) * s                   # d a_y/dv_y
-        J_h = np.array([[col_a, 0.0], [0.0, 1.0]])
-        A = np.eye(2) + np.column_stack([col_f, np.zeros(2)]) - L @ J_h
-        tag = "".join("lu"[i] for i, _ in ths)
-        out.append((f"vertex v_x={'max' if si == 0 else 'min'} theta={tag}", A))
-    return out
-
-
-def _blocks(verts, P, decay, xp):
-    cat = np.block if xp is np else bmat
-    return [(f"(A'PA < lambda^2 P) {label}", cat([[decay ** 2 * P, (P @ A).T], [P @ A, P]])) for label, A in verts]
-
-
-def lmi_problem(verts, settings: NonlinearTyreSettings) -> LMIProblem:
-    prob = LMIProblem("nonlinear-tyre observer: common quadratic Lyapunov matrix over the DMVT vertices")
-    P = prob.symmetric("P", 2)
-    prob.require_psd("P >= I", P, margin=1.0)
-    for label, blk in _blocks(verts, P, settings.decay, LMIProblem):
-        prob.require_psd(label, blk, margin=settings.margin,
-                         hint="lower sliding_fraction or change the gain: the tyre slope is too small at a vertex")
-    prob.minimize(trace(P))
-    return prob
-
-
-def certify(verts, P: np.ndarray, decay: float, samples_A=None) -> dict:
-    checks = check_blocks({"P > 0": P, **dict(_blocks(verts, P, decay, np))})
-    worst = min(checks, key=lambda c: c.min_eig)
-    if worst.min_eig <= 0:
-        raise CertificateError(f"nonlinear-tyre observer: LMI {worst.label!r} fails the numpy re-check on the emitted "
-                               f"P: smallest eigenvalue {worst.min_eig:.3e}")
-    # the contraction factor: max over the vertices of the generalized eigenvalue of (A'PA, P)
-    Li = np.linalg.inv(np.linalg.cholesky(P))
-    ratio = max(float(np.linalg.eigvalsh(Li @ A.T @ P @ A @ Li.T).max()) for _, A in verts)
-    if ratio >= 1.0:
-        raise CertificateError(f"nonlinear-tyre observer: V(e+)/V(e) reaches {ratio:.9f} >= 1 at a vertex")
-    return {"blocks": len(checks), "worst_block": worst.label, "worst_min_eig": worst.min_eig,
-            "worst_relative_margin": worst.relative_margin, "max_ratio": ratio,
-            "contraction_per_step": float(np.sqrt(ratio))}
+    @property
+    def sigma(self) -> np.ndarray:
+        return np.array([self.sigma_force_front, self.sigma_force_rear, self.sigma_ay, self.sigma_r,
+                         self.sigma_euler_vy, self.sigma_euler_r], dtype=float)
 
 
 # --- the step ----------------------------------------------------------------------------------------
@@ -230,26 +117,33 @@ def certify(verts, P: np.ndarray, decay: float, samples_A=None) -> dict:
 def _functions(rep: TyreRepresentation, xp):
     mods = CASADI_MODULES if xp is ca else "numpy"
     args = rep.symbols
-    return [sp.lambdify(args, e, mods) for e in rep.f], sp.lambdify(args, rep.a_y, mods), \
-        [sp.lambdify(args, t, mods) for t in rep.slips]
+    return ([sp.lambdify(args, e, mods) for e in rep.f], sp.lambdify(args, rep.a_y, mods),
+            [sp.lambdify(args, rep.rho * e, mods) for e in rep.sliding], [sp.lambdify(args, t, mods) for t in rep.slips])
 
 
 def step_parts(rep, L, Ts, z, u, y, rho, fns, xp=np):
-    """(x_next, x_now, excess): z = [x_hat_k (prediction from k-1)]; u = [delta], y = [a_y, r], rho = [v_x]."""
-    f_fn, ay_fn, t_fn = fns
+    """(x_next, excess): z = [x_hat_k (prediction from k-1)]; u = [delta, a_x], y = [a_y, r], rho = [v_x]."""
+    f_fn, ay_fn, lim_fn, t_fn = fns
     fmin, fmax, fabs = (ca.fmin, ca.fmax, ca.fabs) if xp is ca else (min, max, abs)
     vy, rh = z[0], z[1]
-    d, a_m, r_m, v = u[0], y[0], y[1], rho[0]
+    a_m, r_m, v = y[0], y[1], rho[0]
     vc = fmin(fmax(v, rep.v_x_box[0]), rep.v_x_box[1])
-    excess = fabs(v - vc) + fmax(0.0, fmax(rep.delta_box[0] - d, d - rep.delta_box[1]))
-    for t_k, lim in zip(t_fn, rep.slip_limits):
-        excess = excess + fmax(0.0, fabs(t_k(vy, r_m, d, vc)) - lim)
-    f = [fn(vy, r_m, d, vc) for fn in f_fn]
-    ea = a_m - ay_fn(vy, r_m, d, vc)
+    excess = fabs(v - vc)
+    for k, (_, (lo, hi)) in enumerate(rep.input_boxes):
+        excess = excess + fmax(0.0, fmax(lo - u[k], u[k] - hi))
+    args = (vy, r_m, *[u[k] for k in range(len(rep.input_boxes))], vc)
+    for t_k, lim_k in zip(t_fn, lim_fn):
+        excess = excess + fmax(0.0, fabs(t_k(*args)) - lim_k(*args))
+    f = [fn(*args) for fn in f_fn]
+    ea = a_m - ay_fn(*args)
     er = r_m - rh
-    vy_n = vy + Ts * f[0] + L[0, 0] * ea + L[0, 1] * er
-    r_n = rh + Ts * f[1] + L[1, 0] * ea + L[1, 1] * er
-    return (vy_n, r_n), excess
+    corrected = (vy + Ts * f[0] + L[0, 0] * ea + L[0, 1] * er, rh + Ts * f[1] + L[1, 0] * ea + L[1, 1] * er)
+    kinematic = (vy + Ts * (a_m - r_m * v), r_m + Ts * f[1])
+    if xp is ca:
+        out = tuple(ca.if_else(excess > 0, k_, c_) for k_, c_ in zip(kinematic, corrected))
+    else:
+        out = kinematic if excess > 0 else corrected
+    return out, excess
 
 
 def _build_class():
@@ -262,32 +156,48 @@ def _build_class():
         config: object
         rep: TyreRepresentation
         settings: NonlinearTyreSettings
-        P: np.ndarray
-        verts: tuple
+        plant: dsn.Plant
+        synthesis: dsn.Design
+        decay_verts: tuple
+        gain_verts: tuple
         certificate: dict
-        solution: object
         timings: dict
 
         @property
         def L(self) -> np.ndarray:
-            return self.settings.gain
+            return self.synthesis.L
+
+        @property
+        def P(self) -> np.ndarray:
+            return self.synthesis.P
+
+        @property
+        def solution(self):
+            return self.synthesis.solution
 
         @property
         def definition(self):
             return self.config.load_model()
 
+        @property
+        def known_inputs(self) -> list:
+            return [n for n, _ in self.rep.input_boxes]
+
         state_names = property(lambda self: ["v_y_next", "r_next", "v_y", "r"])
         output_names = property(lambda self: ["v_y", "r"])
-        input_names = property(lambda self: ["delta", "y_a_y", "y_r", "v_x"])
-        nu = property(lambda self: 1)
+        input_names = property(lambda self: [*self.known_inputs, "y_a_y", "y_r", "v_x"])
+        nu = property(lambda self: len(self.rep.input_boxes))
         ny = property(lambda self: 2)
 
         def step_function(self):
-            z, u, y, rho = ca.SX.sym("z", 4), ca.SX.sym("u", 1), ca.SX.sym("y", 2), ca.SX.sym("rho", 1)
+            nu = self.nu
+            z, u, y, rho = ca.SX.sym("z", 4), ca.SX.sym("u", nu), ca.SX.sym("y", 2), ca.SX.sym("rho", 1)
             (vy_n, r_n), excess = step_parts(self.rep, self.L, self.config.sample_time, z, u, y, rho,
                                              _functions(self.rep, ca), xp=ca)
-            return ca.Function(f"{self.name}_kernel", [z, u, y, rho], [ca.vertcat(vy_n, r_n, z[0], z[1]), excess],
-                               ["z", "u", "y", "rho"], ["z_next", "excess"])
+            # the sympy expressions are put together unevaluated (representation.numeric): one cos(delta),
+            # one capacity per axle, ... instead of one per use
+            outs = ca.cse([ca.vertcat(vy_n, r_n, z[0], z[1]), excess])
+            return ca.Function(f"{self.name}_kernel", [z, u, y, rho], outs, ["z", "u", "y", "rho"], ["z_next", "excess"])
 
         def reference_step(self, z, u, y, rho):
             z, u, y, rho = (np.asarray(a, float) for a in (z, u, y, rho))
@@ -295,18 +205,22 @@ def _build_class():
                                              self.rep.numpy_functions, xp=np)
             return np.array([vy_n, r_n, z[0], z[1]], dtype=float), float(excess)
 
-        def lmi_problem(self):
-            return lmi_problem(self.verts, self.settings)
-
         def contraction_metrics(self):
-            """The common P over the DMVT vertices: the prediction (v_y, r) for the next sample."""
+            """The common P over the DMVT vertices of the certified set: the prediction (v_y, r)."""
             from ...certificate.contraction import ContractionMetric
             return [ContractionMetric(float(self.certificate["contraction_per_step"]), (self.P,), ("v_y_next", "r_next"),
                                       "common P over the DMVT vertices: A' P A <= c^2 P, on the certified slip set",
-                                      knob="[design] decay (lambda imposed by the LMIs), a lower sliding_fraction or another gain")]
+                                      knob="[design] decay or decay_fraction (the rate the LMIs impose), a lower "
+                                           "sliding_fraction")]
+
+        def lmi_problem(self):
+            d = self.synthesis
+            L_scaled = None if not d.given else self.plant.D @ d.L @ np.linalg.inv(self.plant.D)
+            return dsn.lmi_problem(self.plant, self.decay_verts, self.gain_verts, self.settings, d.rate, d.best_rate,
+                                   L_scaled)
 
         def input_boxes(self):
-            return {"v_x": list(self.rep.v_x_box), "delta": list(self.rep.delta_box)}
+            return {"v_x": list(self.rep.v_x_box), **{n: list(b) for n, b in self.rep.input_boxes}}
 
         def scheduling_boxes(self):
             return [("v_x", *self.rep.v_x_box, False)]
@@ -316,58 +230,113 @@ def _build_class():
                      {"name": "r_next", "doc": "predicted yaw rate for the next sample [rad/s]"},
                      {"name": "v_y", "doc": "estimate of v_y at this sample, from the samples before it [m/s]"},
                      {"name": "r", "doc": "estimate of r at this sample, from the samples before it [rad/s]"}]
-            inputs = [{"name": "delta", "doc": "road-wheel steering angle [rad]"},
-                      {"name": "y_a_y", "doc": "measured lateral acceleration at the CoG [m/s^2]"},
-                      {"name": "y_r", "doc": "measured yaw rate [rad/s]"},
-                      {"name": "v_x", "doc": "measured longitudinal speed [m/s]"}]
+            docs = {"delta": "road-wheel steering angle [rad]", "a_x": "measured longitudinal acceleration at the CoG "
+                    "[m/s^2] (combined slip: the axles' lateral capacity)"}
+            inputs = [{"name": n, "doc": docs.get(n, "known input")} for n in self.known_inputs]
+            inputs += [{"name": "y_a_y", "doc": "measured lateral acceleration at the CoG [m/s^2]"},
+                       {"name": "y_r", "doc": "measured yaw rate [rad/s]"},
+                       {"name": "v_x", "doc": "measured longitudinal speed [m/s]"}]
             return state, inputs, state[2:]
 
         def emit_notes(self):
             c = self.certificate
             return {
-                "headline": f"DMVT vertex LMIs worst margin {c['worst_min_eig']:.3g}",
-                "stability": (f"common quadratic Lyapunov matrix over the 8 vertices of (1/v_x, theta_f, theta_r): "
-                              f"sqrt(V) contracts by {c['contraction_per_step']:.6f} per step on the certified set"),
+                "headline": f"DMVT vertex LMIs (designed gains) worst margin {c['worst_min_eig']:.3g}"
+                            if not self.synthesis.given else f"DMVT vertex LMIs (given gains) worst margin "
+                                                          f"{c['worst_min_eig']:.3g}",
+                "stability": (f"common quadratic Lyapunov matrix over the vertices of (1/v_x, theta_f, theta_r): sqrt(V) "
+                              f"contracts by {c['contraction_per_step']:.6f} per step while the true and the "
+                              f"estimated state stay in the certified set; l2 gain {c['gamma_deg']:.3g} deg from the "
+                              f"normalized disturbances to the sideslip error on the gain set"),
                 "step_notes": [
                     "Each call takes the measurements of sample k and returns the estimate of sample k made",
                     "from the samples before it; the state's head is the prediction for sample k+1.",
+                    "A flagged sample integrates the kinematics v_y' = a_y - r v_x (no tyre correction).",
                 ],
-                "clamp_doc": ("v_x or delta outside the certified set (v_x clamped for the model), or an estimated\n"
-                              " * axle slip beyond sliding_fraction of its sliding limit: the certificate does not cover this sample."),
+                "clamp_doc": ("v_x, delta or a_x outside the certified set (v_x clamped for the model), or an estimated\n"
+                              " * axle slip beyond sliding_fraction of its sliding slip: the certificate does not cover this "
+                              "sample,\n * and the step integrates the kinematics instead of correcting by the tyre model."),
                 "warmup_doc": "never set.",
                 "has_warmup": False,
             }
 
-        def artifact(self):
+        def _representation(self):
             rep = self.rep
+
+            def axles(bounds):
+                return [{"theta_bounds": list(map(significant, b.theta)),
+                         "theta_attained_on_grid": list(map(significant, b.attained)),
+                         "slope_bounds": list(map(significant, b.slope)),
+                         "kinematic_factor_bounds": list(map(significant, b.kinematic)),
+                         "slip_max": significant(b.slip_max)} for b in bounds]
+            return {"G_f": rep.G_f.tolist(), "G_a": rep.G_a.tolist(), "v_x_box": list(rep.v_x_box),
+                    "input_boxes": {n: list(b) for n, b in rep.input_boxes},
+                    "certified_set": {"sliding_fraction": self.settings.sliding_fraction, "axles": axles(rep.decay_set)},
+                    "gain_set": {"sliding_fraction": self.settings.gain_sliding_fraction, "axles": axles(rep.gain_set)},
+                    "stiffness_range": list(self.settings.stiffness_range),
+                    "friction_range": list(self.settings.friction_range)}
+
+        def artifact(self):
             return {**artifact_head(self, ["v_x"], flags_from_inputs_only=False),
-                    "representation": {"G_f": rep.G_f.tolist(), "G_a": rep.G_a.tolist(),
-                                       "theta_bounds": [list(map(significant, b)) for b in rep.theta],
-                                       "theta_attained": [list(map(significant, b)) for b in rep.theta_attained],
-                                       "slip_limits": [significant(x) for x in rep.slip_limits],
-                                       "v_x_box": list(rep.v_x_box), "delta_box": list(rep.delta_box)},
-                    "L": self.L.tolist(), "P": self.P.tolist(), "sliding_fraction": self.settings.sliding_fraction,
+                    "representation": self._representation(),
+                    "L": self.L.tolist(), "P": self.P.tolist(), "gains": "given" if self.synthesis.given else "designed",
+                    "noise_levels": dict(zip(dsn.CHANNELS, self.settings.sigma.tolist())),
+                    "sliding_fraction": self.settings.sliding_fraction,
                     "certificate": solver_certificate(self.solution, recheck=self.certificate)}
 
         def summary(self, path):
             c = self.certificate
-            return {"observer": self.name, "artifact": str(path), "theta_bounds": [list(b) for b in self.rep.theta],
-                    "slip_limits": list(self.rep.slip_limits), "L": self.L.tolist(), "P": self.P.tolist(),
+            s = self.settings
+            return {"observer": self.name, "artifact": str(path), "gains": "given" if self.synthesis.given else "designed",
+                    "theta_bounds": [list(b.theta) for b in self.rep.decay_set],
+                    "theta_gain_set": [list(b.theta) for b in self.rep.gain_set],
+                    "slip_max": [b.slip_max for b in self.rep.decay_set], "L": self.L.tolist(), "P": self.P.tolist(),
                     "lmi_blocks": c["blocks"], "worst_block": c["worst_block"], "worst_min_eig": c["worst_min_eig"],
-                    "worst_relative_margin": c["worst_relative_margin"], "contraction_per_step": c["contraction_per_step"],
-                    "sliding_fraction": self.settings.sliding_fraction, "sample_time": self.config.sample_time}
+                    "worst_relative_margin": c["worst_relative_margin"],
+                    "contraction_per_step": c["contraction_per_step"], "time_constant_s": c["time_constant_s"],
+                    "slowest_vertex": c["slowest_vertex"], "decay_rate": c["decay_rate"],
+                    "best_decay_rate": c["best_decay_rate"], "gamma_deg": c["gamma_deg"],
+                    "bound_deg_at_levels": c["bound_deg_at_levels"],
+                    "sliding_fraction": s.sliding_fraction, "gain_sliding_fraction": s.gain_sliding_fraction,
+                    "stiffness_range": list(s.stiffness_range), "friction_range": list(s.friction_range),
+                    "noise_levels": dict(zip(dsn.CHANNELS, s.sigma.tolist())),
+                    "input_boxes": {n: list(b) for n, b in self.rep.input_boxes}, "v_x_box": list(self.rep.v_x_box),
+                    "sample_time": self.config.sample_time}
 
         def summary_lines(self, s):
-            lines = [f"observer {s['observer']}: nonlinear single-track observer, Fiala tyre per axle, certified on "
-                     f"|t| <= {s['sliding_fraction']:g} t_sl per axle"]
-            for name, b, lim in zip(("front", "rear"), s["theta_bounds"], s["slip_limits"]):
-                lines.append(f"  v_x dPhi_{name}/dv_y in [{b[0]:.6g}, {b[1]:.6g}] N on |tan alpha| <= {lim:.4g} "
-                             f"(sound, interval arithmetic)")
-            lines += [f"  L = {s['L']}",
-                      f"  {s['lmi_blocks']} LMI blocks; worst margin {s['worst_min_eig']:.3e} (relative "
-                      f"{s['worst_relative_margin']:.3e}) in {s['worst_block']} (numpy re-check)",
-                      f"  sqrt(V) contracts by {s['contraction_per_step']:.6f} per step at the worst vertex",
-                      f"artifact: {s['artifact']}"]
+            boxes = ", ".join(f"{n} in [{b[0]:g}, {b[1]:g}]" for n, b in s["input_boxes"].items())
+            ranges = ""
+            if s["stiffness_range"] != [1.0, 1.0] or s["friction_range"] != [1.0, 1.0]:
+                ranges = (f"; every axle stiffness x[{s['stiffness_range'][0]:g}, {s['stiffness_range'][1]:g}] and "
+                          f"friction x[{s['friction_range'][0]:g}, {s['friction_range'][1]:g}] of the parameter file")
+            lv = s["noise_levels"]
+            lines = [f"observer {s['observer']}: nonlinear single-track observer, Fiala tyre per axle, gains "
+                     f"{s['gains']} (LMIs, Lyapunov matrix and gains jointly)",
+                     f"  plant class: the model Euler-discretized at T_s = {s['sample_time']:g} s, v_x in "
+                     f"[{s['v_x_box'][0]:g}, {s['v_x_box'][1]:g}] m/s, {boxes}{ranges}",
+                     f"  certified set S: |t_k| <= {s['sliding_fraction']:g} t_sl,k on each axle (t_sl from the capacity "
+                     f"at the measured a_x), for the true AND the estimated state"]
+            for name, b, tmax in zip(("front", "rear"), s["theta_bounds"], s["slip_max"]):
+                lines.append(f"    v_x dPhi_{name}/dv_y in [{b[0]:.6g}, {b[1]:.6g}] N on S (|t| <= {tmax:.4g}; sound, "
+                             f"interval arithmetic)")
+            lines += [
+                f"  decay (no disturbance): the largest certifiable rate is {s['best_decay_rate']:.4g} 1/s; required "
+                f"{s['decay_rate']:.4g} 1/s: sqrt(V) contracts by {s['contraction_per_step']:.6f} per step at the "
+                f"slowest vertex ({s['slowest_vertex']}), time constant {s['time_constant_s']:.3g} s",
+                f"  l2 gain on S_gain (|t_k| <= {s['gain_sliding_fraction']:g} t_sl,k, true and estimated state): "
+                f"sum_k beta_err^2 <= gamma^2 sum_k |w_k / sigma|^2 + V(e_0), gamma = {s['gamma_deg']:.4g} deg",
+                f"    w: axle force residuals (sigma {lv['force_front']:.4g}, {lv['force_rear']:.4g} N), a_y sensor error "
+                f"({lv['ay']:.4g} m/s^2), yaw-rate sensor error ({lv['r']:.4g} rad/s), Euler residuals "
+                f"({lv['euler_vy']:.4g} m/s^2, {lv['euler_r']:.4g} rad/s^2), any sequences",
+                f"    every channel at its level sigma: RMS beta error <= {s['bound_deg_at_levels']:.4g} deg (+ the decaying "
+                f"initial error)",
+                "  status bit SCHEDULING_CLAMPED: the ESTIMATED slip, delta, a_x or v_x outside S; the true slip is not "
+                "seen (v_y is not measured), so the true state can leave S unflagged; flagged samples integrate the "
+                "kinematics",
+                f"  L = {s['L']}",
+                f"  {s['lmi_blocks']} LMI blocks; worst margin {s['worst_min_eig']:.3e} (relative "
+                f"{s['worst_relative_margin']:.3e}) in {s['worst_block']} (numpy re-check)",
+                f"artifact: {s['artifact']}"]
             return lines
 
     return Build
@@ -376,21 +345,28 @@ def _build_class():
 Build = _build_class()
 
 
-def build(config, tol: float | None = None):
-    """model -> force form + sound axle Jacobian bounds on S -> vertex LMIs -> numpy re-check -> step."""
-    settings = parse_settings(NonlinearTyreSettings, config.design, source=config.source, section="design",
-                              **({"tol": tol} if tol is not None else {}))
-    if required_margin(settings):       # precision = "float32": the LMIs impose lambda <= 1 - float32_margin
-        settings = replace(settings, decay=min(settings.decay, 1.0 - required_margin(settings)))
+def parse(config, tol=None) -> NonlinearTyreSettings:
+    return parse_settings(NonlinearTyreSettings, config.design, source=config.source, section="design",
+                          **({"tol": tol} if tol is not None else {}))
+
+
+def build(config, tol: float | None = None, params=None):
+    """model -> force form + sound axle Jacobian bounds on the sets -> vertex LMIs (gains and P) ->
+    numpy re-check -> step. ``params``: a :class:`~codegen.model.ParameterSet` instead of the
+    observer's parameter file (identification: :mod:`.fit`)."""
+    settings = parse(config, tol)
     t0 = time.perf_counter()
-    rep = represent(config.load_model_module(), load_parameters(config.parameter_path), settings, config.source)
+    params = load_parameters(config.parameter_path) if params is None else params
+    rep = represent(config.load_model_module(), params, settings, config.source)
     t1 = time.perf_counter()
-    verts = tuple(vertices(rep, config.sample_time, settings.gain))
-    sol = lmi_problem(verts, settings).solve(tol=settings.tol)
-    P = decimal_round(0.5 * (sol["P"] + sol["P"].T))
+    d = float(np.sqrt(rep.v_x_box[0] * rep.v_x_box[1]))
+    plant = dsn.Plant(config.sample_time, rep.G_f, rep.G_a, np.array(rep.lever), settings.sigma, np.diag([1.0, d]))
+    decay_verts = tuple(dsn.vertices(rep, rep.decay_set, with_speed=False))
+    gain_verts = tuple(dsn.vertices(rep, rep.gain_set, with_speed=True))
+    design = dsn.synthesize(plant, decay_verts, gain_verts, settings)
     t2 = time.perf_counter()
-    cert = certify(verts, P, settings.decay)
+    cert = dsn.certify(plant, decay_verts, gain_verts, design)
     t3 = time.perf_counter()
-    return Build(config, rep, settings, P, verts, cert, sol,
-                 {"representation_s": t1 - t0, "design_s": t2 - t1, "solve_s": sol.solve_time_s,
+    return Build(config, rep, settings, plant, design, decay_verts, gain_verts, cert,
+                 {"representation_s": t1 - t0, "design_s": t2 - t1, "solve_s": design.solution.solve_time_s,
                   "certificates_s": t3 - t2})

@@ -30,13 +30,17 @@ class SwitchedPI(Family):
         from .validation import SENSOR_NOISE
         return dict(SENSOR_NOISE)
 
+    def applicability(self, subject, structure):
+        from .applicability import assess
+        return assess(self, subject, structure)
+
     def build(self, config, tol=None):
         from .build import build
         return build(config, tol)
 
-    def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None) -> dict:
+    def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None, observer=None) -> dict:
         from .validation import run_scenario
-        return run_scenario(config, scenario, plant, duration, seed, progress=progress)
+        return run_scenario(config, scenario, plant, duration, seed, progress=progress, observer=observer)
 
     def format_validation(self, result: dict) -> str:
         from .validation import format_table

@@ -255,13 +255,13 @@ def _flat(scn):
 
 
 def run_scenario(config, scenario: str, plant: str = "nominal", duration: float | None = None,
-                 seed: int = 0, progress=None) -> dict:
+                 seed: int = 0, progress=None, observer=None) -> dict:
     """The compiled step on a scenario: tables (angles in degrees), eq. (26)/(28) ratio, mode occupancy."""
     from ...extension.build import load
     from ...validation import simulate
     tr = truth(config, scenario, plant, duration, progress)
     measured = simulate.add_sensor_noise(tr, SENSOR_NOISE, seed)
-    obs = load(config)
+    obs = observer if observer is not None else load(config)
     out, status, _ = obs.run(simulate.observer_input_matrix(obs.input_names, tr, measured))
     model = config.load_model()
     units = dict(model.units)

@@ -22,13 +22,17 @@ class TSFuzzyUIO(Family):
     demo_scenarios = ("random_trajectory_accel", "circular_path_normal", "time_varying_grip_normal")
     example = "ts_fuzzy_uio"
 
+    def applicability(self, subject, structure):
+        from .applicability import assess
+        return assess(self, subject, structure)
+
     def build(self, config, tol=None):
         from .build import build
         return build(config, tol)
 
-    def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None) -> dict:
+    def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None, observer=None) -> dict:
         from .validation import run
-        return run(config, scenario, plant, duration, progress=progress)
+        return run(config, scenario, plant, duration, progress=progress, observer=observer)
 
     def demo_plant(self, config) -> str:
         """An observer designed for a CommonRoad car runs on the multi-body plant, the counterpart of

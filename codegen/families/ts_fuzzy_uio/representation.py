@@ -25,7 +25,7 @@ import numpy as np
 import sympy as sp
 
 from ...design import canonical
-from ...representation.bounds import RangeBound, range_bound
+from ...representation.bounds import RangeBound, derivative, range_bound
 from ...emit.stepgen import CASADI_MODULES
 from ...errors import ModelDefinitionError, NotAffineError, SchedulingBoundsError
 from ...model import ModelDefinition, ParameterSet, parameter_substitution
@@ -260,7 +260,7 @@ def build(model: ModelDefinition, params: ParameterSet, sample_time: float,
     for phi in parts["phi"]:
         row = []
         for s in x:
-            dphi = sp.diff(phi, s)
+            dphi = derivative(phi, s)        # real symbols; Clarke form where phi switches
             row.append(RangeBound(0.0, 0.0, 0.0, 0.0, 0) if dphi == 0 or s in measured else
                        range_bound(dphi, {v: box[v] for v in dphi.free_symbols}, rel_tol=rel_tol,
                                    max_boxes=max_boxes))

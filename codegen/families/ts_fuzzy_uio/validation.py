@@ -33,7 +33,7 @@ TORQUE_TRUTHS = {
 
 
 def run(config, scenario, plant: str = "nominal", duration: float | None = None,
-        progress=None, roll_stiffness_scale: float = 1.0, camber_force: bool = True) -> dict:
+        progress=None, roll_stiffness_scale: float = 1.0, camber_force: bool = True, observer=None) -> dict:
     """Nguyen et al. 2021 observers: closed-loop angle/torque plant, compiled step, Table II metrics.
 
     ``scenario`` is a library name or a built Scenario (see :func:`scenario_for`); the paper's
@@ -64,7 +64,7 @@ def run(config, scenario, plant: str = "nominal", duration: float | None = None,
         plant_model = definition.name + (" (exact model)" if definition is model_def else "")
     else:
         raise ModelDefinitionError(f"plant must be 'nominal', 'model' or 'commonroad', got {plant!r}")
-    obs = load(config)
+    obs = observer if observer is not None else load(config)
     out, status, _ = obs.run(simulate.observer_input_matrix(obs.input_names, truth, {}))
     units = dict(model_def.units)
     table, estimates = {}, {}

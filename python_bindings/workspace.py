@@ -16,16 +16,21 @@ the current directory. Nothing is ever written where the package is installed.
     PROJECT/build/campaigns/SPEC/               campaign results (uiogen campaign)
     PROJECT/build/plots/                        figures of uiogen demo
 
-This module imports the standard library only.
+The rule lives in the runtime (standard library only) because :func:`python_bindings.load` finds
+an extension by it without the toolchain; the toolchain writes by the same rule
+(:attr:`codegen.project.observer_file.ObserverConfig.workspace`).
 """
 from __future__ import annotations
 
-import sysconfig
+import importlib.machinery
 from dataclasses import dataclass
 from pathlib import Path
 
 # Where the packages are: the checkout, or site-packages once installed.
-PACKAGE_ROOT = Path(__file__).resolve().parents[2]
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+BUILTIN_OBSERVERS = PACKAGE_ROOT / "model_defs" / "observers"
+# This interpreter's extension-module suffix (sysconfig's EXT_SUFFIX, without importing sysconfig).
+EXT_SUFFIX = importlib.machinery.EXTENSION_SUFFIXES[0]
 
 
 def source_checkout() -> Path | None:
@@ -47,6 +52,17 @@ class Workspace:
     def of(cls, project: str | Path | None = None) -> "Workspace":
         """The workspace of ``project`` (a folder), or of the current directory if None."""
         return cls(Path(project if project is not None else Path.cwd()).resolve())
+
+    @classmethod
+    def locate(cls, observer: str | Path, project: str | Path | None = None) -> tuple:
+        """(workspace, name) of ``observer``: a built-in observer's name, or the path of an
+        observer file (``.toml``), whose stem is the observer's name; the file is not read."""
+        text = str(observer)
+        if text.endswith(".toml") or "/" in text:
+            path = Path(text)
+            builtin = path.resolve().parent == BUILTIN_OBSERVERS
+            return cls.for_observer_file(path, project, builtin), path.stem
+        return cls.for_observer_file(BUILTIN_OBSERVERS / f"{text}.toml", project, builtin=True), text
 
     @classmethod
     def for_observer_file(cls, path: str | Path, project: str | Path | None = None,
@@ -81,7 +97,7 @@ class Workspace:
 
     def extension(self, name: str) -> Path:
         """The compiled extension module of observer ``name`` (this interpreter's ABI suffix)."""
-        return self.extensions / f"_{name}{sysconfig.get_config_var('EXT_SUFFIX')}"
+        return self.extensions / f"_{name}{EXT_SUFFIX}"
 
     def objects(self, name: str) -> Path:
         return self.build / "objects" / name

@@ -1,0 +1,428 @@
+"""Which observer families apply to a subject, ranked, with trial designs where they are cheap.
+
+Every registered family is asked (:meth:`codegen.families.Family.applicability`; nothing here
+knows a family by name): it answers with an :class:`Applicability`, "applies" or the one condition
+that fails and the change that would satisfy it, and the observer-file settings it would use.
+Applicable families whose design takes seconds are designed through the normal pipeline
+(:func:`codegen.pipeline.solve`) on an observer file written in a temporary folder, never in
+the user's project; an observer file's own family is tried with the file's own settings.
+
+The ranking puts first what guarantees most (:data:`GUARANTEES`), among what applies:
+
+1. the family applies (every structural condition holds and the parameter file has what it needs);
+2. its trial design is certified (before one not tried, before one that failed);
+3. the guarantee: the error does not depend on the unknown inputs (decoupled), before a certified
+   gain over the whole scheduling box, before a gain at fixed operating points only, before
+   states without the unknown inputs;
+4. fewer differentiated outputs (the sum of the HOSMD orders: noise is amplified by each);
+5. the registry's order.
+"""
+from __future__ import annotations
+
+import tempfile
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from ..errors import UiogenError
+from ..project.settings import toml_repr
+from .subject import Subject
+
+#: guarantee classes, strongest first: (rank, what the certificate says)
+GUARANTEES = {
+    "decoupled": (0, "the estimation error does not depend on the unknown inputs (exact decoupling, certified decay)"),
+    "attenuated_box": (1, "a certified gain from the unknown inputs to the error over the whole scheduling box"),
+    "attenuated_points": (2, "a certified gain at fixed operating points (modes); the model between them is not "
+                             "covered"),
+    "states_only": (3, "the states on a certified set; the unknown inputs are not estimated"),
+    "unknown": (4, "the family gives no applicability check"),
+}
+
+
+@dataclass(frozen=True)
+class Applicability:
+    """A family's answer for one model with its sensors (what ``Family.applicability`` returns).
+
+    Attributes
+    ----------
+    family : str
+        The family's registry name.
+    applies : bool
+        Every condition of the family holds (as far as it can tell without designing).
+    guarantee : str
+        A key of :data:`GUARANTEES`: what a certified design of this family says.
+    condition : str
+        When it does not apply: the ONE condition that fails, naming the signals.
+    fix : str
+        The change that would satisfy it (measure this output, treat this input as known, add a
+        differentiator of order k, change the premises, restrict this box, ...).
+    checked : tuple
+        (statement, basis) of what the family checked, basis a key of
+        :data:`codegen.analysis.structure.BASIS`.
+    notes : tuple
+        What the user should know even though it applies (an unknown input only attenuated, ...).
+    observer : dict or None
+        The observer-file table the family would use (``family``, ``sample_time``, ``[design]``, ...;
+        ``model`` and ``parameters`` are filled in by the analysis); None: no proposal.
+    why : dict
+        {dotted key: the reason for its value}, written as comments by ``uiogen new --from-model``.
+    differentiators : dict
+        {signal: derivative order} the observer needs from HOSMD differentiators.
+    design_cost : str
+        "seconds" (the analysis designs it) or "minutes" (it does not).
+    figures : callable or None
+        ``build -> {name: (value, unit, meaning)}``: the certified figures of a trial design.
+    """
+
+    family: str
+    applies: bool
+    guarantee: str
+    condition: str = ""
+    fix: str = ""
+    checked: tuple = ()
+    notes: tuple = ()
+    observer: dict | None = None
+    why: dict = field(default_factory=dict)
+    differentiators: dict = field(default_factory=dict)
+    design_cost: str = "seconds"
+    figures: Callable | None = None
+
+    def to_json(self) -> dict:
+        return {"family": self.family, "applies": self.applies, "guarantee": self.guarantee,
+                "guarantee_means": GUARANTEES.get(self.guarantee, (9, ""))[1], "condition": self.condition,
+                "fix": self.fix, "checked": [{"statement": s, "basis": b} for s, b in self.checked],
+                "notes": list(self.notes), "observer": self.observer, "differentiators": self.differentiators,
+                "design_cost": self.design_cost}
+
+
+@dataclass(frozen=True)
+class Trial:
+    """A trial design of one family through the normal pipeline."""
+
+    family: str
+    status: str                 # "certified" | "failed" | "not tried"
+    settings: str               # "the observer file's settings" | "the analysis's settings" | ...
+    seconds: float = 0.0
+    headline: str = ""
+    figures: dict = field(default_factory=dict)
+    reason: str = ""
+    error: type | None = None       # the exception class of a failed design
+
+    def to_json(self) -> dict:
+        return {"family": self.family, "status": self.status, "settings": self.settings, "seconds": self.seconds,
+                "headline": self.headline, "reason": self.reason,
+                "figures": {k: {"value": v, "unit": u, "meaning": m} for k, (v, u, m) in self.figures.items()}}
+
+
+@dataclass
+class Ranking:
+    """Families in rank order, each with its applicability and trial."""
+
+    entries: list                # [(Applicability, Trial)]
+    own_family: str | None       # the observer file's family, if one was named
+    seconds: float = 0.0
+    what_if: dict | None = None  # the own family's design with the sensor the structure names
+    completed: dict | None = None  # the own family's design with the file's settings completed by the analysis
+
+    @property
+    def own_trial(self):
+        return next((t for a, t in self.entries if a.family == self.own_family), None)
+
+    @property
+    def best(self) -> Applicability | None:
+        return self.entries[0][0] if self.entries and self.entries[0][0].applies else None
+
+    def position(self, family: str) -> int:
+        return next(k for k, (a, _) in enumerate(self.entries) if a.family == family)
+
+    def to_json(self) -> dict:
+        return {"order": [a.family for a, _ in self.entries], "best": self.best.family if self.best else None,
+                "own_family": self.own_family, "seconds": self.seconds,
+                "what_if": None if self.what_if is None else {**self.what_if, "trial": self.what_if["trial"].to_json()},
+                "completed": None if self.completed is None else {
+                    **{k: v for k, v in self.completed.items() if k not in ("trial", "file_trial")},
+                    "trial": self.completed["trial"].to_json()},
+                "families": [{**a.to_json(), "trial": t.to_json()} for a, t in self.entries]}
+
+
+_TRIAL_ORDER = {"certified": 0, "not tried": 1, "failed": 2}
+
+
+def sort_key(app: Applicability, trial: Trial, index: int) -> tuple:
+    return (not app.applies, _TRIAL_ORDER[trial.status], GUARANTEES.get(app.guarantee, (9,))[0],
+            sum(app.differentiators.values()), index)
+
+
+def assess(subject: Subject, structure) -> list:
+    """Every registered family's :class:`Applicability` for ``subject``, in registry order."""
+    from .. import families
+    out = []
+    for name in families.names():
+        fam = families.get(name)
+        try:
+            app = fam.applicability(subject, structure)
+        except UiogenError as exc:          # the family's own refusal is its condition
+            app = Applicability(name, False, "unknown", condition=f"{type(exc).__name__}: {exc}")
+        except Exception as exc:            # a model the family's check cannot read: say so, rank it last
+            app = Applicability(name, False, "unknown", condition=f"the family's check could not read this model "
+                                f"({type(exc).__name__}: {exc})")
+        if app is None:
+            app = Applicability(name, False, "unknown", condition="the family gives no applicability check "
+                                "(Family.applicability): design it to find out")
+        out.append(app)
+    return out
+
+
+# ---- observer files ------------------------------------------------------------------------------------
+
+def _nested_array(value) -> bool:
+    return (isinstance(value, list) and value and all(isinstance(v, dict) for v in value)
+            and any(isinstance(x, (dict, list)) and not _inline(x) for v in value for x in v.values()))
+
+
+def _inline(value) -> bool:
+    """A value written on one line (scalars, arrays of scalars or of flat tables)."""
+    if isinstance(value, dict):
+        return all(not isinstance(v, (dict, list)) for v in value.values())
+    if isinstance(value, list):
+        return all(not isinstance(v, (dict, list)) or (isinstance(v, dict) and _inline(v)) for v in value)
+    return True
+
+
+def _key(key: str) -> str:
+    """A TOML key: bare when it may be, else quoted ("q_f*v_x")."""
+    import re
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else toml_repr(key, 10 ** 6)
+
+
+def toml_lines(table: dict, why: dict | None = None, prefix: str = "") -> list:
+    """``table`` as TOML lines, each value followed by its reason from ``why`` ({dotted key: text})."""
+    why = why or {}
+    lines, later = [], []
+    for key, value in table.items():
+        path = f"{prefix}{key}"
+        if isinstance(value, dict):
+            later.append((key, value))
+            continue
+        if _nested_array(value):
+            later.append((key, value))
+            continue
+        text = f"{_key(key)} = {toml_repr(value, 10 ** 9)}"
+        lines.append(text + (f"    # {why[path]}" if path in why else ""))
+    for key, value in later:
+        path = f"{prefix}{_key(key)}"
+        if isinstance(value, dict):
+            lines.append("")
+            lines.append(f"[{path}]" + (f"    # {why[path]}" if path in why else ""))
+            lines += toml_lines(value, why, f"{path}.")
+        else:
+            for item in value:
+                lines.append("")
+                lines.append(f"[[{path}]]" + (f"    # {why[path]}" if path in why else ""))
+                lines += toml_lines(item, why, f"{path}.")
+    return lines
+
+
+def wrapper_model(subject: Subject, add_states: tuple = ()) -> str:
+    """A model file that imports the subject's model and applies --outputs/--unknown-inputs (and
+    measures ``add_states``: declared outputs or states, by name), so a trial design runs on exactly
+    what was analyzed."""
+    from ..project import observer_file as observers
+    path = subject.model_path
+    if path.parent == observers.MODELS_DIR:
+        load = f"_base = observers.builtin_model({path.stem!r})"
+    else:
+        load = f"_base = observers.load_module(Path({str(path)!r}), 'uiogen_analysis_base_' + {path.stem!r})"
+    outputs = list(subject.outputs)
+    lines = ['"""uiogen analyze: the model of ' + str(path) + ' with the sensors and unknown inputs analyzed."""',
+             "import dataclasses", "from pathlib import Path", "",
+             "from codegen.project import observer_file as observers", "", load,
+             "globals().update({k: v for k, v in vars(_base).items() if not k.startswith('__')})",
+             "_m = _base.MODEL",
+             f"_add = {list(add_states)!r}",
+             "_declared = [o for o in _m.outputs if o[0] in _add]",
+             "_extra = tuple(_declared) + tuple((str(s), s) for s in _m.states if str(s) in _add and str(s) not in "
+             "[o[0] for o in _declared])",
+             f"_changes = {{'outputs': tuple(o for o in _m.outputs if o[0] in {outputs!r}) + _extra}}"]
+    if subject.selected.get("unknown_inputs") is not None:
+        unknown = list(subject.unknown_inputs)
+        lines += ["_inputs = (*_m.known_inputs, *_m.unknown_inputs)",
+                  f"_changes['known_inputs'] = tuple(s for s in _inputs if str(s) not in {unknown!r})",
+                  f"_changes['unknown_inputs'] = tuple(s for s in _inputs if str(s) in {unknown!r})"]
+    lines += ["MODEL = dataclasses.replace(_m, **_changes)", ""]
+    return "\n".join(lines)
+
+
+def _merge(table: dict, proposal: dict, prefix: str = "") -> tuple:
+    """``table`` with the keys of ``proposal`` it lacks (recursively), and the dotted keys added."""
+    out, added = dict(table), []
+    for key, value in proposal.items():
+        if key in ("family", "model", "parameters"):
+            continue
+        if key not in out:
+            out[key] = value
+            added.append((f"{prefix}{key}", value))
+        elif isinstance(value, dict) and isinstance(out[key], dict):
+            out[key], more = _merge(out[key], value, f"{prefix}{key}.")
+            added += more
+    return out, added
+
+
+def observer_table(subject: Subject, app: Applicability, folder: Path, add_states: tuple = ()) -> tuple:
+    """(table, settings label) of the trial of ``app``: the observer file's own table for its own
+    family, else the family's proposal; model and parameters by absolute path (or a wrapper)."""
+    own = subject.config is not None and subject.config.family == app.family
+    if own:
+        with open(subject.config.source, "rb") as fh:
+            table = tomllib.load(fh)
+        table.pop("data", None)
+        label = "the observer file's settings"
+    else:
+        table = dict(app.observer)
+        label = "the analysis's settings"
+    if subject.restricted or add_states:
+        model = folder / f"{subject.name}_analyzed.py"
+        model.write_text(wrapper_model(subject, add_states))
+    elif subject.is_builtin_model:
+        model = subject.model_path.stem          # a built-in model by its name (some families load it so)
+    else:
+        model = subject.model_path
+    table = {"family": app.family, **{k: v for k, v in table.items() if k != "family"}}
+    table["model"] = str(model)
+    table["parameters"] = str(subject.parameter_path)
+    return table, label
+
+
+def trial(subject: Subject, app: Applicability, folder: Path, add_states: tuple = (), force: bool = False,
+          complete: bool = False) -> Trial:
+    """Design ``app``'s family for ``subject`` through :func:`codegen.pipeline.solve` from an
+    observer file written in ``folder`` (a temporary folder); ``force``: even where the family
+    said it does not apply (with ``add_states`` measured, it may)."""
+    if not app.applies and not force:
+        return Trial(app.family, "not tried", "", reason="does not apply")
+    own = subject.config is not None and subject.config.family == app.family
+    if app.observer is None and not own:
+        return Trial(app.family, "not tried", "", reason="the family proposes no settings for this model")
+    if app.design_cost != "seconds":
+        return Trial(app.family, "not tried", "", reason=f"its design takes {app.design_cost}")
+    table, label = observer_table(subject, app, folder, add_states)
+    if complete:
+        table, _ = _merge(table, app.observer or {})
+        label = "the observer file's settings, completed by the analysis"
+    path = folder / f"{subject.name}_{app.family}.toml"
+    text = "\n".join(toml_lines(table)) + "\n"
+    path.write_text(text)
+    key = _trial_key(text, subject, add_states)
+    if key in _TRIALS:               # the same observer file on the same files: designed once per process
+        return _TRIALS[key]
+    _TRIALS[key] = result = _solve(path, app, label)
+    return result
+
+
+#: trial designs of this process, by observer file text and the digests of the files it reads
+_TRIALS: dict = {}
+
+
+def _trial_key(text: str, subject: Subject, add_states: tuple) -> str:
+    import hashlib
+    h = hashlib.sha256(text.encode())
+    for f in (subject.model_path, subject.parameter_path):
+        h.update(Path(f).read_bytes())
+    h.update(repr((subject.selected, add_states)).encode())
+    return h.hexdigest()
+
+
+def _solve(path: Path, app: Applicability, label: str) -> Trial:
+    from .. import pipeline
+    from ..project import observer_file as observers
+    t0 = time.perf_counter()
+    try:
+        config = observers.get(str(path))
+        b, _ = pipeline.solve(config)
+    except UiogenError as exc:
+        return Trial(app.family, "failed", label, time.perf_counter() - t0,
+                     reason=f"{type(exc).__name__}: {str(exc).replace(str(path), label)}", error=type(exc))
+    figures = app.figures(b) if app.figures is not None else {}
+    return Trial(app.family, "certified", label, time.perf_counter() - t0, b.emit_notes()["headline"], figures)
+
+
+def rank(subject: Subject, structure, design: bool = True, progress=None) -> Ranking:
+    """:func:`assess` every family, design the cheap applicable ones (``design``), rank them."""
+    t0 = time.perf_counter()
+    apps = assess(subject, structure)
+    trials = {}
+    with tempfile.TemporaryDirectory(prefix="uiogen_analyze_") as tmp:
+        for app in apps:
+            if design and app.applies:
+                if progress is not None:
+                    progress(f"designing {app.family} ...")
+                trials[app.family] = trial(subject, app, Path(tmp))
+            else:
+                reason = "does not apply" if not app.applies else "no trial designs requested"
+                trials[app.family] = Trial(app.family, "not tried", "", reason=reason)
+        own = subject.config.family if subject.config is not None else None
+        what_if = completed = None
+        if design and own is not None and trials[own].status != "certified":
+            own_app = next(a for a in apps if a.family == own)
+            completed = _completed(subject, own_app, trials[own], Path(tmp), progress)
+            if completed is not None and completed["trial"].status == "certified":
+                trials[own] = completed["trial"]        # the family can: the file lacked settings
+            else:
+                what_if = _with_sensor(subject, structure, own_app, Path(tmp), progress)
+    order = sorted(range(len(apps)), key=lambda k: sort_key(apps[k], trials[apps[k].family], k))
+    return Ranking([(apps[k], trials[apps[k].family]) for k in order], own, time.perf_counter() - t0, what_if,
+                   completed)
+
+
+def _completed(subject: Subject, app: Applicability, failed: Trial, folder: Path, progress=None) -> dict | None:
+    """The observer file's own design again, its settings completed with the keys of the family's
+    proposal it lacks, when it failed for a setting (a missing differentiator, ...): that fix, measured."""
+    from ..errors import ModelDefinitionError
+    if failed.status != "failed" or failed.error is None or not issubclass(failed.error, ModelDefinitionError) \
+            or not app.observer:
+        return None
+    table, _ = observer_table(subject, app, folder)
+    _, added = _merge(table, app.observer)
+    if not added:
+        return None
+    if progress is not None:
+        progress(f"designing {app.family} again with the settings the analysis completes ...")
+    return {"family": app.family, "added": {k: v for k, v in added},
+            "trial": trial(subject, app, folder, force=True, complete=True), "file_trial": failed}
+
+
+def _with_sensor(subject: Subject, structure, app: Applicability, folder: Path, progress=None) -> dict | None:
+    """The observer file's own design again with the first sensor the structure names for its first
+    failing fact (matching, observability, strong detectability, left invertibility): the fix,
+    measured."""
+    for key in ("matching", "observability", "strong_detectability", "left_invertibility"):
+        fact = structure.fact(key)
+        found = structure.candidates.get(key) or []
+        if fact is not None and fact.holds is False and found:
+            sensor = found[0]["sensor"]
+            if progress is not None:
+                progress(f"designing {app.family} again with {sensor} measured ...")
+            return {"family": app.family, "fact": key, "sensor": sensor,
+                    "trial": trial(subject, app, folder, add_states=(sensor,), force=True)}
+    return None
+
+
+def starter_text(subject: Subject, app: Applicability, folder: Path, structure=None) -> str:
+    """The observer file ``uiogen new --from-model`` writes for ``app``: its settings with the
+    reasons as comments, the model and parameter file by paths relative to ``folder``."""
+    import os
+    table = {"family": app.family, "model": os.path.relpath(subject.model_path, folder),
+             "parameters": os.path.relpath(subject.parameter_path, folder),
+             **{k: v for k, v in app.observer.items() if k != "family"}}
+    why = {"family": f"{GUARANTEES[app.guarantee][1]}",
+           "model": "your equations", "parameters": "your car", **app.why}
+    head = [f"# {subject.name}: {app.family}, chosen by uiogen analyze {subject.target}",
+            f"# (the best-ranked family that applies to these sensors: {', '.join(subject.outputs)};",
+            f"# unknown inputs {', '.join(subject.unknown_inputs) or 'none'}).",
+            "# next: uiogen design THIS_FILE --update && uiogen generate THIS_FILE && uiogen build THIS_FILE"]
+    for note in app.notes:
+        head.append(f"# note: {note}")
+    return "\n".join(head + [""] + toml_lines(table, why)) + "\n"
+

@@ -1,0 +1,275 @@
+"""Gains of the nonlinear-tyre observer: LMIs over the DMVT vertices, solved jointly with the Lyapunov matrix.
+
+Error system (``build.py``): with s = 1/v_x, Theta = (theta_f, theta_r) and the disturbances w,
+
+    e_{k+1} = A(s, Theta) e_k + (B_x(s, v, Theta) - L B_y(s, Theta)) w_k,
+    A = A_0 - L J,   A_0 = I + T_s [G_f Theta s, 0],   J = [[G_a Theta s, 0], [0, 1]],
+
+w = (unmodelled axle forces dPhi_f, dPhi_r [N]; a_y sensor error n_a [m/s^2]; yaw-rate sensor error
+n_r [rad/s]; Euler residuals d_v [m/s^2], d_r [rad/s^2]), each divided by its level sigma (the
+observer file's ``sigma_*``). The a_y model residual enters both the dynamics (v_y' = a_y - r v_x
+is exact kinematics) and the a_y innovation; yaw-rate noise enters the forces through the slips
+(t_f depends on v_y + l_f r, t_r on v_y - l_r r), the term r v_x and the r innovation. Performance
+output: z = s e_vy in degrees, which bounds the sideslip error (|atan a - atan b| <= |a - b|).
+
+With the usual change of variables Y = P L (affine in P, Y), written in the delta form
+A = I + T_s F, B = T_s G (the same conditions divided by T_s: no P - P cancellation, which at
+a decay near 1 leaves the solver a difference of nearly equal numbers):
+
+* decay rate a [1/s] (V(e+) <= (1 - T_s a) V(e), lambda^2 = 1 - T_s a) at the 8 vertices of
+  (s, theta_f, theta_r) on the certified set (``sliding_fraction``):
+  [[-(PF + F'P) - a P, sqrt(T_s) F'P], [sqrt(T_s) PF, P]] >= 0;
+* l2 gain gamma from w to z (bounded-real lemma) at the 16 vertices of (s, v, theta_f, theta_r)
+  on the gain set (``gain_sliding_fraction``), v = v_x taken as independent of s (sound):
+  [[-(PF + F'P) - C'C/T_s, -PG, sqrt(T_s) F'P], [-G'P, eta I, sqrt(T_s) G'P],
+   [sqrt(T_s) PF, sqrt(T_s) PG, P]] >= 0,  gamma^2 = eta T_s.
+
+Design: the largest certifiable decay rate a* by bisection (analysis problems), then one design
+problem: the decay rate ``decay_fraction`` a* (or the observer file's ``decay``) required, the
+gain minimized; L = P^-1 Y. Given gains instead (the four ``gain_*`` keys): the same two steps
+with L fixed (P alone is free). A, C'C and the blocks are multi-affine in (s, theta) except C'C
+(s^2, concave), so the vertices suffice. States and outputs are scaled by D = S = diag(1, d),
+d = sqrt(v_min v_max) [m/s] (r times a speed is a lateral speed, or an acceleration).
+"""
+from __future__ import annotations
+
+import decimal
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...design.canonical import decimal_round
+from ...design.precision import required_margin
+from ...errors import CertificateError, SolverError
+from ...design.lmi import LMIProblem, bmat, check_blocks, committed_data, objective_bound
+
+DEG = 180.0 / np.pi
+CHANNELS = ("force_front", "force_rear", "ay", "r", "euler_vy", "euler_r")
+"""The disturbance channels, in the order of w (each normalized by its level)."""
+
+
+def problem_name(given_gains: bool) -> str:
+    return ("nonlinear-tyre observer: decay and l2 gain of given gains over the DMVT vertices" if given_gains else
+            "nonlinear-tyre observer: gains, decay and l2 gain over the DMVT vertices")
+
+
+def _round_down(x: float, digits: int = 3) -> float:
+    """``x`` rounded down to ``digits`` significant digits in decimal arithmetic (the same on every machine)."""
+    if x <= 0:
+        return 0.0
+    d = decimal.Decimal(repr(float(x)))
+    quantum = decimal.Decimal(1).scaleb(d.adjusted() - digits + 1)
+    return float((d / quantum).to_integral_value(rounding=decimal.ROUND_FLOOR) * quantum)
+
+
+@dataclass(frozen=True)
+class Vertex:
+    label: str
+    s: float                 # 1 / v_x
+    v: float                 # v_x (independent of s in the polytope: sound)
+    theta: np.ndarray        # (theta_f, theta_r)
+
+
+def vertices(rep, bounds, with_speed: bool) -> list:
+    """Vertices of (s, [v,] theta_f, theta_r) over the slope bounds ``bounds`` (one AxleBounds per axle)."""
+    s_box = (1.0 / rep.v_x_box[1], 1.0 / rep.v_x_box[0])
+    v_box = rep.v_x_box if with_speed else (None,)
+    out = []
+    for (si, s), (vi, v), *ths in itertools.product(enumerate(s_box), enumerate(v_box),
+                                                    *[list(enumerate(b.theta)) for b in bounds]):
+        tag = "".join("lu"[i] for i, _ in ths)
+        label = f"v_x={'max' if si == 0 else 'min'}" + (f" v={'min' if vi == 0 else 'max'}" if with_speed else "") \
+            + f" theta={tag}"
+        out.append(Vertex(label, s, v if with_speed else 1.0 / s, np.array([t for _, t in ths])))
+    return out
+
+
+@dataclass(frozen=True)
+class Plant:
+    """The constant matrices of the error system and the scaling."""
+
+    Ts: float
+    G_f: np.ndarray
+    G_a: np.ndarray
+    lever: np.ndarray        # slip t_k depends on v_y + lever_k r
+    sigma: np.ndarray        # levels of the channels (CHANNELS order)
+    D: np.ndarray            # state and output scaling diag(1, d)
+
+    def matrices(self, x: Vertex):
+        """(A_0, J, B_x, B_y, C) at a vertex, in physical units (C: degrees of beta per m/s of v_y)."""
+        Ts, s, th = self.Ts, x.s, x.theta
+        A0 = np.eye(2) + np.column_stack([Ts * self.G_f @ th * s, np.zeros(2)])
+        J = np.array([[self.G_a @ th * s, 0.0], [0.0, 1.0]])
+        sf = self.sigma
+        dr = -self.lever * th * s                          # dPhi/d n_r = -theta_k s lever_k
+        Bx = np.column_stack([Ts * self.G_f[:, 0] * sf[0], Ts * self.G_f[:, 1] * sf[1], np.zeros(2),
+                              (Ts * self.G_f @ dr + np.array([Ts * x.v, 0.0])) * sf[3],
+                              np.array([Ts * sf[4], 0.0]), np.array([0.0, Ts * sf[5]])])
+        By = np.array([[self.G_a[0] * sf[0], self.G_a[1] * sf[1], sf[2], self.G_a @ dr * sf[3], 0.0, 0.0],
+                       [0.0, 0.0, 0.0, sf[3], 0.0, 0.0]])
+        C = np.array([[s * DEG, 0.0]])
+        return A0, J, Bx, By, C
+
+    def delta_form(self, x: Vertex, P, Y):
+        """PF, PG, C~ in the scaled coordinates (P, Y: Affine or numpy; Y = P D L S^-1)."""
+        A0, J, Bx, By, C = self.matrices(x)
+        D, Di = self.D, np.linalg.inv(self.D)
+        F0 = (D @ A0 @ Di - np.eye(2)) / self.Ts
+        PF = P @ F0 - Y @ (D @ J @ Di / self.Ts)
+        PG = (P @ (D @ Bx) - Y @ (D @ By)) * (1.0 / self.Ts)
+        return PF, PG, C @ Di
+
+
+def decay_block(plant, x, P, Y, rate, xp=np):
+    PF = plant.delta_form(x, P, Y)[0]
+    cat = np.block if xp is np else bmat
+    r = np.sqrt(plant.Ts)
+    return cat([[-(PF + PF.T) - rate * P, r * PF.T], [r * PF, P]])
+
+
+def gain_block(plant, x, P, Y, eta, xp=np):
+    PF, PG, C = plant.delta_form(x, P, Y)
+    nw = PG.shape[1]
+    r = np.sqrt(plant.Ts)
+    if xp is np:
+        return np.block([[-(PF + PF.T) - C.T @ C / plant.Ts, -PG, r * PF.T],
+                         [-PG.T, eta * np.eye(nw), r * PG.T], [r * PF, r * PG, P]])
+    return bmat([[-(PF + PF.T) - C.T @ C / plant.Ts, -PG, r * PF.T],
+                 [-PG.T, eta * np.eye(nw), r * PG.T], [r * PF, r * PG, P]])
+
+
+def _decay_feasible(plant, verts, rate, L_scaled, settings) -> bool:
+    prob = LMIProblem("nonlinear-tyre observer: decay rate (analysis)", design=False)
+    P = prob.symmetric("P", 2)
+    Y = prob.matrix("Y", 2, 2) if L_scaled is None else P @ L_scaled
+    prob.require_psd("P >= I", P, margin=1.0)
+    for x in verts:
+        prob.require_psd(f"decay {x.label}", decay_block(plant, x, P, Y, rate, LMIProblem), margin=settings.margin)
+    try:
+        prob.solve(tol=settings.tol, unique=False)
+    except (SolverError, CertificateError):
+        return False
+    return True
+
+
+def best_decay_rate(plant, verts, settings, L_scaled=None, iterations: int = 30) -> float:
+    """The largest decay rate a [1/s] a common Lyapunov matrix certifies at ``verts`` (bisection on
+    [0, 1/T_s]), rounded down to three significant digits; 0 when none is certified."""
+    lo, hi = 0.0, 1.0 / plant.Ts
+    if not _decay_feasible(plant, verts, 0.0, L_scaled, settings):
+        return 0.0
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if _decay_feasible(plant, verts, mid, L_scaled, settings) else (lo, mid)
+    return _round_down(lo)
+
+
+def lmi_problem(plant, decay_verts, gain_verts, settings, rate, best_rate, L_scaled=None) -> LMIProblem:
+    """The design problem: decay ``rate`` at ``decay_verts``, the l2 gain minimized at ``gain_verts``."""
+    prob = LMIProblem(problem_name(L_scaled is not None), data={"best_decay_rate": best_rate, "decay_rate": rate})
+    P = prob.symmetric("P", 2)
+    Y = prob.matrix("Y", 2, 2) if L_scaled is None else P @ L_scaled
+    eta = prob.scalar("eta")
+    prob.require_psd("P >= I", P, margin=1.0)
+    hint = "lower sliding_fraction or decay_fraction: the tyre slope is too small at a vertex"
+    for x in decay_verts:
+        prob.require_psd(f"decay {x.label}", decay_block(plant, x, P, Y, rate, LMIProblem), margin=settings.margin,
+                         hint=hint)
+    for x in gain_verts:
+        prob.require_psd(f"l2 gain {x.label}", gain_block(plant, x, P, Y, eta, LMIProblem), margin=settings.margin,
+                         hint="lower gain_sliding_fraction")
+    prob.minimize(eta)
+    return prob
+
+
+@dataclass(frozen=True)
+class Design:
+    """The designed (or given) gains with their certificate's constants."""
+
+    L: np.ndarray            # (2, 2): rows v_y, r; columns a_y, r (physical units)
+    P: np.ndarray            # Lyapunov matrix in the scaled coordinates
+    eta: float
+    best_rate: float         # a* [1/s]
+    rate: float              # a [1/s] required
+    given: bool
+    solution: object
+
+
+def synthesize(plant, decay_verts, gain_verts, settings) -> Design:
+    """Bisection for a*, then the design problem (see the module docstring); replays the committed
+    constants from a design lock instead of searching again."""
+    given = settings.given_gains
+    D = plant.D
+    L_scaled = None if not given else D @ settings.gain @ np.linalg.inv(D)
+    committed = committed_data(problem_name(given))
+    if committed is not None:
+        best, rate = float(committed["best_decay_rate"]), float(committed["decay_rate"])
+    else:
+        best = best_decay_rate(plant, decay_verts, settings, L_scaled)
+        if best <= 0:
+            raise CertificateError(
+                "nonlinear-tyre observer: no common Lyapunov matrix makes the error contract at the "
+                + ("given gains" if given else "designed gains") + " over the certified set's vertices; lower "
+                "sliding_fraction (the tyre slope near sliding leaves v_y unobservable)")
+        if settings.decay is not None:
+            rate = _round_down((1.0 - settings.decay ** 2) / plant.Ts, 6)
+            if rate > best:
+                raise CertificateError(f"nonlinear-tyre observer: decay = {settings.decay:g} per step needs the rate "
+                                       f"{rate:.4g} 1/s; the largest a common Lyapunov matrix certifies on the set is "
+                                       f"{best:.4g} 1/s (decay {np.sqrt(1 - plant.Ts * best):.6f})")
+        else:
+            rate = _round_down(settings.decay_fraction * best)
+        # [design] precision = "float32": sqrt(1 - Ts rate) <= 1 - float32_margin
+        m = required_margin(settings)
+        need = (1.0 - (1.0 - m) ** 2) / plant.Ts if m else 0.0
+        if need > best:
+            raise CertificateError(f"nonlinear-tyre observer: [design] precision = \"float32\" needs the decay rate "
+                                   f"{need:.4g} 1/s (contraction margin {m:g} per step); the largest a common Lyapunov "
+                                   f"matrix certifies on the set is {best:.4g} 1/s (margin "
+                                   f"{1 - np.sqrt(1 - plant.Ts * best):.4g}): lower sliding_fraction, or a smaller "
+                                   f"[design] float32_margin")
+        rate = max(rate, need)
+    sol = lmi_problem(plant, decay_verts, gain_verts, settings, rate, best, L_scaled).solve(tol=settings.tol)
+    P = decimal_round(0.5 * (sol["P"] + sol["P"].T))
+    if given:
+        L = settings.gain
+    else:
+        L = decimal_round(np.linalg.inv(D) @ np.linalg.solve(P, sol["Y"]) @ D)
+    # the certified gain: the solver's eta rounded up to three significant digits (re-checked in certify)
+    eta = objective_bound(float(sol["eta"]))
+    return Design(L, P, eta, best, rate, given, sol)
+
+
+def certify(plant, decay_verts, gain_verts, design: Design) -> dict:
+    """Independent numpy re-check of every block on the emitted (rounded) P and L; the contraction
+    per step at the decay vertices and the certified gain."""
+    D = plant.D
+    Y = design.P @ (D @ design.L @ np.linalg.inv(D))
+    blocks = {"P >= I": design.P - np.eye(2)}
+    blocks.update({f"decay {x.label}": decay_block(plant, x, design.P, Y, design.rate) for x in decay_verts})
+    blocks.update({f"l2 gain {x.label}": gain_block(plant, x, design.P, Y, design.eta) for x in gain_verts})
+    checks = check_blocks(blocks)
+    worst = min(checks, key=lambda c: c.relative_margin)
+    if worst.min_eig < 0:
+        raise CertificateError(f"nonlinear-tyre observer: LMI {worst.label!r} fails the numpy re-check on the emitted "
+                               f"P and L: smallest eigenvalue {worst.min_eig:.3e}")
+    # contraction: the largest generalized eigenvalue of (A'PA, P) over the decay vertices (physical P)
+    P_phys = D.T @ design.P @ D
+    Li = np.linalg.inv(np.linalg.cholesky(P_phys))
+    ratio, slowest = 0.0, None
+    for x in decay_verts:
+        A0, J, *_ = plant.matrices(x)
+        A = A0 - design.L @ J
+        q = float(np.linalg.eigvalsh(Li @ A.T @ P_phys @ A @ Li.T).max())
+        if q > ratio:
+            ratio, slowest = q, x.label
+    if ratio >= 1.0:
+        raise CertificateError(f"nonlinear-tyre observer: V(e+)/V(e) reaches {ratio:.9f} >= 1 at {slowest}")
+    gamma = float(np.sqrt(design.eta * plant.Ts))
+    return {"blocks": len(checks), "worst_block": worst.label, "worst_min_eig": worst.min_eig,
+            "worst_relative_margin": worst.relative_margin, "max_ratio": ratio,
+            "contraction_per_step": float(np.sqrt(ratio)), "slowest_vertex": slowest,
+            "time_constant_s": float(-plant.Ts / np.log(np.sqrt(ratio))),
+            "decay_rate": design.rate, "best_decay_rate": design.best_rate,
+            "gamma_deg": gamma, "bound_deg_at_levels": float(gamma * np.sqrt(len(CHANNELS)))}

@@ -1,0 +1,149 @@
+"""Loading and running a compiled observer: numpy and the extension, nothing of the toolchain.
+
+The extension module carries everything :class:`CompiledObserver` shows (compiled in by
+``uiogen build`` from the generated C and its design lock): its signal names and units, the
+sample time, and the SHA-256 of the design lock it was built from. :func:`load` finds the
+extension by the workspace rule (:mod:`python_bindings.workspace`: the folder and stem of the
+observer file, or a built-in name) without reading the observer file, and refuses one whose
+design hash is not that of the design lock beside it.
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .errors import SampleError, StaleExtensionError, UnknownObserverError
+from .workspace import Workspace
+
+STATUS_BITS = ("OK", "SCHEDULING_CLAMPED", "NONFINITE_INPUT", "NUMERICAL_FAILURE", "WARMING_UP")
+
+
+class CompiledObserver:
+    """A compiled observer step and what its vectors hold.
+
+    ``step(state, inputs, out) -> status`` is the extension's C function itself (bound once, no
+    Python in between); ``run`` loops in C over a whole array. Names, units and the sample time
+    come from the extension.
+    """
+
+    __slots__ = ("name", "module", "path", "step", "state_names", "input_names", "output_names",
+                 "state_units", "input_units", "output_units", "sample_time", "design_sha256")
+
+    def __init__(self, module, path: Path):
+        self.module = module
+        self.path = Path(path)
+        self.name = module.NAME
+        self.step = module.step
+        self.state_names, self.input_names, self.output_names = (module.STATE_NAMES, module.INPUT_NAMES,
+                                                                 module.OUTPUT_NAMES)
+        self.state_units, self.input_units, self.output_units = (module.STATE_UNITS, module.INPUT_UNITS,
+                                                                 module.OUTPUT_UNITS)
+        self.sample_time = module.SAMPLE_TIME
+        self.design_sha256 = module.DESIGN_SHA256
+
+    def __repr__(self) -> str:
+        return f"<CompiledObserver {self.name} from {self.path}>"
+
+    @property
+    def n_state(self) -> int:
+        return self.module.N_STATE
+
+    @property
+    def n_input(self) -> int:
+        return self.module.N_INPUT
+
+    @property
+    def n_output(self) -> int:
+        return self.module.N_OUTPUT
+
+    @property
+    def status_bits(self) -> dict:
+        return {k: getattr(self.module, k) for k in STATUS_BITS}
+
+    def output_index(self, signal: str) -> int:
+        """Column of ``signal`` in the outputs."""
+        try:
+            return self.output_names.index(signal)
+        except ValueError:
+            raise UnknownObserverError(f"{self.name} has no output {signal!r}; outputs: "
+                                       f"{', '.join(self.output_names)}") from None
+
+    def initial_state(self) -> np.ndarray:
+        return np.zeros(self.n_state)
+
+    def run(self, inputs, state=None):
+        """Run over an (n, n_input) array; returns (outputs (n, n_output), status (n,), final state)."""
+        inputs = np.ascontiguousarray(inputs, dtype=np.float64)
+        if inputs.ndim != 2 or inputs.shape[1] != self.n_input:
+            raise SampleError(f"{self.name}: inputs must have shape (n, {self.n_input}) with columns "
+                              f"{', '.join(self.input_names)}; got {inputs.shape}")
+        state = self.initial_state() if state is None else np.array(state, dtype=np.float64)
+        if state.shape != (self.n_state,):
+            raise SampleError(f"{self.name}: state must have shape ({self.n_state},), got {state.shape}")
+        n = inputs.shape[0]
+        outputs = np.empty((n, self.n_output))
+        status = np.empty(n, dtype=np.int32)
+        self.module.run(state, inputs, outputs, status, n)
+        return outputs, status, state
+
+
+class Recorder:
+    """A compiled observer that records what it is given: ``calls`` fills with (inputs, initial
+    state) per ``run`` and (input row, None) per ``step``, e.g. the input sequence of a
+    validation scenario, to replay it through the FMU or a cross-compiled build. Pass it where a
+    compiled observer is run (``codegen.validation.run.run_scenario(..., observer=Recorder(obs))``)."""
+
+    def __init__(self, observer: CompiledObserver):
+        self.observer = observer
+        self.calls: list = []
+
+    def __getattr__(self, attr):          # names, units, sizes: those of the observer
+        return getattr(self.observer, attr)
+
+    def step(self, state, inputs, out):
+        self.calls.append((np.array(inputs, dtype=np.float64, copy=True), None))
+        return self.observer.step(state, inputs, out)
+
+    def run(self, inputs, state=None):
+        inputs = np.ascontiguousarray(inputs, dtype=np.float64)
+        first = self.observer.initial_state() if state is None else np.array(state, dtype=np.float64)
+        self.calls.append((inputs.copy(), first.copy()))
+        return self.observer.run(inputs, first)
+
+
+def load(observer, project: str | Path | None = None) -> CompiledObserver:
+    """The compiled observer of ``observer``: a built-in observer's name or the path of an
+    observer file (built by ``uiogen build``); ``project``: its project folder when it is not
+    the default (:mod:`python_bindings.workspace`)."""
+    workspace, name = Workspace.locate(observer, project)
+    return open_observer(workspace, name, str(observer) + (f" --project {project}" if project is not None else ""))
+
+
+def open_observer(workspace: Workspace, name: str, argument: str | None = None) -> CompiledObserver:
+    """The compiled observer ``name`` of ``workspace``; ``argument``: how the commands the
+    errors suggest name it (default ``name``)."""
+    argument = argument or name
+    lock = workspace.design_lock(name)
+    if not lock.is_file():
+        raise UnknownObserverError(f"observer {name!r} has not been generated (no {lock}); "
+                                   f"run `uiogen generate {argument}`")
+    path = workspace.extension(name)
+    key = f"uiogen_ext_{hashlib.sha256(str(path).encode()).hexdigest()[:16]}_{name}"
+    module = sys.modules.get(key)
+    if module is None:
+        if not path.is_file():
+            raise UnknownObserverError(f"observer {name!r} is generated but not compiled (no {path}); "
+                                       f"run `uiogen build {argument}`")
+        spec = importlib.util.spec_from_file_location(f"_{name}", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        sys.modules[key] = module
+    design = hashlib.sha256(lock.read_bytes()).hexdigest()
+    if getattr(module, "DESIGN_SHA256", None) != design:
+        raise StaleExtensionError(f"the extension {path} was built from another design than {lock} (the design "
+                                  f"changed since the last build); run `uiogen build {argument}`")
+    return CompiledObserver(module, path)
