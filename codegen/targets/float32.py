@@ -27,7 +27,10 @@ report checks against the certified ``c``; first order in the deviation elsewher
 proven: the accumulation. State entries with their own dynamics that no certificate covers
 (the sliding-mode differentiators, which converge in finite time but do not contract) get
 their measured deviation instead of a bound; the report names them and every output they
-reach, and such an output is not accepted.
+reach, and such an output is accepted only where the observer file says so (``[precision]
+uncertified_states = "measured"``). On a sample outside the certified set (SCHEDULING_CLAMPED:
+the certificate does not cover it) the step's own gain in the norm replaces ``c`` where it is
+larger; the report counts those samples.
 
 The tolerance (:mod:`codegen.project.precision`): per output, in its unit, a declared fraction
 of the estimate's RMS response to the sensor noise (the double step run again with the noise
@@ -394,7 +397,9 @@ def compare_scenario(b, obs, fobs, terms: StepTerms, metrics: list, inputs: np.n
                          "noise_response": float(response[i]),
                          "certified": b.state_names[nz - no + i] not in res["from_measured"],
                          "within": bound <= tol}
+    clamped = int(np.count_nonzero(status_d & obs.status_bits["SCHEDULING_CLAMPED"]))
     return {"samples": int(inputs.shape[0]), "signals": signals, "status_equal": bool(np.array_equal(status_d, status_f)),
+            "outside_certified_set": clamped,
             "measured_entries": res["measured_entries"], "self_gain": res["self_gain"],
             "bound_covers_deviation": all(s["bound"] >= s["deviation"] for s in signals.values())}
 
@@ -452,8 +457,14 @@ def _verdict(report: dict) -> dict:
         need = m["margin"] * worst["ratio"]
         reason = (f"{worst['signal']} on {worst['scenario']}: bound {worst['bound']:.3g} {worst['unit']} > tolerance "
                   f"{worst['tolerance']:.3g} {worst['unit']} ({worst['tolerance_rule']}); the certified contraction "
-                  f"margin 1 - c = {m['margin']:.4g} ({m['source']}) would need to be about {need:.3g}"
+                  f"margin 1 - c = {m['margin']:.4g} ({m['source']}) "
+                  + (f"would need to be about {need:.3g}" if need < 1 else
+                     f"cannot reach what the bound needs ({need:.3g} > 1): a faster contraction alone does not fix it")
                   + (f" ({m['knob']})" if m["knob"] else "") + ", or a declared [precision] tolerance")
+        outside = report["scenarios"][worst["scenario"]]["outside_certified_set"]
+        if outside:
+            reason += (f"; {outside} samples of {worst['scenario']} lie outside the certified set (SCHEDULING_CLAMPED), "
+                       f"where no certificate bounds the deviation (the step's own gain is used there)")
     elif not status:
         reason = "the float32 status bits differ from the double step's on some sample"
     return {"passes": passes, "worst": worst, "uncertified": uncertified, "reason": reason}

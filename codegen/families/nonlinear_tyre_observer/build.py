@@ -208,7 +208,9 @@ def _build_class():
         def contraction_metrics(self):
             """The common P over the DMVT vertices of the certified set: the prediction (v_y, r)."""
             from ...certificate.contraction import ContractionMetric
-            return [ContractionMetric(float(self.certificate["contraction_per_step"]), (self.P,), ("v_y_next", "r_next"),
+            D = self.plant.D            # P is solved in the scaled state D x (certify: D' P D)
+            return [ContractionMetric(float(self.certificate["contraction_per_step"]), (D.T @ self.P @ D,),
+                                      ("v_y_next", "r_next"),
                                       "common P over the DMVT vertices: A' P A <= c^2 P, on the certified slip set",
                                       knob="[design] decay or decay_fraction (the rate the LMIs impose), a lower "
                                            "sliding_fraction")]
