@@ -1,6 +1,7 @@
 # uiogen — every target installs what it needs into .venv/ first.
-#   make demo    main job: design + generate + build + summary (README)
+#   make demo    main job: design + generate + build + runs; the page build/report/index.html (README)
 #   make test    the test suite (CI runs this through .ci/run)
+#   make test-fast  the fast lane: no build, compiler, QEMU, Dask or browser (pytest -m "not slow"), <= 3 min
 #   make misra   cppcheck's MISRA C:2012 addon on the generated C, against misra/kernel_deviations.toml
 #   make embedded-tools  cppcheck, arm-none-eabi-gcc, qemu-system-arm (apt-get where available)
 #   make check   reliability suite (hostile input, sanitizers, static facts, determinism, long runs)
@@ -17,7 +18,7 @@ PIN    := -c constraints.txt
 CC     ?= cc
 export CC
 
-.PHONY: all venv generate build demo test check bench docs clean lock misra embedded-tools
+.PHONY: all venv generate build demo test test-fast check bench docs clean lock misra embedded-tools
 
 all: demo
 
@@ -36,13 +37,20 @@ build: generate
 	$(BIN)/uiogen build
 
 demo: build
-	$(BIN)/uiogen demo
+	$(BIN)/uiogen demo --report build/report
 
 embedded-tools:
 	sh scripts/install_embedded_tools.sh
 
+# The full suite: every lane. The reliability suite is in it too (make check runs it alone):
+# CI runs make test only, and hostile input, sanitizers and determinism are what a merge must keep.
 test: build embedded-tools
 	$(BIN)/python -m pytest -q tests
+
+# The fast lane: the venv only (no generate, no build): what a developer runs in a minute or two.
+# A test that needs a compiled extension, a compiler, QEMU, Dask, mkdocs or a browser is marked slow.
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -q -m "not slow" tests
 
 misra: generate embedded-tools
 	$(BIN)/python -m codegen.targets.misra

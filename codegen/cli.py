@@ -7,9 +7,9 @@
     uiogen build [NAME ...] [--float32] [--project DIR]
     uiogen check-gains NAME --gains FILE [--json]
     uiogen fit NAME --data PATH|stanford --samples A:B [--folds K] [--write] [--json]
-    uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png] [--project DIR]
-    uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png] [--project DIR]
-    uiogen demo [--json]
+    uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png] [--report DIR] [--project DIR]
+    uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png] [--report DIR] [--project DIR]
+    uiogen demo [--json] [--report DIR]
     uiogen bench [--json]
     uiogen campaign SPEC.toml [--runs N] [--only K] [--json] [--scheduler ADDRESS] [--workers N] [--out DIR]
     uiogen export NAME --format fmu|fmu3 --out FILE.fmu [--project DIR]
@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import sys
 from pathlib import Path
 
@@ -32,6 +31,7 @@ from .design import lock as design_lock
 from .emit import generate as emit
 from . import families, pipeline
 from .project import observer_file as observers
+from .project import outputs
 from .errors import (CertificateError, ConfigurationError, DesignLockError, MissingParameterError,
                      SchedulingBoundsError, UiogenError, UnknownObserverError, UnknownParameterError)
 
@@ -134,14 +134,12 @@ def cmd_design(args) -> int:
     path = None
     if args.update:
         path = design_lock.path(config)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(text)
-        tmp.replace(path)
+        outputs.make_folder(path.parent)
+        outputs.write_atomic(path, text)
     if args.out:
         path = Path(args.out)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text)
+        outputs.make_folder(path.parent)
+        outputs.write_atomic(path, text)
     shown = path if path is not None else "not written (--update commits it as the design lock, --out FILE writes a copy)"
     code = _print_design(b, shown, args.json, compare)
     if not args.json:
@@ -155,7 +153,7 @@ def cmd_design(args) -> int:
                 print(f"committed design: {row['problem']}: objective {row['committed']:.8g}, fresh "
                       f"{row['fresh']:.8g} (relative difference {row['relative_difference']:.2e}){var}")
         if args.update:
-            print(f"design lock updated: {design_lock.path(config)}; `uiogen generate {b.name}` emits its C")
+            print(f"design lock updated: {design_lock.path(config)}; `uiogen generate {config.command_name}` emits its C")
     return code
 
 
@@ -282,22 +280,36 @@ def cmd_validate(args) -> int:
     if args.data:
         result = validate.run_data(config, args.data)
         if args.plot:
-            validate.plot_data(result, args.plot)
+            with outputs.writing(args.plot):
+                validate.plot_data(result, args.plot)
+        if args.report:
+            from .validation import report
+            with outputs.writing(args.report):
+                page = report.write_validation(args.name, result, args.report, data=True)
         if args.json:
-            keys = ("observer", "baselines", "estimates", "status_flags", "samples", "splits", "peaks")
+            keys = ("observer", "baselines", "estimates", "status_flags", "samples", "splits", "peaks", "warnings",
+                    "log_checks", "baselines_skipped")
             print(json.dumps({k: result[k] for k in keys if k in result}, indent=1, sort_keys=True))
             return 0
-        print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} flagged")
+        warned = f", {len(result['warnings'])} warning(s) below" if result.get("warnings") else ""
+        print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} flagged{warned}")
         print(validate.format_data_table(result))
         if args.plot:
             print(f"plot: {args.plot}")
+        if args.report:
+            print(f"report: {page.resolve()}")
         return 0
     if not args.scenario:
         raise ConfigurationError("validate needs --scenario S (simulated plant) or --data PATH (logged run)")
     result = validate.run_scenario(config, args.scenario, args.plant, duration=args.duration,
                                    progress=validate.progress_bar(f"{args.scenario} on {args.plant}"))
     if args.plot:
-        validate.plot(result, args.plot)
+        with outputs.writing(args.plot):
+            validate.plot(result, args.plot)
+    if args.report:
+        from .validation import report
+        with outputs.writing(args.report):
+            page = report.write_validation(args.name, result, args.report, data=False)
     if args.json:
         print(validate.to_json(result))
         return 0
@@ -305,19 +317,23 @@ def cmd_validate(args) -> int:
     print(validate.format_table(result))
     if args.plot:
         print(f"plot: {args.plot}")
+    if args.report:
+        print(f"report: {page.resolve()}")
     return 0
 
 
 def cmd_demo(args) -> int:
     from .validation import demo
-    return demo.main(json_output=args.json)
+    return demo.main(json_output=args.json, report_dir=args.report)
 
 
 def cmd_new(args) -> int:
     """A starter project: the family's example observer, its model and its parameters, copied
-    into DIR and wired to each other by paths, ready to design, generate and build as written.
-    With ``--from-model FILE`` instead: the observer file of the family ``uiogen analyze`` ranks
-    first for that model, with the settings the analysis chose and comments that say why."""
+    into DIR and wired to each other by paths, ready to design, generate, build and validate as
+    written (:mod:`codegen.project.starter`). With ``--from-model FILE`` instead: the observer file
+    of the family ``uiogen analyze`` ranks first for that model, with the settings the analysis
+    chose and comments that say why."""
+    from .project import starter
     if (args.family is None) == (args.from_model is None):
         raise ConfigurationError("uiogen new DIR: give either --family F (a starter copied from the family's example) "
                                  "or --from-model FILE [--parameters FILE] (the observer the analysis chooses)",
@@ -326,34 +342,15 @@ def cmd_new(args) -> int:
         return _new_from_model(args)
     if args.parameters is not None:
         raise ConfigurationError("uiogen new --parameters goes with --from-model", key="--parameters")
-    family = families.get(args.family)
-    if not family.example:
-        raise ConfigurationError(f"family {family.name!r} has no example observer to start from")
-    folder = Path(args.dir)
-    example = observers.get(family.example)
-    name = args.name or family.example
-    files = {folder / "model.py": example.model_path, folder / "parameters.toml": example.parameter_path}
-    target = folder / f"{name}.toml"
-    existing = [str(p) for p in [*files, target] if p.exists()]
-    if existing:
-        raise ConfigurationError(f"uiogen new {folder}: would overwrite {', '.join(existing)}; choose an empty folder")
-    folder.mkdir(parents=True, exist_ok=True)
-    for dst, src in files.items():
-        dst.write_text(src.read_text())
-    text = Path(example.source).read_text()
-    text = re.sub(r'^model = "[^"]*"', 'model = "model.py"      ', text, count=1, flags=re.M)
-    text = re.sub(r'^parameters = "[^"]*"', 'parameters = "parameters.toml"', text, count=1, flags=re.M)
-    head = (f"# Starter for your own {family.title} ({family.citation}), copied from the built-in\n"
-            f"# observer {family.example}: edit model.py (your equations, sympy) and parameters.toml (your car),\n"
-            f"# then:  uiogen design {target} --update && uiogen generate {target} && uiogen build {target}\n#\n")
-    target.write_text(head + text)
-    print(f"wrote {target}, {folder / 'model.py'}, {folder / 'parameters.toml'}")
-    print(f"next: uiogen design {target} --update; uiogen generate {target}; uiogen build {target}")
+    target = starter.write(Path(args.dir), families.get(args.family), args.name)
+    print(f"wrote {target}, {target.parent / 'model.py'}, {target.parent / 'parameters.toml'}")
+    print("next: " + "; ".join(starter.next_steps(target)))
     return 0
 
 
 def _new_from_model(args) -> int:
     from . import analysis
+    from .project import starter
     from .analysis.ranking import starter_text
     folder = Path(args.dir)
     result = analysis.analyze(args.from_model, args.parameters, design=True,
@@ -369,9 +366,7 @@ def _new_from_model(args) -> int:
                                  f"no settings for this model; start from uiogen new DIR --family {best.family}",
                                  key="--from-model")
     name = args.name or f"{result.subject.name}_{best.family}"
-    if name in observers.names():
-        raise ConfigurationError(f"uiogen new: the name {name!r} is a built-in observer; choose another with --name",
-                                 key="--name", value=name)
+    starter.check_name(name)
     target = folder / f"{name}.toml"
     if target.exists():
         raise ConfigurationError(f"uiogen new {folder}: would overwrite {target}; choose an empty folder or --name",
@@ -504,9 +499,12 @@ def main(argv=None) -> int:
     p.add_argument("--duration", type=float, default=None, help="truncate the scenario [s]")
     p.add_argument("--json", action="store_true")
     p.add_argument("--plot", help="write estimates vs truth to this PNG")
+    p.add_argument("--report", metavar="DIR", help="write an HTML page (DIR/index.html) with the figures and the tables")
     p.set_defaults(func=cmd_validate)
     p = sub.add_parser("demo", help="simulate every observer on its nonlinear model and summarize")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--report", metavar="DIR", help="write an HTML page (DIR/index.html) of every observer, the best "
+                                                   "real-data observer first, and print a summary pointing at it")
     p.set_defaults(func=cmd_demo)
     p = sub.add_parser("new", help="a starter project (model, parameters, observer file) in DIR, or the observer "
                                    "file of the family the analysis ranks first for your model (--from-model)")
@@ -514,7 +512,8 @@ def main(argv=None) -> int:
     p.add_argument("--family", help="an observer family (uiogen list shows them in use)")
     p.add_argument("--from-model", help="your model file (.py): the observer file of the best-ranked family")
     p.add_argument("--parameters", help="the model's parameter file (with --from-model)")
-    p.add_argument("--name", help="the observer's name (default: the family's example)")
+    p.add_argument("--name", help="the observer's name, the file's stem (default: my_FAMILY, or MODEL_FAMILY with "
+                                  "--from-model; never a built-in's)")
     p.set_defaults(func=cmd_new)
     p = sub.add_parser("docs", help="the docs' tables of figures from docs/data/{demo,bench}.json")
     p.add_argument("--check", action="store_true", help="only compare; exit 1 if a page differs")
@@ -548,6 +547,12 @@ def main(argv=None) -> int:
         return args.func(args)
     except UiogenError as exc:
         print(f"uiogen: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:        # a disk that does not take an output the command writes: one line, no traceback
+        if exc.errno not in outputs.DISK_ERRORS:
+            raise
+        err = outputs.error(exc.filename or "an output", exc)
+        print(f"uiogen: error: {type(err).__name__}: {err}", file=sys.stderr)
         return 2
 
 

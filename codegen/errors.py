@@ -139,4 +139,10 @@ class RepresentationError(ModelDefinitionError):
 class ConformanceError(UiogenError, RuntimeError):
     """A compiled step disagrees with its model (signal layout, or numbers on samples across the
     declared boxes): ``uiogen build`` does not install it; the message names the signal and the
-    sample (:mod:`codegen.conformance`)."""
+    sample (:mod:`codegen.extension.conformance`)."""
+
+
+class OutputError(UiogenError, OSError):
+    """An output file or folder cannot be written (a read-only or full file system, no
+    permission): the message names the path and the cause; nothing partial is left there
+    (:mod:`codegen.project.outputs`)."""

@@ -9,7 +9,23 @@ from __future__ import annotations
 
 from .design import lock as design_lock, lmi, precision
 from . import families
+from .errors import BoundsError
 from .project.observer_file import ObserverConfig
+
+
+def _family_build(config: ObserverConfig, tol: float | None):
+    """The family's pipeline; an expression it cannot bound is reported with what the user can change:
+    the boxes of the parameter file it was bounded over, and the family's bounds settings
+    (``Family.bounds_settings``) where it has them."""
+    family = families.get(config.family)
+    try:
+        return family.build(config, tol)
+    except BoundsError as exc:
+        keys = " or ".join(f"[design] {k}" for k in family.bounds_settings)
+        raise BoundsError(f"{config.parameter_path}: {exc}. The expression is bounded over the boxes this file "
+                          f"declares ([scheduling.NAME], [state_bounds]): narrow those of the variables it ranges "
+                          f"over" + (f", or loosen {keys} of {config.source}" if keys else "")
+                          + f" (observer {config.command_name})") from exc
 
 
 def build(config: ObserverConfig, tol: float | None = None, fresh: bool = False):
@@ -21,14 +37,20 @@ def build(config: ObserverConfig, tol: float | None = None, fresh: bool = False)
         if data is not None:
             where = str(design_lock.path(config))
             with lmi.replaying(design_lock.solutions(data, where), source=where):
-                return _checked(families.get(config.family).build(config, None))
-    return _checked(families.get(config.family).build(config, tol))
+                return _build(config, None)
+    return _build(config, tol)
+
+
+def _build(config: ObserverConfig, tol):
+    """The family's stages, and the unknown inputs of ``[substitute]`` recovered after its step."""
+    from .families.substituted import wrap
+    return wrap(_checked(_family_build(config, tol)))
 
 
 def solve(config: ObserverConfig, tol: float | None = None) -> tuple:
     """A fresh design of ``config`` and the LMI solutions it solved: (build, [SolveRecord])."""
     with lmi.recording() as ledger:
-        b = _checked(families.get(config.family).build(config, tol))
+        b = _build(config, tol)
     return b, list(ledger.records)
 
 

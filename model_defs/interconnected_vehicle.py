@@ -4,7 +4,7 @@ Sentouh, Fouka, Popieul, "Virtual Sensor: Simultaneous State and Input Estimatio
 Interconnected Ground Vehicle System Dynamics", Sensors 23, 4236, 2023.
 
 One vehicle model, written once. What belongs to which subsystem of eq. (8) is declared by the
-state partition only; :mod:`codegen.interconnected` finds everything else from these equations:
+state partition only; :mod:`codegen.families.interconnected_uio.representation` finds everything else from these equations:
 which unknown inputs and outputs belong to each subsystem, the coupling signals zeta_F (terms of
 one subsystem's equations that are not a premise times one of its own states or inputs), the
 premise variables (11) and the 2^q-vertex T-S matrices (9)-(13).

@@ -8,7 +8,7 @@ Nguyen, Dinh, Guerra, Pan, IEEE/ASME T-Mech 26(3), 2021, eqs. (1) and (3):
 
 with linear axle forces F_yf = 2 C_f (delta - (v_y + l_f r)/v_x), F_yr = 2 C_r (l_r r - v_y)/v_x.
 States x = [v_x, v_y, r]; unknown inputs d = [T_eng, delta]; measured y = [v_x, r].
-Nothing here says which terms are premises or consequents: :mod:`codegen.ts_fuzzy` finds
+Nothing here says which terms are premises or consequents: :mod:`codegen.families.ts_fuzzy_uio.representation` finds
 the measured premises (1/v_x, r) and the unmeasured consequent v_y^2 itself.
 
 Note on the paper's eq. (8): its f_v(xi) second entry prints (2(C_r l_r - C_f l_f) r - v_x r)/(M v_x),

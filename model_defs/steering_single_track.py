@@ -47,7 +47,10 @@ MODEL = ModelDefinition(
     scheduling=(SchedulingSignal(v_x, "m/s"),),
     parameters=(l_f, l_r, eta_t, R_s, B_s, K_p, M, I_z, I_s, C_f, C_r),
     units={"beta": "rad", "r": "rad/s", "delta": "rad", "delta_dot": "rad/s",
-           "T_a": "N m", "T_d": "N m", "v_x": "m/s"},
+           "T_a": "N m", "T_d": "N m", "v_x": "m/s",
+           # parameters: checked against plausible ranges (codegen.model.dimensions)
+           "l_f": "m", "l_r": "m", "eta_t": "m", "R_s": "-", "B_s": "N m s/rad", "K_p": "-", "M": "kg",
+           "I_z": "kg m^2", "I_s": "kg m^2", "C_f": "N/rad", "C_r": "N/rad"},
     doc=__doc__,
 )
 

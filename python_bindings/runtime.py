@@ -76,12 +76,18 @@ class CompiledObserver:
         return np.zeros(self.n_state)
 
     def run(self, inputs, state=None):
-        """Run over an (n, n_input) array; returns (outputs (n, n_output), status (n,), final state)."""
-        inputs = np.ascontiguousarray(inputs, dtype=np.float64)
+        """Run over an (n, n_input) array; returns (outputs (n, n_output), status (n,), final state).
+
+        ``inputs`` and ``state`` must hold real numbers (float or integer dtypes): complex, string,
+        boolean or object arrays are refused, not converted (a complex part would be dropped, a
+        string parsed). One state must not be run by two threads at once: the compiled module
+        refuses a state (or an output) that another thread's run is using (RuntimeError)."""
+        inputs = np.ascontiguousarray(real(inputs, self.name, "inputs"), dtype=np.float64)
         if inputs.ndim != 2 or inputs.shape[1] != self.n_input:
             raise SampleError(f"{self.name}: inputs must have shape (n, {self.n_input}) with columns "
                               f"{', '.join(self.input_names)}; got {inputs.shape}")
-        state = self.initial_state() if state is None else np.array(state, dtype=np.float64)
+        state = (self.initial_state() if state is None
+                 else np.array(real(state, self.name, "state"), dtype=np.float64))
         if state.shape != (self.n_state,):
             raise SampleError(f"{self.name}: state must have shape ({self.n_state},), got {state.shape}")
         n = inputs.shape[0]
@@ -89,6 +95,17 @@ class CompiledObserver:
         status = np.empty(n, dtype=np.int32)
         self.module.run(state, inputs, outputs, status, n)
         return outputs, status, state
+
+
+def real(a, name: str, what: str) -> np.ndarray:
+    """``a`` as an array of real numbers, or a SampleError: numpy would drop a complex part
+    (ComplexWarning) and parse strings ('1.5') where the caller meant numbers."""
+    arr = np.asarray(a)
+    if arr.dtype.kind not in "fiu":
+        why = "a complex part would be dropped" if arr.dtype.kind == "c" else "not numbers"
+        raise SampleError(f"{name}: {what} must be real numbers (a float or integer array), got dtype {arr.dtype} "
+                          f"({why})")
+    return arr
 
 
 class Recorder:
@@ -109,8 +126,9 @@ class Recorder:
         return self.observer.step(state, inputs, out)
 
     def run(self, inputs, state=None):
-        inputs = np.ascontiguousarray(inputs, dtype=np.float64)
-        first = self.observer.initial_state() if state is None else np.array(state, dtype=np.float64)
+        inputs = np.ascontiguousarray(real(inputs, self.name, "inputs"), dtype=np.float64)
+        first = (self.observer.initial_state() if state is None
+                 else np.array(real(state, self.name, "state"), dtype=np.float64))
         self.calls.append((inputs.copy(), first.copy()))
         return self.observer.run(inputs, first)
 

@@ -32,8 +32,22 @@ def config():
 
 
 @pytest.fixture(scope="session")
-def build(config):
-    return pipeline.build(config)
+def built():
+    """``built(NAME)``: the pipeline's build of a built-in observer (its committed design replayed and
+    re-checked), made once per test session and shared by every test module that reads it. Tests
+    read these builds; a test that changes a design makes its own (``dataclasses.replace``)."""
+    cache = {}
+
+    def get(name: str):
+        if name not in cache:
+            cache[name] = pipeline.build(observers.get(name))
+        return cache[name]
+    return get
+
+
+@pytest.fixture(scope="session")
+def build(built):
+    return built(NAME)
 
 
 @pytest.fixture(scope="session")
@@ -50,3 +64,15 @@ def compiled():
 @pytest.fixture(scope="session")
 def published():
     return json.loads(require_shared(PUBLISHED, "shared reference file").read_text())
+
+
+# --- lanes -----------------------------------------------------------------------------------------
+# `make test-fast` runs `pytest -m "not slow"`: no generate, no build, no compiler, QEMU, Dask, mkdocs
+# or browser. A test that needs one of them (a compiled extension above all) carries
+# @pytest.mark.slow, or its module `pytestmark = pytest.mark.slow`, with the reason beside it.
+# The reliability suite (make check) is slow by definition.
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.get_closest_marker("reliability") is not None and item.get_closest_marker("slow") is None:
+            item.add_marker(pytest.mark.slow)

@@ -21,8 +21,8 @@ NAMES = ("algebraic_uio_example1", "algebraic_uio_example2", "algebraic_uio_late
 
 
 @pytest.fixture(scope="module")
-def builds():
-    return {n: pipeline.build(observers.get(n)) for n in NAMES}
+def builds(built):
+    return {n: built(n) for n in NAMES}
 
 
 def _lpv(name):
@@ -300,6 +300,7 @@ def test_differentiator_order_below_relative_degree_is_refused():
 
 # ---- the step: C == CasADi, C ~ numpy -------------------------------------------------------------------
 
+@pytest.mark.slow          # the compiled observers
 @pytest.mark.parametrize("name", NAMES)
 def test_c_step_matches_casadi_and_numpy(builds, name):
     from python_bindings import load
@@ -325,6 +326,7 @@ def test_c_step_matches_casadi_and_numpy(builds, name):
     assert worst < 1e-9
 
 
+@pytest.mark.slow          # the compiled observers
 def test_c_step_status_behaviour():
     from python_bindings import load
     obs = load("algebraic_uio_example2")
@@ -341,6 +343,7 @@ def test_c_step_status_behaviour():
 
 # ---- item 4: the examples' targets ----------------------------------------------------------------------
 
+@pytest.mark.slow          # the compiled observers
 @pytest.mark.parametrize("name", ["algebraic_uio_example1", "algebraic_uio_example2"])
 def test_noise_free_examples_reach_1e_6(name):
     """State and UI errors below 1e-6 of each signal's peak once the differentiators have converged and
@@ -356,6 +359,7 @@ def test_noise_free_examples_reach_1e_6(name):
         assert all(row["max_rel_after_t_c"] < 1e-6 for row in res["observer"].values())
 
 
+@pytest.mark.slow          # the compiled observers
 def test_lateral_force_with_noise_meets_5_percent():
     from codegen.validation import run as validate
     res = validate.run_scenario("algebraic_uio_lateral_force", "paper")

@@ -177,7 +177,12 @@ def _ranks_own_family_first(name):
     return a
 
 
-@pytest.mark.parametrize("name", REPRESENTATIVES)
+# the trial designs of these take 5-17 s of CPU each: the full lane's
+HEAVY_TRIALS = ("lpv_linf_driver_torque", "stanford_sideslip_nonlinear_tyre", "switched_pi_bank_angle")
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in HEAVY_TRIALS else n
+                                  for n in REPRESENTATIVES])
 def test_a_builtin_observer_ranks_its_own_family_first(name):
     """One built-in per family, with trial designs: the own family is first and its design (the file's
     own settings) certified; every other applicable family is designed too (side by side)."""

@@ -4,6 +4,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -63,6 +65,7 @@ def test_sweep_json_and_mistakes():
     assert proc.returncode == 2 and "not a TOML value" in proc.stderr and "Traceback" not in proc.stderr
 
 
+@pytest.mark.slow          # a float32 build
 def test_build_float32_accepted_and_refused():
     """`uiogen build --float32`: an observer whose certified contraction bounds the float
     rounding within every output's tolerance is built (exit 0, its library on disk, the figures

@@ -13,6 +13,7 @@ ROOT = Path(__file__).resolve().parent.parent
 NAMES = generated_names()
 
 
+@pytest.mark.slow          # CasADi generation of every observer
 @pytest.mark.parametrize("NAME", NAMES)
 def test_regeneration_is_byte_identical(tmp_path, NAME):
     emit.generate([NAME], out_dir=tmp_path, force=True, log=lambda *_: None)
@@ -38,6 +39,7 @@ def test_generated_files_have_banner_and_no_timestamp(NAME):
         assert not re.search(r"20\d\d-\d\d-\d\d|\d\d:\d\d:\d\d", text), f"{f.name} carries a timestamp"
 
 
+@pytest.mark.slow          # gcc and clang over every observer
 @pytest.mark.parametrize("NAME", NAMES)
 @pytest.mark.parametrize("cc", ["gcc", "clang"])
 def test_strict_flags_compile(cc, tmp_path, NAME):
@@ -52,15 +54,53 @@ def test_strict_flags_compile(cc, tmp_path, NAME):
         assert not {"malloc", "calloc", "realloc", "free"} & set(syms), syms
 
 
+@pytest.mark.slow          # the compiled extensions
 @pytest.mark.parametrize("NAME", NAMES)
 def test_work_query_fits_fixed_arrays(NAME):
     from python_bindings import load
     assert load(NAME).module.check_work() == 0
 
 
-def test_no_fast_math_anywhere():
+def test_no_fast_math_in_any_flag_list():
     from codegen.extension.build import GLUE_FLAGS, LTO_FLAGS, SPEED_FLAGS
-    assert "-ffast-math" not in ROOT.joinpath("Makefile").read_text()
     flags = [*STRICT_FLAGS, *GLUE_FLAGS, *SPEED_FLAGS, *LTO_FLAGS]
     assert not [f for f in flags if "fast-math" in f and f != "-fno-fast-math" or f.startswith("-Ofast")]
     assert "-ffp-contract=off" in STRICT_FLAGS and "-ffp-contract=off" in GLUE_FLAGS
+
+
+# Whether subnormal arithmetic survives loading the given shared objects: gcc links crtfastmath.o
+# into an object built with -ffast-math or -Ofast (from any source: our flags, Python's CFLAGS, an
+# environment), and its constructor sets flush-to-zero / denormals-are-zero for the whole process.
+SUBNORMAL_PROBE = """
+import ctypes, sys
+for path in sys.argv[1:]:
+    ctypes.CDLL(path)
+n = float(len(sys.argv))                          # computed at run time, not folded
+tiny = float.fromhex("0x0.0000000000001p-1022")   # the smallest subnormal double
+x = tiny * n
+print("kept" if x != 0.0 and x / n == tiny else "flushed")
+"""
+
+
+def _subnormals(*objects) -> str:
+    import sys
+    proc = subprocess.run([sys.executable, "-c", SUBNORMAL_PROBE, *map(str, objects)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout.strip()
+
+
+@pytest.mark.slow          # the built extensions
+def test_no_built_extension_flushes_subnormals(tmp_path):
+    from codegen.project import observer_file as observers
+    extensions = [observers.get(n).workspace.extension(n) for n in NAMES]
+    assert all(p.exists() for p in extensions), "make build first"
+    # the probe can fail: a shared object built with -ffast-math flips it on this compiler
+    src = tmp_path / "fast.c"
+    src.write_text("int uiogen_probe(void) { return 0; }\n")
+    fast = tmp_path / "fast.so"
+    subprocess.run([shutil.which("cc") or "gcc", "-O2", "-ffast-math", "-fPIC", "-shared", str(src), "-o", str(fast)],
+                   check=True)
+    if _subnormals(fast) != "flushed":
+        pytest.skip("this compiler does not link crtfastmath.o into shared objects: the probe cannot see -ffast-math")
+    assert _subnormals() == "kept"
+    assert _subnormals(*extensions) == "kept", "an extension was linked with -ffast-math (crtfastmath.o)"

@@ -324,10 +324,10 @@ def test_parameter_ranges_in_every_family(tmp_path):
         ts_fuzzy.build(LONLAT, load_parameters(path), 0.01)
     path = params_file(tmp_path, "sentouh2023_twingo.toml", r"^m = \S+", "m = -1000.0")
     with pytest.raises(ConfigurationError, match=r"\[parameters\] m = -1000.0: must be a finite number > 0"):
-        icm.load("interconnected_vehicle", path)
+        icm.build(observers.builtin_model("interconnected_vehicle").MODEL, load_parameters(path))
     path = params_file(tmp_path, "sentouh2023_twingo.toml", r"^c_a = \S+", "c_a = -0.3")
     with pytest.raises(ConfigurationError, match=r"c_a = -0.3: must be a finite number >= 0"):
-        icm.load("interconnected_vehicle", path)
+        icm.build(observers.builtin_model("interconnected_vehicle").MODEL, load_parameters(path))
 
 
 def test_parameter_ranges_field(tmp_path):
@@ -559,7 +559,7 @@ def test_committed_parameter_files_load_and_pass():
     for name in observers.names():
         cfg = observers.get(name)
         if cfg.family == "interconnected_uio":
-            icm.load(cfg.model, cfg.parameter_path)
+            icm.load(cfg)
         elif cfg.family == "ts_fuzzy_uio":
             ts_fuzzy.build(cfg.load_model(), load_parameters(cfg.parameter_path), cfg.sample_time)
         elif cfg.family not in OLD_PARSER_FAMILIES:     # nonlinear in the states: the parameter check alone

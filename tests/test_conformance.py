@@ -28,11 +28,12 @@ from codegen.project import observer_file as observers
 BUILTIN = observers.names()
 
 
+@pytest.mark.slow          # builds
 @pytest.mark.parametrize("name", BUILTIN)
-def test_every_builtin_extension_conforms(name):
+def test_every_builtin_extension_conforms(name, built):
     config = observers.get(name)
     lock_path = design_lock.path(config)
-    report = conformance.check(pipeline.build(config), load(config).module, lock_path.parent,
+    report = conformance.check(built(name), load(config).module, lock_path.parent,
                                json.loads(lock_path.read_text()))
     assert report.samples == conformance.SAMPLES
     assert report.worst["numpy"][0] <= conformance.TOLERANCE
@@ -93,6 +94,7 @@ def known_input_project(tmp_path_factory):
     return path
 
 
+@pytest.mark.slow          # builds
 def test_a_known_input_is_read_where_the_model_puts_it(known_input_project, capsys):
     config = observers.get(str(known_input_project))
     obs = load(config)
@@ -118,6 +120,7 @@ def _restamp(folder, fname):
                             flags=re.M))
 
 
+@pytest.mark.slow          # builds
 def test_a_kernel_that_swaps_two_inputs_is_refused(known_input_project, capsys):
     config = observers.get(str(known_input_project))
     folder = design_lock.path(config).parent
@@ -143,6 +146,7 @@ def test_a_kernel_that_swaps_two_inputs_is_refused(known_input_project, capsys):
         _restamp(folder, kernel.name)
 
 
+@pytest.mark.slow          # builds
 def test_a_hand_edited_c_file_is_not_compiled(known_input_project, capsys):
     config = observers.get(str(known_input_project))
     api = design_lock.path(config).parent / "steered.c"
@@ -156,6 +160,7 @@ def test_a_hand_edited_c_file_is_not_compiled(known_input_project, capsys):
         api.write_text(original)
 
 
+@pytest.mark.slow          # builds
 def test_a_lock_whose_signal_order_differs_from_the_model_is_refused():
     name = "lpv_linf_driver_torque"
     config = observers.get(name)

@@ -14,6 +14,8 @@ from codegen.targets import cortexm
 from codegen.tools import qemu
 from codegen.extension.build import build_extension
 
+pytestmark = pytest.mark.slow          # arm-none-eabi-gcc and QEMU
+
 NAME = "lpv_linf_driver_torque"
 
 

@@ -7,8 +7,6 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from codegen.project import observer_file as observers
-from codegen import pipeline
 from codegen.validation import simulate
 from codegen.families.linf_uio import discrete
 from codegen.validation import common
@@ -48,8 +46,8 @@ def test_derived_input_matrices_and_step():
 
 
 @pytest.fixture(scope="module")
-def bmw():
-    return pipeline.build(observers.get(NAME))
+def bmw(built):
+    return built(NAME)
 
 
 def test_bmw_twin_inputs_are_the_seeds(bmw):
@@ -60,6 +58,7 @@ def test_bmw_twin_inputs_are_the_seeds(bmw):
     assert bmw.discrete_certificate.kappa > 1
 
 
+@pytest.mark.slow          # the compiled extension
 def test_compiled_step_equals_numpy_step_with_derived_inputs(bmw):
     from python_bindings import load
     obs = load(NAME)

@@ -143,6 +143,7 @@ def test_an_edited_or_truncated_output_is_regenerated(tmp_path):
     assert "unchanged" in lines[-1]
 
 
+@pytest.mark.slow          # two generate processes
 def test_two_generate_runs_at_once_are_safe(tmp_path):
     name = "switched_pi_bank_angle"
     cmd = [sys.executable, "-m", "codegen.cli", "generate", name, "--force", "--out", str(tmp_path)]
@@ -195,6 +196,7 @@ def test_exact_operations_are_correctly_rounded():
 QEMU = shutil.which("qemu-x86_64")
 
 
+@pytest.mark.slow          # QEMU user-mode
 @pytest.mark.skipif(os.uname().machine != "x86_64", reason="the emulated CPU models are x86-64")
 @pytest.mark.parametrize("cpu", ["Nehalem"])
 def test_generation_is_byte_identical_on_another_cpu(tmp_path, cpu):

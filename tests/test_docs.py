@@ -28,6 +28,7 @@ def test_a_changed_record_changes_the_page(tmp_path):
     assert tmp_path / "docs" / "families" / "linf_uio.md" in changed
 
 
+@pytest.mark.slow          # mkdocs
 def test_mkdocs_build_is_strict_clean(tmp_path):
     mkdocs = shutil.which("mkdocs", path=str(Path(sys.executable).parent))
     assert mkdocs, "mkdocs is installed by `make test` ([test] extra)"

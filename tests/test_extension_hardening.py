@@ -20,6 +20,8 @@ import pytest
 from codegen.extension import build
 from python_bindings import load
 
+pytestmark = pytest.mark.slow          # the compiled extensions, and a build of its own
+
 ROOT = Path(__file__).resolve().parent.parent
 # lpv: N_STATE = N_INPUT = N_OUTPUT = 5; stanford: 3 states, 4 inputs, 3 outputs (a mix-up of
 # the three sizes shows there)

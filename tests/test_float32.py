@@ -19,6 +19,8 @@ from codegen.targets import float32 as precision
 from codegen.errors import CertificateError, ConfigurationError, DiscretizationError
 from codegen.extension.build import build_extension, load
 
+pytestmark = pytest.mark.slow          # float32 builds
+
 NAME = "lpv_linf_driver_torque"
 
 

@@ -18,8 +18,9 @@ from codegen.extension.build import build_extension, load
 fmpy = pytest.importorskip("fmpy", reason="FMPy is not installed (pip install -c constraints.txt '.[fmu]')")
 from fmpy.validation import validate_fmu  # noqa: E402
 
-pytestmark = pytest.mark.skipif(platform.system() != "Linux" or platform.machine() != "x86_64",
-                                reason="the FMU carries a linux64 binary only")
+pytestmark = [pytest.mark.slow,          # compiles FMU binaries
+              pytest.mark.skipif(platform.system() != "Linux" or platform.machine() != "x86_64",
+                                 reason="the FMU carries a linux64 binary only")]
 
 NAMES = ("lpv_linf_driver_torque", "interconnected_uio")
 FORMATS = ("fmu", "fmu3")
@@ -138,3 +139,50 @@ def test_export_refuses_a_file_that_is_not_fmu(tmp_path, capsys, fmt):
     assert cli.main(["export", NAMES[0], "--format", fmt, "--out", str(tmp_path / "x.zip")]) == 2
     err = capsys.readouterr().err
     assert "ConfigurationError" in err and ".fmu" in err and "Traceback" not in err
+
+
+DRIVER = r"""
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include "fmi2Functions.h"
+static void logger(fmi2ComponentEnvironment e, fmi2String n, fmi2Status s, fmi2String c, fmi2String f, ...)
+{ (void)e; (void)n; (void)s; (void)c; printf("log: %s\n", f); }
+int main(void)
+{
+    fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
+    double steps[] = {NAN, INFINITY, -INFINITY, 1e300, -1.0, 0.0};
+    int i, refused = 0;
+    fmi2Component c = fmi2Instantiate("x", fmi2CoSimulation, GUID, "", &cb, fmi2False, fmi2False);
+    if (c == NULL) return 2;
+    fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0);
+    fmi2EnterInitializationMode(c);
+    fmi2ExitInitializationMode(c);
+    for (i = 0; i < 6; ++i) refused += fmi2DoStep(c, 0.0, steps[i], fmi2True) == fmi2Error;
+    printf("refused %d, then %d\n", refused, fmi2DoStep(c, 0.0, 2 * SAMPLE_TIME, fmi2True) == fmi2OK);
+    fmi2FreeInstance(c);
+    return 0;
+}
+"""
+
+
+def test_fmu_step_size_nan_or_huge_is_refused_without_undefined_behaviour(fmus, tmp_path):
+    """fmi2DoStep(NaN), (+-inf), (1e300): refused before any conversion to an integer (converting
+    them to long is undefined behaviour: UBSan's float-cast-overflow reported it before the fix)."""
+    import subprocess
+    from codegen.emit.toolchain import compiler
+    name = NAMES[0]
+    with zipfile.ZipFile(fmus[name]) as z:
+        for f in z.namelist():
+            if f.startswith("sources/"):
+                (tmp_path / f[len("sources/"):]).write_bytes(z.read(f))
+        guid = ET.fromstring(z.read("modelDescription.xml")).get("guid")
+    (tmp_path / "driver.c").write_text(DRIVER)
+    exe = tmp_path / "driver"
+    srcs = [str(tmp_path / f) for f in (f"{name}_kernel.c", f"{name}.c", f"{name}_fmu.c", "driver.c")]
+    subprocess.run([compiler(), "-O1", "-fsanitize=float-cast-overflow,undefined", "-fno-sanitize-recover=all",
+                    f"-DGUID=\"{guid}\"", f"-DSAMPLE_TIME={load(name).sample_time!r}", "-I", str(tmp_path), *srcs,
+                    "-o", str(exe), "-lm"], check=True, capture_output=True)
+    proc = subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and "runtime error" not in proc.stderr, proc.stderr
+    assert "refused 6, then 1" in proc.stdout, proc.stdout

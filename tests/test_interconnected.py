@@ -13,7 +13,6 @@ import sympy as sp
 
 from codegen.families.interconnected_uio import representation as icm
 from codegen.project import observer_file as observers
-from codegen import pipeline
 from codegen.families.interconnected_uio import design as du
 from codegen.families.interconnected_uio import build as dub
 from codegen.errors import (CertificateError, ModelDefinitionError, RankConditionError, SchedulingBoundsError)
@@ -26,8 +25,8 @@ TWIN = "interconnected_uio_ford_escort"
 
 
 @pytest.fixture(scope="module")
-def icb():
-    return pipeline.build(observers.get(NAME))
+def icb(built):
+    return built(NAME)
 
 
 @pytest.fixture(scope="module")
@@ -215,6 +214,7 @@ def _random_state(rng, icb):
     return z
 
 
+@pytest.mark.slow          # the compiled observer
 def test_c_step_matches_numpy_and_casadi(icb, compiled):
     rng = np.random.default_rng(3)
     f = icb.step_function()
@@ -237,6 +237,7 @@ def test_c_step_matches_numpy_and_casadi(icb, compiled):
     assert worst <= 1e-12
 
 
+@pytest.mark.slow          # the compiled observer
 def test_c_step_status_behaviour(compiled):
     bits = compiled.status_bits
     s, out = compiled.initial_state(), np.empty(compiled.n_output)
@@ -252,6 +253,7 @@ def test_c_step_status_behaviour(compiled):
     assert np.isfinite(s).all()
 
 
+@pytest.mark.slow          # the compiled observer
 def test_straight_driving_is_reproduced_exactly(compiled):
     """Steady straight driving at 20 m/s, consistent measurements: every estimate converges to the
     truth, the unknown inputs to the steady torques (rolling resistance and drag on the front axle)."""

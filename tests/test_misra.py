@@ -11,9 +11,10 @@ from python_bindings.workspace import Workspace, source_checkout
 
 GENERATED_DIR = Workspace.of(source_checkout()).generated
 
-pytestmark = pytest.mark.skipif(shutil.which("cppcheck") is None,
-                                reason="cppcheck is not installed (make embedded-tools / "
-                                       "scripts/install_embedded_tools.sh: apt-get install cppcheck)")
+pytestmark = [pytest.mark.slow,          # cppcheck over the generated C
+              pytest.mark.skipif(shutil.which("cppcheck") is None,
+                                 reason="cppcheck is not installed (make embedded-tools / "
+                                        "scripts/install_embedded_tools.sh: apt-get install cppcheck)")]
 NAME = "lpv_linf_driver_torque"
 
 

@@ -174,6 +174,7 @@ def test_full_sliding_cannot_be_certified():
         FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, "gain_sliding_fraction": 0.95}))
 
 
+@pytest.mark.slow          # the compiled observer
 def test_c_step_matches_reference_with_the_kinematic_fallback(built):
     from codegen.extension.build import load
     obs = load(NAME)
@@ -194,6 +195,7 @@ def test_c_step_matches_reference_with_the_kinematic_fallback(built):
     assert excess > 0 and z1[0] == pytest.approx(-3.0 + 0.01 * (9.0 - 0.3 * 20.0), abs=1e-15)
 
 
+@pytest.mark.slow          # the compiled observer
 def test_real_log_figures_evaluation_part_first():
     from codegen.validation import run as validate
     _run()
@@ -270,6 +272,7 @@ def test_the_starter_designs_its_own_gains_for_another_car(tmp_path, capsys):
     assert not np.allclose(s["L"], stanford_L, rtol=0.05)     # its own gains, not the Stanford car's
 
 
+@pytest.mark.slow          # the compiled observer
 def test_demo_real_data_table_headlines_the_evaluation_part():
     from codegen.validation import demo
     from codegen.tools import docs
@@ -288,6 +291,7 @@ def test_demo_real_data_table_headlines_the_evaluation_part():
         assert row in table
 
 
+@pytest.mark.slow          # the compiled observer
 def test_bench_reports_the_observer_within_the_issue_target():
     # uiogen bench iterates observers.names(): the design benchmark reads this family's settings
     # from the build itself (it has no separate design record), and the batch loop of the C step

@@ -6,6 +6,8 @@ from codegen.validation import simulate
 from codegen.errors import SampleError
 from codegen.validation import common
 
+pytestmark = pytest.mark.slow          # the compiled extension
+
 REL = 1e-12
 
 

@@ -18,6 +18,8 @@ from codegen.extension.build import generated_names
 from python_bindings import Recorder, StaleExtensionError, UnknownObserverError, load
 from python_bindings.workspace import Workspace
 
+pytestmark = pytest.mark.slow          # the compiled extensions
+
 ROOT = Path(__file__).resolve().parent.parent
 NAME = "lpv_linf_driver_torque"
 TOOLCHAIN = ("codegen", "sympy", "casadi", "clarabel", "scipy", "jinja2")
@@ -81,12 +83,10 @@ def test_the_extension_carries_the_names_units_sample_time_and_hash_of_its_c_and
                                                         len(obs.output_names))
 
 
-def test_units_are_those_the_family_documents():
+def test_units_are_those_the_family_documents(built):
     """Independent of the header: the build's own signal docs."""
-    from codegen import pipeline
     from codegen.emit.header import unit_of
-    from codegen.project import observer_file
-    b = pipeline.build(observer_file.get(NAME))
+    b = built(NAME)
     state, inputs, outputs = b.signal_docs()
     obs = load(NAME)
     assert obs.input_units == tuple(unit_of(s["doc"]) for s in inputs) == ("N m", "rad/s", "rad", "rad/s", "m/s")

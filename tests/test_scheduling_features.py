@@ -4,7 +4,6 @@ import pytest
 import sympy as sp
 
 from codegen.project import observer_file as observers
-from codegen import pipeline
 from codegen.errors import ModelDefinitionError
 from codegen.model import ModelDefinition, SchedulingSignal
 from codegen.families.linf_uio import build as linf_build
@@ -28,7 +27,7 @@ def test_derived_signal_may_only_use_outputs_and_parameters():
                         (SchedulingSignal(v, derived=q * 2),), (k,))
 
 
-def test_stanford_polytope_and_step_inputs():
+def test_stanford_polytope_and_step_inputs(built):
     cfg = observers.get("stanford_sideslip")
     lpv, poly, _ = linf_build.representation(cfg)
     assert poly.n_vertices == 8 and len(poly.signals) == 2
@@ -40,7 +39,7 @@ def test_stanford_polytope_and_step_inputs():
         for s in (1 / 3, 0.7, 1.0):
             eta = poly.eta(np.array([vx, s]))
             assert np.allclose(np.einsum("i,ijk->jk", eta, poly.C), np.array(C(vx, s), float), rtol=1e-12, atol=1e-9)
-    b = pipeline.build(cfg)
+    b = built("stanford_sideslip")
     assert b.input_names == ["delta", "y_r", "y_a_y", "v_x"]      # s is computed inside the step
     assert b.data.quadratic and b.discrete_certificate.kappa > 1
 

@@ -6,6 +6,8 @@ from codegen.project import observer_file as observers
 from codegen.validation import simulate, run as validate
 from codegen.validation import common
 
+pytestmark = pytest.mark.slow          # the compiled extension on simulated runs
+
 
 def test_converges_on_track_scenario_with_noise():
     r = validate.run_scenario("lpv_linf_driver_torque", "track_varying_speed", "model")

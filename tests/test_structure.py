@@ -138,8 +138,30 @@ def test_design_hash_covers_every_module_the_pipeline_imports(NAME):
     assert ROOT / "codegen" / "design" / "lmi.py" in covered and config.model_path in covered
     # validation code is not a design input: editing a plot does not re-solve a design
     assert package / "validation.py" not in covered
-    # and the C's hash covers emission on top of the design's
-    lock = design_lock.path(config).read_text()
+
+
+
+@pytest.mark.parametrize("NAME", ["lpv_linf_driver_torque", "interconnected_uio"])
+def test_the_c_hash_covers_the_design_the_emitters_and_the_templates(NAME, monkeypatch):
+    # the files emission_inputs really hashes (read off sources.digest as it is called)
     from codegen.emit import generate as emit
-    assert set(sources.closure("codegen.emit.generate")) <= set(sources.closure("codegen.emit.generate", "codegen.pipeline"))
+    from codegen.emit.toolchain import TEMPLATES
+    config = observers.get(NAME)
+    lock = design_lock.path(config).read_text()
+    hashed, real_digest = [], sources.digest
+
+    def spy(files, extra=None):
+        hashed.append(([Path(f) for f in files], dict(extra or {})))
+        return real_digest(files, extra)
+    monkeypatch.setattr(sources, "digest", spy)
+    emit.emission_inputs(config, lock)
+    (files, extra), = [h for h in hashed if "lock" in h[1]]
+    design = set(design_lock.design_sources(config))
+    assert design <= set(files)                                   # a change that re-solves also regenerates
+    emitter = ROOT / "codegen" / "emit" / "generate.py"
+    assert emitter in files and emitter not in design             # emission code: new C, not a new design
+    assert set(TEMPLATES.glob("observer.*.j2")) <= set(files)
+    assert {"casadi", "jinja2"} <= set(extra) and extra["lock"] != ""
+    monkeypatch.undo()
+    # and the hash moves with the lock's text
     assert emit.emission_inputs(config, lock) != emit.emission_inputs(config, lock + " ")

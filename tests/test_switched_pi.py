@@ -7,7 +7,6 @@ import pytest
 import sympy as sp
 
 from codegen.project import observer_file as observers
-from codegen import pipeline
 from codegen.families.switched_pi import representation as switched
 from codegen.families.switched_pi import design as switched_pi
 from codegen.errors import CertificateError, ModelDefinitionError, RankConditionError
@@ -19,8 +18,8 @@ SPEED, SLIP, FINE = NAMES
 
 
 @pytest.fixture(scope="module")
-def builds():
-    return {n: pipeline.build(observers.get(n)) for n in NAMES}
+def builds(built):
+    return {n: built(n) for n in NAMES}
 
 
 @pytest.fixture(scope="module")
@@ -268,6 +267,7 @@ def _random_rows(rng, n, box):
                             rng.normal(0, 0.1, n), rng.uniform(box[0] - 2, box[1] + 2, n)])
 
 
+@pytest.mark.slow          # the compiled observer
 @pytest.mark.parametrize("name", NAMES)
 def test_c_step_matches_casadi_and_numpy(builds, compiled, name):
     b, obs = builds[name], compiled[name]
@@ -291,6 +291,7 @@ def test_c_step_matches_casadi_and_numpy(builds, compiled, name):
     assert worst <= 1e-12
 
 
+@pytest.mark.slow          # the compiled observer
 def test_mode_selection_and_flags_in_c(compiled):
     obs = compiled[SPEED]
     bits = obs.status_bits
@@ -308,6 +309,7 @@ def test_mode_selection_and_flags_in_c(compiled):
     np.testing.assert_array_equal(out, held[-6:])
 
 
+@pytest.mark.slow          # the compiled observer
 def test_slip_premise_from_the_estimate_switches_and_flags(builds, compiled):
     obs = compiled[SLIP]
     out = np.empty(obs.n_output)
@@ -320,6 +322,7 @@ def test_slip_premise_from_the_estimate_switches_and_flags(builds, compiled):
         assert out[0] == mode and bool(status & bits["SCHEDULING_CLAMPED"]) == flag, beta_hat
 
 
+@pytest.mark.slow          # the compiled observer
 def test_whole_trajectory_equals_casadi_mapaccum(builds, compiled):
     from codegen.validation import simulate
     from codegen.families.switched_pi import validation as banked_road
@@ -336,6 +339,7 @@ def test_whole_trajectory_equals_casadi_mapaccum(builds, compiled):
 
 # --- validation targets (issue 6) -------------------------------------------------------------------------
 
+@pytest.mark.slow          # the compiled observer
 def test_banked_road_targets_on_the_pacejka_plant():
     from codegen.validation import run as validate
     res = validate.run_scenario(FINE, "banked_road_braking", "nominal")
@@ -346,6 +350,7 @@ def test_banked_road_targets_on_the_pacejka_plant():
     assert seed_rule["beta"]["rms"] <= 0.2
 
 
+@pytest.mark.slow          # the compiled observer
 def test_bank_channel_within_gamma_and_the_rest_is_model_mismatch():
     """gamma bounds phi_r -> beta error on the model class; on the Pacejka plant the run's ratio
     (0.0151) exceeds it because a flat road (phi_r = 0) alone leaves a larger beta error (tyres,
@@ -375,6 +380,7 @@ def test_bank_channel_within_gamma_and_the_rest_is_model_mismatch():
     assert e_flat / bank == pytest.approx(0.0184, rel=0.05) and e_flat > e_pacejka and e_flat / bank > gamma
 
 
+@pytest.mark.slow          # the compiled observer
 def test_commonroad_flat_road_targets():
     from codegen.validation import run as validate
     res = validate.run_scenario(FINE, "banked_road_braking", "commonroad")

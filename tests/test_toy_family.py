@@ -168,6 +168,7 @@ def toy(tmp_path):
     families.unregister(family.name)
 
 
+@pytest.mark.slow          # builds
 def test_a_family_registered_from_outside_goes_to_a_compiled_step(toy, capsys):
     path, _ = toy
     config = observers.get(str(path))

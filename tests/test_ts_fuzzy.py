@@ -19,8 +19,8 @@ NAME = "ts_fuzzy_uio"
 
 
 @pytest.fixture(scope="module")
-def tsb():
-    return pipeline.build(observers.get(NAME))
+def tsb(built):
+    return built(NAME)
 
 
 @pytest.fixture(scope="module")
@@ -148,6 +148,7 @@ def test_design_certificate_and_decoupling(tsb):
     assert other.ts.A[0][1, 1] == pytest.approx(1 - 0.5 * (1 - ts.A[0][1, 1]), rel=1e-12)
 
 
+@pytest.mark.slow          # the compiled observer
 def test_c_step_matches_numpy_and_casadi(tsb, compiled):
     rng = np.random.default_rng(11)
     f = tsb.step_function()
@@ -168,6 +169,7 @@ def test_c_step_matches_numpy_and_casadi(tsb, compiled):
     assert worst <= 1e-12
 
 
+@pytest.mark.slow          # the compiled observer
 def test_c_step_status_behaviour(compiled):
     bits = compiled.status_bits
     s, out = compiled.initial_state(), np.empty(compiled.n_output)
@@ -189,6 +191,7 @@ PACEJKA_MEASURED = {
 }
 
 
+@pytest.mark.slow          # the compiled observer
 @pytest.mark.parametrize("scenario", ["circular_path_normal", "random_trajectory_accel"])
 def test_seed004_targets_on_the_pacejka_plant(scenario):
     """Table II's MAE and RMSD of v_y, delta, T_eng at the measured figures (+15 %); every MAE is at or
@@ -206,6 +209,7 @@ def test_seed004_targets_on_the_pacejka_plant(scenario):
     assert res["status_flags"] == 0
 
 
+@pytest.mark.slow          # the compiled observer
 def test_seed004_scenario3_on_the_pacejka_plant():
     """Nguyen et al. 2021 scenario 3 in its normal-driving reading (``time_varying_grip_normal``): the delta
     target is met; v_y and T_eng miss the issue's targets (README: rear-tyre saturation in the literal
@@ -274,6 +278,7 @@ def test_commonroad_torque_truth_is_the_effective_torque_of_eq1():
 COMMONROAD_MEASURED = {"v_y": (0.01063, 0.00224), "delta": (4.44e-4, 1.24e-4), "T_eng": (0.784, 0.273)}
 
 
+@pytest.mark.slow          # the compiled observer
 def test_commonroad_angle_steered_run():
     """The CommonRoad twin on the multi-body plant, scenario 2: MAE and RMSD of Table II at the measured
     figures (+15 %). The paper's T_eng MAE 0.733 N m is missed by 7 %, its T_eng RMSD 5.21 met; v_y
@@ -319,6 +324,7 @@ def test_commonroad_ablation_knobs_are_checked():
         ts_validation.run(observers.get(NAME), "circular_path_normal", "nominal", camber_force=False)
 
 
+@pytest.mark.slow          # the compiled observer
 def test_real_data_with_delta_as_unknown_input():
     from codegen.validation import run as validate
     res = validate.run_data("ts_fuzzy_uio_stanford", "stanford")

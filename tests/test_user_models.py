@@ -170,6 +170,7 @@ def test_pdlf_never_worse_than_the_quadratic_design_it_contains(monkeypatch):
     assert b.certificate["feasible"] and b.certificate["gamma"] <= b.quadratic.gamma * (1 + 1e-6)
 
 
+@pytest.mark.slow          # builds
 @pytest.mark.parametrize("family", ["linf_uio", "ts_fuzzy_uio"])
 def test_uiogen_new_writes_a_starter_that_designs_generates_and_builds(tmp_path, family, capsys):
     folder = tmp_path / "my_project"
@@ -246,6 +247,7 @@ F = { min = -1500.0, max = 1500.0, bandwidth = 0.5 }
 """
 
 
+@pytest.mark.slow          # builds
 def test_scheduling_dependent_D_with_feedthrough_designs_and_tracks(tmp_path):
     """The L-infinity family beyond the paper's structure: D(v_x) (the UI filter's pseudo-inverse
     formed at run time) and the unknown input in an output (the full step system); the UI filter

@@ -13,6 +13,7 @@ from codegen.errors import ModelDefinitionError
 ROOT = Path(__file__).resolve().parent.parent
 
 
+@pytest.mark.slow          # the compiled observer
 def test_nominal_plant_short_run():
     ticks = []
     r = validate.run_scenario("lpv_linf_driver_torque", "zigzag_constant_speed_assist", "nominal", duration=8.0,
@@ -31,12 +32,14 @@ def test_nominal_plant_short_run():
     assert all(np.isfinite(v["beta"]["rms"]) for v in r["baselines"].values())
 
 
+@pytest.mark.slow          # the compiled observer
 def test_commonroad_requires_a_twin_designed_for_that_car():
     pytest.importorskip("vehiclemodels")
     with pytest.raises(ModelDefinitionError, match="lpv_linf_driver_torque_bmw320i"):
         validate.run_scenario("lpv_linf_driver_torque", "circular_path", "commonroad", duration=1.0)
 
 
+@pytest.mark.slow          # the compiled observer
 def test_commonroad_cli_json_and_plot(tmp_path):
     pytest.importorskip("vehiclemodels")
     png = tmp_path / "v.png"

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow          # builds the wheel and installs it into a fresh venv
+
 ROOT = Path(__file__).resolve().parent.parent
 SOURCE_IGNORE = shutil.ignore_patterns(".git", ".venv*", "build", "generated_c", "__pycache__", "*.egg-info",
                                        ".pytest_cache", "site", "*.so", "*.o")

@@ -310,10 +310,10 @@ def _casadi_jacobian(F: sp.Matrix, xd: tuple):
     automatic differentiation of the model's own expressions (a nonlinear model: sympy's symbolic
     Jacobian of a tyre law with Min/Max/|.| can take minutes to print)."""
     import casadi as ca
-    from ..emit.stepgen import CASADI_MODULES
+    from ..emit.stepgen import lambdify
     syms = list(dict.fromkeys([*xd, *sorted(F.free_symbols, key=str)]))
     Z = ca.SX.sym("z", len(syms))
-    values = sp.lambdify(syms, list(F), CASADI_MODULES)(*[Z[i] for i in range(len(syms))])
+    values = lambdify(syms, list(F))(*[Z[i] for i in range(len(syms))])
     Fv = ca.vertcat(*[v if isinstance(v, ca.SX) else ca.SX(float(v)) for v in values])
     J = ca.jacobian(Fv, ca.vertcat(*[Z[syms.index(s)] for s in xd])) if xd else ca.SX(F.shape[0], 0)
     used = [s for i, s in enumerate(syms) if ca.depends_on(J, Z[i])]

@@ -8,7 +8,11 @@ Each plant here is the same closed loop as a Python plant of the library, sample
   over each sample, RK4 at Ts/10);
 * ``banked_road``: :func:`codegen.families.switched_pi.validation.banked_plant` (the roll/bank
   Pacejka plant with the yaw-rate driver setting the road-wheel angle; speed, acceleration and
-  bank linear within a sample, RK4 at Ts/10).
+  bank linear within a sample, RK4 at Ts/10);
+* ``model``, for every family: the observer's own model equations, derived from its symbolic
+  definition (:mod:`codegen.validation.model_plant`), driven by the generic ``excitation``
+  scenario (:mod:`codegen.validation.excitation`): no driver, every parameter of the model
+  dispersible.
 
 One sample is a CasADi ``Function`` ``step(x, p, theta) -> (x_next, y)``: ``x`` the plant's
 states with the pose and the driver's integrators, ``p`` the scenario's values at the sample,
@@ -31,21 +35,21 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelDefinitionError, UnsupportedError
-from ..emit.stepgen import CASADI_MODULES
+from ..emit.stepgen import lambdify
 
 SUBSTEPS = 10
 CACHE_ENV = "UIOGEN_PLANT_CACHE"
 DRIVER_KEYS = ("wheelbase", "R_s", "k_e", "k_edot", "k_r", "k_ri", "k_p", "k_i", "k_d")
 
 
-def cache_dir() -> Path:
-    """Where compiled plants live: ``$UIOGEN_PLANT_CACHE``, else the built-in observers' project's
-    ``build/plants/`` (:mod:`python_bindings.workspace`; a campaign runs a built-in observer)."""
+def cache_dir(config=None) -> Path:
+    """Where compiled plants live: ``$UIOGEN_PLANT_CACHE``, else the observer's project's
+    ``build/plants/`` (:mod:`python_bindings.workspace`; without an observer, the built-in observers')."""
     from python_bindings.workspace import Workspace, source_checkout
     env = os.environ.get(CACHE_ENV)
     if env:
         return Path(env)
-    return Workspace.of(source_checkout()).plants
+    return config.workspace.plants if config is not None else Workspace.of(source_checkout()).plants
 
 
 def _rk4(f, x, h, e0, em, e1):
@@ -66,7 +70,7 @@ def _casadi_rhs(definition, params: dict):
         raise UnsupportedError(f"campaign plants do not support derived inputs (model {definition.name!r})")
     args = [*definition.states, *definition.known_inputs, *definition.unknown_inputs,
             *(s.symbol for s in definition.scheduling), *definition.parameters]
-    fn = sp.lambdify(args, list(sp.Matrix(definition.dynamics)), CASADI_MODULES)
+    fn = lambdify(args, list(sp.Matrix(definition.dynamics)))
     return fn, names
 
 
@@ -203,7 +207,7 @@ def _banked_road_step(spec: PlantSpec) -> ca.Function:
     fn, pnames = _casadi_rhs(d, spec.params)
     np_ = len(pnames)
     args = [*d.states, *d.known_inputs, *d.unknown_inputs, *(s.symbol for s in d.scheduling), *d.parameters]
-    acc_fn = sp.lambdify(args, spec.extra, CASADI_MODULES)
+    acc_fn = lambdify(args, spec.extra)
     x = ca.SX.sym("x", 5)                  # v_y, r, phi, phi_dot, i_r
     p = ca.SX.sym("p", 7)
     theta = ca.SX.sym("theta", len(spec.param_names))
@@ -246,25 +250,62 @@ def banked_road_inputs(spec: PlantSpec, scn, driver_gains: dict) -> tuple:
     return x0, p, [driver_gains[k] for k in BANKED_DRIVER_KEYS]
 
 
+# --- the model's own equations (codegen.validation.model_plant), for every family ---------------------------
+
+EXCITATION = "excitation"
+"""The scenario of the ``model`` plant: the generic excitation of :mod:`codegen.validation.excitation`."""
+
+
+def model_spec(config) -> PlantSpec:
+    from ..model import load_parameters
+    from ..validation import model_plant
+    params = load_parameters(config.parameter_path)
+    definition = config.load_model()
+    plant = model_plant.plant(definition, config.sample_time)
+    names = tuple(str(p) for p in definition.parameters)
+    stages = tuple(f"{k}@{m}" for m in range(plant.n_stage) for k in plant.external)   # rows of E
+    return PlantSpec("model", definition, {n: float(params.values[n]) for n in names}, names, (),
+                     stages, plant.outputs, len(plant.states), config.sample_time, extra=plant)
+
+
+def _model_step(spec: PlantSpec) -> ca.Function:
+    return spec.extra.step
+
+
+def model_inputs(spec: PlantSpec, scn, driver_gains: dict) -> tuple:
+    """(x0, E, []) of an excitation run (:func:`codegen.validation.excitation.scenario`)."""
+    return scn.x0, scn.stages, []
+
+
 KINDS = {"steering_torque": (steering_torque_spec, _steering_torque_step, steering_torque_inputs),
-         "banked_road": (banked_road_spec, _banked_road_step, banked_road_inputs)}
+         "banked_road": (banked_road_spec, _banked_road_step, banked_road_inputs),
+         "model": (model_spec, _model_step, model_inputs)}
+
 
 def families_with_plants() -> list:
-    """The registered families with a compiled campaign plant (``Family.campaign_plant``)."""
+    """The registered families with a compiled plant of their own library scenarios
+    (``Family.campaign_plant``); every family has the ``model`` plant of the excitation scenario."""
     from .. import families
     return [n for n in families.names() if families.get(n).campaign_plant]
 
 
-def plant_kind(config) -> str:
+def plant_kind(config, scenarios=(EXCITATION,)) -> str:
+    """The kind of compiled plant of a campaign of ``config`` on ``scenarios``: ``model`` for the
+    excitation scenario (every family), else the family's own (``Family.campaign_plant``)."""
     from .. import families
+    if scenarios and all(s == EXCITATION for s in scenarios):
+        return "model"
     kind = families.get(config.family).campaign_plant
     if kind is None:
-        raise UnsupportedError(f"campaigns have compiled plants for the families {', '.join(families_with_plants())}; "
-                               f"observer {config.name!r} is of family {config.family!r}")
+        raise UnsupportedError(f"campaigns on the library scenarios have compiled plants for the families "
+                               f"{', '.join(families_with_plants())}; observer {config.name!r} is of family "
+                               f"{config.family!r}: its campaigns run the scenario {EXCITATION!r} on its own model")
     return kind
 
 
 def default_driver_gains(kind: str, scn) -> dict:
+    if kind == "model":
+        return {}
     if kind == "banked_road":
         return dict(BANKED_DRIVER)
     from ..validation.scenarios import DriverGains
@@ -277,8 +318,8 @@ def default_driver_gains(kind: str, scn) -> dict:
 class CompiledPlant:
     """A closed-loop plant of ``n`` samples as one compiled C function."""
 
-    def __init__(self, config, n: int):
-        kind = plant_kind(config)
+    def __init__(self, config, n: int, kind: str | None = None):
+        kind = kind or plant_kind(config, ())
         make_spec, make_step, self._inputs = KINDS[kind]
         self.kind, self.n = kind, int(n)
         self.spec = make_spec(config)
@@ -289,7 +330,7 @@ class CompiledPlant:
             ca.MX.sym("theta", len(self.spec.param_names))
         _, Y = whole(x0, P, ca.repmat(th, 1, self.n))
         run = ca.Function("plant_run", [x0, P, th], [Y])
-        self.path = _compile(run)
+        self.path = _compile(run, cache_dir(config))
         self._fn = ca.external("plant_run", str(self.path))
 
     @property
@@ -308,6 +349,8 @@ class CompiledPlant:
         Y = np.asarray(self._fn(x0, P, theta))
         out = {k: np.ascontiguousarray(Y[i]) for i, k in enumerate(self.spec.output_names)}
         out["t"] = np.asarray(scn.t, float)
+        if self.kind == "model":
+            return {**scn.signals, **out}
         out["v_x"] = np.asarray(scn.v_ref, float)
         if self.kind == "steering_torque":
             out["T_a"] = np.asarray(scn.T_a, float)
@@ -317,7 +360,7 @@ class CompiledPlant:
         return out
 
 
-def _compile(f: ca.Function) -> Path:
+def _compile(f: ca.Function, where: Path) -> Path:
     """The shared object of ``f``'s C, compiled once per source hash (atomic rename: safe for
     several worker processes compiling at once)."""
     from ..emit.toolchain import compiler, run
@@ -329,7 +372,7 @@ def _compile(f: ca.Function) -> Path:
     cc = compiler()
     flags = ["-O2", "-fPIC", "-shared", "-fno-fast-math"]
     key = hashlib.sha256("\0".join([code, cc, *flags, ca.__version__]).encode()).hexdigest()[:20]
-    out = cache_dir() / f"plant_{key}.so"
+    out = Path(where) / f"plant_{key}.so"
     if out.is_file():
         return out
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -46,12 +46,21 @@ def _artifact(spec) -> dict:
 
 
 def _plant(spec, n: int):
-    from .plants import CompiledPlant
-    return _cached(("plant", spec.observer, n), lambda: CompiledPlant(_config(spec), n))
+    from .plants import CompiledPlant, plant_kind
+    kind = plant_kind(_config(spec), spec.scenarios)
+    return _cached(("plant", spec.observer, kind, n), lambda: CompiledPlant(_config(spec), n, kind))
 
 
 def _scenario(spec, name: str, seed: int | None):
     from ..validation import scenarios
+    from .plants import EXCITATION
+    if name == EXCITATION:             # the model's own plant: the generic scenario, its seed drawn or 0
+        from ..validation import excitation
+        config = _config(spec)
+        if seed is not None:
+            return excitation.scenario(config, spec.duration or excitation.DURATION, seed)
+        return _cached(("scn", spec.observer, name, spec.duration),
+                       lambda: excitation.scenario(config, spec.duration or excitation.DURATION, 0))
     rate = 1.0 / _config(spec).sample_time
     if seed is not None:       # drawn per run: not kept (10,000 of them would fill a worker's memory)
         return truncate(scenarios.make(name, seed=seed, sample_rate=rate), spec.duration)
@@ -96,7 +105,7 @@ def _measure(spec, truth: dict, values: dict, rng, sample_time: float) -> dict:
     fields = {sig: dict(f) for sig, f in spec.sensors}
     measured = {}
     for sig in sorted(set(noise) | set(fields)):
-        y = np.asarray(truth[sig], float)
+        y = np.asarray(truth.get(f"y_{sig}", truth[sig]), float)      # the output y_X of a model plant, else X
         std = values.get(f"sensor.{sig}.noise", noise.get(sig, 0.0))
         delay = int(round(values.get(f"sensor.{sig}.delay", 0.0) / sample_time))
         if delay > 0:
@@ -108,7 +117,9 @@ def _measure(spec, truth: dict, values: dict, rng, sample_time: float) -> dict:
 
 def _error_signals(spec) -> tuple:
     from .spec import _error_signals as errs
-    return _cached(("errs", spec.observer), lambda: errs(_config(spec)))
+    from .plants import plant_kind
+    return _cached(("errs", spec.observer, spec.scenarios),
+                   lambda: errs(_config(spec), plant_kind(_config(spec), spec.scenarios)))
 
 
 def run_one(spec, run: int, traces: bool = False):
@@ -149,7 +160,7 @@ def run_one(spec, run: int, traces: bool = False):
         row[f"rms.{s}"] = math.sqrt(_sum(e * e) / e.size)
         row[f"max.{s}"] = float(np.max(np.abs(e)))
     row["ratio"] = _ratio(spec, config, truth, est, keep)
-    row["gamma"] = float(_artifact(spec)["gamma"])
+    row["gamma"] = float(_artifact(spec).get("gamma", math.nan))     # families with a certified gain
     if traces:
         return row, {"t": truth["t"], **{f"{s}_truth": truth[s] for s in signals},
                      **{f"{s}_estimate": est[s] for s in signals}}
@@ -174,7 +185,7 @@ def _ratio(spec, config, truth, est, keep) -> float:
     if kind == "l2":
         perf = list(config.switching.get("performance", ["beta"]))
         e = math.sqrt(sum(_sum((est[s] - truth[s])[keep] ** 2) for s in perf))
-        w = math.sqrt(_sum(truth["phi_r"][keep] ** 2))
+        w = math.sqrt(sum(_sum(truth[str(u)][keep] ** 2) for u in config.load_model().unknown_inputs))
         return float(e / w) if w > 0 else math.nan
     return math.nan
 

@@ -38,8 +38,10 @@ from ..errors import ConfigurationError
 from ..project.settings import Rule, check_keys, config_error, parse_table, suggest
 
 TOP = {
-    "observer": Rule(str, required=True, doc="a built-in observer name"),
-    "scenarios": Rule(list, items=Rule(str), required=True, doc="scenario names, cycled over the runs"),
+    "observer": Rule(str, required=True, doc="a built-in observer name, or an observer file (.toml, relative to "
+                                             "this file)"),
+    "scenarios": Rule(list, items=Rule(str), required=True, doc="scenario names, cycled over the runs: the library's "
+                                                                "(families with a plant of their own) or excitation"),
     "runs": Rule(int, ge=1, required=True, doc="number of dispersed runs"),
     "seed": Rule(int, ge=0, doc="campaign seed: run K draws from SeedSequence([seed, K])"),
     "duration": Rule(float, gt=0, doc="truncate every scenario to this many seconds"),
@@ -150,24 +152,32 @@ def parse(data: dict, source: str) -> CampaignSpec:
     from ..project import observer_file as observers
     from ..errors import UnknownObserverError
     from ..validation import scenarios as scn_lib
-    from .plants import DRIVER_KEYS, BANKED_DRIVER_KEYS, families_with_plants, plant_kind
+    from .plants import BANKED_DRIVER_KEYS, DRIVER_KEYS, EXCITATION, families_with_plants, plant_kind
     top = parse_table(data, TOP, source=source)
     name = top["observer"]
+    if observers.is_path(name):             # an observer file, relative to the campaign file
+        name = str((Path(source).resolve().parent / name).resolve())
     try:
         config = observers.get(name)
     except UnknownObserverError:
-        raise config_error(source, None, "observer", name, "must be a built-in observer: "
-                           + ", ".join(observers.names()), suggest(name, observers.names())) from None
-    if config.family not in families_with_plants():
-        raise config_error(source, None, "observer", name, "must be an observer of a family with a compiled "
-                           f"campaign plant ({', '.join(families_with_plants())}); {name!r} is {config.family!r}")
+        raise config_error(source, None, "observer", name, "must be a built-in observer ("
+                           + ", ".join(observers.names()) + ") or an observer file (.toml) relative to "
+                           + str(Path(source).resolve().parent), suggest(name, observers.names())) from None
     if not top["scenarios"]:
         raise config_error(source, None, "scenarios", [], "must name at least one scenario")
+    known = (EXCITATION, *scn_lib.names())
     for i, s in enumerate(top["scenarios"]):
-        if s not in scn_lib.names():
-            raise config_error(source, None, f"scenarios[{i}]", s, "must be one of " + ", ".join(scn_lib.names()),
-                               suggest(s, scn_lib.names()))
-    kind = plant_kind(config)
+        if s not in known:
+            raise config_error(source, None, f"scenarios[{i}]", s, "must be one of " + ", ".join(known),
+                               suggest(s, list(known)))
+    if EXCITATION in top["scenarios"] and set(top["scenarios"]) != {EXCITATION}:
+        raise config_error(source, None, "scenarios", top["scenarios"], f"either [\"{EXCITATION}\"] (the model's own "
+                           f"equations) or library scenarios (the family's plant), not both in one campaign")
+    if top["scenarios"][0] != EXCITATION and config.family not in families_with_plants():
+        raise config_error(source, None, "scenarios", top["scenarios"], f"[\"{EXCITATION}\"]: observer {name!r} is of "
+                           f"family {config.family!r}, whose campaigns run on its own model; the library scenarios have "
+                           f"compiled plants for the families {', '.join(families_with_plants())}")
+    kind = plant_kind(config, top["scenarios"])
     plant_params = _plant_parameters(config, kind)
     params = []
     for k, v in top.get("parameters", {}).items():
@@ -175,12 +185,12 @@ def parse(data: dict, source: str) -> CampaignSpec:
             raise config_error(source, "parameters", k, v, "must be a parameter of the plant: "
                                + ", ".join(plant_params), suggest(k, plant_params))
         params.append((k, parse_dist(v, source=source, section="parameters", key=k)))
-    gains = DRIVER_KEYS if kind == "steering_torque" else BANKED_DRIVER_KEYS
+    gains = {"steering_torque": DRIVER_KEYS, "banked_road": BANKED_DRIVER_KEYS, "model": ()}[kind]
     driver = []
     for k, v in top.get("driver", {}).items():
         if k not in gains:
-            raise config_error(source, "driver", k, v, "must be a gain of the driver: " + ", ".join(gains),
-                               suggest(k, gains))
+            raise config_error(source, "driver", k, v, ("must be a gain of the driver: " + ", ".join(gains)) if gains
+                               else f"not set: the {EXCITATION} scenario has no driver", suggest(k, gains))
         driver.append((k, parse_dist(v, source=source, section="driver", key=k)))
     measured = _measured_signals(config)
     sensors = []
@@ -195,7 +205,7 @@ def parse(data: dict, source: str) -> CampaignSpec:
         fields = tuple((f, parse_dist(table[f], source=source, section=sec, key=f,
                                       ge=0.0 if f in ("noise", "delay") else None)) for f in SENSOR_KEYS if f in table)
         sensors.append((sig, fields))
-    signals = _error_signals(config)
+    signals = _error_signals(config, kind)
     rank = top.get("rank_by", signals[0])
     if rank not in signals:
         raise config_error(source, None, "rank_by", rank, "must be an estimated signal: " + ", ".join(signals),
@@ -220,12 +230,12 @@ def _measured_signals(config) -> tuple:
     return tuple(c[2:] if c.startswith("y_") else c for c in art["signals"]["input"])
 
 
-def _error_signals(config) -> tuple:
+def _error_signals(config, kind: str) -> tuple:
     import json
     from ..design import lock as design_lock
-    from .plants import KINDS, plant_kind
+    from .plants import KINDS
     art = json.loads(design_lock.path(config).read_text())
     outputs = art["signals"].get("output", art["signals"]["state"])
-    spec = KINDS[plant_kind(config)][0](config)
-    truth = set(spec.output_names) | {"phi_r"}
+    spec = KINDS[kind][0](config)
+    truth = set(spec.output_names) | {"phi_r"} | set(getattr(spec.extra, "external", ()))   # a model plant's inputs
     return tuple(s for s in outputs if s in truth)

@@ -20,6 +20,7 @@ from pathlib import Path
 from ..design import lock as design_lock, sources
 from .. import families, pipeline
 from ..project import observer_file as observers
+from ..project import outputs
 from ..errors import GenerationError, UiogenError
 from ..families import ObserverBuild
 from .toolchain import TEMPLATES, casadi_sources, render_template
@@ -188,8 +189,10 @@ def signal_fields(b: ObserverBuild, f) -> tuple:
 @contextlib.contextmanager
 def _exclusive(out_dir: Path):
     """One ``generate`` at a time per output folder (a second one waits for the first)."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    with open(out_dir / ".generate.lock", "w") as fh:
+    outputs.make_folder(out_dir)
+    with outputs.writing(out_dir / ".generate.lock"):
+        fh = open(out_dir / ".generate.lock", "w")
+    with fh:
         fcntl.flock(fh, fcntl.LOCK_EX)
         try:
             yield
@@ -200,17 +203,18 @@ def _exclusive(out_dir: Path):
 def _write_atomically(target: Path, files: dict) -> None:
     """Write every file into a fresh sibling folder, then swap it in: a reader (or an
     interrupted run) sees the old complete set or the new complete set, never a mixture."""
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.new-", dir=target.parent))
+    tmp = outputs.make_temp_folder(f".{target.name}.new-", target.parent)     # the user's mode, not 0700
     try:
-        for fname, text in files.items():
-            (tmp / fname).write_text(text)
-        old = None
-        if target.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
-            os.replace(target, old / target.name)
-        os.replace(tmp, target)
-        if old is not None:
-            shutil.rmtree(old)
+        with outputs.writing(target):
+            for fname, text in files.items():
+                (tmp / fname).write_text(text)
+            old = None
+            if target.exists():
+                old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
+                os.replace(target, old / target.name)
+            os.replace(tmp, target)
+            if old is not None:
+                shutil.rmtree(old)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

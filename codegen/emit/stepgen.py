@@ -7,17 +7,84 @@ builds SX graphs; nothing is evaluated numerically.
 """
 from __future__ import annotations
 
+import math
+
 import casadi as ca
 import numpy as np
+import sympy as sp
+
+from ..errors import ModelDefinitionError
 
 # The functions a model's expressions may use, for every CasADi lambdify of the toolchain (sympy
-# prints them unqualified); "math" after it only supplies constants such as pi. One table, so a
-# function a user's model uses (tanh of a tyre, say) is never NaN in one step and fine in another.
+# prints them unqualified). One table, so a function a user's model uses (tanh of a tyre, say) is
+# never NaN in one step and fine in another.
 CASADI_FUNCTIONS = {"sqrt": ca.sqrt, "exp": ca.exp, "log": ca.log, "Abs": ca.fabs, "Min": ca.fmin,
                     "Max": ca.fmax, "sin": ca.sin, "cos": ca.cos, "tan": ca.tan, "asin": ca.asin,
                     "acos": ca.acos, "atan": ca.atan, "atan2": ca.atan2, "sinh": ca.sinh, "cosh": ca.cosh,
-                    "tanh": ca.tanh, "sign": ca.sign, "floor": ca.floor, "ceiling": ca.ceil}
-CASADI_MODULES = [CASADI_FUNCTIONS, "math"]
+                    "tanh": ca.tanh, "asinh": ca.asinh, "acosh": ca.acosh, "atanh": ca.atanh, "erf": ca.erf,
+                    "erfinv": ca.erfinv, "sign": ca.sign, "floor": ca.floor, "ceiling": ca.ceil,
+                    "if_else": ca.if_else, "logic_and": ca.logic_and, "logic_or": ca.logic_or,
+                    "logic_not": ca.logic_not}
+
+
+def _no_casadi(name):
+    def refuse(*_):
+        raise ModelDefinitionError(f"the function {name} has no counterpart in the generated C (CasADi); the "
+                                   f"model may use {', '.join(sorted(k for k in CASADI_FUNCTIONS if k.islower()))}, "
+                                   f"Abs, Min, Max, Piecewise and Heaviside")
+    return refuse
+
+
+# Anything else sympy would take from Python's math module is refused by name: math's functions
+# applied to a CasADi symbol return NaN, silently (math.atanh(SX) is nan). Only its constants stay.
+_MATH = {name: _no_casadi(name) for name in dir(math) if callable(getattr(math, name)) and not name.startswith("_")}
+_MATH.update(pi=math.pi, e=math.e, E=math.e, inf=math.inf)
+CASADI_MODULES = [CASADI_FUNCTIONS, _MATH]
+
+
+class _IfElse(sp.Function):
+    """if_else(condition, then, else) for the CasADi printer (a Piecewise, a Heaviside)."""
+
+    nargs = 3
+
+
+def _casadi_form(expr):
+    """``expr`` with what CasADi writes as selects (Piecewise, Heaviside) and logic (And, Or, Not)
+    in the functions of :data:`CASADI_FUNCTIONS`."""
+    expr = sp.sympify(expr)
+    if not isinstance(expr, sp.Basic) or not expr.has(sp.Piecewise, sp.Heaviside, sp.And, sp.Or, sp.Not):
+        return expr
+
+    def piecewise(*pairs):
+        (value, cond), rest = pairs[0], pairs[1:]
+        if cond is sp.true or not rest:
+            return value
+        return _IfElse(cond, value, piecewise(*rest))
+
+    def heaviside(x, h0=sp.Rational(1, 2)):
+        return _IfElse(sp.Gt(x, 0), 1, _IfElse(sp.Lt(x, 0), 0, h0))
+    expr = expr.replace(sp.Heaviside, heaviside)
+    expr = expr.replace(sp.Piecewise, piecewise)
+    expr = expr.replace(sp.And, lambda *a: sp.Function("logic_and")(*a) if len(a) == 2 else
+                        sp.Function("logic_and")(a[0], sp.And(*a[1:])))
+    expr = expr.replace(sp.Or, lambda *a: sp.Function("logic_or")(*a) if len(a) == 2 else
+                        sp.Function("logic_or")(a[0], sp.Or(*a[1:])))
+    expr = expr.replace(sp.Not, lambda a: sp.Function("logic_not")(a))
+    return expr.replace(_IfElse, lambda c, a, b: sp.Function("if_else")(c, a, b))
+
+
+def lambdify(args, expr, xp=ca, **options):
+    """``sympy.lambdify`` for a CasADi graph (``xp`` = casadi: selects for Piecewise/Heaviside, any
+    function without a C counterpart refused by name) or for numpy."""
+    if xp is not ca:
+        return sp.lambdify(args, expr, "numpy", **options)
+    if isinstance(expr, (list, tuple)):
+        form = [_casadi_form(e) for e in expr]
+    elif isinstance(expr, sp.MatrixBase):
+        form = expr.applyfunc(_casadi_form)
+    else:
+        form = _casadi_form(expr)
+    return sp.lambdify(args, form, CASADI_MODULES, **options)
 
 
 TAIL = 3   # trailing block solved by its adjugate (see :func:`solve_unpivoted`)

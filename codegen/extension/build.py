@@ -29,6 +29,7 @@ from ..emit.header import signals as header_signals
 from ..emit.toolchain import STRICT_CFLAGS, compile_and_link, compiler, render_template, run
 from ..errors import UnknownObserverError
 from ..project import observer_file as observers
+from ..project import outputs
 
 STRICT_FLAGS = list(STRICT_CFLAGS)
 # Python.h is not -pedantic/-Wconversion clean; the glue gets the same flags minus those two.
@@ -78,7 +79,7 @@ def observer_sources(observer) -> list:
 def check_generated(config: observers.ObserverConfig) -> str:
     """The lock text of ``config`` after checking that its generated folder is exactly what
     ``uiogen generate`` wrote from the current design and toolchain (the stamp,
-    :func:`codegen.emit.stamp_matches`): an edited, truncated or stale C file is never compiled.
+    :func:`codegen.emit.generate.stamp_matches`): an edited, truncated or stale C file is never compiled.
 
     Raises
     ------
@@ -115,7 +116,7 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
     1. The generated folder matches its stamp (:func:`check_generated`).
     2. The C is compiled into a temporary folder beside the target.
     3. The module is loaded from there and checked against independent evaluations of its model
-       (:func:`codegen.conformance.check`: signal layout, then numbers across every declared box).
+       (:func:`codegen.extension.conformance.check`: signal layout, then numbers across every declared box).
     4. Only then it replaces the installed module (one rename): a failed check leaves the previous
        extension as it was and raises :class:`~codegen.errors.ConformanceError`.
     """
@@ -129,18 +130,17 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
     extra = SPEED_FLAGS + (LTO_FLAGS if lto_supported() else []) + list(extra_flags or [])
     workspace = config.workspace
     ext_dir = Path(ext_dir) if ext_dir is not None else workspace.extensions
-    build_dir = workspace.objects(name)
-    build_dir.mkdir(parents=True, exist_ok=True)
-    ext_dir.mkdir(parents=True, exist_ok=True)
-    glue = build_dir / f"{name}_pymodule.c"
+    build_dir = outputs.make_folder(workspace.objects(name))
+    outputs.make_folder(ext_dir)
     signals = header_signals((src_dir / f"{name}.h").read_text(), name)
     lock = design_lock.path(config)
-    glue.write_text(render_template("pymodule.c.j2", name=name, NAME=name.upper(), signals=signals,
-                                    c_string=c_string, design_sha256=hashlib.sha256(lock.read_bytes()).hexdigest()))
+    glue = outputs.write_atomic(build_dir / f"{name}_pymodule.c", render_template(
+        "pymodule.c.j2", name=name, NAME=name.upper(), signals=signals, c_string=c_string,
+        design_sha256=hashlib.sha256(lock.read_bytes()).hexdigest()))
     import numpy
     glue_flags = [*GLUE_FLAGS, "-I", sysconfig.get_paths()["include"], "-I", numpy.get_include()]
     module_file = workspace.extension(name).name
-    staging = Path(tempfile.mkdtemp(prefix=f".{name}.new-", dir=ext_dir))
+    staging = outputs.make_temp_folder(f".{name}.new-", ext_dir)
     try:
         candidate = compile_and_link(observer_sources(config) + [glue], staging / module_file, include=[src_dir],
                                      flags=STRICT_FLAGS, extra_flags=extra, source_flags={glue: glue_flags},
@@ -150,7 +150,8 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
         spec.loader.exec_module(module)
         report = conformance.check(pipeline.build(config), module, src_dir, json.loads(lock_text))
         target = ext_dir / module_file
-        os.replace(candidate, target)
+        with outputs.writing(target):
+            os.replace(candidate, target)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     if log is not None:

@@ -134,6 +134,9 @@ class Family(abc.ABC):
     #: robustness campaigns (:mod:`codegen.campaign`): the kind of compiled closed-loop plant of the
     #: family's validation (a key of ``codegen.campaign.plants.KINDS``), None where it has none
     campaign_plant: str | None = None
+    #: ``[design]`` keys that set how hard :mod:`codegen.representation.bounds` tries to bound the
+    #: model's expressions (its tolerance, its box budget), named when a bound cannot be reached
+    bounds_settings: tuple = ()
     #: the norm of the certified gain a campaign run's empirical ratio is set beside: "peak"
     #: (L-infinity: sup|x - x_hat| / sup|d|) or "l2" (|xi - xi_hat|_2 / |w|_2); None: no such gain
     certified_gain_norm: str | None = None
@@ -166,6 +169,12 @@ class Family(abc.ABC):
         return (f"{name}: scenario {result['scenario']} on the {result['plant']} plant "
                 f"({result.get('plant_model', result['plant'])}), {result['samples']} samples, "
                 f"{result['status_flags']} flagged samples")
+
+    def log_peers(self, config, run) -> dict:
+        """{name: sideslip estimate [rad] per sample} of estimators the family runs beside the
+        observer on a logged run in the shared format (``uiogen validate --data``), e.g. Kalman
+        filters of the observer's own model and parameter file; {} for none."""
+        return {}
 
     def demo_report(self, artifact: dict) -> dict:
         """Design figures for ``uiogen demo`` from the committed design report."""
@@ -209,7 +218,7 @@ class Family(abc.ABC):
 
         The generic form is the design lock's: ``{"lmi_solutions": [{"problem", "variables",
         "objective", "iterations"}, ...]}``, one record per LMI problem of the design, in order
-        (as in ``generated_c/NAME/NAME_design.json``). The family's pipeline runs on them as on a
+        (as in ``generated_c/NAME/NAME_design.json``, which may be given as it is). The family's pipeline runs on them as on a
         committed design: every block is re-checked with numpy, and the discrete step certified.
         Families with a paper-specific form of their gains override this (and fall back to it).
         """
@@ -217,6 +226,8 @@ class Family(abc.ABC):
         from ..errors import (CertificateError, ConfigurationError, DesignLockError, DiscretizationError,
                                InfeasibleLMIError)
         raw = gains.get("lmi_solutions")
+        if raw is None and isinstance(gains.get("lock"), dict):      # a design lock file, as committed
+            raw = gains["lock"].get("lmi_solutions")
         if not isinstance(raw, list):
             raise ConfigurationError(
                 f"gains: family {self.name!r} checks gains given as the design lock gives them: "

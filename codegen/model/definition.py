@@ -179,6 +179,7 @@ class ParameterSet:
     plant: Mapping[str, float] = field(default_factory=dict)   # truth-plant-only values ([plant])
     state_bounds: Mapping[str, tuple] = field(default_factory=dict)   # [state_bounds] NAME = [min, max]
     inputs: Mapping[str, dict] = field(default_factory=dict)   # [inputs.NAME] min, max, bandwidth (excitation)
+    accepted: tuple = ()      # [plausibility] accept: values right although they look implausible
 
 
 @dataclass(frozen=True)
@@ -240,13 +241,16 @@ class LPVModel:
 
 
 # Tables of a parameter file and the keys of a [scheduling.NAME] table (derivative_bounds is read by
-# codegen.relative_degree.derivative_boxes; exogenous and premise_bounds by codegen.interconnected).
+# codegen.families.algebraic_uio.representation.derivative_boxes; exogenous and premise_bounds by
+# codegen.families.interconnected_uio.representation).
 PARAMETER_TABLES = ("parameters", "scheduling", "meta", "plant", "state_bounds", "exogenous", "premise_bounds",
-                    "inputs")
+                    "inputs", "plausibility")
 INPUT_KEYS = {"min": Rule(float, required=True), "max": Rule(float, required=True),
               "bandwidth": Rule(float, gt=0, doc="Hz, highest frequency of the excitation signal")}
 SCHEDULING_KEYS = {"min": Rule(float), "max": Rule(float), "rate_min": Rule(float), "rate_max": Rule(float),
                    "derivative_bounds": Rule(list, doc="[[min, max], ...] of the derivatives of order 2, 3, ...")}
+PLAUSIBILITY_KEYS = {"accept": Rule(list, items=Rule(str), doc="parameters whose values are right although "
+                                                               "they look implausible (codegen.model.dimensions)")}
 _NUMBER = Rule(float)
 _PAIR = Rule(list, items=Rule(float), allowed="[min, max], two finite numbers")
 
@@ -276,7 +280,7 @@ def load_parameters(path: str | Path) -> ParameterSet:
     ``NAME = [min, max]`` (the compact state set of designs that bound unmeasured nonlinearities);
     ``[exogenous]`` and ``[premise_bounds]`` are read by the interconnected family; ``[inputs.NAME]``
     (``min``, ``max``, optional ``bandwidth`` in Hz) bounds a known or unknown input for the generic
-    excitation scenario (:mod:`codegen.validation.excitation`).
+    excitation scenario (:mod:`codegen.validation.excitation`; ``min = max`` holds it at that value).
 
     Raises
     ------
@@ -341,14 +345,22 @@ def load_parameters(path: str | Path) -> ParameterSet:
         if not isinstance(table, dict):
             raise config_error(str(path), "inputs", key, table, "must be a table [inputs.NAME] with min, max")
         table = parse_table(table, INPUT_KEYS, source=str(path), section=f"inputs.{key}")
-        if not table["min"] < table["max"]:
-            raise config_error(str(path), f"inputs.{key}", "max", table["max"], f"must exceed min = {table['min']}")
+        if not table["min"] <= table["max"]:      # min = max: the input held at that value
+            raise config_error(str(path), f"inputs.{key}", "max", table["max"], f"must be >= min = {table['min']}")
         inputs[key] = table
-    return ParameterSet(str(path), values, boxes, meta, plant, state_bounds, inputs)
+    plausibility = parse_table(_table(data, "plausibility", path), PLAUSIBILITY_KEYS, source=str(path),
+                               section="plausibility")
+    accepted = tuple(plausibility.get("accept", ()))
+    stray = [a for a in accepted if a not in values]
+    if stray:
+        raise config_error(str(path), "plausibility", "accept", stray,
+                           f"names of [parameters] ({', '.join(values)})", suggest(stray[0], list(values)))
+    return ParameterSet(str(path), values, boxes, meta, plant, state_bounds, inputs, accepted)
 
 
-def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str) -> sp.Matrix:
-    """Jacobian of ``expr_column`` w.r.t. ``symbols``, checked to be constant in them."""
+def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str, hint=None) -> sp.Matrix:
+    """Jacobian of ``expr_column`` w.r.t. ``symbols``, checked to be constant in them (``hint(symbol)``:
+    a sentence on how to make it so)."""
     if not symbols:
         return sp.zeros(expr_column.shape[0], 0)
     jac = expr_column.jacobian(sp.Matrix(symbols))
@@ -356,7 +368,8 @@ def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str) 
         if entry.free_symbols & set(symbols):
             raise NotAffineError(
                 f"model {model!r}: row {i} is not affine in {what} (d/d{symbols[j]} = {entry} "
-                f"still depends on {', '.join(sorted(map(str, entry.free_symbols & set(symbols))))})")
+                f"still depends on {', '.join(sorted(map(str, entry.free_symbols & set(symbols))))})"
+                + (f"; {hint(symbols[j])}" if hint is not None else ""))
     return jac
 
 
@@ -456,6 +469,8 @@ def parameter_substitution(model: ModelDefinition, params: ParameterSet) -> dict
             f"parameter file {params.source} sets {', '.join(unknown)}, which model "
             f"{model.name!r} does not use (declared: {', '.join(needed)})")
     check_parameter_values(model, params.values, params.source)
+    from .dimensions import check_plausibility
+    check_plausibility(model, params.values, params.source, params.accepted)
     return {p: params.values[str(p)] for p in model.parameters}
 
 
@@ -467,14 +482,13 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     MissingParameterError, UnknownParameterError, SchedulingBoundsError, NotAffineError
     """
     subs = parameter_substitution(model, params)
-    boxes = []
-    for sig in model.scheduling:
-        box = params.scheduling.get(str(sig.symbol))
-        if box is None:
-            raise SchedulingBoundsError(
-                f"model {model.name!r}: scheduling signal {sig.symbol} has no "
-                f"[scheduling.{sig.symbol}] bounds in {params.source}")
-        boxes.append(box)
+    missing = [str(sig.symbol) for sig in model.scheduling if str(sig.symbol) not in params.scheduling]
+    if missing:
+        raise SchedulingBoundsError(
+            f"model {model.name!r}: scheduling signal(s) {', '.join(missing)} {'has' if len(missing) == 1 else 'have'} "
+            f"no bounds in {params.source}: add " + "; ".join(f"[scheduling.{n}] with min, max, rate_min, rate_max"
+                                                            for n in missing))
+    boxes = [params.scheduling[str(sig.symbol)] for sig in model.scheduling]
     # structure is checked exactly, with the parameters still symbolic; numbers come after
     f = sp.Matrix(model.dynamics)
     h = sp.Matrix([expr for _, expr in model.outputs])
@@ -483,11 +497,12 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     A = _affine_part(f, x, "the states", model.name)
     B = _affine_part(f, u, "the known inputs", model.name)
     Bw = _affine_part(f, w, "the derived inputs", model.name)
-    D = _affine_part(f, d, "the unknown inputs", model.name)
+    from .substitution import offer
+    D = _affine_part(f, d, "the unknown inputs", model.name, hint=lambda s: offer(model, s))
     C = _affine_part(h, x, "the states", model.name)
     Du = _affine_part(h, u, "the known inputs", model.name)
     Duw = _affine_part(h, w, "the derived inputs", model.name)
-    Dd = _affine_part(h, d, "the unknown inputs", model.name)
+    Dd = _affine_part(h, d, "the unknown inputs", model.name, hint=lambda s: offer(model, s))
     col = lambda syms: sp.Matrix(len(syms), 1, list(syms))   # a (k, 1) column, also for k = 0
     rest = sp.simplify(f - A * col(x) - B * col(u) - D * col(d)
                        - (Bw * sp.Matrix(w) if w else sp.zeros(*f.shape))) if x else f

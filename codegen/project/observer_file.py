@@ -16,12 +16,13 @@ import dataclasses
 import hashlib
 import importlib
 import importlib.util
+import re
 import sys
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import ModelDefinitionError, UnknownObserverError
+from ..errors import ConfigurationError, ModelDefinitionError, UnknownObserverError
 from ..model import ModelDefinition
 from . import columns, precision
 from .settings import Rule, config_error, parse_table, suggest
@@ -41,6 +42,8 @@ COMMON_KEYS = {
     "design": Rule(dict),
     "data": Rule(dict, doc="the column map of a logged run (uiogen validate --data; codegen.project.columns)"),
     "precision": Rule(dict, doc="the float32 build's tolerances (codegen.project.precision)"),
+    "substitute": Rule(dict, doc="{UNKNOWN_INPUT = \"NEW_NAME\"}: design for the value of the one expression an "
+                                 "unknown input enters through (codegen.model.substitution)"),
 }
 
 
@@ -68,6 +71,8 @@ class ObserverConfig:
     # [precision]: the float32 build's tolerances (codegen.project.precision); not part of the
     # design either.
     precision: object = None
+    # [substitute]: unknown inputs designed for through the value of their carrier expression
+    substitute: dict = field(default_factory=dict)
 
     @property
     def folder(self) -> Path:
@@ -78,6 +83,12 @@ class ObserverConfig:
     def builtin(self) -> bool:
         """A built-in observer (``model_defs/observers/NAME.toml``)."""
         return not self.source or Path(self.source).resolve().parent == OBSERVERS_DIR
+
+    @property
+    def command_name(self) -> str:
+        """What a ``uiogen`` command takes to find this observer again: a built-in's name, else
+        its file's path (a name resolves to the built-ins first)."""
+        return self.name if self.builtin else self.source
 
     @property
     def workspace(self) -> Workspace:
@@ -102,12 +113,44 @@ class ObserverConfig:
     def load_model_module(self):
         return load_module(self.model_path, self.model_module)
 
-    def load_model(self) -> ModelDefinition:
+    def load_definition(self):
+        """The model file's ``MODEL`` as written: a :class:`~codegen.model.ModelDefinition`, or the
+        definition of a family that needs more structure (an ``InterconnectedModelDefinition``:
+        the states partitioned into subsystems). A family's ``build`` checks the class it takes."""
         module = self.load_model_module()
         model = getattr(module, "MODEL", None)
-        if not isinstance(model, ModelDefinition):
-            raise ModelDefinitionError(f"{self.model_path} does not define MODEL = ModelDefinition(...)")
+        if model is None:
+            raise ModelDefinitionError(f"{self.model_path} does not define MODEL = ModelDefinition(...) (model of "
+                                       f"observer file {self.source or self.name})")
+        if not (isinstance(model, ModelDefinition) or callable(getattr(model, "as_model_definition", None))):
+            raise ModelDefinitionError(f"{self.model_path}: MODEL is a {type(model).__name__}, not a "
+                                       f"ModelDefinition(...) (codegen.model)")
         return model
+
+    def load_model(self) -> ModelDefinition:
+        """The model as one system of equations (:class:`~codegen.model.ModelDefinition`), the form
+        every family-independent path reads (the excitation scenario, campaign plants, logs,
+        conformance): ``MODEL`` itself, or ``MODEL.as_model_definition()`` for a family's richer
+        definition (the same equations, its extra structure dropped)."""
+        model = self.load_definition()
+        return model if isinstance(model, ModelDefinition) else model.as_model_definition()
+
+    def design_model(self) -> ModelDefinition:
+        """The model the family designs with: :meth:`load_model`, with the unknown inputs of the
+        ``[substitute]`` table replaced by the values of their carriers (:meth:`substitutions`)."""
+        return self._substituted()[0]
+
+    def substitutions(self) -> list:
+        """[:class:`~codegen.model.substitution.Substitution`] of the ``[substitute]`` table."""
+        return self._substituted()[1]
+
+    def _substituted(self) -> tuple:
+        model = self.load_model()
+        if not self.substitute:
+            return model, []
+        from ..model import load_parameters
+        from ..model.substitution import apply
+        return apply(model, load_parameters(self.parameter_path), self.substitute, self.source)
 
     @property
     def parameter_path(self) -> Path:
@@ -118,7 +161,8 @@ class ObserverConfig:
                 "parameters": self.parameters, "polytope": self.polytope,
                 "rate_bounds": self.rate_bounds, "sample_time": self.sample_time,
                 "design": dict(self.design), "ui_filter": dict(self.ui_filter),
-                **({"switching": self.switching} if self.switching else {})}
+                **({"switching": self.switching} if self.switching else {}),
+                **({"substitute": dict(self.substitute)} if self.substitute else {})}
 
 
 def _model_file(model: str, folder: Path) -> Path:
@@ -158,6 +202,10 @@ def load_module(path: Path, name: str):
     except Exception as exc:       # a user's module that does not run: say where, keep the cause
         del sys.modules[name]
         raise ModelDefinitionError(f"{path}: importing the model failed: {type(exc).__name__}: {exc}") from exc
+    except SystemExit as exc:      # sys.exit() in a model file must not end (or succeed) the command
+        del sys.modules[name]
+        raise ModelDefinitionError(f"{path}: importing the model called sys.exit({exc.code!r}); a model file "
+                                   f"defines MODEL = ModelDefinition(...) and returns") from None
     return module
 
 
@@ -183,6 +231,50 @@ def apply_overrides(data: dict, overrides: dict, source: str) -> dict:
     return data
 
 
+MAX_NAME_LENGTH = 64
+"""Longest observer name: the name prefixes every identifier of its C API and names its
+extension module (``_NAME``); C99 guarantees 63 significant characters of an identifier, and
+names of up to 64 characters build and load (a 200-character one did not)."""
+_C_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_C_KEYWORDS = frozenset(
+    "auto break case char const continue default do double else enum extern float for goto if inline int long "
+    "register restrict return short signed sizeof static struct switch typedef union unsigned void volatile "
+    "while _Bool _Complex _Imaginary".split())
+
+
+def check_name(name: str, source: str) -> str:
+    """The observer's name (its file's stem) as the C identifier that prefixes its C API and
+    names its extension, checked before anything is designed.
+
+    Raises
+    ------
+    ConfigurationError
+        not a C identifier (``my obs``, ``1abc``, ``my-obs``), a C keyword, or longer than
+        :data:`MAX_NAME_LENGTH`.
+    """
+    why = None
+    if not _C_IDENTIFIER.fullmatch(name):
+        why = "is not a C identifier"
+    elif name in _C_KEYWORDS:
+        why = "is a C keyword"
+    elif len(name) > MAX_NAME_LENGTH:
+        why = f"has {len(name)} characters"
+    if why is None:
+        return name
+    raise ConfigurationError(
+        f"{source}: the observer's name {name!r} (the file's name) {why}; allowed: ASCII letters, digits and '_', "
+        f"not starting with a digit, not a C keyword, at most {MAX_NAME_LENGTH} characters (it prefixes the "
+        f"observer's C functions and names its extension): rename the file, e.g. "
+        f"{_suggest_name(name)}.toml", source=source, key="name", value=name,
+        allowed=f"a C identifier of at most {MAX_NAME_LENGTH} characters")
+
+
+def _suggest_name(name: str) -> str:
+    s = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    s = s if s and not s[0].isdigit() else f"obs_{s}"
+    return (s + "_obs" if s in _C_KEYWORDS else s)[:MAX_NAME_LENGTH]
+
+
 def _parse(path: Path, overrides: dict | None = None, project: str | Path | None = None) -> ObserverConfig:
     from .. import families
     path = Path(path)
@@ -196,6 +288,7 @@ def _parse(path: Path, overrides: dict | None = None, project: str | Path | None
     except UnicodeDecodeError as exc:
         raise ModelDefinitionError(f"{path}: not UTF-8 text: {exc}") from None
     source = str(path)
+    check_name(path.stem, source)
     if overrides:
         data = apply_overrides(data, overrides, source)
     known = families.names()
@@ -231,7 +324,8 @@ def _parse(path: Path, overrides: dict | None = None, project: str | Path | None
                             dict(data.get("switching", {})),
                             str(Workspace.for_observer_file(path, project, builtin).root),
                             columns.parse(data["data"], source) if "data" in data else None,
-                            precision.parse(data.get("precision"), source))
+                            precision.parse(data.get("precision"), source),
+                            dict(data.get("substitute", {})))
     family.check_config(config, data)
     return config
 

@@ -11,6 +11,7 @@ extension). One ``fmi2DoStep`` of ``k`` sample times takes ``k`` samples with th
 from __future__ import annotations
 
 import hashlib
+import io
 import platform
 import tempfile
 import uuid
@@ -20,6 +21,7 @@ from xml.sax.saxutils import quoteattr
 
 from .. import __version__ as UIOGEN_VERSION
 from ..project import observer_file as observers
+from ..project import outputs
 from .. import pipeline
 from ..errors import ConfigurationError, UnknownObserverError, UnsupportedError
 from ..emit.header import unit_of
@@ -88,14 +90,14 @@ def model_description(b, guid: str, source_files: list) -> str:
 
 
 def _zip(out: Path, files: dict) -> None:
-    tmp = out.with_name(out.name + ".tmp")
-    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
         for arcname in sorted(files):
             info = zipfile.ZipInfo(arcname, date_time=ZIP_TIME)
             info.compress_type = zipfile.ZIP_DEFLATED
             info.external_attr = 0o644 << 16
             z.writestr(info, files[arcname])
-    tmp.replace(out)
+    outputs.write_atomic(out, buf.getvalue())
 
 
 def export_fmu(observer, out, log=print, fmi_version: str = "2.0") -> Path:

@@ -1,17 +1,26 @@
-"""Reading logged runs: CSV (plain or gzip), checked before any number is used.
+"""Reading logged runs: CSV (plain or gzip), in chunks, checked before any number is used.
 
 Shared by the Stanford loader (:mod:`codegen.validation.stanford`) and the column maps of user
-logs (:mod:`codegen.validation.logs`): decoding (UTF-8, a byte-order mark dropped, UTF-16
-refused), the separator (comma, semicolon or tab, from the header), numbers with a '.' decimal
-mark, finite values, and a time column sampled at the observer's period without gaps. Every
-failure is a :class:`~codegen.errors.DatasetError` naming the file, the column and the row.
+logs (:mod:`codegen.validation.logs`). A log of any size is read in chunks of about
+:data:`BLOCK_BYTES` of text (pyarrow's streaming CSV reader; only the columns used are
+converted, so an extra text column is ignored), and every check below is streaming too: a 1 GB
+log needs the memory of one chunk, not of the file.
+
+Checked: a regular file (a directory, a FIFO or a device is refused as such), decoding (UTF-8,
+a byte-order mark dropped, UTF-16 refused), the separator (comma, semicolon or tab, from the
+header), line endings (LF, CRLF or CR alone), numbers with a '.' decimal mark, rows of the
+header's length, finite values, and a time column sampled at the observer's period without gaps
+(:class:`TimeCheck`). Every failure is a :class:`~codegen.errors.DatasetError` naming the file,
+the column and the row.
 """
 from __future__ import annotations
 
 import csv
 import gzip
 import io
+import os
 import re
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -26,24 +35,47 @@ SHORT_FACTOR = 0.5
 """A time step shorter than SHORT_FACTOR x the median period is irregular sampling."""
 MAX_PERIOD = 1.0
 """[s] A vehicle-dynamics log sampled slower than 1 Hz is implausible: t is likely in milliseconds."""
+MEDIAN_STEPS = 10_000
+"""The sample period is the median of the log's first MEDIAN_STEPS time steps (all of them in a
+shorter log): the gaps of the rest are judged against it without holding the time column."""
+BLOCK_BYTES = 1 << 22
+"""Text per chunk (4 MiB, about 26,000 rows of 11 columns; pyarrow reads a few ahead)."""
 
 _SEPARATORS = {",": "comma ','", ";": "semicolon ';'", "\t": "tab"}
+_HEAD_BYTES = 1 << 20           # a header line longer than 1 MiB is not a CSV header
+_SLOW_ROWS = 50_000             # rows per chunk of the csv-module reader
 
 
-def _decode(p: Path, raw: bytes) -> str:
-    """Bytes of a (possibly gzip) file -> text; a UTF-8 byte-order mark is dropped."""
+def _file_kind(mode: int) -> str:
+    for test, what in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return what
+    return "not a regular file"
+
+
+def regular_file(p: Path) -> None:
+    """Refuse a path that is missing or is not a regular file (``/dev/zero``, a FIFO, a directory):
+    reading one would block, never end or fail with an unrelated message."""
     try:
-        if raw[:2] == b"\x1f\x8b":
-            raw = gzip.decompress(raw)
-    except (OSError, EOFError, gzip.BadGzipFile) as exc:
-        raise DatasetError(f"cannot read {p}: {exc}") from None
-    if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
-        raise DatasetError(f"cannot read {p}: the file is UTF-16 encoded (byte-order mark {raw[:2]!r}); "
-                           f"allowed: UTF-8 or ASCII text; save it as UTF-8")
-    try:
-        return raw.decode("utf-8-sig")          # utf-8-sig strips a leading BOM, if any
-    except UnicodeDecodeError as exc:
-        raise DatasetError(f"cannot read {p}: not UTF-8 text ({exc}); allowed: UTF-8 or ASCII text") from None
+        st = os.stat(p)
+    except FileNotFoundError:
+        raise DatasetError(f"data file not found: {p}") from None
+    except OSError as exc:
+        raise DatasetError(f"cannot read {p}: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise DatasetError(f"{p} is {_file_kind(st.st_mode)}, not a data file; allowed: a regular CSV file "
+                           f"(plain or gzip)")
+
+
+def _is_gzip(p: Path) -> bool:
+    with open(p, "rb") as fh:
+        return fh.read(2) == b"\x1f\x8b"
+
+
+def _binary(p: Path, gz: bool):
+    return gzip.open(p, "rb") if gz else open(p, "rb")
 
 
 def _split_header(line: str, sep: str) -> list:
@@ -66,112 +98,296 @@ def _separator(p: Path, first_line: str, columns) -> str:
 _DECIMAL_COMMA = re.compile(r"^\s*[+-]?(\d+,\d*|,\d+)([eE][+-]?\d+)?\s*$")
 
 
-def _to_float(p: Path, rows: list, header: list, sep: str) -> np.ndarray:
-    try:
-        return np.array(rows, dtype=float)
-    except ValueError:
-        pass
-    for i, r in enumerate(rows):           # locate the first bad cell for the message
-        for j, v in enumerate(r):
-            try:
-                float(v)
-            except ValueError:
-                where = f"{p}: column {header[j]!r}, data row {i + 1}"
-                if _DECIMAL_COMMA.match(v):
-                    raise DatasetError(
-                        f"{where}: value {v!r} uses a decimal comma (file read with {_SEPARATORS[sep]} "
-                        f"separators); allowed: '.' as the decimal mark (e.g. 1.5). Re-export the log with "
-                        f"'.' decimals, e.g. pandas.read_csv(path, sep={sep!r}, decimal=',')"
-                        f".to_csv(out, index=False)") from None
-                raise DatasetError(f"{where}: non-numeric value {v!r}; allowed: a decimal number "
-                                   f"such as 1.5 or -2.5e-3") from None
-    raise DatasetError(f"{p}: non-numeric value")   # pragma: no cover (np.array and float agree)
+def _bad_value(p: Path, column: str, row: int, v: str, sep: str) -> DatasetError:
+    where = f"{p}: column {column!r}, data row {row}"
+    if _DECIMAL_COMMA.match(v):
+        return DatasetError(
+            f"{where}: value {v!r} uses a decimal comma (file read with {_SEPARATORS[sep]} "
+            f"separators); allowed: '.' as the decimal mark (e.g. 1.5). Re-export the log with "
+            f"'.' decimals, e.g. pandas.read_csv(path, sep={sep!r}, decimal=',')"
+            f".to_csv(out, index=False)")
+    return DatasetError(f"{where}: non-numeric value {v!r}; allowed: a decimal number "
+                        f"such as 1.5 or -2.5e-3")
 
 
-def check_time(p: Path, t: np.ndarray, sample_time, column: str = "t") -> None:
-    """Strictly increasing, plausible period (not milliseconds), = sample_time, no gaps."""
-    d = np.diff(t)
-    if np.any(d <= 0):
-        i = int(np.flatnonzero(d <= 0)[0])
-        raise DatasetError(f"{p}: time column {column!r} is not strictly increasing: data row {i + 2} has "
-                           f"t = {t[i + 1]!r} after t = {t[i]!r}; allowed: strictly increasing times in s")
-    per = float(np.median(d))
-    ratio = per / sample_time if sample_time is not None else None
-    if per > MAX_PERIOD or (ratio is not None and 300.0 <= ratio <= 3000.0):
-        expect = f"the sample time {sample_time:g} s" if sample_time is not None else \
-            f"a period of at most {MAX_PERIOD:g} s for a vehicle log"
-        raise DatasetError(
-            f"{p}: column {column!r} (declared unit s): median step of t {per:.6g} (in the file's unit), "
-            f"expected {expect}; t looks like milliseconds (t / 1000 gives a period of {per / 1000:.6g} s, "
-            f"{1000 / per:.4g} Hz); convert the column to seconds")
-    if ratio is not None and abs(ratio - 1.0) > PERIOD_RTOL:
-        raise DatasetError(
-            f"{p}: column {column!r}: median sample period {per:.6g} s ({1 / per:.4g} Hz), but the expected "
-            f"sample time is {sample_time:.6g} s ({1 / sample_time:.4g} Hz), allowed within "
-            f"{PERIOD_RTOL:.0%}; resample the log to {1 / sample_time:.4g} Hz (e.g. "
-            f"scipy.signal.resample_poly on a uniform grid) or use an observer designed for "
-            f"{per:.6g} s")
-    long, short = d > GAP_FACTOR * per, d < SHORT_FACTOR * per
-    if long.any() or short.any():
-        i = int(np.flatnonzero(long | short)[0])           # the first irregular step of the log
-        bad, what, allowed = ((long, "gap", f"at most {GAP_FACTOR:g}") if long[i] else
-                              (short, "short step", f"at least {SHORT_FACTOR:g}"))
-        missing = f", about {d[i] / per - 1:.0f} sample(s) missing" if long[i] else ""
-        raise DatasetError(
-            f"{p}: column {column!r}: {what} of {d[i]:.6g} s before data row {i + 2} (t = {t[i]:.6g} -> "
-            f"{t[i + 1]:.6g} s{missing}), {d[i] / per:.3g} x the median period {per:.6g} s; "
-            f"{int(bad.sum())} {what}(s) in the log ({int((long | short).sum())} irregular step(s) in "
-            f"all); allowed: steps {allowed} x the median period (no interpolation is done: split the "
-            f"log at the {what} or resample it)")
+class LogReader:
+    """A CSV log opened for chunked reading of some of its columns.
 
-
-def read_table(p: Path, columns) -> tuple:
-    """(header, float table) of a CSV file holding at least ``columns``.
+    Parameters
+    ----------
+    path : str or os.PathLike
+    columns : mapping of str to str
+        The columns to read, each with the unit its message names (``{"t": "s", ...}``).
+    block_bytes : int, optional
+        Text per chunk (tests force it small to prove the checks do not depend on it).
 
     Raises
     ------
     DatasetError
-        missing or unreadable file, duplicated or missing columns, rows of the wrong length,
-        non-numeric values, fewer than 2 rows.
+        missing or not a regular file, unreadable, UTF-16, empty, duplicated or missing columns.
     """
-    p = Path(p)
-    if not p.is_file():
-        raise DatasetError(f"data file not found: {p}")
-    try:
-        raw = p.read_bytes()
-    except OSError as exc:
-        raise DatasetError(f"cannot read {p}: {exc}") from None
-    text = _decode(p, raw)
-    first = next(iter(io.StringIO(text)), "")
-    sep = _separator(p, first, columns)
-    reader = csv.reader(io.StringIO(text), delimiter=sep)
-    try:
-        header = [h.strip() for h in next(reader)]
-    except StopIteration:
-        raise DatasetError(f"{p} is empty") from None
-    dup = sorted({h for h in header if header.count(h) > 1})
-    if dup:
-        raise DatasetError(f"{p}: duplicated column(s) {dup}")
-    missing = [c for c in columns if c not in header]
-    if missing:
-        raise DatasetError(f"{p}: missing column(s) {missing}; found {header} (fields separated by "
-                           f"{_SEPARATORS[sep]}; allowed separators: comma, semicolon or tab)")
-    rows = [r for r in reader if r and any(f.strip() for f in r)]
-    if len(rows) < 2:
-        raise DatasetError(f"{p}: needs at least 2 data rows, found {len(rows)}")
-    bad_len = next((i for i, r in enumerate(rows) if len(r) != len(header)), None)
-    if bad_len is not None:
-        raise DatasetError(f"{p}: data row {bad_len + 1} has {len(rows[bad_len])} fields, "
-                           f"header has {len(header)} (separator {_SEPARATORS[sep]})")
-    return header, _to_float(p, rows, header, sep)
+
+    def __init__(self, path, columns, block_bytes: int = BLOCK_BYTES):
+        p = Path(path)
+        self.path, self.units, self.block_bytes = p, dict(columns), int(block_bytes)
+        regular_file(p)
+        try:
+            self.gz = _is_gzip(p)
+            with _binary(p, self.gz) as fh:
+                head = fh.read(_HEAD_BYTES)
+        except (OSError, EOFError) as exc:
+            raise DatasetError(f"cannot read {p}: {exc}") from None
+        if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
+            raise DatasetError(f"cannot read {p}: the file is UTF-16 encoded (byte-order mark {head[:2]!r}); "
+                               f"allowed: UTF-8 or ASCII text; save it as UTF-8")
+        line = re.split(rb"\r\n|\r|\n", head, maxsplit=1)[0]
+        try:
+            first = line.decode("utf-8-sig")        # utf-8-sig strips a leading BOM, if any
+        except UnicodeDecodeError as exc:
+            raise DatasetError(f"cannot read {p}: not UTF-8 text ({exc}); allowed: UTF-8 or ASCII text") from None
+        if not first.strip():
+            raise DatasetError(f"{p} is empty" if not head.strip() else f"{p}: the first line (the header) is empty")
+        self.sep = _separator(p, first, list(self.units))
+        self.header = _split_header(first, self.sep)
+        dup = sorted({h for h in self.header if self.header.count(h) > 1})
+        if dup:
+            raise DatasetError(f"{p}: duplicated column(s) {dup}")
+        missing = [c for c in self.units if c not in self.header]
+        if missing:
+            raise DatasetError(f"{p}: missing column(s) {missing}; found {self.header} (fields separated by "
+                               f"{_SEPARATORS[self.sep]}; allowed separators: comma, semicolon or tab)")
+        self.rows = 0                # data rows delivered so far
+
+    # --- the chunks ------------------------------------------------------------------------------
+
+    def chunks(self):
+        """Yield ``(first, {column: float64 array})`` per chunk, ``first`` the 0-based index of the
+        chunk's first data row. Format errors are raised where they occur; non-finite values and
+        a log of fewer than 2 rows when the last chunk has been read (the message counts them all).
+
+        Raises
+        ------
+        DatasetError
+        """
+        self.rows = 0
+        self._nonfinite = {c: [0, None] for c in self.units}
+        try:
+            yield from self._arrow()
+        except _SlowPath:
+            yield from self._slow(self.rows)
+        for c, (count, first) in self._nonfinite.items():
+            if count:
+                raise DatasetError(f"{self.path}: column {c!r} has {count} non-finite value(s), first at data "
+                                   f"row {first + 1}; allowed: finite numbers in {self.units[c]}")
+        if self.rows < 2:
+            raise DatasetError(f"{self.path}: needs at least 2 data rows, found {self.rows}")
+
+    def _deliver(self, cols: dict):
+        n = len(next(iter(cols.values())))
+        for c, a in cols.items():
+            bad = ~np.isfinite(a)
+            if bad.any():
+                rec = self._nonfinite[c]
+                if rec[1] is None:
+                    rec[1] = self.rows + int(np.flatnonzero(bad)[0])
+                rec[0] += int(bad.sum())
+        first, self.rows = self.rows, self.rows + n
+        return first, cols
+
+    def _arrow(self):
+        import pyarrow as pa
+        from pyarrow import csv as pcsv
+        names = list(self.units)
+        try:
+            source = pa.CompressedInputStream(pa.OSFile(str(self.path)), "gzip") if self.gz else str(self.path)
+            reader = pcsv.open_csv(
+                source,
+                read_options=pcsv.ReadOptions(block_size=self.block_bytes, skip_rows=1,
+                                              column_names=[f"{i}:{h}" for i, h in enumerate(self.header)]),
+                parse_options=pcsv.ParseOptions(delimiter=self.sep, newlines_in_values=False),
+                convert_options=pcsv.ConvertOptions(
+                    include_columns=[f"{self.header.index(c)}:{c}" for c in names],
+                    column_types={f"{self.header.index(c)}:{c}": pa.float64() for c in names},
+                    null_values=[], strings_can_be_null=False, quoted_strings_can_be_null=False))
+        except (pa.ArrowInvalid, pa.ArrowNotImplementedError, UnicodeDecodeError):
+            raise _SlowPath() from None
+        except OSError as exc:
+            raise DatasetError(f"cannot read {self.path}: {exc}") from None
+        while True:
+            try:
+                batch = reader.read_next_batch()
+            except StopIteration:
+                return
+            except (pa.ArrowInvalid, pa.ArrowNotImplementedError, UnicodeDecodeError):
+                raise _SlowPath() from None     # the csv module locates the row and says what is wrong
+            except OSError as exc:
+                raise DatasetError(f"cannot read {self.path}: {exc}") from None
+            if batch.num_rows:
+                yield self._deliver({c: batch.column(i).to_numpy(zero_copy_only=False)
+                                     for i, c in enumerate(names)})
+
+    def _text(self):
+        raw = _binary(self.path, self.gz)
+        return io.TextIOWrapper(raw, encoding="utf-8-sig", newline="")
+
+    def _slow(self, done: int):
+        """The csv module from the first row: the exact row and message of what pyarrow refused
+        (rows before ``done`` were delivered already), or the rest of a log it cannot parse."""
+        p, sep = self.path, self.sep
+        idx = [self.header.index(c) for c in self.units]
+        names = list(self.units)
+        rows, i = [], 0
+
+        def flush():
+            out = {c: np.empty(len(rows)) for c in names}
+            for k, r in enumerate(rows):
+                for c, j in zip(names, idx):
+                    try:
+                        out[c][k] = float(r[j])
+                    except ValueError:
+                        raise _bad_value(p, c, self.rows + k + 1, r[j], sep) from None
+            return self._deliver(out)
+
+        try:
+            with self._text() as fh:
+                reader = csv.reader(fh, delimiter=sep)
+                next(reader, None)                       # the header
+                for r in reader:
+                    if not r or not any(f.strip() for f in r):
+                        continue
+                    i += 1
+                    if len(r) != len(self.header):
+                        raise DatasetError(f"{p}: data row {i} has {len(r)} fields, header has {len(self.header)} "
+                                           f"(separator {_SEPARATORS[sep]})")
+                    if i <= done:
+                        continue
+                    rows.append(r)
+                    if len(rows) == _SLOW_ROWS:
+                        yield flush()
+                        rows = []
+        except UnicodeDecodeError as exc:
+            raise DatasetError(f"cannot read {p}: not UTF-8 text ({exc}); allowed: UTF-8 or ASCII text") from None
+        except csv.Error as exc:
+            raise DatasetError(f"{p}: data row {i + 1}: not a CSV row ({exc})") from None
+        except (OSError, EOFError) as exc:
+            raise DatasetError(f"cannot read {p}: {exc}") from None
+        if rows:
+            yield flush()
 
 
-def finite_column(p: Path, table: np.ndarray, header: list, column: str, unit: str) -> np.ndarray:
-    """One column, refused when any value is not finite."""
-    a = table[:, header.index(column)].copy()
-    nonfinite = ~np.isfinite(a)
-    if nonfinite.any():
-        raise DatasetError(f"{p}: column {column!r} has {int(nonfinite.sum())} non-finite value(s), "
-                           f"first at data row {int(np.flatnonzero(nonfinite)[0]) + 1}; allowed: "
-                           f"finite numbers in {unit}")
-    return a
+class _SlowPath(Exception):
+    """pyarrow refused a chunk: the csv module reads on from there."""
+
+
+def read_columns(path, columns, block_bytes: int = BLOCK_BYTES) -> dict:
+    """Every chunk of :class:`LogReader` concatenated: ``{column: float64 array}`` (a log held in memory)."""
+    reader = LogReader(path, columns, block_bytes)
+    parts = {c: [] for c in reader.units}
+    for _, cols in reader.chunks():
+        for c, a in cols.items():
+            parts[c].append(a)
+    return {c: np.concatenate(a) for c, a in parts.items()}
+
+
+class TimeCheck:
+    """The time column, chunk by chunk: strictly increasing, a plausible period (not
+    milliseconds), equal to the observer's sample time, without gaps or short steps.
+
+    The period is the median of the first :data:`MEDIAN_STEPS` steps; :meth:`finish` raises
+    what :func:`check_time` raises on the whole column (the first fault, the counts of all).
+    """
+
+    def __init__(self, p, sample_time=None, column: str = "t"):
+        self.p, self.sample_time, self.column = Path(p), sample_time, column
+        self.n = 0
+        self.last = None             # last time of the previous chunk
+        self.pending = []            # steps held until the period is known
+        self.period = None
+        self.back = None             # first non-increasing step (row, t_before, t_after)
+        self.first_irregular = None  # (kind, row, step, t_before, t_after)
+        self.long = self.short = 0
+
+    def feed(self, t: np.ndarray) -> None:
+        t = np.asarray(t, dtype=float)
+        if not t.size:
+            return
+        # both[k] is the data row of index start + k; step k goes from it to the next one
+        both, start = (t, 0) if self.last is None else (np.concatenate([[self.last], t]), self.n - 1)
+        d = np.diff(both)
+        self.last = float(t[-1])
+        self.n += t.size
+        if self.back is None:
+            bad = np.flatnonzero(d <= 0)
+            if bad.size:
+                i = int(bad[0])
+                self.back = (start + i, float(both[i]), float(both[i + 1]))
+        if self.period is None:
+            self.pending.append((start, both, d))
+            if sum(x[2].size for x in self.pending) >= MEDIAN_STEPS:
+                self._settle()
+        else:
+            self._irregular(start, both, d)
+
+    def _settle(self) -> None:
+        steps = np.concatenate([x[2] for x in self.pending])[:MEDIAN_STEPS]
+        self.period = float(np.median(steps)) if steps.size else None
+        pending, self.pending = self.pending, []
+        if self.period is not None:
+            for start, both, d in pending:
+                self._irregular(start, both, d)
+
+    def _irregular(self, start: int, both: np.ndarray, d: np.ndarray) -> None:
+        per = self.period
+        long, short = d > GAP_FACTOR * per, d < SHORT_FACTOR * per
+        self.long += int(long.sum())
+        self.short += int(short.sum())
+        if self.first_irregular is None and (long.any() or short.any()):
+            i = int(np.flatnonzero(long | short)[0])
+            self.first_irregular = ("gap" if long[i] else "short step", start + i, float(d[i]),
+                                    float(both[i]), float(both[i + 1]))
+
+    def finish(self) -> float:
+        """Raise the first fault; return the sample period (median step) [s]."""
+        if self.period is None:
+            self._settle()
+        p, column, sample_time = self.p, self.column, self.sample_time
+        if self.back is not None:
+            i, before, after = self.back
+            raise DatasetError(f"{p}: time column {column!r} is not strictly increasing: data row {i + 2} has "
+                               f"t = {after!r} after t = {before!r}; allowed: strictly increasing times in s")
+        per = self.period
+        ratio = per / sample_time if sample_time is not None else None
+        if per > MAX_PERIOD or (ratio is not None and 300.0 <= ratio <= 3000.0):
+            expect = f"the sample time {sample_time:g} s" if sample_time is not None else \
+                f"a period of at most {MAX_PERIOD:g} s for a vehicle log"
+            raise DatasetError(
+                f"{p}: column {column!r} (declared unit s): median step of t {per:.6g} (in the file's unit), "
+                f"expected {expect}; t looks like milliseconds (t / 1000 gives a period of {per / 1000:.6g} s, "
+                f"{1000 / per:.4g} Hz); convert the column to seconds")
+        if ratio is not None and abs(ratio - 1.0) > PERIOD_RTOL:
+            raise DatasetError(
+                f"{p}: column {column!r}: median sample period {per:.6g} s ({1 / per:.4g} Hz), but the expected "
+                f"sample time is {sample_time:.6g} s ({1 / sample_time:.4g} Hz), allowed within "
+                f"{PERIOD_RTOL:.0%}; resample the log to {1 / sample_time:.4g} Hz (e.g. "
+                f"scipy.signal.resample_poly on a uniform grid) or use an observer designed for "
+                f"{per:.6g} s")
+        if self.first_irregular is not None:
+            what, i, step, before, after = self.first_irregular
+            is_gap = what == "gap"
+            allowed = f"at most {GAP_FACTOR:g}" if is_gap else f"at least {SHORT_FACTOR:g}"
+            missing = f", about {step / per - 1:.0f} sample(s) missing" if is_gap else ""
+            raise DatasetError(
+                f"{p}: column {column!r}: {what} of {step:.6g} s before data row {i + 2} (t = {before:.6g} -> "
+                f"{after:.6g} s{missing}), {step / per:.3g} x the median period {per:.6g} s; "
+                f"{self.long if is_gap else self.short} {what}(s) in the log ({self.long + self.short} irregular "
+                f"step(s) in all); allowed: steps {allowed} x the median period (no interpolation is done: split "
+                f"the log at the {what} or resample it)")
+        return per
+
+
+def check_time(p: Path, t: np.ndarray, sample_time, column: str = "t") -> float:
+    """Strictly increasing, plausible period (not milliseconds), = sample_time, no gaps
+    (:class:`TimeCheck` on a whole column); returns the median period [s]."""
+    check = TimeCheck(p, sample_time, column)
+    check.feed(t)
+    return check.finish()

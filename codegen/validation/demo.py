@@ -22,24 +22,43 @@ REAL_DATA_OTHERS = ("ts_fuzzy_uio_stanford", "stanford_sideslip_nonlinear_tyre")
 REAL_DATA_ONLY = ("ts_fuzzy_uio_stanford",)
 
 
-def main(json_output: bool = False) -> int:
+def run_all(names=None) -> dict:
+    """{observer: its demo entry}: the design figures from its lock (``Family.demo_report``) and
+    its runs on its family's demo scenarios (``"scenarios"``), for every built-in observer but the
+    real-data ones (or for ``names``)."""
     report = {}
     for name in [n for n in observers.names() if n not in (REAL_DATA_OBSERVER, *REAL_DATA_ONLY)]:
+        if names is not None and name not in names:
+            continue
         config = observers.get(name)
         family = families.get(config.family)
         art = json.loads(design_lock.path(config).read_text())
         plant = getattr(family, "demo_plant", lambda _config: "nominal")(config)
         scen = {s: validate.run_scenario(config, s, plant) for s in family.demo_scenarios}
         report[name] = {"family": config.family, **family.demo_report(art), "scenarios": scen}
+    return report
+
+
+def main(json_output: bool = False, report_dir=None) -> int:
+    """``uiogen demo``: the text tables (or ``--json``); with ``report_dir`` the HTML page
+    (:mod:`codegen.validation.report`) and a summary of a few lines pointing at it."""
+    report = run_all()
     real, others = run_real_data()
-    plot = observers.get(REAL_DATA_OBSERVER).workspace.plots / f"{REAL_DATA_OBSERVER}_real_data.png"
-    plot.parent.mkdir(parents=True, exist_ok=True)
-    validate.plot_data(real, str(plot))
     if json_output:
         print(json.dumps({"real_data": real_data_json(real, others), **{n: {**{k: v for k, v in e.items() if k != "scenarios"},
                               "scenarios": {s: json.loads(validate.to_json(r)) for s, r in e["scenarios"].items()}}
                           for n, e in report.items()}}, indent=1, sort_keys=True))
         return 0
+    if report_dir is not None:
+        from . import report as html_report
+        page = html_report.write_demo(report, {REAL_DATA_OBSERVER: real, **others}, report_dir)
+        for line in summary_lines(report, real, others):
+            print(line)
+        print(f"report: {page.resolve()}")
+        return 0
+    plot = observers.get(REAL_DATA_OBSERVER).workspace.plots / f"{REAL_DATA_OBSERVER}_real_data.png"
+    plot.parent.mkdir(parents=True, exist_ok=True)
+    validate.plot_data(real, str(plot))
     for name, e in report.items():
         print(f"== {name}")
         for line in families.get(e["family"]).demo_lines(e):
@@ -51,6 +70,20 @@ def main(json_output: bool = False) -> int:
         print(line)
     print(f"   plot: {plot}")
     return 0
+
+
+def summary_lines(report: dict, real: dict, others: dict) -> list:
+    """What ``uiogen demo --report`` prints beside the page: the real-data ranking and, per
+    simulated observer, its scenarios and flagged samples (the tables are on the page)."""
+    from .report import rank_real_data
+    lines = ["real data (shared Stanford log), sideslip RMS, best first:"]
+    for label, _, rms, what in rank_real_data({REAL_DATA_OBSERVER: real, **others}):
+        lines.append(f"   {label:44s} {rms:8.4f} deg ({what})")
+    lines.append(f"simulated ({len(report)} observers): scenario [samples, flagged]")
+    for name, e in report.items():
+        runs = ", ".join(f"{s} [{r['samples']}, {r['status_flags']}]" for s, r in e["scenarios"].items())
+        lines.append(f"   {name:44s} {runs or 'design figures only'}")
+    return lines
 
 
 def run_real_data() -> tuple:

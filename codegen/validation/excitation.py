@@ -6,9 +6,11 @@ inputs evaluated continuously between the samples, as a real car's are) with
 
 * every input scheduling signal swept inside its box: a sine of 0.9 of the half-range about the
   box's centre whose slope stays within the box's rate bounds (at its centre when it has none);
+  an ``[inputs.NAME]`` table of the signal narrows the swept range (a car the open-loop scenario
+  would spin at the top of its speed box);
 * every known and unknown input a seeded, smooth random signal (a sum of sinusoids below its
   ``bandwidth``, 1 Hz by default) filling the range ``[inputs.NAME] min, max`` of the parameter
-  file;
+  file (or, without that table, the input's ``[state_bounds]`` entry: the set a design certifies);
 * the state starting at the centre of its ``[state_bounds]`` box (or at 0).
 
 The compiled step runs over the sampled outputs (noise-free), and its estimates are compared
@@ -17,12 +19,14 @@ every validation (``observer.SIGNAL.rms``, ``nmse_percent``).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
-import sympy as sp
 
 from ..errors import ModelDefinitionError
+from ..project.settings import config_error, suggest
 from ..model import load_parameters, parameter_substitution
-from .simulate import rk4_step
+from . import model_plant
 from .common import SETTLE_TIME, signal_stats
 
 DURATION = 30.0
@@ -39,36 +43,72 @@ def _smooth(t: np.ndarray, rng, lo: float, hi: float, bandwidth: float):
     return lambda tt: lo + (0.05 + 0.9 * (raw(tt) - x_min) / width) * (hi - lo)
 
 
-def _sweep(box):
-    mid, half = 0.5 * (box.lower + box.upper), 0.45 * (box.upper - box.lower)
+def _sweep(box, lower: float, upper: float):
+    mid, half = 0.5 * (lower + upper), 0.45 * (upper - lower)
     rate = min(abs(box.rate_lower), abs(box.rate_upper))
+    if half <= 0:
+        return lambda tt: np.full(np.shape(np.atleast_1d(tt)), mid)
     if rate <= 0:
         return lambda tt: np.full(np.shape(np.atleast_1d(tt)), mid)
     omega = 0.9 * rate / half                  # |d/dt half sin(omega t)| <= 0.9 rate
     return lambda tt: mid - half * np.cos(omega * np.atleast_1d(tt))
 
 
+def input_range(params, name: str):
+    """(min, max, bandwidth Hz) of input ``name`` in the excitation scenario: its ``[inputs.NAME]``
+    table, else its ``[state_bounds]`` entry (the set a design certifies, at 1 Hz), else None."""
+    spec = params.inputs.get(name)
+    if spec is not None:
+        return spec["min"], spec["max"], spec.get("bandwidth", 1.0)
+    if name in params.state_bounds:
+        return (*params.state_bounds[name], 1.0)
+    return None
+
+
 def signal_functions(config, duration: float = DURATION, seed: int = 0) -> tuple:
-    """(sample times, {name: function of time}) of the scenario's raw scheduling signals and inputs."""
+    """(sample times, {name: function of time}) of the scenario's raw scheduling signals and inputs.
+
+    Raises
+    ------
+    ModelDefinitionError
+        naming every scheduling box and input range the parameter file lacks, in one message.
+    """
     model = config.load_model()
     params = load_parameters(config.parameter_path)
     t = np.arange(0.0, duration + 0.5 * config.sample_time, config.sample_time)
     rng = np.random.default_rng(seed)
-    out = {}
+    signals = [str(s) for s in (*model.known_inputs, *model.unknown_inputs,
+                                *(g.symbol for g in model.scheduling if g.derived is None))]
+    for key in params.inputs:
+        if key not in signals:
+            raise config_error(params.source, "inputs", key, params.inputs[key], f"an input or input scheduling signal of model "
+                               f"{model.name!r}: {', '.join(signals) or 'none'}", suggest(key, signals))
+    out, missing = {}, []
     for sig in model.scheduling:
         if sig.derived is None:
-            box = params.scheduling.get(str(sig.symbol))
+            name = str(sig.symbol)
+            box = params.scheduling.get(name)
             if box is None:
-                raise ModelDefinitionError(f"{params.source}: the excitation scenario sweeps {sig.symbol} inside "
-                                           f"[scheduling.{sig.symbol}], which is missing")
-            out[str(sig.symbol)] = _sweep(box)
+                missing.append(f"[scheduling.{name}] (min, max, rate_min, rate_max: the sweep of {name})")
+                continue
+            lower, upper = box.lower, box.upper
+            if name in params.inputs:           # a narrower sweep (a car unstable at the top of the box)
+                lower, upper = params.inputs[name]["min"], params.inputs[name]["max"]
+                if not box.lower <= lower <= upper <= box.upper:
+                    raise config_error(params.source, f"inputs.{name}", "min", lower,
+                                       f"min and max inside [scheduling.{name}] = [{box.lower:g}, {box.upper:g}] "
+                                       f"(the sweep of the excitation scenario narrows the box, never widens it)")
+            out[name] = _sweep(box, lower, upper)
     for u in (*model.known_inputs, *model.unknown_inputs):
-        spec = params.inputs.get(str(u))
+        spec = input_range(params, str(u))
         if spec is None:
-            raise ModelDefinitionError(
-                f"{params.source}: the excitation scenario needs the range of input {u}: add a table "
-                f"[inputs.{u}] with min = ..., max = ... (and optionally bandwidth = ... Hz)")
-        out[str(u)] = _smooth(t, rng, spec["min"], spec["max"], spec.get("bandwidth", 1.0))
+            missing.append(f"[inputs.{u}] (min, max, optionally bandwidth in Hz: the range of "
+                           f"{'known' if u in model.known_inputs else 'unknown'} input {u})")
+        else:
+            out[str(u)] = _smooth(t, rng, *spec)
+    if missing:
+        raise ModelDefinitionError(f"{params.source}: the excitation scenario needs {len(missing)} table(s) the file "
+                                   f"lacks: {'; '.join(missing)}")
     return t, out
 
 
@@ -78,52 +118,47 @@ def signals(config, duration: float = DURATION, seed: int = 0) -> dict:
     return {"t": t, **{name: f(t) for name, f in funcs.items()}}
 
 
-def simulate(config, duration: float = DURATION, seed: int = 0, substeps: int = 10) -> dict:
-    """Truth of the excitation scenario on the model's own equations: states, inputs, outputs
-    (as ``y_NAME`` and NAME), scheduling signals, at the observer's sample times."""
+@dataclass(frozen=True, eq=False)
+class ExcitationRun:
+    """One excitation run's inputs, ready for a plant: the sample times, every external signal
+    at them, and the stage-input matrix of :class:`~codegen.validation.model_plant.ModelPlant`."""
+
+    name: str
+    seed: int
+    t: np.ndarray
+    signals: dict           # {external signal: values at t}
+    stages: np.ndarray      # E of ModelPlant.simulate
+    x0: np.ndarray          # the state at t = 0
+
+
+def scenario(config, duration: float = DURATION, seed: int = 0, plant=None) -> ExcitationRun:
+    """The excitation run of ``config`` (its model's plant, or ``plant``) as data."""
+    model = config.load_model()
+    params = load_parameters(config.parameter_path)
+    plant = plant or model_plant.plant(model, config.sample_time)
+    t, funcs = signal_functions(config, duration, seed)
+    return ExcitationRun("excitation", int(seed), t, {k: np.asarray(funcs[k](t), float) for k in plant.external},
+                         plant.stage_inputs(t, funcs), model_plant.initial_state(model, params))
+
+
+def simulate(config, duration: float = DURATION, seed: int = 0) -> dict:
+    """Truth of the excitation scenario on the model's own equations (:mod:`codegen.validation.model_plant`,
+    RK4 at Ts/10 with the inputs between the samples): states, inputs, outputs (as ``y_NAME`` and
+    NAME), scheduling signals, at the observer's sample times."""
     model = config.load_model()
     params = load_parameters(config.parameter_path)
     subs = parameter_substitution(model, params)
-    t_s, funcs = signal_functions(config, duration, seed)
-    sig = {"t": t_s, **{name: f(t_s) for name, f in funcs.items()}}
-    x_s, u_s, d_s = tuple(model.states), tuple(model.known_inputs), tuple(model.unknown_inputs)
-    sched = tuple(s.symbol for s in model.scheduling)
-    derived = {s.symbol: s.derived for s in model.scheduling if s.derived is not None}
-    outputs = {sp.Symbol(f"y_{n}"): expr for n, expr in model.outputs}
-    f = sp.Matrix(model.dynamics)
-    if model.derived_inputs:      # functions of the measurements, here of the model's own outputs
-        f = f.subs({w.symbol: sp.sympify(w.expr).subs(outputs) for w in model.derived_inputs})
-    f = f.subs({s: sp.sympify(e).subs(outputs) for s, e in derived.items()}).subs(subs)
-    raw = tuple(s for s in sched if s not in derived)
-    args = (*x_s, *u_s, *d_s, *raw)
-    fn = sp.lambdify(args, f, "numpy")
-    h = sp.lambdify(args, sp.Matrix([sp.sympify(e).subs(subs) for _, e in model.outputs]), "numpy")
-    n = len(sig["t"])
-    x = np.array([0.5 * sum(params.state_bounds[str(s)]) if str(s) in params.state_bounds else 0.0 for s in x_s])
-    X, Y = np.zeros((n, len(x_s))), np.zeros((n, len(model.outputs)))
-    ext = np.column_stack([sig[str(s)] for s in (*u_s, *d_s, *raw)]) if (u_s or d_s or raw) else np.zeros((n, 0))
-    ext_funcs = [funcs[str(s)] for s in (*u_s, *d_s, *raw)]
-    Ts = config.sample_time
-    h_sub = Ts / substeps
-    rhs = lambda z, e: np.asarray(fn(*z, *e), dtype=float).ravel()
-    # the inputs between two samples at the RK4 stages' times (t, t + h/2, t + h of each substep)
-    stage_t = lambda k: t_s[k] + 0.5 * h_sub * np.arange(2 * substeps + 1)
-    for k in range(n):
-        X[k] = x
-        Y[k] = np.asarray(h(*x, *ext[k]), dtype=float).ravel()
-        if k + 1 < n:
-            tt = stage_t(k)
-            E = np.column_stack([f(tt) for f in ext_funcs]) if ext_funcs else np.zeros((tt.size, 0))
-            for j in range(substeps):
-                x = rk4_step(rhs, x, h_sub, (E[2 * j], E[2 * j + 1], E[2 * j + 2]))
-            if not np.all(np.isfinite(x)):
-                raise ModelDefinitionError(f"model {model.name!r}: the excitation run left the finite numbers at "
-                                           f"t = {sig['t'][k + 1]:.3g} s; narrow the [inputs.*] ranges")
-    truth = dict(sig)
-    truth.update({str(s): X[:, i] for i, s in enumerate(x_s)})
-    for j, (name, _) in enumerate(model.outputs):
-        truth[f"y_{name}"] = Y[:, j]
-        truth.setdefault(name, Y[:, j])
+    plant = model_plant.plant(model, config.sample_time)
+    run = scenario(config, duration, seed, plant)
+    truth = {"t": run.t, **run.signals, **plant.simulate(run.x0, run.stages, [subs[p] for p in model.parameters])}
+    bad = [k for k in plant.states if not np.all(np.isfinite(truth[k]))]
+    if bad:
+        k = int(np.argmin(np.isfinite(truth[bad[0]])))
+        raise ModelDefinitionError(f"model {model.name!r}: the excitation run left the finite numbers at t = "
+                                   f"{run.t[k]:.3g} s (state {bad[0]}); narrow the [inputs.*] ranges of "
+                                   f"{params.source}")
+    for name, _ in model.outputs:
+        truth.setdefault(name, truth[f"y_{name}"])
     return truth
 
 
@@ -154,7 +189,7 @@ def run(config, duration: float | None = None, seed: int = 0, progress=None, obs
             "samples": int(len(status)), "max_abs_ay": float(np.abs(truth.get("a_y", np.zeros(1))).max()),
             "plant": "model", "plant_model": f"{model.name} (its own equations, excitation)",
             "scenario": "excitation", "table_format": "generic", "units": units,
-            "signals": {"t": truth["t"], "truth": truth, "estimate": estimates}}
+            "signals": {"t": truth["t"], "truth": truth, "estimate": estimates, "status": status}}
 
 
 def format_table(result: dict) -> str:

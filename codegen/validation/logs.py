@@ -17,10 +17,13 @@ unit the model declares for that signal) or an explicit scale::
     v_y = { column = "vy_ref", unit = "m/s" }
 
 A column's value in the model's unit is ``value * unit factor * scale`` (:mod:`codegen.project.columns`
-parses the map with the observer file). The log is read by
+parses the map with the observer file). The log is read in chunks by
 :mod:`codegen.validation.csvlog` (separator, decimal mark, finite values, the sample time of the
-observer, no gaps). Estimates with a reference get the error statistics of every validation
-(``observer.SIGNAL.rms`` ...); the others a summary (``estimates.SIGNAL.mean`` ...).
+observer, no gaps) and every mapped column is checked against its unit's plausible range and the
+physics of the observer's model (:mod:`codegen.validation.log_checks`) before any estimate is
+reported. Estimates with a reference get the error statistics of every validation
+(``observer.SIGNAL.rms`` ...); the others a summary (``estimates.SIGNAL.mean`` ...); ``warnings``
+lists the checks that were ambiguous, ``log_checks`` every check and its verdict.
 """
 from __future__ import annotations
 
@@ -28,24 +31,20 @@ from pathlib import Path
 
 import numpy as np
 
-from ..project.columns import UNITS, ColumnMap, factor, model_unit, normalize_unit
 from ..errors import ConfigurationError, DatasetError
+from ..project.columns import UNITS, factor, model_unit, normalize_unit
 from ..project.settings import config_error, suggest
-from . import csvlog
-from .common import signal_stats
-
-def _read(path, cmap: ColumnMap, names: dict, sample_time: float) -> tuple:
-    p = Path(path)
-    needed = [cmap.time.column, *(c.column for c in names.values())]
-    header, table = csvlog.read_table(p, list(dict.fromkeys(needed)))
-    t = csvlog.finite_column(p, table, header, cmap.time.column, cmap.time.unit or "s")
-    t = t * (UNITS[cmap.time.unit][1] if cmap.time.unit else 1.0) * cmap.time.scale
-    csvlog.check_time(p, t, sample_time, column=cmap.time.column)
-    return t, {k: csvlog.finite_column(p, table, header, c.column, c.unit or "model units") for k, c in names.items()}
+from . import csvlog, log_checks, streaming
+from .common import SETTLE_TIME
 
 
-def run(config, path) -> dict:
+def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
     """The compiled step over a logged run mapped by the observer file's ``[data]`` table.
+
+    The log is read in chunks (``block_bytes`` of text each): the step runs chunk by chunk with
+    its state carried over, the statistics are merged, and every check of
+    :mod:`codegen.validation.log_checks` (units, the model's physics) must pass before anything
+    is returned.
 
     Raises
     ------
@@ -53,9 +52,11 @@ def run(config, path) -> dict:
         the map misses an observer input, names an input or output the observer does not have,
         or a unit that does not convert.
     DatasetError
-        the log (see :mod:`codegen.validation.csvlog`).
+        the log (see :mod:`codegen.validation.csvlog`), or a column that fails its unit or the
+        model's physics (:mod:`codegen.validation.log_checks`).
     """
     from ..extension.build import load
+    from ..model import load_parameters
     cmap = config.column_map
     if cmap is None:
         raise ConfigurationError(f"{config.source}: logged runs of this observer need a [data] table mapping the log's "
@@ -76,28 +77,47 @@ def run(config, path) -> dict:
     scale.update({f"truth:{k}": factor(c, model_unit(model, k), cmap.source, "data.truth", k)
                   for k, c in cmap.truth.items()})
     names = {**cmap.inputs, **{f"truth:{k}": c for k, c in cmap.truth.items()}}
-    t, cols = _read(path, cmap, names, obs.sample_time)
-    inputs = np.column_stack([cols[n] * scale[n] for n in obs.input_names])
-    out, status, _ = obs.run(inputs)
-    t = t - t[0]
+    p = Path(path)
+    units = {cmap.time.column: cmap.time.unit or "s"}
+    for c in names.values():
+        units.setdefault(c.column, c.unit or "model units")
+    reader = csvlog.LogReader(p, units, block_bytes)
+    time = csvlog.TimeCheck(p, obs.sample_time, column=cmap.time.column)
+    t_factor = (UNITS[cmap.time.unit][1] if cmap.time.unit else 1.0) * cmap.time.scale
+    checks = log_checks.LogChecks(
+        p, model, load_parameters(config.parameter_path), obs.input_names,
+        {n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale) for n, c in cmap.inputs.items()},
+        obs.sample_time)
     angle = {n: normalize_unit(model_unit(model, n) or "") == "rad" for n in obs.output_names}
-    compared, summary, signals = {}, {}, {"t": t}
-    for j, name in enumerate(obs.output_names):
-        est = out[:, j]
-        signals[name] = est
-        if name in cmap.truth:
-            ref = cols[f"truth:{name}"] * scale[f"truth:{name}"]
-            signals[f"{name}_truth"] = ref
-            compared[name] = signal_stats(ref, est, t, angle=angle[name])
-        else:
-            shown = np.degrees(est) if angle[name] else est
-            summary[name] = {"mean": float(shown.mean()), "std": float(shown.std()), "min": float(shown.min()),
-                             "max": float(shown.max())}
-    if not len(t):
-        raise DatasetError(f"{path}: no samples")
-    return {"kind": "column_map", "observer": compared, "estimates": summary, "baselines": {},
-            "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)), "data": str(path),
-            "signals": signals}
+    compared = {n: streaming.ErrorStats(angle[n], settle=SETTLE_TIME) for n in cmap.truth}
+    summary = {n: streaming.Summary(angle[n]) for n in obs.output_names if n not in cmap.truth}
+    kept = streaming.Decimated()
+    state, flags, t0 = obs.initial_state(), 0, None
+    for _, cols in reader.chunks():
+        t = cols[cmap.time.column] * t_factor
+        time.feed(t)
+        inputs = np.column_stack([cols[cmap.inputs[n].column] * scale[n] for n in obs.input_names])
+        checks.feed(t, {n: inputs[:, j] for j, n in enumerate(obs.input_names)})
+        out, status, state = obs.run(inputs, state)
+        flags += int(np.count_nonzero(status))
+        t0 = t[0] if t0 is None else t0
+        t = t - t0
+        sig = {"t": t}
+        for j, name in enumerate(obs.output_names):
+            sig[name] = out[:, j]
+            if name in cmap.truth:
+                ref = cols[cmap.truth[name].column] * scale[f"truth:{name}"]
+                sig[f"{name}_truth"] = ref
+                compared[name].add(ref, out[:, j], t)
+            else:
+                summary[name].add(out[:, j])
+        kept.add(sig)
+    time.finish()
+    report = checks.finish()
+    return {"kind": "column_map", "observer": {n: s.result() for n, s in compared.items()},
+            "estimates": {n: s.result() for n, s in summary.items()}, "baselines": {},
+            "status_flags": flags, "samples": reader.rows, "data": str(path), "signals": kept.signals(),
+            "signals_stride": kept.stride, "log_checks": report["checks"], "warnings": report["warnings"]}
 
 
 def format_table(result: dict) -> str:
@@ -111,4 +131,5 @@ def format_table(result: dict) -> str:
         lines.append(f"{'estimate':12s} {'mean':>10s} {'std':>10s} {'min':>10s} {'max':>10s}   (no reference column)")
         for name, s in result["estimates"].items():
             lines.append(f"{name:12s} {s['mean']:10.4g} {s['std']:10.4g} {s['min']:10.4g} {s['max']:10.4g}")
+    lines += [f"warning: {w}" for w in result.get("warnings", ())]
     return "\n".join(lines)

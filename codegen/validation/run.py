@@ -118,101 +118,202 @@ def shared_log_inputs(input_names) -> np.ndarray | None:
                                 dtype=np.float64)
 
 
-def run_data(name, path: str = "stanford") -> dict:
+PEAK_HALF_WIDTH = 5.0
+
+BASELINE_MAX_SAMPLES = 300_000
+"""The Kalman baselines run on logs of at most this many samples (50 min at 100 Hz): they hold the
+whole run in memory and step at about 0.1 ms per sample, so on a longer log the observer is
+reported alone and the result says why (``baselines_skipped``)."""
+
+
+def run_data(name, path: str = "stanford", block_bytes: int | None = None) -> dict:
     """Run the compiled step over a logged run, beside the baselines.
 
     An observer file with a ``[data]`` table maps the log's own columns (:mod:`codegen.validation.logs`);
-    otherwise the log is in the shared (Stanford) CSV format.
+    otherwise the log is in the shared (Stanford) CSV format. Either way the log is read in
+    chunks (``block_bytes`` of text each; any size in bounded memory) and checked against its
+    units and the physics of the observer's model (:mod:`codegen.validation.log_checks`) before
+    anything is returned.
 
     Returns ``{"observer": {SIGNAL: {"rms", "mae", "max", "std"}}, "baselines": {...}}`` with
-    SIGNAL ``beta`` [deg] and ``vy`` [m/s] (v_y = v_x tan(beta)), plus the signals for plots.
+    SIGNAL ``beta`` [deg] and ``vy`` [m/s] (v_y = v_x tan(beta)), plus the signals for plots,
+    ``log_checks`` (every check and its verdict) and ``warnings``.
     """
     from ..extension.build import load
+    from ..model import load_parameters
+    from ..project.columns import model_unit
     from ..project.observer_file import get
-    from . import stanford
+    from . import csvlog, log_checks, stanford, streaming
     config = get(name)
+    block_bytes = csvlog.BLOCK_BYTES if block_bytes is None else block_bytes
     if config.column_map is not None:
         from . import logs
-        return logs.run(config, path)
+        return logs.run(config, path, block_bytes)
     obs = load(config)
-    run = stanford.load(path, sample_time=obs.sample_time)   # a log at another rate is refused, not run
     missing = [c for c in obs.input_names if c not in DATA_COLUMNS]
     if missing:
         raise SampleError(f"observer {config.name!r} needs {', '.join(missing)}, which the log does not record "
                           f"(it has delta, r, a_y, v_x); use an observer designed for this data, e.g. "
                           f"stanford_sideslip")
-    inputs = np.column_stack([getattr(run, DATA_COLUMNS[c]) for c in obs.input_names])
-    out, status, _ = obs.run(inputs)
+    model = _model_or_none(config)
+    checks = None
+    if model is not None:
+        checks = log_checks.LogChecks(
+            stanford._resolve(path), model, load_parameters(config.parameter_path), obs.input_names,
+            {n: log_checks.Column(DATA_COLUMNS[n], stanford.UNITS[DATA_COLUMNS[n]], model_unit(model, n),
+                                  declared_by="format") for n in obs.input_names}, obs.sample_time)
     outputs = obs.output_names
-    extra = {}
-    if "beta" in outputs:
-        beta = out[:, outputs.index("beta")]
-    else:   # observers of v_y (Nguyen et al. 2021): beta = atan(v_y / v_x) with the log's v_x
-        beta = np.arctan2(out[:, outputs.index("v_y")], run.vx)
-    if "delta" in outputs and "y_delta" not in obs.input_names and "delta" not in obs.input_names:
-        # delta is an unknown input of the observer (one sample late): the log's measured delta checks it
-        delta_hat = np.concatenate([out[1:, outputs.index("delta")], [np.nan]])
-        extra["delta"] = signal_stats(run.delta[:-1], delta_hat[:-1], angle=True)
-    t = run.t - run.t[0]
-
-    def table(b):
-        return {"beta": signal_stats(run.beta_true, b, angle=True),
-                "vy": signal_stats(run.vx * np.tan(run.beta_true), run.vx * np.tan(b))}
-
-    kf, ekf = stanford.linear_kf(run), stanford.ekf(run)
-    estimates = {"linear_kf": kf.beta, "ekf": ekf.beta}
-    if config.model == "single_track_nonlinear_tyre":
-        # peers of the same symbolic model and the same parameter file, in the same run
-        estimates.update({k: v.beta for k, v in stanford.nonlinear_tyre_peers(run, config.parameter_path).items()})
-    result = {"observer": {**table(beta), **extra}, "baselines": {k: table(b) for k, b in estimates.items()},
-              "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)), "data": run.source,
-              "signals": {"t": t, "beta_true": run.beta_true, "beta": beta, **estimates}}
-    split = _identification_split(config, t, run.source)
-    if split is not None:
-        def rms(b, m):
-            return float(np.degrees(np.sqrt(np.mean((b - run.beta_true)[m] ** 2))))
-        result["splits"] = {"t_split": split, "identification": {"samples": int((t < split).sum())},
-                            "evaluation": {"samples": int((t >= split).sum())}}
-        for part, m in (("identification", t < split), ("evaluation", t >= split)):
-            result["splits"][part].update({"observer": rms(beta, m), **{k: rms(b, m) for k, b in estimates.items()}})
-    result["peaks"] = peak_errors(t, run.beta_true, {"observer": beta, **estimates})
+    delta_unknown = "delta" in outputs and "y_delta" not in obs.input_names and "delta" not in obs.input_names
+    table = {"beta": streaming.ErrorStats(angle=True), "vy": streaming.ErrorStats()}
+    delta_stats, prev_delta = streaming.ErrorStats(angle=True), None
+    split = _identification_split(config, stanford._resolve(path))
+    parts = {"identification": _Rms(), "evaluation": _Rms()}
+    peaks = {tp: _Peak() for tp in stanford.peak_times(path)}
+    kept, whole = streaming.Decimated(), {c: [] for c in stanford.COLUMNS}
+    state, flags, n, t0, t_end = obs.initial_state(), 0, 0, None, None
+    for cols in stanford.chunks(path, sample_time=obs.sample_time, block_bytes=block_bytes):
+        inputs = np.column_stack([cols[DATA_COLUMNS[c]] for c in obs.input_names])
+        t0 = cols["t"][0] if t0 is None else t0
+        t = cols["t"] - t0
+        if checks is not None:
+            checks.feed(cols["t"], {c: inputs[:, j] for j, c in enumerate(obs.input_names)})
+        out, status, state = obs.run(inputs, state)
+        flags += int(np.count_nonzero(status))
+        n += t.size
+        t_end = float(t[-1])
+        vx, truth = cols["vx"], cols["beta_true"]
+        if "beta" in outputs:
+            beta = out[:, outputs.index("beta")]
+        else:   # observers of v_y (Nguyen et al. 2021): beta = atan(v_y / v_x) with the log's v_x
+            beta = np.arctan2(out[:, outputs.index("v_y")], vx)
+        table["beta"].add(truth, beta)
+        table["vy"].add(vx * np.tan(truth), vx * np.tan(beta))
+        if delta_unknown:
+            # delta is an unknown input of the observer (one sample late): the log's measured delta checks it
+            est = out[:, outputs.index("delta")]
+            meas = cols["delta"] if prev_delta is None else np.concatenate([[prev_delta], cols["delta"]])
+            delta_stats.add(meas[:est.size - (prev_delta is None)], est[prev_delta is None:])
+            prev_delta = float(cols["delta"][-1])
+        if split is not None:
+            parts["identification"].add(beta, truth, t < split)
+            parts["evaluation"].add(beta, truth, t >= split)
+        for tp, pk in peaks.items():
+            pk.add(t, truth, beta, tp)
+        kept.add({"t": t, "beta_true": truth, "beta": beta, "status": status})
+        if whole is not None:
+            for c in stanford.COLUMNS:
+                whole[c].append(cols[c])
+            if n > BASELINE_MAX_SAMPLES:
+                whole = None                      # too long for the baselines: stop holding the run
+    report = checks.finish() if checks is not None else {"checks": [], "warnings": []}
+    extra = {"delta": delta_stats.result()} if delta_unknown else {}
+    result = {"observer": {k: v.result() for k, v in table.items()} | extra, "baselines": {},
+              "status_flags": flags, "samples": n, "data": str(stanford._resolve(path)),
+              "log_checks": report["checks"], "warnings": report["warnings"]}
+    signals = kept.signals()
+    estimates = {}
+    if whole is not None:
+        run = stanford.StanfordRun(source=result["data"], **{c: np.concatenate(v) for c, v in whole.items()})
+        estimates = _baselines(config, run)
+        result["baselines"] = {k: _table(run, b) for k, b in estimates.items()}
+        signals.update(estimates)
+    else:
+        result["baselines_skipped"] = (f"the log has {n} samples, more than {BASELINE_MAX_SAMPLES} (the Kalman "
+                                       f"baselines hold the whole run and step at about 0.1 ms per sample); the "
+                                       f"observer is reported alone")
+    result["signals"], result["signals_stride"] = signals, kept.stride
+    if split is not None and t_end is not None and t_end > split:
+        result["splits"] = {"t_split": split}
+        for part, m in (("identification", signals["t"] < split), ("evaluation", signals["t"] >= split)):
+            row = {"samples": parts[part].n, "observer": parts[part].rms()}
+            for k, b in estimates.items():
+                row[k] = float(np.degrees(np.sqrt(np.mean((b - signals["beta_true"])[m] ** 2))))
+            result["splits"][part] = row
+    rows = []
+    for tp, pk in peaks.items():
+        if pk.n:
+            row = {"t": tp, "truth_peak_deg": float(np.degrees(pk.truth_peak)), "observer": float(np.degrees(pk.err))}
+            if estimates:
+                m = np.abs(signals["t"] - tp) <= PEAK_HALF_WIDTH
+                row.update({k: float(np.degrees(np.abs(b[m] - signals["beta_true"][m]).max()))
+                            for k, b in estimates.items()})
+            rows.append(row)
+    result["peaks"] = rows
     return result
 
 
-PEAK_TIMES = (110.0, 170.0, 207.0)
-"""Times [s from the log's start] of the three large-sideslip peaks of the shared Stanford half
-(the truth reaches about -5 deg there)."""
-PEAK_HALF_WIDTH = 5.0
+def _model_or_none(config):
+    """The observer's model definition, or None for a family whose model is not one
+    ModelDefinition (its log is then checked by the format alone)."""
+    from ..errors import ModelDefinitionError
+    try:
+        return config.load_model()
+    except ModelDefinitionError:
+        return None
 
 
-def peak_errors(t, truth, estimates: dict) -> list:
-    """Max |beta error| [deg] of each estimate within +-PEAK_HALF_WIDTH s of each peak inside the log."""
-    out = []
-    for tp in PEAK_TIMES:
+def _baselines(config, run) -> dict:
+    """beta of every baseline of the shared log: the source repository's linear KF, the EKF, and the
+    same-model peers of an observer of the nonlinear-tyre model."""
+    from . import stanford
+    kf, ekf = stanford.linear_kf(run), stanford.ekf(run)
+    estimates = {"linear_kf": kf.beta, "ekf": ekf.beta}
+    # the family's peers of the observer's own model and parameter file, in the same run (Family.log_peers)
+    estimates.update(families.get(config.family).log_peers(config, run))
+    return estimates
+
+
+def _table(run, b) -> dict:
+    return {"beta": signal_stats(run.beta_true, b, angle=True),
+            "vy": signal_stats(run.vx * np.tan(run.beta_true), run.vx * np.tan(b))}
+
+
+class _Rms:
+    """RMS of the beta error [deg] over the samples of a mask, streamed."""
+
+    def __init__(self):
+        self.n, self.sq = 0, 0.0
+
+    def add(self, beta, truth, mask) -> None:
+        e = (beta - truth)[mask]
+        self.n += int(e.size)
+        self.sq += float(np.sum(e * e))
+
+    def rms(self) -> float:
+        return float(np.degrees(np.sqrt(self.sq / self.n))) if self.n else float("nan")
+
+
+class _Peak:
+    """The truth's largest |beta| and the observer's largest |error| within +-PEAK_HALF_WIDTH of a time."""
+
+    def __init__(self):
+        self.n, self.truth_peak, self.err = 0, 0.0, 0.0
+
+    def add(self, t, truth, beta, tp) -> None:
         m = np.abs(t - tp) <= PEAK_HALF_WIDTH
         if not m.any():
-            continue
+            return
         tm = truth[m]
-        out.append({"t": tp, "truth_peak_deg": float(np.degrees(tm[np.argmax(np.abs(tm))])),
-                    **{k: float(np.degrees(np.abs(b[m] - truth[m]).max())) for k, b in estimates.items()}})
-    return out
+        i = int(np.argmax(np.abs(tm)))
+        if not self.n or abs(tm[i]) > abs(self.truth_peak):
+            self.truth_peak = float(tm[i])
+        self.err = max(self.err, float(np.abs(beta[m] - tm).max()))
+        self.n += int(m.sum())
 
 
-def _identification_split(config, t, path=None):
+def _identification_split(config, path=None):
     """Where the evaluation part of a log starts [s from its start]: the observer's parameter file's
     ``[meta] identification_t_end`` (its numbers were chosen before it), else, on the shared Stanford
     log, :data:`codegen.validation.stanford.EVALUATION_T_START` (the same protocol for every estimator
-    of that log); None when the log does not reach past it."""
+    of that log); None otherwise (and the result has no split when the log does not reach past it)."""
     from ..model import load_parameters
     from . import stanford
     raw = load_parameters(config.parameter_path).meta.get("identification_t_end")
     if raw is not None:
-        split = float(raw)
-    elif path is not None and str(path) == str(stanford.STANFORD_PATH):
-        split = stanford.EVALUATION_T_START
-    else:
-        return None
-    return split if t[-1] > split else None
+        return float(raw)
+    if path is not None and str(path) == str(stanford.STANFORD_PATH):
+        return stanford.EVALUATION_T_START
+    return None
 
 
 def plot_data(result: dict, path: str) -> None:
@@ -290,14 +391,19 @@ def format_data_table(result: dict) -> str:
         d = result["observer"]["delta"]
         lines.append(f"steering angle delta (an unknown input of this observer) vs the log's measured delta: "
                      f"RMSE {d['rms']:.4f} deg, max {d['max']:.4f} deg, MAE {d['mae']:.4f} deg")
+    if result.get("baselines_skipped"):
+        lines.append(f"baselines not run: {result['baselines_skipped']}")
+    lines += [f"warning: {w}" for w in result.get("warnings", ())]
     return "\n".join(lines)
 
 
 def scenario_names(name) -> tuple:
-    """The validation scenarios of an observer that ``uiogen demo`` runs (its family's
-    ``demo_scenarios``), or the generic excitation scenario for a family without its own."""
+    """The validation scenarios of an observer: for a built-in one those ``uiogen demo`` runs (its
+    family's ``demo_scenarios``, the papers' on the library's plants), for a project's observer
+    and a family without its own the generic excitation scenario on the model's own equations
+    (the library's plants are of the built-in models)."""
     config = observers.get(name) if isinstance(name, str) else name
-    return tuple(families.get(config.family).demo_scenarios) or ("excitation",)
+    return (tuple(families.get(config.family).demo_scenarios) if config.builtin else ()) or ("excitation",)
 
 
 def scenario_inputs(name, scenario, plant: str = "nominal", duration: float | None = None) -> np.ndarray:

@@ -134,10 +134,11 @@ def observer_input_matrix(input_names, truth: dict, measured: dict) -> np.ndarra
     columns = []
     for col in input_names:
         key = col[2:] if col.startswith("y_") else col
-        source = measured if key in measured else truth
-        if key not in source:
+        # the measurement, else the truth of the output itself (y_X, a model plant's), else of the signal X
+        value = measured.get(key, truth.get(col, truth.get(key)))
+        if value is None:
             raise SampleError(f"the plant does not provide the observer input {col!r}")
-        columns.append(source[key])
+        columns.append(value)
     return np.column_stack(columns)
 
 

@@ -48,7 +48,7 @@ import numpy as np
 
 from ..errors import DatasetError, ModelDefinitionError, SampleError
 from ..project.observer_file import builtin_model
-from . import csvlog, kalman, metrics
+from . import csvlog, kalman, log_checks, metrics
 from .csvlog import GAP_FACTOR, MAX_PERIOD, PERIOD_RTOL, SHORT_FACTOR  # noqa: F401 (documented here too)
 
 __all__ = [
@@ -65,6 +65,18 @@ EVALUATION_T_START = 137.5
 identification part (samples 0-13749) is the only one any number of an estimator of this log may be
 chosen on; the evaluation part is reported, never fitted (``uiogen validate --data`` splits every
 estimator's error there)."""
+
+PEAK_TIMES = (110.0, 170.0, 207.0)
+"""[s from the log's start] The three large-sideslip peaks of the shared half (its reference reaches
+about -5 deg there): ``uiogen validate --data stanford`` reports each estimator's largest error
+around them. A property of this log (:func:`peak_times`), not of any observer."""
+
+
+def peak_times(path) -> tuple:
+    """The sideslip peaks [s from the start] of a log in the shared format: :data:`PEAK_TIMES` for the
+    shared log, none known for any other."""
+    return PEAK_TIMES if str(_resolve(path)) == str(STANFORD_PATH) else ()
+
 
 COLUMNS = ("t", "vx", "vy", "beta_true", "ax", "ay", "yaw_rate", "yaw_acc",
            "delta", "delta_fl", "delta_fr")
@@ -163,64 +175,106 @@ def _resolve(path) -> Path:
     return Path(path)
 
 
-def _range_error(p: Path, c: str, a: np.ndarray, lo: float, hi: float) -> DatasetError:
+def _range_error(p: Path, c: str, lo_found: float, hi_found: float, lo: float, hi: float) -> DatasetError:
     unit = UNITS[c]
     hint = ""
     for name, f in _ALT_UNITS.get(unit, ()):
-        if lo <= a.min() * f and a.max() * f <= hi:
-            hint = f"; it looks like {name} (x {f:.4g} gives [{a.min() * f:.4g}, {a.max() * f:.4g}] {unit})"
+        if lo <= lo_found * f and hi_found * f <= hi:
+            hint = f"; it looks like {name} (x {f:.4g} gives [{lo_found * f:.4g}, {hi_found * f:.4g}] {unit})"
             break
     return DatasetError(
-        f"{p}: column {c!r} spans [{a.min():.4g}, {a.max():.4g}], outside the plausible range "
+        f"{p}: column {c!r} spans [{lo_found:.4g}, {hi_found:.4g}], outside the plausible range "
         f"[{lo}, {hi}] of its declared unit {unit} (wrong unit?){hint}")
 
 
-def _box(x: np.ndarray, h: int) -> np.ndarray:
-    """Centered moving average over 2h+1 samples ('valid' part)."""
-    return np.convolve(x, np.full(2 * h + 1, 1.0 / (2 * h + 1)), mode="valid") if h else x
+@dataclass(eq=False)
+class _Rule:
+    """One physical relation of the format: ``y ~ k x`` with k in ``band`` (see :func:`_judge`)."""
+
+    col: str
+    sides: object                   # (columns, t, h) -> (y, x); on the raw chunk when not windowed
+    windowed: bool
+    what: str
+    unit: str
+    band: tuple
+    min_std: float
+    guesses: tuple
+    moments: log_checks.Moments = None
+
+    def __post_init__(self):
+        self.moments = log_checks.Moments()
 
 
-def _ddt(x: np.ndarray, t: np.ndarray, h: int) -> np.ndarray:
-    """Central difference over +-h samples (aligned with ``_box(., h)``)."""
-    h = max(h, 1)
-    return (x[2 * h:] - x[:-2 * h]) / (t[2 * h:] - t[:-2 * h])
+def _rules() -> list:
+    """The relations of :func:`_check_physics`, in the order they are judged."""
+    box, ddt = log_checks.box, log_checks.ddt
+    rules = [
+        _Rule("beta_true", lambda c, t, h: (c["beta_true"], np.arctan2(c["vy"], c["vx"])), False,
+              "beta_true = atan(vy / vx)", "", _RATIO_BAND, 1e-3, (
+                  (1 / _DEG, "beta_true in degrees", "convert it with numpy.radians"),
+                  (-1.0, "opposite sign conventions of beta_true and vy", "flip the sign of one of them"),
+                  (1 / _KMH, "vx in km/h (vy in m/s)", "divide vx by 3.6"),
+                  (_KMH, "vy in km/h (vx in m/s)", "divide vy by 3.6"))),
+        _Rule("ax", lambda c, t, h: (box(c["ax"], h), ddt(c["vx"], t, h) - box(c["vy"] * c["yaw_rate"], h)), True,
+              "ax = dvx/dt - vy yaw_rate", "", _RATIO_BAND, 0.2, (
+                  (1 / _G, "ax in g", "multiply it by 9.81"),
+                  (_KMH, "vx in km/h", "divide vx by 3.6"),
+                  (_MPH, "vx in mph", "multiply vx by 0.44704"),
+                  (-1.0, "ax of the opposite sign (braking positive)", "flip its sign"))),
+        _Rule("ay", lambda c, t, h: (box(c["ay"], h), box(c["vx"] * c["yaw_rate"], h)), True,
+              "ay = dvy/dt + vx yaw_rate (ay ~ vx yaw_rate while cornering)", "", _RATIO_BAND, 0.2, (
+                  (1 / _G, "ay in g", "multiply it by 9.81"),
+                  (_DEG, "yaw_rate in deg/s", "convert yaw_rate with numpy.radians"),
+                  (_KMH, "vx in km/h", "divide vx by 3.6"),
+                  (_MPH, "vx in mph", "multiply vx by 0.44704"),
+                  (-1.0, "opposite sign conventions of ay and yaw_rate", "flip the sign of one of them"))),
+        _Rule("yaw_acc", lambda c, t, h: (box(c["yaw_acc"], h), ddt(c["yaw_rate"], t, h)), True,
+              "yaw_acc = d(yaw_rate)/dt", "", _RATIO_BAND, 0.05, (
+                  (1 / _DEG, "yaw_acc in deg/s^2", "convert it with numpy.radians"),
+                  (_DEG, "yaw_rate in deg/s (yaw_acc in rad/s^2)", "convert yaw_rate with numpy.radians"),
+                  (-1.0, "yaw_acc of the opposite sign", "flip its sign"))),
+        _Rule("delta", lambda c, t, h: (box(c["yaw_rate"], h), box(c["vx"] * c["delta"], h)), True,
+              "yaw_rate / (vx delta) = 1 / (wheelbase + K_us vx^2)", " 1/m", (0.02, 2.0), 0.05, (
+                  (_DEG, "delta in degrees, or a steering-wheel angle instead of the road-wheel angle",
+                   "convert it with numpy.radians, or divide a steering-wheel angle by the steering ratio"),
+                  (-1.0, "opposite sign conventions of delta and yaw_rate", "flip the sign of one of them")))]
+    for side in ("delta_fl", "delta_fr"):
+        rules.append(_Rule(side, lambda c, t, h, side=side: (c[side], c["delta"]), False,
+                           "delta (the mean road-wheel angle)", "", _RATIO_BAND, 1e-3, (
+                               (1 / _DEG, f"{side} in degrees (delta in rad)", "convert it with numpy.radians"),
+                               (_DEG, f"delta in degrees ({side} in rad)", "convert delta with numpy.radians"),
+                               (-1.0, f"{side} of the opposite sign", "flip its sign"))))
+    return rules
 
 
-def _relation(p, col, y, x, *, what, unit, band, guesses, min_std):
-    """Check that y ~ k x with k in ``band``; y, x of equal length.
+def _judge(p, rule: _Rule) -> None:
+    """Check that y ~ k x with k in the rule's band.
 
     The ratio k is bracketed by the direct and the reverse least-squares slopes, cov/var(x) and
     var(y)/cov (with errors in both variables the true slope lies between the two): the relation
-    fails only when the whole bracket misses ``band``. It is inconclusive (skipped) when x barely
+    fails only when the whole bracket misses the band. It is inconclusive (skipped) when x barely
     moves (std < min_std), |correlation| < _MIN_CORR or fewer than _MIN_SAMPLES samples.
     ``guesses``: (factor, "looks like ...", fix): the ratio a known unit mistake would give.
     """
-    if y.size < _MIN_SAMPLES:
+    m, col, band = rule.moments, rule.col, rule.band
+    if m.n < _MIN_SAMPLES:
         return
-    xc, yc = x - x.mean(), y - y.mean()
-    sxx, syy, sxy = float(xc @ xc), float(yc @ yc), float(xc @ yc)
-    if not (math.sqrt(sxx / x.size) >= min_std and syy > 0 and sxy != 0):
+    if not (m.std_x >= rule.min_std and m.cyy > 0 and m.cxy != 0):
         return
-    corr = sxy / math.sqrt(sxx * syy)
+    corr = m.corr
     if abs(corr) < _MIN_CORR:
         return
-    k1, k2 = sxy / sxx, syy / sxy
-    lo, hi = min(k1, k2), max(k1, k2)
-
-    def meets(a, b):
-        a, b = min(a, b), max(a, b)
-        return lo <= b and a <= hi
-
-    if meets(*band):
+    k1, lo, hi = m.bracket()
+    if log_checks.meets(lo, hi, band):
         return
-    found = f"ratio {k1:.4g} (bracket [{lo:.4g}, {hi:.4g}], correlation {corr:.2f}, {y.size} samples)"
-    allowed = f"{band[0]:.3g} to {band[1]:.3g}{unit} in the declared units"
-    fits = [(f, looks, fix) for f, looks, fix in guesses if meets(band[0] * f, band[1] * f)]
+    found = f"ratio {k1:.4g} (bracket [{lo:.4g}, {hi:.4g}], correlation {corr:.2f}, {m.n} samples)"
+    allowed = f"{band[0]:.3g} to {band[1]:.3g}{rule.unit} in the declared units"
+    fits = [(f, looks, fix) for f, looks, fix in rule.guesses if log_checks.meets(lo, hi, (band[0] * f, band[1] * f))]
     if fits:
-        raise DatasetError(f"{p}: column {col!r} is inconsistent with {what}: {found}; allowed: "
+        raise DatasetError(f"{p}: column {col!r} is inconsistent with {rule.what}: {found}; allowed: "
                            f"{allowed}. It looks like "
                            + "; or ".join(f"{looks} (ratio ~ {f:.4g}): {fix}" for f, looks, fix in fits))
-    raise DatasetError(f"{p}: column {col!r} is inconsistent with {what}: {found}; allowed: {allowed}; "
+    raise DatasetError(f"{p}: column {col!r} is inconsistent with {rule.what}: {found}; allowed: {allowed}; "
                        f"no single known unit mistake explains it: check the units and sign conventions "
                        f"of the columns involved ({', '.join(f'{c} [{UNITS[c]}]' for c in _INVOLVED[col])})")
 
@@ -231,7 +285,63 @@ _INVOLVED = {"beta_true": ("beta_true", "vy", "vx"), "ax": ("ax", "vx", "vy", "y
              "delta_fr": ("delta_fr", "delta")}
 
 
-def _check_physics(p: Path, c: dict) -> None:
+class _Checks:
+    """Every check of the format, chunk by chunk: ranges, the time column and
+    :func:`_check_physics`; :meth:`finish` raises the first failure, in that order."""
+
+    def __init__(self, p: Path, sample_time):
+        self.p = p
+        self.time = csvlog.TimeCheck(p, sample_time)
+        self.ranges = {c: [math.inf, -math.inf] for c in _LIMITS}
+        self.rules = _rules()
+        self.window = None
+        self.pending = []            # chunks held until the period (the averaging window) is known
+        self.n = 0
+
+    def feed(self, cols: dict) -> None:
+        self.n += cols["t"].size
+        for c, r in self.ranges.items():
+            r[0], r[1] = min(r[0], float(cols[c].min())), max(r[1], float(cols[c].max()))
+        self.time.feed(cols["t"])
+        if self.time.period is None:
+            self.pending.append(cols)
+            return
+        self._physics(cols)
+
+    def _flush(self) -> None:
+        """The period is known: the averaging window, and the chunks held until then."""
+        self.window = log_checks.Window(max(1, int(round(_SMOOTH_S / self.time.period))))
+        pending, self.pending = self.pending, []
+        for chunk in pending:
+            self._physics(chunk)
+
+    def _physics(self, cols: dict) -> None:
+        if self.window is None:
+            self._flush()
+        h = self.window.h
+        for rule in self.rules:
+            if not rule.windowed:
+                y, x = rule.sides(cols, cols["t"], h)
+                rule.moments.add(x, y)
+        w = self.window.join(cols)
+        if w is not None:
+            for rule in self.rules:
+                if rule.windowed:
+                    y, x = rule.sides(w, w["t"], h)
+                    rule.moments.add(x, y)
+
+    def finish(self) -> None:
+        for c, (lo_found, hi_found) in self.ranges.items():
+            lo, hi = _LIMITS[c]
+            if lo_found < lo or hi_found > hi:
+                raise _range_error(self.p, c, lo_found, hi_found, lo, hi)
+        per = self.time.finish()
+        if self.window is None:
+            self._flush()
+        _check_physics(self.p, self, per)
+
+
+def _check_physics(p: Path, checks: _Checks, per: float) -> None:
     """Unit consistency of the columns with one another (rules that a range check cannot give).
 
     * beta_true = atan(vy / vx) (definition of the sideslip angle);
@@ -244,57 +354,50 @@ def _check_physics(p: Path, c: dict) -> None:
     * delta_fl, delta_fr ~ delta (delta is their mean).
 
     Derivatives are central differences over +-_SMOOTH_S, compared with the other side averaged
-    over the same window. A relation is skipped when the log does not excite it (see _relation).
+    over the same window (the chunks of a long log joined by :class:`log_checks.Window`, so the
+    sums are those of the whole log). A relation is skipped when the log does not excite it
+    (see :func:`_judge`), and all of them when the log is shorter than _MIN_SAMPLES + 2 windows.
     """
-    t = c["t"]
-    per = float(np.median(np.diff(t)))
     h = max(1, int(round(_SMOOTH_S / per)))
-    if t.size < _MIN_SAMPLES + 2 * h:          # too short to judge any relation
+    if checks.n < _MIN_SAMPLES + 2 * h:          # too short to judge any relation
         return
-
-    def b(k):
-        return _box(c[k], h)
-
-    _relation(p, "beta_true", c["beta_true"], np.arctan2(c["vy"], c["vx"]),
-              what="beta_true = atan(vy / vx)", unit="", band=_RATIO_BAND, min_std=1e-3, guesses=(
-                  (1 / _DEG, "beta_true in degrees", "convert it with numpy.radians"),
-                  (-1.0, "opposite sign conventions of beta_true and vy", "flip the sign of one of them"),
-                  (1 / _KMH, "vx in km/h (vy in m/s)", "divide vx by 3.6"),
-                  (_KMH, "vy in km/h (vx in m/s)", "divide vy by 3.6")))
-    _relation(p, "ax", b("ax"), _ddt(c["vx"], t, h) - _box(c["vy"] * c["yaw_rate"], h),
-              what="ax = dvx/dt - vy yaw_rate", unit="", band=_RATIO_BAND, min_std=0.2, guesses=(
-                  (1 / _G, "ax in g", "multiply it by 9.81"),
-                  (_KMH, "vx in km/h", "divide vx by 3.6"),
-                  (_MPH, "vx in mph", "multiply vx by 0.44704"),
-                  (-1.0, "ax of the opposite sign (braking positive)", "flip its sign")))
-    _relation(p, "ay", b("ay"), _box(c["vx"] * c["yaw_rate"], h),
-              what="ay = dvy/dt + vx yaw_rate (ay ~ vx yaw_rate while cornering)", unit="",
-              band=_RATIO_BAND, min_std=0.2, guesses=(
-                  (1 / _G, "ay in g", "multiply it by 9.81"),
-                  (_DEG, "yaw_rate in deg/s", "convert yaw_rate with numpy.radians"),
-                  (_KMH, "vx in km/h", "divide vx by 3.6"),
-                  (_MPH, "vx in mph", "multiply vx by 0.44704"),
-                  (-1.0, "opposite sign conventions of ay and yaw_rate", "flip the sign of one of them")))
-    _relation(p, "yaw_acc", b("yaw_acc"), _ddt(c["yaw_rate"], t, h),
-              what="yaw_acc = d(yaw_rate)/dt", unit="", band=_RATIO_BAND, min_std=0.05, guesses=(
-                  (1 / _DEG, "yaw_acc in deg/s^2", "convert it with numpy.radians"),
-                  (_DEG, "yaw_rate in deg/s (yaw_acc in rad/s^2)", "convert yaw_rate with numpy.radians"),
-                  (-1.0, "yaw_acc of the opposite sign", "flip its sign")))
-    _relation(p, "delta", b("yaw_rate"), _box(c["vx"] * c["delta"], h),
-              what="yaw_rate / (vx delta) = 1 / (wheelbase + K_us vx^2)", unit=" 1/m",
-              band=(0.02, 2.0), min_std=0.05, guesses=(
-                  (_DEG, "delta in degrees, or a steering-wheel angle instead of the road-wheel angle",
-                   "convert it with numpy.radians, or divide a steering-wheel angle by the steering ratio"),
-                  (-1.0, "opposite sign conventions of delta and yaw_rate", "flip the sign of one of them")))
-    for side in ("delta_fl", "delta_fr"):
-        _relation(p, side, c[side], c["delta"], what="delta (the mean road-wheel angle)", unit="",
-                  band=_RATIO_BAND, min_std=1e-3, guesses=(
-                      (1 / _DEG, f"{side} in degrees (delta in rad)", "convert it with numpy.radians"),
-                      (_DEG, f"delta in degrees ({side} in rad)", "convert delta with numpy.radians"),
-                      (-1.0, f"{side} of the opposite sign", "flip its sign")))
+    for rule in checks.rules:
+        _judge(p, rule)
 
 
-def load(path="stanford", sample_time=None) -> StanfordRun:
+def _sample_time(sample_time):
+    if sample_time is None:
+        return None
+    try:
+        sample_time = float(sample_time)
+    except (TypeError, ValueError):
+        raise DatasetError(f"sample_time must be a number of seconds, got {sample_time!r}") from None
+    if not (math.isfinite(sample_time) and sample_time > 0):
+        raise DatasetError(f"sample_time must be finite and > 0 s, got {sample_time!r}")
+    return sample_time
+
+
+def chunks(path="stanford", sample_time=None, block_bytes: int = csvlog.BLOCK_BYTES):
+    """Yield the columns of a Stanford-format log chunk by chunk (``{column: array}``), checked
+    as :func:`load` checks them: the format where it fails, the ranges, the time column and the
+    physics once the last chunk has been read (the generator raises then).
+
+    Raises
+    ------
+    DatasetError
+        see :func:`load`.
+    """
+    p = _resolve(path)
+    sample_time = _sample_time(sample_time)
+    reader = csvlog.LogReader(p, UNITS, block_bytes)
+    checks = _Checks(p, sample_time)
+    for _, cols in reader.chunks():
+        checks.feed(cols)
+        yield cols
+    checks.finish()
+
+
+def load(path="stanford", sample_time=None, block_bytes: int = csvlog.BLOCK_BYTES) -> StanfordRun:
     """Read a Stanford-format CSV (plain or gzip) and validate it.
 
     Parameters
@@ -303,10 +406,12 @@ def load(path="stanford", sample_time=None) -> StanfordRun:
         File to read; ``"stanford"`` (default) resolves to :data:`STANFORD_PATH`. Gzip is detected
         from the file's magic bytes, not its name. A UTF-8 byte-order mark is ignored; the field
         separator may be a comma, a semicolon or a tab (detected from the header); the decimal
-        mark must be '.'.
+        mark must be '.'; extra columns are ignored.
     sample_time : float, optional
         Expected sample time [s] (e.g. the observer's): the log's median period must equal it
         within :data:`PERIOD_RTOL` (relative). None: not compared.
+    block_bytes : int, optional
+        Text per chunk read (:mod:`codegen.validation.csvlog`); the result does not depend on it.
 
     Returns
     -------
@@ -315,36 +420,26 @@ def load(path="stanford", sample_time=None) -> StanfordRun:
     Raises
     ------
     DatasetError
-        Missing or unreadable file (UTF-16, not UTF-8), missing or duplicated columns, non-numeric
-        values (a decimal comma included) or non-finite values, fewer than 2 rows; a time column
-        that is not strictly increasing, looks like milliseconds, has gaps (a step >
-        :data:`GAP_FACTOR` x the median period) or short steps (< :data:`SHORT_FACTOR` x), or whose
-        period differs from ``sample_time``; values outside physical ranges, or columns that
-        contradict one another physically (a unit mistake: degrees for radians, g, km/h, deg/s;
-        see :func:`_check_physics`). The message names the file, the column, what was found and
-        what is allowed.
+        Missing, unreadable or not a regular file (UTF-16, not UTF-8), missing or duplicated
+        columns, non-numeric values (a decimal comma included) or non-finite values, fewer than 2
+        rows; a time column that is not strictly increasing, looks like milliseconds, has gaps (a
+        step > :data:`GAP_FACTOR` x the median period) or short steps (< :data:`SHORT_FACTOR` x),
+        or whose period differs from ``sample_time``; values outside physical ranges, or columns
+        that contradict one another physically (a unit mistake: degrees for radians, g, km/h,
+        deg/s; see :func:`_check_physics`). The message names the file, the column, what was
+        found and what is allowed.
     """
+    parts = {c: [] for c in COLUMNS}
     p = _resolve(path)
-    if sample_time is not None:
-        try:
-            sample_time = float(sample_time)
-        except (TypeError, ValueError):
-            raise DatasetError(f"sample_time must be a number of seconds, got {sample_time!r}") from None
-        if not (math.isfinite(sample_time) and sample_time > 0):
-            raise DatasetError(f"sample_time must be finite and > 0 s, got {sample_time!r}")
-    header, table = csvlog.read_table(p, COLUMNS)
-    cols = {}
+    for cols in chunks(p, sample_time, block_bytes):
+        for c in COLUMNS:
+            parts[c].append(cols[c])
+    out = {}
     for c in COLUMNS:
-        a = csvlog.finite_column(p, table, header, c, UNITS[c])
-        if c in _LIMITS:
-            lo, hi = _LIMITS[c]
-            if a.min() < lo or a.max() > hi:
-                raise _range_error(p, c, a, lo, hi)
+        a = np.concatenate(parts[c])
         a.setflags(write=False)
-        cols[c] = a
-    csvlog.check_time(p, cols["t"], sample_time)
-    _check_physics(p, cols)
-    return StanfordRun(source=str(p), **cols)
+        out[c] = a
+    return StanfordRun(source=str(p), **out)
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,6 @@
 """The ``algebraic_uio`` family (Ichalal and Mammar 2015) in the pipeline: build, discrete step (CasADi and numpy), C API.
 
-:func:`build` runs model -> relative degrees and decoupling (:mod:`codegen.relative_degree`) ->
+:func:`build` runs model -> relative degrees and decoupling (:mod:`codegen.families.algebraic_uio.representation`) ->
 classical-UIO check -> LMI (39) -> certificates (numpy re-check, dense check, Gauss-Legendre
 B-stability, auxiliary system) and returns an :class:`AlgebraicUIOBuild`, which offers the interface
 :mod:`codegen.emit` needs (``step_function`` etc.).
@@ -497,19 +497,27 @@ def step_numpy(b: AlgebraicUIOBuild, z, u, y, rho):
 # ---- build -----------------------------------------------------------------------------------------------
 
 def _check_differentiators(lpv: LPVModel, dec: rdeg.Decoupling, settings: alg.AlgebraicSettings, config):
+    """Every differentiator the observer needs is declared, of a high enough order, and none is
+    declared for another signal: all the mistakes in one error."""
     need = {f"y_{o}": r for o, r in zip(lpv.definition.output_names, dec.relative_degrees)}
     need.update({str(s): max(dec.derivative_orders[s], 1) for s in dec.base})
+    problems = []
     for name, order in need.items():
         spec = settings.differentiators.get(name)
         if spec is None:
-            raise ModelDefinitionError(f"{config.source}: [design.differentiators.{name}] is missing (the observer "
-                                       f"needs derivatives of {name} up to order {order})")
-        if spec.order < order:
-            raise ModelDefinitionError(f"{config.source}: differentiator {name} has order {spec.order}, but the observer "
-                                       f"needs derivative {order} (relative degree / parameter derivatives)")
-    extra = set(settings.differentiators) - set(need)
+            problems.append(f"[design.differentiators.{name}] is missing (the observer needs derivatives of {name} up "
+                            f"to order {order}: {name} = {{ order = {order}, lipschitz = ... }}, the bound of its "
+                            f"derivative {order + 1})")
+        elif spec.order < order:
+            problems.append(f"[design.differentiators.{name}] order = {spec.order}, but the observer needs derivative "
+                            f"{order} (relative degree / parameter derivatives)")
+    extra = sorted(set(settings.differentiators) - set(need))
     if extra:
-        raise ModelDefinitionError(f"{config.source}: differentiators for unknown signals {sorted(extra)}")
+        problems.append(f"differentiators for signals the observer does not differentiate: "
+                        f"{', '.join(f'[design.differentiators.{k}]' for k in extra)} (it needs {', '.join(need)})")
+    if problems:
+        raise ModelDefinitionError(f"{config.source}: {len(problems)} differentiator setting(s) to fix: "
+                                   + "; ".join(problems))
 
 
 def build(config, tol: float | None = None, lpv: LPVModel | None = None) -> AlgebraicUIOBuild:
@@ -521,9 +529,14 @@ def build(config, tol: float | None = None, lpv: LPVModel | None = None) -> Alge
         settings = replace(settings, tol=tol)
     t0 = time.perf_counter()
     if lpv is None:
-        lpv = instantiate(config.load_model(), load_parameters(config.parameter_path))
+        lpv = instantiate(config.design_model(), load_parameters(config.parameter_path))
     if any(s.derived is not None for s in lpv.definition.scheduling):
-        raise ModelDefinitionError(f"{config.source}: derived scheduling signals are not supported by this family")
+        derived = [str(s.symbol) for s in lpv.definition.scheduling if s.derived is not None]
+        raise ModelDefinitionError(f"{config.source}: derived scheduling signal(s) {', '.join(derived)}: the algebraic "
+                                   f"UIO differentiates its scheduling signals as measured inputs (HOSMD of each); "
+                                   f"make each an input of the step (SchedulingSignal without derived=). The "
+                                   f"L-infinity UIO (family linf_uio) and the TS fuzzy UIO (ts_fuzzy_uio) take "
+                                   f"scheduling derived from the outputs")
     rdeg.check_structure(lpv)          # before anything evaluates the model's matrices
     boxes = rdeg.derivative_boxes(lpv)
     aux = alg.aux_design(lpv, boxes, settings.auxiliary, settings.auxiliary_alpha, settings.tol)

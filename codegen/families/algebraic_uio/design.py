@@ -1,6 +1,6 @@
 """Algebraic LPV unknown-input observers of arbitrary relative degree (Ichalal and Mammar 2015, Ichalal & Mammar 2015).
 
-Continuous observer (59)/(85)/(86), with everything derived by :mod:`codegen.relative_degree`::
+Continuous observer (59)/(85)/(86), with everything derived by :mod:`codegen.families.algebraic_uio.representation`::
 
     x_hat' = (A - L C - Q Mcal) x_hat + Q Y + L y,      d_hat = Gamma^-1 (Y - Mcal x_hat)   (or Gamma^+)
 
@@ -48,7 +48,7 @@ from scipy.linalg import matrix_balance
 from . import representation as rdeg
 from ...representation.bounds import range_bound
 from ...representation.differentiators import MAX_ORDER, HosmdSpec
-from ...emit.stepgen import CASADI_MODULES
+from ...emit.stepgen import lambdify
 from ...errors import (CertificateError, DiscretizationError, InfeasibleLMIError, ModelDefinitionError,
                       SolverError)
 from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
@@ -176,7 +176,7 @@ def matrix_polytope(mat: sp.Matrix, boxes: dict, label: str) -> MatrixPolytope:
 def _lambdify(symbols, expr, xp):
     expr = sp.sympify(expr)
     expr = expr.evalf(20) if not isinstance(expr, sp.MatrixBase) else expr.applyfunc(lambda e: e.evalf(20))
-    return sp.lambdify(symbols, expr, CASADI_MODULES if xp is ca else "numpy")
+    return lambdify(symbols, expr, xp)
 
 
 # ---- the classical polytopic UIO (11) --------------------------------------------------------------------

@@ -215,12 +215,15 @@ def check_structure(lpv: LPVModel) -> None:
                                   "recovered from output derivatives of their relative degree")
     if any(e.free_symbols for e in C):
         raise ModelDefinitionError(f"model {lpv.definition.name!r}: this family needs a constant output matrix C "
-                                   f"(Ichalal and Mammar 2015, eq. (1)); C depends on {sorted(map(str, set().union(*(e.free_symbols for e in C))))}")
+                                   f"(Ichalal and Mammar 2015, eq. (1)); C depends on {sorted(map(str, set().union(*(e.free_symbols for e in C))))}. "
+                                   f"The L-infinity UIO (family linf_uio) takes a scheduling-dependent C")
     if getattr(lpv, "Bw", None) is not None and lpv.Bw.shape[1] > 0:
-        raise ModelDefinitionError(f"model {lpv.definition.name!r}: derived inputs are not supported by this family")
+        raise ModelDefinitionError(f"model {lpv.definition.name!r}: derived inputs are not supported by the algebraic "
+                                   f"UIO. The L-infinity UIO (family linf_uio) takes them")
     if lpv.Du is not None and any(e != 0 for e in lpv.Du):
         raise ModelDefinitionError(f"model {lpv.definition.name!r}: outputs with a known-input feedthrough are not "
-                                   f"supported by this family (y = C x)")
+                                   f"supported by the algebraic UIO (y = C x). The L-infinity UIO (family linf_uio) "
+                                   f"takes y = C x + Du u")
 
 
 def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:

@@ -22,7 +22,6 @@ With noise: RMS errors in % of each signal's RMS after ``eval_after``.
 """
 from __future__ import annotations
 
-import importlib
 import math
 import tomllib
 
@@ -81,7 +80,7 @@ def simulate(b, scn: dict, duration: float | None = None, seed: int = 0) -> dict
     h = b.config.sample_time
     T = float(duration if duration is not None else scn.get("duration", 20.0))
     t = np.arange(int(round(T / h)) + 1) * h
-    module = importlib.import_module(f"model_defs.{b.config.model}")
+    module = b.config.load_model_module()
     d = b.lpv.definition
     out = {"t": t}
     sched = {}
@@ -225,7 +224,7 @@ def run(config, scenario_name: str, plant: str = "nominal", duration: float | No
               "max_abs_ay": float(np.abs(truth["a_y"]).max()) if "a_y" in truth else None,
               "noise": dict(scn.get("noise", {})), "units": dict(d.units),
               "relative_degrees": list(b.dec.relative_degrees), "alpha": b.settings.alpha,
-              "signals": {"t": t, "truth": {n: truth[n] for n in b.output_names}, "estimate": est}}
+              "signals": {"t": t, "truth": {n: truth[n] for n in b.output_names}, "estimate": est, "status": status}}
     # differentiator convergence (noise free runs): derivative estimates at t_j from the state history
     conv = {}
     for k_in, name in enumerate(b.input_names):

@@ -19,7 +19,7 @@ from ...certificate.contraction import ContractionMetric
 from ...design.precision import rate_for_backward_euler, required_margin
 from . import representation as icm
 from ...representation.differentiators import MAX_ORDER, HosmdSpec, hosmd_step_numpy, hosmd_step_sx
-from ...emit.stepgen import CASADI_MODULES, solve_unpivoted
+from ...emit.stepgen import lambdify, solve_unpivoted
 from ...errors import ModelDefinitionError
 from ...representation.polytope import sector_weights_product
 from ...project.settings import Rule, parse_settings, parse_table
@@ -144,15 +144,14 @@ class _Ops:
 def _lambdas(layout: StepLayout, xp):
     """Compiled premise, coupling and initial-state functions."""
     ts = layout.ts
-    mods = CASADI_MODULES if xp is ca else "numpy"
     states = ts.definition.states
     exo = ts.definition.exogenous
     prem = []
     for sub in ts.subsystems:
-        prem.append([sp.lambdify(states, sp.sympify(p.expr).subs(ts.switched), mods) for p in sub.premises])
-    zeta = [[sp.lambdify((states, exo), c.expr, mods) for c in sub.coupling] for sub in ts.subsystems]
+        prem.append([lambdify(states, sp.sympify(p.expr).subs(ts.switched), xp) for p in sub.premises])
+    zeta = [[lambdify((states, exo), c.expr, xp) for c in sub.coupling] for sub in ts.subsystems]
     outs = [sp.Symbol(n) for n in layout.measured]
-    init = {state: sp.lambdify(outs, e, mods) for state, e in layout.step.initial}
+    init = {state: lambdify(outs, e, xp) for state, e in layout.step.initial}
     return prem, zeta, init
 
 
@@ -290,7 +289,7 @@ def step_parts(ts: icm.InterconnectedTS, d: ICDesign, layout: StepLayout, z, y, 
         for j, (u, g) in enumerate(zip(sub.unknown_inputs, sub.ui_scales)):
             up = sum(sd.CBp[j, r] * resid[r] for r in range(sub.ny) if sd.CBp[j, r] != 0)
             if g != 1:
-                gval = sp.lambdify([s for s in states], g, CASADI_MODULES if xp is ca else "numpy")(
+                gval = lambdify([s for s in states], g, xp)(
                     *[vals[s] for s in states])
                 up = up / gval
             u_hat.append(up)
@@ -558,7 +557,7 @@ def build(config, tol: float | None = None) -> InterconnectedBuild:
         need = rate_for_backward_euler(required_margin(settings), config.sample_time, factor=1.0)
         settings = dataclasses.replace(settings, alpha=max(settings.alpha, need))
     t0 = time.perf_counter()
-    ts = icm.load(config.model, config.parameter_path)
+    ts = icm.load(config)
     step = step_settings(ts, table, config.sample_time, config.source)
     layout = StepLayout(ts, step)
     t1 = time.perf_counter()

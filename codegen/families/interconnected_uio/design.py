@@ -1,7 +1,7 @@
 """Two-stage interconnected LPV unknown-input observer of Sentouh et al. 2023 (NI-UIO), Sec. 4.
 
 Per subsystem (longitudinal bar, lateral check) of the T-S model (8) built by
-:mod:`codegen.interconnected`:
+:mod:`codegen.families.interconnected_uio.representation`:
 
 * decoupling (26): H = -B (C B)^+, after the matching condition (16) rank(CB) = rank(B);
   T = I + H C (B, C constant: see that module for the kappa' = v_x kappa input), so T' = 0;

@@ -139,6 +139,21 @@ class InterconnectedModelDefinition:
     def rhs(self) -> dict:
         return dict(self.dynamics)
 
+    def as_model_definition(self):
+        """The same equations as one system (:class:`codegen.model.ModelDefinition`), for the paths
+        that do not need the subsystems (the excitation scenario, campaign plants, logs): the
+        switched signals replaced by their definitions, the exogenous signals as known inputs
+        (the plant's; the observer assumes their nominal ``[exogenous]`` values)."""
+        from ...model import ModelDefinition
+        switched = {w.symbol: w.definition for w in self.switched}
+        rhs = self.rhs
+        return ModelDefinition(
+            name=self.name, states=self.states, known_inputs=tuple(self.exogenous),
+            unknown_inputs=tuple(self.unknown_inputs),
+            dynamics=sp.Matrix([sp.sympify(rhs[s]).subs(switched) for s in self.states]),
+            outputs=tuple((n, sp.sympify(e).subs(switched)) for n, e in self.outputs), scheduling=(),
+            parameters=tuple(self.parameters), units=dict(self.units), doc=self.doc)
+
 
 @dataclass(frozen=True)
 class CouplingSignal:
@@ -399,7 +414,9 @@ def build(model: InterconnectedModelDefinition, params: ParameterSet) -> Interco
                 if term == 0:
                     continue
                 if any(u in term.free_symbols for u in model.unknown_inputs):
-                    raise NotAffineError(f"output {nm!r}: unknown inputs may not reach the outputs (term {term})")
+                    raise NotAffineError(f"output {nm!r}: unknown inputs may not reach the outputs of the interconnected "
+                                         f"UIO (term {term}); the L-infinity UIO (family linf_uio) takes that "
+                                         f"feedthrough")
                 lin = [s for s in own if s in term.free_symbols]
                 if len(lin) == 1 and not (term / lin[0]).free_symbols:
                     C[k, own.index(lin[0])] += float(term / lin[0])
@@ -464,17 +481,22 @@ def _premise(name, g, model, state_box, switched, premise_bounds, source) -> Pre
     return Premise(name, g, rb.lower, rb.upper)
 
 
-def load(model_module: str, parameter_path) -> InterconnectedTS:
-    """Import ``model_defs.<model_module>.MODEL`` and build its representation."""
-    import importlib
-    try:
-        module = importlib.import_module(f"model_defs.{model_module}")
-    except ModuleNotFoundError:
-        raise ModelDefinitionError(f"no model module model_defs/{model_module}.py") from None
-    model = getattr(module, "MODEL", None)
+def _families() -> tuple:
+    from ... import families
+    return families.names()
+
+
+def load(config) -> InterconnectedTS:
+    """The representation of an observer file's model (``model = "NAME"`` of ``model_defs/`` or a
+    ``.py`` path beside the file), which must define ``MODEL = InterconnectedModelDefinition(...)``."""
+    model = config.load_definition()
     if not isinstance(model, InterconnectedModelDefinition):
-        raise ModelDefinitionError(f"model_defs/{model_module}.py does not define MODEL = InterconnectedModelDefinition(...)")
-    return build(model, load_parameters(parameter_path))
+        raise ModelDefinitionError(
+            f"{config.model_path}: the interconnected UIO (family interconnected_uio) needs the states partitioned "
+            f"into subsystems: MODEL = InterconnectedModelDefinition(subsystems=..., ...) "
+            f"(codegen.families.interconnected_uio.representation); MODEL is a {type(model).__name__}, one system "
+            f"of equations, which the other families take ({', '.join(f for f in _families() if f != 'interconnected_uio')})")
+    return build(model, load_parameters(config.parameter_path))
 
 
 def vertex_check(ts: InterconnectedTS, samples: int = 200, seed: int = 0) -> float:

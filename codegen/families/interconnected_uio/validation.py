@@ -483,7 +483,7 @@ def params_toml(vehicle: int = 1, identified: dict | None = None) -> str:
                   f"R^2 {r2['R']!r} (the set's R_w {p.R_w!r})")
     drive = "front" if p.T_se == 1.0 else "rear" if p.T_se == 0.0 else "split"
     return f"""# CommonRoad parameter set {vehicle} ({VEHICLE_NAMES[vehicle]}) for the Sentouh et al. 2023 model, derived by
-# codegen.validation.satory.params_toml: set values + tyre/aligning coefficients identified on a calibration
+# codegen.families.interconnected_uio.validation.params_toml: set values + tyre/aligning coefficients identified on a calibration
 # drive ({CALIBRATION_LAPS} lap of the oval, mu = 1; not the validation track). Do not edit by hand (a test
 # regenerates it).
 
@@ -588,7 +588,7 @@ def run(name: str, mu: float = 1.0, plant: str = "commonroad", duration: float |
             truth = simulate_commonroad(track, mu, int(vehicle), _l_s(config), duration, 1.0 / config.sample_time,
                                         progress=progress)
         elif plant == "model":
-            ts = interconnected.load(config.model, config.parameter_path)
+            ts = interconnected.load(config)
             meta = load_parameters(config.parameter_path).meta
             vehicle = meta.get("commonroad_vehicle")
             if vehicle in ("1", "2", "3"):
@@ -613,7 +613,8 @@ def run(name: str, mu: float = 1.0, plant: str = "commonroad", duration: float |
             "max_abs_ax": float(np.abs(truth["a_x"]).max()), "min_ax": float(truth["a_x"].min()),
             "max_abs_ay": float(np.abs(truth["a_y"]).max()),
             "speed_range": [float(truth["v_x"].min()), float(truth["v_x"].max())],
-            "duration_s": float(truth["t"][-1]), "signals": {"t": truth["t"], "truth": truth, "estimate": est}}
+            "duration_s": float(truth["t"][-1]),
+            "signals": {"t": truth["t"], "truth": truth, "estimate": est, "status": status}}
 
 
 def format_table(results: list) -> str:
@@ -709,7 +710,7 @@ def periodic_lap(name: str, mu: float = 1.0) -> dict:
     from . import representation as interconnected
     from ...model import load_parameters
     config = observers.get(name) if isinstance(name, str) else name
-    ts = interconnected.load(config.model, config.parameter_path)
+    ts = interconnected.load(config)
     vehicle = load_parameters(config.parameter_path).meta.get("commonroad_vehicle")
     if vehicle in ("1", "2", "3"):
         from ...validation.commonroad_plant import vehicle_parameters

@@ -186,7 +186,7 @@ def _settings(config: ObserverConfig, lyapunov: str | None = None) -> linf_uio.L
         linf_uio.LinfDesignSettings, config.design, source=config.source, section="design",
         aliases={"gain_bound_times_sample_time": Alias("gain_bound", lambda v: v / config.sample_time, default=1.0)},
         **({"lyapunov": lyapunov} if lyapunov else {}))
-    states = [str(x) for x in config.load_model().states]
+    states = [str(x) for x in config.design_model().states]
     try:
         linf_uio.performance_matrix(states, settings.performance)
     except ValueError as exc:
@@ -201,7 +201,7 @@ def _settings(config: ObserverConfig, lyapunov: str | None = None) -> linf_uio.L
 
 
 def representation(config: ObserverConfig):
-    lpv = instantiate(config.load_model(), load_parameters(config.parameter_path))
+    lpv = instantiate(config.design_model(), load_parameters(config.parameter_path))
     if config.polytope == "taylor_reduced":
         poly = polytope.taylor_reduced_polytope(lpv, config.rate_bounds)
         err = polytope.taylor_error(lpv, poly)

@@ -40,7 +40,7 @@ from ...design import canonical, lmi
 from ...errors import CertificateError, ConfigurationError, DiscretizationError, SolverError, UILoopError
 from ...design.lmi import LMIProblem
 from ...representation.polytope import Polytope, sector_weights_product
-from ...emit.stepgen import CASADI_MODULES, TAIL, clamp, const_times, solve_unpivoted, sum_in_order
+from ...emit.stepgen import TAIL, lambdify, clamp, const_times, solve_unpivoted, sum_in_order
 from .design import ui_feedthrough, ui_scaling
 
 
@@ -104,8 +104,7 @@ class ObserverData:
 
     def _derived_functions(self, xp):
         args = (*self.output_symbols, *self.raw_signals)
-        mods = CASADI_MODULES if xp is ca else "numpy"
-        return {sym: sp.lambdify(args, expr, mods) for sym, expr in self.derived}
+        return {sym: lambdify(args, expr, xp) for sym, expr in self.derived}
 
     @cached_property
     def _derived_numpy(self) -> dict:
@@ -120,8 +119,7 @@ class ObserverData:
         """All derived inputs as one function, common subexpressions shared (one slip inversion
         serves several inputs)."""
         args = (*self.output_symbols, *self.raw_signals)
-        mods = CASADI_MODULES if xp is ca else "numpy"
-        return sp.lambdify(args, [expr for _, expr in self.derived_inputs], mods, cse=True)
+        return lambdify(args, [expr for _, expr in self.derived_inputs], xp, cse=True)
 
     @cached_property
     def _derived_inputs_numpy(self):
@@ -175,8 +173,7 @@ def premise_of_signal(poly: Polytope, rho, xp=np):
     rho = list(rho) if isinstance(rho, (list, tuple, np.ndarray)) and np.ndim(rho) > 0 else [rho]
     if xp is np:
         return [f(*rho) for f in poly.premise_functions]
-    mods = CASADI_MODULES
-    return [sp.lambdify(poly.signals, p.expr, mods)(*rho) for p in poly.premises]
+    return [lambdify(poly.signals, p.expr)(*rho) for p in poly.premises]
 
 
 def step_numpy(data: ObserverData, z, u, y, rho):
@@ -311,10 +308,9 @@ def step_casadi(data: ObserverData, name: str) -> ca.Function:
         lam, V, W0, W1 = fact
         # 1/(1 + lam theta(rho)) as one cancelled rational function of rho, one division each:
         # it does not wait for theta's own division
-        mods = CASADI_MODULES
         num_den = [sp.fraction(sp.cancel(1 / (1 + sp.Float(float(l), 17) * poly.premises[0].expr)))
                    for l in lam]
-        scale = [sp.lambdify(poly.signals, n_, mods)(*clamped) / sp.lambdify(poly.signals, d_, mods)(*clamped)
+        scale = [lambdify(poly.signals, n_)(*clamped) / lambdify(poly.signals, d_)(*clamped)
                  for n_, d_ in num_den]
         SW = ca.vertcat(*[scale[k] * (ca.DM(W0[k:k + 1]) + th * ca.DM(W1[k:k + 1])) for k in range(nx)])
         N = const_times(canonical.matmul(left_N, V), SW)

@@ -20,9 +20,10 @@ def truth_commonroad(config, scn, progress=None):
             "v_y": gt.v_y}
 
 
-def baselines(config, truth, noisy) -> dict:
+def baselines(config, truth, noisy, traces: dict | None = None) -> dict:
     """The source repository's linear KF and the Fiala EKF (generated from ``model_defs/baselines.py``
-    with the observer's car: axle stiffness = 2 x tyre stiffness, mu = 1), on the same noisy measurements."""
+    with the observer's car: axle stiffness = 2 x tyre stiffness, mu = 1), on the same noisy measurements.
+    ``traces``: a dict that receives each baseline's estimates ({name: {"beta": ..., "r": ...}}), for plots."""
     from ...validation import stanford
     car_ = car(config)
     run = stanford.StanfordRun(t=truth["t"], vx=truth["v_x"], vy=np.tan(truth["beta"]) * truth["v_x"],
@@ -35,6 +36,8 @@ def baselines(config, truth, noisy) -> dict:
                       ("ekf", stanford.ekf(run, car_, stanford.EKFConfig(mu=1.0)))):
         out[name] = {"beta": signal_stats(truth["beta"], res.beta, truth["t"], angle=True),
                      "r": signal_stats(truth["r"], res.r, truth["t"], angle=True)}
+        if traces is not None:
+            traces[name] = {"beta": res.beta, "r": res.r}
     return out
 
 
@@ -71,11 +74,13 @@ def run(config, scenario, plant: str = "nominal", duration: float | None = None,
     for i, sig in enumerate(obs.state_names):
         if sig in truth:
             table[sig] = signal_stats(truth[sig], out[:, i], truth["t"], angle=d.units.get(sig, "").startswith("rad"))
-    return {"observer": table, "baselines": baselines(config, truth, noisy),
+    peers = {}
+    return {"observer": table, "baselines": baselines(config, truth, noisy, peers),
             "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)),
             "max_abs_ay": float(np.abs(truth["a_y"]).max()), "plant": plant, "plant_model": plant_model,
             "scenario": scn.name,
-            "signals": {"t": truth["t"], "truth": truth, "estimate": {s: out[:, i] for i, s in enumerate(obs.state_names)}},
+            "signals": {"t": truth["t"], "truth": truth, "estimate": {s: out[:, i] for i, s in enumerate(obs.state_names)},
+                        "status": status, "baselines": peers},
             "units": dict(d.units)}
 
 

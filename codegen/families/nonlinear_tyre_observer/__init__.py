@@ -18,6 +18,7 @@ class NonlinearTyreObserver(Family):
     citation = "DMVT certificate after Nguyen, Dinh, Guerra, Pan, IEEE/ASME T-Mech 26(3), 2021; Fiala tyre (Pacejka 2012, Sec. 3.2)"
     short_citation = "nonlinear-tyre DMVT"
     observer_keys = {}
+    bounds_settings = ("bounds_rel_tol",)
     demo_scenarios = ()
     example = "stanford_sideslip_nonlinear_tyre"
 
@@ -41,6 +42,16 @@ class NonlinearTyreObserver(Family):
                 f"sqrt(V) contracts by {e['contraction_per_step']:.6f}/step (time constant {e['time_constant_s']:.3g} s); "
                 f"l2 gain {e['gamma_deg']:.4g} deg, RMS beta error <= {e['bound_deg_at_levels']:.4g} deg at the noise "
                 f"levels"]
+
+    def log_peers(self, config, run) -> dict:
+        """The EKF and UKF of the same symbolic model and parameter file
+        (:func:`codegen.validation.stanford.nonlinear_tyre_peers`), for an observer of that model
+        (``model_defs/single_track_nonlinear_tyre.py`` or an unedited copy of it)."""
+        from ...project.observer_file import builtin_model
+        from ...validation import stanford
+        if config.load_model() != builtin_model("single_track_nonlinear_tyre").MODEL:
+            return {}
+        return {k: v.beta for k, v in stanford.nonlinear_tyre_peers(run, config.parameter_path).items()}
 
     def fit(self, config, path, samples: str, folds: int = 0) -> dict:
         from .fit import fit

@@ -44,7 +44,7 @@ from ...certificate.artifact import artifact_head, significant, solver_certifica
 from ...model import load_parameters
 from ...project.settings import Rule, parse_settings, setting
 from ...design.precision import margin_field, precision_field
-from ...emit.stepgen import CASADI_MODULES
+from ...emit.stepgen import lambdify
 from . import design as dsn
 from .representation import TyreRepresentation, represent
 
@@ -93,10 +93,11 @@ class NonlinearTyreSettings:
             if len(rng) != 2 or not rng[0] <= 1.0 <= rng[1]:
                 raise ValueError(f"{key} = {list(rng)} must be [lo, hi] with lo <= 1 <= hi (factors on the "
                                  f"parameter file's value)")
-        for key in ("sigma_force_front", "sigma_force_rear"):
-            if getattr(self, key) is None:
-                raise ValueError(f"{key} is required: the level of the axle force the tyre model misses [N] "
-                                 f"(`uiogen fit` identifies it from a log with a sideslip reference)")
+        missing = [key for key in ("sigma_force_front", "sigma_force_rear") if getattr(self, key) is None]
+        if missing:
+            raise ValueError(f"{' and '.join(missing)} {'is' if len(missing) == 1 else 'are'} required: the level of "
+                             f"the axle force the tyre model misses [N] (`uiogen fit` identifies it from a log with a "
+                             f"sideslip reference)")
 
     @property
     def given_gains(self) -> bool:
@@ -115,10 +116,9 @@ class NonlinearTyreSettings:
 # --- the step ----------------------------------------------------------------------------------------
 
 def _functions(rep: TyreRepresentation, xp):
-    mods = CASADI_MODULES if xp is ca else "numpy"
     args = rep.symbols
-    return ([sp.lambdify(args, e, mods) for e in rep.f], sp.lambdify(args, rep.a_y, mods),
-            [sp.lambdify(args, rep.rho * e, mods) for e in rep.sliding], [sp.lambdify(args, t, mods) for t in rep.slips])
+    return ([lambdify(args, e, xp) for e in rep.f], lambdify(args, rep.a_y, xp),
+            [lambdify(args, rep.rho * e, xp) for e in rep.sliding], [lambdify(args, t, xp) for t in rep.slips])
 
 
 def step_parts(rep, L, Ts, z, u, y, rho, fns, xp=np):

@@ -92,7 +92,9 @@ def _check_structure(model, source):
             or [n for n, _ in model.outputs] != ["a_y", str(model.states[1])]:
         raise ModelDefinitionError(f"{source}: model {model.name!r}: the nonlinear-tyre observer needs states "
                                    f"(v_y, r), known inputs (delta first, then any measured signal the tyre laws "
-                                   f"read, e.g. a_x), one scheduling signal (v_x) and outputs (a_y, r)")
+                                   f"read, e.g. a_x), one scheduling signal (v_x) and outputs (a_y, r). Another "
+                                   f"structure: the L-infinity UIO (family linf_uio) takes outputs C(rho) x + "
+                                   f"Du(rho) u, the TS fuzzy UIO (ts_fuzzy_uio) tyre laws of measured states")
 
 
 def _axle_bounds(k, a, subs, measured_boxes, rho, delta, d_box, t_sym, vx, vy, stiffness_range, friction_range,

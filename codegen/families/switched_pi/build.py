@@ -2,7 +2,7 @@
 
 :func:`build_switched_pi` is what :func:`codegen.pipeline.build` runs for a configuration of this
 family; :class:`SwitchedPIBuild` offers the interface :mod:`codegen.emit` and the validation use
-(the same as :class:`codegen.pipeline.TSFuzzyBuild`).
+(the same as :class:`codegen.families.ts_fuzzy_uio.build.TSFuzzyBuild`).
 """
 from __future__ import annotations
 
@@ -206,7 +206,7 @@ def build(config: ObserverConfig, tol: float | None = None) -> SwitchedPIBuild:
     """Menhour et al. 2014: modes from the model and the rule -> A1/A2 -> LMIs (20) -> re-check, H-inf check -> ZOH step."""
     settings = settings_of(config, tol)
     t0 = time.perf_counter()
-    sm = switched.build(config.load_model(), load_parameters(config.parameter_path), config.switching, config.source)
+    sm = switched.build(config.design_model(), load_parameters(config.parameter_path), config.switching, config.source)
     t1 = time.perf_counter()
     design = switched_pi.design(sm, settings)
     t2 = time.perf_counter()

@@ -391,12 +391,13 @@ def scheduling_inputs(sm: SwitchedModel) -> tuple:
 
 def _premise_functions(sm: SwitchedModel, xp):
     import sympy as sp_
+    from ...emit.stepgen import lambdify
     d = sm.definition
     sched = {str(g.symbol): g.symbol for g in d.scheduling}
     args = (*d.states, *d.known_inputs, *(sched[n] for n in scheduling_inputs(sm)))
-    mods = [{"Abs": ca.fabs, "Max": ca.fmax, "Min": ca.fmin, "sqrt": ca.sqrt, "atan": ca.atan,
-             "exp": ca.exp, "log": ca.log}, "math"] if xp is ca else "math"
-    return [sp_.lambdify(args, a.premise, mods) for a in sm.rule.axes]
+    if xp is ca:
+        return [lambdify(args, a.premise) for a in sm.rule.axes]
+    return [sp_.lambdify(args, a.premise, "math") for a in sm.rule.axes]
 
 
 def mode_indicators(sm: SwitchedModel, premise_values, xp=np) -> list:

@@ -281,13 +281,15 @@ def build(model: ModelDefinition, params: ParameterSet, raw_rule: dict, source: 
             mats.append(np.array(M.subs(subs), dtype=float))
         if lpv.Du is not None and len(lpv.Du) and np.any(np.array(lpv.Du.subs(subs), dtype=float) != 0):
             raise ModelDefinitionError(f"model {model.name!r}: outputs with known-input feedthrough are not "
-                                       f"supported by the switched PI observer")
+                                       f"supported by the switched PI observer (Menhour et al. 2014, eq. (2): "
+                                       f"y = C x). The L-infinity UIO (family linf_uio) takes y = C x + Du u")
         points.append(point)
     C = np.array(C)
     if np.ptp(C, axis=0).max(initial=0.0) != 0.0:
         raise ModelDefinitionError(
             f"model {model.name!r}: the output matrix C differs between modes; the observer's "
-            f"coordinates z = T_i x would jump at a switch, which the paper's proof does not cover")
+            f"coordinates z = T_i x would jump at a switch, which the paper's proof does not cover. The L-infinity "
+            f"UIO (family linf_uio) takes a scheduling-dependent C")
     L = np.array([[1.0 if str(s) == p else 0.0 for s in model.states] for p in rule.performance])
     boxes = {}
     used = set().union(*(a.premise.free_symbols for a in rule.axes))

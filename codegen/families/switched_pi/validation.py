@@ -65,7 +65,7 @@ def roll_params_toml(vehicle: int = 2) -> str:
     cf, cr = tyre_cornering_stiffness(p, fzf), tyre_cornering_stiffness(p, fzr)
     eq = roll_equivalents(p)
     return f"""# Roll-augmented single-track model (Menhour et al. 2014) of CommonRoad parameter set {vehicle} ({VEHICLE_NAMES[vehicle]}),
-# derived number by number by codegen.validation.banked_road.roll_params_toml (a test re-derives it).
+# derived number by number by codegen.families.switched_pi.validation.roll_params_toml (a test re-derives it).
 
 [meta]
 source = "commonroad-vehicle-models parameters_vehicle{vehicle} (vehicle_dynamics_mb), linear roll equivalents"
@@ -279,7 +279,7 @@ def run_scenario(config, scenario: str, plant: str = "nominal", duration: float 
             "max_abs_ax": float(np.abs(tr["a_x"]).max()), "plant": plant, "plant_model": tr["plant_model"],
             "scenario": scenario, "ratio_beta_to_bank": ratio, "paper_ratio": PAPER_RATIO[rule],
             "mode_occupancy": occupancy, "Menhour et al. 2014": True,
-            "signals": {"t": tr["t"], "truth": tr, "estimate": est}, "units": units}
+            "signals": {"t": tr["t"], "truth": tr, "estimate": est, "status": status}, "units": units}
 
 
 def format_table(result: dict) -> str:

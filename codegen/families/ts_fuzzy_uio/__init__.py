@@ -19,6 +19,7 @@ class TSFuzzyUIO(Family):
     citation = "Nguyen, Dinh, Guerra, Pan, IEEE/ASME T-Mech 26(3), 2021"
     short_citation = "Nguyen et al. 2021"
     observer_keys = {}
+    bounds_settings = ("bounds_rel_tol", "bounds_max_boxes")
     demo_scenarios = ("random_trajectory_accel", "circular_path_normal", "time_varying_grip_normal")
     example = "ts_fuzzy_uio"
 

@@ -173,7 +173,7 @@ def build(config: ObserverConfig, tol: float | None = None) -> TSFuzzyBuild:
     if required_margin(settings):       # precision = "float32": (27) imposes lambda <= 1 - float32_margin
         settings = dataclasses.replace(settings, decay=min(settings.decay, 1.0 - required_margin(settings)))
     t0 = time.perf_counter()
-    ts = ts_fuzzy.build(config.load_model(), load_parameters(config.parameter_path), config.sample_time,
+    ts = ts_fuzzy.build(config.design_model(), load_parameters(config.parameter_path), config.sample_time,
                         rel_tol=settings.bounds_rel_tol, max_boxes=settings.bounds_max_boxes,
                         before_bounds=lambda n, nx, ny, nphi: ts_fuzzy_uio.size_guard(n, nx, ny, 1, settings,
                                                                                       config.source))

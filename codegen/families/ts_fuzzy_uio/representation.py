@@ -26,7 +26,7 @@ import sympy as sp
 
 from ...design import canonical
 from ...representation.bounds import RangeBound, derivative, range_bound
-from ...emit.stepgen import CASADI_MODULES
+from ...emit.stepgen import lambdify
 from ...errors import ModelDefinitionError, NotAffineError, SchedulingBoundsError
 from ...model import ModelDefinition, ParameterSet, parameter_substitution
 from ...representation.polytope import (Premise, affine_decomposition, memberships, nonlinear_factors,
@@ -104,12 +104,11 @@ class TSFuzzyModel:
     def functions(self, xp) -> tuple:
         """(f, premises, phi) as callables of (measured..., u...) / (x..., u...) for numpy or CasADi."""
         import casadi as ca
-        mods = CASADI_MODULES if xp is ca else "numpy"
         meas_args = (*self.measured, *self.definition.known_inputs)
         state_args = (*self.definition.states, *self.definition.known_inputs)
-        return ([sp.lambdify(meas_args, e, mods) for e in self.f],
-                [sp.lambdify(meas_args, p.expr, mods) for p in self.premises],
-                [sp.lambdify(state_args, e, mods) for e in self.phi])
+        return ([lambdify(meas_args, e, xp) for e in self.f],
+                [lambdify(meas_args, p.expr, xp) for p in self.premises],
+                [lambdify(state_args, e, xp) for e in self.phi])
 
     @cached_property
     def numpy_functions(self) -> tuple:
@@ -152,9 +151,38 @@ def _output_selection(model: ModelDefinition) -> tuple:
         if expr not in model.states:
             raise ModelDefinitionError(
                 f"model {model.name!r}: output {name!r} = {expr} is not a state; the TS fuzzy UIO needs "
-                f"outputs that measure states directly (its premises are measured states)")
+                f"outputs that measure states directly (its premises are measured states). The L-infinity UIO "
+                f"(family linf_uio) takes outputs y = C(rho) x + Du(rho) u")
         measured.append(expr)
     return tuple(measured)
+
+
+def measured_scheduling(model: ModelDefinition) -> ModelDefinition:
+    """The model with every derived scheduling signal replaced by its expression in the measured
+    outputs, which this family's outputs make measured states (a speed computed from a measured
+    speed is that state): the TS premises are measured states and known inputs.
+
+    Raises
+    ------
+    ModelDefinitionError
+        a scheduling signal that is an input of its own (not derived from the outputs), naming
+        what to write instead and the family that takes it.
+    """
+    raw = [str(g.symbol) for g in model.scheduling if g.derived is None]
+    if raw:
+        raise ModelDefinitionError(
+            f"model {model.name!r}: scheduling signal(s) {', '.join(raw)} given as inputs of their own; the TS fuzzy "
+            f"UIO's premises are measured states and known inputs: make each a state with an output, a known input, "
+            f"or derived from the measured outputs (SchedulingSignal(..., derived=y_NAME)). The L-infinity UIO "
+            f"(family linf_uio) takes scheduling inputs")
+    if not model.scheduling:
+        return model
+    import dataclasses
+    outputs = {sp.Symbol(f"y_{n}"): sp.sympify(e) for n, e in model.outputs}
+    on_states = {g.symbol: sp.sympify(g.derived).subs(outputs) for g in model.scheduling}
+    return dataclasses.replace(model, dynamics=sp.Matrix(model.dynamics).subs(on_states),
+                               outputs=tuple((n, sp.sympify(e).subs(on_states)) for n, e in model.outputs),
+                               scheduling=())
 
 
 def split_consequents(model: ModelDefinition, subs: dict) -> dict:
@@ -168,8 +196,12 @@ def split_consequents(model: ModelDefinition, subs: dict) -> dict:
     F = sp.Matrix(model.dynamics).subs(subs)
     Dv = F.jacobian(sp.Matrix(d)) if d else sp.zeros(len(x), 0)
     if any(e.free_symbols for e in Dv):
+        from ...model.substitution import offer
+        nonlinear = [u for j, u in enumerate(d) if any(u in e.free_symbols for e in Dv[:, j])]
         raise NotAffineError(f"model {model.name!r}: the unknown inputs must enter with a constant matrix "
-                             f"(D_v depends on {sorted(map(str, set().union(*(e.free_symbols for e in Dv))))})")
+                             f"(D_v depends on {sorted(map(str, set().union(*(e.free_symbols for e in Dv))))}). The "
+                             f"L-infinity UIO (family linf_uio) takes a scheduling-dependent D(rho)"
+                             + "".join(f"; {offer(model, u)}" for u in nonlinear))
     drift = sp.expand(F - Dv * sp.Matrix(d))
     Av = sp.zeros(len(x), len(x))
     fv = sp.zeros(len(x), 1)
@@ -209,6 +241,7 @@ def build(model: ModelDefinition, params: ParameterSet, sample_time: float,
     """
     if not sample_time > 0:
         raise ModelDefinitionError(f"sample time must be positive, got {sample_time}")
+    model = measured_scheduling(model)
     subs = parameter_substitution(model, params)
     parts = split_consequents(model, subs)
     x = tuple(model.states)

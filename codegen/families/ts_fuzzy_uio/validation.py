@@ -86,7 +86,7 @@ def run(config, scenario, plant: str = "nominal", duration: float | None = None,
             "samples": int(len(status)), "max_abs_ay": float(np.abs(truth["a_y"]).max()), "plant": plant,
             "plant_model": plant_model, "scenario": scn.name,
             "paper_table": PAPER_TABLE_II.get(scn.name),
-            "signals": {"t": truth["t"], "truth": truth, "estimate": estimates}, "units": units}
+            "signals": {"t": truth["t"], "truth": truth, "estimate": estimates, "status": status}, "units": units}
 
 
 # How each plant compares with the paper's column (its Table II is from a 15-DOF AMESim vehicle).

@@ -1,0 +1,383 @@
+"""Dimensional analysis of a model, and the plausibility of a parameter file's numbers.
+
+A model declares the units of its signals (``ModelDefinition.units``: states, inputs, outputs,
+scheduling signals; parameters may be declared too). Every equation must be dimensionally
+consistent: each term of ``x_i' = f_i`` has the unit of ``x_i`` per second, each output the unit
+of the output, the argument of ``sin``, ``tanh``, ``exp`` ... is dimensionless, the terms of a sum
+agree. Those rules are linear in the (log-)dimensions of the parameters, so :func:`infer` solves
+them exactly (rational arithmetic) for every parameter's dimension in the base quantities
+length, mass and time. Angles are dimensionless, as in SI.
+
+Equations alone fix only *relative* dimensions when the model has a scaling symmetry (a
+single-track model is unchanged if mass and every stiffness are scaled together): the front and
+the rear cornering stiffness then still have the same dimension, and one declared parameter
+unit (``units={"M": "kg", ...}``) fixes all of them.
+
+:func:`check_plausibility` uses this on a parameter file, before any design:
+
+* a parameter whose unit the model declares is checked against the plausible range of that
+  quantity for a road vehicle (:data:`PLAUSIBLE`), in SI units (a dimension inferred from the
+  equations alone does not say what a parameter is: a drag coefficient can have the dimension
+  of a mass, so inferred dimensions serve the next check only);
+* two parameters of the same kind (the same dimension and the same name up to an axle or side
+  suffix: ``C_f``/``C_r``, ``l_f``/``l_r``, ``K_fl``/``K_rr``) whose values differ by
+  :data:`SAME_KIND_RATIO` or more are refused with the ratio: a kN beside an N, a mm beside an m.
+
+A value that is right although it looks wrong is accepted by naming it in the parameter file's
+``[plausibility] accept = ["C_f", ...]``.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from fractions import Fraction
+
+import sympy as sp
+
+from ..errors import ModelDefinitionError
+
+BASE = ("L", "M", "T")          # length [m], mass [kg], time [s]
+
+# unit symbol -> ((L, M, T) exponents, factor to SI); angles and "-" are dimensionless
+_UNITS = {
+    "m": ((1, 0, 0), 1.0), "mm": ((1, 0, 0), 1e-3), "cm": ((1, 0, 0), 1e-2), "km": ((1, 0, 0), 1e3),
+    "kg": ((0, 1, 0), 1.0), "t": ((0, 1, 0), 1e3),
+    "s": ((0, 0, 1), 1.0), "ms": ((0, 0, 1), 1e-3), "min": ((0, 0, 1), 60.0), "h": ((0, 0, 1), 3600.0),
+    "N": ((1, 1, -2), 1.0), "kN": ((1, 1, -2), 1e3), "Pa": ((-1, 1, -2), 1.0), "W": ((2, 1, -3), 1.0),
+    "J": ((2, 1, -2), 1.0), "Hz": ((0, 0, -1), 1.0), "rpm": ((0, 0, -1), 2 * 3.141592653589793 / 60),
+    "rad": ((0, 0, 0), 1.0), "mrad": ((0, 0, 0), 1e-3), "deg": ((0, 0, 0), 3.141592653589793 / 180),
+    "rev": ((0, 0, 0), 2 * 3.141592653589793), "%": ((0, 0, 0), 1e-2),
+}
+_SPELLING = {"²": "^2", "³": "^3", "·": " ", "*": " ", "Nm": "N m", "°": "deg"}
+
+#: plausible ranges of road-vehicle parameters, by dimension (L, M, T), in SI units
+PLAUSIBLE = {
+    (0, 1, 0): ("mass", "kg", 0.5, 1.0e5),
+    (2, 1, 0): ("moment of inertia", "kg m^2", 1.0e-5, 1.0e6),
+    (1, 0, 0): ("length", "m", 1.0e-4, 100.0),
+    (1, 1, -2): ("force (or force per radian)", "N", 1.0, 1.0e7),
+    (2, 1, -2): ("torque (or torque per radian)", "N m", 1.0e-4, 1.0e7),
+    (2, 1, -1): ("rotational damping", "N m s", 1.0e-5, 1.0e5),
+    (1, 0, -2): ("acceleration", "m/s^2", 0.1, 100.0),
+}
+#: a ratio this large between two parameters of the same kind is refused (a kN beside an N)
+SAME_KIND_RATIO = 100.0
+
+# axle / side / wheel suffixes: parameters differing only by one are of the same kind
+_SUFFIX = re.compile(r"^(?P<stem>.+?)_?(?:f|r|front|rear|fl|fr|rl|rr|left|right|1|2)$")
+
+
+class DimensionError(ModelDefinitionError):
+    """A unit string the analysis cannot read."""
+
+
+def unit(text: str) -> tuple:
+    """((L, M, T) exponents, factor to SI) of a unit such as ``"N m s/rad"``, ``"kg m^2"``,
+    ``"m/s^2"``, ``"1/m"``, ``"kN/rad"``."""
+    u = str(text).strip()
+    for a, b in _SPELLING.items():
+        u = u.replace(a, b)
+    if u in ("", "-", "1"):
+        return (0, 0, 0), 1.0
+    num, _, den = u.partition("/")
+    dims, factor = [0, 0, 0], 1.0
+    for part, sign in ((num, 1), (den, -1)):
+        for token in part.replace("(", " ").replace(")", " ").split():
+            m = re.fullmatch(r"([A-Za-z%]+|1)(?:\^?(-?\d+))?", token)
+            if not m or (m.group(1) not in _UNITS and m.group(1) != "1"):
+                raise DimensionError(f"unit {text!r}: cannot read {token!r} (known: {', '.join(_UNITS)})")
+            power = int(m.group(2)) if m.group(2) else 1
+            d, f = _UNITS.get(m.group(1), ((0, 0, 0), 1.0))
+            for k in range(3):
+                dims[k] += sign * power * d[k]
+            factor *= f ** (sign * power)
+    return tuple(dims), factor
+
+
+def parse_unit(text: str) -> tuple:
+    """(L, M, T) exponents of a unit (:func:`unit`)."""
+    return unit(text)[0]
+
+
+def format_dims(d) -> str:
+    if d is None:
+        return "undetermined"
+    parts = [f"{u}^{int(e) if Fraction(e).denominator == 1 else e}" if e != 1 else u
+             for u, e in zip(("m", "kg", "s"), d) if e != 0]
+    return " ".join(parts) or "dimensionless"
+
+
+@dataclass
+class _Form:
+    """A dimension as const + sum coef[p] * dim(p): one vector per base, the same coefficients."""
+
+    const: tuple = (0, 0, 0)
+    coef: dict = field(default_factory=dict)
+
+    def __add__(self, other: "_Form") -> "_Form":
+        coef = dict(self.coef)
+        for p, c in other.coef.items():
+            coef[p] = coef.get(p, 0) + c
+        return _Form(tuple(a + b for a, b in zip(self.const, other.const)), {p: c for p, c in coef.items() if c})
+
+    def scale(self, k) -> "_Form":
+        return _Form(tuple(k * a for a in self.const), {p: k * c for p, c in self.coef.items() if k * c})
+
+    def __sub__(self, other: "_Form") -> "_Form":
+        return self + other.scale(-1)
+
+    @property
+    def trivial(self) -> bool:
+        return not self.coef and not any(self.const)
+
+
+@dataclass
+class Analysis:
+    """What :func:`infer` found: each parameter's dimension (None: not fixed by the model), which
+    parameters share a dimension even where it is not fixed, and the model's inconsistencies."""
+
+    dims: dict                 # {parameter name: (L, M, T) as Fractions, or None}
+    same: list                 # [(p, q)] parameters whose dimensions are equal in every solution
+    inconsistencies: list      # [text]
+
+
+def _dimensionless(f: _Form, where: str, constraints: list) -> None:
+    if not f.trivial:
+        constraints.append((f, where))
+
+
+def _form(expr, known: dict, params: set, constraints: list, where: str) -> _Form:
+    """The dimension of ``expr`` as a form in the parameters' unknown dimensions; rules that must
+    hold (sum terms equal, function arguments dimensionless) go to ``constraints``."""
+    if expr.is_Number or expr in (sp.pi, sp.E) or expr.is_number:
+        return _Form()
+    if expr.is_Symbol:
+        name = str(expr)
+        if name in known:
+            return _Form(known[name])
+        if name in params:
+            return _Form((0, 0, 0), {name: 1})
+        return _Form()               # a symbol without a unit (an unlabelled signal): no information
+    if expr.is_Add:
+        forms = [_form(a, known, params, constraints, where) for a in expr.args]
+        for f in forms[1:]:
+            _dimensionless(f - forms[0], f"{where}: terms of a sum", constraints)
+        return forms[0]
+    if expr.is_Mul:
+        out = _Form()
+        for a in expr.args:
+            out = out + _form(a, known, params, constraints, where)
+        return out
+    if expr.is_Pow:
+        base, exp = expr.args
+        if exp.is_Rational:
+            return _form(base, known, params, constraints, where).scale(Fraction(int(exp.p), int(exp.q)))
+        _dimensionless(_form(base, known, params, constraints, where), f"{where}: base of {expr}", constraints)
+        _dimensionless(_form(exp, known, params, constraints, where), f"{where}: exponent of {expr}", constraints)
+        return _Form()
+    if isinstance(expr, (sp.Abs, sp.re, sp.im)):
+        return _form(expr.args[0], known, params, constraints, where)
+    if isinstance(expr, (sp.Min, sp.Max)):
+        forms = [_form(a, known, params, constraints, where) for a in expr.args]
+        for f in forms[1:]:
+            _dimensionless(f - forms[0], f"{where}: arguments of {expr.func.__name__}", constraints)
+        return forms[0]
+    if isinstance(expr, sp.Piecewise):
+        forms = []
+        for value, cond in expr.args:
+            forms.append(_form(value, known, params, constraints, where))
+            _relational(cond, known, params, constraints, where)
+        for f in forms[1:]:
+            _dimensionless(f - forms[0], f"{where}: branches of a Piecewise", constraints)
+        return forms[0]
+    if isinstance(expr, sp.atan2):
+        a, b = (_form(x, known, params, constraints, where) for x in expr.args)
+        _dimensionless(a - b, f"{where}: arguments of atan2", constraints)
+        return _Form()
+    if isinstance(expr, (sp.sign, sp.Heaviside)):
+        _form(expr.args[0], known, params, constraints, where)
+        return _Form()
+    if isinstance(expr, sp.Function):          # sin, tanh, exp, log, atan, ...: dimensionless in and out
+        for a in expr.args:
+            _dimensionless(_form(a, known, params, constraints, where), f"{where}: argument of {expr.func}",
+                           constraints)
+        return _Form()
+    if isinstance(expr, sp.Derivative):
+        raise DimensionError(f"{where}: a derivative inside the model ({expr})")
+    return _Form()                             # relational booleans and anything else: no information
+
+
+def _relational(cond, known, params, constraints, where) -> None:
+    if isinstance(cond, sp.core.relational.Relational):
+        a, b = (_form(x, known, params, constraints, where) for x in (cond.lhs, cond.rhs))
+        if not (cond.rhs.is_number and cond.rhs == 0) and not (cond.lhs.is_number and cond.lhs == 0):
+            _dimensionless(a - b, f"{where}: sides of {cond}", constraints)
+    elif isinstance(cond, (sp.And, sp.Or, sp.Not)):
+        for c in cond.args:
+            _relational(c, known, params, constraints, where)
+
+
+def _equations(model) -> list:
+    """[(name of what the expression must have the unit of, unit exponents of it, expr)]."""
+    units = dict(getattr(model, "units", None) or {})
+    dyn = model.dynamics
+    if isinstance(dyn, tuple) and dyn and isinstance(dyn[0], tuple):        # ((state, expr), ...)
+        rows = [(str(s), e) for s, e in dyn]
+    else:
+        rows = [(str(s), e) for s, e in zip(model.states, list(dyn))]
+    out = []
+    for name, expr in rows:
+        if name in units:
+            d = parse_unit(units[name])
+            out.append((f"d{name}/dt", (d[0], d[1], d[2] - 1), sp.sympify(expr)))
+    for name, expr in model.outputs:
+        if name in units:
+            out.append((f"output {name}", parse_unit(units[name]), sp.sympify(expr)))
+    return out
+
+
+def infer(model) -> Analysis:
+    """Every parameter's dimension from the model's equations and declared units (module docstring)."""
+    units = dict(getattr(model, "units", None) or {})
+    params = [str(p) for p in model.parameters]
+    known = {}
+    for name, text in units.items():
+        if name not in params:
+            known[name] = parse_unit(text)
+    for g in getattr(model, "scheduling", ()):
+        if getattr(g, "unit", "") and str(g.symbol) not in known:
+            known[str(g.symbol)] = parse_unit(g.unit)
+    constraints = []
+    for what, dims, expr in _equations(model):
+        f = _form(sp.expand(expr) if not expr.has(sp.Piecewise) else expr, known, set(params), constraints, what)
+        _dimensionless(f - _Form(dims), what, constraints)
+    for name, text in units.items():           # declared parameter units fix the free scales
+        if name in params:
+            _dimensionless(_Form((0, 0, 0), {name: 1}) - _Form(parse_unit(text)), f"declared unit of {name}",
+                           constraints)
+    index = {p: k for k, p in enumerate(params)}
+    system, inconsistencies = _Echelon(len(params)), []
+    for f, where in constraints:            # sum coef d_p = -const, one system for the three bases
+        row = [Fraction(0)] * len(params)
+        for p, c in f.coef.items():
+            row[index[p]] += Fraction(c)
+        if not system.add(row, [-Fraction(c) for c in f.const]) and where not in inconsistencies:
+            inconsistencies.append(where)
+    dims = {p: system.value(_unit_row(len(params), index[p])) for p in params}
+    same = []
+    for i, p in enumerate(params):
+        for q in params[i + 1:]:
+            diff = _unit_row(len(params), index[p])
+            diff[index[q]] -= 1
+            d = system.value(diff)
+            if d is not None and not any(d) and not (dims[p] is not None and not any(dims[p])):
+                same.append((p, q))
+    return Analysis(dims, same, inconsistencies)
+
+
+def _unit_row(n, k):
+    row = [Fraction(0)] * n
+    row[k] = Fraction(1)
+    return row
+
+
+class _Echelon:
+    """Rows of a linear system in reduced echelon form, exact (Fractions), grown one row at a time."""
+
+    def __init__(self, n: int):
+        self.n = n
+        self.rows = {}          # pivot column -> (row with 1 at the pivot, rhs vector)
+
+    def _reduce(self, row, rhs):
+        row, rhs = list(row), list(rhs)
+        for col, (prow, prhs) in self.rows.items():
+            c = row[col]
+            if c:
+                row = [a - c * b for a, b in zip(row, prow)]
+                rhs = [a - c * b for a, b in zip(rhs, prhs)]
+        return row, rhs
+
+    def add(self, row, rhs) -> bool:
+        """Add ``row . d = rhs``; False (and nothing added) when it contradicts the rows so far."""
+        row, rhs = self._reduce(row, rhs)
+        pivot = next((k for k, v in enumerate(row) if v), None)
+        if pivot is None:
+            return not any(rhs)
+        c = row[pivot]
+        row, rhs = [v / c for v in row], [v / c for v in rhs]
+        for col, (prow, prhs) in list(self.rows.items()):     # keep the form reduced
+            f = prow[pivot]
+            if f:
+                self.rows[col] = ([a - f * b for a, b in zip(prow, row)], [a - f * b for a, b in zip(prhs, rhs)])
+        self.rows[pivot] = (row, rhs)
+        return True
+
+    def value(self, vec):
+        """vec . d when every solution gives the same value (vec in the row space), else None."""
+        acc = [Fraction(0)] * 3
+        vec = list(vec)
+        for col, (prow, prhs) in self.rows.items():
+            c = vec[col]
+            if c:
+                vec = [a - c * b for a, b in zip(vec, prow)]
+                acc = [a + c * b for a, b in zip(acc, prhs)]
+        return tuple(acc) if not any(vec) else None
+
+
+def check_plausibility(model, values: dict, source: str, accepted=()) -> None:
+    """Refuse parameter values implausible for their dimension, or a kind's values a unit apart.
+
+    Raises
+    ------
+    ConfigurationError
+        naming the file, the parameter(s), the values, the dimension and the ratio, with the
+        ``[plausibility] accept`` that overrides.
+    """
+    from ..project.settings import config_error
+    analysis = analysis_of(model)
+    accepted = set(accepted)
+    declared = {p: u for p, u in (getattr(model, "units", None) or {}).items() if p in analysis.dims}
+    # a range only where the unit is declared: a dimension alone does not say what a parameter is
+    # (a drag coefficient can have the dimension of a mass)
+    for p, text in declared.items():
+        if p in accepted or p not in values:
+            continue
+        key, factor = unit(text)
+        if key in PLAUSIBLE:
+            kind, si, lo, hi = PLAUSIBLE[key]
+            v = abs(values[p]) * factor
+            if v != 0 and not lo <= v <= hi:
+                raise config_error(source, "parameters", p, values[p],
+                                   f"a {kind} of a road vehicle in {text} (model {model.name!r} declares it): "
+                                   f"|value| in [{lo / factor:.4g}, {hi / factor:.4g}] {text}; if the value is "
+                                   f"right, add [plausibility] accept = [\"{p}\"]")
+    for p, q in analysis.same:
+        if p in accepted or q in accepted or p not in values or q not in values:
+            continue
+        mp, mq = _SUFFIX.match(p), _SUFFIX.match(q)
+        if not (mp and mq and mp.group("stem") == mq.group("stem")):
+            continue
+        a, b = abs(values[p]), abs(values[q])
+        if a == 0 or b == 0:
+            continue
+        ratio = max(a, b) / min(a, b)
+        if ratio >= SAME_KIND_RATIO:
+            dim = analysis.dims.get(p)
+            raise config_error(source, "parameters", f"{p}, {q}", f"{values[p]:g}, {values[q]:g}",
+                               f"values of the same kind within a factor {SAME_KIND_RATIO:g} (both "
+                               f"{format_dims(dim) if dim is not None else 'of one dimension'} by model "
+                               f"{model.name!r}'s equations); they differ by {ratio:.4g}x: a unit slip (kN against "
+                               f"N, mm against m)? If both are right, add [plausibility] accept = [\"{p}\", \"{q}\"]")
+
+
+_CACHE: dict = {}
+
+
+def analysis_of(model) -> Analysis:
+    """:func:`infer`, once per model object (the analysis is exact and costs a few sympy solves)."""
+    key = id(model)
+    hit = _CACHE.get(key)
+    if hit is None or hit[0] is not model:
+        hit = (model, infer(model))
+        _CACHE[key] = hit
+    return hit[1]

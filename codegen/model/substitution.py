@@ -1,0 +1,258 @@
+"""Unknown inputs that enter through a nonlinearity: the change of variables that makes them affine.
+
+Every observer family needs the unknown inputs to enter affinely (``x' = ... + D d``). A road
+bank angle enters as ``g sin(phi_r)``, a steering angle the driver sets enters through the front
+tyre's saturating law. When an unknown input ``d`` enters *only* through one expression
+``c(d, x, ...)`` (its *carrier*: the same expression in every equation, nowhere else), the model is
+affine in the carrier's value ``w = c``: the observer is designed with ``w`` as its unknown input,
+and ``d`` is recovered in the step by inverting the carrier,
+
+    d_hat = c^{-1}(w_hat; x_hat, u, y),
+
+with ``w_hat`` kept inside the range ``c`` takes on the declared box (outside it the inverse is not
+defined; a sample beyond it is clamped *and flagged*). The inverse exists when ``c`` is strictly
+monotone in ``d`` on the box: :func:`analyse` proves this with a sound interval bound of ``dc/dd``
+(:func:`codegen.representation.bounds.range_bound`) over the declared ranges of ``d``, the states
+and the other signals ``c`` depends on, and finds the inverse in closed form (sympy), checked at
+points of the box. Otherwise it says exactly why not.
+
+An observer file asks for it by naming the new unknown input::
+
+    [substitute]
+    phi_r = "bank_accel"      # design for w = the one expression phi_r enters through
+
+:func:`offer` writes that line into the error a family raises for a non-affine unknown input.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+import sympy as sp
+
+from ..errors import ModelDefinitionError, NotAffineError
+
+
+@dataclass(frozen=True)
+class Substitution:
+    """One unknown input replaced by the value of its carrier."""
+
+    unknown: sp.Symbol          # d, the user's unknown input
+    carrier: sp.Expr            # c(d, ...), as written in the model (parameters symbolic)
+    symbol: sp.Symbol           # w, the new unknown input
+    inverse: sp.Expr            # d = inverse(w, other variables), parameters substituted
+    lower: float                # range of w on the box
+    upper: float
+    slope: tuple                # sound [min, max] of dc/dd on the box (bounded away from 0)
+
+    def describe(self) -> str:
+        return (f"{self.unknown} enters only through {self.symbol} = {self.carrier}; designed for {self.symbol} "
+                f"in [{self.lower:.6g}, {self.upper:.6g}], {self.unknown} recovered as {self.inverse}")
+
+    def to_json(self) -> dict:
+        return {"unknown_input": str(self.unknown), "carrier": str(self.carrier), "as": str(self.symbol),
+                "inverse": str(self.inverse), "range": [self.lower, self.upper], "slope_bound": list(self.slope)}
+
+
+def _variables(model) -> set:
+    return {*model.states, *model.known_inputs, *model.unknown_inputs, *(g.symbol for g in model.scheduling),
+            *(w.symbol for w in getattr(model, "derived_inputs", ()))}
+
+
+def _is_nonlinear_node(e, d) -> bool:
+    """A node that is not affine in ``d`` by its own operation (a function, a power, a product
+    of two factors in ``d``)."""
+    if isinstance(e, (sp.Function, sp.Piecewise, sp.Min, sp.Max)):
+        return True
+    if e.is_Pow:
+        base, exp = e.args
+        return d in exp.free_symbols or (d in base.free_symbols and exp != 1)
+    if e.is_Mul:
+        return sum(1 for a in e.args if d in a.free_symbols) > 1
+    return False
+
+
+def carriers(expr, d) -> tuple:
+    """(set of outermost nonlinear nodes containing ``d``, whether ``d`` also appears outside them)."""
+    found, direct = set(), [False]
+
+    def visit(e):
+        if d not in e.free_symbols:
+            return
+        if e == d:
+            direct[0] = True
+            return
+        if _is_nonlinear_node(e, d):
+            found.add(e)
+            return
+        for a in e.args:
+            visit(a)
+    visit(sp.sympify(expr))
+    return found, direct[0]
+
+
+def _rows(model) -> list:
+    return [*list(sp.Matrix(model.dynamics)), *[sp.sympify(e) for _, e in model.outputs]]
+
+
+def find_carrier(model, d) -> tuple:
+    """(carrier, None) when ``d`` enters every equation through one and the same expression, or
+    (None, why not)."""
+    found, direct = set(), False
+    for row in _rows(model):
+        c, dr = carriers(row, d)
+        found |= c
+        direct = direct or dr
+    if not found:
+        return None, f"{d} enters affinely already"
+    if direct:
+        return None, (f"{d} enters both directly and through {', '.join(sorted(map(str, found)))}: no single "
+                      f"expression carries it")
+    if len(found) > 1:
+        return None, (f"{d} enters through {len(found)} different expressions ({'; '.join(sorted(map(str, found)))}): "
+                      f"the change of variables needs one")
+    return next(iter(found)), None
+
+
+def _box(params, symbols, source: str) -> tuple:
+    """({symbol: (lo, hi)}, missing names with the table that declares them)."""
+    box, missing = {}, []
+    for s in symbols:
+        name = str(s)
+        if name in params.state_bounds:
+            box[s] = tuple(params.state_bounds[name])
+        elif name in params.inputs:
+            box[s] = (float(params.inputs[name]["min"]), float(params.inputs[name]["max"]))
+        elif name in params.scheduling:
+            b = params.scheduling[name]
+            box[s] = (b.lower, b.upper)
+        else:
+            missing.append(name)
+    return box, missing
+
+
+def analyse(model, params, d, name: str) -> tuple:
+    """(Substitution, None) for unknown input ``d`` as new unknown input ``name``, or (None, why not)."""
+    from ..representation.bounds import range_bound
+    from .definition import parameter_substitution
+    carrier, why = find_carrier(model, d)
+    if carrier is None:
+        return None, why
+    subs = parameter_substitution(model, params)
+    c = sp.sympify(carrier).subs(subs)
+    others = sorted(c.free_symbols - {d}, key=str)
+    stray = [s for s in others if s not in _variables(model)]
+    if stray:
+        return None, f"the carrier {carrier} of {d} depends on {', '.join(map(str, stray))}, which are not signals"
+    box, missing = _box(params, [d, *others], params.source)
+    if missing:
+        return None, (f"proving {carrier} invertible in {d} needs the range of {', '.join(missing)}: add "
+                      f"[inputs.NAME] min/max (inputs) or [state_bounds] NAME = [min, max] (states) to {params.source}")
+    try:
+        slope = range_bound(sp.diff(c, d), box, rel_tol=1e-2)
+        rng = range_bound(c, box, rel_tol=1e-3)
+    except ModelDefinitionError as exc:
+        return None, f"{carrier} cannot be bounded on the box ({exc})"
+    if slope.lower <= 0.0 <= slope.upper:
+        return None, (f"{carrier} is not monotone in {d} on the box (its slope d/d{d} ranges over "
+                      f"[{slope.lower:.4g}, {slope.upper:.4g}], which contains 0): {d} cannot be recovered from "
+                      f"its value; narrow [inputs.{d}] or the state box")
+    w = sp.Symbol(name)
+    solutions = _inverses(c, d, w)
+    rng_pts = np.random.default_rng(0)
+    syms = [d, *others]
+    pts = np.array([[rng_pts.uniform(*box[s]) for s in syms] for _ in range(200)])
+    fc = sp.lambdify(syms, c, "numpy")
+    for inv in solutions:
+        finv = sp.lambdify([w, *others], inv, "numpy")
+        with np.errstate(all="ignore"):
+            wv = np.asarray(fc(*pts.T), dtype=complex)
+            back = np.asarray(finv(wv, *pts[:, 1:].T), dtype=complex)
+        if np.all(np.isfinite(back)) and np.allclose(back.real, pts[:, 0], rtol=1e-7, atol=1e-9) \
+                and np.allclose(back.imag, 0.0, atol=1e-9):
+            return Substitution(d, carrier, w, sp.simplify(inv) if sp.count_ops(inv) < 60 else inv,
+                                float(rng.lower), float(rng.upper), (float(slope.lower), float(slope.upper))), None
+    return None, f"no closed-form inverse of {carrier} in {d} (sympy found {len(solutions)} candidate(s), none exact)"
+
+
+# f -> f^-1 for the functions a carrier is made of (the principal branch; checked numerically)
+_INVERSE = {sp.tanh: sp.atanh, sp.atanh: sp.tanh, sp.sin: sp.asin, sp.asin: sp.sin, sp.tan: sp.atan,
+            sp.atan: sp.tan, sp.sinh: sp.asinh, sp.asinh: sp.sinh, sp.exp: sp.log, sp.log: sp.exp,
+            sp.cos: sp.acos, sp.acos: sp.cos, sp.erf: sp.erfinv}
+
+
+def _inverses(c, d, w) -> list:
+    """Candidate closed forms of d from w = c(d): peeled operation by operation when d occurs once
+    in c (each elementary function by its principal inverse), else sympy's solve for a rational
+    c. The caller checks each candidate at points of the box."""
+    if sp.sympify(c).count(d) == 1:
+        e, target = sp.sympify(c), w
+        while e != d:
+            if e.is_Add:
+                inner = next(a for a in e.args if d in a.free_symbols)
+                target, e = target - (e - inner), inner
+            elif e.is_Mul:
+                inner = next(a for a in e.args if d in a.free_symbols)
+                target, e = target / (e / inner), inner
+            elif e.is_Pow and d in e.args[0].free_symbols and d not in e.args[1].free_symbols:
+                target, e = target ** (1 / e.args[1]), e.args[0]
+            elif e.is_Pow and d in e.args[1].free_symbols and d not in e.args[0].free_symbols:
+                target, e = sp.log(target) / sp.log(e.args[0]), e.args[1]
+            elif isinstance(e, sp.Function) and e.func in _INVERSE and len(e.args) == 1:
+                target, e = _INVERSE[e.func](target), e.args[0]
+            else:
+                return []
+        return [target]
+    if sp.sympify(c).is_rational_function(d):
+        try:
+            return list(sp.solve(sp.Eq(w, c), d))
+        except (NotImplementedError, ValueError):
+            return []
+    return []
+
+
+def offer(model, d) -> str:
+    """The sentence a family's "not affine in the unknown inputs" error ends with."""
+    carrier, why = find_carrier(model, d)
+    if carrier is None:
+        return f"no change of variables applies: {why}"
+    return (f"{d} enters only through {carrier}: add [substitute] {d} = \"{d}_carrier\" to the observer file to "
+            f"design for that expression's value and recover {d} by inverting it in the step (docs: tutorial, "
+            f"'Unknown inputs inside a nonlinearity')")
+
+
+def apply(model, params, table: dict, source: str) -> tuple:
+    """(model with every named unknown input replaced by its carrier's value, [Substitution]).
+
+    Raises
+    ------
+    NotAffineError
+        naming the observer file, the unknown input and why the change of variables does not apply.
+    ConfigurationError
+        a key that is not an unknown input, or a name already used.
+    """
+    from ..project.settings import config_error, suggest
+    uis = {str(d): d for d in model.unknown_inputs}
+    taken = {str(s) for s in _variables(model)} | {str(p) for p in model.parameters}
+    out, done = model, []
+    for key, name in table.items():
+        if key not in uis:
+            raise config_error(source, "substitute", key, name, f"an unknown input of model {model.name!r} "
+                               f"({', '.join(uis) or 'none'})", suggest(key, list(uis)))
+        if not isinstance(name, str) or not name.isidentifier() or name in taken:
+            raise config_error(source, "substitute", key, name, "a new identifier, not a name the model uses")
+        sub, why = analyse(out, params, uis[key], name)
+        if sub is None:
+            raise NotAffineError(f"{source}: [substitute] {key}: {why}")
+        rows = sp.Matrix(out.dynamics).xreplace({sub.carrier: sub.symbol})
+        outputs = tuple((n, sp.sympify(e).xreplace({sub.carrier: sub.symbol})) for n, e in out.outputs)
+        left = [str(e) for e in (*rows, *(e for _, e in outputs)) if uis[key] in e.free_symbols]
+        if left:
+            raise NotAffineError(f"{source}: [substitute] {key}: {key} is still in {left[0]} after the change of "
+                                 f"variables")
+        units = dict(out.units)
+        out = replace(out, unknown_inputs=tuple(sub.symbol if u == uis[key] else u for u in out.unknown_inputs),
+                      dynamics=rows, outputs=outputs, units=units)
+        taken.add(name)
+        done.append(sub)
+    return out, done

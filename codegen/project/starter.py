@@ -1,0 +1,81 @@
+"""``uiogen new DIR --family F [--name NAME]``: a starter project that works as written.
+
+A starter is the family's example observer (``Family.example``, a built-in observer) with its
+model and parameter file copied beside it and wired to them by path: ``DIR/model.py``,
+``DIR/parameters.toml``, ``DIR/NAME.toml``. The example's parameter file declares the ranges the
+generic excitation scenario needs (``[inputs.NAME]``), so a starter designs, generates, builds and
+validates (``uiogen validate DIR/NAME.toml --scenario excitation``) before the user edits a line;
+``tests/test_families_and_verbs.py`` holds that, and every other verb, for every family.
+
+The observer's name is the file's stem. It must not be a built-in observer's: a command given a
+name resolves built-ins first, so ``uiogen generate NAME`` would regenerate the built-in, and both
+extensions would be ``_NAME``. Every hint printed names the file by its path.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from ..errors import ConfigurationError
+from . import observer_file as observers, outputs
+
+NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+
+
+def default_name(family) -> str:
+    return f"my_{family.name}"
+
+
+def check_name(name: str) -> None:
+    """An observer name for a new project: a C identifier, not a built-in observer's name."""
+    if not NAME.match(name):
+        raise ConfigurationError(f"uiogen new --name {name!r}: an observer name is a C identifier (letters, digits, "
+                                 f"underscores, not starting with a digit): it names the C API NAME_step and the "
+                                 f"extension _NAME", key="--name", value=name, allowed="a C identifier")
+    if name in observers.names():
+        raise ConfigurationError(f"uiogen new --name {name}: {name!r} is a built-in observer (uiogen list); a project "
+                                 f"observer of that name would be shadowed by it wherever a name is given "
+                                 f"(uiogen generate {name} regenerates the built-in): choose another name",
+                                 key="--name", value=name, allowed="a name that is not a built-in observer's")
+
+
+def write(folder: Path, family, name: str | None = None) -> Path:
+    """Write the starter of ``family`` into ``folder``; the observer file's path.
+
+    Raises
+    ------
+    ConfigurationError
+        a name that collides with a built-in or is not a C identifier, a family without an
+        example, or a file the starter would overwrite.
+    """
+    if not family.example:
+        raise ConfigurationError(f"family {family.name!r} has no example observer to start from", key="--family",
+                                 value=family.name)
+    name = name or default_name(family)
+    check_name(name)
+    folder = Path(folder)
+    example = observers.get(family.example)
+    files = {folder / "model.py": example.model_path, folder / "parameters.toml": example.parameter_path}
+    target = folder / f"{name}.toml"
+    existing = [str(p) for p in [*files, target] if p.exists()]
+    if existing:
+        raise ConfigurationError(f"uiogen new {folder}: would overwrite {', '.join(existing)}; choose an empty folder",
+                                 key="dir", value=str(folder))
+    outputs.make_folder(folder)
+    for dst, src in files.items():
+        outputs.write_atomic(dst, src.read_text())
+    text = Path(example.source).read_text()
+    text = re.sub(r'^model = "[^"]*"', 'model = "model.py"', text, count=1, flags=re.M)
+    text = re.sub(r'^parameters = "[^"]*"', 'parameters = "parameters.toml"', text, count=1, flags=re.M)
+    head = (f"# Observer {name}: a starter for your own {family.title} ({family.citation}), copied from the\n"
+            f"# built-in observer {family.example}. Edit model.py (your equations, sympy) and parameters.toml\n"
+            f"# (your car; [inputs.NAME] ranges for the excitation scenario), then:\n"
+            + "".join(f"#   {line}\n" for line in next_steps(target)) + "#\n")
+    outputs.write_atomic(target, head + text)
+    return target
+
+
+def next_steps(target: Path) -> list:
+    """The commands that take a starter from its files to a validated compiled step."""
+    return [f"uiogen design {target} --update", f"uiogen generate {target}", f"uiogen build {target}",
+            f"uiogen validate {target} --scenario excitation"]

@@ -1,0 +1,154 @@
+"""Dimensional analysis of models and the plausibility of parameter files (codegen.model.dimensions).
+
+A kN beside an N (C_f in kN/rad, C_r in N/rad) is refused with the ratio before any design, in a
+model that declares no parameter unit at all (the equations say the two stiffnesses are of one
+kind); a declared unit brings the plausible range of its quantity; a value that is right although
+it looks wrong is accepted by name.
+"""
+import textwrap
+from fractions import Fraction
+
+import pytest
+import sympy as sp
+
+from codegen import cli
+from codegen.errors import ConfigurationError
+from codegen.model import ModelDefinition, SchedulingSignal, dimensions, load_parameters, parameter_substitution
+from codegen.project import observer_file as observers
+
+
+@pytest.mark.parametrize("text, dims, factor", [
+    ("N m s/rad", (2, 1, -1), 1.0), ("kg m^2", (2, 1, 0), 1.0), ("m/s^2", (1, 0, -2), 1.0),
+    ("1/m", (-1, 0, 0), 1.0), ("kN/rad", (1, 1, -2), 1e3), ("-", (0, 0, 0), 1.0), ("km/h", (1, 0, -1), 1 / 3.6),
+    ("kg m²", (2, 1, 0), 1.0), ("Nm", (2, 1, -2), 1.0), ("mm", (1, 0, 0), 1e-3),
+])
+def test_units_are_read(text, dims, factor):
+    d, f = dimensions.unit(text)
+    assert d == dims and f == pytest.approx(factor)
+
+
+def test_an_unknown_unit_is_a_typed_error():
+    with pytest.raises(dimensions.DimensionError, match="cannot read 'furlong'"):
+        dimensions.unit("furlong/s")
+
+
+def _single_track(units: dict) -> ModelDefinition:
+    beta, r, delta, a_y = sp.symbols("beta r delta a_y")
+    v_x = sp.Symbol("v_x", positive=True)
+    M, I_z, l_f, l_r, C_f, C_r = sp.symbols("M I_z l_f l_r C_f C_r", positive=True)
+    F_f = C_f * (delta - beta - l_f * r / v_x)
+    F_r = C_r * (l_r * r / v_x - beta)
+    return ModelDefinition(
+        "user_single_track", (beta, r), (delta,), (), sp.Matrix([(F_f + F_r) / (M * v_x) - r,
+                                                                  (l_f * F_f - l_r * F_r) / I_z]),
+        (("r", r),), (SchedulingSignal(v_x, "m/s"),), (M, I_z, l_f, l_r, C_f, C_r),
+        units={"beta": "rad", "r": "rad/s", "delta": "rad", "v_x": "m/s", **units})
+
+
+def test_dimensions_follow_from_the_equations():
+    a = dimensions.infer(_single_track({"M": "kg"}))
+    F = (Fraction(1), Fraction(1), Fraction(-2))
+    assert a.dims["C_f"] == F and a.dims["C_r"] == F             # N (per radian)
+    assert a.dims["l_f"] == (1, 0, 0) and a.dims["I_z"] == (2, 1, 0)
+    assert not a.inconsistencies
+    # without any parameter unit the absolute dimension of a mass is free, the kinds are not
+    free = dimensions.infer(_single_track({}))
+    assert free.dims["M"] is None and free.dims["C_f"] is None
+    assert ("C_f", "C_r") in free.same and ("l_f", "l_r") in free.same
+    assert ("M", "C_f") not in free.same
+
+
+def test_an_inconsistent_unit_is_reported():
+    a = dimensions.infer(_single_track({"M": "kg", "l_f": "kg"}))
+    assert a.inconsistencies                  # l_f is a length by the slip angle, declared a mass
+
+
+CAR = '''
+import sympy as sp
+from codegen.model import ModelDefinition
+v_y, r = sp.symbols("v_y r")
+v_x = sp.Symbol("v_x", positive=True)
+T_eng, delta = sp.symbols("T_eng delta")
+M, l_f, l_r, I_e, I_z, C_f, C_r = sp.symbols("M l_f l_r I_e I_z C_f C_r", positive=True)
+F_yf = 2 * C_f * (delta - (v_y + l_f * r) / v_x)
+F_yr = 2 * C_r * (l_r * r - v_y) / v_x
+MODEL = ModelDefinition(
+    name="unit_slip_car", states=(v_x, v_y, r), known_inputs=(), unknown_inputs=(T_eng, delta),
+    dynamics=sp.Matrix([T_eng / I_e + v_y * r, (F_yf + F_yr) / M - v_x * r, (l_f * F_yf - l_r * F_yr) / I_z]),
+    outputs=(("v_x", v_x), ("r", r)), scheduling=(), parameters=(M, l_f, l_r, I_e, I_z, C_f, C_r),
+    units={"v_x": "m/s", "v_y": "m/s", "r": "rad/s", "T_eng": "N m", "delta": "rad"{extra}})
+'''
+PARAMS = """[parameters]
+M = {M}
+l_f = 1.13
+l_r = 1.49
+I_e = 442.8
+I_z = 1810.0
+C_f = {C_f}     # N/rad ... or kN/rad?
+C_r = 59000.0
+{plausibility}
+[state_bounds]
+v_x = [5.0, 30.0]
+v_y = [-1.5, 1.5]
+r = [-0.55, 0.55]
+"""
+
+
+def _project(tmp_path, C_f="57000.0", M="1476.0", extra="", plausibility=""):
+    tmp_path.mkdir(exist_ok=True)
+    (tmp_path / "car.py").write_text(CAR.replace("{extra}", extra))
+    (tmp_path / "car.toml").write_text(PARAMS.format(C_f=C_f, M=M, plausibility=plausibility))
+    path = tmp_path / "obs.toml"
+    path.write_text('family = "ts_fuzzy_uio"\nmodel = "car.py"\nparameters = "car.toml"\nsample_time = 0.01\n')
+    return path
+
+
+def test_a_kn_beside_an_n_is_refused_with_the_ratio(tmp_path, capsys):
+    path = _project(tmp_path, C_f="57.0")            # kN/rad beside N/rad; no parameter unit declared
+    assert cli.main(["design", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "Traceback" not in err
+    assert "car.toml" in err and "C_f, C_r" in err and "1035x" in err and "unit slip" in err
+    assert "[plausibility] accept" in err
+
+
+def test_the_same_values_in_consistent_units_design(tmp_path):
+    config = observers.get(str(_project(tmp_path)))
+    model = config.load_model()
+    assert parameter_substitution(model, load_parameters(config.parameter_path))
+
+
+def test_accepting_a_value_by_name(tmp_path):
+    path = _project(tmp_path, C_f="57.0", plausibility='[plausibility]\naccept = ["C_f"]\n')
+    config = observers.get(str(path))
+    parameter_substitution(config.load_model(), load_parameters(config.parameter_path))
+    bad = _project(tmp_path, C_f="57.0", plausibility='[plausibility]\naccept = ["C_ff"]\n')
+    config = observers.get(str(bad))
+    with pytest.raises(ConfigurationError, match=r"\[plausibility\] accept .*did you mean 'C_f'"):
+        load_parameters(config.parameter_path)
+
+
+def test_a_declared_unit_brings_its_range(tmp_path):
+    # M declared in kg, written in grams
+    path = _project(tmp_path / "g", M="1476000.0", extra=', "M": "kg"')
+    config = observers.get(str(path))
+    with pytest.raises(ConfigurationError, match=r"M = 1476000.0: a mass of a road vehicle in kg .* \[0.5, 1e\+05\] kg"):
+        parameter_substitution(config.load_model(), load_parameters(config.parameter_path))
+    # the same number in a unit that makes it plausible
+    ok = _project(tmp_path / "t", M="1.476", extra=', "M": "t"')
+    config = observers.get(str(ok))
+    parameter_substitution(config.load_model(), load_parameters(config.parameter_path))
+
+
+def test_every_builtin_parameter_file_is_plausible_and_consistent():
+    for name in observers.names():
+        config = observers.get(name)
+        try:
+            model = config.load_model()
+        except Exception:          # a family whose model module is not one ModelDefinition
+            continue
+        parameter_substitution(model, load_parameters(config.parameter_path))
+    core = observers.get("lpv_linf_driver_torque").load_model()
+    analysis = dimensions.infer(core)
+    assert not analysis.inconsistencies
+    assert all(d is not None for d in analysis.dims.values())     # every parameter's dimension is fixed

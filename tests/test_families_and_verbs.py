@@ -1,0 +1,48 @@
+"""Every verb for every family (issue 23 items 5 and 6): each family's starter, from ``uiogen new``
+in an empty folder outside the checkout, through design, generate, build, validate (excitation,
+and a logged run with a column map), check-gains, the FMU, the float32 build and a campaign on
+the model's own equations (:mod:`codegen.tools.verbs`). Writes the record the docs' table is
+rendered from (``docs/data/families_and_verbs.json``; ``tests/test_docs.py`` compares the page)."""
+import json
+
+import pytest
+
+from codegen import families
+from codegen.tools import docs, verbs
+
+FAMILIES = [f for f in families.names() if families.get(f).example]
+_ROWS: dict = {}
+
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory):
+    return tmp_path_factory.mktemp("verbs")
+
+
+def row(family, base) -> dict:
+    if family not in _ROWS:
+        _ROWS[family] = verbs.family_row(family, base)
+    return _ROWS[family]
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_the_starter_takes_every_verb(family, base):
+    r = row(family, base)
+    assert list(r) == list(verbs.VERBS)
+    failed = {v: c["note"] for v, c in r.items() if c["outcome"] == "fail"}
+    assert not failed, failed
+    refused = [v for v, c in r.items() if c["outcome"] == "refused"]
+    assert refused in ([], ["build --float32"])             # only the float32 build may refuse ...
+    if refused:
+        assert r["build --float32"]["note"].startswith("margin 1-c = ")      # ... and says by what margin
+    assert r["campaign"]["note"] == f"{verbs.CAMPAIGN_RUNS}/{verbs.CAMPAIGN_RUNS} runs"
+
+
+def test_the_record_of_every_family(base):
+    rows = {f: row(f, base) for f in FAMILIES}
+    path = verbs.write_record(rows)
+    rec = json.loads(path.read_text())
+    assert path == docs.DATA / f"{verbs.RECORD}.json"
+    assert [r[0] for r in rec["table"]["rows"]] == [f"`{f}`" for f in FAMILIES]
+    assert rec["table"]["header"] == ["family", *verbs.VERBS]
+    assert f"<!-- uiogen:record {verbs.RECORD} -->" in (docs.DOCS / "families_and_verbs.md").read_text()
