@@ -176,7 +176,7 @@ def test_tyre_contraction_metric_is_the_certified_one_in_the_physical_state():
     config = observers.get(name)
     b = pipeline.build(config)
     obs = load(config)
-    (inputs,) = precision.scenario_inputs(config, obs).values()
+    (inputs,) = precision.scenario_inputs(config, obs, ["stanford log"]).values()
     z, status = precision.double_states(obs, inputs)
     J = precision.StepTerms(b).jacobian(z[:-1], inputs)[:, :2, :2]
     (m,) = b.contraction_metrics()

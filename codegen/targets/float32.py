@@ -345,11 +345,15 @@ def _check_tolerance_keys(config, outputs) -> None:
 # ---- the comparison ---------------------------------------------------------------------------------
 
 def scenario_inputs(config, obs, scenarios=None) -> dict:
-    """{scenario: inputs} of the observer's validation scenarios (the shared log for an observer
-    of the real log; the generic excitation for a family whose scenarios need another plant)."""
+    """{scenario: inputs} of the observer's validation scenarios (the generic excitation for a
+    family whose scenarios need another plant) and, for an observer of the real log, the shared
+    log too: the float build is held to the data it is meant to run on, not to a synthetic run
+    alone."""
     from ..validation import run as validate
     out = {}
     todo = list(scenarios or validate.scenario_names(config))
+    if scenarios is None and validate.reads_the_log(obs.input_names) and validate.SHARED_LOG not in todo:
+        todo.append(validate.SHARED_LOG)
     while todo:
         scenario = todo.pop(0)
         try:
