@@ -172,7 +172,7 @@ def test_fmu_step_size_nan_or_huge_is_refused_without_undefined_behaviour(fmus, 
     import subprocess
     from codegen.emit.toolchain import compiler
     name = NAMES[0]
-    with zipfile.ZipFile(fmus[name]) as z:
+    with zipfile.ZipFile(fmus[name, "fmu"]) as z:
         for f in z.namelist():
             if f.startswith("sources/"):
                 (tmp_path / f[len("sources/"):]).write_bytes(z.read(f))

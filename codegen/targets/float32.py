@@ -346,13 +346,14 @@ def _check_tolerance_keys(config, outputs) -> None:
 
 def scenario_inputs(config, obs, scenarios=None) -> dict:
     """{scenario: inputs} of the observer's validation scenarios (the generic excitation for a
-    family whose scenarios need another plant) and, for an observer of the real log, the shared
-    log too: the float build is held to the data it is meant to run on, not to a synthetic run
-    alone."""
-    from ..validation import run as validate
+    family whose scenarios need another plant) and, for an observer the demo validates on the
+    real log (its real-data table), the shared log too: the float build is held to the data it is
+    validated on, not to a synthetic run alone."""
+    from ..validation import demo, run as validate
     out = {}
     todo = list(scenarios or validate.scenario_names(config))
-    if scenarios is None and validate.reads_the_log(obs.input_names) and validate.SHARED_LOG not in todo:
+    real_data = (demo.REAL_DATA_OBSERVER, *demo.REAL_DATA_OTHERS)
+    if scenarios is None and config.name in real_data and validate.SHARED_LOG not in todo:
         todo.append(validate.SHARED_LOG)
     while todo:
         scenario = todo.pop(0)

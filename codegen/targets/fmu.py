@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import io
 import platform
+import re
 import tempfile
 import uuid
 import zipfile
