@@ -11,7 +11,7 @@
     uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png] [--report DIR] [--project DIR]
     uiogen demo [--json] [--report DIR]
     uiogen bench [--json]
-    uiogen campaign SPEC.toml [--runs N] [--only K] [--json] [--scheduler ADDRESS] [--workers N] [--out DIR]
+    uiogen campaign SPEC.toml [--runs N] [--only K] [--resume] [--json] [--scheduler ADDRESS] [--workers N] [--out DIR]
     uiogen export NAME --format fmu|fmu3 --out FILE.fmu [--project DIR]
 
 ``--project DIR``: the project folder whose ``generated_c/`` and ``build/`` the command reads and
@@ -74,7 +74,10 @@ def _compare_with_committed(config, records) -> dict:
     data, why = design_lock.read(config)
     if data is None:
         return {"committed": None, "reason": why}
-    committed = design_lock.solutions(data, str(design_lock.path(config)))
+    try:
+        committed = design_lock.solutions(data, str(design_lock.path(config)))
+    except DesignLockError as exc:          # a damaged lock: nothing to compare, --update replaces it
+        return {"committed": None, "reason": str(exc)}
     rows = []
     for fresh, old in zip(records, committed):
         rel = abs(fresh.objective - old.objective) / max(abs(old.objective), 1e-300)
@@ -83,7 +86,10 @@ def _compare_with_committed(config, records) -> dict:
         rows.append({"problem": fresh.problem, "fresh": fresh.objective, "committed": old.objective,
                      "relative_difference": rel, "variables_relative_difference": spread,
                      "worst_variable": worst})
-    status, _ = design_lock.status(config)
+    try:
+        status, _ = design_lock.status(config)
+    except DesignLockError as exc:          # edited by hand: shown, and --update replaces it
+        return {"committed": rows, "current": False, "edited": str(exc)}
     return {"committed": rows, "current": status is not None}
 
 
@@ -133,9 +139,7 @@ def cmd_design(args) -> int:
     compare = _compare_with_committed(config, records)
     path = None
     if args.update:
-        path = design_lock.path(config)
-        outputs.make_folder(path.parent)
-        outputs.write_atomic(path, text)
+        path = emit.commit_lock(config, text)
     if args.out:
         path = Path(args.out)
         outputs.make_folder(path.parent)
@@ -401,8 +405,11 @@ def cmd_campaign(args) -> int:
     if args.runs is not None:
         spec = spec.with_runs(args.runs)
     if args.only is not None:
-        if args.only < 0:
-            raise ConfigurationError(f"--only {args.only}: a run index is >= 0", key="--only")
+        if not 0 <= args.only < spec.runs:
+            raise ConfigurationError(f"--only {args.only}: {args.spec} has runs 0 to {spec.runs - 1} (runs = "
+                                     f"{spec.runs}{', --runs' if args.runs is not None else ''})", source=args.spec,
+                                     key="--only", value=args.only, allowed=f"0 <= K < {spec.runs}")
+        runner.design_hash(spec)                # the current design, its extension built from it
         row = runner.run_one(spec, args.only)
         if args.json:
             print(json.dumps(row, indent=1))
@@ -410,8 +417,13 @@ def cmd_campaign(args) -> int:
             print(report.format_row(row))
         return 0
     out = Path(args.out) if args.out else observers.get(spec.observer).workspace.campaigns / Path(args.spec).stem
-    summary = engine.run(spec, out, scheduler=args.scheduler, workers=args.workers,
-                         progress=None if args.json else engine.progress_bar())
+    try:
+        summary = engine.run(spec, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
+                             progress=None if args.json else engine.progress_bar())
+    except KeyboardInterrupt:
+        print(f"uiogen: interrupted: the finished runs are kept in {out / engine.JOURNAL}; `uiogen campaign "
+              f"{args.spec} --resume --out {out}` continues the campaign", file=sys.stderr)
+        return 130
     if args.json:
         _print_json(summary)
     else:
@@ -525,6 +537,9 @@ def main(argv=None) -> int:
     p.add_argument("spec", help="a campaign file (TOML), e.g. docs/campaigns/lpv_linf_driver_torque.toml")
     p.add_argument("--runs", type=int, help="number of runs (default: the file's runs)")
     p.add_argument("--only", type=int, metavar="K", help="re-run run K alone (no cluster) and print its row")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted campaign: the runs kept in OUT/runs.jsonl are not run again "
+                        "(refused if the campaign file or the observer's design changed since)")
     p.add_argument("--json", action="store_true", help="print the summary (or the row) as JSON")
     p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: a local cluster)")
     p.add_argument("--workers", type=int, help="local cluster size (default: the cores)")

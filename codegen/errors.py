@@ -146,3 +146,8 @@ class OutputError(UiogenError, OSError):
     """An output file or folder cannot be written (a read-only or full file system, no
     permission): the message names the path and the cause; nothing partial is left there
     (:mod:`codegen.project.outputs`)."""
+
+
+class CampaignError(UiogenError, RuntimeError):
+    """A campaign could not finish or continue: its workers were lost, or ``--resume`` found the
+    results of another campaign; the runs already finished are kept (the message says where)."""

@@ -26,6 +26,19 @@ def require_shared(path: Path, what: str = "shared file") -> Path:
     return path
 
 
+def require_strace() -> str:
+    """The path of strace (the kill-at-each-syscall tests): skipped where it is missing, a failure
+    in CI (CI=true), where .ci/run installs it."""
+    import shutil
+    path = shutil.which("strace")
+    if path is None:
+        message = "strace is not installed (apt-get install strace): the crash-safety tests need it"
+        if os.environ.get("CI") == "true":
+            pytest.fail(message + "; .ci/run installs it")
+        pytest.skip(message)
+    return path
+
+
 @pytest.fixture(scope="session")
 def config():
     return observers.get(NAME)

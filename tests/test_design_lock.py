@@ -4,7 +4,9 @@ What is pinned here: generation never solves an LMI when the lock is current; a 
 agrees with the committed design by certificate and objective (tolerance below); ``uiogen design``
 writes nothing under generated_c/ without ``--update``; the stamp covers the outputs; writes are
 atomic and serialized; one failing observer does not stop the others; package versions are part
-of the hashes and match constraints.txt.
+of the hashes and match constraints.txt. Every entry of a lock is verified (an edited lock is
+refused, naming the entry); `generate` killed at a rename loses nothing; `design --update` waits
+for a running `generate`; validate and export refuse what is not built from the current design.
 """
 import filecmp
 import importlib.metadata
@@ -14,6 +16,7 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +26,7 @@ from codegen.design import canonical, lock as design_lock, lmi, sources
 from codegen import cli, pipeline
 from codegen.emit import generate as emit
 from codegen.project import observer_file as observers
-from codegen.errors import GenerationError
+from codegen.errors import DesignLockError, GenerationError
 
 ROOT = Path(__file__).resolve().parent.parent
 NAMES = observers.names()
@@ -247,3 +250,188 @@ def test_check_gains_works_for_every_family_in_the_lock_form(tmp_path, capsys):
     bad.write_text(json.dumps({"lmi_solutions": data["lock"]["lmi_solutions"]}))
     assert cli.main(["check-gains", "ts_fuzzy_uio", "--gains", str(bad)]) == 2
     assert "L1" in capsys.readouterr().err
+
+
+# --- the lock verified and never lost (issue 25) -----------------------------------------------------------
+
+LINF = "lpv_linf_driver_torque"
+
+
+def _copy_generated(tmp_path, name: str = LINF) -> Path:
+    """The committed generated folder of ``name`` in a project folder of its own; its lock's path."""
+    shutil.copytree(ROOT / "generated_c" / name, tmp_path / "generated_c" / name)
+    return tmp_path / "generated_c" / name / f"{name}_design.json"
+
+
+def _swap_inputs(d):
+    names = d["signals"]["input"]
+    names[0], names[1] = names[1], names[0]
+
+
+def _scale_a_gain(d):
+    d["lock"]["lmi_solutions"][0]["variables"]["L1"][0][0] *= 1.01
+
+
+EDITS = {
+    "signals": _swap_inputs,                                               # load().input_names would lie
+    "gamma": lambda d: d.update(gamma=d["gamma"] / 2),                     # the certificate's figure
+    "gains_at_vertices": lambda d: d["gains_at_vertices"]["M1"][0].__setitem__(0, 0.0),
+    "lock.lmi_solutions": _scale_a_gain,                                   # the solution the C replays
+    "lock.versions": lambda d: d["lock"]["versions"].update(clarabel="9.9.9"),
+    "note": lambda d: d.update(note="added by hand"),                      # an entry uiogen never wrote
+    "the checksums themselves": lambda d: d["lock"].pop("sha256"),
+}
+
+
+@pytest.mark.parametrize("entry", EDITS)
+def test_an_edited_lock_is_refused_naming_the_entry(tmp_path, capsys, entry):
+    lock = _copy_generated(tmp_path)
+    data = json.loads(lock.read_text())
+    EDITS[entry](data)
+    lock.write_text(design_lock.dumps(data))
+    before = {p.name: p.read_bytes() for p in lock.parent.iterdir()}
+    lines = []
+    with pytest.raises(GenerationError):
+        emit.generate([LINF], log=lines.append, project=tmp_path)
+    assert "DesignLockError" in lines[-1] and "edited after uiogen wrote it" in lines[-1], lines
+    assert entry in lines[-1] and f"uiogen design {LINF} --update" in lines[-1]
+    assert {p.name: p.read_bytes() for p in lock.parent.iterdir()} == before      # nothing rewritten
+    with pytest.raises(DesignLockError, match="edited"):                         # nor replayed, nor loaded
+        pipeline.build(observers.get(LINF, project=tmp_path))
+    assert cli.main(["generate", LINF, "--project", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "DesignLockError" in err
+
+
+def test_every_committed_lock_verifies_against_its_checksums():
+    for name in NAMES:
+        config = observers.get(name)
+        data = json.loads(design_lock.path(config).read_text())
+        assert design_lock.verify(data, name) == data["lock"]["sha256"]
+        assert set(data["lock"]["sections"]) == set(design_lock.sections(data)), name
+
+
+def test_design_update_replaces_an_edited_lock(tmp_path, capsys):
+    lock = _copy_generated(tmp_path)
+    data = json.loads(lock.read_text())
+    data["gamma"] = 1e-9
+    lock.write_text(design_lock.dumps(data))
+    config = observers.get(LINF, project=tmp_path)
+    assert cli.main(["design", LINF, "--update", "--project", str(tmp_path)]) == 0
+    assert design_lock.status(config)[0]["gamma"] == json.loads(
+        (ROOT / "generated_c" / LINF / f"{LINF}_design.json").read_text())["gamma"]
+    assert not list(lock.parent.glob(".*.tmp"))
+
+
+def _generate_cmd(project: Path, name: str = LINF) -> list:
+    return [sys.executable, "-m", "codegen.cli", "generate", name, "--force", "--project", str(project)]
+
+
+def _env() -> dict:
+    # no bytecode written while traced: the only renames are generate's own
+    return dict(os.environ, PYTHONDONTWRITEBYTECODE="1")
+
+
+def _assert_recovered_without_solving(project: Path, name: str = LINF) -> None:
+    """A plain generate after an interrupted one: nothing re-solved, the committed set complete,
+    no leftovers."""
+    lines = []
+    emit.generate([name], log=lines.append, project=project)
+    assert not any("solving" in line for line in lines), lines
+    committed, here = ROOT / "generated_c" / name, project / "generated_c" / name
+    files = [p.name for p in committed.iterdir()]
+    _, mismatch, errors = filecmp.cmpfiles(committed, here, files, shallow=False)
+    assert not mismatch and not errors, (mismatch, errors)
+    assert sorted(p.name for p in here.iterdir()) == sorted(files)
+    assert [p.name for p in here.parent.iterdir() if p.name.startswith(f".{name}.")] == []
+
+
+@pytest.mark.parametrize("when", [1, 2, 3])
+def test_generate_killed_at_each_rename_loses_nothing(tmp_path, when):
+    """`strace -e inject=rename:signal=KILL:when=N`: the process dies as it enters its Nth rename
+    (1: moving the current set aside, 2: moving the new set in; 3: there is none, it finishes).
+    The lock is never lost and the next run re-solves nothing."""
+    from conftest import require_strace
+    strace = require_strace()
+    _copy_generated(tmp_path)
+    proc = subprocess.run([strace, "-f", "-qq", "-o", os.devnull, "-e", "trace=/^rename",
+                           "-e", f"inject=/^rename:signal=KILL:when={when}", *_generate_cmd(tmp_path)],
+                          cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=600)
+    assert (proc.returncode != 0) == (when < 3), (proc.returncode, proc.stderr[-2000:])
+    _assert_recovered_without_solving(tmp_path)
+
+
+def test_design_update_during_a_running_generate_is_kept(tmp_path):
+    """A generate paused (strace: 20 s at its first rename, the new set written, the old lock in
+    it) while `design --update` commits a new alpha: the update waits for the generate and its
+    lock is the one that stays."""
+    from conftest import require_strace
+    strace = require_strace()
+    project = tmp_path / "project"
+    run = lambda *a: subprocess.run([sys.executable, "-m", "codegen.cli", *a], cwd=ROOT, env=_env(),  # noqa: E731
+                                    capture_output=True, text=True, timeout=600)
+    assert run("new", str(project), "--family", "linf_uio", "--name", "probe").returncode == 0
+    source = project / "probe.toml"
+    res = run("generate", str(source))
+    assert res.returncode == 0, res.stderr
+    generate = subprocess.Popen([strace, "-f", "-qq", "-o", os.devnull, "-e", "trace=/^rename",
+                                 "-e", "inject=/^rename:delay_enter=20000000:when=1",
+                                 sys.executable, "-m", "codegen.cli", "generate", str(source), "--force"],
+                                cwd=ROOT, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        generated = project / "generated_c"
+        deadline = time.time() + 300
+        while not any((p / emit.STAMP).is_file() for p in generated.glob(".probe.new-*")):
+            assert generate.poll() is None and time.time() < deadline, "generate did not reach its rename"
+            time.sleep(0.2)
+        source.write_text(re.sub(r"^alpha = 5\.0", "alpha = 4.0", source.read_text(), count=1, flags=re.M))
+        res = run("design", str(source), "--update")
+        assert res.returncode == 0, res.stderr
+        assert generate.wait(timeout=300) == 0, generate.stderr.read()
+    finally:
+        if generate.poll() is None:
+            generate.kill()
+    config = observers.get(str(source))
+    data, why = design_lock.status(config)
+    assert data is not None, why
+    assert data["config"]["design"]["alpha"] == 4.0              # the update's, not the paused generate's
+    res = run("generate", str(source))          # its C follows the committed lock, without a solve
+    assert res.returncode == 0 and "solving" not in res.stdout and "committed design" in res.stdout, res.stdout
+
+
+def test_validate_and_export_refuse_what_is_not_built_from_the_current_design(tmp_path):
+    """Change alpha: validate and export name `uiogen generate` until it ran; after it, validate
+    (and load) name `uiogen build` until it ran; export compiles only C whose stamp matches."""
+    project = tmp_path / "project"
+    run = lambda *a: subprocess.run([sys.executable, "-m", "codegen.cli", *a], cwd=ROOT, env=_env(),  # noqa: E731
+                                    capture_output=True, text=True, timeout=900)
+    assert run("new", str(project), "--family", "linf_uio", "--name", "probe").returncode == 0
+    source = project / "probe.toml"
+    for step in ("generate", "build"):
+        res = run(step, str(source))
+        assert res.returncode == 0, res.stderr
+    validate = ("validate", str(source), "--scenario", "excitation", "--duration", "3")
+    assert run(*validate).returncode == 0
+    fmu = str(tmp_path / "obs.fmu")
+    source.write_text(re.sub(r"^alpha = 5\.0", "alpha = 4.0", source.read_text(), count=1, flags=re.M))
+    for cmd in (validate, ("export", str(source), "--format", "fmu", "--out", fmu)):
+        res = run(*cmd)
+        assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+        assert "DesignLockError" in res.stderr and f"uiogen generate {source}" in res.stderr, res.stderr
+    assert run("generate", str(source)).returncode == 0
+    res = run(*validate)                        # the C is current, the extension is not
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+    assert "StaleExtensionError" in res.stderr and f"uiogen build {source}" in res.stderr, res.stderr
+    code = ("from python_bindings import load\nfrom codegen.errors import StaleExtensionError\n"
+            f"try:\n    load({str(source)!r})\nexcept StaleExtensionError as e:\n    print('refused:', e)\n")
+    assert "refused:" in subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
+                                        text=True).stdout
+    c_file = project / "generated_c" / "probe" / "probe.c"
+    c_file.write_text(c_file.read_text() + "/* edited */\n")
+    res = run("export", str(source), "--format", "fmu", "--out", fmu)
+    assert res.returncode == 2 and "does not match its stamp" in res.stderr, res.stderr
+    assert not Path(fmu).exists()
+    for step in ("generate", "build"):
+        assert run(step, str(source)).returncode == 0
+    res = run(*validate)
+    assert res.returncode == 0, res.stderr

@@ -304,9 +304,17 @@ def test_the_shared_logs_peaks_are_the_logs_not_the_observers():
     from codegen.validation import run as validate, stanford
     assert stanford.peak_times("stanford") == stanford.PEAK_TIMES
     assert stanford.peak_times("/elsewhere/my_log.csv") == ()
-    t = np.arange(0.0, 300.0, 0.5)
-    assert validate.peak_errors(t, np.zeros_like(t), {"observer": np.zeros_like(t)}) == []
-    assert len(validate.peak_errors(t, np.zeros_like(t), {"observer": np.zeros_like(t)}, (110.0,))) == 1
+
+
+@pytest.mark.slow       # runs the compiled step and the Kalman baselines over the shared log twice
+def test_the_same_log_elsewhere_has_no_peaks_of_ours(tmp_path):
+    from codegen.validation import run as validate, stanford
+    here = validate.run_data("stanford_sideslip", "stanford")
+    assert [round(p["t"]) for p in here["peaks"]] == [round(t) for t in stanford.PEAK_TIMES]
+    copy = tmp_path / "my_log.csv.gz"
+    copy.write_bytes(stanford._resolve("stanford").read_bytes())
+    there = validate.run_data("stanford_sideslip", str(copy))
+    assert there["peaks"] == [] and there["observer"] == here["observer"]
 
 
 def test_a_bound_out_of_reach_names_the_files_settings(tmp_path):

@@ -68,7 +68,7 @@ def test_names_up_to_the_limit_are_accepted(tmp_path):
 
 def test_uiogen_new_refuses_a_bad_name_and_writes_nothing(tmp_path):
     err = _one_line(_cli("new", str(tmp_path / "p"), "--family", "linf_uio", "--name", "my obs"))
-    assert "is not a C identifier" in err and not (tmp_path / "p").exists()
+    assert "an observer name is a C identifier" in err and not (tmp_path / "p").exists()
 
 
 # --- a model file that exits ----------------------------------------------------------------------

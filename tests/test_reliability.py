@@ -176,6 +176,72 @@ def test_generation_independent_of_hash_seed(tmp_path):
     assert trees[0] == committed
 
 
+# The system calls that change files (and fsync, between a write and the next step), as strace names them.
+FILE_CALLS = ("openat", "write", "fsync", "mkdir", "mkdirat", "rename", "renameat", "renameat2", "unlink",
+              "unlinkat", "rmdir")
+
+
+def _file_operations(log: Path, folder: Path) -> list:
+    """[(system call, its ordinal among the main thread's calls of that name, the line)] of every
+    successful operation on ``folder`` that writes: an open for writing, a write, a sync, a
+    mkdir, rename, unlink or rmdir (strace -f -y log; its first pid is the main thread)."""
+    from collections import Counter
+    counts, points, main = Counter(), [], None
+    for line in log.read_text().splitlines():
+        m = re.match(r"^(\d+) +(\w+)\(", line)
+        if not m or "resumed>" in line:
+            continue
+        pid, call = m.groups()
+        main = main or pid
+        if pid != main:
+            continue
+        counts[call] += 1
+        if str(folder) not in line or re.search(r"= -1 E", line):
+            continue
+        if call == "openat" and not re.search(r"O_WRONLY|O_RDWR|O_CREAT", line):
+            continue                            # a read
+        points.append((call, counts[call], line))
+    return points
+
+
+def test_generate_killed_at_every_file_operation_loses_nothing(tmp_path):
+    """`uiogen generate --force` killed (strace syscall injection, SIGKILL) as it enters each of
+    its file operations on the generated folder in turn: the killed run dies exactly there, and a
+    plain generate after it re-solves nothing and leaves the committed set, complete, and no
+    leftover (the design lock is never lost, whatever the point)."""
+    from conftest import require_strace
+    from codegen.emit import generate as emit
+    import filecmp
+    import shutil
+    strace = require_strace()
+    name = "lpv_linf_driver_torque"
+    project = tmp_path / "project"
+    committed, here = ROOT / "generated_c" / name, project / "generated_c" / name
+    shutil.copytree(committed, here)
+    cmd = [sys.executable, "-m", "codegen.cli", "generate", name, "--force", "--project", str(project)]
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1")     # no bytecode written: generate's files only
+    log = tmp_path / "trace.log"
+    calls = ",".join(FILE_CALLS)
+    subprocess.run([strace, "-f", "-y", "-qq", "-o", str(log), "-e", f"trace={calls}", *cmd], cwd=ROOT, env=env,
+                   check=True, capture_output=True, timeout=600)
+    points = _file_operations(log, project / "generated_c")
+    assert sum(call.startswith("rename") for call, _, _ in points) == 2 and len(points) > 20, points
+    for call, n, line in points:
+        killed = subprocess.run([strace, "-f", "-y", "-qq", "-o", str(log), "-e", f"trace={call}",
+                                 "-e", f"inject={call}:signal=KILL:when={n}", *cmd],
+                                cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+        assert killed.returncode != 0, f"not killed at {line}"
+        last = [x for x in log.read_text().splitlines() if f" {call}(" in x][-1]
+        assert str(project / "generated_c") in last, f"killed at {last}, not at {line}"
+        lines = []
+        emit.generate([name], log=lines.append, project=project)
+        assert not any("solving" in x for x in lines), (line, lines)
+        _, mismatch, errors = filecmp.cmpfiles(committed, here, [p.name for p in committed.iterdir()], shallow=False)
+        assert not mismatch and not errors, (line, mismatch, errors)
+        assert sorted(p.name for p in here.iterdir()) == sorted(p.name for p in committed.iterdir()), line
+        assert not [p.name for p in here.parent.iterdir() if p.name.startswith(f".{name}.")], line
+
+
 def realistic_inputs(name, obs):
     """The real log for observers that consume its signals and whose boxes it fits (observers
     designed for that car), else the nominal closed-loop plant."""

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 
+from codegen.design import lock as design_lock
+
 pytestmark = pytest.mark.slow          # builds the wheel and installs it into a fresh venv
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -73,7 +75,8 @@ def test_the_tutorial_runs_from_an_empty_folder_with_the_installed_wheel(install
     assert "next:" in out and (work / toml).is_file()
     _run([uiogen, "design", toml, "--update"], work, env)
     lock = work / "proj" / "generated_c" / name / f"{name}_design.json"
-    assert json.loads(lock.read_text())["lock"]["format"] == 1
+    data = json.loads(lock.read_text())
+    assert data["lock"]["format"] == design_lock.FORMAT and design_lock.verify(data, str(lock))
     out = _run([uiogen, "generate", toml], work, env)
     assert "committed design" in out and (lock.parent / f"{name}.h").is_file()
     _run([uiogen, "build", toml], work, env)

@@ -4,11 +4,18 @@ Tasks carry the spec (a small frozen dataclass) and a list of run indices, never
 returns the summary rows of its runs. The same code runs on ``LocalCluster(n_workers=cores,
 processes=True, threads_per_worker=1)`` and on ``Client(address)``: workers import ``codegen``,
 load the observer's built extension and compile (or find in their disk cache) the plant.
+
+What a campaign did is never lost: every finished task's rows are appended to ``runs.jsonl``
+(synced to disk) as it finishes; ``--resume`` continues an interrupted campaign from there; a
+lost worker is Dask's to replace, and a cluster with no worker left, or no run finished within
+the per-run timeout, stops the campaign with a typed error instead of waiting forever.
 """
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
+import logging
 import math
 import os
 import sys
@@ -16,6 +23,7 @@ import time
 from pathlib import Path
 
 from . import runner
+from ..errors import CampaignError
 
 
 def local_workers() -> int:
@@ -37,58 +45,278 @@ def client_for(scheduler: str | None = None, workers: int | None = None):
     return Client(cluster), cluster
 
 
-def _chunks(spec, runs: int, n_workers: int) -> list:
-    size = spec.chunk or max(1, min(50, runs // max(4 * n_workers, 1)))
-    return [list(range(i, min(i + size, runs))) for i in range(0, runs, size)]
+def _chunks(spec, runs, n_workers: int) -> list:
+    runs = list(runs)
+    size = spec.chunk or max(1, min(50, len(runs) // max(4 * n_workers, 1)))
+    return [runs[i:i + size] for i in range(0, len(runs), size)]
+
+
+JOURNAL = "runs.jsonl"
+JOURNAL_FORMAT = 1
+GATHER_TIMEOUT = 5.0       # s to fetch a finished task's rows before looking at the cluster again
+
+
+def identity(spec, design_hash: str) -> dict:
+    """What a run's row derives from besides its index: the campaign's draws and scenarios as
+    parsed (not ``runs``: run K is the same run in a campaign of any length; not how it is
+    scheduled or ranked) and the observer's design."""
+    import dataclasses
+    rows_from = {k: getattr(spec, k) for k in ("observer", "scenarios", "seed", "duration", "scenario_seed",
+                                               "parameters", "driver", "sensors")}
+    text = json.dumps(rows_from, sort_keys=True, default=lambda d: dataclasses.asdict(d))
+    return {"format": JOURNAL_FORMAT, "observer": spec.observer, "design": design_hash,
+            "spec_sha256": hashlib.sha256(text.encode()).hexdigest()}
+
+
+class Journal:
+    """The rows of a campaign, appended as their runs finish: one JSON line per run (floats
+    written as their shortest repr, which reads back to the same double), flushed and synced to
+    disk per finished task, so a campaign killed at any point keeps every run it finished. The
+    first line is the campaign's :func:`identity`; the last, once every run is in, ``{"complete": N}``.
+    """
+
+    def __init__(self, path: Path, header: dict, resume: bool, source: str = "SPEC"):
+        self.path, self.header = Path(path), header
+        self.rows: dict = {}
+        resume_hint = f"`uiogen campaign {source} --resume` continues it"
+        if self.path.exists():
+            found, rows, complete = self._read()
+            if resume:
+                if found != header:
+                    diff = ", ".join(k for k in header if found.get(k) != header.get(k)) or "format"
+                    raise CampaignError(f"{self.path}: --resume: these results are of another campaign ({diff} "
+                                        f"differ: the campaign file or the observer's design changed since); "
+                                        f"run without --resume into another --out folder, or delete {self.path}")
+                self.rows = rows
+            elif not complete:
+                raise CampaignError(f"{self.path}: holds {len(rows)} finished runs of an interrupted campaign; "
+                                    f"{resume_hint}, or delete {self.path.parent} to start over")
+        if not self.rows:
+            self._write_all([header])
+        self._fh = open(self.path, "a")
+
+    def _read(self) -> tuple:
+        """(header, {run: row}, complete) of an existing journal; a torn last line (the process
+        killed while writing it) is cut off, any other damage is an error."""
+        raw = self.path.read_bytes()
+        end = raw.rfind(b"\n") + 1             # after it: a line cut by a kill while it was written
+        if end < len(raw):
+            with open(self.path, "r+b") as fh:
+                fh.truncate(end)
+        entries = []
+        for i, line in enumerate(raw[:end].splitlines()):
+            try:
+                entries.append(json.loads(line))
+            except (json.JSONDecodeError, UnicodeDecodeError):
+                raise CampaignError(f"{self.path}: line {i + 1} is not a JSON row: the results file is damaged "
+                                    f"(it is only ever appended to); delete it to start over") from None
+        if not entries or not isinstance(entries[0], dict) or "spec_sha256" not in entries[0]:
+            raise CampaignError(f"{self.path}: not a campaign results file (no header line); delete it to start over")
+        rows, complete = {}, False
+        for i, e in enumerate(entries[1:], start=2):
+            if isinstance(e, dict) and "complete" in e:
+                complete = True
+            elif isinstance(e, dict) and isinstance(e.get("run"), int):
+                rows.setdefault(e["run"], e)
+            else:
+                raise CampaignError(f"{self.path}: line {i} is neither a run's row nor the end mark: the results "
+                                    f"file is damaged; delete it to start over")
+        return entries[0], rows, complete
+
+    def _write_all(self, entries) -> None:
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        with open(tmp, "w") as fh:
+            fh.write("".join(json.dumps(e) + "\n" for e in entries))
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, self.path)
+
+    def append(self, rows) -> None:
+        """Keep ``rows`` (one write, then synced to disk)."""
+        if not rows:
+            return
+        self._fh.write("".join(json.dumps(r) + "\n" for r in rows))
+        self._fh.flush()
+        os.fsync(self._fh.fileno())
+        for r in rows:
+            self.rows.setdefault(int(r["run"]), r)
+
+    def complete(self, runs: int) -> None:
+        """Mark the campaign finished (a later campaign into the same folder may start over)."""
+        self._fh.write(json.dumps({"complete": runs}) + "\n")
+        self._fh.flush()
+        os.fsync(self._fh.fileno())
+
+    def close(self) -> None:
+        self._fh.close()
+
+
+def _failed_rows(spec, runs, status: str, error: str) -> list:
+    """Rows of runs that produced no result (their worker died, or the run raised): the run, its
+    scenario, the status and what happened; counted, never scored."""
+    return [{"run": int(k), "scenario": spec.scenarios[int(k) % len(spec.scenarios)], "status": status,
+             "error": error} for k in runs]
+
+
+class _OrphanedGather(logging.Filter):
+    """Drops one log record: a gather that timed out (the rows of a task whose worker died, waited
+    for again as a pending task's) leaves a helper task in distributed that fails with AllExit
+    when the client closes, which asyncio logs as a "Task exception was never retrieved"
+    traceback. Nothing failed: the task was re-run or is reported among the unfinished runs."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        return type(exc).__name__ != "AllExit"
+
+
+def _quiet_orphaned_gathers() -> None:
+    log = logging.getLogger("asyncio")
+    if not any(isinstance(f, _OrphanedGather) for f in log.filters):
+        log.addFilter(_OrphanedGather())
+
+
+def _execute(client, spec, todo: list, n_workers: int, journal: Journal, progress, done_before: int,
+             log) -> list:
+    """Run the runs ``todo`` on the cluster, appending each finished task's rows to the journal;
+    returns the runs left unfinished (empty unless the cluster lost every worker, or no run
+    finished within the per-run timeout)."""
+    from dask.distributed import TimeoutError as DaskTimeoutError, as_completed
+    from distributed import KilledWorker
+    _quiet_orphaned_gathers()
+    chunks = _chunks(spec, todo, n_workers)
+    futures = client.map(runner.run_chunk, [spec] * len(chunks), chunks, pure=False)
+    pending = dict(zip(futures, chunks))
+    queue = as_completed(futures)
+    done = done_before
+    last_progress = last_check = time.monotonic()
+    no_workers_since = None
+    while pending:
+        batch = queue.next_batch(block=False) if queue.has_ready() else []
+        for fut in batch:
+            chunk = pending.pop(fut)
+            try:
+                # the rows live on the worker that ran the task: if it died since, Dask re-runs the
+                # task, and its rows are waited for like any pending task's, not here
+                rows = fut.result(timeout=GATHER_TIMEOUT)
+            except DaskTimeoutError:
+                pending[fut] = chunk
+                queue.add(fut)
+                continue
+            except Exception as exc:           # a run raised, or killed its worker (Dask gave up re-running it)
+                if len(chunk) > 1:             # which run: each alone, once; the others are kept
+                    singles = client.map(runner.run_chunk, [spec] * len(chunk), [[k] for k in chunk], pure=False)
+                    pending.update(zip(singles, [[k] for k in chunk]))
+                    queue.update(singles)
+                    continue
+                rows = _failed_rows(spec, chunk, "worker_lost" if isinstance(exc, KilledWorker) else "error",
+                                    f"{type(exc).__name__}: {exc}")
+            journal.append(rows)
+            done += len(rows)
+            last_progress = time.monotonic()
+            if progress is not None:
+                progress(done / spec.runs)
+        if not batch:
+            time.sleep(0.1)
+        now = time.monotonic()
+        if now - last_check < 1.0 or not pending:        # the cluster's state: once a second
+            continue
+        last_check = now
+        try:
+            workers = len(client.scheduler_info(n_workers=-1)["workers"])
+        except Exception as exc:               # the scheduler itself is gone
+            log(f"campaign: the scheduler is unreachable ({type(exc).__name__}: {exc})")
+            break
+        no_workers_since = None if workers else (no_workers_since or now)
+        if no_workers_since is not None and now - no_workers_since > spec.run_timeout:
+            log(f"campaign: no worker for {spec.run_timeout:g} s (run_timeout): every worker was lost")
+            break
+        stall = spec.run_timeout * max(len(c) for c in pending.values())
+        if now - last_progress > stall:
+            log(f"campaign: no task finished for {stall:g} s ({spec.run_timeout:g} s per run of a task) with "
+                f"{workers} worker(s): they were lost or hang")
+            break
+    left = sorted(k for chunk in pending.values() for k in chunk)
+    for fut in pending:
+        fut.cancel()
+    return left
 
 
 def run(spec, out_dir, scheduler: str | None = None, workers: int | None = None, progress=None,
-        client=None) -> dict:
+        client=None, resume: bool = False, log=None) -> dict:
     """Run every run of ``spec`` on Dask; write ``runs.csv``, ``summary.json``, the worst runs'
-    traces and the plots into ``out_dir``; return the summary."""
-    from dask.distributed import as_completed
+    traces and the plots into ``out_dir``; return the summary.
+
+    Each finished task's rows are appended to ``out_dir/runs.jsonl`` (:class:`Journal`) as it
+    finishes; with ``resume`` the runs already there are not run again (the journal must be of
+    the same campaign file and design). A worker that dies is replaced (Dask re-runs its tasks);
+    a task that kills its worker repeatedly is re-run one run at a time and the run that does is
+    reported (status ``worker_lost``); a run that raises is reported (status ``error``). When
+    every worker is gone, or no run finishes within ``run_timeout``, the campaign stops and
+    raises :class:`CampaignError` naming the runs it kept and the command that continues it.
+    """
     from . import report
+    log = log or (lambda text: print(text, file=sys.stderr))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    runner.prepare(spec)                    # compile the plant once, here: workers find it cached
-    own = client is None
-    cluster = None
-    if own:
-        client, cluster = client_for(scheduler, workers)
+    design = runner.prepare(spec)           # the design is current; the plant compiled once, here
+    journal = Journal(out_dir / JOURNAL, identity(spec, design), resume, source=spec.source)
+    if not resume:
+        for stale in ("runs.csv", "summary.json"):
+            (out_dir / stale).unlink(missing_ok=True)   # never beside the results of another campaign
     try:
-        n_workers = max(len(client.scheduler_info(n_workers=-1)["workers"]), 1)
-        t0 = time.perf_counter()
-        chunks = _chunks(spec, spec.runs, n_workers)
-        futures = client.map(runner.run_chunk, [spec] * len(chunks), chunks, pure=False)
-        rows, done = [], 0
-        for fut in as_completed(futures):
-            part = fut.result()
-            rows.extend(part)
-            done += len(part)
-            if progress is not None:
-                progress(done / spec.runs)
-        wall = time.perf_counter() - t0
-        rows.sort(key=lambda r: r["run"])
-        worst = report.worst_runs(spec, rows)
-        traces = {}
-        if worst:
-            for k, fut in zip(worst, client.map(runner.run_traces, [spec] * len(worst), worst, pure=False)):
-                traces[k] = fut.result()[1]
+        todo = [k for k in range(spec.runs) if k not in journal.rows]
+        wall, n_workers, left = 0.0, 0, []
+        if todo:
+            own = client is None
+            cluster = None
+            if own:
+                client, cluster = client_for(scheduler, workers)
+            try:
+                n_workers = max(len(client.scheduler_info(n_workers=-1)["workers"]), 1)
+                t0 = time.perf_counter()
+                left = _execute(client, spec, todo, n_workers, journal, progress, spec.runs - len(todo), log)
+                wall = time.perf_counter() - t0
+            finally:
+                if own:
+                    client.close()
+                    if cluster is not None:
+                        cluster.close()
+        if left:
+            raise CampaignError(f"campaign {spec.source}: {spec.runs - len(left)} of {spec.runs} runs finished and "
+                                f"kept in {journal.path}; {len(left)} did not finish (runs {_ranges(left)}): "
+                                f"`uiogen campaign {spec.source} --resume --out {out_dir}` continues it")
+        journal.complete(spec.runs)
     finally:
-        if own:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+        journal.close()
+    rows = sorted((journal.rows[k] for k in range(spec.runs)), key=lambda r: r["run"])
+    # the worst runs' traces: re-run here (a row re-runs bit for bit from its index alone)
+    worst = report.worst_runs(spec, rows)
+    traces = {k: runner.run_traces(spec, k)[1] for k in worst}
     summary = report.summarize(spec, rows, wall_s=wall, workers=n_workers,
                                scheduler=scheduler or f"LocalCluster({n_workers} processes)")
+    summary["resumed_runs"] = spec.runs - len(todo)
+    summary["runs_per_s"] = len(todo) / wall if wall > 0 else None       # the runs this call ran
     write_rows(rows, out_dir / "runs.csv")
     for k, tr in traces.items():
         write_trace(tr, out_dir / f"worst_run_{k}.csv")
-    summary["files"] = {"runs": str(out_dir / "runs.csv"), "summary": str(out_dir / "summary.json"),
+    summary["files"] = {"runs": str(out_dir / "runs.csv"), "journal": str(journal.path),
+                        "summary": str(out_dir / "summary.json"),
                         "traces": [str(out_dir / f"worst_run_{k}.csv") for k in traces],
                         "plots": report.plots(spec, rows, traces, out_dir)}
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=1, sort_keys=True))
     return summary
+
+
+def _ranges(runs: list) -> str:
+    """``[3, 4, 5, 9]`` as ``3-5, 9`` (at most ten groups shown)."""
+    groups, start = [], None
+    for i, k in enumerate(runs):
+        if start is None:
+            start = k
+        if i + 1 == len(runs) or runs[i + 1] != k + 1:
+            groups.append(f"{start}-{k}" if k != start else f"{k}")
+            start = None
+    return ", ".join(groups[:10]) + (f", ... ({len(groups) - 10} more)" if len(groups) > 10 else "")
 
 
 def columns(rows) -> list:
@@ -124,6 +352,8 @@ def read_rows(path) -> list:
         for r in csv.DictReader(fh):
             row = {}
             for k, v in r.items():
+                if v == "":                    # a key the row does not have (write_rows leaves it blank)
+                    continue
                 if k in ("run", "scenario_seed"):
                     row[k] = int(v)
                 else:

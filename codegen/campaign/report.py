@@ -62,6 +62,8 @@ def summarize(spec, rows, wall_s: float, workers: int, scheduler: str) -> dict:
     from ..project import observer_file as observers
     cert = certified_gain_norm(observers.get(spec.observer))
     s = {"observer": spec.observer, "spec": spec.source, "scenarios": list(spec.scenarios), "seed": spec.seed,
+         # every run that is not "ok" (flagged samples, a spun or diverged plant, a lost worker, an
+         # error) is counted here by its status and left out of every distribution below
          "runs": len(rows), "runs_ok": len(ok), "runs_failed": {st: sum(r["status"] == st for r in rows)
                                                               for st in sorted({r["status"] for r in rows}) if st != "ok"},
          "wall_s": wall_s, "runs_per_s": len(rows) / wall_s if wall_s > 0 else None, "workers": workers,
@@ -83,14 +85,17 @@ def summarize(spec, rows, wall_s: float, workers: int, scheduler: str) -> dict:
 
 
 def format_summary(s: dict) -> str:
-    lines = [f"{s['observer']}: {s['runs']} runs ({s['runs_ok']} ok{', failed ' + str(s['runs_failed']) if s['runs_failed'] else ''}) "
-             f"of {', '.join(s['scenarios'])} in {s['wall_s']:.1f} s ({s['runs_per_s']:.1f} runs/s, {s['scheduler']})",
+    failed = ", ".join(f"{n} {st}" for st, n in s["runs_failed"].items())
+    speed = f"{s['runs_per_s']:.1f} runs/s, " if s.get("runs_per_s") else ""
+    resumed = f", {s['resumed_runs']} of them from the results kept before" if s.get("resumed_runs") else ""
+    lines = [f"{s['observer']}: {s['runs']} runs ({s['runs_ok']} ok{'; not ok: ' + failed if failed else ''}) "
+             f"of {', '.join(s['scenarios'])} in {s['wall_s']:.1f} s ({speed}{s['scheduler']}{resumed})",
              f"{'RMS error':14s} {'mean':>10s} {'p50':>10s} {'p90':>10s} {'p99':>10s} {'max':>10s}"]
     for sig, d in s["rms"].items():
         if d:
             lines.append(f"{sig:14s} " + " ".join(f"{d[k]:10.4g}" for k in ("mean", "p50", "p90", "p99", "max")))
     c = s["certificate"]
-    if c["kind"]:
+    if c["kind"] and c["gamma"] is not None and c["ratio"]:
         r = c["ratio"]
         lines.append(f"certificate ({c['kind']}): gamma {c['gamma']:.4g}; empirical ratio p50 {r['p50']:.4g}, p99 "
                      f"{r['p99']:.4g}, max {r['max']:.4g}; {c['runs_above_gamma']} runs above gamma")

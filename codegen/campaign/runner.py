@@ -153,7 +153,9 @@ def run_one(spec, run: int, traces: bool = False):
     keep = truth["t"] >= SETTLE_TIME
     est = {s: out[:, obs.output_names.index(s)] for s in signals}
     ok = all(np.all(np.isfinite(est[s][keep])) for s in signals)
-    row["status"] = "ok" if ok else "observer_nonfinite"
+    # a run whose step flagged a sample (a non-finite input, a numerical failure) is not "ok",
+    # whatever its estimates: it is counted apart, never scored among the ok runs
+    row["status"] = "observer_nonfinite" if not ok else "flagged" if row["flagged_fraction"] > 0 else "ok"
     for s in signals:
         scale = 180.0 / math.pi if units.get(s, "").startswith("rad") else 1.0
         e = (est[s] - truth[s])[keep] * scale
@@ -199,8 +201,20 @@ def run_traces(spec, run: int):
     return run_one(spec, int(run), traces=True)
 
 
-def prepare(spec) -> None:
-    """Compile (or find in the cache) the plant of every scenario length of the campaign."""
+def design_hash(spec) -> str:
+    """The design hash of the observer a campaign runs (checked current, its extension built
+    from it): part of the campaign's identity, so ``--resume`` never mixes two designs' rows."""
+    from ..extension.build import require_current
+    require_current(_config(spec))
+    _observer(spec)                        # load() refuses an extension of another design
+    return _artifact(spec)["lock"]["sha256"]
+
+
+def prepare(spec) -> str:
+    """Check the observer's design and extension are current (:func:`design_hash`, returned) and
+    compile (or find in the cache) the plant of every scenario length of the campaign."""
+    design = design_hash(spec)
     for name in spec.scenarios:
         scn = _scenario(spec, name, None)
         _plant(spec, scn.t.size)
+    return design

@@ -10,6 +10,7 @@
     duration = 60.0                         # s (optional: truncate the scenarios)
     worst = 3                               # traces of the worst runs to keep
     rank_by = "beta"                        # the signal whose RMS error ranks the runs
+    run_timeout = 60.0                      # s a run may take on a worker (engine: lost workers)
 
     [parameters]                            # the plant's parameters (not the observer's model)
     M = { dist = "uniform", low = 0.9, high = 1.1, relative = true }
@@ -25,26 +26,37 @@
 
 A distribution is a number (a constant) or a table ``dist`` = ``"uniform"`` (``low``, ``high``)
 or ``"normal"`` (``mean``, ``std``), with ``relative = true`` for a factor on the nominal value.
-Every mistake is a :class:`~codegen.errors.ConfigurationError` naming the file, the key and what
-is allowed.
+Every value a distribution can draw must be admissible: a plant parameter within the range its
+model declares (``positive=True``, ``parameter_ranges``: no zero mass, no negative friction), a
+sensor's noise and delay >= 0; a normal draw is unbounded, so a bounded quantity takes a uniform
+one. Every mistake is a :class:`~codegen.errors.ConfigurationError` naming the file, the key and
+what is allowed, raised before any run or file.
 """
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import ConfigurationError
 from ..project.settings import Rule, check_keys, config_error, parse_table, suggest
+from ..validation.common import SETTLE_TIME
+
+MAX_RUNS = 10_000_000
 
 TOP = {
     "observer": Rule(str, required=True, doc="a built-in observer name, or an observer file (.toml, relative to "
                                              "this file)"),
     "scenarios": Rule(list, items=Rule(str), required=True, doc="scenario names, cycled over the runs: the library's "
                                                                 "(families with a plant of their own) or excitation"),
-    "runs": Rule(int, ge=1, required=True, doc="number of dispersed runs"),
+    "runs": Rule(int, ge=1, le=MAX_RUNS, required=True, doc="number of dispersed runs"),
     "seed": Rule(int, ge=0, doc="campaign seed: run K draws from SeedSequence([seed, K])"),
-    "duration": Rule(float, gt=0, doc="truncate every scenario to this many seconds"),
+    "duration": Rule(float, gt=SETTLE_TIME, doc=f"truncate every scenario to this many seconds (errors are "
+                                                  f"scored after the settle time, {SETTLE_TIME:g} s)"),
+    "run_timeout": Rule(float, gt=0, doc="seconds one run may take on a worker; a campaign with no run finished "
+                                         "for that long per run in flight, or with no worker for that long, "
+                                         "stops and keeps what it did (default 60)"),
     "scenario_seed": Rule(str, choices=("fixed", "per_run")),
     "worst": Rule(int, ge=0, doc="traces of this many worst runs are written"),
     "rank_by": Rule(str, doc="signal whose RMS error ranks the runs"),
@@ -64,6 +76,15 @@ class Dist:
     a: float = 0.0            # constant value, low, or mean
     b: float = 0.0            # high or std
     relative: bool = False
+
+    def support(self, nominal: float = 0.0) -> tuple:
+        """(lowest, highest) value a draw can take (a normal one: unbounded unless std = 0)."""
+        if self.kind == "normal" and self.b > 0:
+            return -math.inf, math.inf
+        lo, hi = (self.a, self.a) if self.kind != "uniform" else (self.a, self.b)
+        if self.relative:
+            lo, hi = sorted((lo * nominal, hi * nominal))
+        return lo, hi
 
     def draw(self, rng, nominal: float = 0.0) -> float:
         if self.kind == "constant":
@@ -87,6 +108,7 @@ class CampaignSpec:
     worst: int = 3
     rank_by: str | None = None
     chunk: int | None = None
+    run_timeout: float = 60.0
     parameters: tuple = ()           # ((name, Dist), ...) in file order
     driver: tuple = ()
     sensors: tuple = ()              # ((signal, ((field, Dist), ...)), ...)
@@ -104,10 +126,10 @@ class CampaignSpec:
         return cols
 
 
-def parse_dist(value, *, source: str, section: str, key: str, ge: float | None = None) -> Dist:
+def parse_dist(value, *, source: str, section: str, key: str) -> Dist:
     if isinstance(value, (int, float)) and not isinstance(value, bool):
-        if ge is not None and value < ge:
-            raise config_error(source, section, key, value, f"must be >= {ge:g}")
+        if not math.isfinite(value):
+            raise config_error(source, section, key, value, "must be a finite number")
         return Dist("constant", float(value))
     if not isinstance(value, dict):
         raise config_error(source, section, key, value, 'must be a number or a table { dist = "uniform", low, high } '
@@ -125,14 +147,37 @@ def parse_dist(value, *, source: str, section: str, key: str, ge: float | None =
                                  f"{', '.join(need)})", source=source, section=sec, key=missing[0], allowed="required")
     if t["dist"] == "uniform" and not t["low"] <= t["high"]:
         raise config_error(source, sec, "high", t["high"], f"must be >= low = {t['low']:g}")
-    if ge is not None and not t.get("relative", False):
-        lo = t["low"] if t["dist"] == "uniform" else (t["mean"] if t["std"] == 0 else None)
-        if lo is None:
-            raise config_error(source, sec, "dist", "normal", f"must be 'uniform' here (values must stay >= {ge:g})")
-        if lo < ge:
-            raise config_error(source, sec, "low" if t["dist"] == "uniform" else "mean", lo, f"must be >= {ge:g}")
     a, b = (t["low"], t["high"]) if t["dist"] == "uniform" else (t["mean"], t["std"])
     return Dist(t["dist"], a, b, t.get("relative", False))
+
+
+_HOLDS = {">": lambda lo, hi, b: lo > b, ">=": lambda lo, hi, b: lo >= b, "<": lambda lo, hi, b: hi < b,
+          "<=": lambda lo, hi, b: hi <= b, "!=": lambda lo, hi, b: not lo <= b <= hi}
+
+
+def check_support(d: Dist, nominal: float, conditions, *, source: str, section: str, key: str,
+                  what: str) -> None:
+    """Refuse a dispersion that can draw a value outside ``conditions`` ([(op, bound, reason)],
+    op in >, >=, <, <=, !=), naming the key of the distribution that crosses it."""
+    lo, hi = d.support(nominal)
+    failed = [op for op, b, _ in conditions if not _HOLDS[op](lo, hi, b)]
+    if not failed:
+        return
+    why = "; ".join(dict.fromkeys(w for _, _, w in conditions if w))
+    rule = f"{what} {' and '.join(f'{op} {b:g}' for op, b, _ in conditions)}" + (f" ({why})" if why else "")
+    relative = f" (relative = true: a factor on the nominal {nominal:g}, draws from {lo:g} to {hi:g})" \
+        if d.relative else ""
+    if d.kind == "constant":
+        raise config_error(source, section, key, d.a, f"must keep {rule}{relative}")
+    sec = f"{section}.{key}"
+    if d.kind == "normal":
+        raise config_error(source, sec, "dist", "normal", f"must be 'uniform' here: a normal draw is unbounded, and "
+                           f"every draw must keep {rule}")
+    low_side = failed[0] in (">", ">=", "!=")
+    if d.relative and nominal < 0:
+        low_side = not low_side
+    side = "low" if low_side else "high"
+    raise config_error(source, sec, side, d.a if low_side else d.b, f"must keep every draw of {rule}{relative}")
 
 
 def load(path) -> CampaignSpec:
@@ -152,7 +197,9 @@ def parse(data: dict, source: str) -> CampaignSpec:
     from ..project import observer_file as observers
     from ..errors import UnknownObserverError
     from ..validation import scenarios as scn_lib
-    from .plants import BANKED_DRIVER_KEYS, DRIVER_KEYS, EXCITATION, families_with_plants, plant_kind
+    from .. import families
+    from ..model.definition import parameter_conditions
+    from .plants import BANKED_DRIVER_KEYS, DRIVER_KEYS, EXCITATION, KINDS, families_with_plants, plant_kind
     top = parse_table(data, TOP, source=source)
     name = top["observer"]
     if observers.is_path(name):             # an observer file, relative to the campaign file
@@ -178,13 +225,19 @@ def parse(data: dict, source: str) -> CampaignSpec:
                            f"family {config.family!r}, whose campaigns run on its own model; the library scenarios have "
                            f"compiled plants for the families {', '.join(families_with_plants())}")
     kind = plant_kind(config, top["scenarios"])
-    plant_params = _plant_parameters(config, kind)
+    plant = KINDS[kind][0](config)
+    plant_params = _plant_parameters(plant)
+    symbols = {str(p): p for p in plant.definition.parameters}
     params = []
     for k, v in top.get("parameters", {}).items():
         if k not in plant_params:
             raise config_error(source, "parameters", k, v, "must be a parameter of the plant: "
                                + ", ".join(plant_params), suggest(k, plant_params))
-        params.append((k, parse_dist(v, source=source, section="parameters", key=k)))
+        d = parse_dist(v, source=source, section="parameters", key=k)
+        conditions = parameter_conditions(plant.definition, symbols[k]) if k in symbols else []
+        check_support(d, plant.params[k], conditions, source=source, section="parameters", key=k,
+                      what=f"parameter {k} of the plant {plant.definition.name!r}")
+        params.append((k, d))
     gains = {"steering_torque": DRIVER_KEYS, "banked_road": BANKED_DRIVER_KEYS, "model": ()}[kind]
     driver = []
     for k, v in top.get("driver", {}).items():
@@ -202,9 +255,15 @@ def parse(data: dict, source: str) -> CampaignSpec:
         if not isinstance(table, dict):
             raise config_error(source, "sensors", sig, table, "must be a table with noise, bias, delay")
         check_keys(table, SENSOR_KEYS, source=source, section=sec)
-        fields = tuple((f, parse_dist(table[f], source=source, section=sec, key=f,
-                                      ge=0.0 if f in ("noise", "delay") else None)) for f in SENSOR_KEYS if f in table)
-        sensors.append((sig, fields))
+        fields = []
+        for f in (f for f in SENSOR_KEYS if f in table):
+            d = parse_dist(table[f], source=source, section=sec, key=f)
+            if f in ("noise", "delay"):
+                nominal = families.get(config.family).sensor_noise().get(sig, 0.0) if f == "noise" else 0.0
+                check_support(d, nominal, [(">=", 0.0, "")], source=source, section=sec, key=f,
+                              what=f"the {'standard deviation' if f == 'noise' else 'delay'} of sensor {sig}")
+            fields.append((f, d))
+        sensors.append((sig, tuple(fields)))
     signals = _error_signals(config, kind)
     rank = top.get("rank_by", signals[0])
     if rank not in signals:
@@ -213,14 +272,13 @@ def parse(data: dict, source: str) -> CampaignSpec:
     return CampaignSpec(source=source, observer=name, scenarios=tuple(top["scenarios"]), runs=top["runs"],
                         seed=top.get("seed", 0), duration=top.get("duration"),
                         scenario_seed=top.get("scenario_seed", "fixed"), worst=top.get("worst", 3), rank_by=rank,
-                        chunk=top.get("chunk"), parameters=tuple(params), driver=tuple(driver),
+                        chunk=top.get("chunk"), run_timeout=top.get("run_timeout", 60.0),
+                        parameters=tuple(params), driver=tuple(driver),
                         sensors=tuple(sensors), raw=data)
 
 
-def _plant_parameters(config, kind) -> tuple:
-    from .plants import KINDS
-    spec = KINDS[kind][0](config)
-    return tuple(n for n in spec.param_names if not n.startswith("driver."))
+def _plant_parameters(plant) -> tuple:
+    return tuple(n for n in plant.param_names if not n.startswith("driver."))
 
 
 def _measured_signals(config) -> tuple:

@@ -13,9 +13,17 @@ file, the model and every toolchain module the design imports, the numeric packa
 versions). A lock whose hash matches is *current*: :func:`codegen.pipeline.build` replays it
 (:func:`codegen.design.lmi.replaying`), re-checking every block with numpy. A stale or missing lock
 is re-solved by ``uiogen generate`` (and on request by ``uiogen design NAME --update``).
+
+Nothing in a lock is taken on trust: ``design_inputs`` is re-derived and compared, and every
+other entry is covered by a checksum (``lock.sections``: the SHA-256 of each entry's JSON;
+``lock.sha256``: of those) that :func:`status` verifies, so a lock edited by hand (two signal
+names swapped, a gain or gamma changed) is refused, naming the entries, instead of compiled.
+(The extension built from a lock carries the SHA-256 of its file, and ``load`` refuses it beside
+another lock: :mod:`python_bindings.runtime`.)
 """
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -26,7 +34,9 @@ from ..errors import DesignLockError
 from .lmi import SolveRecord
 from ..project.observer_file import ObserverConfig
 
-FORMAT = 1
+FORMAT = 2
+# The entries of the lock record that seal the rest (not covered by themselves).
+SEALS = ("sha256", "sections")
 DESIGN_PACKAGES = ("numpy", "scipy", "sympy", "mpmath", "clarabel")
 
 
@@ -95,7 +105,13 @@ def read(config: ObserverConfig, base: Path | None = None) -> tuple:
 
 
 def status(config: ObserverConfig, base: Path | None = None) -> tuple:
-    """(lock or None, reason): the lock when it is current, else None and why not."""
+    """(lock or None, reason): the lock when it is current, else None and why not.
+
+    Raises
+    ------
+    DesignLockError
+        The lock is current but was edited after uiogen wrote it (:func:`verify`).
+    """
     data, why = read(config, base)
     if data is None:
         return None, why
@@ -104,7 +120,60 @@ def status(config: ObserverConfig, base: Path | None = None) -> tuple:
         return None, f"lock format {lock.get('format')!r}, this toolchain writes {FORMAT}"
     if lock.get("design_inputs") != design_inputs(config):
         return None, "design inputs changed (model, parameters, configuration, toolchain or package versions)"
+    verify(data, str(path(config, base)), config.name if config.builtin else config.source)
     return data, "current"
+
+
+def _digest(value) -> str:
+    return hashlib.sha256(json.dumps(value, sort_keys=True).encode()).hexdigest()
+
+
+def sections(doc: dict) -> dict:
+    """{entry: SHA-256 of its JSON} of every top-level entry of a lock and every entry of its
+    ``lock`` record (``lock.KEY``) but the seals."""
+    out = {}
+    for key, value in doc.items():
+        if key == "lock" and isinstance(value, dict):
+            out.update({f"lock.{k}": _digest(v) for k, v in value.items() if k not in SEALS})
+        else:
+            out[key] = _digest(value)
+    return out
+
+
+def seal(doc: dict) -> dict:
+    """``doc`` (as its JSON reads back) with its checksums: ``lock.sections`` and ``lock.sha256``."""
+    doc = json.loads(json.dumps(doc, sort_keys=True))
+    doc["lock"] = {k: v for k, v in doc["lock"].items() if k not in SEALS}
+    parts = sections(doc)
+    doc["lock"].update(sections=parts, sha256=_digest(parts))
+    return doc
+
+
+def verify(data: dict, source: str, how: str = "NAME") -> str:
+    """The checksum (``lock.sha256``) of a parsed lock after checking every entry against its
+    checksum.
+
+    Raises
+    ------
+    DesignLockError
+        An entry was edited, added or removed after uiogen wrote the lock (the message names
+        them, the file, and how to get a lock uiogen wrote: restore it, or re-solve it).
+    """
+    lock = data.get("lock") if isinstance(data, dict) else None
+    if not isinstance(lock, dict):
+        raise DesignLockError(f"{source}: no lock record; re-solve it with `uiogen design {how} --update`")
+    parts = sections(data)
+    recorded = lock.get("sections")
+    if recorded == parts and lock.get("sha256") == _digest(parts):
+        return lock["sha256"]
+    if not isinstance(recorded, dict) or lock.get("sha256") != _digest(recorded):
+        edited = ["lock.sections / lock.sha256 (the checksums themselves)"]
+    else:
+        edited = sorted(k for k in set(parts) | set(recorded) if parts.get(k) != recorded.get(k))
+    raise DesignLockError(f"{source}: the design lock was edited after uiogen wrote it: {', '.join(edited)} "
+                          f"{'does' if len(edited) == 1 else 'do'} not match the checksums in lock.sections; a lock "
+                          f"is not edited by hand (its C, names and certificate derive from it): restore it from "
+                          f"version control, or re-solve it with `uiogen design {how} --update`")
 
 
 def solutions(data: dict, source: str = "") -> list:
@@ -118,10 +187,10 @@ def solutions(data: dict, source: str = "") -> list:
 def document(build, records: list) -> dict:
     """The lock of a freshly solved design: the family's report plus the solutions and the hash."""
     v = sources.versions()
-    return {**build.artifact(),
-            "lock": {"format": FORMAT, "design_inputs": design_inputs(build.config),
-                     "versions": {k: v[k] for k in DESIGN_PACKAGES},
-                     "lmi_solutions": [r.to_json() for r in records]}}
+    return seal({**build.artifact(),
+                 "lock": {"format": FORMAT, "design_inputs": design_inputs(build.config),
+                          "versions": {k: v[k] for k in DESIGN_PACKAGES},
+                          "lmi_solutions": [r.to_json() for r in records]}})
 
 
 def dumps(doc: dict) -> str:

@@ -88,7 +88,18 @@ def closure(*modules: str, files=()) -> list:
             seen.add(f)
             module_level = parent_only or k < len(parts)
             todo += [(m, False) for m in _imports(f, module_level) if (m, False) not in done]
-    return sorted(seen)
+    return sorted(seen, key=_order)
+
+
+def _order(f: Path) -> tuple:
+    """Sort key of a source file that does not depend on where the project is installed: the
+    project's files by their path inside it, then files outside it (a user's model) by name.
+    (Sorting absolute paths put a user's model before or after the package depending on whether
+    the checkout's folder sorts above /tmp: the same design hashed differently on two machines.)"""
+    try:
+        return (0, str(f.relative_to(ROOT)), "")
+    except ValueError:
+        return (1, f.name, str(f))
 
 
 def versions() -> dict:

@@ -27,7 +27,7 @@ from python_bindings.workspace import Workspace, source_checkout
 from ..design import lock as design_lock
 from ..emit.header import signals as header_signals
 from ..emit.toolchain import STRICT_CFLAGS, compile_and_link, compiler, render_template, run
-from ..errors import UnknownObserverError
+from ..errors import DesignLockError, UnknownObserverError
 from ..project import observer_file as observers
 from ..project import outputs
 
@@ -186,6 +186,25 @@ def load(observer) -> CompiledObserver:
     if config.workspace != Workspace.locate(argument)[0]:
         argument += f" --project {config.workspace.root}"
     return open_observer(config.workspace, config.name, argument)
+
+
+def require_current(config: observers.ObserverConfig) -> None:
+    """Refuse to run an observer whose committed design is not the one its files describe now
+    (the observer file, parameters or model changed since ``uiogen generate``): its C and its
+    extension are of the old design. :func:`load` refuses an extension of another lock; this is
+    the check before it, for the commands that run a compiled observer (validate, export, campaign).
+
+    Raises
+    ------
+    DesignLockError
+        The lock is missing or stale (names the commands that bring it up to date), or edited.
+    """
+    how = config.name if config.builtin else config.source
+    data, why = design_lock.status(config)
+    if data is None:
+        raise DesignLockError(f"{config.name}: the committed design {design_lock.path(config)} is not the current one "
+                              f"({why}), so neither is its C or its extension: run `uiogen generate {how}` and "
+                              f"`uiogen build {how}`")
 
 
 def main(argv=None, project: Path | None = None) -> int:

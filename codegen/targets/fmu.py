@@ -108,7 +108,7 @@ def export_fmu(observer, out, log=print, fmi_version: str = "2.0") -> Path:
         return export_fmu3(observer, out, log)
     if fmi_version != "2.0":
         raise UnsupportedError(f"FMI version {fmi_version!r}: uiogen exports 2.0 and 3.0 co-simulation FMUs")
-    from ..extension.build import generated_dir
+    from ..extension.build import check_generated, generated_dir, require_current
     config = observer if isinstance(observer, observers.ObserverConfig) else observers.get(str(observer))
     out = Path(out)
     if out.suffix != ".fmu":
@@ -123,6 +123,8 @@ def export_fmu(observer, out, log=print, fmi_version: str = "2.0") -> Path:
     if missing:
         raise UnknownObserverError(f"observer {name!r} has not been generated (no {src_dir / missing[0]}); "
                                    f"run `uiogen generate {name if config.builtin else config.source}`")
+    require_current(config)        # the committed design is the current one,
+    check_generated(config)        # and the C is what generate wrote from it (its stamp), never as found
     b = pipeline.build(config)
     sources = {f: (src_dir / f).read_text() for f in c_files}
     digest = hashlib.sha256("".join(f + sources[f] for f in c_files).encode())
@@ -273,7 +275,7 @@ def export_fmu3(observer, out, log=print) -> Path:
     fmu3``): ``modelDescription.xml``, ``sources/`` (the generated C, the wrapper rendered from
     ``fmu3.c.j2``, the FMI 3.0 headers and ``buildDescription.xml``) and
     ``binaries/x86_64-linux/NAME.so``, compiled with the strict flags like the FMI 2.0 FMU."""
-    from ..extension.build import generated_dir
+    from ..extension.build import check_generated, generated_dir, require_current
     config = observer if isinstance(observer, observers.ObserverConfig) else observers.get(str(observer))
     out = Path(out)
     if out.suffix != ".fmu":
@@ -288,6 +290,8 @@ def export_fmu3(observer, out, log=print) -> Path:
     if missing:
         raise UnknownObserverError(f"observer {name!r} has not been generated (no {src_dir / missing[0]}); "
                                    f"run `uiogen generate {name if config.builtin else config.source}`")
+    require_current(config)        # the committed design is the current one,
+    check_generated(config)        # and the C is what generate wrote from it (its stamp), never as found
     b = pipeline.build(config)
     sources = {f: (src_dir / f).read_text() for f in c_files}
     digest = hashlib.sha256(("fmi3" + "".join(f + sources[f] for f in c_files)).encode())

@@ -56,6 +56,8 @@ rely on the model's boxes and the physics."""
 BOX_FACTOR = 2.0
 """A column beyond BOX_FACTOR x the largest |bound| of the model's box for it is a unit mistake
 when another unit of its dimension brings it inside the box."""
+FILL = 0.05
+"""A unit explains a column beyond its box only if, converted, it spans at least this fraction of the box."""
 MIN_STD = {"angle": 2e-3, "angular rate": 0.02, "angular acceleration": 0.1, "speed": 0.2,
            "acceleration": 0.2, "force": 50.0, "torque": 5.0, "length": 0.05}
 """[SI] Standard deviation a side of a relation needs for the relation to be judged (below it the
@@ -659,7 +661,11 @@ class LogChecks:
             if bounds is not None:
                 big = BOX_FACTOR * max(abs(bounds[0]), abs(bounds[1]))
                 if max(abs(r.lo), abs(r.hi)) > big:
-                    fits = [(f, u) for f, u in self._alternatives(n) if self._inside(r, f, bounds)]
+                    # a unit explains the excess only if it brings the column inside the box at the box's
+                    # scale: any small excursion "fits" as degrees once divided by 57 (a heading drifting
+                    # to 0.6 rad in a +-0.3 rad box is a state leaving its box, not a column in degrees)
+                    fits = [(f, u) for f, u in self._alternatives(n)
+                            if self._inside(r, f, bounds) and abs(r.hi - r.lo) * f >= FILL * (bounds[1] - bounds[0])]
                     if fits:
                         raise DatasetError(
                             f"{self.source}: {col.describe(n)} spans [{r.lo:.4g}, {r.hi:.4g}] {unit_model}, beyond "

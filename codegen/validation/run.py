@@ -42,7 +42,9 @@ def run_scenario(name, scenario, plant: str = "nominal", duration: float | None 
     tables (``observer``, ``baselines``), the signals and ``family`` (which formats the table).
     ``observer``: the compiled observer to run (default: the observer's extension), e.g. a
     :class:`python_bindings.Recorder` of it."""
+    from ..extension.build import require_current
     config = observers.get(name) if isinstance(name, str) else name
+    require_current(config)                 # never the compiled step of an older design
     if scenario == "excitation":            # every model: its own equations, swept and excited
         from . import excitation
         return {"family": config.family, **excitation.run(config, duration, seed, progress=progress,
@@ -139,12 +141,13 @@ def run_data(name, path: str = "stanford", block_bytes: int | None = None) -> di
     SIGNAL ``beta`` [deg] and ``vy`` [m/s] (v_y = v_x tan(beta)), plus the signals for plots,
     ``log_checks`` (every check and its verdict) and ``warnings``.
     """
-    from ..extension.build import load
+    from ..extension.build import load, require_current
     from ..model import load_parameters
     from ..project.columns import model_unit
     from ..project.observer_file import get
     from . import csvlog, log_checks, stanford, streaming
     config = get(name)
+    require_current(config)                 # never the compiled step of an older design
     block_bytes = csvlog.BLOCK_BYTES if block_bytes is None else block_bytes
     if config.column_map is not None:
         from . import logs
