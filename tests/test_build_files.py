@@ -110,5 +110,11 @@ def test_header_carries_the_design_hash_and_a_typed_status():
     lock = (generated_dir(NAME) / f"{NAME}_design.json").read_text()
     assert f'#define LPV_LINF_DRIVER_TORQUE_DESIGN_HASH "{design_hash(lock)}"' in h
     assert len(design_hash(lock)) == 64 and json.loads(lock)["lock"]["design_inputs"] not in h
+    # a re-hash of the toolchain (design_inputs and the seals over it) keeps it; a design change does not
+    doc = json.loads(lock)
+    doc["lock"].update(design_inputs="0" * 64, sha256="1" * 64, sections={})
+    assert design_hash(json.dumps(doc)) == design_hash(lock)
+    doc["L1"][0][0] += 1e-9
+    assert design_hash(json.dumps(doc)) != design_hash(lock)
     assert "} lpv_linf_driver_torque_status_bit;" in h and "typedef int lpv_linf_driver_torque_status;" in h
     assert "lpv_linf_driver_torque_status lpv_linf_driver_torque_step(" in h

@@ -83,15 +83,13 @@ PRECISIONS = {
 
 
 def design_hash(lock_text: str) -> str:
-    """The design hash of a design lock: its own seal ``lock.sha256`` where it carries one, else
-    the SHA-256 of its canonical JSON less ``lock.design_inputs`` (the hash of the toolchain's
-    sources, which a re-hash changes while the design stays the same)."""
+    """The design hash of a design lock: the SHA-256 of its canonical JSON less
+    ``lock.design_inputs`` (the hash of the toolchain's sources, which a re-hash changes while the
+    design stays the same) and less the lock's seals (``lock.sha256``, ``lock.sections``: they
+    cover ``design_inputs`` too)."""
     import json
     lock = json.loads(lock_text)
-    seal = lock.get("lock", {}).get("sha256")
-    if seal:
-        return seal
-    lock["lock"] = {k: v for k, v in lock.get("lock", {}).items() if k != "design_inputs"}
+    lock["lock"] = {k: v for k, v in lock.get("lock", {}).items() if k not in ("design_inputs", "sha256", "sections")}
     return hashlib.sha256(json.dumps(lock, sort_keys=True).encode()).hexdigest()
 
 
