@@ -32,7 +32,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of algebraic_uio_example1_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define ALGEBRAIC_UIO_EXAMPLE1_DESIGN_HASH "4a2fd5898bb90e4146f95be86d163485f7174d3b8e4b63a3f1c889d512e32c5b"
+#define ALGEBRAIC_UIO_EXAMPLE1_DESIGN_HASH "f5af042dceabe5f34008505b3b288958c4effbd5e42928bf2c74ea123ad3178e"
 
 /* Status bits returned by algebraic_uio_example1_step; a sample's status is their OR (algebraic_uio_example1_status). */
 typedef enum {

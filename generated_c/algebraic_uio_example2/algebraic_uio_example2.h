@@ -35,7 +35,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of algebraic_uio_example2_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define ALGEBRAIC_UIO_EXAMPLE2_DESIGN_HASH "46cca1b18b39f443b28110e4e79abf656394846437901f561577030292ff78ac"
+#define ALGEBRAIC_UIO_EXAMPLE2_DESIGN_HASH "974076e82f04b462f7d4970e899c971254d7976ca30634deaad7f9169f00fede"
 
 /* Status bits returned by algebraic_uio_example2_step; a sample's status is their OR (algebraic_uio_example2_status). */
 typedef enum {

@@ -43,7 +43,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of interconnected_uio_ford_escort_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define INTERCONNECTED_UIO_FORD_ESCORT_DESIGN_HASH "7a6fedb957eb79e63626eb6ba1eadae83db7b59d2028e65bf5625743b84470dc"
+#define INTERCONNECTED_UIO_FORD_ESCORT_DESIGN_HASH "e04b5fd23215b9da68332129dd74a3d674d592a0d8a7c0ecdf8b3311fb128cd1"
 
 /* Status bits returned by interconnected_uio_ford_escort_step; a sample's status is their OR (interconnected_uio_ford_escort_status). */
 typedef enum {

@@ -28,7 +28,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of lpv_linf_driver_torque_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define LPV_LINF_DRIVER_TORQUE_DESIGN_HASH "d63882ae75e9af8b0031018fd6e4b0fa814d36eaf095bee0f710d71dfcdb0894"
+#define LPV_LINF_DRIVER_TORQUE_DESIGN_HASH "888f7361b0eceae5d33310b978554db5032161eff17f4ef844039053bcacf1b9"
 
 /* Status bits returned by lpv_linf_driver_torque_step; a sample's status is their OR (lpv_linf_driver_torque_status). */
 typedef enum {

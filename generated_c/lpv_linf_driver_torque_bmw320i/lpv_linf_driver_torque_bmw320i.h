@@ -32,7 +32,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of lpv_linf_driver_torque_bmw320i_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define LPV_LINF_DRIVER_TORQUE_BMW320I_DESIGN_HASH "15d98305a4ea0f4815da397020c4894269dbbde156d137ef4f3e8b5a83624a0f"
+#define LPV_LINF_DRIVER_TORQUE_BMW320I_DESIGN_HASH "16634f3af38641d0eb1aca7fb33386f3e8044fc4449cb22ba419a03d93949f65"
 
 /* Status bits returned by lpv_linf_driver_torque_bmw320i_step; a sample's status is their OR (lpv_linf_driver_torque_bmw320i_status). */
 typedef enum {

@@ -28,7 +28,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of lpv_linf_driver_torque_sector_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define LPV_LINF_DRIVER_TORQUE_SECTOR_DESIGN_HASH "3552afc684478ec81fe2b35891eacb144d0cc34ffa96667eb4e7ed49c8ce2845"
+#define LPV_LINF_DRIVER_TORQUE_SECTOR_DESIGN_HASH "b94d52c994ad52e9b0c287e780d4ed9a6e8b65f742af6ad244f31a9c359ada2a"
 
 /* Status bits returned by lpv_linf_driver_torque_sector_step; a sample's status is their OR (lpv_linf_driver_torque_sector_status). */
 typedef enum {

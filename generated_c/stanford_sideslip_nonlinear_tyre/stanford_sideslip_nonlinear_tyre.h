@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of stanford_sideslip_nonlinear_tyre_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define STANFORD_SIDESLIP_NONLINEAR_TYRE_DESIGN_HASH "a3408cd9d15aa0f1e0c45d6423a40f1c52dca69d8594d69940cc206a2aafd943"
+#define STANFORD_SIDESLIP_NONLINEAR_TYRE_DESIGN_HASH "5283eb8268e05a193d906faea1719fa0f46c31583615f704e755edcaa03a3d50"
 
 /* Status bits returned by stanford_sideslip_nonlinear_tyre_step; a sample's status is their OR (stanford_sideslip_nonlinear_tyre_status). */
 typedef enum {

@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of switched_pi_bank_angle_fine_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define SWITCHED_PI_BANK_ANGLE_FINE_DESIGN_HASH "21b86bf33e233bf3a01b9228bd99c5086f62e09e017a73e4f3193ab5cfaacddb"
+#define SWITCHED_PI_BANK_ANGLE_FINE_DESIGN_HASH "fbfe5b52508163112163e6dac7e5ee611809819154d66dd277935cad2a4cf782"
 
 /* Status bits returned by switched_pi_bank_angle_fine_step; a sample's status is their OR (switched_pi_bank_angle_fine_status). */
 typedef enum {

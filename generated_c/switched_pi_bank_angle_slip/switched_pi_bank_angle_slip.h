@@ -34,7 +34,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of switched_pi_bank_angle_slip_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define SWITCHED_PI_BANK_ANGLE_SLIP_DESIGN_HASH "465815f201589ad21c0585cb956ad339838fd0c03beb23d66948a1aecc1faff2"
+#define SWITCHED_PI_BANK_ANGLE_SLIP_DESIGN_HASH "0b06996157d46d5502a28a2d06cdd4628e4a750797946b39898e5485be8e0072"
 
 /* Status bits returned by switched_pi_bank_angle_slip_step; a sample's status is their OR (switched_pi_bank_angle_slip_status). */
 typedef enum {

@@ -34,7 +34,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of ts_fuzzy_uio_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define TS_FUZZY_UIO_DESIGN_HASH "1d8224690ab5007bbb4a099c3629b436ff6832631cffe2106f20e3c9ba90d153"
+#define TS_FUZZY_UIO_DESIGN_HASH "ea902073fd49a7f0f04b12c5ebc85ef9b3fee77aa16f4b3679223e13c3b9832a"
 
 /* Status bits returned by ts_fuzzy_uio_step; a sample's status is their OR (ts_fuzzy_uio_status). */
 typedef enum {
