@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from .design import lock as design_lock
 from .design.solver import FreshSolver, LockReplay
+from .design import precision
 from . import families
 from .errors import BoundsError
 from .project.observer_file import ObserverConfig
@@ -46,7 +47,7 @@ def build(config: ObserverConfig, solver=None):
     solutions of a fresh design."""
     from .families.substituted import wrap
     solver = committed(config) if solver is None else solver
-    b = wrap(_family_build(config, solver))
+    b = wrap(_checked(_family_build(config, solver)))
     if isinstance(solver, LockReplay):
         solver.check_complete()
     return b
@@ -57,3 +58,10 @@ def solve(config: ObserverConfig, tol: float | None = None) -> tuple:
     solver = FreshSolver(tol)
     b = build(config, solver)
     return b, solver.records
+
+
+def _checked(b):
+    """``b``, refused when its ``[design] precision = "float32"`` margin is not certified
+    (:mod:`codegen.design.precision`)."""
+    precision.check(b)
+    return b

@@ -67,21 +67,24 @@ def test_sweep_json_and_mistakes():
 
 @pytest.mark.slow          # a float32 build
 def test_build_float32_accepted_and_refused():
-    """`uiogen build --float32`: an observer whose contraction margin covers the float rounding
-    is built (exit 0, its library on disk); one whose margin does not is refused with exit 2 and
-    a one-line typed error naming the measured margin, no traceback."""
-    ok = uiogen("build", "--float32", "lpv_linf_driver_torque_bmw320i")
+    """`uiogen build --float32`: an observer whose certified contraction bounds the float
+    rounding within every output's tolerance is built (exit 0, its library on disk, the figures
+    per signal printed); one whose margin does not is refused with exit 2 and a one-line typed
+    error, the reason (signal, bound, tolerance, margin, the setting that would fix it) above it."""
+    ok = uiogen("build", "--float32", "lpv_linf_driver_torque")
     assert ok.returncode == 0, ok.stderr
-    assert "lpv_linf_driver_torque_bmw320i: float32 accepted" in ok.stdout
+    assert "lpv_linf_driver_torque: float32 accepted" in ok.stdout
+    assert "T_d            bound" in ok.stdout and "N m" in ok.stdout
     from codegen.project import observer_file
-    lib = (observer_file.get("lpv_linf_driver_torque_bmw320i").workspace.float32 / "lpv_linf_driver_torque_bmw320i"
-           / "liblpv_linf_driver_torque_bmw320i_f32.so")
+    lib = (observer_file.get("lpv_linf_driver_torque").workspace.float32 / "lpv_linf_driver_torque"
+           / "liblpv_linf_driver_torque_f32.so")
     assert lib.exists() and f"built {lib}" in ok.stdout
-    bad = uiogen("build", "--float32", "lpv_linf_driver_torque")
+    bad = uiogen("build", "--float32", "stanford_sideslip_nonlinear_tyre")
     assert bad.returncode == 2
     assert "Traceback" not in bad.stderr
     lines = bad.stderr.strip().splitlines()
-    assert len(lines) == 1
-    assert lines[0].startswith("uiogen: error: CertificateError: float32 build refused for lpv_linf_driver_torque ")
-    assert "margin 1-c = 0.02317" in lines[0]
-    assert "lpv_linf_driver_torque: float32 REFUSED" in bad.stdout
+    assert lines == ["uiogen: error: CertificateError: float32 build refused for stanford_sideslip_nonlinear_tyre "
+                     "(the reasons and figures above)"]
+    assert "stanford_sideslip_nonlinear_tyre: float32 REFUSED: v_y on stanford log: bound" in bad.stdout
+    assert "margin 1 - c = " in bad.stdout and "sliding_fraction" in bad.stdout
+    assert "outside the certified set (SCHEDULING_CLAMPED)" in bad.stdout

@@ -52,3 +52,31 @@ def test_core_observer_under_qemu_is_bit_identical_to_the_host_build(recorded, p
     r = qemu.compare(NAME, precision, inputs, scenario, work=tmp_path)
     assert r["samples"] == qemu.SAMPLES
     assert r["differing_values"] == 0 and r["status_equal"] and r["bit_identical"], qemu.format_row(r)
+
+
+def test_cycle_count_reads_the_executed_instructions_of_the_step(recorded, tmp_path):
+    """Cycles per step of the core observer (codegen/tools/m4cycles.py): the float32 step runs on
+    the FPU (about one float instruction per flop of the CasADi graph, no soft-float routine), the
+    double step in libgcc's soft-float routines; cycles are at least the instructions, and grow
+    with the refill P. (Figures, not speed claims: `uiogen bench` reports them.)"""
+    from codegen.tools import m4cycles
+    require(m4cycles.available(), f"{qemu.missing() or m4cycles.OBJDUMP}")
+    scenario, inputs = recorded
+    flops = m4cycles.flops(NAME)
+    f32 = m4cycles.measure(NAME, "float32", inputs, tmp_path / "f32")
+    # one call per step, the harness's of NAME_step_flat: the kernel is inlined (-flto)
+    assert f32["soft_float_instructions"] == 0 and f32["mnemonics"].get("bl", 0) == 1
+    assert 0.9 * flops <= f32["by_kind"]["float"] <= 1.2 * flops
+    assert f32["instructions"] <= f32["cycles_p1"] < f32["cycles_p3"]
+    assert f32["mnemonics"]["vdiv"] >= 1
+    dbl = m4cycles.measure(NAME, "double", inputs, tmp_path / "f64")
+    arithmetic = ("vadd", "vsub", "vmul", "vdiv", "vsqrt", "vmla", "vmls", "vnmls", "vnmla", "vfma")
+    assert not any(m in dbl["mnemonics"] for m in arithmetic)          # moves only: the FPU has no double
+    assert dbl["soft_float_instructions"] > 0.8 * dbl["instructions"]
+
+
+def test_instruction_timings_of_the_cycle_count():
+    from codegen.tools import m4cycles
+    assert m4cycles._base("vldrle") == "vldr" and m4cycles._base("bls.n") == "b" and m4cycles._base("bl") == "bl"
+    assert m4cycles._base("vmul.f32") == "vmul" and m4cycles._base("movgt") == "mov"
+    assert m4cycles._registers("{d8-d15}") == 16 and m4cycles._registers("{r4, r5, r6, lr}") == 4

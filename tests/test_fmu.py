@@ -1,6 +1,6 @@
-"""uiogen export --format fmu: an FMI 2.0 co-simulation FMU, checked with FMPy (its model
-description validation, and a simulation over every validation scenario of the named observers
-whose outputs and status are bit-identical to the Python extension's)."""
+"""uiogen export --format fmu / fmu3: FMI 2.0 and FMI 3.0 co-simulation FMUs, checked with FMPy
+(its model description validation, and a simulation over every validation scenario of the named
+observers whose outputs and status are bit-identical to the Python extension's)."""
 from __future__ import annotations
 
 import platform
@@ -23,6 +23,8 @@ pytestmark = [pytest.mark.slow,          # compiles FMU binaries
                                  reason="the FMU carries a linux64 binary only")]
 
 NAMES = ("lpv_linf_driver_torque", "interconnected_uio")
+FORMATS = ("fmu", "fmu3")
+KEYS = [(n, f) for f in FORMATS for n in NAMES]
 
 
 @pytest.fixture(scope="module")
@@ -30,45 +32,57 @@ def fmus(tmp_path_factory):
     out = {}
     for name in NAMES:
         build_extension(name)
-        path = tmp_path_factory.mktemp("fmu") / f"{name}.fmu"
-        assert cli.main(["export", name, "--format", "fmu", "--out", str(path)]) == 0
-        out[name] = path
+        for fmt in FORMATS:
+            path = tmp_path_factory.mktemp(fmt) / f"{name}.fmu"
+            assert cli.main(["export", name, "--format", fmt, "--out", str(path)]) == 0
+            out[name, fmt] = path
     return out
 
 
-@pytest.mark.parametrize("name", NAMES)
-def test_fmu_model_description_passes_fmpy_validation(fmus, name):
-    assert validate_fmu(str(fmus[name])) == []
+@pytest.mark.parametrize("name,fmt", KEYS)
+def test_fmu_model_description_passes_fmpy_validation(fmus, name, fmt):
+    assert validate_fmu(str(fmus[name, fmt])) == []
+    assert fmpy.read_model_description(str(fmus[name, fmt])).fmiVersion == fmu.FORMATS[fmt]
 
 
-@pytest.mark.parametrize("name", NAMES)
-def test_fmu_holds_sources_binary_units_and_sample_time(fmus, name):
+@pytest.mark.parametrize("name,fmt", KEYS)
+def test_fmu_holds_sources_binary_units_and_sample_time(fmus, name, fmt):
     obs = load(name)
-    with zipfile.ZipFile(fmus[name]) as z:
+    with zipfile.ZipFile(fmus[name, fmt]) as z:
         names = set(z.namelist())
         md = ET.fromstring(z.read("modelDescription.xml"))
-    assert f"binaries/linux64/{name}.so" in names
-    assert {f"sources/{name}.c", f"sources/{name}_kernel.c", f"sources/{name}_fmu.c",
-            "sources/fmi2Functions.h"} <= names
+    platform_dir, wrapper, header = (("linux64", f"{name}_fmu.c", "fmi2Functions.h") if fmt == "fmu" else
+                                     ("x86_64-linux", f"{name}_fmu3.c", "fmi3Functions.h"))
+    assert f"binaries/{platform_dir}/{name}.so" in names
+    assert {f"sources/{name}.c", f"sources/{name}_kernel.c", f"sources/{wrapper}", f"sources/{header}"} <= names
     assert float(md.find("DefaultExperiment").get("stepSize")) == obs.sample_time
-    variables = {v.get("name"): v for v in md.iter("ScalarVariable")}
+    if fmt == "fmu":
+        variables = {v.get("name"): v for v in md.iter("ScalarVariable")}
+        units = [v.find("Real").get("unit") for n, v in variables.items() if n != "status"]
+        assert variables["status"].find("Integer") is not None
+    else:
+        assert "sources/buildDescription.xml" in names
+        variables = {v.get("name"): v for v in md.find("ModelVariables")}
+        assert variables.pop("time").get("causality") == "independent"
+        units = [v.get("unit") for n, v in variables.items() if n != "status"]
+        assert variables["status"].tag == "Int32"
+        assert [o.get("valueReference") for o in md.find("ModelStructure")] == \
+            [v.get("valueReference") for v in variables.values() if v.get("causality") == "output"]
     assert [n for n, v in variables.items() if v.get("causality") == "input"] == list(obs.input_names)
     assert [n for n, v in variables.items() if v.get("causality") == "output"] == [*obs.output_names, "status"]
-    assert variables["status"].find("Integer") is not None
-    units = [v.find("Real").get("unit") for n, v in variables.items() if n != "status"]
     assert any(units) and all(v.get("description") for v in variables.values())
 
 
 def _scenarios():
-    return [(n, s) for n in NAMES for s in validate.scenario_names(n)]
+    return [(n, s, f) for f in FORMATS for n in NAMES for s in validate.scenario_names(n)]
 
 
-@pytest.mark.parametrize("name,scenario", _scenarios())
-def test_fmu_outputs_bit_identical_to_extension(fmus, name, scenario):
+@pytest.mark.parametrize("name,scenario,fmt", _scenarios())
+def test_fmu_outputs_bit_identical_to_extension(fmus, name, scenario, fmt):
     obs = load(name)
     inputs = validate.scenario_inputs(name, scenario)
     out, status, _ = obs.run(inputs)
-    f_out, f_status = fmu.run_fmu(fmus[name], inputs, obs.input_names, obs.output_names)
+    f_out, f_status = fmu.run_fmu(fmus[name, fmt], inputs, obs.input_names, obs.output_names)
     assert f_out.shape == out.shape
     assert np.array_equal(f_out.view(np.uint64), out.view(np.uint64))
     assert np.array_equal(f_status, status)
@@ -77,8 +91,8 @@ def test_fmu_outputs_bit_identical_to_extension(fmus, name, scenario):
 def test_fmu_refuses_a_step_that_is_not_whole_samples(fmus):
     name = NAMES[0]
     obs = load(name)
-    md = fmpy.read_model_description(str(fmus[name]))
-    unzipped = fmpy.extract(str(fmus[name]))
+    md = fmpy.read_model_description(str(fmus[name, "fmu"]))
+    unzipped = fmpy.extract(str(fmus[name, "fmu"]))
     from fmpy.fmi1 import FMICallException
     from fmpy.fmi2 import FMU2Slave
     slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=name, instanceName="x")
@@ -93,8 +107,36 @@ def test_fmu_refuses_a_step_that_is_not_whole_samples(fmus):
     slave.freeInstance()
 
 
-def test_export_refuses_a_file_that_is_not_fmu(tmp_path, capsys):
-    assert cli.main(["export", NAMES[0], "--format", "fmu", "--out", str(tmp_path / "x.zip")]) == 2
+def test_fmu3_refuses_a_step_that_is_not_whole_samples_and_a_foreign_token(fmus):
+    name = NAMES[0]
+    obs = load(name)
+    md = fmpy.read_model_description(str(fmus[name, "fmu3"]))
+    unzipped = fmpy.extract(str(fmus[name, "fmu3"]))
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi3 import FMU3Slave
+    slave = FMU3Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=name,
+                      instanceName="x")
+    slave.instantiate()
+    slave.enterInitializationMode(startTime=0.0)
+    slave.exitInitializationMode()
+    slave.setFloat64([1, 2], [0.1, 0.01])
+    slave.doStep(currentCommunicationPoint=0.0, communicationStepSize=3 * obs.sample_time)
+    assert slave.getFloat64([0])[0] == pytest.approx(3 * obs.sample_time)
+    with pytest.raises(FMICallException):
+        slave.doStep(currentCommunicationPoint=3 * obs.sample_time, communicationStepSize=0.5 * obs.sample_time)
+    with pytest.raises(FMICallException):
+        slave.getFloat32([0])                    # not offered: fmi3Error, not a missing symbol
+    slave.terminate()
+    slave.freeInstance()
+    foreign = FMU3Slave(guid="{00000000-0000-0000-0000-000000000000}", unzipDirectory=unzipped,
+                        modelIdentifier=name, instanceName="y")
+    with pytest.raises(Exception, match="Failed to instantiate FMU"):
+        foreign.instantiate()
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_export_refuses_a_file_that_is_not_fmu(tmp_path, capsys, fmt):
+    assert cli.main(["export", NAMES[0], "--format", fmt, "--out", str(tmp_path / "x.zip")]) == 2
     err = capsys.readouterr().err
     assert "ConfigurationError" in err and ".fmu" in err and "Traceback" not in err
 
@@ -130,7 +172,7 @@ def test_fmu_step_size_nan_or_huge_is_refused_without_undefined_behaviour(fmus, 
     import subprocess
     from codegen.emit.toolchain import compiler
     name = NAMES[0]
-    with zipfile.ZipFile(fmus[name]) as z:
+    with zipfile.ZipFile(fmus[name, "fmu"]) as z:
         for f in z.namelist():
             if f.startswith("sources/"):
                 (tmp_path / f[len("sources/"):]).write_bytes(z.read(f))

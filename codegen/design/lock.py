@@ -69,14 +69,16 @@ def design_sources(config: ObserverConfig) -> list:
 
 
 def observer_file_digest(config: ObserverConfig) -> str:
-    """Hash of the observer file as parsed, less its ``[data]`` table (the column map of logs,
-    which no design or C derives from), with its leading comment (the C's description): editing a
-    log's map or a comment inside the file never re-solves a design."""
+    """Hash of the observer file as parsed, less its ``[data]`` table (the column map of logs) and
+    its ``[precision]`` table (the float32 build's tolerances), which no design or C derives from,
+    with its leading comment (the C's description): editing them or a comment inside the file
+    never re-solves a design."""
     import hashlib
     import tomllib
     with open(config.source, "rb") as fh:
         table = tomllib.load(fh)
     table.pop("data", None)
+    table.pop("precision", None)
     text = json.dumps({"table": table, "doc": config.doc}, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 

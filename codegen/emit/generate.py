@@ -76,18 +76,34 @@ def banner(b: ObserverBuild, what: str) -> str:
 
 # The floating-point type of the emitted C: the type, its zero, and the bits of its finite check.
 PRECISIONS = {
-    "double": {"real": "double", "zero": "0.0", "uint": "uint64_t", "sign_bit": 63, "suffix": "",
+    "double": {"real": "double", "zero": "0.0", "uint": "uint64_t", "sign_bit": 63, "suffix": "", "print": "%.17g",
                "exponent_mask": "UINT64_C(0x7ff0000000000000)", "exponent_unit": "UINT64_C(0x0010000000000000)"},
-    "float32": {"real": "float", "zero": "0.0f", "uint": "uint32_t", "sign_bit": 31, "suffix": "_f32",
+    "float32": {"real": "float", "zero": "0.0f", "uint": "uint32_t", "sign_bit": 31, "suffix": "_f32", "print": "%.9g",
                 "exponent_mask": "UINT32_C(0x7f800000)", "exponent_unit": "UINT32_C(0x00800000)"},
 }
 
 
-def render(b: ObserverBuild, precision: str = "double") -> dict:
-    """All files of one observer as {file name: text}. ``precision`` "float32" gives the same API
-    in ``float`` (CasADi's ``casadi_real``), every name suffixed ``_f32`` (``NAME_f32_step``, ...),
-    the finite checks on float bit patterns; the committed C is the "double" one."""
+def design_hash(lock_text: str) -> str:
+    """The design hash of a design lock: the SHA-256 of its canonical JSON less
+    ``lock.design_inputs`` (the hash of the toolchain's sources, which a re-hash changes while the
+    design stays the same) and less the lock's seals (``lock.sha256``, ``lock.sections``: they
+    cover ``design_inputs`` too)."""
+    import json
+    lock = json.loads(lock_text)
+    lock["lock"] = {k: v for k, v in lock.get("lock", {}).items() if k not in ("design_inputs", "sha256", "sections")}
+    return hashlib.sha256(json.dumps(lock, sort_keys=True).encode()).hexdigest()
+
+
+def render(b: ObserverBuild, precision: str = "double", lock_text: str | None = None) -> dict:
+    """All files of one observer as {file name: text}: the kernel and the API (``NAME_kernel.{c,h}``,
+    ``NAME.{c,h}``), an example program that runs the step on a recorded CSV (``NAME_example.c``)
+    and its ``CMakeLists.txt``. ``precision`` "float32" gives the same API in ``float`` (CasADi's
+    ``casadi_real``), every name suffixed ``_f32`` (``NAME_f32_step``, ...), the finite checks on
+    float bit patterns; the committed C is the "double" one. ``lock_text``: the design lock the C
+    is emitted from (default: the committed one), whose design hash the header carries."""
     fp = PRECISIONS[precision]
+    if lock_text is None:
+        lock_text = design_lock.path(b.config).read_text()
     name = b.name + fp["suffix"]
     f = b.step_function()
     if precision == "float32":
@@ -120,12 +136,15 @@ def render(b: ObserverBuild, precision: str = "double") -> dict:
         "offset_u": 0, "offset_y": nu, "offset_rho": nu + ny,
         "sz_arg": max(int(f.sz_arg()), 1), "sz_res": max(int(f.sz_res()), 1),
         "sz_iw": max(int(f.sz_iw()), 1), "sz_w": max(int(f.sz_w()), 1),
+        "design_hash": design_hash(lock_text), "lock_name": design_lock.path(b.config).name,
     }
     return {
         f"{name}_kernel.c": kernel_c,
         f"{name}_kernel.h": kernel_h,
         f"{name}.h": render_template("observer.h.j2", **ctx),
         f"{name}.c": render_template("observer.c.j2", **ctx),
+        f"{name}_example.c": render_template("observer.example.c.j2", **ctx),
+        "CMakeLists.txt": render_template("observer.CMakeLists.txt.j2", **ctx),
     }
 
 
@@ -312,7 +331,7 @@ def _generate_one(config: observers.ObserverConfig, out_dir: Path, force: bool, 
         return None
     if records is None:        # the committed design, replayed and re-checked
         b = pipeline.build(config, design_lock.replay(data, str(design_lock.path(config))))
-    files = render(b)
+    files = render(b, lock_text=lock_text)
     files[design_lock.path(config).name] = lock_text
     files[STAMP] = _stamp_text(digest, files)
     _write_atomically(target, files)

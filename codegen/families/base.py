@@ -113,6 +113,12 @@ class ObserverBuild(abc.ABC):
         """[{name, unit}] of known inputs the step computes from the measurements."""
         return []
 
+    def contraction_metrics(self) -> list:
+        """The Lyapunov norms in which the certificate proves the step contracting, over parts of
+        its state (:class:`~codegen.certificate.contraction.ContractionMetric`): what bounds the
+        float32 step's deviation (:mod:`codegen.targets.float32`); [] for none."""
+        return []
+
     def output_lags(self) -> dict:
         """{output name: samples} by which an estimate lags the sample it is returned with (a
         step whose unknown-input estimate needs the next output returns the previous one)."""

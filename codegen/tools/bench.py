@@ -40,24 +40,8 @@ from ..representation import differentiators
 from .. import families, pipeline
 from ..families.capabilities import BenchFigures, BenchStudy
 from . import harness
+from .flops import ARITHMETIC_OPS, flop_count  # noqa: F401  (the floor of every figure here)
 from ..project import observer_file as observers
-
-ARITHMETIC_OPS = ("OP_ADD", "OP_SUB", "OP_MUL", "OP_DIV", "OP_NEG", "OP_SQ", "OP_SQRT", "OP_FMIN",
-                  "OP_FMAX", "OP_FABS", "OP_EXP", "OP_LOG", "OP_POW", "OP_CONSTPOW", "OP_INV",
-                  "OP_TWICE", "OP_FMOD", "OP_ATAN2", "OP_SIN", "OP_COS", "OP_TAN")
-
-
-def flop_count(f: ca.Function) -> dict:
-    """Floating-point operations of a CasADi SX Function, by kind."""
-    codes = {getattr(ca, n): n for n in ARITHMETIC_OPS if hasattr(ca, n)}
-    counts: dict = {}
-    for k in range(f.n_instructions()):
-        name = codes.get(f.instruction_id(k))
-        if name:
-            counts[name] = counts.get(name, 0) + 1
-    counts["total"] = sum(counts.values())
-    return counts
-
 
 def callgrind_instructions_per_step(name: str, n1: int = 2000, n2: int = 12000) -> float | None:
     """Instructions per step: (Ir(n2 steps) - Ir(n1 steps)) / (n2 - n1), start-up cancels."""
@@ -404,10 +388,21 @@ def bench_cortexm() -> dict:
     rodata size of the step, worst-case stack along its call chain; skipped (``available``
     false, with the reason) where arm-none-eabi-gcc is not installed."""
     from ..targets import cortexm
+    from . import m4cycles
     if not cortexm.available():
         return {"available": False, "reason": f"{cortexm.CC} is not installed (scripts/install_embedded_tools.sh)",
-                "flags": " ".join(cortexm.FLAGS), "rows": []}
-    return {"available": True, "reason": None, "flags": " ".join(cortexm.FLAGS), "rows": cortexm.table()}
+                "flags": " ".join(cortexm.FLAGS), "rows": [], "cycles": {"available": False, "rows": []}}
+    cycles = ({"available": True, "method": m4cycles.METHOD, "flags": " ".join(m4cycles.OPTIMIZE),
+               "rows": m4cycles.table()} if m4cycles.available() else
+              {"available": False, "reason": f"{qemu_missing()} not installed (scripts/install_embedded_tools.sh)",
+               "rows": []})
+    return {"available": True, "reason": None, "flags": " ".join(cortexm.FLAGS), "rows": cortexm.table(),
+            "cycles": cycles}
+
+
+def qemu_missing() -> str:
+    from . import m4cycles, qemu
+    return qemu.missing() or m4cycles.OBJDUMP
 
 
 def cortexm_lines(c: dict) -> list:
@@ -417,6 +412,12 @@ def cortexm_lines(c: dict) -> list:
     for r in c["rows"]:
         lines.append(f"{r['observer']:32s} {r['precision']:9s} {r['code_bytes']:9d} {r['rodata_bytes']:10d} "
                      f"{r['stack_bytes']:9d}" + (f"  unbounded: {', '.join(r['unbounded'])}" if r["unbounded"] else ""))
+    cycles = c.get("cycles", {"available": False, "reason": "not measured", "rows": []})
+    if not cycles["available"]:
+        return lines + [f"cycles per step: skipped: {cycles['reason']}"]
+    from . import m4cycles
+    lines += [f"cycles per step ({cycles['method']}; {cycles['flags']}):", m4cycles.HEADER]
+    lines += [m4cycles.format_row(r) for r in cycles["rows"]]
     return lines
 
 
@@ -514,7 +515,7 @@ def main(json_output: bool = False) -> int:
     t = res["toolchain"]
     print(f"== toolchain: uiogen generate cold {t['generate_cold_s']:.2f} s, unchanged {t['generate_unchanged_s']:.2f} s")
     _print_hosmd(res["hosmd"])
-    print("== Cortex-M4F (arm-none-eabi-gcc -Os, hard float; step only: libgcc/libm not counted)")
+    print("== Cortex-M4F (arm-none-eabi-gcc, hard float; size: -Os, the step only, libgcc/libm not counted)")
     for line in cortexm_lines(res["cortex_m"]):
         print("   " + line)
     for name, rows in res["families"].items():

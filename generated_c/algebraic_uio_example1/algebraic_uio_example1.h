@@ -30,20 +30,31 @@ extern "C" {
 #define ALGEBRAIC_UIO_EXAMPLE1_RHO_MIN 1.0
 #define ALGEBRAIC_UIO_EXAMPLE1_RHO_MAX 5.0
 
-/* Status bits returned by algebraic_uio_example1_step (0 = nominal sample). */
-#define ALGEBRAIC_UIO_EXAMPLE1_OK 0
-/* A scheduling input outside its box, or a differentiator's estimate of a parameter derivative
+/* The design this C implements: the design hash of algebraic_uio_example1_design.json (a build can check that the
+ * step it links is the one it was validated with). */
+#define ALGEBRAIC_UIO_EXAMPLE1_DESIGN_HASH "f5af042dceabe5f34008505b3b288958c4effbd5e42928bf2c74ea123ad3178e"
+
+/* Status bits returned by algebraic_uio_example1_step; a sample's status is their OR (algebraic_uio_example1_status). */
+typedef enum {
+    /* nominal sample */
+    ALGEBRAIC_UIO_EXAMPLE1_OK = 0,
+    /* A scheduling input outside its box, or a differentiator's estimate of a parameter derivative
  * outside its bound (converging differentiator, or Assumption 1 violated): clamped for the
  * step, which stays certified, but the decoupling uses the clamped value. */
-#define ALGEBRAIC_UIO_EXAMPLE1_SCHEDULING_CLAMPED 1
-/* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
-#define ALGEBRAIC_UIO_EXAMPLE1_NONFINITE_INPUT 2
-/* The step produced a non-finite value (the state had grown past double range, e.g. after
- * absurd finite inputs): the state restarts from the initial (zero) estimate. */
-#define ALGEBRAIC_UIO_EXAMPLE1_NUMERICAL_FAILURE 4
-/* First sample after init or after a restart: the differentiators start at (sample, 0, ..., 0); the observer state is
+    ALGEBRAIC_UIO_EXAMPLE1_SCHEDULING_CLAMPED = 1,
+    /* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
+    ALGEBRAIC_UIO_EXAMPLE1_NONFINITE_INPUT = 2,
+    /* The step produced a non-finite value (the state had grown past double range, e.g. after
+     * absurd finite inputs): the state restarts from the initial (zero) estimate. */
+    ALGEBRAIC_UIO_EXAMPLE1_NUMERICAL_FAILURE = 4,
+    /* First sample after init or after a restart: the differentiators start at (sample, 0, ..., 0); the observer state is
  * held and the unknown-input estimate of this sample is not meaningful. */
-#define ALGEBRAIC_UIO_EXAMPLE1_WARMING_UP 8
+    ALGEBRAIC_UIO_EXAMPLE1_WARMING_UP = 8
+} algebraic_uio_example1_status_bit;
+
+/* The status of one sample: ALGEBRAIC_UIO_EXAMPLE1_OK, or the OR of algebraic_uio_example1_status_bit values
+ * (an int, so that every combination of the bits is one of its values). */
+typedef int algebraic_uio_example1_status;
 
 typedef struct {
     double primed; /* 1 once the differentiators are started, else 0 */
@@ -78,14 +89,14 @@ typedef struct {
 /* Zero initial estimate. */
 void algebraic_uio_example1_init(algebraic_uio_example1_state *s);
 
-/* One sample. Returns a combination of the status bits above. */
-int algebraic_uio_example1_step(algebraic_uio_example1_state *s, const algebraic_uio_example1_input *in, algebraic_uio_example1_output *out);
+/* One sample. Returns its status: ALGEBRAIC_UIO_EXAMPLE1_OK or an OR of the status bits above. */
+algebraic_uio_example1_status algebraic_uio_example1_step(algebraic_uio_example1_state *s, const algebraic_uio_example1_input *in, algebraic_uio_example1_output *out);
 
 /* Same on flat arrays in the field order above (state: N_STATE, input: N_INPUT, out: N_OUTPUT). */
-int algebraic_uio_example1_step_flat(double *state, const double *input, double *out);
+algebraic_uio_example1_status algebraic_uio_example1_step_flat(double *state, const double *input, double *out);
 
 /* n samples: inputs is n x N_INPUT (row-major), outputs n x N_OUTPUT, status n entries. */
-void algebraic_uio_example1_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status);
+void algebraic_uio_example1_run_flat(double *state, const double *inputs, size_t n, double *outputs, algebraic_uio_example1_status *status);
 
 /* Checks that the compiled kernel's work query fits the fixed work arrays (returns 0 if so). */
 int algebraic_uio_example1_check_work(void);

@@ -72,7 +72,7 @@ static uint64_t nonfinite_bit(const double *x)
 #if defined(__GNUC__) && !defined(__clang__)
 __attribute__((noinline, noclone))
 #endif
-void algebraic_uio_example2_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status)
+void algebraic_uio_example2_run_flat(double *state, const double *inputs, size_t n, double *outputs, algebraic_uio_example2_status *status)
 {
     const casadi_real *arg[ALGEBRAIC_UIO_EXAMPLE2_SZ_ARG];
     casadi_real *res[ALGEBRAIC_UIO_EXAMPLE2_SZ_RES];
@@ -108,25 +108,25 @@ void algebraic_uio_example2_run_flat(double *state, const double *inputs, size_t
             for (i = 0; i < ALGEBRAIC_UIO_EXAMPLE2_N_OUTPUT; ++i) {
                 out[i] = state[i + 13];
             }
-            status[k] = ALGEBRAIC_UIO_EXAMPLE2_NONFINITE_INPUT;
+            status[k] = (algebraic_uio_example2_status)ALGEBRAIC_UIO_EXAMPLE2_NONFINITE_INPUT;
             continue;
         }
         if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2]) | nonfinite_bit(&next[3]) | nonfinite_bit(&next[4]) | nonfinite_bit(&next[5]) | nonfinite_bit(&next[6]) | nonfinite_bit(&next[7]) | nonfinite_bit(&next[8]) | nonfinite_bit(&next[9]) | nonfinite_bit(&next[10]) | nonfinite_bit(&next[11]) | nonfinite_bit(&next[12]) | nonfinite_bit(&next[13]) | nonfinite_bit(&next[14]) | nonfinite_bit(&next[15])) >> 63) != 0u)) {
-            status[k] = ALGEBRAIC_UIO_EXAMPLE2_NUMERICAL_FAILURE;
+            status[k] = (algebraic_uio_example2_status)ALGEBRAIC_UIO_EXAMPLE2_NUMERICAL_FAILURE;
         } else {
-            status[k] = ALGEBRAIC_UIO_EXAMPLE2_OK;
+            status[k] = (algebraic_uio_example2_status)ALGEBRAIC_UIO_EXAMPLE2_OK;
         }
         /* the kernel clamps the scheduling signals for the memberships and reports by how much */
         if (excess > 0.0) {
-            status[k] |= ALGEBRAIC_UIO_EXAMPLE2_SCHEDULING_CLAMPED;
+            status[k] |= (algebraic_uio_example2_status)ALGEBRAIC_UIO_EXAMPLE2_SCHEDULING_CLAMPED;
         }
         if (warmup > 0.0) {
-            status[k] |= ALGEBRAIC_UIO_EXAMPLE2_WARMING_UP;
+            status[k] |= (algebraic_uio_example2_status)ALGEBRAIC_UIO_EXAMPLE2_WARMING_UP;
         }
         /* A non-finite result means the state had grown past what doubles hold (e.g. after
          * absurd but finite inputs such as 1e300): holding it would freeze the observer, so it
          * restarts from the initial estimate, which the certified step then drives back. */
-        if ((status[k] & ALGEBRAIC_UIO_EXAMPLE2_NUMERICAL_FAILURE) != 0) {
+        if ((status[k] & (algebraic_uio_example2_status)ALGEBRAIC_UIO_EXAMPLE2_NUMERICAL_FAILURE) != 0) {
             for (i = 0; i < ALGEBRAIC_UIO_EXAMPLE2_N_STATE; ++i) {
                 next[i] = 0.0;
             }
@@ -140,19 +140,19 @@ void algebraic_uio_example2_run_flat(double *state, const double *inputs, size_t
     }
 }
 
-int algebraic_uio_example2_step_flat(double *state, const double *input, double *out)
+algebraic_uio_example2_status algebraic_uio_example2_step_flat(double *state, const double *input, double *out)
 {
-    int status;
+    algebraic_uio_example2_status status;
     algebraic_uio_example2_run_flat(state, input, 1, out, &status);
     return status;
 }
 
-int algebraic_uio_example2_step(algebraic_uio_example2_state *s, const algebraic_uio_example2_input *in, algebraic_uio_example2_output *out)
+algebraic_uio_example2_status algebraic_uio_example2_step(algebraic_uio_example2_state *s, const algebraic_uio_example2_input *in, algebraic_uio_example2_output *out)
 {
     double state[ALGEBRAIC_UIO_EXAMPLE2_N_STATE];
     double input[ALGEBRAIC_UIO_EXAMPLE2_N_INPUT];
     double flat_out[ALGEBRAIC_UIO_EXAMPLE2_N_OUTPUT];
-    int status;
+    algebraic_uio_example2_status status;
     state[0] = s->primed;
     state[1] = s->hosmd_y_x1_d0;
     state[2] = s->hosmd_y_x1_d1;

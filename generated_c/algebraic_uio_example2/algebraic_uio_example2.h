@@ -33,20 +33,31 @@ extern "C" {
 #define ALGEBRAIC_UIO_EXAMPLE2_RHO_D1_MIN -2.5
 #define ALGEBRAIC_UIO_EXAMPLE2_RHO_D1_MAX 2.5
 
-/* Status bits returned by algebraic_uio_example2_step (0 = nominal sample). */
-#define ALGEBRAIC_UIO_EXAMPLE2_OK 0
-/* A scheduling input outside its box, or a differentiator's estimate of a parameter derivative
+/* The design this C implements: the design hash of algebraic_uio_example2_design.json (a build can check that the
+ * step it links is the one it was validated with). */
+#define ALGEBRAIC_UIO_EXAMPLE2_DESIGN_HASH "974076e82f04b462f7d4970e899c971254d7976ca30634deaad7f9169f00fede"
+
+/* Status bits returned by algebraic_uio_example2_step; a sample's status is their OR (algebraic_uio_example2_status). */
+typedef enum {
+    /* nominal sample */
+    ALGEBRAIC_UIO_EXAMPLE2_OK = 0,
+    /* A scheduling input outside its box, or a differentiator's estimate of a parameter derivative
  * outside its bound (converging differentiator, or Assumption 1 violated): clamped for the
  * step, which stays certified, but the decoupling uses the clamped value. */
-#define ALGEBRAIC_UIO_EXAMPLE2_SCHEDULING_CLAMPED 1
-/* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
-#define ALGEBRAIC_UIO_EXAMPLE2_NONFINITE_INPUT 2
-/* The step produced a non-finite value (the state had grown past double range, e.g. after
- * absurd finite inputs): the state restarts from the initial (zero) estimate. */
-#define ALGEBRAIC_UIO_EXAMPLE2_NUMERICAL_FAILURE 4
-/* First sample after init or after a restart: the differentiators start at (sample, 0, ..., 0); the observer state is
+    ALGEBRAIC_UIO_EXAMPLE2_SCHEDULING_CLAMPED = 1,
+    /* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
+    ALGEBRAIC_UIO_EXAMPLE2_NONFINITE_INPUT = 2,
+    /* The step produced a non-finite value (the state had grown past double range, e.g. after
+     * absurd finite inputs): the state restarts from the initial (zero) estimate. */
+    ALGEBRAIC_UIO_EXAMPLE2_NUMERICAL_FAILURE = 4,
+    /* First sample after init or after a restart: the differentiators start at (sample, 0, ..., 0); the observer state is
  * held and the unknown-input estimate of this sample is not meaningful. */
-#define ALGEBRAIC_UIO_EXAMPLE2_WARMING_UP 8
+    ALGEBRAIC_UIO_EXAMPLE2_WARMING_UP = 8
+} algebraic_uio_example2_status_bit;
+
+/* The status of one sample: ALGEBRAIC_UIO_EXAMPLE2_OK, or the OR of algebraic_uio_example2_status_bit values
+ * (an int, so that every combination of the bits is one of its values). */
+typedef int algebraic_uio_example2_status;
 
 typedef struct {
     double primed; /* 1 once the differentiators are started, else 0 */
@@ -81,14 +92,14 @@ typedef struct {
 /* Zero initial estimate. */
 void algebraic_uio_example2_init(algebraic_uio_example2_state *s);
 
-/* One sample. Returns a combination of the status bits above. */
-int algebraic_uio_example2_step(algebraic_uio_example2_state *s, const algebraic_uio_example2_input *in, algebraic_uio_example2_output *out);
+/* One sample. Returns its status: ALGEBRAIC_UIO_EXAMPLE2_OK or an OR of the status bits above. */
+algebraic_uio_example2_status algebraic_uio_example2_step(algebraic_uio_example2_state *s, const algebraic_uio_example2_input *in, algebraic_uio_example2_output *out);
 
 /* Same on flat arrays in the field order above (state: N_STATE, input: N_INPUT, out: N_OUTPUT). */
-int algebraic_uio_example2_step_flat(double *state, const double *input, double *out);
+algebraic_uio_example2_status algebraic_uio_example2_step_flat(double *state, const double *input, double *out);
 
 /* n samples: inputs is n x N_INPUT (row-major), outputs n x N_OUTPUT, status n entries. */
-void algebraic_uio_example2_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status);
+void algebraic_uio_example2_run_flat(double *state, const double *inputs, size_t n, double *outputs, algebraic_uio_example2_status *status);
 
 /* Checks that the compiled kernel's work query fits the fixed work arrays (returns 0 if so). */
 int algebraic_uio_example2_check_work(void);

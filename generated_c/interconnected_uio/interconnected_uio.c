@@ -105,7 +105,7 @@ static uint64_t nonfinite_bit(const double *x)
 #if defined(__GNUC__) && !defined(__clang__)
 __attribute__((noinline, noclone))
 #endif
-void interconnected_uio_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status)
+void interconnected_uio_run_flat(double *state, const double *inputs, size_t n, double *outputs, interconnected_uio_status *status)
 {
     const casadi_real *arg[INTERCONNECTED_UIO_SZ_ARG];
     casadi_real *res[INTERCONNECTED_UIO_SZ_RES];
@@ -141,25 +141,25 @@ void interconnected_uio_run_flat(double *state, const double *inputs, size_t n, 
             for (i = 0; i < INTERCONNECTED_UIO_N_OUTPUT; ++i) {
                 out[i] = state[i + 30];
             }
-            status[k] = INTERCONNECTED_UIO_NONFINITE_INPUT;
+            status[k] = (interconnected_uio_status)INTERCONNECTED_UIO_NONFINITE_INPUT;
             continue;
         }
         if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2]) | nonfinite_bit(&next[3]) | nonfinite_bit(&next[4]) | nonfinite_bit(&next[5]) | nonfinite_bit(&next[6]) | nonfinite_bit(&next[7]) | nonfinite_bit(&next[8]) | nonfinite_bit(&next[9]) | nonfinite_bit(&next[10]) | nonfinite_bit(&next[11]) | nonfinite_bit(&next[12]) | nonfinite_bit(&next[13]) | nonfinite_bit(&next[14]) | nonfinite_bit(&next[15]) | nonfinite_bit(&next[16]) | nonfinite_bit(&next[17]) | nonfinite_bit(&next[18]) | nonfinite_bit(&next[19]) | nonfinite_bit(&next[20]) | nonfinite_bit(&next[21]) | nonfinite_bit(&next[22]) | nonfinite_bit(&next[23]) | nonfinite_bit(&next[24]) | nonfinite_bit(&next[25]) | nonfinite_bit(&next[26]) | nonfinite_bit(&next[27]) | nonfinite_bit(&next[28]) | nonfinite_bit(&next[29]) | nonfinite_bit(&next[30]) | nonfinite_bit(&next[31]) | nonfinite_bit(&next[32]) | nonfinite_bit(&next[33]) | nonfinite_bit(&next[34]) | nonfinite_bit(&next[35]) | nonfinite_bit(&next[36]) | nonfinite_bit(&next[37]) | nonfinite_bit(&next[38]) | nonfinite_bit(&next[39]) | nonfinite_bit(&next[40]) | nonfinite_bit(&next[41]) | nonfinite_bit(&next[42]) | nonfinite_bit(&next[43]) | nonfinite_bit(&next[44]) | nonfinite_bit(&next[45]) | nonfinite_bit(&next[46]) | nonfinite_bit(&next[47]) | nonfinite_bit(&next[48])) >> 63) != 0u)) {
-            status[k] = INTERCONNECTED_UIO_NUMERICAL_FAILURE;
+            status[k] = (interconnected_uio_status)INTERCONNECTED_UIO_NUMERICAL_FAILURE;
         } else {
-            status[k] = INTERCONNECTED_UIO_OK;
+            status[k] = (interconnected_uio_status)INTERCONNECTED_UIO_OK;
         }
         /* the kernel clamps the scheduling signals for the memberships and reports by how much */
         if (excess > 0.0) {
-            status[k] |= INTERCONNECTED_UIO_SCHEDULING_CLAMPED;
+            status[k] |= (interconnected_uio_status)INTERCONNECTED_UIO_SCHEDULING_CLAMPED;
         }
         if (warmup > 0.0) {
-            status[k] |= INTERCONNECTED_UIO_WARMING_UP;
+            status[k] |= (interconnected_uio_status)INTERCONNECTED_UIO_WARMING_UP;
         }
         /* A non-finite result means the state had grown past what doubles hold (e.g. after
          * absurd but finite inputs such as 1e300): holding it would freeze the observer, so it
          * restarts from the initial estimate, which the certified step then drives back. */
-        if ((status[k] & INTERCONNECTED_UIO_NUMERICAL_FAILURE) != 0) {
+        if ((status[k] & (interconnected_uio_status)INTERCONNECTED_UIO_NUMERICAL_FAILURE) != 0) {
             for (i = 0; i < INTERCONNECTED_UIO_N_STATE; ++i) {
                 next[i] = 0.0;
             }
@@ -173,19 +173,19 @@ void interconnected_uio_run_flat(double *state, const double *inputs, size_t n, 
     }
 }
 
-int interconnected_uio_step_flat(double *state, const double *input, double *out)
+interconnected_uio_status interconnected_uio_step_flat(double *state, const double *input, double *out)
 {
-    int status;
+    interconnected_uio_status status;
     interconnected_uio_run_flat(state, input, 1, out, &status);
     return status;
 }
 
-int interconnected_uio_step(interconnected_uio_state *s, const interconnected_uio_input *in, interconnected_uio_output *out)
+interconnected_uio_status interconnected_uio_step(interconnected_uio_state *s, const interconnected_uio_input *in, interconnected_uio_output *out)
 {
     double state[INTERCONNECTED_UIO_N_STATE];
     double input[INTERCONNECTED_UIO_N_INPUT];
     double flat_out[INTERCONNECTED_UIO_N_OUTPUT];
-    int status;
+    interconnected_uio_status status;
     state[0] = s->z_v_x;
     state[1] = s->z_omega_f;
     state[2] = s->z_omega_r;

@@ -41,19 +41,30 @@ extern "C" {
 #define INTERCONNECTED_UIO_LATERAL_PREMISE_1_OVER_V_X_MIN 0.028571428571428564
 #define INTERCONNECTED_UIO_LATERAL_PREMISE_1_OVER_V_X_MAX 0.20000000000000007
 
-/* Status bits returned by interconnected_uio_step (0 = nominal sample). */
-#define INTERCONNECTED_UIO_OK 0
-/* The v_x estimate or a premise outside its box (clamped for the memberships), or a measured
+/* The design this C implements: the design hash of interconnected_uio_design.json (a build can check that the
+ * step it links is the one it was validated with). */
+#define INTERCONNECTED_UIO_DESIGN_HASH "7eda8da1920233156dfb19d2dd907e5455794cfc4fb3f82fa36e5afaec1a24c0"
+
+/* Status bits returned by interconnected_uio_step; a sample's status is their OR (interconnected_uio_status). */
+typedef enum {
+    /* nominal sample */
+    INTERCONNECTED_UIO_OK = 0,
+    /* The v_x estimate or a premise outside its box (clamped for the memberships), or a measured
  * wheel speed or steering angle outside its box: the certificate does not cover this sample. */
-#define INTERCONNECTED_UIO_SCHEDULING_CLAMPED 1
-/* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
-#define INTERCONNECTED_UIO_NONFINITE_INPUT 2
-/* The step produced a non-finite value (the state had grown past double range, e.g. after
- * absurd finite inputs): the state restarts from the initial (zero) estimate. */
-#define INTERCONNECTED_UIO_NUMERICAL_FAILURE 4
-/* First sample after init or after a restart: the estimate and the differentiators start from this sample (v_x from the wheel
+    INTERCONNECTED_UIO_SCHEDULING_CLAMPED = 1,
+    /* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
+    INTERCONNECTED_UIO_NONFINITE_INPUT = 2,
+    /* The step produced a non-finite value (the state had grown past double range, e.g. after
+     * absurd finite inputs): the state restarts from the initial (zero) estimate. */
+    INTERCONNECTED_UIO_NUMERICAL_FAILURE = 4,
+    /* First sample after init or after a restart: the estimate and the differentiators start from this sample (v_x from the wheel
  * speeds); the unknown-input estimates need a few samples of differentiator convergence. */
-#define INTERCONNECTED_UIO_WARMING_UP 8
+    INTERCONNECTED_UIO_WARMING_UP = 8
+} interconnected_uio_status_bit;
+
+/* The status of one sample: INTERCONNECTED_UIO_OK, or the OR of interconnected_uio_status_bit values
+ * (an int, so that every combination of the bits is one of its values). */
+typedef int interconnected_uio_status;
 
 typedef struct {
     double z_v_x; /* UIO state z of (17) for v_x [m/s] */
@@ -143,14 +154,14 @@ typedef struct {
 /* Zero initial estimate. */
 void interconnected_uio_init(interconnected_uio_state *s);
 
-/* One sample. Returns a combination of the status bits above. */
-int interconnected_uio_step(interconnected_uio_state *s, const interconnected_uio_input *in, interconnected_uio_output *out);
+/* One sample. Returns its status: INTERCONNECTED_UIO_OK or an OR of the status bits above. */
+interconnected_uio_status interconnected_uio_step(interconnected_uio_state *s, const interconnected_uio_input *in, interconnected_uio_output *out);
 
 /* Same on flat arrays in the field order above (state: N_STATE, input: N_INPUT, out: N_OUTPUT). */
-int interconnected_uio_step_flat(double *state, const double *input, double *out);
+interconnected_uio_status interconnected_uio_step_flat(double *state, const double *input, double *out);
 
 /* n samples: inputs is n x N_INPUT (row-major), outputs n x N_OUTPUT, status n entries. */
-void interconnected_uio_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status);
+void interconnected_uio_run_flat(double *state, const double *inputs, size_t n, double *outputs, interconnected_uio_status *status);
 
 /* Checks that the compiled kernel's work query fits the fixed work arrays (returns 0 if so). */
 int interconnected_uio_check_work(void);

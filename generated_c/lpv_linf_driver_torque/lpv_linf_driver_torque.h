@@ -26,18 +26,29 @@ extern "C" {
 #define LPV_LINF_DRIVER_TORQUE_V_X_MIN 5.0
 #define LPV_LINF_DRIVER_TORQUE_V_X_MAX 35.0
 
-/* Status bits returned by lpv_linf_driver_torque_step (0 = nominal sample). */
-#define LPV_LINF_DRIVER_TORQUE_OK 0
-/* A scheduling signal outside its box: clamped for the membership functions and the step
+/* The design this C implements: the design hash of lpv_linf_driver_torque_design.json (a build can check that the
+ * step it links is the one it was validated with). */
+#define LPV_LINF_DRIVER_TORQUE_DESIGN_HASH "888f7361b0eceae5d33310b978554db5032161eff17f4ef844039053bcacf1b9"
+
+/* Status bits returned by lpv_linf_driver_torque_step; a sample's status is their OR (lpv_linf_driver_torque_status). */
+typedef enum {
+    /* nominal sample */
+    LPV_LINF_DRIVER_TORQUE_OK = 0,
+    /* A scheduling signal outside its box: clamped for the membership functions and the step
  * taken; the stability certificate does not cover this sample. */
-#define LPV_LINF_DRIVER_TORQUE_SCHEDULING_CLAMPED 1
-/* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
-#define LPV_LINF_DRIVER_TORQUE_NONFINITE_INPUT 2
-/* The step produced a non-finite value (the state had grown past double range, e.g. after
- * absurd finite inputs): the state restarts from the initial (zero) estimate. */
-#define LPV_LINF_DRIVER_TORQUE_NUMERICAL_FAILURE 4
-/* First sample after init or after a restart: never set by this observer (its step needs no previous sample). */
-#define LPV_LINF_DRIVER_TORQUE_WARMING_UP 8
+    LPV_LINF_DRIVER_TORQUE_SCHEDULING_CLAMPED = 1,
+    /* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
+    LPV_LINF_DRIVER_TORQUE_NONFINITE_INPUT = 2,
+    /* The step produced a non-finite value (the state had grown past double range, e.g. after
+     * absurd finite inputs): the state restarts from the initial (zero) estimate. */
+    LPV_LINF_DRIVER_TORQUE_NUMERICAL_FAILURE = 4,
+    /* First sample after init or after a restart: never set by this observer (its step needs no previous sample). */
+    LPV_LINF_DRIVER_TORQUE_WARMING_UP = 8
+} lpv_linf_driver_torque_status_bit;
+
+/* The status of one sample: LPV_LINF_DRIVER_TORQUE_OK, or the OR of lpv_linf_driver_torque_status_bit values
+ * (an int, so that every combination of the bits is one of its values). */
+typedef int lpv_linf_driver_torque_status;
 
 typedef struct {
     double beta; /* estimate of beta [rad] */
@@ -60,14 +71,14 @@ typedef lpv_linf_driver_torque_state lpv_linf_driver_torque_output;
 /* Zero initial estimate. */
 void lpv_linf_driver_torque_init(lpv_linf_driver_torque_state *s);
 
-/* One sample. Returns a combination of the status bits above. */
-int lpv_linf_driver_torque_step(lpv_linf_driver_torque_state *s, const lpv_linf_driver_torque_input *in, lpv_linf_driver_torque_output *out);
+/* One sample. Returns its status: LPV_LINF_DRIVER_TORQUE_OK or an OR of the status bits above. */
+lpv_linf_driver_torque_status lpv_linf_driver_torque_step(lpv_linf_driver_torque_state *s, const lpv_linf_driver_torque_input *in, lpv_linf_driver_torque_output *out);
 
 /* Same on flat arrays in the field order above (state: N_STATE, input: N_INPUT, out: N_OUTPUT). */
-int lpv_linf_driver_torque_step_flat(double *state, const double *input, double *out);
+lpv_linf_driver_torque_status lpv_linf_driver_torque_step_flat(double *state, const double *input, double *out);
 
 /* n samples: inputs is n x N_INPUT (row-major), outputs n x N_OUTPUT, status n entries. */
-void lpv_linf_driver_torque_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status);
+void lpv_linf_driver_torque_run_flat(double *state, const double *inputs, size_t n, double *outputs, lpv_linf_driver_torque_status *status);
 
 /* Checks that the compiled kernel's work query fits the fixed work arrays (returns 0 if so). */
 int lpv_linf_driver_torque_check_work(void);

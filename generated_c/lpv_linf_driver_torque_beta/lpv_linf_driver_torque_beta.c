@@ -61,7 +61,7 @@ static uint64_t nonfinite_bit(const double *x)
 #if defined(__GNUC__) && !defined(__clang__)
 __attribute__((noinline, noclone))
 #endif
-void lpv_linf_driver_torque_beta_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status)
+void lpv_linf_driver_torque_beta_run_flat(double *state, const double *inputs, size_t n, double *outputs, lpv_linf_driver_torque_beta_status *status)
 {
     const casadi_real *arg[LPV_LINF_DRIVER_TORQUE_BETA_SZ_ARG];
     casadi_real *res[LPV_LINF_DRIVER_TORQUE_BETA_SZ_RES];
@@ -94,22 +94,22 @@ void lpv_linf_driver_torque_beta_run_flat(double *state, const double *inputs, s
             for (i = 0; i < LPV_LINF_DRIVER_TORQUE_BETA_N_OUTPUT; ++i) {
                 out[i] = state[i];
             }
-            status[k] = LPV_LINF_DRIVER_TORQUE_BETA_NONFINITE_INPUT;
+            status[k] = (lpv_linf_driver_torque_beta_status)LPV_LINF_DRIVER_TORQUE_BETA_NONFINITE_INPUT;
             continue;
         }
         if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2]) | nonfinite_bit(&next[3]) | nonfinite_bit(&next[4])) >> 63) != 0u)) {
-            status[k] = LPV_LINF_DRIVER_TORQUE_BETA_NUMERICAL_FAILURE;
+            status[k] = (lpv_linf_driver_torque_beta_status)LPV_LINF_DRIVER_TORQUE_BETA_NUMERICAL_FAILURE;
         } else {
-            status[k] = LPV_LINF_DRIVER_TORQUE_BETA_OK;
+            status[k] = (lpv_linf_driver_torque_beta_status)LPV_LINF_DRIVER_TORQUE_BETA_OK;
         }
         /* the kernel clamps the scheduling signals for the memberships and reports by how much */
         if (excess > 0.0) {
-            status[k] |= LPV_LINF_DRIVER_TORQUE_BETA_SCHEDULING_CLAMPED;
+            status[k] |= (lpv_linf_driver_torque_beta_status)LPV_LINF_DRIVER_TORQUE_BETA_SCHEDULING_CLAMPED;
         }
         /* A non-finite result means the state had grown past what doubles hold (e.g. after
          * absurd but finite inputs such as 1e300): holding it would freeze the observer, so it
          * restarts from the initial estimate, which the certified step then drives back. */
-        if ((status[k] & LPV_LINF_DRIVER_TORQUE_BETA_NUMERICAL_FAILURE) != 0) {
+        if ((status[k] & (lpv_linf_driver_torque_beta_status)LPV_LINF_DRIVER_TORQUE_BETA_NUMERICAL_FAILURE) != 0) {
             for (i = 0; i < LPV_LINF_DRIVER_TORQUE_BETA_N_STATE; ++i) {
                 next[i] = 0.0;
             }
@@ -123,19 +123,19 @@ void lpv_linf_driver_torque_beta_run_flat(double *state, const double *inputs, s
     }
 }
 
-int lpv_linf_driver_torque_beta_step_flat(double *state, const double *input, double *out)
+lpv_linf_driver_torque_beta_status lpv_linf_driver_torque_beta_step_flat(double *state, const double *input, double *out)
 {
-    int status;
+    lpv_linf_driver_torque_beta_status status;
     lpv_linf_driver_torque_beta_run_flat(state, input, 1, out, &status);
     return status;
 }
 
-int lpv_linf_driver_torque_beta_step(lpv_linf_driver_torque_beta_state *s, const lpv_linf_driver_torque_beta_input *in, lpv_linf_driver_torque_beta_output *out)
+lpv_linf_driver_torque_beta_status lpv_linf_driver_torque_beta_step(lpv_linf_driver_torque_beta_state *s, const lpv_linf_driver_torque_beta_input *in, lpv_linf_driver_torque_beta_output *out)
 {
     double state[LPV_LINF_DRIVER_TORQUE_BETA_N_STATE];
     double input[LPV_LINF_DRIVER_TORQUE_BETA_N_INPUT];
     double flat_out[LPV_LINF_DRIVER_TORQUE_BETA_N_OUTPUT];
-    int status;
+    lpv_linf_driver_torque_beta_status status;
     state[0] = s->beta;
     state[1] = s->r;
     state[2] = s->delta;

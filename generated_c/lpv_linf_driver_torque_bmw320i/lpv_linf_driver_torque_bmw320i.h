@@ -30,18 +30,29 @@ extern "C" {
 /* known input F_nr [N]: computed inside the step from the measurements, not an input */
 /* known input T_nl [N m]: computed inside the step from the measurements, not an input */
 
-/* Status bits returned by lpv_linf_driver_torque_bmw320i_step (0 = nominal sample). */
-#define LPV_LINF_DRIVER_TORQUE_BMW320I_OK 0
-/* A scheduling signal outside its box: clamped for the membership functions and the step
+/* The design this C implements: the design hash of lpv_linf_driver_torque_bmw320i_design.json (a build can check that the
+ * step it links is the one it was validated with). */
+#define LPV_LINF_DRIVER_TORQUE_BMW320I_DESIGN_HASH "16634f3af38641d0eb1aca7fb33386f3e8044fc4449cb22ba419a03d93949f65"
+
+/* Status bits returned by lpv_linf_driver_torque_bmw320i_step; a sample's status is their OR (lpv_linf_driver_torque_bmw320i_status). */
+typedef enum {
+    /* nominal sample */
+    LPV_LINF_DRIVER_TORQUE_BMW320I_OK = 0,
+    /* A scheduling signal outside its box: clamped for the membership functions and the step
  * taken; the stability certificate does not cover this sample. */
-#define LPV_LINF_DRIVER_TORQUE_BMW320I_SCHEDULING_CLAMPED 1
-/* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
-#define LPV_LINF_DRIVER_TORQUE_BMW320I_NONFINITE_INPUT 2
-/* The step produced a non-finite value (the state had grown past double range, e.g. after
- * absurd finite inputs): the state restarts from the initial (zero) estimate. */
-#define LPV_LINF_DRIVER_TORQUE_BMW320I_NUMERICAL_FAILURE 4
-/* First sample after init or after a restart: never set by this observer (its step needs no previous sample). */
-#define LPV_LINF_DRIVER_TORQUE_BMW320I_WARMING_UP 8
+    LPV_LINF_DRIVER_TORQUE_BMW320I_SCHEDULING_CLAMPED = 1,
+    /* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
+    LPV_LINF_DRIVER_TORQUE_BMW320I_NONFINITE_INPUT = 2,
+    /* The step produced a non-finite value (the state had grown past double range, e.g. after
+     * absurd finite inputs): the state restarts from the initial (zero) estimate. */
+    LPV_LINF_DRIVER_TORQUE_BMW320I_NUMERICAL_FAILURE = 4,
+    /* First sample after init or after a restart: never set by this observer (its step needs no previous sample). */
+    LPV_LINF_DRIVER_TORQUE_BMW320I_WARMING_UP = 8
+} lpv_linf_driver_torque_bmw320i_status_bit;
+
+/* The status of one sample: LPV_LINF_DRIVER_TORQUE_BMW320I_OK, or the OR of lpv_linf_driver_torque_bmw320i_status_bit values
+ * (an int, so that every combination of the bits is one of its values). */
+typedef int lpv_linf_driver_torque_bmw320i_status;
 
 typedef struct {
     double beta; /* estimate of beta [rad] */
@@ -64,14 +75,14 @@ typedef lpv_linf_driver_torque_bmw320i_state lpv_linf_driver_torque_bmw320i_outp
 /* Zero initial estimate. */
 void lpv_linf_driver_torque_bmw320i_init(lpv_linf_driver_torque_bmw320i_state *s);
 
-/* One sample. Returns a combination of the status bits above. */
-int lpv_linf_driver_torque_bmw320i_step(lpv_linf_driver_torque_bmw320i_state *s, const lpv_linf_driver_torque_bmw320i_input *in, lpv_linf_driver_torque_bmw320i_output *out);
+/* One sample. Returns its status: LPV_LINF_DRIVER_TORQUE_BMW320I_OK or an OR of the status bits above. */
+lpv_linf_driver_torque_bmw320i_status lpv_linf_driver_torque_bmw320i_step(lpv_linf_driver_torque_bmw320i_state *s, const lpv_linf_driver_torque_bmw320i_input *in, lpv_linf_driver_torque_bmw320i_output *out);
 
 /* Same on flat arrays in the field order above (state: N_STATE, input: N_INPUT, out: N_OUTPUT). */
-int lpv_linf_driver_torque_bmw320i_step_flat(double *state, const double *input, double *out);
+lpv_linf_driver_torque_bmw320i_status lpv_linf_driver_torque_bmw320i_step_flat(double *state, const double *input, double *out);
 
 /* n samples: inputs is n x N_INPUT (row-major), outputs n x N_OUTPUT, status n entries. */
-void lpv_linf_driver_torque_bmw320i_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status);
+void lpv_linf_driver_torque_bmw320i_run_flat(double *state, const double *inputs, size_t n, double *outputs, lpv_linf_driver_torque_bmw320i_status *status);
 
 /* Checks that the compiled kernel's work query fits the fixed work arrays (returns 0 if so). */
 int lpv_linf_driver_torque_bmw320i_check_work(void);

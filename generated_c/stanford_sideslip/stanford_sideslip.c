@@ -59,7 +59,7 @@ static uint64_t nonfinite_bit(const double *x)
 #if defined(__GNUC__) && !defined(__clang__)
 __attribute__((noinline, noclone))
 #endif
-void stanford_sideslip_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status)
+void stanford_sideslip_run_flat(double *state, const double *inputs, size_t n, double *outputs, stanford_sideslip_status *status)
 {
     const casadi_real *arg[STANFORD_SIDESLIP_SZ_ARG];
     casadi_real *res[STANFORD_SIDESLIP_SZ_RES];
@@ -92,22 +92,22 @@ void stanford_sideslip_run_flat(double *state, const double *inputs, size_t n, d
             for (i = 0; i < STANFORD_SIDESLIP_N_OUTPUT; ++i) {
                 out[i] = state[i];
             }
-            status[k] = STANFORD_SIDESLIP_NONFINITE_INPUT;
+            status[k] = (stanford_sideslip_status)STANFORD_SIDESLIP_NONFINITE_INPUT;
             continue;
         }
         if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2])) >> 63) != 0u)) {
-            status[k] = STANFORD_SIDESLIP_NUMERICAL_FAILURE;
+            status[k] = (stanford_sideslip_status)STANFORD_SIDESLIP_NUMERICAL_FAILURE;
         } else {
-            status[k] = STANFORD_SIDESLIP_OK;
+            status[k] = (stanford_sideslip_status)STANFORD_SIDESLIP_OK;
         }
         /* the kernel clamps the scheduling signals for the memberships and reports by how much */
         if (excess > 0.0) {
-            status[k] |= STANFORD_SIDESLIP_SCHEDULING_CLAMPED;
+            status[k] |= (stanford_sideslip_status)STANFORD_SIDESLIP_SCHEDULING_CLAMPED;
         }
         /* A non-finite result means the state had grown past what doubles hold (e.g. after
          * absurd but finite inputs such as 1e300): holding it would freeze the observer, so it
          * restarts from the initial estimate, which the certified step then drives back. */
-        if ((status[k] & STANFORD_SIDESLIP_NUMERICAL_FAILURE) != 0) {
+        if ((status[k] & (stanford_sideslip_status)STANFORD_SIDESLIP_NUMERICAL_FAILURE) != 0) {
             for (i = 0; i < STANFORD_SIDESLIP_N_STATE; ++i) {
                 next[i] = 0.0;
             }
@@ -121,19 +121,19 @@ void stanford_sideslip_run_flat(double *state, const double *inputs, size_t n, d
     }
 }
 
-int stanford_sideslip_step_flat(double *state, const double *input, double *out)
+stanford_sideslip_status stanford_sideslip_step_flat(double *state, const double *input, double *out)
 {
-    int status;
+    stanford_sideslip_status status;
     stanford_sideslip_run_flat(state, input, 1, out, &status);
     return status;
 }
 
-int stanford_sideslip_step(stanford_sideslip_state *s, const stanford_sideslip_input *in, stanford_sideslip_output *out)
+stanford_sideslip_status stanford_sideslip_step(stanford_sideslip_state *s, const stanford_sideslip_input *in, stanford_sideslip_output *out)
 {
     double state[STANFORD_SIDESLIP_N_STATE];
     double input[STANFORD_SIDESLIP_N_INPUT];
     double flat_out[STANFORD_SIDESLIP_N_OUTPUT];
-    int status;
+    stanford_sideslip_status status;
     state[0] = s->beta;
     state[1] = s->r;
     state[2] = s->M_z;

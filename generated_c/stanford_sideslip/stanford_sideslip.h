@@ -29,18 +29,29 @@ extern "C" {
 #define STANFORD_SIDESLIP_S_MIN 0.3333333333333333
 #define STANFORD_SIDESLIP_S_MAX 1.0
 
-/* Status bits returned by stanford_sideslip_step (0 = nominal sample). */
-#define STANFORD_SIDESLIP_OK 0
-/* A scheduling signal outside its box: clamped for the membership functions and the step
+/* The design this C implements: the design hash of stanford_sideslip_design.json (a build can check that the
+ * step it links is the one it was validated with). */
+#define STANFORD_SIDESLIP_DESIGN_HASH "7f6dc674964c0112c3218a49e103259fb57f8af6e729bd0caf6b18c3e4865f9b"
+
+/* Status bits returned by stanford_sideslip_step; a sample's status is their OR (stanford_sideslip_status). */
+typedef enum {
+    /* nominal sample */
+    STANFORD_SIDESLIP_OK = 0,
+    /* A scheduling signal outside its box: clamped for the membership functions and the step
  * taken; the stability certificate does not cover this sample. */
-#define STANFORD_SIDESLIP_SCHEDULING_CLAMPED 1
-/* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
-#define STANFORD_SIDESLIP_NONFINITE_INPUT 2
-/* The step produced a non-finite value (the state had grown past double range, e.g. after
- * absurd finite inputs): the state restarts from the initial (zero) estimate. */
-#define STANFORD_SIDESLIP_NUMERICAL_FAILURE 4
-/* First sample after init or after a restart: never set by this observer (its step needs no previous sample). */
-#define STANFORD_SIDESLIP_WARMING_UP 8
+    STANFORD_SIDESLIP_SCHEDULING_CLAMPED = 1,
+    /* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
+    STANFORD_SIDESLIP_NONFINITE_INPUT = 2,
+    /* The step produced a non-finite value (the state had grown past double range, e.g. after
+     * absurd finite inputs): the state restarts from the initial (zero) estimate. */
+    STANFORD_SIDESLIP_NUMERICAL_FAILURE = 4,
+    /* First sample after init or after a restart: never set by this observer (its step needs no previous sample). */
+    STANFORD_SIDESLIP_WARMING_UP = 8
+} stanford_sideslip_status_bit;
+
+/* The status of one sample: STANFORD_SIDESLIP_OK, or the OR of stanford_sideslip_status_bit values
+ * (an int, so that every combination of the bits is one of its values). */
+typedef int stanford_sideslip_status;
 
 typedef struct {
     double beta; /* estimate of beta [rad] */
@@ -60,14 +71,14 @@ typedef stanford_sideslip_state stanford_sideslip_output;
 /* Zero initial estimate. */
 void stanford_sideslip_init(stanford_sideslip_state *s);
 
-/* One sample. Returns a combination of the status bits above. */
-int stanford_sideslip_step(stanford_sideslip_state *s, const stanford_sideslip_input *in, stanford_sideslip_output *out);
+/* One sample. Returns its status: STANFORD_SIDESLIP_OK or an OR of the status bits above. */
+stanford_sideslip_status stanford_sideslip_step(stanford_sideslip_state *s, const stanford_sideslip_input *in, stanford_sideslip_output *out);
 
 /* Same on flat arrays in the field order above (state: N_STATE, input: N_INPUT, out: N_OUTPUT). */
-int stanford_sideslip_step_flat(double *state, const double *input, double *out);
+stanford_sideslip_status stanford_sideslip_step_flat(double *state, const double *input, double *out);
 
 /* n samples: inputs is n x N_INPUT (row-major), outputs n x N_OUTPUT, status n entries. */
-void stanford_sideslip_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status);
+void stanford_sideslip_run_flat(double *state, const double *inputs, size_t n, double *outputs, stanford_sideslip_status *status);
 
 /* Checks that the compiled kernel's work query fits the fixed work arrays (returns 0 if so). */
 int stanford_sideslip_check_work(void);

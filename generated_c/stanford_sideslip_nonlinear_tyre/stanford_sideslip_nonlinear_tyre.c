@@ -60,7 +60,7 @@ static uint64_t nonfinite_bit(const double *x)
 #if defined(__GNUC__) && !defined(__clang__)
 __attribute__((noinline, noclone))
 #endif
-void stanford_sideslip_nonlinear_tyre_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status)
+void stanford_sideslip_nonlinear_tyre_run_flat(double *state, const double *inputs, size_t n, double *outputs, stanford_sideslip_nonlinear_tyre_status *status)
 {
     const casadi_real *arg[STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_ARG];
     casadi_real *res[STANFORD_SIDESLIP_NONLINEAR_TYRE_SZ_RES];
@@ -93,22 +93,22 @@ void stanford_sideslip_nonlinear_tyre_run_flat(double *state, const double *inpu
             for (i = 0; i < STANFORD_SIDESLIP_NONLINEAR_TYRE_N_OUTPUT; ++i) {
                 out[i] = state[i + 2];
             }
-            status[k] = STANFORD_SIDESLIP_NONLINEAR_TYRE_NONFINITE_INPUT;
+            status[k] = (stanford_sideslip_nonlinear_tyre_status)STANFORD_SIDESLIP_NONLINEAR_TYRE_NONFINITE_INPUT;
             continue;
         }
         if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2]) | nonfinite_bit(&next[3])) >> 63) != 0u)) {
-            status[k] = STANFORD_SIDESLIP_NONLINEAR_TYRE_NUMERICAL_FAILURE;
+            status[k] = (stanford_sideslip_nonlinear_tyre_status)STANFORD_SIDESLIP_NONLINEAR_TYRE_NUMERICAL_FAILURE;
         } else {
-            status[k] = STANFORD_SIDESLIP_NONLINEAR_TYRE_OK;
+            status[k] = (stanford_sideslip_nonlinear_tyre_status)STANFORD_SIDESLIP_NONLINEAR_TYRE_OK;
         }
         /* the kernel clamps the scheduling signals for the memberships and reports by how much */
         if (excess > 0.0) {
-            status[k] |= STANFORD_SIDESLIP_NONLINEAR_TYRE_SCHEDULING_CLAMPED;
+            status[k] |= (stanford_sideslip_nonlinear_tyre_status)STANFORD_SIDESLIP_NONLINEAR_TYRE_SCHEDULING_CLAMPED;
         }
         /* A non-finite result means the state had grown past what doubles hold (e.g. after
          * absurd but finite inputs such as 1e300): holding it would freeze the observer, so it
          * restarts from the initial estimate, which the certified step then drives back. */
-        if ((status[k] & STANFORD_SIDESLIP_NONLINEAR_TYRE_NUMERICAL_FAILURE) != 0) {
+        if ((status[k] & (stanford_sideslip_nonlinear_tyre_status)STANFORD_SIDESLIP_NONLINEAR_TYRE_NUMERICAL_FAILURE) != 0) {
             for (i = 0; i < STANFORD_SIDESLIP_NONLINEAR_TYRE_N_STATE; ++i) {
                 next[i] = 0.0;
             }
@@ -122,19 +122,19 @@ void stanford_sideslip_nonlinear_tyre_run_flat(double *state, const double *inpu
     }
 }
 
-int stanford_sideslip_nonlinear_tyre_step_flat(double *state, const double *input, double *out)
+stanford_sideslip_nonlinear_tyre_status stanford_sideslip_nonlinear_tyre_step_flat(double *state, const double *input, double *out)
 {
-    int status;
+    stanford_sideslip_nonlinear_tyre_status status;
     stanford_sideslip_nonlinear_tyre_run_flat(state, input, 1, out, &status);
     return status;
 }
 
-int stanford_sideslip_nonlinear_tyre_step(stanford_sideslip_nonlinear_tyre_state *s, const stanford_sideslip_nonlinear_tyre_input *in, stanford_sideslip_nonlinear_tyre_output *out)
+stanford_sideslip_nonlinear_tyre_status stanford_sideslip_nonlinear_tyre_step(stanford_sideslip_nonlinear_tyre_state *s, const stanford_sideslip_nonlinear_tyre_input *in, stanford_sideslip_nonlinear_tyre_output *out)
 {
     double state[STANFORD_SIDESLIP_NONLINEAR_TYRE_N_STATE];
     double input[STANFORD_SIDESLIP_NONLINEAR_TYRE_N_INPUT];
     double flat_out[STANFORD_SIDESLIP_NONLINEAR_TYRE_N_OUTPUT];
-    int status;
+    stanford_sideslip_nonlinear_tyre_status status;
     state[0] = s->v_y_next;
     state[1] = s->r_next;
     state[2] = s->v_y;

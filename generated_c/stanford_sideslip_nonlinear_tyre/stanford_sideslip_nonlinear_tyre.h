@@ -29,19 +29,30 @@ extern "C" {
 #define STANFORD_SIDESLIP_NONLINEAR_TYRE_V_X_MIN 15.0
 #define STANFORD_SIDESLIP_NONLINEAR_TYRE_V_X_MAX 65.0
 
-/* Status bits returned by stanford_sideslip_nonlinear_tyre_step (0 = nominal sample). */
-#define STANFORD_SIDESLIP_NONLINEAR_TYRE_OK 0
-/* v_x, delta or a_x outside the certified set (v_x clamped for the model), or an estimated
+/* The design this C implements: the design hash of stanford_sideslip_nonlinear_tyre_design.json (a build can check that the
+ * step it links is the one it was validated with). */
+#define STANFORD_SIDESLIP_NONLINEAR_TYRE_DESIGN_HASH "5283eb8268e05a193d906faea1719fa0f46c31583615f704e755edcaa03a3d50"
+
+/* Status bits returned by stanford_sideslip_nonlinear_tyre_step; a sample's status is their OR (stanford_sideslip_nonlinear_tyre_status). */
+typedef enum {
+    /* nominal sample */
+    STANFORD_SIDESLIP_NONLINEAR_TYRE_OK = 0,
+    /* v_x, delta or a_x outside the certified set (v_x clamped for the model), or an estimated
  * axle slip beyond sliding_fraction of its sliding slip: the certificate does not cover this sample,
  * and the step integrates the kinematics instead of correcting by the tyre model. */
-#define STANFORD_SIDESLIP_NONLINEAR_TYRE_SCHEDULING_CLAMPED 1
-/* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
-#define STANFORD_SIDESLIP_NONLINEAR_TYRE_NONFINITE_INPUT 2
-/* The step produced a non-finite value (the state had grown past double range, e.g. after
- * absurd finite inputs): the state restarts from the initial (zero) estimate. */
-#define STANFORD_SIDESLIP_NONLINEAR_TYRE_NUMERICAL_FAILURE 4
-/* First sample after init or after a restart: never set. */
-#define STANFORD_SIDESLIP_NONLINEAR_TYRE_WARMING_UP 8
+    STANFORD_SIDESLIP_NONLINEAR_TYRE_SCHEDULING_CLAMPED = 1,
+    /* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
+    STANFORD_SIDESLIP_NONLINEAR_TYRE_NONFINITE_INPUT = 2,
+    /* The step produced a non-finite value (the state had grown past double range, e.g. after
+     * absurd finite inputs): the state restarts from the initial (zero) estimate. */
+    STANFORD_SIDESLIP_NONLINEAR_TYRE_NUMERICAL_FAILURE = 4,
+    /* First sample after init or after a restart: never set. */
+    STANFORD_SIDESLIP_NONLINEAR_TYRE_WARMING_UP = 8
+} stanford_sideslip_nonlinear_tyre_status_bit;
+
+/* The status of one sample: STANFORD_SIDESLIP_NONLINEAR_TYRE_OK, or the OR of stanford_sideslip_nonlinear_tyre_status_bit values
+ * (an int, so that every combination of the bits is one of its values). */
+typedef int stanford_sideslip_nonlinear_tyre_status;
 
 typedef struct {
     double v_y_next; /* predicted lateral speed for the next sample [m/s] */
@@ -66,14 +77,14 @@ typedef struct {
 /* Zero initial estimate. */
 void stanford_sideslip_nonlinear_tyre_init(stanford_sideslip_nonlinear_tyre_state *s);
 
-/* One sample. Returns a combination of the status bits above. */
-int stanford_sideslip_nonlinear_tyre_step(stanford_sideslip_nonlinear_tyre_state *s, const stanford_sideslip_nonlinear_tyre_input *in, stanford_sideslip_nonlinear_tyre_output *out);
+/* One sample. Returns its status: STANFORD_SIDESLIP_NONLINEAR_TYRE_OK or an OR of the status bits above. */
+stanford_sideslip_nonlinear_tyre_status stanford_sideslip_nonlinear_tyre_step(stanford_sideslip_nonlinear_tyre_state *s, const stanford_sideslip_nonlinear_tyre_input *in, stanford_sideslip_nonlinear_tyre_output *out);
 
 /* Same on flat arrays in the field order above (state: N_STATE, input: N_INPUT, out: N_OUTPUT). */
-int stanford_sideslip_nonlinear_tyre_step_flat(double *state, const double *input, double *out);
+stanford_sideslip_nonlinear_tyre_status stanford_sideslip_nonlinear_tyre_step_flat(double *state, const double *input, double *out);
 
 /* n samples: inputs is n x N_INPUT (row-major), outputs n x N_OUTPUT, status n entries. */
-void stanford_sideslip_nonlinear_tyre_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status);
+void stanford_sideslip_nonlinear_tyre_run_flat(double *state, const double *inputs, size_t n, double *outputs, stanford_sideslip_nonlinear_tyre_status *status);
 
 /* Checks that the compiled kernel's work query fits the fixed work arrays (returns 0 if so). */
 int stanford_sideslip_nonlinear_tyre_check_work(void);

@@ -29,18 +29,29 @@ extern "C" {
 #define SWITCHED_PI_BANK_ANGLE_V_X_MIN 6.25
 #define SWITCHED_PI_BANK_ANGLE_V_X_MAX 28.75
 
-/* Status bits returned by switched_pi_bank_angle_step (0 = nominal sample). */
-#define SWITCHED_PI_BANK_ANGLE_OK 0
-/* A premise signal outside its range (the nearest mode is used; the certificate's
+/* The design this C implements: the design hash of switched_pi_bank_angle_design.json (a build can check that the
+ * step it links is the one it was validated with). */
+#define SWITCHED_PI_BANK_ANGLE_DESIGN_HASH "d44366038a230a83d6d840eff164354cdf3e0b7cdb45c979737923fbb3454871"
+
+/* Status bits returned by switched_pi_bank_angle_step; a sample's status is their OR (switched_pi_bank_angle_status). */
+typedef enum {
+    /* nominal sample */
+    SWITCHED_PI_BANK_ANGLE_OK = 0,
+    /* A premise signal outside its range (the nearest mode is used; the certificate's
  * model does not cover this sample). */
-#define SWITCHED_PI_BANK_ANGLE_SCHEDULING_CLAMPED 1
-/* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
-#define SWITCHED_PI_BANK_ANGLE_NONFINITE_INPUT 2
-/* The step produced a non-finite value (the state had grown past double range, e.g. after
- * absurd finite inputs): the state restarts from the initial (zero) estimate. */
-#define SWITCHED_PI_BANK_ANGLE_NUMERICAL_FAILURE 4
-/* First sample after init or after a restart: never set by this observer. */
-#define SWITCHED_PI_BANK_ANGLE_WARMING_UP 8
+    SWITCHED_PI_BANK_ANGLE_SCHEDULING_CLAMPED = 1,
+    /* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
+    SWITCHED_PI_BANK_ANGLE_NONFINITE_INPUT = 2,
+    /* The step produced a non-finite value (the state had grown past double range, e.g. after
+     * absurd finite inputs): the state restarts from the initial (zero) estimate. */
+    SWITCHED_PI_BANK_ANGLE_NUMERICAL_FAILURE = 4,
+    /* First sample after init or after a restart: never set by this observer. */
+    SWITCHED_PI_BANK_ANGLE_WARMING_UP = 8
+} switched_pi_bank_angle_status_bit;
+
+/* The status of one sample: SWITCHED_PI_BANK_ANGLE_OK, or the OR of switched_pi_bank_angle_status_bit values
+ * (an int, so that every combination of the bits is one of its values). */
+typedef int switched_pi_bank_angle_status;
 
 typedef struct {
     double z_beta; /* observer state z of (5) */
@@ -76,14 +87,14 @@ typedef struct {
 /* Zero initial estimate. */
 void switched_pi_bank_angle_init(switched_pi_bank_angle_state *s);
 
-/* One sample. Returns a combination of the status bits above. */
-int switched_pi_bank_angle_step(switched_pi_bank_angle_state *s, const switched_pi_bank_angle_input *in, switched_pi_bank_angle_output *out);
+/* One sample. Returns its status: SWITCHED_PI_BANK_ANGLE_OK or an OR of the status bits above. */
+switched_pi_bank_angle_status switched_pi_bank_angle_step(switched_pi_bank_angle_state *s, const switched_pi_bank_angle_input *in, switched_pi_bank_angle_output *out);
 
 /* Same on flat arrays in the field order above (state: N_STATE, input: N_INPUT, out: N_OUTPUT). */
-int switched_pi_bank_angle_step_flat(double *state, const double *input, double *out);
+switched_pi_bank_angle_status switched_pi_bank_angle_step_flat(double *state, const double *input, double *out);
 
 /* n samples: inputs is n x N_INPUT (row-major), outputs n x N_OUTPUT, status n entries. */
-void switched_pi_bank_angle_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status);
+void switched_pi_bank_angle_run_flat(double *state, const double *inputs, size_t n, double *outputs, switched_pi_bank_angle_status *status);
 
 /* Checks that the compiled kernel's work query fits the fixed work arrays (returns 0 if so). */
 int switched_pi_bank_angle_check_work(void);

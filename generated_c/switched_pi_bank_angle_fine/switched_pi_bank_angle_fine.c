@@ -67,7 +67,7 @@ static uint64_t nonfinite_bit(const double *x)
 #if defined(__GNUC__) && !defined(__clang__)
 __attribute__((noinline, noclone))
 #endif
-void switched_pi_bank_angle_fine_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status)
+void switched_pi_bank_angle_fine_run_flat(double *state, const double *inputs, size_t n, double *outputs, switched_pi_bank_angle_fine_status *status)
 {
     const casadi_real *arg[SWITCHED_PI_BANK_ANGLE_FINE_SZ_ARG];
     casadi_real *res[SWITCHED_PI_BANK_ANGLE_FINE_SZ_RES];
@@ -100,22 +100,22 @@ void switched_pi_bank_angle_fine_run_flat(double *state, const double *inputs, s
             for (i = 0; i < SWITCHED_PI_BANK_ANGLE_FINE_N_OUTPUT; ++i) {
                 out[i] = state[i + 5];
             }
-            status[k] = SWITCHED_PI_BANK_ANGLE_FINE_NONFINITE_INPUT;
+            status[k] = (switched_pi_bank_angle_fine_status)SWITCHED_PI_BANK_ANGLE_FINE_NONFINITE_INPUT;
             continue;
         }
         if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2]) | nonfinite_bit(&next[3]) | nonfinite_bit(&next[4]) | nonfinite_bit(&next[5]) | nonfinite_bit(&next[6]) | nonfinite_bit(&next[7]) | nonfinite_bit(&next[8]) | nonfinite_bit(&next[9]) | nonfinite_bit(&next[10])) >> 63) != 0u)) {
-            status[k] = SWITCHED_PI_BANK_ANGLE_FINE_NUMERICAL_FAILURE;
+            status[k] = (switched_pi_bank_angle_fine_status)SWITCHED_PI_BANK_ANGLE_FINE_NUMERICAL_FAILURE;
         } else {
-            status[k] = SWITCHED_PI_BANK_ANGLE_FINE_OK;
+            status[k] = (switched_pi_bank_angle_fine_status)SWITCHED_PI_BANK_ANGLE_FINE_OK;
         }
         /* the kernel clamps the scheduling signals for the memberships and reports by how much */
         if (excess > 0.0) {
-            status[k] |= SWITCHED_PI_BANK_ANGLE_FINE_SCHEDULING_CLAMPED;
+            status[k] |= (switched_pi_bank_angle_fine_status)SWITCHED_PI_BANK_ANGLE_FINE_SCHEDULING_CLAMPED;
         }
         /* A non-finite result means the state had grown past what doubles hold (e.g. after
          * absurd but finite inputs such as 1e300): holding it would freeze the observer, so it
          * restarts from the initial estimate, which the certified step then drives back. */
-        if ((status[k] & SWITCHED_PI_BANK_ANGLE_FINE_NUMERICAL_FAILURE) != 0) {
+        if ((status[k] & (switched_pi_bank_angle_fine_status)SWITCHED_PI_BANK_ANGLE_FINE_NUMERICAL_FAILURE) != 0) {
             for (i = 0; i < SWITCHED_PI_BANK_ANGLE_FINE_N_STATE; ++i) {
                 next[i] = 0.0;
             }
@@ -129,19 +129,19 @@ void switched_pi_bank_angle_fine_run_flat(double *state, const double *inputs, s
     }
 }
 
-int switched_pi_bank_angle_fine_step_flat(double *state, const double *input, double *out)
+switched_pi_bank_angle_fine_status switched_pi_bank_angle_fine_step_flat(double *state, const double *input, double *out)
 {
-    int status;
+    switched_pi_bank_angle_fine_status status;
     switched_pi_bank_angle_fine_run_flat(state, input, 1, out, &status);
     return status;
 }
 
-int switched_pi_bank_angle_fine_step(switched_pi_bank_angle_fine_state *s, const switched_pi_bank_angle_fine_input *in, switched_pi_bank_angle_fine_output *out)
+switched_pi_bank_angle_fine_status switched_pi_bank_angle_fine_step(switched_pi_bank_angle_fine_state *s, const switched_pi_bank_angle_fine_input *in, switched_pi_bank_angle_fine_output *out)
 {
     double state[SWITCHED_PI_BANK_ANGLE_FINE_N_STATE];
     double input[SWITCHED_PI_BANK_ANGLE_FINE_N_INPUT];
     double flat_out[SWITCHED_PI_BANK_ANGLE_FINE_N_OUTPUT];
-    int status;
+    switched_pi_bank_angle_fine_status status;
     state[0] = s->z_beta;
     state[1] = s->z_r;
     state[2] = s->z_phi;

@@ -67,7 +67,7 @@ static uint64_t nonfinite_bit(const double *x)
 #if defined(__GNUC__) && !defined(__clang__)
 __attribute__((noinline, noclone))
 #endif
-void ts_fuzzy_uio_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status)
+void ts_fuzzy_uio_run_flat(double *state, const double *inputs, size_t n, double *outputs, ts_fuzzy_uio_status *status)
 {
     const casadi_real *arg[TS_FUZZY_UIO_SZ_ARG];
     casadi_real *res[TS_FUZZY_UIO_SZ_RES];
@@ -103,25 +103,25 @@ void ts_fuzzy_uio_run_flat(double *state, const double *inputs, size_t n, double
             for (i = 0; i < TS_FUZZY_UIO_N_OUTPUT; ++i) {
                 out[i] = state[i + 6];
             }
-            status[k] = TS_FUZZY_UIO_NONFINITE_INPUT;
+            status[k] = (ts_fuzzy_uio_status)TS_FUZZY_UIO_NONFINITE_INPUT;
             continue;
         }
         if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2]) | nonfinite_bit(&next[3]) | nonfinite_bit(&next[4]) | nonfinite_bit(&next[5]) | nonfinite_bit(&next[6]) | nonfinite_bit(&next[7]) | nonfinite_bit(&next[8]) | nonfinite_bit(&next[9]) | nonfinite_bit(&next[10])) >> 63) != 0u)) {
-            status[k] = TS_FUZZY_UIO_NUMERICAL_FAILURE;
+            status[k] = (ts_fuzzy_uio_status)TS_FUZZY_UIO_NUMERICAL_FAILURE;
         } else {
-            status[k] = TS_FUZZY_UIO_OK;
+            status[k] = (ts_fuzzy_uio_status)TS_FUZZY_UIO_OK;
         }
         /* the kernel clamps the scheduling signals for the memberships and reports by how much */
         if (excess > 0.0) {
-            status[k] |= TS_FUZZY_UIO_SCHEDULING_CLAMPED;
+            status[k] |= (ts_fuzzy_uio_status)TS_FUZZY_UIO_SCHEDULING_CLAMPED;
         }
         if (warmup > 0.0) {
-            status[k] |= TS_FUZZY_UIO_WARMING_UP;
+            status[k] |= (ts_fuzzy_uio_status)TS_FUZZY_UIO_WARMING_UP;
         }
         /* A non-finite result means the state had grown past what doubles hold (e.g. after
          * absurd but finite inputs such as 1e300): holding it would freeze the observer, so it
          * restarts from the initial estimate, which the certified step then drives back. */
-        if ((status[k] & TS_FUZZY_UIO_NUMERICAL_FAILURE) != 0) {
+        if ((status[k] & (ts_fuzzy_uio_status)TS_FUZZY_UIO_NUMERICAL_FAILURE) != 0) {
             for (i = 0; i < TS_FUZZY_UIO_N_STATE; ++i) {
                 next[i] = 0.0;
             }
@@ -135,19 +135,19 @@ void ts_fuzzy_uio_run_flat(double *state, const double *inputs, size_t n, double
     }
 }
 
-int ts_fuzzy_uio_step_flat(double *state, const double *input, double *out)
+ts_fuzzy_uio_status ts_fuzzy_uio_step_flat(double *state, const double *input, double *out)
 {
-    int status;
+    ts_fuzzy_uio_status status;
     ts_fuzzy_uio_run_flat(state, input, 1, out, &status);
     return status;
 }
 
-int ts_fuzzy_uio_step(ts_fuzzy_uio_state *s, const ts_fuzzy_uio_input *in, ts_fuzzy_uio_output *out)
+ts_fuzzy_uio_status ts_fuzzy_uio_step(ts_fuzzy_uio_state *s, const ts_fuzzy_uio_input *in, ts_fuzzy_uio_output *out)
 {
     double state[TS_FUZZY_UIO_N_STATE];
     double input[TS_FUZZY_UIO_N_INPUT];
     double flat_out[TS_FUZZY_UIO_N_OUTPUT];
-    int status;
+    ts_fuzzy_uio_status status;
     state[0] = s->zeta_v_x;
     state[1] = s->zeta_v_y;
     state[2] = s->zeta_r;

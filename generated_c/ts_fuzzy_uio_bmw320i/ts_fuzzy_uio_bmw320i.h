@@ -32,19 +32,30 @@ extern "C" {
 #define TS_FUZZY_UIO_BMW320I_R_MIN -0.55
 #define TS_FUZZY_UIO_BMW320I_R_MAX 0.55
 
-/* Status bits returned by ts_fuzzy_uio_bmw320i_step (0 = nominal sample). */
-#define TS_FUZZY_UIO_BMW320I_OK 0
-/* A measured premise signal outside the compact set D_x (clamped for the model and the
+/* The design this C implements: the design hash of ts_fuzzy_uio_bmw320i_design.json (a build can check that the
+ * step it links is the one it was validated with). */
+#define TS_FUZZY_UIO_BMW320I_DESIGN_HASH "2fca23ef6dc2111ec13ab26d9639212a81fe7d296e4164fb6fc4721a6b576f53"
+
+/* Status bits returned by ts_fuzzy_uio_bmw320i_step; a sample's status is their OR (ts_fuzzy_uio_bmw320i_status). */
+typedef enum {
+    /* nominal sample */
+    TS_FUZZY_UIO_BMW320I_OK = 0,
+    /* A measured premise signal outside the compact set D_x (clamped for the model and the
  * memberships), or an unmeasured estimate outside D_x: the certificate does not cover this sample. */
-#define TS_FUZZY_UIO_BMW320I_SCHEDULING_CLAMPED 1
-/* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
-#define TS_FUZZY_UIO_BMW320I_NONFINITE_INPUT 2
-/* The step produced a non-finite value (the state had grown past double range, e.g. after
- * absurd finite inputs): the state restarts from the initial (zero) estimate. */
-#define TS_FUZZY_UIO_BMW320I_NUMERICAL_FAILURE 4
-/* First sample after init or after a restart: there is no previous output y_k yet, so y_{k+1} stands in for it
+    TS_FUZZY_UIO_BMW320I_SCHEDULING_CLAMPED = 1,
+    /* An input is NaN or +-Inf: the state is held unchanged and the outputs repeat it. */
+    TS_FUZZY_UIO_BMW320I_NONFINITE_INPUT = 2,
+    /* The step produced a non-finite value (the state had grown past double range, e.g. after
+     * absurd finite inputs): the state restarts from the initial (zero) estimate. */
+    TS_FUZZY_UIO_BMW320I_NUMERICAL_FAILURE = 4,
+    /* First sample after init or after a restart: there is no previous output y_k yet, so y_{k+1} stands in for it
  * and the unknown-input estimate of this sample is not meaningful. */
-#define TS_FUZZY_UIO_BMW320I_WARMING_UP 8
+    TS_FUZZY_UIO_BMW320I_WARMING_UP = 8
+} ts_fuzzy_uio_bmw320i_status_bit;
+
+/* The status of one sample: TS_FUZZY_UIO_BMW320I_OK, or the OR of ts_fuzzy_uio_bmw320i_status_bit values
+ * (an int, so that every combination of the bits is one of its values). */
+typedef int ts_fuzzy_uio_bmw320i_status;
 
 typedef struct {
     double zeta_v_x; /* observer internal state zeta of (16a) */
@@ -76,14 +87,14 @@ typedef struct {
 /* Zero initial estimate. */
 void ts_fuzzy_uio_bmw320i_init(ts_fuzzy_uio_bmw320i_state *s);
 
-/* One sample. Returns a combination of the status bits above. */
-int ts_fuzzy_uio_bmw320i_step(ts_fuzzy_uio_bmw320i_state *s, const ts_fuzzy_uio_bmw320i_input *in, ts_fuzzy_uio_bmw320i_output *out);
+/* One sample. Returns its status: TS_FUZZY_UIO_BMW320I_OK or an OR of the status bits above. */
+ts_fuzzy_uio_bmw320i_status ts_fuzzy_uio_bmw320i_step(ts_fuzzy_uio_bmw320i_state *s, const ts_fuzzy_uio_bmw320i_input *in, ts_fuzzy_uio_bmw320i_output *out);
 
 /* Same on flat arrays in the field order above (state: N_STATE, input: N_INPUT, out: N_OUTPUT). */
-int ts_fuzzy_uio_bmw320i_step_flat(double *state, const double *input, double *out);
+ts_fuzzy_uio_bmw320i_status ts_fuzzy_uio_bmw320i_step_flat(double *state, const double *input, double *out);
 
 /* n samples: inputs is n x N_INPUT (row-major), outputs n x N_OUTPUT, status n entries. */
-void ts_fuzzy_uio_bmw320i_run_flat(double *state, const double *inputs, size_t n, double *outputs, int *status);
+void ts_fuzzy_uio_bmw320i_run_flat(double *state, const double *inputs, size_t n, double *outputs, ts_fuzzy_uio_bmw320i_status *status);
 
 /* Checks that the compiled kernel's work query fits the fixed work arrays (returns 0 if so). */
 int ts_fuzzy_uio_bmw320i_check_work(void);

@@ -30,6 +30,7 @@ from scipy.linalg import expm
 from ...certificate.artifact import artifact_head, significant, solver_certificate
 from ...certificate.certificate import Certificate, Recheck, Step
 from ..base import ObserverBuild, StepNotes
+from ...certificate.contraction import ContractionMetric
 from . import representation as rdeg
 from . import design as alg
 from ...representation.differentiators import HosmdSpec, hosmd_step_numpy, hosmd_step_sx
@@ -127,6 +128,14 @@ class AlgebraicUIOBuild(ObserverBuild):
     @property
     def n_state(self) -> int:
         return sum(size for _, size, _ in self.layout)
+
+    def contraction_metrics(self) -> list:
+        """V = e' X e of (39) over z_hat, the Gauss-Legendre step's B-stability bound per step."""
+        d = self.lpv.definition
+        return [ContractionMetric(float(self.discrete["contraction_bound_per_step"]), (self.design.X,),
+                                  tuple(f"zhat_{s}" if self.nu else str(s) for s in d.states),
+                                  f"(39) He(X (F - L C)) <= -2 alpha X on every vertex, alpha = {self.settings.alpha:g} "
+                                  f"1/s, 2-stage Gauss-Legendre step (B-stable)", knob="[design] alpha")]
 
     @property
     def state_names(self) -> list:

@@ -3,6 +3,8 @@ pipeline build (:class:`InterconnectedBuild`); the LMIs and certificates are in 
 """
 from __future__ import annotations
 
+import dataclasses
+
 import time
 from dataclasses import dataclass
 from functools import cached_property
@@ -14,6 +16,8 @@ import sympy as sp
 from ...certificate.artifact import artifact_head, significant, solver_certificate
 from ...certificate.certificate import Certificate, Recheck, Step
 from ..base import ObserverBuild, StepNotes
+from ...certificate.contraction import ContractionMetric
+from ...design.precision import rate_for_backward_euler, required_margin
 from . import representation as icm
 from ...representation.differentiators import MAX_ORDER, HosmdSpec, hosmd_step_numpy, hosmd_step_sx
 from ...emit.stepgen import lambdify, solve_unpivoted
@@ -408,6 +412,17 @@ class InterconnectedBuild(ObserverBuild):
         """A fresh LMI problem of this design (benchmark: our path vs CVXPY on the same blocks)."""
         return build_problem(self.ts, self.design.settings)[0]
 
+    def contraction_metrics(self) -> list:
+        """Each subsystem's (27) Lyapunov matrix over its z (physical units: P is solved in z / S)."""
+        out = []
+        for sub, sd in zip(self.ts.subsystems, self.design.subsystems):
+            Si = np.diag(1.0 / np.asarray(sd.S, dtype=float))
+            c = float(self.discrete[sub.name]["certified_contraction"])
+            out.append(ContractionMetric(c, (Si @ sd.P @ Si,), tuple(f"z_{s}" for s in sub.states),
+                                         f"{sub.name}: (I - Ts N)' P (I - Ts N) >= (1 + alpha Ts) P at every membership "
+                                         f"(27b), backward Euler", knob="[design] alpha"))
+        return out
+
     @property
     def state_names(self) -> list:
         return self.layout.state_names()
@@ -536,6 +551,9 @@ def build(config, solver) -> InterconnectedBuild:
     table = dict(config.design)
     settings = parse_settings(ICDesignSettings, table, source=config.source, section="design", extra=STEP_KEYS,
                               **({"tol": solver.tol} if solver.tol is not None else {}))
+    if required_margin(settings):      # precision = "float32": 1 / sqrt(1 + alpha Ts) <= 1 - margin
+        need = rate_for_backward_euler(required_margin(settings), config.sample_time, factor=1.0)
+        settings = dataclasses.replace(settings, alpha=max(settings.alpha, need))
     t0 = time.perf_counter()
     ts = icm.load(config)
     step = step_settings(ts, table, config.sample_time, config.source)

@@ -78,6 +78,7 @@ from . import representation as icm
 from ...errors import CertificateError, DiscretizationError, ModelDefinitionError, RankConditionError
 from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks
 from ...project.settings import setting
+from ...design.precision import margin_field, precision_field
 from ...design import canonical
 from ...design.canonical import decimal_round
 
@@ -117,6 +118,8 @@ class ICDesignSettings:
     tol: float = setting(1e-7, gt=0)
     gain_structure: str = setting("affine", choices=("affine", "vertex"))
     decoupling: str = setting("minimum_norm", choices=("minimum_norm", "measured_rows"))
+    precision: str = precision_field()
+    float32_margin: float = margin_field()
 
     def __post_init__(self):
         if self.gain_structure not in ("affine", "vertex"):

@@ -13,6 +13,8 @@ from ...design.solver import FreshSolver
 from ...representation import polytope
 from ...certificate.artifact import artifact_head, significant
 from ...certificate.certificate import Bound, Certificate, Recheck, Step, unit_ratio
+from ...certificate.contraction import ContractionMetric
+from ...design.precision import required_margin
 from ...model import LPVModel, instantiate, load_parameters
 from ...project.observer_file import ObserverConfig
 from ...errors import ModelDefinitionError, RankConditionError, RepresentationError, UILoopError, UiogenError
@@ -114,6 +116,14 @@ class LinfBuild(ObserverBuild):
                   + [{"name": str(s.symbol), "doc": f"scheduling signal [{s.unit or '-'}]"} for s in d.scheduling
                      if s.derived is None])
         return state, inputs, state
+
+    def contraction_metrics(self) -> list:
+        """The UI-filter loop's common Lyapunov function: the whole step state [x_hat; d_hat]."""
+        ui = self.discrete_certificate.ui_loop
+        return [ContractionMetric(ui.contraction, (ui.P,), tuple(self.state_names),
+                                  f"common Lyapunov function of the error with the UI filter loop, He(P Aa) <= "
+                                  f"-2 beta P over the polytope, beta = {ui.beta:g} 1/s, backward Euler at Ts",
+                                  knob="a faster certified UI-filter loop: [design] alpha, [ui_filter] time_constant")]
 
     def reference_step(self, z, u, y, rho):
         """Independent numpy step (tests, the benchmark's numpy peer)."""
@@ -228,7 +238,7 @@ def build(config: ObserverConfig, solver) -> LinfBuild:
                                  float(config.ui_filter.get("time_constant", 0.005)), config.sample_time,
                                  lpv.derived, lpv.definition.output_symbols, lpv.derived_inputs)
     try:
-        dcert = discrete.certify_step(data, settings.alpha, solver)
+        dcert = discrete.certify_step(data, settings.alpha, solver, min_margin=required_margin(settings))
     except UILoopError as exc:
         raise UILoopError(f"{config.source}: {exc}"
                           f"{_measured_remedies(poly, settings, data, config.sample_time, lpv.definition.states)}") from None

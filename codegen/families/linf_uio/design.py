@@ -34,6 +34,7 @@ from ...errors import SolverError
 from ...design.lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks
 from ...representation.polytope import Polytope
 from ...project.settings import Rule, setting
+from ...design.precision import margin_field, precision_field
 
 
 @dataclass(frozen=True)
@@ -65,6 +66,8 @@ class LinfDesignSettings:
     tol: float = setting(1e-8, gt=0)
     taylor_error_limit: float = setting(0.25, gt=0, doc="relative error a Taylor-reduced polytope may have")
     performance: tuple = setting((), items=Rule(str), doc="states of the performance output z = F e of (17); empty: all (Remark 4, z = e)")
+    precision: str = precision_field()
+    float32_margin: float = margin_field()
 
 
 def performance_matrix(states, performance: tuple = ()) -> np.ndarray | None:

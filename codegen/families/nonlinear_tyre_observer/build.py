@@ -44,6 +44,7 @@ from ...certificate.artifact import artifact_head, significant, solver_certifica
 from ...certificate.certificate import Bound, Certificate, Recheck, Step
 from ...model import load_parameters
 from ...project.settings import Rule, parse_settings, setting
+from ...design.precision import margin_field, precision_field
 from ...emit.stepgen import lambdify
 from . import design as dsn
 from .representation import TyreRepresentation, represent
@@ -77,6 +78,8 @@ class NonlinearTyreSettings:
     margin: float = setting(1e-6, gt=0, doc="smallest eigenvalue imposed on every LMI block")
     tol: float = setting(1e-8, gt=0, doc="solver tolerance")
     bounds_rel_tol: float = setting(1e-3, gt=0, doc="tightness of the Jacobian bounds")
+    precision: str = precision_field()
+    float32_margin: float = margin_field()
 
     def __post_init__(self):
         gains = [self.gain_vy_ay, self.gain_vy_r, self.gain_r_ay, self.gain_r_r]
@@ -202,6 +205,16 @@ def _build_class():
             (vy_n, r_n), excess = step_parts(self.rep, self.L, self.config.sample_time, z, u, y, rho,
                                              self.rep.numpy_functions, xp=np)
             return np.array([vy_n, r_n, z[0], z[1]], dtype=float), float(excess)
+
+        def contraction_metrics(self):
+            """The common P over the DMVT vertices of the certified set: the prediction (v_y, r)."""
+            from ...certificate.contraction import ContractionMetric
+            D = self.plant.D            # P is solved in the scaled state D x (certify: D' P D)
+            return [ContractionMetric(float(self.recheck["contraction_per_step"]), (D.T @ self.P @ D,),
+                                      ("v_y_next", "r_next"),
+                                      "common P over the DMVT vertices: A' P A <= c^2 P, on the certified slip set",
+                                      knob="[design] decay or decay_fraction (the rate the LMIs impose), a lower "
+                                           "sliding_fraction")]
 
         def lmi_problem(self):
             d = self.synthesis

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...design.canonical import decimal_round
+from ...design.precision import required_margin
 from ...errors import CertificateError, SolverError
 from ...design.lmi import LMIProblem, bmat, check_blocks, objective_bound
 
@@ -219,6 +220,16 @@ def synthesize(plant, decay_verts, gain_verts, settings, solver) -> Design:
                                        f"{best:.4g} 1/s (decay {np.sqrt(1 - plant.Ts * best):.6f})")
         else:
             rate = _round_down(settings.decay_fraction * best)
+        # [design] precision = "float32": sqrt(1 - Ts rate) <= 1 - float32_margin
+        m = required_margin(settings)
+        need = (1.0 - (1.0 - m) ** 2) / plant.Ts if m else 0.0
+        if need > best:
+            raise CertificateError(f"nonlinear-tyre observer: [design] precision = \"float32\" needs the decay rate "
+                                   f"{need:.4g} 1/s (contraction margin {m:g} per step); the largest a common Lyapunov "
+                                   f"matrix certifies on the set is {best:.4g} 1/s (margin "
+                                   f"{1 - np.sqrt(1 - plant.Ts * best):.4g}): lower sliding_fraction, or a smaller "
+                                   f"[design] float32_margin")
+        rate = max(rate, need)
     sol = solver.solve(lmi_problem(plant, decay_verts, gain_verts, settings, rate, best, L_scaled), tol=settings.tol)
     P = decimal_round(0.5 * (sol["P"] + sol["P"].T))
     if given:

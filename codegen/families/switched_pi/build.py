@@ -14,6 +14,7 @@ import casadi as ca
 from ...certificate.artifact import artifact_head, significant, solver_certificate
 from ...certificate.certificate import Bound, Certificate, Recheck, Step, unit_ratio
 from ..base import ObserverBuild, StepNotes
+from ...certificate.contraction import ContractionMetric
 from . import representation as switched
 from . import design as switched_pi
 from ...model import load_parameters
@@ -61,6 +62,15 @@ class SwitchedPIBuild(ObserverBuild):
     @property
     def output_names(self) -> list:
         return switched_pi.output_layout(self.model)
+
+    def contraction_metrics(self) -> list:
+        """The common Lyapunov matrix of every mode's sampled transition: q = [z; w_hat]."""
+        d = self.model.definition
+        states = tuple([f"z_{s}" for s in d.states] + [f"z_{w}" for w in d.unknown_inputs])
+        c = float(self.discrete_certificate["contraction_per_step"])
+        return [ContractionMetric(c, (self.design.P,), states,
+                                  f"common P: Phi_i' P Phi_i <= c^2 P in every mode (exact ZOH at Ts), any switching",
+                                  knob="[design] decay_rate")]
 
     @property
     def input_names(self) -> list:
@@ -179,9 +189,15 @@ class SwitchedPIBuild(ObserverBuild):
 
 def settings_of(config: ObserverConfig, tol: float | None = None) -> switched_pi.SwitchedPIDesignSettings:
     """The ``[design]`` table, every key and value checked (codegen.project.settings); ``tol`` overrides its tol."""
+    import dataclasses
     from ...project.settings import parse_settings
-    return parse_settings(switched_pi.SwitchedPIDesignSettings, config.design, source=config.source,
-                          section="design", **({"tol": tol} if tol is not None else {}))
+    from ...design.precision import rate_for_exact_step, required_margin
+    settings = parse_settings(switched_pi.SwitchedPIDesignSettings, config.design, source=config.source,
+                              section="design", **({"tol": tol} if tol is not None else {}))
+    if required_margin(settings):      # precision = "float32": He(P A) <= -2 a P with exp(-a Ts) <= 1 - margin
+        need = rate_for_exact_step(required_margin(settings), config.sample_time)
+        settings = dataclasses.replace(settings, decay_rate=max(settings.decay_rate, need))
+    return settings
 
 
 def build(config: ObserverConfig, solver) -> SwitchedPIBuild:

@@ -44,6 +44,7 @@ import numpy as np
 from ...errors import CertificateError, ConfigurationError, DiscretizationError, RankConditionError
 from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks
 from ...project.settings import setting
+from ...design.precision import margin_field, precision_field
 from .representation import SwitchedModel
 from ...design import canonical
 from ...design.canonical import decimal_round
@@ -69,6 +70,8 @@ class SwitchedPIDesignSettings:
     decay_rate: float = setting(1.0, ge=0, doc="a [1/s], below pole_radius")
     margin: float = setting(1e-6, ge=0)
     tol: float = setting(1e-9, gt=0)
+    precision: str = precision_field()
+    float32_margin: float = margin_field()
 
     def __post_init__(self):
         if not (self.pole_radius > 0 and np.isfinite(self.pole_radius)):

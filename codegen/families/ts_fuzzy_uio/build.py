@@ -2,6 +2,7 @@
 LMIs (27) -> certificates -> discrete step (16) (:class:`TSFuzzyBuild`)."""
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -9,6 +10,8 @@ import casadi as ca
 
 from ...certificate.artifact import artifact_head, significant, solver_certificate
 from ...certificate.certificate import Certificate, Recheck, Step
+from ...certificate.contraction import ContractionMetric
+from ...design.precision import required_margin
 from ...model import load_parameters
 from ...project.observer_file import ObserverConfig
 from ..base import ObserverBuild, StepNotes
@@ -42,6 +45,18 @@ class TSFuzzyBuild(ObserverBuild):
 
     def lmi_problem(self):
         return ts_fuzzy_uio.build_problem(self.ts, self.design.T, self.design.settings)
+
+    def contraction_metrics(self) -> list:
+        """(27) on the committed P_i: zeta (= x_hat - N y) contracts by the certified lambda in the
+        parameter-dependent norm of P(h)."""
+        lam = ts_fuzzy_uio.certified_decay(self.ts, self.design)
+        if not lam < 1.0:
+            return []
+        states = tuple(f"zeta_{s}" for s in self.ts.definition.states)
+        return [ContractionMetric(lam, tuple(self.design.P), states,
+                                  f"(27) with lambda^2 P(h) in the (1,1) blocks passes on the committed matrices "
+                                  f"(numpy) at lambda = {lam:.6f}: V(e+) <= lambda^2 V(e), V = e' P(h) e",
+                                  knob="[design] decay (lambda imposed by the LMIs)")]
 
     @property
     def state_names(self) -> list:
@@ -160,6 +175,8 @@ def build(config: ObserverConfig, solver) -> TSFuzzyBuild:
     from ...project.settings import parse_settings
     settings = parse_settings(ts_fuzzy_uio.TSDesignSettings, config.design, source=config.source, section="design",
                               **({"tol": solver.tol} if solver.tol is not None else {}))
+    if required_margin(settings):       # precision = "float32": (27) imposes lambda <= 1 - float32_margin
+        settings = dataclasses.replace(settings, decay=min(settings.decay, 1.0 - required_margin(settings)))
     t0 = time.perf_counter()
     ts = ts_fuzzy.build(config.design_model(), load_parameters(config.parameter_path), config.sample_time,
                         rel_tol=settings.bounds_rel_tol, max_boxes=settings.bounds_max_boxes,
