@@ -32,7 +32,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of algebraic_uio_example1_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define ALGEBRAIC_UIO_EXAMPLE1_DESIGN_HASH "f5af042dceabe5f34008505b3b288958c4effbd5e42928bf2c74ea123ad3178e"
+#define ALGEBRAIC_UIO_EXAMPLE1_DESIGN_HASH "4dd362178dee6dff6d74ff63c4652eee4cf0c4c7dc3bf047b0d679a133afecf8"
 
 /* Status bits returned by algebraic_uio_example1_step; a sample's status is their OR (algebraic_uio_example1_status). */
 typedef enum {

@@ -35,7 +35,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of algebraic_uio_example2_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define ALGEBRAIC_UIO_EXAMPLE2_DESIGN_HASH "974076e82f04b462f7d4970e899c971254d7976ca30634deaad7f9169f00fede"
+#define ALGEBRAIC_UIO_EXAMPLE2_DESIGN_HASH "94b204aa697f023ac01e5b1b9d135bc9c6fa4599730994edc69c2bf701bf9016"
 
 /* Status bits returned by algebraic_uio_example2_step; a sample's status is their OR (algebraic_uio_example2_status). */
 typedef enum {

@@ -38,7 +38,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of algebraic_uio_lateral_force_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define ALGEBRAIC_UIO_LATERAL_FORCE_DESIGN_HASH "9ada4d14b8f349d42e0aa219529db99211ee3419e65294832b4a228bbeb568bb"
+#define ALGEBRAIC_UIO_LATERAL_FORCE_DESIGN_HASH "3f2333a6f214f50f03132ef31b3921475598a003945bf858752d7518caad9ffb"
 
 /* Status bits returned by algebraic_uio_lateral_force_step; a sample's status is their OR (algebraic_uio_lateral_force_status). */
 typedef enum {

@@ -43,7 +43,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of interconnected_uio_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define INTERCONNECTED_UIO_DESIGN_HASH "7eda8da1920233156dfb19d2dd907e5455794cfc4fb3f82fa36e5afaec1a24c0"
+#define INTERCONNECTED_UIO_DESIGN_HASH "d107409155fa81b8cd5bbf03b7f337a08559d669a127ec633b3196ebd63880ed"
 
 /* Status bits returned by interconnected_uio_step; a sample's status is their OR (interconnected_uio_status). */
 typedef enum {

@@ -43,7 +43,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of interconnected_uio_ford_escort_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define INTERCONNECTED_UIO_FORD_ESCORT_DESIGN_HASH "e04b5fd23215b9da68332129dd74a3d674d592a0d8a7c0ecdf8b3311fb128cd1"
+#define INTERCONNECTED_UIO_FORD_ESCORT_DESIGN_HASH "8a3babc6f77b28fd9ec50947b6136355ae5e5555517ac3ad2f33db65c9fd1e4b"
 
 /* Status bits returned by interconnected_uio_ford_escort_step; a sample's status is their OR (interconnected_uio_ford_escort_status). */
 typedef enum {

@@ -28,7 +28,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of lpv_linf_driver_torque_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define LPV_LINF_DRIVER_TORQUE_DESIGN_HASH "888f7361b0eceae5d33310b978554db5032161eff17f4ef844039053bcacf1b9"
+#define LPV_LINF_DRIVER_TORQUE_DESIGN_HASH "40e96245a16695a26f25a5b71cd9e11a230bcaa346870969113098b810b07b16"
 
 /* Status bits returned by lpv_linf_driver_torque_step; a sample's status is their OR (lpv_linf_driver_torque_status). */
 typedef enum {

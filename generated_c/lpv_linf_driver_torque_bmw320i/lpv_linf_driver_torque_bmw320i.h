@@ -32,7 +32,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of lpv_linf_driver_torque_bmw320i_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define LPV_LINF_DRIVER_TORQUE_BMW320I_DESIGN_HASH "16634f3af38641d0eb1aca7fb33386f3e8044fc4449cb22ba419a03d93949f65"
+#define LPV_LINF_DRIVER_TORQUE_BMW320I_DESIGN_HASH "f4884454e9172786e2e85610be08353438642dda628225dd9b2451f9fe21c182"
 
 /* Status bits returned by lpv_linf_driver_torque_bmw320i_step; a sample's status is their OR (lpv_linf_driver_torque_bmw320i_status). */
 typedef enum {

@@ -28,7 +28,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of lpv_linf_driver_torque_sector_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define LPV_LINF_DRIVER_TORQUE_SECTOR_DESIGN_HASH "b94d52c994ad52e9b0c287e780d4ed9a6e8b65f742af6ad244f31a9c359ada2a"
+#define LPV_LINF_DRIVER_TORQUE_SECTOR_DESIGN_HASH "ec6f9f05ea8d23d495b4d3ef4a76ff3dac3c8d0a8e337288da126f66b2330042"
 
 /* Status bits returned by lpv_linf_driver_torque_sector_step; a sample's status is their OR (lpv_linf_driver_torque_sector_status). */
 typedef enum {

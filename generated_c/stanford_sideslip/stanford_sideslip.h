@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of stanford_sideslip_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define STANFORD_SIDESLIP_DESIGN_HASH "7f6dc674964c0112c3218a49e103259fb57f8af6e729bd0caf6b18c3e4865f9b"
+#define STANFORD_SIDESLIP_DESIGN_HASH "f334f7833a14dffae4a8a07b5046b91db0154be90583cc411528eecf7aefdeea"
 
 /* Status bits returned by stanford_sideslip_step; a sample's status is their OR (stanford_sideslip_status). */
 typedef enum {

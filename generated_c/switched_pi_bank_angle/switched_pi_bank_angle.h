@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of switched_pi_bank_angle_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define SWITCHED_PI_BANK_ANGLE_DESIGN_HASH "d44366038a230a83d6d840eff164354cdf3e0b7cdb45c979737923fbb3454871"
+#define SWITCHED_PI_BANK_ANGLE_DESIGN_HASH "80d44ee8b6cc0b1153cf769cfb0bad862efb78005bd344e476af7df3454b90ee"
 
 /* Status bits returned by switched_pi_bank_angle_step; a sample's status is their OR (switched_pi_bank_angle_status). */
 typedef enum {

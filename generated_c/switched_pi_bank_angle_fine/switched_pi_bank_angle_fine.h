@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of switched_pi_bank_angle_fine_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define SWITCHED_PI_BANK_ANGLE_FINE_DESIGN_HASH "fbfe5b52508163112163e6dac7e5ee611809819154d66dd277935cad2a4cf782"
+#define SWITCHED_PI_BANK_ANGLE_FINE_DESIGN_HASH "1b4dd0551c81cc33a48271373bfa0b13fe8b6933dd3af8e43d279ffcdd801ea8"
 
 /* Status bits returned by switched_pi_bank_angle_fine_step; a sample's status is their OR (switched_pi_bank_angle_fine_status). */
 typedef enum {

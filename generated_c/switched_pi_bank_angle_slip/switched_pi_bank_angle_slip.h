@@ -34,7 +34,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of switched_pi_bank_angle_slip_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define SWITCHED_PI_BANK_ANGLE_SLIP_DESIGN_HASH "0b06996157d46d5502a28a2d06cdd4628e4a750797946b39898e5485be8e0072"
+#define SWITCHED_PI_BANK_ANGLE_SLIP_DESIGN_HASH "5bed4c221a2dd27783b723fd3faebe1c42e7da99ac9f1bd9b7c861260d293e0c"
 
 /* Status bits returned by switched_pi_bank_angle_slip_step; a sample's status is their OR (switched_pi_bank_angle_slip_status). */
 typedef enum {

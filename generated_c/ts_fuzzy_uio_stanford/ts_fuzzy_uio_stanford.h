@@ -34,7 +34,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of ts_fuzzy_uio_stanford_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define TS_FUZZY_UIO_STANFORD_DESIGN_HASH "abb9a267dfa347f497d05bb8f92f9597c4bce7e20501a271c7b51c1ff01c7550"
+#define TS_FUZZY_UIO_STANFORD_DESIGN_HASH "d8b1fcf88520bf6fbd151df38debfe96c0d5fabdb6e7e9f60f20c877e1ae5b74"
 
 /* Status bits returned by ts_fuzzy_uio_stanford_step; a sample's status is their OR (ts_fuzzy_uio_stanford_status). */
 typedef enum {
