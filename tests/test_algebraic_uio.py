@@ -181,6 +181,7 @@ def _mimo_build(tmp_path, outputs):
     return algebraic_uio.build(cfg, FreshSolver(), lpv=lpv), lpv
 
 
+@pytest.mark.slow       # 4 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 @pytest.mark.parametrize("outputs", [("x1", "x3"), ("x1", "x3", "x2")])
 def test_mimo_gamma_inverse_and_convergence(tmp_path, outputs):
     """y1 = x1, y2 = x3 (r = (2, 1), Gamma = diag(rho, 1)); with y3 = x2 Gamma is 3x2 and the

@@ -201,6 +201,7 @@ def test_every_other_builtin_observer_ranks_its_own_family_first(name):
     _ranks_own_family_first(name)
 
 
+@pytest.mark.slow       # 20 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_switched_pi_bank_angle_explains_the_other_families_with_what_it_measured():
     """The roll model: the L-infinity UIO and the algebraic UIO apply structurally (and would rank above
     by their guarantee), but their trial designs fail, with the reason measured."""
@@ -228,6 +229,7 @@ def _design_fails_with_the_analysis_on_top(obs: Path, capsys) -> tuple:
     return out.out, err[0]
 
 
+@pytest.mark.slow       # 4 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_ts_model_with_the_speed_only_names_the_steering_angle_and_the_sensor(tmp_path, capsys):
     """rank(C D) = 1 != rank(D) = 2: the report names delta (it reaches v_x only in its second derivative),
     the states it drives and the sensors that restore the rank; measuring the first one, design passes."""
@@ -245,6 +247,7 @@ def test_ts_model_with_the_speed_only_names_the_steering_angle_and_the_sensor(tm
     assert b.recheck["worst_min_eig"] > 0 and b.decrease["contraction_per_step"] < 1
 
 
+@pytest.mark.slow       # 11 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_linf_model_without_the_accelerometer_names_the_force_and_its_equation(tmp_path, capsys):
     """Only r measured: F reaches it in r'' and the UI filter loop does not certify at T_f = 5 ms (the
     design's suggestion is a 20 times slower filter). The report names F, its relative degree 2 and the
@@ -324,6 +327,7 @@ def test_analyze_a_model_file_without_parameters_is_one_line(capsys):
     assert len(err) == 1 and "--parameters" in err[0] and err[0].startswith("uiogen: error: ConfigurationError")
 
 
+@pytest.mark.slow       # 11 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_new_from_model_writes_the_best_family_and_it_designs(tmp_path, capsys):
     """uiogen new --from-model: the observer file of the best-ranked family (here the algebraic UIO: the
     lateral force is decoupled through r'', with its differentiators), commented, designs as written;

@@ -147,6 +147,7 @@ widths = st.one_of(st.floats(0, 3, allow_nan=False), st.sampled_from([0.0, 1e-9,
 
 @settings(max_examples=150, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow])
+@pytest.mark.slow       # 6 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 @given(expr=expressions, x_lo=ends, x_w=widths, y_lo=ends, y_w=widths, seed=st.integers(0, 2 ** 32 - 1))
 def test_random_expressions_are_enclosed_at_every_sampled_point(expr, x_lo, x_w, y_lo, y_w, seed):
     used = sorted(expr.free_symbols, key=str)
@@ -262,6 +263,7 @@ def test_magic_formula_with_a_sign_is_bounded_and_its_derivative_is_continuous()
     assert r0.lower <= B * C * D <= r0.upper
 
 
+@pytest.mark.slow       # 8 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_jacobian_of_a_clamped_law_in_two_states_satisfies_the_mean_value_theorem():
     """phi(v_y, r) = Fiala(clamped rear slip (l_r r - v_y)/v_x): each partial's enclosure holds the
     coordinate-wise difference quotients, across the clamp and the kink of |t| t."""

@@ -19,6 +19,7 @@ def test_list_json():
     assert "lpv_linf_driver_torque" in [r["name"] for r in json.loads(proc.stdout)]
 
 
+@pytest.mark.slow       # 15 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_design_json_and_artifact(tmp_path):
     out = tmp_path / "design.json"
     proc = uiogen("design", "lpv_linf_driver_torque", "--json", "--out", str(out))
@@ -36,12 +37,14 @@ def test_design_json_and_artifact(tmp_path):
     assert res["cases"]["exact"]["gamma"] <= art["gamma"] * (1 + 1e-6)
 
 
+@pytest.mark.slow       # 4 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_check_gains_published(published):
     proc = uiogen("check-gains", "lpv_linf_driver_torque", "--gains",
                   str(ROOT.parent / "shared" / "reference" / "seed000_published_design.json"))
     assert proc.returncode == 0 and "PASS" in proc.stdout and "0.00951" in proc.stdout
 
 
+@pytest.mark.slow       # 6 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_errors_are_typed(tmp_path):
     proc = uiogen("design", "no_such_observer")
     assert proc.returncode == 2 and "UnknownObserverError" in proc.stderr
@@ -51,6 +54,7 @@ def test_errors_are_typed(tmp_path):
     assert proc.returncode == 2 and "lack" in proc.stderr
 
 
+@pytest.mark.slow       # 10 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_sweep_json_and_mistakes():
     proc = uiogen("sweep", "switched_pi_bank_angle", "--set", "design.pole_radius=[29, 100]",
                   "--set", "design.decay_rate=[0]", "--show", "gamma,max_pole_modulus", "--json")

@@ -554,6 +554,7 @@ def test_settings_by_hand(monkeypatch):
     assert new_settings(observers.get("ts_fuzzy_uio"), monkeypatch) == ts_fuzzy_uio.TSDesignSettings(1.0, 1e-4, 1e-8)
 
 
+@pytest.mark.slow       # 34 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_committed_parameter_files_load_and_pass():
     """Every committed parameter file loads; each observer's passes its model's declared ranges."""
     for path in sorted(PARAMS_DIR.glob("*.toml")):

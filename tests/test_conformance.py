@@ -179,6 +179,7 @@ def test_a_lock_whose_signal_order_differs_from_the_model_is_refused():
         conformance.check_layout(build, json.loads(lock_path.read_text()), swapped, module)
 
 
+@pytest.mark.slow       # 5 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_boxes_come_from_the_declarations():
     build = pipeline.build(observers.get("ts_fuzzy_uio"))
     boxes = conformance.sample_boxes(build, np.random.default_rng(1))

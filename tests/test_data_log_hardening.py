@@ -99,6 +99,7 @@ def _rows(cols, keep):
 
 # --- consistent logs load unchanged -------------------------------------------------------------
 
+@pytest.mark.slow       # 9 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 @pytest.mark.parametrize("source", ["synthetic", "gentle", "real"])
 def test_consistent_logs_load_unchanged(tmp_path, source):
     cols = {"synthetic": _synthetic, "gentle": _gentle, "real": _real_head}[source]()

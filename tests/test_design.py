@@ -33,6 +33,7 @@ def test_gain_bound_holds_over_the_box(build):
         assert np.linalg.norm(M, 2) <= bound * (1 + 1e-9)
 
 
+@pytest.mark.slow       # 4 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_gamma_reproducible_under_tighter_tolerance(config, build):
     tight = pipeline.build(config, FreshSolver(tol=1e-9))
     assert build.design.settings.tol > 1e-9

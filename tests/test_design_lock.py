@@ -42,6 +42,7 @@ def _c_files(d: Path) -> list:
     return sorted(p.name for p in d.iterdir() if p.suffix in (".c", ".h"))
 
 
+@pytest.mark.slow       # 5 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_generation_never_solves_with_a_current_lock(tmp_path, monkeypatch):
     def no_solver(*args, **kwargs):
         raise AssertionError("generation called the SDP solver although the design lock is current")
@@ -55,6 +56,7 @@ def test_generation_never_solves_with_a_current_lock(tmp_path, monkeypatch):
         assert not mismatch and not errors, mismatch
 
 
+@pytest.mark.slow       # 6 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 @pytest.mark.parametrize("NAME", NAMES)
 def test_fresh_resolve_agrees_with_the_committed_design(NAME):
     config = observers.get(NAME)
@@ -346,6 +348,7 @@ def _assert_recovered_without_solving(project: Path, name: str = LINF) -> None:
     assert [p.name for p in here.parent.iterdir() if p.name.startswith(f".{name}.")] == []
 
 
+@pytest.mark.slow       # 5 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 @pytest.mark.parametrize("when", [1, 2, 3])
 def test_generate_killed_at_each_rename_loses_nothing(tmp_path, when):
     """`strace -e inject=rename:signal=KILL:when=N`: the process dies as it enters its Nth rename
@@ -361,6 +364,7 @@ def test_generate_killed_at_each_rename_loses_nothing(tmp_path, when):
     _assert_recovered_without_solving(tmp_path)
 
 
+@pytest.mark.slow       # 44 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_design_update_during_a_running_generate_is_kept(tmp_path):
     """A generate paused (strace: 20 s at its first rename, the new set written, the old lock in
     it) while `design --update` commits a new alpha: the update waits for the generate and its
@@ -399,6 +403,7 @@ def test_design_update_during_a_running_generate_is_kept(tmp_path):
     assert res.returncode == 0 and "solving" not in res.stdout and "committed design" in res.stdout, res.stdout
 
 
+@pytest.mark.slow       # 76 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_validate_and_export_refuse_what_is_not_built_from_the_current_design(tmp_path):
     """Change alpha: validate and export name `uiogen generate` until it ran; after it, validate
     (and load) name `uiogen build` until it ran; export compiles only C whose stamp matches."""

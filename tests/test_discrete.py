@@ -80,6 +80,7 @@ def test_numpy_and_casadi_steps_agree(build):
         assert clamped == float(not 5 <= rho <= 35)
 
 
+@pytest.mark.slow       # 5 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_unstable_step_refused(build):
     """Gains that close an unstable loop through the UI filter (here the committed design's with
     the wrong sign; Q, hence kappa, unchanged) are refused: no step is emitted. The least-norm

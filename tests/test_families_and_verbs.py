@@ -26,6 +26,7 @@ def row(family, base) -> dict:
     return _ROWS[family]
 
 
+@pytest.mark.slow       # 99 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 @pytest.mark.parametrize("family", FAMILIES)
 def test_the_starter_takes_every_verb(family, base):
     r = row(family, base)

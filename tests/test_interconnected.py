@@ -67,6 +67,7 @@ def test_toolchain_splits_the_model_and_finds_the_coupling(icb):
     assert lat.B[2, 1] == -1.0 and lat.B[3, 1] == -5.0
 
 
+@pytest.mark.slow       # 7 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_ts_form_is_exact(icb):
     assert icm.vertex_check(icb.ts, samples=300) < 1e-12
 
@@ -181,6 +182,7 @@ def test_design_time_and_vertex_gain_option(icb):
     assert du.certify(ts, d)["worst_min_eig"] > 0
 
 
+@pytest.mark.slow       # 6 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_differentiator_configuration_errors(icb):
     cfg = observers.get(NAME)
     table = dict(cfg.design)
@@ -275,6 +277,7 @@ def test_straight_driving_is_reproduced_exactly(compiled):
     assert not np.any(status[1:])
 
 
+@pytest.mark.slow       # 4 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_model_plant_run_is_nearly_exact():
     """On the observer's own model (1)-(7) the errors are those of discretization and differentiators."""
     from codegen.families.interconnected_uio import validation as satory
@@ -298,6 +301,7 @@ OURS_TABLE1 = {
 }
 
 
+@pytest.mark.slow       # 61 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 @pytest.mark.parametrize("mu", (1.0, 0.6, 0.4))
 def test_commonroad_table1_at_each_friction(mu):
     """The full Table 1 run at mu = 1, 0.6, 0.4: every RMSE% within 5 % of ours above (0.005 points
@@ -361,6 +365,7 @@ def test_commonroad_parameter_file_is_derived_from_the_package():
     assert satory.params_toml(1, fits) == committed
 
 
+@pytest.mark.slow       # 14 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_identification_reproduces_the_committed_coefficients():
     from codegen.families.interconnected_uio import validation as satory
     committed = tomllib.loads((ROOT / "model_defs" / "params" / "commonroad_ford_escort_interconnected.toml").read_text())

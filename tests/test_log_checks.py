@@ -105,6 +105,7 @@ def log(request, tmp_path):
 
 # --- a consistent log: every relation judged and holding, the same estimates as the shared format ---------
 
+@pytest.mark.slow       # 5 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_a_consistent_log_passes_every_check(tmp_path, log):
     proc = _validate(_observer(tmp_path), log, "--json")
     assert proc.returncode == 0, proc.stderr
@@ -116,6 +117,7 @@ def test_a_consistent_log_passes_every_check(tmp_path, log):
     assert 0.95 < kinds["identity"]["ratio"] < 1.05
 
 
+@pytest.mark.slow       # 4 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_the_column_map_and_the_shared_format_agree(tmp_path):
     log = _write(tmp_path / "log.csv", _synthetic())
     mapped = validate.run_data(observers.get(str(_observer(tmp_path)), project=ROOT), str(log))
@@ -153,6 +155,7 @@ def test_other_single_column_mistakes_name_the_column_and_cause(tmp_path, log, c
     assert f"column {column!r}" in err and cause in err, err
 
 
+@pytest.mark.slow       # 5 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_a_steering_ratio_slip_is_a_flagged_warning(tmp_path, log):
     """delta x 1.5 through the column map: the yaw rate is 0.55 x the model's steady state. The
     log's scale or the model's steering gain: ambiguous, so a warning in the report and the JSON."""
@@ -228,6 +231,7 @@ def test_range_beyond_the_model_box_with_a_unit_that_fits():
         _feed(_checks(), _synthetic(vx0=36.0), v_x=3.6)
 
 
+@pytest.mark.slow       # 8 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_every_builtin_model_derives_without_error():
     """The derivation is generic: every built-in observer with one ModelDefinition gets its
     relations (or none) without an error, and a known relation where its model has one."""

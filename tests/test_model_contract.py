@@ -109,6 +109,7 @@ def test_new_refuses_a_built_in_name_and_prints_paths(tmp_path, capsys):
     assert 'model = "model.py"' in target.read_text() and 'parameters = "parameters.toml"' in target.read_text()
 
 
+@pytest.mark.slow       # 4 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_the_design_hint_names_the_file(tmp_path, capsys):
     obs = project(tmp_path, "linf_uio", extra='polytope = "sector"\n')
     assert cli.main(["design", str(obs), "--update"]) == 0

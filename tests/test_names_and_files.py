@@ -133,6 +133,7 @@ def test_a_file_size_limit_is_an_output_error_and_leaves_nothing(tmp_path):
     assert _leftovers(lock.parent) == [] and not lock.exists()
 
 
+@pytest.mark.slow       # 5 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_a_full_output_folder_is_an_output_error_and_leaves_nothing(mounts):
     full = mounts("size=8k")
     err = _one_line(_cli("design", DESIGNED, "--out", str(full / "d.json")))
@@ -142,6 +143,7 @@ def test_a_full_output_folder_is_an_output_error_and_leaves_nothing(mounts):
     assert _leftovers(full) == [] and not (full / DESIGNED).exists() and not (full / "d.json").exists()
 
 
+@pytest.mark.slow       # 7 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_a_read_only_output_folder_is_an_output_error(mounts):
     ro = mounts("ro,size=16k")
     err = _one_line(_cli("design", DESIGNED, "--out", str(ro / "d.json")))

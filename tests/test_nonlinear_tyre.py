@@ -222,6 +222,7 @@ def test_real_log_figures_evaluation_part_first():
     assert text.splitlines()[1].split()[:2] == ["estimator", "evaluation"]     # the headline column
 
 
+@pytest.mark.slow       # 6 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_fit_reproduces_the_committed_files():
     """`uiogen fit NAME --data stanford --samples 0:13750` gives exactly the committed numbers."""
     from codegen.families.nonlinear_tyre_observer import fit
@@ -234,6 +235,7 @@ def test_fit_reproduces_the_committed_files():
     assert result["peers"] == {"sigma_fy": 0.1, "sigma_ay": 0.3}
 
 
+@pytest.mark.slow       # 4 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_fit_on_a_short_range_is_deterministic_and_typed(capsys):
     from codegen.families.nonlinear_tyre_observer import fit
     _run()
@@ -255,6 +257,7 @@ def test_fit_on_a_short_range_is_deterministic_and_typed(capsys):
     assert "no identification" in capsys.readouterr().err
 
 
+@pytest.mark.slow       # 15 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_the_starter_designs_its_own_gains_for_another_car(tmp_path, capsys):
     folder = tmp_path / "my_car"
     assert cli.main(["new", str(folder), "--family", "nonlinear_tyre_observer", "--name", "my_observer"]) == 0

@@ -96,6 +96,7 @@ def test_the_bank_angle_error_offers_the_change_of_variables(tmp_path, capsys):
     assert '[substitute] phi_r = "phi_r_carrier"' in err and "Traceback" not in err
 
 
+@pytest.mark.slow       # 8 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_the_bank_angle_is_designed_through_its_sine_and_recovered(tmp_path, capsys):
     path = _bank(tmp_path)
     config = observers.get(str(path))
@@ -146,6 +147,7 @@ delta = { min = -0.04, max = 0.04, bandwidth = 0.5 }
 """
 
 
+@pytest.mark.slow       # 8 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_a_steering_angle_inside_a_saturating_tyre(tmp_path, capsys):
     (tmp_path / "car.py").write_text(TS_MODEL)
     (tmp_path / "car.toml").write_text(TS_PARAMS)

@@ -97,6 +97,7 @@ def test_parameter_file_and_second_stiffness_pair_are_derived_not_typed():
     assert pts[0] == {"C_f": params.values["C_f"], "C_r": params.values["C_r"]}
 
 
+@pytest.mark.slow       # 4 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_commonroad_roll_gradient_matches_the_derived_roll_stiffness():
     """Steady circle on the CommonRoad multi-body plant: roll per lateral acceleration within 2 % of
     m_s h_r / (K_r - m_s g h_r) of the derived parameters, and of the paper's sign after the flip."""
@@ -200,6 +201,7 @@ POLE_RADIUS_CURVE = {(35.0, 1.0): (0.07765, 0.01), (50.0, 1.0): (0.022136, 0.01)
                      (30.5, 0.0): (0.43012, 0.05)}
 
 
+@pytest.mark.slow       # 6 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_gamma_is_set_by_the_pole_radius():
     """gamma of Theorem 2 with the pole disk falls with the radius; the paper's 2.1 lies at the
     feasibility edge (r = 29 rad/s infeasible without decay region, 30.5 already gives 0.43)."""

@@ -299,6 +299,7 @@ def test_commonroad_angle_steered_run():
     assert truths["drive torque less steered-wheel projection"] == pytest.approx(1.25, rel=0.15)
 
 
+@pytest.mark.slow       # 12 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_commonroad_without_camber_force_meets_the_paper():
     """The v_y and delta gap on the multi-body plant is the tyres' camber force (the body's roll
     cambers the wheels; the package's PAC2002 multiplies its offsets p_hy1, p_vy1 by sgn(gamma)):

@@ -117,6 +117,7 @@ def test_atan_and_magic_formula_tyres_bound_soundly_within_seconds(tmp_path, law
             assert bound.upper - bound.lower <= 1.5 * (vals.max() - vals.min()) + 1e-9     # tight, not just sound
 
 
+@pytest.mark.slow       # 6 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_a_too_large_ts_design_is_refused_within_a_second(tmp_path):
     """Cubic rear slip: 5 premises, 32 rules; the paper's rule triples would need ~1e5 blocks of
     (27): refused before the bounds."""
@@ -188,6 +189,7 @@ def test_uiogen_new_writes_a_starter_that_designs_generates_and_builds(tmp_path,
     assert cli.main(["new", str(folder), "--family", family, "--name", "my_observer"]) == 2   # no overwrite
 
 
+@pytest.mark.slow       # 10 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_the_taylor_reduced_polytope_is_labelled_and_starters_are_exact(tmp_path, capsys):
     """The paper's Taylor-reduced polytope is an approximation whose error is not in the LMI: said in the
     summary (text and JSON), the design lock's polytope and check-gains; the L-infinity starter uses the
