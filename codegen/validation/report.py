@@ -215,7 +215,11 @@ def write_demo(report: dict, runs: dict, out_dir) -> Path:
     :func:`codegen.validation.demo.run_all`; ``runs``: {observer: its run on the shared log}, the
     demo's main real-data observer first."""
     from .. import families
-    from .demo import entry_lines
+    from ..certificate import text
+    from ..certificate.certificate import Certificate
+
+    def entry_lines(entry):        # the design part of a demo entry, from its typed certificate
+        return text.demo_lines(families.get(entry["family"]), Certificate.from_json(entry["certificate"]))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     ranking = rank_real_data(runs)

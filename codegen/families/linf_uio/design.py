@@ -279,7 +279,7 @@ def ui_gain(poly: Polytope, settings: LinfDesignSettings, solver, performance: n
     there the least-norm stage's bound (the optimum rounded up to three significant digits,
     codegen.design.lmi.objective_bound) gives up at most 0.4 % of nu. k is a power of two: exact, and the
     same on machines whose nu differ in the last digits; any k within 8x of it gives the same
-    gamma to 3 digits (tests/test_design.py). Committed with the design (design lock) and read
+    gamma to 3 digits (tests/families/linf_uio/test_design.py). Committed with the design (design lock) and read
     back on replay (``solver.committed_data``)."""
     committed = solver.committed_data(problem_name(settings))
     if committed is not None and "ui_gain" in committed:
