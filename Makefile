@@ -44,8 +44,10 @@ embedded-tools:
 
 # The full suite: every lane. The reliability suite is in it too (make check runs it alone):
 # CI runs make test only, and hostile input, sanitizers and determinism are what a merge must keep.
+# Two workers (pytest-xdist) on a 2-core machine, a test module per worker at a time: module fixtures
+# stay in one process, and the CPU-bound solves and compiles use both cores.
 test: build embedded-tools
-	$(BIN)/python -m pytest -q tests
+	$(BIN)/python -m pytest -q -n auto --dist loadfile tests
 
 # The fast lane: the venv only (no generate, no build): what a developer runs in a minute or two.
 # A test that needs a compiled extension, a compiler, QEMU, Dask, mkdocs or a browser is marked slow.

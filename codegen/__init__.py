@@ -5,14 +5,17 @@ Subpackages, in pipeline order:
 * :mod:`codegen.project`         the inputs: observer files, settings tables, log column maps
 * :mod:`codegen.model`           1. symbolic model definitions and parameter files
 * :mod:`codegen.representation`  2. representations the families share (polytope, bounds, HOSMD)
-* :mod:`codegen.design`          3. LMI layer (Clarabel + numpy re-check), the design lock,
-                                 machine-independent numbers, source hashing, sweeps
-* :mod:`codegen.certificate`     4. the design artifact's certificate parts
+* :mod:`codegen.design`          3. LMI layer (Clarabel + numpy re-check), the solvers (fresh or
+                                 the lock replayed), the design lock, machine-independent numbers,
+                                 source hashing, sweeps
+* :mod:`codegen.certificate`     4. one typed Certificate for every family, the check of external
+                                 gains, and every line of text about a design
 * :mod:`codegen.emit`            5. C emission (CasADi kernel + Jinja2 API) and the C toolchain
 * :mod:`codegen.extension`       6. the compiled step as a Python extension (:mod:`python_bindings`)
 * :mod:`codegen.families`        one folder per observer family (representation, design, build,
-                                 validation) and the registry the toolchain asks
-* :mod:`codegen.pipeline`        runs the stages of an observer's family (replaying its lock)
+                                 validation), the required protocol, the optional capabilities
+                                 and the registry the toolchain asks
+* :mod:`codegen.pipeline`        runs the stages of an observer's family with a solver (fresh, or its lock replayed)
 * :mod:`codegen.cli`             the ``uiogen`` command; :mod:`codegen.errors` its typed errors
 
 Beside the pipeline: :mod:`codegen.validation` (scenarios, real logs, plants, the demo),

@@ -12,7 +12,7 @@
     uiogen demo [--json] [--report DIR]
     uiogen bench [--json]
     uiogen campaign SPEC.toml [--runs N] [--only K] [--resume] [--json] [--scheduler ADDRESS] [--workers N] [--out DIR]
-    uiogen export NAME --format fmu --out FILE.fmu [--project DIR]
+    uiogen export NAME --format fmu|fmu3 --out FILE.fmu [--project DIR]
 
 ``--project DIR``: the project folder whose ``generated_c/`` and ``build/`` the command reads and
 writes (:mod:`python_bindings.workspace`); default: the observer file's folder, or for a built-in
@@ -162,12 +162,13 @@ def cmd_design(args) -> int:
 
 
 def _print_design(b, path, as_json: bool, compare: dict) -> int:
-    """The family's design summary (text, or JSON with the comparison to the committed design)."""
-    summary = b.summary(path)
+    """The design's certificate and figures (text, or JSON with the comparison to the committed design)."""
+    from .certificate import text
     if as_json:
-        _print_json({**summary, "committed_design": compare})
+        _print_json({"observer": b.name, "artifact": str(path), **b.figures(), "certificate": b.certificate.to_json(),
+                     "committed_design": compare})
         return 0
-    print("\n".join(b.summary_lines(summary)))
+    print("\n".join(text.design_lines(families.get(b.config.family), b, path)))
     return 0
 
 
@@ -205,15 +206,14 @@ def cmd_build(args) -> int:
         config = observers.get(name, project=args.project)
         name = config.name
         report = precision.compare(config)
-        print(precision.format_report(report))
+        print(precision.format_report(report), flush=True)
         if report["passes"]:
-            print(f"{name}: built {config.workspace.float32 / name / f'lib{name}_f32.so'} (API {name}_f32_*)")
+            print(f"{name}: built {config.workspace.float32 / name / f'lib{name}_f32.so'} (API {name}_f32_*, "
+                  f"CMakeLists.txt and {name}_f32_example.c beside it)", flush=True)
         else:
-            refused.append(f"{name} (margin 1-c = {report['margin']:.4g}, bound {report['bound']:.2g}, "
-                           f"max deviation {report['max_deviation']:.2g})")
+            refused.append(name)
     if refused:
-        raise CertificateError(f"float32 build refused for {', '.join(refused)}: the contraction margin does not "
-                               f"cover the rounding within {precision.TOLERANCE:g} of the signal RMS (figures above)")
+        raise CertificateError(f"float32 build refused for {', '.join(refused)} (the reasons and figures above)")
     return 0
 
 
@@ -229,24 +229,23 @@ def _load_gains(path: Path) -> dict:
     return data
 
 
-def check_gains(name: str, gains: dict) -> dict:
-    """Check externally supplied gains against the observer family's LMIs (no solver)."""
+def check_gains(name: str, gains: dict, source: str = "gains"):
+    """Check externally supplied gains against the observer family's LMIs (no solver): a
+    :class:`~codegen.certificate.gains.GainsCheck`."""
+    from .certificate import gains as gains_check
     cfg = observers.get(name)
-    return families.get(cfg.family).check_gains(cfg, gains)
-
-
-def _feasible(res: dict) -> bool:
-    return res["feasible"] if "feasible" in res else all(r["feasible"] for r in res["results"].values())
+    return gains_check.check(families.get(cfg.family), cfg, gains, source)
 
 
 def cmd_check_gains(args) -> int:
+    from .certificate import text
     cfg = observers.get(args.name)
-    res = families.get(cfg.family).check_gains(cfg, _load_gains(args.gains))
+    res = check_gains(args.name, _load_gains(args.gains), args.gains)
     if args.json:
-        _print_json(res)
+        _print_json(res.to_json())
     else:
-        print("\n".join(families.get(cfg.family).format_check_gains(res, args.gains)))
-    return 0 if _feasible(res) else 1
+        print("\n".join(text.check_gains_lines(families.get(cfg.family), res)))
+    return 0 if res.feasible else 1
 
 
 def _shown(path: Path) -> str:
@@ -260,8 +259,10 @@ def _shown(path: Path) -> str:
 def cmd_fit(args) -> int:
     """Identify an observer's numbers on samples A..B-1 of a log (the family's ``fit``); print them,
     say whether the committed files hold them, and with --write put them there."""
+    from .certificate import text
+    from .families.capabilities import Identification, require
     cfg = observers.get(args.name)
-    family = families.get(cfg.family)
+    family = require(families.get(cfg.family), Identification)
     result = family.fit(cfg, args.data, args.samples, folds=args.folds)
     texts = family.fit_files(cfg, result)
     changed = {path: path.read_text() != text for path, text in texts.items()}
@@ -273,7 +274,7 @@ def cmd_fit(args) -> int:
         _print_json({**result, "files": {_shown(p): ("written" if args.write and c else "differs" if c else "equal")
                                          for p, c in changed.items()}})
     else:
-        print("\n".join(family.fit_lines(result, changed)))
+        print("\n".join(text.fit_lines(family, result, changed)))
         if args.write and any(changed.values()):
             print("written: " + ", ".join(str(p) for p, c in changed.items() if c))
     return 0
@@ -292,9 +293,11 @@ def cmd_validate(args) -> int:
             with outputs.writing(args.report):
                 page = report.write_validation(args.name, result, args.report, data=True)
         if args.json:
+            from .validation.metrics import DEFINITIONS
             keys = ("observer", "baselines", "estimates", "status_flags", "samples", "splits", "peaks", "warnings",
                     "log_checks", "baselines_skipped")
-            print(json.dumps({k: result[k] for k in keys if k in result}, indent=1, sort_keys=True))
+            print(json.dumps({**{k: result[k] for k in keys if k in result}, "definitions": DEFINITIONS},
+                             indent=1, sort_keys=True))
             return 0
         warned = f", {len(result['warnings'])} warning(s) below" if result.get("warnings") else ""
         print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} flagged{warned}")
@@ -391,7 +394,7 @@ def cmd_docs(args) -> int:
 
 def cmd_export(args) -> int:
     from .targets import fmu
-    fmu.export_fmu(observers.get(args.name, project=args.project), args.out)
+    fmu.export_fmu(observers.get(args.name, project=args.project), args.out, fmi_version=fmu.FORMATS[args.format])
     return 0
 
 
@@ -548,9 +551,10 @@ def main(argv=None) -> int:
                                  "(default: build/campaigns/SPEC_STEM of the observer's project)")
     p.set_defaults(func=cmd_campaign)
     p = sub.add_parser("export", parents=[project],
-                       help="package a generated observer for another tool (fmu: FMI 2.0 co-simulation)")
+                       help="package a generated observer for another tool (fmu: FMI 2.0, fmu3: FMI 3.0 co-simulation)")
     p.add_argument("name")
-    p.add_argument("--format", choices=("fmu",), required=True)
+    p.add_argument("--format", choices=("fmu", "fmu3"), required=True,
+                   help="fmu: FMI 2.0 co-simulation; fmu3: FMI 3.0 co-simulation")
     p.add_argument("--out", required=True, help="the file to write (FILE.fmu)")
     p.set_defaults(func=cmd_export)
     args = parser.parse_args(argv)

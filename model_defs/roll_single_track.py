@@ -20,7 +20,7 @@ linear axle forces (2) F_yf = C_f (delta - beta - l_f r / V_x), F_yr = C_r (l_r 
 (axle cornering stiffnesses), states x = [beta, r, phi, phi_dot], known input u = delta (road-wheel
 angle), unknown input omega = phi_r, outputs y = [r, phi, phi_dot], scheduling signal V_x.
 With m_s = m the toolchain's matrices equal the paper's (1) term by term, after three misprints of
-the paper are corrected (``tests/test_switched_pi.py`` checks it): A_22 = -C_a2/(I_z V_x) (printed
+the paper are corrected (``tests/families/switched_pi/test_switched_pi.py`` checks it): A_22 = -C_a2/(I_z V_x) (printed
 I_x), A_14 = -h_r b_r/(I_x V_x) (printed h_r L_r) and H_4 = h_r C_f / I_x (printed C_f / I_x).
 We keep the sprung mass m_s separate from the total mass m because the validation car has heavy
 unsprung masses (the CommonRoad BMW 320i: m_s / m = 0.88).

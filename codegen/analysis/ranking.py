@@ -158,11 +158,12 @@ def sort_key(app: Applicability, trial: Trial, index: int) -> tuple:
 def assess(subject: Subject, structure) -> list:
     """Every registered family's :class:`Applicability` for ``subject``, in registry order."""
     from .. import families
+    from ..families.capabilities import Applicability as HasApplicability
     out = []
     for name in families.names():
         fam = families.get(name)
         try:
-            app = fam.applicability(subject, structure)
+            app = fam.applicability(subject, structure) if isinstance(fam, HasApplicability) else None
         except UiogenError as exc:          # the family's own refusal is its condition
             app = Applicability(name, False, "unknown", condition=f"{type(exc).__name__}: {exc}")
         except Exception as exc:            # a model the family's check cannot read: say so, rank it last
@@ -170,7 +171,7 @@ def assess(subject: Subject, structure) -> list:
                                 f"({type(exc).__name__}: {exc})")
         if app is None:
             app = Applicability(name, False, "unknown", condition="the family gives no applicability check "
-                                "(Family.applicability): design it to find out")
+                                "(the Applicability capability): design it to find out")
         out.append(app)
     return out
 
@@ -345,7 +346,8 @@ def _solve(path: Path, app: Applicability, label: str) -> Trial:
         return Trial(app.family, "failed", label, time.perf_counter() - t0,
                      reason=f"{type(exc).__name__}: {str(exc).replace(str(path), label)}", error=type(exc))
     figures = app.figures(b) if app.figures is not None else {}
-    return Trial(app.family, "certified", label, time.perf_counter() - t0, b.emit_notes()["headline"], figures)
+    from ..certificate.text import headline
+    return Trial(app.family, "certified", label, time.perf_counter() - t0, headline(b.certificate), figures)
 
 
 def rank(subject: Subject, structure, design: bool = True, progress=None) -> Ranking:

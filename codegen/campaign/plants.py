@@ -283,19 +283,22 @@ KINDS = {"steering_torque": (steering_torque_spec, _steering_torque_step, steeri
 
 
 def families_with_plants() -> list:
-    """The registered families with a compiled plant of their own library scenarios
-    (``Family.campaign_plant``); every family has the ``model`` plant of the excitation scenario."""
+    """The registered families with a compiled plant of their own library scenarios (the
+    ``Campaigns`` capability); every family has the ``model`` plant of the excitation scenario."""
     from .. import families
-    return [n for n in families.names() if families.get(n).campaign_plant]
+    from ..families.capabilities import Campaigns
+    return [n for n in families.names() if isinstance(families.get(n), Campaigns)]
 
 
 def plant_kind(config, scenarios=(EXCITATION,)) -> str:
     """The kind of compiled plant of a campaign of ``config`` on ``scenarios``: ``model`` for the
     excitation scenario (every family), else the family's own (``Family.campaign_plant``)."""
     from .. import families
+    from ..families.capabilities import Campaigns
     if scenarios and all(s == EXCITATION for s in scenarios):
         return "model"
-    kind = families.get(config.family).campaign_plant
+    family = families.get(config.family)
+    kind = family.campaign_plant if isinstance(family, Campaigns) else None
     if kind is None:
         raise UnsupportedError(f"campaigns on the library scenarios have compiled plants for the families "
                                f"{', '.join(families_with_plants())}; observer {config.name!r} is of family "

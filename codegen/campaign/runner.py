@@ -17,11 +17,13 @@ SPIN_BETA = math.pi / 4      # |beta| above 45 deg: the plant car has spun (not 
 
 
 def certified_gain_norm(config) -> str | None:
-    """The norm of the family's certified gain (``Family.certified_gain_norm``): "peak" (L-infinity,
+    """The norm of the family's certified gain (``Campaigns.certified_gain_norm``): "peak" (L-infinity,
     sup_t |x - x_hat|_2 over the model's states / sup_t |d|), "l2" (H-infinity, |xi - xi_hat|_2 /
     |w|_2 with xi the performance outputs), or None."""
     from .. import families
-    return families.get(config.family).certified_gain_norm
+    from ..families.capabilities import Campaigns
+    family = families.get(config.family)
+    return family.certified_gain_norm if isinstance(family, Campaigns) else None
 
 
 def _cached(key, make):
@@ -69,9 +71,13 @@ def _scenario(spec, name: str, seed: int | None):
 
 
 def default_noise(config) -> dict:
-    """The sensor noise of the family's own validation (std per measured signal)."""
+    """The sensor noise of the family's own validation (std per measured signal): the family's
+    (``Campaigns.sensor_noise``), else the common one of the library's validations."""
     from .. import families
-    return families.get(config.family).sensor_noise()
+    from ..families.capabilities import Campaigns
+    from ..validation.common import SENSOR_NOISE
+    family = families.get(config.family)
+    return family.sensor_noise() if isinstance(family, Campaigns) else dict(SENSOR_NOISE)
 
 
 def draw(spec, run: int) -> dict:

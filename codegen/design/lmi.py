@@ -14,8 +14,6 @@ returned.
 """
 from __future__ import annotations
 
-import contextlib
-import contextvars
 import functools
 import time
 from dataclasses import dataclass, field
@@ -292,7 +290,7 @@ def objective_bound(t: float, slack: float = OPTIMALITY_SLACK) -> float:
     return float((d / quantum).to_integral_value(rounding=decimal.ROUND_CEILING) * quantum)
 
 
-def _exact_json(values: dict) -> dict:
+def exact_json(values: dict) -> dict:
     """Decision variables as nested lists of floats (JSON writes the shortest repr that
     round-trips, so a replayed value is bit-identical to the solved one)."""
     return {k: (float(v) if np.ndim(v) == 0 else np.asarray(v, dtype=float).tolist()) for k, v in values.items()}
@@ -319,79 +317,6 @@ class SolveRecord:
                        int(data["iterations"]), dict(data.get("data", {})))
         except (KeyError, TypeError, ValueError) as exc:
             raise DesignLockError(f"{source}: malformed LMI solution record ({exc})") from None
-
-
-@dataclass
-class Ledger:
-    """The LMI solutions of one design, in the order they are solved (recording), or the
-    committed ones handed back in that order (replaying)."""
-
-    replay: list | None = None
-    source: str = ""
-    records: list = field(default_factory=list)
-    solutions: list = field(default_factory=list)     # the re-checked LMISolution of each replayed record
-
-    @property
-    def replaying(self) -> bool:
-        return self.replay is not None
-
-    def take(self, problem: str) -> SolveRecord:
-        k = len(self.records)
-        if k >= len(self.replay):
-            raise DesignLockError(f"{self.source}: the design solves more LMI problems than the {len(self.replay)} "
-                                  f"committed (next: {problem!r}); re-solve with `uiogen design NAME --update`")
-        rec = self.replay[k]
-        if rec.problem != problem:
-            raise DesignLockError(f"{self.source}: committed LMI solution {k + 1} is for {rec.problem!r}, the "
-                                  f"design asks for {problem!r}; re-solve with `uiogen design NAME --update`")
-        self.records.append(rec)
-        return rec
-
-
-_LEDGER: contextvars.ContextVar = contextvars.ContextVar("uiogen_lmi_ledger", default=None)
-
-
-def committed_data(problem: str) -> dict | None:
-    """The constants committed with the next LMI solution when it is for ``problem`` and a design
-    lock is being replayed; None otherwise (recording, or no lock).
-
-    A problem whose constants come from a search at design time (a bisection on a decay rate)
-    builds itself from the committed constants on replay instead of searching again: the
-    replayed solution is then re-checked against the same problem on every machine.
-    """
-    ledger = _LEDGER.get()
-    if ledger is None or not ledger.replaying:
-        return None
-    k = len(ledger.records)
-    if k < len(ledger.replay) and ledger.replay[k].problem == problem:
-        return dict(ledger.replay[k].data)
-    return None
-
-
-@contextlib.contextmanager
-def recording():
-    """Collect every LMI solve inside the block: ``with recording() as ledger: ...; ledger.records``."""
-    ledger = Ledger()
-    token = _LEDGER.set(ledger)
-    try:
-        yield ledger
-    finally:
-        _LEDGER.reset(token)
-
-
-@contextlib.contextmanager
-def replaying(records, source: str = ""):
-    """Inside the block, every :meth:`LMIProblem.solve` returns the next committed solution
-    (checked to be for the same problem, then re-checked block by block) instead of solving."""
-    ledger = Ledger(list(records), source)
-    token = _LEDGER.set(ledger)
-    try:
-        yield ledger
-    finally:
-        _LEDGER.reset(token)
-    if len(ledger.records) != len(ledger.replay):
-        raise DesignLockError(f"{source}: the design used {len(ledger.records)} of the {len(ledger.replay)} committed "
-                              f"LMI solutions; re-solve with `uiogen design NAME --update`")
 
 
 @dataclass(frozen=True)
@@ -425,8 +350,8 @@ class LMIProblem:
     # False for an analysis (a bisection, a report): solved afresh every time, never committed
     # to or replayed from a design lock, and without the least-norm stage unless asked.
     design: bool = True
-    # constants found at design time that the problem is built from (committed with the solution;
-    # see :func:`committed_data`); exact JSON numbers
+    # constants found at design time that the problem is built from (committed with the solution and
+    # handed back by a replay: codegen.design.solver.Solver.committed_data); exact JSON numbers
     data: dict = field(default_factory=dict)
     _names: list = field(default_factory=list)
     _variables: dict = field(default_factory=dict)
@@ -618,8 +543,9 @@ class LMIProblem:
         smaller cones, fewer variables: fewer and cheaper iterations). Off by default: the
         emitted designs come from the problem as stated (see docs, Performance).
 
-        Inside :func:`replaying`, nothing is solved: the committed solution of this problem is
-        taken from the design lock and re-checked block by block like a fresh one.
+        Always a fresh solve: a design's pipeline hands its design problems to a solver object
+        (:mod:`codegen.design.solver`), which records this solution for a design lock or replays
+        a committed one (:meth:`replay`) instead.
 
         Raises
         ------
@@ -627,12 +553,7 @@ class LMIProblem:
             names the blocks carrying most of the infeasibility certificate.
         InaccurateSolveError, IllConditionedError, CertificateError, DesignLockError
         """
-        ledger = _LEDGER.get() if self.design else None
         unique = self.design if unique is None else unique
-        if ledger is not None and ledger.replaying:
-            sol = self._replay(ledger.take(self.name))
-            ledger.solutions.append(sol)
-            return sol
         t0 = time.perf_counter()
         names, A, b, q, cones, blocks = self._compile()
         nvar = len(names)
@@ -658,11 +579,7 @@ class LMIProblem:
                 f"{self.name}: solution has entries up to {np.abs(xv).max():.3g} (limit "
                 f"{max_abs_value:g}); the problem is nearly unbounded — add or tighten a bound "
                 f"on the gains/Lyapunov matrices")
-        sol = self._solution(xv, blocks, float(q @ xv), "Solved", solve_time, t1 - t0, iterations)
-        if ledger is not None:
-            ledger.records.append(SolveRecord(self.name, _exact_json(sol.values), sol.objective, iterations,
-                                              dict(self.data)))
-        return sol
+        return self._solution(xv, blocks, float(q @ xv), "Solved", solve_time, t1 - t0, iterations)
 
     def _unique_point(self, red: "ReducedProblem", blocks, x0: np.ndarray, tol, max_iter, verbose, slack) -> tuple:
         """The least-norm point of the optimal set (see :meth:`solve`); returns (x, iterations, seconds).
@@ -878,8 +795,15 @@ class LMIProblem:
         checks = self.certify_values(xv, blocks, self._evaluate)
         return LMISolution(values, objective, status, solve_time, build_time, iterations, checks)
 
-    def _replay(self, record: "SolveRecord") -> LMISolution:
-        """The committed solution of this problem, re-checked block by block."""
+    def replay(self, record: "SolveRecord") -> LMISolution:
+        """The committed solution ``record`` of this problem, re-checked block by block (no solver).
+
+        Raises
+        ------
+        DesignLockError
+            the record was solved for other constants (:attr:`data`), other variables or shapes.
+        CertificateError
+            a block fails the numpy re-check."""
         t0 = time.perf_counter()
         names, _, _, q, _, blocks = self._compile()
         if record.data != self.data:

@@ -6,13 +6,15 @@ committed as ``NAME_design.json`` (the design lock); everything after it, C gene
 included, is a pure function of (model, parameters, configuration, design lock, templates,
 pinned tool versions) and never solves an LMI again.
 
-The lock records, beside the design report of the family (gains, certificates), the exact
+The lock records, beside the design data of the family (gains) and its certificate (one typed
+record for every family, :mod:`codegen.certificate.certificate`), the exact
 decision variables of every LMI problem the design solved (:class:`codegen.design.lmi.SolveRecord`)
 and the hash of the design's inputs (:func:`design_inputs`: the observer file, the parameter
 file, the model and every toolchain module the design imports, the numeric packages'
 versions). A lock whose hash matches is *current*: :func:`codegen.pipeline.build` replays it
-(:func:`codegen.design.lmi.replaying`), re-checking every block with numpy. A stale or missing lock
-is re-solved by ``uiogen generate`` (and on request by ``uiogen design NAME --update``).
+(:func:`replay`, a :class:`codegen.design.solver.LockReplay` handed to the family's build),
+re-checking every block with numpy; its solutions are matched to the design's problems by name.
+A stale or missing lock is re-solved by ``uiogen generate`` (and on request by ``uiogen design NAME --update``).
 
 Nothing in a lock is taken on trust: ``design_inputs`` is re-derived and compared, and every
 other entry is covered by a checksum (``lock.sections``: the SHA-256 of each entry's JSON;
@@ -32,6 +34,7 @@ import numpy as np
 from . import sources
 from ..errors import DesignLockError
 from .lmi import SolveRecord
+from .solver import LockReplay
 from ..project.observer_file import ObserverConfig
 
 FORMAT = 2
@@ -66,14 +69,16 @@ def design_sources(config: ObserverConfig) -> list:
 
 
 def observer_file_digest(config: ObserverConfig) -> str:
-    """Hash of the observer file as parsed, less its ``[data]`` table (the column map of logs,
-    which no design or C derives from), with its leading comment (the C's description): editing a
-    log's map or a comment inside the file never re-solves a design."""
+    """Hash of the observer file as parsed, less its ``[data]`` table (the column map of logs) and
+    its ``[precision]`` table (the float32 build's tolerances), which no design or C derives from,
+    with its leading comment (the C's description): editing them or a comment inside the file
+    never re-solves a design."""
     import hashlib
     import tomllib
     with open(config.source, "rb") as fh:
         table = tomllib.load(fh)
     table.pop("data", None)
+    table.pop("precision", None)
     text = json.dumps({"table": table, "doc": config.doc}, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -175,17 +180,24 @@ def verify(data: dict, source: str, how: str = "NAME") -> str:
 
 
 def solutions(data: dict, source: str = "") -> list:
-    """The committed LMI solutions of a lock, in solve order."""
+    """The committed LMI solutions of a lock, in solve order (each names its problem)."""
     raw = data["lock"].get("lmi_solutions")
     if not isinstance(raw, list):
         raise DesignLockError(f"{source}: the lock has no list 'lmi_solutions'")
     return [SolveRecord.from_json(r, source) for r in raw]
 
 
+def replay(data: dict, source: str = ""):
+    """A :class:`~codegen.design.solver.LockReplay` of the lock ``data`` (read from ``source``)."""
+    return LockReplay(solutions(data, source), source)
+
+
 def document(build, records: list) -> dict:
-    """The lock of a freshly solved design: the family's report plus the solutions and the hash."""
+    """The lock of a freshly solved design: the family's design data, its typed certificate
+    (:class:`~codegen.certificate.certificate.Certificate`, the same keys for every family), the
+    solutions and the hash."""
     v = sources.versions()
-    return seal({**build.artifact(),
+    return seal({**build.artifact(), "certificate": build.certificate.to_json(),
                  "lock": {"format": FORMAT, "design_inputs": design_inputs(build.config),
                           "versions": {k: v[k] for k in DESIGN_PACKAGES},
                           "lmi_solutions": [r.to_json() for r in records]}})

@@ -1,16 +1,36 @@
 """What an observer family provides: :class:`Family` (the registry's entry) and
-:class:`ObserverBuild` (what its pipeline returns). Nothing outside a family's own folder
-needs to know which family it handles: the toolchain (:mod:`codegen.pipeline`,
-:mod:`codegen.emit`, :mod:`codegen.cli`, :mod:`codegen.validation.run`, :mod:`codegen.validation.demo`,
-:mod:`codegen.tools.bench`) only calls these members.
+:class:`ObserverBuild` (what its pipeline returns).
+
+The required part is what the pipeline needs: ``Family.build(config, solver)`` returning an
+:class:`ObserverBuild` with its step (``step_function``, ``reference_step``), its signals (names,
+counts, boxes) and its :class:`~codegen.certificate.certificate.Certificate`, plus the design data
+the lock records (``artifact``). Everything else a family may offer is an optional capability,
+declared by a small protocol of :mod:`codegen.families.capabilities` (validation scenarios, demo
+figures, bench figures, campaign plants, applicability, paper forms of check-gains, an
+identification) and discovered with ``isinstance``; text is rendered in one place,
+:mod:`codegen.certificate.text`. Nothing outside a family's own folder needs to know which family
+it handles.
 """
 from __future__ import annotations
 
 import abc
+from dataclasses import dataclass
 
 import casadi as ca
 
-from ..errors import UnsupportedError
+
+@dataclass(frozen=True)
+class StepNotes:
+    """What the C API says about the step beyond its certificate (the header's prose).
+
+    ``notes``: lines on what one call does (which sample the estimates are of, the state's
+    layout); ``clamp``: when the step sets SCHEDULING_CLAMPED; ``warmup``: what WARMING_UP means
+    (only read when the step has a warm-up output)."""
+
+    notes: tuple = ()
+    clamp: str = ("A scheduling input outside its box: clamped for the step; the certificate does not cover "
+                  "this sample.")
+    warmup: str = "never set by this observer."
 
 
 class ObserverBuild(abc.ABC):
@@ -18,6 +38,7 @@ class ObserverBuild(abc.ABC):
 
     Concrete builds are frozen dataclasses with at least ``config`` (the
     :class:`~codegen.project.observer_file.ObserverConfig`) and ``timings`` ({stage: seconds}).
+    The abstract members are required; the others have defaults a family may override.
     """
 
     config: object
@@ -27,7 +48,7 @@ class ObserverBuild(abc.ABC):
     def name(self) -> str:
         return self.config.name
 
-    # -- signals of the step: z_next = step(z, u, y, rho) ------------------------------------------
+    # -- required: signals of the step z_next = step(z, u, y, rho) ------------------------------
     @property
     @abc.abstractmethod
     def state_names(self) -> list:
@@ -54,6 +75,15 @@ class ObserverBuild(abc.ABC):
         """Number of measured outputs y (after u in the flat input)."""
 
     @abc.abstractmethod
+    def input_boxes(self) -> dict:
+        """{flat input name: [min, max]} of the inputs that schedule the step."""
+
+    @abc.abstractmethod
+    def scheduling_boxes(self) -> list:
+        """(name, min, max, derived) of every scheduling signal, for the C header."""
+
+    # -- required: the step and its certificate --------------------------------------------------
+    @abc.abstractmethod
     def step_function(self) -> ca.Function:
         """The discrete step as a CasADi Function (z, u, y, rho) -> (z_next, excess[, warmup]);
         named ``NAME_kernel``. ``excess`` > 0 flags SCHEDULING_CLAMPED, ``warmup`` > 0 WARMING_UP."""
@@ -62,24 +92,31 @@ class ObserverBuild(abc.ABC):
     def reference_step(self, z, u, y, rho):
         """An independent numpy implementation of the same step (tests, the benchmark's peer)."""
 
+    @property
     @abc.abstractmethod
-    def lmi_problem(self):
-        """A fresh :class:`~codegen.design.lmi.LMIProblem` of the design (benchmark: our path vs CVXPY)."""
+    def certificate(self):
+        """What the design certifies: a :class:`~codegen.certificate.certificate.Certificate`."""
 
     @abc.abstractmethod
-    def input_boxes(self) -> dict:
-        """{flat input name: [min, max]} of the inputs that schedule the step."""
+    def artifact(self) -> dict:
+        """The design data the design lock records beside the certificate (the head of
+        :func:`~codegen.certificate.artifact.artifact_head`, gains, Lyapunov matrices, the
+        representation): everything needed to re-check the design without uiogen."""
 
-    @abc.abstractmethod
-    def scheduling_boxes(self) -> list:
-        """(name, min, max, derived) of every scheduling signal, for the C header."""
-
-    @abc.abstractmethod
+    # -- optional, with defaults ---------------------------------------------------------------
     def signal_docs(self) -> tuple:
-        """(state, inputs, outputs): lists of {name, doc} for the C API's struct fields."""
+        """(state, inputs, outputs): lists of {name, doc} for the C API's struct fields; a signal
+        without a doc is documented by its name and unit."""
+        return [], [], []
 
     def derived_input_docs(self) -> list:
         """[{name, unit}] of known inputs the step computes from the measurements."""
+        return []
+
+    def contraction_metrics(self) -> list:
+        """The Lyapunov norms in which the certificate proves the step contracting, over parts of
+        its state (:class:`~codegen.certificate.contraction.ContractionMetric`): what bounds the
+        float32 step's deviation (:mod:`codegen.targets.float32`); [] for none."""
         return []
 
     def output_lags(self) -> dict:
@@ -87,28 +124,26 @@ class ObserverBuild(abc.ABC):
         step whose unknown-input estimate needs the next output returns the previous one)."""
         return {}
 
-    @abc.abstractmethod
-    def emit_notes(self) -> dict:
-        """Text of the C API: headline, stability, step_notes, clamp_doc, warmup_doc, has_warmup."""
+    def step_notes(self) -> StepNotes:
+        """The C API's prose about the step (:class:`StepNotes`)."""
+        return StepNotes()
 
-    @abc.abstractmethod
-    def artifact(self) -> dict:
-        """The design report written into the design lock (gains, certificates, signals)."""
+    def figures(self) -> dict:
+        """Design figures beside the certificate (JSON), which ``uiogen design`` prints and
+        ``uiogen sweep`` tabulates (e.g. ``gamma``, the representation's size, timings)."""
+        return {}
 
-    @abc.abstractmethod
-    def summary(self, path) -> dict:
-        """Figures ``uiogen design`` prints (``path``: where the design was written, or why not)."""
-
-    @abc.abstractmethod
-    def summary_lines(self, summary: dict) -> list:
-        """``summary`` as the lines ``uiogen design`` prints."""
+    def lmi_problem(self):
+        """A fresh :class:`~codegen.design.lmi.LMIProblem` of the design (the benchmark: our path
+        against CVXPY), or None."""
+        return None
 
 
 class Family(abc.ABC):
-    """An observer family: its paper, its observer-file keys, its pipeline, its validation.
+    """An observer family: its paper, its observer-file keys and its pipeline.
 
     Register an instance with :func:`codegen.families.register`; an observer file selects it
-    with ``family = NAME``.
+    with ``family = NAME``. Optional capabilities: :mod:`codegen.families.capabilities`.
     """
 
     #: the observer file's ``family = "..."``
@@ -121,147 +156,22 @@ class Family(abc.ABC):
     short_citation: str = ""
     #: top-level observer-file keys beyond the common ones: {key: codegen.project.settings.Rule}
     observer_keys: dict = {}
-    #: the library scenarios ``uiogen demo`` runs
-    demo_scenarios: tuple = ()
-    #: the built-in observer ``uiogen new DIR --family NAME`` copies as a starter
+    #: the built-in observer ``uiogen new DIR --family NAME`` copies as a starter ("": none)
     example: str = ""
-    #: robustness campaigns (:mod:`codegen.campaign`): the kind of compiled closed-loop plant of the
-    #: family's validation (a key of ``codegen.campaign.plants.KINDS``), None where it has none
-    campaign_plant: str | None = None
     #: ``[design]`` keys that set how hard :mod:`codegen.representation.bounds` tries to bound the
     #: model's expressions (its tolerance, its box budget), named when a bound cannot be reached
     bounds_settings: tuple = ()
-    #: the norm of the certified gain a campaign run's empirical ratio is set beside: "peak"
-    #: (L-infinity: sup|x - x_hat| / sup|d|) or "l2" (|xi - xi_hat|_2 / |w|_2); None: no such gain
-    certified_gain_norm: str | None = None
-
-    def sensor_noise(self) -> dict:
-        """Standard deviation per measured signal of the family's validation runs."""
-        from ..validation.common import SENSOR_NOISE
-        return dict(SENSOR_NOISE)
 
     def check_config(self, config, data: dict) -> None:
         """Check the family's own tables of an observer file (``data``: the parsed TOML) beyond
         :attr:`observer_keys`; raise :class:`~codegen.errors.ConfigurationError`."""
 
     @abc.abstractmethod
-    def build(self, config, tol: float | None = None) -> ObserverBuild:
-        """model -> representation -> design -> certificates -> discrete step."""
+    def build(self, config, solver) -> ObserverBuild:
+        """model -> representation -> design -> certificates -> discrete step; every design LMI
+        problem answered by ``solver`` (:mod:`codegen.design.solver`: a fresh solve or a replay)."""
 
-    def validate(self, config, scenario, plant: str = "nominal", duration: float | None = None,
-                 seed: int = 0, progress=None, observer=None) -> dict:
-        """Run the compiled step (``observer``: a compiled observer of ``config``, default its
-        extension) on a simulated plant: {"observer": {SIGNAL: stats}, "baselines", ...}."""
-        raise UnsupportedError(f"family {self.name!r} has no simulated validation scenarios")
-
-    def format_validation(self, result: dict) -> str:
-        """The validation table as text (the paper's format)."""
-        raise UnsupportedError(f"family {self.name!r} has no validation table")
-
-    def validation_header(self, name: str, result: dict) -> str:
-        """The line ``uiogen validate`` prints above the table."""
-        return (f"{name}: scenario {result['scenario']} on the {result['plant']} plant "
-                f"({result.get('plant_model', result['plant'])}), {result['samples']} samples, "
-                f"{result['status_flags']} flagged samples")
-
-    def log_peers(self, config, run) -> dict:
-        """{name: sideslip estimate [rad] per sample} of estimators the family runs beside the
-        observer on a logged run in the shared format (``uiogen validate --data``), e.g. Kalman
-        filters of the observer's own model and parameter file; {} for none."""
-        return {}
-
-    def demo_report(self, artifact: dict) -> dict:
-        """Design figures for ``uiogen demo`` from the committed design report."""
-        return {}
-
-    def demo_lines(self, report: dict) -> list:
-        """``demo_report`` as text lines."""
-        return []
-
-    def bench_inputs(self, build):
-        """A realistic (n, n_input) input sequence for ``uiogen bench``, or None for constant
-        mid-box samples (fine for steps without internal filters or differentiators)."""
-        return None
-
-    def bench_figures(self, build) -> dict:
-        """Family-specific figures ``uiogen bench`` adds to an observer's (e.g. differentiator cost)."""
-        return {}
-
-    def bench_lines(self, figures: dict) -> list:
-        return []
-
-    def bench_family(self) -> list:
-        """Rows of a family-wide study ``uiogen bench`` runs once (e.g. how the design grows with the
-        number of rules); [] for none."""
-        return []
-
-    def bench_family_lines(self, rows: list) -> list:
-        return []
-
-    def applicability(self, subject, structure):
-        """Whether this family can take ``subject`` (a model with its sensors and unknown inputs,
-        :class:`codegen.analysis.subject.Subject`), given its ``structure``
-        (:class:`codegen.analysis.structure.Structure`): a
-        :class:`codegen.analysis.ranking.Applicability`, "applies" with the observer-file settings
-        the family would use, or the one condition that fails and the change that satisfies it.
-        ``uiogen analyze`` ranks the families by these answers; None: the family does not say."""
-        return None
-
-    def check_gains(self, config, gains: dict) -> dict:
-        """Check externally supplied decision variables against the family's LMIs, without a solver.
-
-        The generic form is the design lock's: ``{"lmi_solutions": [{"problem", "variables",
-        "objective", "iterations"}, ...]}``, one record per LMI problem of the design, in order
-        (as in ``generated_c/NAME/NAME_design.json``, which may be given as it is). The family's pipeline runs on them as on a
-        committed design: every block is re-checked with numpy, and the discrete step certified.
-        Families with a paper-specific form of their gains override this (and fall back to it).
-        """
-        from ..design import lmi
-        from ..errors import (CertificateError, ConfigurationError, DesignLockError, DiscretizationError,
-                               InfeasibleLMIError)
-        raw = gains.get("lmi_solutions")
-        if raw is None and isinstance(gains.get("lock"), dict):      # a design lock file, as committed
-            raw = gains["lock"].get("lmi_solutions")
-        if not isinstance(raw, list):
-            raise ConfigurationError(
-                f"gains: family {self.name!r} checks gains given as the design lock gives them: "
-                f'{{"lmi_solutions": [{{"problem", "variables", "objective", "iterations"}}, ...]}} '
-                f"(see generated_c/{config.name}/{config.name}_design.json)", key="lmi_solutions")
-        records = [lmi.SolveRecord.from_json(r, "gains") for r in raw]
-        out = {"observer": config.name, "form": "lmi_solutions", "problems": []}
-        try:
-            with lmi.replaying(records, source="gains") as ledger:
-                self.build(config)
-        except (CertificateError, DiscretizationError, InfeasibleLMIError) as exc:
-            out.update(feasible=False, reason=f"{type(exc).__name__}: {exc}")
-            return out
-        except DesignLockError as exc:
-            raise ConfigurationError(f"gains: {exc}") from None
-        for rec, sol in zip(ledger.records, ledger.solutions):
-            worst = sol.worst
-            out["problems"].append({"problem": rec.problem, "objective": rec.objective, "blocks": len(sol.checks),
-                                    "worst_block": worst.label, "worst_min_eig": worst.min_eig})
-        out["feasible"] = True
-        return out
-
-    def fit(self, config, path, samples: str, folds: int = 0) -> dict:
-        """Identify the observer's numbers on samples A..B-1 (``samples`` = "A:B") of a log
-        (``uiogen fit``); families without an identification refuse."""
-        raise UnsupportedError(f"family {self.name!r} has no identification (uiogen fit): its numbers come from its "
-                               f"paper or its parameter file")
-
-    def fit_files(self, config, result: dict) -> dict:
-        """{path: text} of the files that hold the fitted numbers."""
-        return {}
-
-    def fit_lines(self, result: dict, changed: dict) -> list:
-        return []
-
-    def format_check_gains(self, result: dict, source: str) -> list:
-        lines = [f"{self.title} ({self.short_citation}): check of {source} on observer {result['observer']}"]
-        for p in result.get("problems", []):
-            lines.append(f"  {p['problem']}: {p['blocks']} blocks re-checked with numpy, worst {p['worst_min_eig']:.6g} "
-                         f"in {p['worst_block']}; objective {p['objective']:.6g}")
-        lines.append("  PASS: every block and the discrete step are certified" if result["feasible"]
-                     else f"  FAIL: {result['reason']}")
-        return lines
+    def capabilities(self) -> tuple:
+        """The names of the optional capabilities this family has (:mod:`codegen.families.capabilities`)."""
+        from .capabilities import of
+        return of(self)

@@ -182,12 +182,16 @@ class RecoveredInputs(ObserverBuild):
                  for s in self.substitutions]
         return [*state, *extra], inputs, [*outputs, *extra]
 
-    def emit_notes(self) -> dict:
-        notes = dict(self.inner.emit_notes())
-        notes["step_notes"] = [*notes["step_notes"], *[
+    @property
+    def certificate(self):
+        return self.inner.certificate
+
+    def step_notes(self):
+        from dataclasses import replace
+        notes = self.inner.step_notes()
+        return replace(notes, notes=(*notes.notes, *[
             f"{s.unknown} is recovered after the step: {s.unknown} = {s.inverse}, with {s.symbol} kept in "
-            f"[{s.lower:.6g}, {s.upper:.6g}] (beyond: flagged)" for s in self.substitutions]]
-        return notes
+            f"[{s.lower:.6g}, {s.upper:.6g}] (beyond: flagged)" for s in self.substitutions]))
 
     def artifact(self) -> dict:
         art = dict(self.inner.artifact())
@@ -197,13 +201,8 @@ class RecoveredInputs(ObserverBuild):
         art["substitutions"] = [s.to_json() for s in self.substitutions]
         return art
 
-    def summary(self, path) -> dict:
-        return {**self.inner.summary(path), "substitutions": [s.to_json() for s in self.substitutions]}
-
-    def summary_lines(self, summary: dict) -> list:
-        lines = list(self.inner.summary_lines(summary))
-        lines += [f"  change of variables       {s.describe()}" for s in self.substitutions]
-        return lines
+    def figures(self) -> dict:
+        return {**self.inner.figures(), "substitutions": [s.to_json() for s in self.substitutions]}
 
 
 def wrap(build: ObserverBuild) -> ObserverBuild:

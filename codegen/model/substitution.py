@@ -131,14 +131,14 @@ def _box(params, symbols, source: str) -> tuple:
     return box, missing
 
 
-def analyse(model, params, d, name: str) -> tuple:
-    """(Substitution, None) for unknown input ``d`` as new unknown input ``name``, or (None, why not)."""
+def analyse(model, params, subs: dict, d, name: str) -> tuple:
+    """(Substitution, None) for unknown input ``d`` as new unknown input ``name``, or (None, why not).
+    ``subs``: the model's parameter values (``definition.parameter_substitution``, computed by the
+    caller: the model layer's definitions import this module for :func:`offer`)."""
     from ..representation.bounds import range_bound
-    from .definition import parameter_substitution
     carrier, why = find_carrier(model, d)
     if carrier is None:
         return None, why
-    subs = parameter_substitution(model, params)
     c = sp.sympify(carrier).subs(subs)
     others = sorted(c.free_symbols - {d}, key=str)
     stray = [s for s in others if s not in _variables(model)]
@@ -221,7 +221,7 @@ def offer(model, d) -> str:
             f"'Unknown inputs inside a nonlinearity')")
 
 
-def apply(model, params, table: dict, source: str) -> tuple:
+def apply(model, params, subs: dict, table: dict, source: str) -> tuple:
     """(model with every named unknown input replaced by its carrier's value, [Substitution]).
 
     Raises
@@ -241,7 +241,7 @@ def apply(model, params, table: dict, source: str) -> tuple:
                                f"({', '.join(uis) or 'none'})", suggest(key, list(uis)))
         if not isinstance(name, str) or not name.isidentifier() or name in taken:
             raise config_error(source, "substitute", key, name, "a new identifier, not a name the model uses")
-        sub, why = analyse(out, params, uis[key], name)
+        sub, why = analyse(out, params, subs, uis[key], name)
         if sub is None:
             raise NotAffineError(f"{source}: [substitute] {key}: {why}")
         rows = sp.Matrix(out.dynamics).xreplace({sub.carrier: sub.symbol})

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from ..errors import ConfigurationError, ModelDefinitionError, UnknownObserverError
 from ..model import ModelDefinition
-from . import columns
+from . import columns, precision
 from .settings import Rule, config_error, parse_table, suggest
 from python_bindings.workspace import PACKAGE_ROOT, Workspace
 
@@ -41,6 +41,7 @@ COMMON_KEYS = {
     "sample_time": Rule(float, gt=0, required=True, doc="s"),
     "design": Rule(dict),
     "data": Rule(dict, doc="the column map of a logged run (uiogen validate --data; codegen.project.columns)"),
+    "precision": Rule(dict, doc="the float32 build's tolerances (codegen.project.precision)"),
     "substitute": Rule(dict, doc="{UNKNOWN_INPUT = \"NEW_NAME\"}: design for the value of the one expression an "
                                  "unknown input enters through (codegen.model.substitution)"),
 }
@@ -67,6 +68,9 @@ class ObserverConfig:
     # [data]: how a logged run's columns map onto the observer's inputs. Not part of to_json (so
     # not of the design hash): editing the map of a log never re-solves the design.
     column_map: object = None
+    # [precision]: the float32 build's tolerances (codegen.project.precision); not part of the
+    # design either.
+    precision: object = None
     # [substitute]: unknown inputs designed for through the value of their carrier expression
     substitute: dict = field(default_factory=dict)
 
@@ -145,8 +149,10 @@ class ObserverConfig:
         if not self.substitute:
             return model, []
         from ..model import load_parameters
+        from ..model.definition import parameter_substitution
         from ..model.substitution import apply
-        return apply(model, load_parameters(self.parameter_path), self.substitute, self.source)
+        params = load_parameters(self.parameter_path)
+        return apply(model, params, parameter_substitution(model, params), self.substitute, self.source)
 
     @property
     def parameter_path(self) -> Path:
@@ -320,6 +326,7 @@ def _parse(path: Path, overrides: dict | None = None, project: str | Path | None
                             dict(data.get("switching", {})),
                             str(Workspace.for_observer_file(path, project, builtin).root),
                             columns.parse(data["data"], source) if "data" in data else None,
+                            precision.parse(data.get("precision"), source),
                             dict(data.get("substitute", {})))
     family.check_config(config, data)
     return config

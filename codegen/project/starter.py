@@ -5,7 +5,7 @@ model and parameter file copied beside it and wired to them by path: ``DIR/model
 ``DIR/parameters.toml``, ``DIR/NAME.toml``. The example's parameter file declares the ranges the
 generic excitation scenario needs (``[inputs.NAME]``), so a starter designs, generates, builds and
 validates (``uiogen validate DIR/NAME.toml --scenario excitation``) before the user edits a line;
-``tests/test_families_and_verbs.py`` holds that, and every other verb, for every family.
+``tests/product/test_families_and_verbs.py`` holds that, and every other verb, for every family.
 
 The observer's name is the file's stem. It must not be a built-in observer's: a command given a
 name resolves built-ins first, so ``uiogen generate NAME`` would regenerate the built-in, and both

@@ -48,7 +48,7 @@ defaults are the standard Levant gains.  Why this scheme and not another:
   and becomes dead-beat as sigma -> 0.  Noise free, on polynomials of degree <= k, the errors
   contract faster than any exponential and sit at the round-off floor after finitely many samples
   (exactly dead-beat once every exp(tau rho nu_j) underflows); with bounded noise the errors
-  follow the accuracy asymptotics above.  ``tests/test_differentiators.py`` checks both (the noise
+  follow the accuracy asymptotics above.  ``tests/representation/test_differentiators.py`` checks both (the noise
   exponents are fitted, not assumed).
 
 The estimate convention: the state z_j (before the update with f_j) estimates

@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import io
 import platform
+import re
 import tempfile
 import uuid
 import zipfile
@@ -28,13 +29,16 @@ from ..emit.header import unit_of
 from ..emit.toolchain import STRICT_CFLAGS, compile_and_link, render_template
 
 FMI2_HEADERS = Path(__file__).resolve().parent / "fmi2"
+FMI3_HEADERS = Path(__file__).resolve().parent / "fmi3"
+FORMATS = {"fmu": "2.0", "fmu3": "3.0"}
 # Fixed entry time of every file in the archive: the same sources give the same zip entries.
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 
 
 def variables(b) -> list:
     """The FMI variables: (name, value reference, causality, type, unit, description)."""
-    _, inputs, outputs = b.signal_docs()
+    from ..emit.generate import signal_fields
+    _, inputs, outputs = signal_fields(b, b.step_function())      # every signal documented, as in the C header
     rows = [(s["name"], k, "input", "Real", unit_of(s["doc"]), s["doc"]) for k, s in enumerate(inputs)]
     rows += [(s["name"], len(inputs) + k, "output", "Real", unit_of(s["doc"]), s["doc"])
              for k, s in enumerate(outputs)]
@@ -98,8 +102,13 @@ def _zip(out: Path, files: dict) -> None:
     outputs.write_atomic(out, buf.getvalue())
 
 
-def export_fmu(observer, out, log=print) -> Path:
-    """Write the FMU of ``observer`` (a built-in name, an observer file or a config) to ``out``."""
+def export_fmu(observer, out, log=print, fmi_version: str = "2.0") -> Path:
+    """Write the FMU of ``observer`` (a built-in name, an observer file or a config) to ``out``:
+    FMI 2.0 co-simulation, or FMI 3.0 with ``fmi_version="3.0"`` (:func:`export_fmu3`)."""
+    if fmi_version == "3.0":
+        return export_fmu3(observer, out, log)
+    if fmi_version != "2.0":
+        raise UnsupportedError(f"FMI version {fmi_version!r}: uiogen exports 2.0 and 3.0 co-simulation FMUs")
     from ..extension.build import check_generated, generated_dir, require_current
     config = observer if isinstance(observer, observers.ObserverConfig) else observers.get(str(observer))
     out = Path(out)
@@ -165,3 +174,147 @@ def run_fmu(path, inputs, input_names, output_names):
         raise UnsupportedError(f"FMPy recorded {len(res)} rows for {n} communication steps")
     out = np.column_stack([res[c][1:] for c in output_names])
     return out, np.asarray(res["status"][1:], dtype=np.int32)
+
+
+# ---- FMI 3.0 ---------------------------------------------------------------------------------------
+
+FMI3_PLATFORM = "x86_64-linux"
+# the functions fmu3.c.j2 implements; every other function of fmi3Functions.h gets a stub (fmi3Error)
+FMI3_IMPLEMENTED = {"fmi3GetVersion", "fmi3SetDebugLogging", "fmi3InstantiateCoSimulation", "fmi3FreeInstance",
+                    "fmi3EnterInitializationMode", "fmi3ExitInitializationMode", "fmi3EnterStepMode",
+                    "fmi3Terminate", "fmi3Reset", "fmi3GetFloat64", "fmi3SetFloat64", "fmi3GetInt32", "fmi3DoStep"}
+
+
+def _fmi3_signatures() -> dict:
+    """{function: (return type, [(declaration, parameter name)])} of every function fmi3Functions.h
+    exports, from the typedefs of fmi3FunctionTypes.h."""
+    types = (FMI3_HEADERS / "fmi3FunctionTypes.h").read_text()
+    exported = re.findall(r"FMI3_Export\s+fmi3(\w+)TYPE\s+fmi3\1\s*;", (FMI3_HEADERS / "fmi3Functions.h").read_text())
+    out = {}
+    for fn in exported:
+        m = re.search(rf"typedef\s+([\w\s*]+?)\s*\(?\s*fmi3{fn}TYPE\s*\)?\s*\(([^;]*?)\)\s*;", types, re.S)
+        if m is None:
+            raise UnsupportedError(f"fmi3FunctionTypes.h: no typedef of fmi3{fn}TYPE")
+        params = []
+        for decl in (p.strip() for p in m.group(2).split(",")):
+            if decl in ("", "void"):
+                continue
+            name = re.search(r"(\w+)\s*(\[\s*\])?$", decl).group(1)
+            params.append((decl, name))
+        out[f"fmi3{fn}"] = (" ".join(m.group(1).split()), params)
+    return out
+
+
+def fmi3_stubs() -> str:
+    """C of every fmi3Functions.h function the wrapper does not implement: fmi3Error (NULL for an
+    instantiation), the instance's logger told which function was called."""
+    blocks = []
+    for fn, (ret, params) in sorted(_fmi3_signatures().items()):
+        if fn in FMI3_IMPLEMENTED:
+            continue
+        # "instance" is a parameter name of the standard and the wrapper's type name: renamed
+        decls = [re.sub(r"\binstance\b", "inst", d) for d, _ in params] or ["void"]
+        names = ["inst" if n == "instance" else n for _, n in params]
+        body = [f"    (void){n};" for n in names if n != "inst"]
+        if ret == "fmi3Status":
+            body.append(f'    return unsupported({"inst" if "inst" in names else "NULL"}, "{fn}: not offered by this FMU");')
+        elif ret == "fmi3Instance":
+            body.append("    return NULL;")
+        else:
+            raise UnsupportedError(f"fmi3Functions.h: {fn} returns {ret}, which the stub generator does not know")
+        if "inst" in names and ret != "fmi3Status":
+            body.insert(0, "    (void)inst;")
+        blocks.append(f"{ret} {fn}({', '.join(decls)})\n{{\n" + "\n".join(body) + "\n}")
+    return "\n\n".join(blocks)
+
+
+def model_description3(b, token: str) -> str:
+    """modelDescription.xml of the FMI 3.0 FMU: time (value reference 0), the inputs, the outputs
+    and the Int32 status, with the units and descriptions of the C API."""
+    rows = variables(b)
+    units = sorted({r[4] for r in rows if r[4]})
+    out = ['<?xml version="1.0" encoding="UTF-8"?>',
+           f'<fmiModelDescription fmiVersion="3.0" modelName={quoteattr(b.name)} instantiationToken="{token}"',
+           f'  description={quoteattr(b.config.doc)}',
+           f'  generationTool="uiogen {UIOGEN_VERSION}" variableNamingConvention="flat">',
+           f'  <CoSimulation modelIdentifier={quoteattr(b.name)} canHandleVariableCommunicationStepSize="false"',
+           '    canGetAndSetFMUState="false" canSerializeFMUState="false" providesDirectionalDerivatives="false"',
+           '    providesAdjointDerivatives="false" providesIntermediateUpdate="false" canReturnEarlyAfterIntermediateUpdate="false"',
+           '    hasEventMode="false" fixedInternalStepSize=' + f'"{b.config.sample_time!r}"/>']
+    if units:
+        out.append('  <UnitDefinitions>')
+        out += [f'    <Unit name={quoteattr(u)}/>' for u in units]
+        out.append('  </UnitDefinitions>')
+    out.append(f'  <DefaultExperiment startTime="0.0" stepSize="{b.config.sample_time!r}"/>')
+    out.append('  <ModelVariables>')
+    out.append('    <Float64 name="time" valueReference="0" causality="independent" variability="continuous" '
+               'description="simulation time"/>')
+    for name, vr, causality, typ, unit, doc in rows:
+        unit_attr = f" unit={quoteattr(unit)}" if unit else ""
+        kind = "Float64" if typ == "Real" else "Int32"
+        start = "0.0" if typ == "Real" else "0"
+        extra = ' initial="exact"' if causality == "output" else ""
+        out.append(f'    <{kind} name={quoteattr(name)} valueReference="{vr + 1}" description={quoteattr(doc)} '
+                   f'causality="{causality}" variability="discrete"{extra}{unit_attr} start="{start}"/>')
+    out.append('  </ModelVariables>')
+    out.append('  <ModelStructure>')
+    out += [f'    <Output valueReference="{r[1] + 1}"/>' for r in rows if r[2] == "output"]
+    out += ['  </ModelStructure>', '</fmiModelDescription>', '']
+    return "\n".join(out)
+
+
+def build_description3(name: str, c_sources: list) -> str:
+    """sources/buildDescription.xml: how to compile the FMU from its sources (FMI 3.0)."""
+    files = "\n".join(f'      <SourceFile name={quoteattr(f)}/>' for f in c_sources)
+    return ('<?xml version="1.0" encoding="UTF-8"?>\n<fmiBuildDescription fmiVersion="3.0">\n'
+            f'  <BuildConfiguration modelIdentifier={quoteattr(name)}>\n    <SourceFileSet language="C99">\n'
+            f'{files}\n    </SourceFileSet>\n  </BuildConfiguration>\n</fmiBuildDescription>\n')
+
+
+def export_fmu3(observer, out, log=print) -> Path:
+    """Write the FMI 3.0 co-simulation FMU of ``observer`` to ``out`` (``uiogen export --format
+    fmu3``): ``modelDescription.xml``, ``sources/`` (the generated C, the wrapper rendered from
+    ``fmu3.c.j2``, the FMI 3.0 headers and ``buildDescription.xml``) and
+    ``binaries/x86_64-linux/NAME.so``, compiled with the strict flags like the FMI 2.0 FMU."""
+    from ..extension.build import check_generated, generated_dir, require_current
+    config = observer if isinstance(observer, observers.ObserverConfig) else observers.get(str(observer))
+    out = Path(out)
+    if out.suffix != ".fmu":
+        raise ConfigurationError(f"uiogen export --format fmu3: --out must name a .fmu file, got {out}")
+    if platform.system() != "Linux" or platform.machine() not in ("x86_64", "AMD64"):
+        raise UnsupportedError(f"the FMU carries an x86_64-linux binary built by the host compiler; this host is "
+                               f"{platform.system()} {platform.machine()}")
+    name = config.name
+    src_dir = generated_dir(config)
+    c_files = [f"{name}_kernel.c", f"{name}.c", f"{name}_kernel.h", f"{name}.h"]
+    missing = [f for f in c_files if not (src_dir / f).is_file()]
+    if missing:
+        raise UnknownObserverError(f"observer {name!r} has not been generated (no {src_dir / missing[0]}); "
+                                   f"run `uiogen generate {name if config.builtin else config.source}`")
+    require_current(config)        # the committed design is the current one,
+    check_generated(config)        # and the C is what generate wrote from it (its stamp), never as found
+    b = pipeline.build(config)
+    sources = {f: (src_dir / f).read_text() for f in c_files}
+    digest = hashlib.sha256(("fmi3" + "".join(f + sources[f] for f in c_files)).encode())
+    token = "{" + str(uuid.UUID(hex=digest.hexdigest()[:32])) + "}"
+    sources[f"{name}_fmu3.c"] = render_template("fmu3.c.j2", name=name, NAME=name.upper(), ts=repr(config.sample_time),
+                                                guid=token, stubs=fmi3_stubs())
+    for h in sorted(FMI3_HEADERS.glob("fmi3*.h")):
+        sources[h.name] = h.read_text()
+    c_sources = [f"{name}_kernel.c", f"{name}.c", f"{name}_fmu3.c"]
+    sources["buildDescription.xml"] = build_description3(name, c_sources)
+    md = model_description3(b, token)
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for f, text in sources.items():
+            (tmp / f).write_text(text)
+        (tmp / "bin").mkdir()
+        so = compile_and_link([tmp / f for f in c_sources], tmp / "bin" / f"{name}.so", include=[tmp],
+                              flags=STRICT_CFLAGS, shared=True, object_dir=tmp / "obj")
+        files = {"modelDescription.xml": md.encode(), f"binaries/{FMI3_PLATFORM}/{name}.so": so.read_bytes(),
+                 **{f"sources/{f}": text.encode() for f, text in sources.items()}}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    _zip(out, files)
+    log(f"{name}: wrote {out} (FMI 3.0 co-simulation, {len(variables(b)) + 1} variables, step "
+        f"{config.sample_time:g} s, binaries/{FMI3_PLATFORM}/{name}.so and sources/)")
+    return out

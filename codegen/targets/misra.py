@@ -39,8 +39,10 @@ def cppcheck() -> str:
 
 def api_use(name: str, header: str) -> str:
     """A translation unit that calls every function of the API and uses its macros."""
-    macros = re.findall(rf"^#define ({name.upper()}_\w+)", header, flags=re.M)
-    uses = "\n".join(f"    sink += (double)({m});" for m in macros)
+    macros = [m for m in re.findall(rf"^#define ({name.upper()}_\w+)", header, flags=re.M)
+              if m != f"{name.upper()}_DESIGN_HASH"]
+    bits = re.findall(rf"^    ({name.upper()}_\w+) = \d+,?$", header, flags=re.M)
+    uses = "\n".join([f"    sink += (double)({m});" for m in macros] + [f"    bit = {b};" for b in bits])
     return f"""#include <stddef.h>
 #include "{name}.h"
 
@@ -54,15 +56,19 @@ int main(void)
     static double state[{name.upper()}_N_STATE];
     static double input[{name.upper()}_N_INPUT];
     static double output[{name.upper()}_N_OUTPUT];
-    static int status[1];
+    static {name}_status status[1];
+    const char *hash = {name.upper()}_DESIGN_HASH;
+    {name}_status_bit bit = {name.upper()}_OK;
     double sink = 0.0;
-    int flags;
+    {name}_status flags;
     {name}_init(&s);
     flags = {name}_step(&s, &in, &out);
     flags += {name}_step_flat(state, input, output);
     {name}_run_flat(state, input, 1u, output, status);
     flags += status[0] + {name}_check_work();
 {uses}
+    flags += (hash[0] == '\\0') ? 1 : 0;
+    flags += (bit == {name.upper()}_OK) ? 1 : 0;
     return (sink > 0.0) ? flags : 0;
 }}
 """

@@ -34,28 +34,14 @@ import numpy as np
 
 from ..errors import InaccurateSolveError
 
+from ..certificate import text
 from ..design import lock as design_lock
 from ..representation import differentiators
 from .. import families, pipeline
+from ..families.capabilities import BenchFigures, BenchStudy
 from . import harness
+from .flops import ARITHMETIC_OPS, flop_count  # noqa: F401  (the floor of every figure here)
 from ..project import observer_file as observers
-
-ARITHMETIC_OPS = ("OP_ADD", "OP_SUB", "OP_MUL", "OP_DIV", "OP_NEG", "OP_SQ", "OP_SQRT", "OP_FMIN",
-                  "OP_FMAX", "OP_FABS", "OP_EXP", "OP_LOG", "OP_POW", "OP_CONSTPOW", "OP_INV",
-                  "OP_TWICE", "OP_FMOD", "OP_ATAN2", "OP_SIN", "OP_COS", "OP_TAN")
-
-
-def flop_count(f: ca.Function) -> dict:
-    """Floating-point operations of a CasADi SX Function, by kind."""
-    codes = {getattr(ca, n): n for n in ARITHMETIC_OPS if hasattr(ca, n)}
-    counts: dict = {}
-    for k in range(f.n_instructions()):
-        name = codes.get(f.instruction_id(k))
-        if name:
-            counts[name] = counts.get(name, 0) + 1
-    counts["total"] = sum(counts.values())
-    return counts
-
 
 def callgrind_instructions_per_step(name: str, n1: int = 2000, n2: int = 12000) -> float | None:
     """Instructions per step: (Ir(n2 steps) - Ir(n1 steps)) / (n2 - n1), start-up cancels."""
@@ -131,6 +117,8 @@ def bench_design(b) -> dict:
     # single-problem builds (nonlinear_tyre_observer) on the build itself
     settings = b.design.settings if hasattr(b, "design") else b.settings
     builder = b.lmi_problem
+    if builder() is None:
+        return {"status": "the family gives no LMI problem to compare (ObserverBuild.lmi_problem)"}
     out = {}
     for key, reduce in (("ours_clarabel", False), ("ours_clarabel_reduced", True)):
         ours = []
@@ -167,7 +155,7 @@ def bench_observer(name: str) -> dict:
     """Step cost (Python call, batch loop, instructions, flops) and design time of any observer.
 
     The sample is mid-box for the inputs that schedule the step (design lock), small elsewhere,
-    unless the family gives a realistic input sequence (``Family.bench_inputs``, e.g. a periodic
+    unless the family gives a realistic input sequence (``BenchFigures.bench_inputs``, e.g. a periodic
     scenario for steps with differentiators); the state is the one after 50 such samples."""
     from ..extension.build import load
     config = observers.get(name)
@@ -178,7 +166,7 @@ def bench_observer(name: str) -> dict:
     art = json.loads(design_lock.path(config).read_text())
     boxes = {obs.input_names.index(k): v for k, v in art["signals"]["input_boxes"].items()}
     n = 200000
-    sequence = family.bench_inputs(b)
+    sequence = family.bench_inputs(b) if isinstance(family, BenchFigures) else None
     if sequence is None:
         rng = np.random.default_rng(0)
         inp = rng.standard_normal(obs.n_input) * 0.01
@@ -228,7 +216,7 @@ def bench_observer(name: str) -> dict:
         "instructions_per_step": instr,
         "instructions_per_flop": (instr / flops["total"]) if instr else None,
         "design": bench_design(b),
-        "family_figures": family.bench_figures(b),
+        "family_figures": family.bench_figures(b) if isinstance(family, BenchFigures) else {},
     }
 
 
@@ -400,10 +388,21 @@ def bench_cortexm() -> dict:
     rodata size of the step, worst-case stack along its call chain; skipped (``available``
     false, with the reason) where arm-none-eabi-gcc is not installed."""
     from ..targets import cortexm
+    from . import m4cycles
     if not cortexm.available():
         return {"available": False, "reason": f"{cortexm.CC} is not installed (scripts/install_embedded_tools.sh)",
-                "flags": " ".join(cortexm.FLAGS), "rows": []}
-    return {"available": True, "reason": None, "flags": " ".join(cortexm.FLAGS), "rows": cortexm.table()}
+                "flags": " ".join(cortexm.FLAGS), "rows": [], "cycles": {"available": False, "rows": []}}
+    cycles = ({"available": True, "method": m4cycles.METHOD, "flags": " ".join(m4cycles.OPTIMIZE),
+               "rows": m4cycles.table()} if m4cycles.available() else
+              {"available": False, "reason": f"{qemu_missing()} not installed (scripts/install_embedded_tools.sh)",
+               "rows": []})
+    return {"available": True, "reason": None, "flags": " ".join(cortexm.FLAGS), "rows": cortexm.table(),
+            "cycles": cycles}
+
+
+def qemu_missing() -> str:
+    from . import m4cycles, qemu
+    return qemu.missing() or m4cycles.OBJDUMP
 
 
 def cortexm_lines(c: dict) -> list:
@@ -413,6 +412,12 @@ def cortexm_lines(c: dict) -> list:
     for r in c["rows"]:
         lines.append(f"{r['observer']:32s} {r['precision']:9s} {r['code_bytes']:9d} {r['rodata_bytes']:10d} "
                      f"{r['stack_bytes']:9d}" + (f"  unbounded: {', '.join(r['unbounded'])}" if r["unbounded"] else ""))
+    cycles = c.get("cycles", {"available": False, "reason": "not measured", "rows": []})
+    if not cycles["available"]:
+        return lines + [f"cycles per step: skipped: {cycles['reason']}"]
+    from . import m4cycles
+    lines += [f"cycles per step ({cycles['method']}; {cycles['flags']}):", m4cycles.HEADER]
+    lines += [m4cycles.format_row(r) for r in cycles["rows"]]
     return lines
 
 
@@ -457,7 +462,8 @@ def main(json_output: bool = False) -> int:
     res = {"observers": {name: bench_observer(name) for name in observers.names()},
            "runtime": bench_runtime(),
            "toolchain": bench_toolchain(), "hosmd": bench_hosmd(), "cortex_m": bench_cortexm()}
-    res["families"] = {name: rows for name in families.names() if (rows := families.get(name).bench_family())}
+    res["families"] = {name: rows for name in families.names()
+                       if isinstance(families.get(name), BenchStudy) and (rows := families.get(name).bench_family())}
     if json_output:
         print(json.dumps(res, indent=1, sort_keys=True))
         return 0
@@ -500,7 +506,7 @@ def main(json_output: bool = False) -> int:
                   f"{p['objective']:.6g}"
                   + ("" if diff is None else f" (objective differs by {100 * diff:.2f} %; vs reduced "
                                              f"{100 * p['objective_rel_diff_reduced']:.2f} %)"))
-        for line in families.get(observers.get(name).family).bench_lines(r["family_figures"]):
+        for line in text.bench_lines(r["family_figures"]):
             print("   " + line)
     r = res["runtime"]
     print(f"== runtime: import + load + first step {r['import_load_first_step_ms']:.1f} ms in a fresh interpreter "
@@ -509,11 +515,11 @@ def main(json_output: bool = False) -> int:
     t = res["toolchain"]
     print(f"== toolchain: uiogen generate cold {t['generate_cold_s']:.2f} s, unchanged {t['generate_unchanged_s']:.2f} s")
     _print_hosmd(res["hosmd"])
-    print("== Cortex-M4F (arm-none-eabi-gcc -Os, hard float; step only: libgcc/libm not counted)")
+    print("== Cortex-M4F (arm-none-eabi-gcc, hard float; size: -Os, the step only, libgcc/libm not counted)")
     for line in cortexm_lines(res["cortex_m"]):
         print("   " + line)
     for name, rows in res["families"].items():
         print(f"== {name}")
-        for line in families.get(name).bench_family_lines(rows):
+        for line in text.bench_study_lines(families.get(name), rows)[1:]:
             print("   " + line)
     return 0

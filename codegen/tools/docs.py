@@ -78,21 +78,27 @@ def design_table(demo: dict, family: str) -> str:
     return "\n".join(out)
 
 
+def _stats_row(label: str, s: dict) -> list:
+    """A row of the one definition of every validation (codegen.validation.metrics.signal_report)."""
+    unit = (s.get("unit") or "–") + (f" (from {s['converted_from']})" if s.get("converted_from") else "")
+    return [label, unit, s.get("rms"), s.get("truth_rms"), s.get("rms_percent"), s.get("max"), s.get("mae"),
+            s.get("nmse_percent")]
+
+
 def validation_table(demo: dict, family: str) -> str:
     out = []
     for name, e in sorted(demo.items()):
         if not isinstance(e, dict) or e.get("family") != family:
             continue
         for scen, r in e["scenarios"].items():
-            rows = []
-            for sig, s in r["observer"].items():
-                rows.append([f"{sig}", s.get("rms"), s.get("max"), s.get("mae"), s.get("nmse_percent")])
+            rows = [_stats_row(sig, s) for sig, s in r["observer"].items()]
             for base, sigs in r.get("baselines", {}).items():
-                for sig, s in sigs.items():
-                    rows.append([f"{sig} ({base})", s.get("rms"), s.get("max"), s.get("mae"), s.get("nmse_percent")])
+                rows += [_stats_row(f"{sig} ({base})", s) for sig, s in sigs.items()]
+            after = {s.get("after_s") for s in r["observer"].values()}
+            window = f"after the first {after.pop():g} s; " if len(after) == 1 and None not in after else ""
             out.append(f"`{name}`, scenario `{scen}` on the {r.get('plant_model', r['plant'])} plant "
-                       f"({r['samples']} samples, {r['status_flags']} flagged; angles in degrees)\n\n"
-                       + _table(["signal", "RMS", "max", "MAE", "NMSE %"], rows))
+                       f"({r['samples']} samples, {r['status_flags']} flagged; {window}every figure in its row's unit)\n\n"
+                       + _table(["signal", "unit", "RMS", "truth RMS", "RMS % of truth", "max", "MAE", "NMSE %"], rows))
     return "\n".join(out) or "(no demo scenario)\n"
 
 
@@ -106,9 +112,9 @@ def real_data_table(demo: dict) -> str:
     entries += [(name, f"`{name}`", t) for name, t in sorted(real.get("other_observers", {}).items())]
     entries += [(name, name, t) for name, t in sorted(real.get("other_baselines", {}).items())]
     rows = [[label, parts.get(key, {}).get("evaluation"), parts.get(key, {}).get("identification"), t["beta"]["rms"],
-             t["beta"]["max"], t["beta"]["mae"]] for key, label, t in entries]
-    return _table(["estimator", "β RMSE evaluation part [deg]", "identification part", "whole half", "β max [deg]",
-                   "β MAE [deg]"], rows)
+             t["beta"].get("rms_percent"), t["beta"]["max"], t["beta"]["mae"]] for key, label, t in entries]
+    return _table(["estimator", "β RMSE evaluation part [deg]", "identification part", "whole half",
+                   "whole half, % of β's RMS", "β max [deg]", "β MAE [deg]"], rows)
 
 
 def bench_table(bench: dict) -> str:

@@ -125,6 +125,17 @@ int main(void)
     {prefix_lc}_init(&s);
     memcpy(state, &s, sizeof state);
     put("BEGIN\\n");
+#ifdef UIOGEN_COUNT_STEPS
+    /* instruction counting (codegen/tools/m4cycles.py): the steps alone, nothing printed; the
+     * inputs are read in place (the bit patterns are the inputs' own representation) */
+    for (k = 0u; k < (size_t)UIOGEN_COUNT_STEPS; ++k) {{
+        (void){prefix_lc}_step_flat(state, (const {real} *)(const void *)&inputs[k * N_IN], out);
+    }}
+    (void)line;
+    (void)j;
+    put("END\\n");
+    return 0;
+#endif
     for (k = 0u; k < N_SAMPLES; ++k) {{
         char *q = line;
         int status;
@@ -177,8 +188,11 @@ def record_inputs(name: str, scenario: str | None = None, samples: int = SAMPLES
     raise last
 
 
-def build_elf(name: str, src_dir: Path, inputs: np.ndarray, out_dir: Path, precision: str = "double") -> Path:
-    """Cross-compile the harness + the observer's step (``src_dir``) into ``out_dir/NAME.elf``."""
+def build_elf(name: str, src_dir: Path, inputs: np.ndarray, out_dir: Path, precision: str = "double",
+              defines=(), optimize=("-Os",)) -> Path:
+    """Cross-compile the harness + the observer's step (``src_dir``) into ``out_dir/NAME.elf``
+    (``defines``: extra ``-D`` flags of the harness, e.g. ``UIOGEN_COUNT_STEPS=N``; ``optimize``:
+    the optimization flags, given to the compiler and the linker, e.g. ``("-O2", "-flto")``)."""
     if not available():
         raise UnsupportedError(f"{missing()} not installed: run scripts/install_embedded_tools.sh")
     f32 = precision == "float32"
@@ -192,14 +206,15 @@ def build_elf(name: str, src_dir: Path, inputs: np.ndarray, out_dir: Path, preci
                                       bits=bits, real=real, data=data))
     ld = out_dir / "mps2_an386.ld"
     ld.write_text(LINKER_SCRIPT)
-    flags = [f for f in cortexm.FLAGS if f != "-fstack-usage"]
+    flags = [f for f in cortexm.FLAGS if f not in ("-fstack-usage", "-Os")] + list(optimize)
     objs = []
     for src in (src_dir / f"{stem}_kernel.c", src_dir / f"{stem}.c", harness):
         obj = out_dir / (src.stem + ".o")
-        run([cortexm.CC, *flags, "-I", src_dir, "-c", src, "-o", obj], cwd=out_dir)
+        own = [f"-D{d}" for d in defines] if src == harness else []
+        run([cortexm.CC, *flags, *own, "-I", src_dir, "-c", src, "-o", obj], cwd=out_dir)
         objs.append(obj)
     elf = out_dir / f"{stem}.elf"
-    run([cortexm.CC, *cortexm.CPU_FLAGS, "-nostartfiles", "-T", ld, "-Wl,--gc-sections", *objs,
+    run([cortexm.CC, *cortexm.CPU_FLAGS, *optimize, "-nostartfiles", "-T", ld, "-Wl,--gc-sections", *objs,
          "-lm", "-lc", "-lgcc", "-o", elf], cwd=out_dir)
     return elf
 

@@ -25,6 +25,7 @@ from .. import families
 from ..design import lmi
 from ..project import observer_file as observers
 from ..design.lock import variable_spread
+from ..design.solver import FreshSolver
 from ..design.sources import ROOT
 
 
@@ -42,20 +43,25 @@ def under_cpu(name: str, cpu: str) -> list:
              "worst_variable": r["worst_variable"]} for r in rows]
 
 
-def under_perturbation(name: str, relative: float = 1e-13, seed: int = 7) -> list:
-    captured = []
-    solve = lmi.LMIProblem.solve
+class _Capturing(FreshSolver):
+    """A fresh solve that also keeps each design problem and its tolerance."""
 
-    def capture(self, *args, **kwargs):
-        if self.design:
-            captured.append((self, kwargs.get("tol", args[0] if args else 1e-9)))
-        return solve(self, *args, **kwargs)
-    lmi.LMIProblem.solve = capture
-    try:
-        config = observers.get(name)
-        families.get(config.family).build(config)
-    finally:
-        lmi.LMIProblem.solve = solve
+    def __init__(self):
+        super().__init__()
+        self.problems = []
+
+    def solve(self, problem, **options):
+        if problem.design:
+            self.problems.append((problem, options.get("tol", 1e-9)))
+        return super().solve(problem, **options)
+
+
+def under_perturbation(name: str, relative: float = 1e-13, seed: int = 7) -> list:
+    config = observers.get(name)
+    capturing = _Capturing()
+    families.get(config.family).build(config, capturing)
+    captured = capturing.problems
+    solve = lmi.LMIProblem.solve
     compile_ = lmi.LMIProblem._compile
 
     def perturbed(self):

@@ -19,7 +19,7 @@ user would, through :func:`codegen.cli.main` with the arguments a shell would pa
 A cell passes when the command exits 0 (for ``--float32`` also: exits 2 with a CertificateError
 that states the margin) and prints no traceback. ``python -m codegen.tools.verbs [--only F ...]
 [--out FILE]`` prints the table, or writes the record ``docs/data/families_and_verbs.json`` that
-``uiogen docs`` renders into ``docs/families_and_verbs.md``; ``tests/test_families_and_verbs.py``
+``uiogen docs`` renders into ``docs/families_and_verbs.md``; ``tests/product/test_families_and_verbs.py``
 runs every cell and writes it.
 """
 from __future__ import annotations
@@ -196,7 +196,7 @@ def _shown(cell: dict) -> str:
 def record(rows: dict) -> dict:
     """The record ``uiogen docs`` renders: the table, and every cell's outcome and note."""
     return {"command": "python -m codegen.tools.verbs --out docs/data/families_and_verbs.json "
-                       "(tests/test_families_and_verbs.py)",
+                       "(tests/product/test_families_and_verbs.py)",
             "verbs": list(VERBS),
             "cells": {f: {v: {"outcome": c["outcome"], "note": c["note"]} for v, c in row.items()}
                       for f, row in rows.items()},

@@ -1,6 +1,6 @@
-"""What every family's validation shares: the settle time, the error statistics in the papers'
-formats, scenarios at an observer's rate, the model module's truth plant and the CommonRoad
-vehicle an observer was designed for, and the sensor noise of the simulated measurements."""
+"""What every family's validation shares: the settle time, the error statistics (one definition
+for every family), scenarios at an observer's rate, the model module's truth plant and the
+CommonRoad vehicle an observer was designed for, and the sensor noise of the simulated measurements."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -15,18 +15,43 @@ SENSOR_NOISE = {"r": np.deg2rad(0.05), "delta": np.deg2rad(0.02), "delta_dot": n
 SETTLE_TIME = 2.0
 
 
-def signal_stats(truth, est, t=None, angle: bool = False) -> dict:
-    """Error statistics in the papers' formats (Nguyen et al. 2019 E_mean/E_max/Std/RMS, Nguyen et al. 2021 MAE,
-    Sentouh et al. 2023 eq. (32) RMSE% and NMSE%), after SETTLE_TIME when sample times ``t`` are given."""
+def signal_stats(truth, est, t=None, *, unit: str | None) -> dict:
+    """The error statistics of one signal, every family's one definition
+    (:func:`codegen.validation.metrics.signal_report`: figures in the declared ``unit``, a plane
+    angle in rad given in degrees and marked so, the truth's RMS and the error as a percentage of
+    it, NMSE % of Sentouh et al. 2023 eq. (32)), after SETTLE_TIME when sample times ``t`` are given
+    (``after_s``). The papers' own table formats are built from these rows (or beside them)."""
     mask = slice(None) if t is None else np.asarray(t) >= SETTLE_TIME
-    y, yh = np.asarray(truth)[mask], np.asarray(est)[mask]
-    s = metrics.error_stats(y, yh, degrees=angle)
-    try:
-        nmse = metrics.nmse_percent(y, yh)
-    except metrics.MetricInputError:   # constant reference: NMSE undefined
-        nmse = None
-    return {"mae": s.e_mean, "max": s.e_max, "std": s.std, "rms": s.rms,
-            "rmse_percent": metrics.rmse_percent(y, yh, degrees=angle), "nmse_percent": nmse}
+    row = metrics.signal_report(np.asarray(truth)[mask], np.asarray(est)[mask], unit=unit)
+    row["after_s"] = None if t is None else SETTLE_TIME
+    return row
+
+
+def _cell(v, width: int) -> str:
+    return f"{'–':>{width}s}" if v is None else f"{v:{width}.4g}"
+
+
+def format_stats(rows: dict, label: str = "signal") -> str:
+    """:func:`signal_stats` rows as text, one definition for every table: the unit each row's figures
+    are in (``deg*`` where converted from the declared rad), RMS, the truth's RMS and the error in %
+    of it, max and mean absolute error, NMSE %."""
+    lines = [f"{label:16s} {'unit':>7s} {'RMS':>10s} {'truth RMS':>10s} {'RMS %':>8s} {'max':>10s} {'MAE':>10s} "
+             f"{'NMSE %':>8s}"]
+    for sig, r in rows.items():
+        unit = (r.get("unit") or "–") + ("*" if r.get("converted_from") else "")
+        pct = "–" if r.get("rms_percent") is None else f"{r['rms_percent']:.3g}"
+        nmse = "–" if r.get("nmse_percent") is None else f"{r['nmse_percent']:.2f}"
+        lines.append(f"{sig:16s} {unit:>7s} {_cell(r.get('rms'), 10)} {_cell(r.get('truth_rms'), 10)} {pct:>8s} "
+                     f"{_cell(r.get('max'), 10)} {_cell(r.get('mae'), 10)} {nmse:>8s}")
+    after = {r.get("after_s") for r in rows.values()}
+    notes = []
+    if any(r.get("converted_from") for r in rows.values()):
+        notes.append("* converted from the declared rad")
+    if len(after) == 1 and None not in after:
+        notes.append(f"after the first {after.pop():g} s")
+    if notes:
+        lines.append("(" + "; ".join(notes) + "; RMS % = 100 RMS / truth RMS)")
+    return "\n".join(lines)
 
 
 def truncate(scn, duration: float | None):

@@ -1,17 +1,20 @@
 """``uiogen demo``: the README's main job, after design + generate + build.
 
-For every built-in observer: its design figures (from the design lock, ``Family.demo_report``),
-then the compiled C step on its family's demo scenarios (``Family.demo_scenarios``) against the
-plant its family names for it (an optional ``demo_plant(config)`` of the family, else the nominal
-one), beside the baselines, in the table format of its paper; then the real-data table
-(the shared Stanford log).
+For every built-in observer: its certificate and design figures (from the design lock: the typed
+certificate, and the family's ``DemoFigures``), then the compiled C step on its family's demo
+scenarios (``Scenarios.demo_scenarios``) against the plant its family names for it (``DemoPlant``,
+else the nominal one), beside the baselines, in the table format of its paper; then the real-data
+table (the shared Stanford log). Capabilities: :mod:`codegen.families.capabilities`.
 """
 from __future__ import annotations
 
 import json
 
+from ..certificate import text
+from ..certificate.certificate import Certificate, of_lock
 from ..design import lock as design_lock
 from .. import families
+from ..families.capabilities import DemoFigures, DemoPlant, Scenarios
 from ..project import observer_file as observers
 from . import run as validate
 
@@ -23,9 +26,9 @@ REAL_DATA_ONLY = ("ts_fuzzy_uio_stanford",)
 
 
 def run_all(names=None) -> dict:
-    """{observer: its demo entry}: the design figures from its lock (``Family.demo_report``) and
-    its runs on its family's demo scenarios (``"scenarios"``), for every built-in observer but the
-    real-data ones (or for ``names``)."""
+    """{observer: its demo entry}: the certificate (JSON) and design figures from its lock (the
+    family's ``DemoFigures``) and its runs on its family's demo scenarios (``"scenarios"``), for
+    every built-in observer but the real-data ones (or for ``names``)."""
     report = {}
     for name in [n for n in observers.names() if n not in (REAL_DATA_OBSERVER, *REAL_DATA_ONLY)]:
         if names is not None and name not in names:
@@ -33,10 +36,18 @@ def run_all(names=None) -> dict:
         config = observers.get(name)
         family = families.get(config.family)
         art = json.loads(design_lock.path(config).read_text())
-        plant = getattr(family, "demo_plant", lambda _config: "nominal")(config)
-        scen = {s: validate.run_scenario(config, s, plant) for s in family.demo_scenarios}
-        report[name] = {"family": config.family, **family.demo_report(art), "scenarios": scen}
+        certificate = of_lock(art, str(design_lock.path(config)))
+        plant = family.demo_plant(config) if isinstance(family, DemoPlant) else "nominal"
+        scenarios = family.demo_scenarios if isinstance(family, Scenarios) else ()
+        scen = {s: validate.run_scenario(config, s, plant) for s in scenarios}
+        figures = family.demo_report(art) if isinstance(family, DemoFigures) else {}
+        report[name] = {"family": config.family, **figures, "certificate": certificate.to_json(), "scenarios": scen}
     return report
+
+
+def entry_lines(entry: dict) -> list:
+    """The design part of an observer's demo entry as text (:func:`codegen.certificate.text.demo_lines`)."""
+    return text.demo_lines(families.get(entry["family"]), Certificate.from_json(entry["certificate"]))
 
 
 def main(json_output: bool = False, report_dir=None) -> int:
@@ -45,9 +56,14 @@ def main(json_output: bool = False, report_dir=None) -> int:
     report = run_all()
     real, others = run_real_data()
     if json_output:
-        print(json.dumps({"real_data": real_data_json(real, others), **{n: {**{k: v for k, v in e.items() if k != "scenarios"},
-                              "scenarios": {s: json.loads(validate.to_json(r)) for s, r in e["scenarios"].items()}}
-                          for n, e in report.items()}}, indent=1, sort_keys=True))
+        from .metrics import DEFINITIONS
+
+        def scenario_json(r):       # the metrics' definitions once, at the top
+            return {k: v for k, v in json.loads(validate.to_json(r)).items() if k != "definitions"}
+        print(json.dumps({"definitions": DEFINITIONS, "real_data": real_data_json(real, others),
+                          **{n: {**{k: v for k, v in e.items() if k != "scenarios"},
+                                 "scenarios": {s: scenario_json(r) for s, r in e["scenarios"].items()}}
+                             for n, e in report.items()}}, indent=1, sort_keys=True))
         return 0
     if report_dir is not None:
         from . import report as html_report
@@ -61,7 +77,7 @@ def main(json_output: bool = False, report_dir=None) -> int:
     validate.plot_data(real, str(plot))
     for name, e in report.items():
         print(f"== {name}")
-        for line in families.get(e["family"]).demo_lines(e):
+        for line in entry_lines(e):
             print("   " + line)
         for r in e["scenarios"].values():
             print("   " + validate.header(name, r))

@@ -15,7 +15,8 @@ inputs evaluated continuously between the samples, as a real car's are) with
 
 The compiled step runs over the sampled outputs (noise-free), and its estimates are compared
 with the simulated states and unknown inputs after the settle time; the result has the shape of
-every validation (``observer.SIGNAL.rms``, ``nmse_percent``).
+every validation (``observer.SIGNAL.rms``, ``unit``, ``truth_rms``, ``rms_percent``, ``nmse_percent``:
+:func:`codegen.validation.metrics.signal_report`).
 """
 from __future__ import annotations
 
@@ -183,8 +184,7 @@ def run(config, duration: float | None = None, seed: int = 0, progress=None, obs
         estimates[s] = est
         if s in truth:
             keep = slice(0, len(est) - lag)
-            table[s] = signal_stats(truth[s][keep], est[keep], truth["t"][keep],
-                                    angle=units.get(s, "").startswith("rad"))
+            table[s] = signal_stats(truth[s][keep], est[keep], truth["t"][keep], unit=units.get(s))
     return {"observer": table, "baselines": {}, "status_flags": int(np.count_nonzero(status)),
             "samples": int(len(status)), "max_abs_ay": float(np.abs(truth.get("a_y", np.zeros(1))).max()),
             "plant": "model", "plant_model": f"{model.name} (its own equations, excitation)",
@@ -193,10 +193,7 @@ def run(config, duration: float | None = None, seed: int = 0, progress=None, obs
 
 
 def format_table(result: dict) -> str:
-    """Every estimated signal: RMS, max and mean absolute error, NMSE % (eq. (32) of Sentouh et al.)."""
-    lines = [f"{'signal':16s} {'RMS':>11s} {'max':>11s} {'MAE':>11s} {'NMSE %':>8s}   (after {SETTLE_TIME:g} s; "
-             f"angles in degrees)"]
-    for sig, r in result["observer"].items():
-        nmse = "–" if r["nmse_percent"] is None else f"{r['nmse_percent']:.2f}"
-        lines.append(f"{sig:16s} {r['rms']:11.4g} {r['max']:11.4g} {r['mae']:11.4g} {nmse:>8s}")
-    return "\n".join(lines)
+    """Every estimated signal in the one definition of every validation
+    (:func:`codegen.validation.common.format_stats`)."""
+    from .common import format_stats
+    return format_stats(result["observer"])

@@ -579,7 +579,8 @@ class LogChecks:
         self.sample = []             # a few averaged rows of the log: the points the exponents are taken at
 
     def box_of(self, name: str):
-        """The model's (lo, hi) for an input: scheduling box, [state_bounds] or [inputs] range."""
+        """The model's (lo, hi) for an input: scheduling box, [state_bounds] (of the input or of the
+        state an output ``y_NAME`` measures), else the excitation's [inputs] range."""
         p = self.params
         if name in p.scheduling:
             b = p.scheduling[name]
@@ -588,6 +589,8 @@ class LogChecks:
         out = dict(self.model.outputs).get(base) if name.startswith("y_") else None
         if out is not None and str(out) in p.state_bounds:
             return tuple(p.state_bounds[str(out)])
+        if name in p.state_bounds:          # the set the design certifies, before the excitation's range
+            return tuple(p.state_bounds[name])
         if name in p.inputs:
             return p.inputs[name]["min"], p.inputs[name]["max"]
         return None

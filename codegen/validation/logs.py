@@ -22,7 +22,9 @@ parses the map with the observer file). The log is read in chunks by
 observer, no gaps) and every mapped column is checked against its unit's plausible range and the
 physics of the observer's model (:mod:`codegen.validation.log_checks`) before any estimate is
 reported. Estimates with a reference get the error statistics of every validation
-(``observer.SIGNAL.rms`` ...); the others a summary (``estimates.SIGNAL.mean`` ...); ``warnings``
+(``observer.SIGNAL.rms``, ``unit``, ``truth_rms``, ``rms_percent`` ...:
+:func:`codegen.validation.metrics.signal_report`); the others a summary in the same unit
+(``estimates.SIGNAL.mean``, ``unit`` ...); ``warnings``
 lists the checks that were ambiguous, ``log_checks`` every check and its verdict.
 """
 from __future__ import annotations
@@ -32,10 +34,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigurationError, DatasetError
-from ..project.columns import UNITS, factor, model_unit, normalize_unit
+from ..project.columns import UNITS, factor, model_unit
 from ..project.settings import config_error, suggest
 from . import csvlog, log_checks, streaming
-from .common import SETTLE_TIME
+from .common import SETTLE_TIME, format_stats
 
 
 def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
@@ -88,9 +90,9 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
         p, model, load_parameters(config.parameter_path), obs.input_names,
         {n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale) for n, c in cmap.inputs.items()},
         obs.sample_time)
-    angle = {n: normalize_unit(model_unit(model, n) or "") == "rad" for n in obs.output_names}
-    compared = {n: streaming.ErrorStats(angle[n], settle=SETTLE_TIME) for n in cmap.truth}
-    summary = {n: streaming.Summary(angle[n]) for n in obs.output_names if n not in cmap.truth}
+    declared = {n: model_unit(model, n) for n in obs.output_names}
+    compared = {n: streaming.ErrorStats(declared[n], settle=SETTLE_TIME) for n in cmap.truth}
+    summary = {n: streaming.Summary(declared[n]) for n in obs.output_names if n not in cmap.truth}
     kept = streaming.Decimated()
     state, flags, t0 = obs.initial_state(), 0, None
     for _, cols in reader.chunks():
@@ -123,13 +125,12 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
 def format_table(result: dict) -> str:
     lines = []
     if result["observer"]:
-        lines.append(f"{'signal':12s} {'RMS':>10s} {'max':>10s} {'MAE':>10s} {'NMSE %':>8s}   (angles in degrees)")
-        for name, s in result["observer"].items():
-            nmse = "-" if s.get("nmse_percent") is None else f"{s['nmse_percent']:.2f}"
-            lines.append(f"{name:12s} {s['rms']:10.4g} {s['max']:10.4g} {s['mae']:10.4g} {nmse:>8s}")
+        lines.append(format_stats(result["observer"]))
     if result["estimates"]:
-        lines.append(f"{'estimate':12s} {'mean':>10s} {'std':>10s} {'min':>10s} {'max':>10s}   (no reference column)")
+        lines.append(f"{'estimate':12s} {'unit':>7s} {'mean':>10s} {'std':>10s} {'min':>10s} {'max':>10s}   "
+                     f"(no reference column)")
         for name, s in result["estimates"].items():
-            lines.append(f"{name:12s} {s['mean']:10.4g} {s['std']:10.4g} {s['min']:10.4g} {s['max']:10.4g}")
+            unit = (s.get("unit") or "–") + ("*" if s.get("converted_from") else "")
+            lines.append(f"{name:12s} {unit:>7s} {s['mean']:10.4g} {s['std']:10.4g} {s['min']:10.4g} {s['max']:10.4g}")
     lines += [f"warning: {w}" for w in result.get("warnings", ())]
     return "\n".join(lines)

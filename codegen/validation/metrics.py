@@ -1,4 +1,28 @@
-"""Per-signal estimation-error metrics, exactly as the paper papers define them.
+"""Per-signal estimation-error metrics: one definition of each, and the papers' formats.
+
+**One definition** (:func:`signal_report`, the rows of every ``uiogen validate`` table and
+``--json`` report, every family): with ``e = estimate - truth`` over the samples compared,
+
+====================  ==========================================================================
+``unit``              the unit of every figure of the row: the model's declared unit, except a
+                      plane angle declared in ``rad``, reported in ``deg`` (``converted_from``
+                      then says ``"rad"``); angular rates (``rad/s``: yaw rates, wheel speeds)
+                      stay as declared
+``rms``               ``sqrt(mean(e²))``
+``mae``               ``mean(|e|)``
+``max``               ``max(|e|)``
+``std``               standard deviation of ``e`` (ddof = 0)
+``bias``              ``mean(e)``
+``truth_rms``         ``sqrt(mean(truth²))``, the scale the error is set against
+``rms_percent``       ``100 rms / truth_rms`` (None for an all-zero truth)
+``nmse_percent``      ``100 - 100 Σe² / Σ(truth - mean(truth))²`` (Sentouh et al. 2023 eq. (32):
+                      100 is perfect, 0 no better than the truth's mean, negative worse; None
+                      for a constant truth)
+``samples``           how many samples were compared
+====================  ==========================================================================
+
+**The papers' formats** (the extra tables of each family, :func:`error_stats` and the functions
+below it):
 
 * Nguyen et al. 2019, Tables II-IV: ``E_mean`` (mean *absolute* error), ``E_max``
   (maximal absolute error), ``Std`` (standard deviation of the error), ``RMS`` (root mean square
@@ -12,6 +36,8 @@
   taken literally: ``RMSE_%`` is 100 times the RMS error in the signal's own units (the paper
   does not normalize it), ``NMSE_%`` is 100 times the coefficient of determination (100 is a
   perfect fit, it can be negative). ``NMSE_%`` is undefined for a constant reference signal.
+  The interconnected family's Table 1 reads ``RMSE_%`` normalized by ``max |y|`` instead
+  (its ``rmse_percent_of_max``); neither is the ``rms_percent`` above.
 
 Errors are ``estimate - reference``. Every function rejects empty, mismatched or non-finite input
 with :class:`MetricInputError` (a :class:`codegen.errors.SampleError`); Sentouh et al. 2023 states the same
@@ -21,12 +47,39 @@ from __future__ import annotations
 
 from dataclasses import dataclass, asdict
 
+import math
+
 import numpy as np
 
 from ..errors import MetricInputError
 
+#: what each key of a :func:`signal_report` row means (``uiogen validate --json`` carries it)
+DEFINITIONS = {
+    "unit": "unit of every figure of the row: the model's declared unit, except a plane angle declared in rad, "
+            "reported in deg (converted_from: rad); angular rates (rad/s) stay as declared",
+    "converted_from": "the declared unit, present only where the figures were converted from it",
+    "rms": "sqrt(mean(e^2)), e = estimate - truth over the samples compared",
+    "mae": "mean(|e|)",
+    "max": "max(|e|)",
+    "std": "standard deviation of e (ddof 0)",
+    "bias": "mean(e)",
+    "truth_rms": "sqrt(mean(truth^2)) over the same samples",
+    "rms_percent": "100 rms / truth_rms (null for an all-zero truth)",
+    "nmse_percent": "100 - 100 sum(e^2) / sum((truth - mean(truth))^2), Sentouh et al. 2023 eq. (32): 100 perfect, "
+                    "0 no better than the truth's mean (null for a constant truth)",
+    "samples": "samples compared",
+    "after_s": "the samples compared are those at t >= after_s [s] (the settle time); null: every sample",
+}
+
+#: declared unit -> (reported unit, factor): plane angles in degrees, as the field and the papers' tables
+#: give them; nothing else is converted (a wheel speed in rad/s is no angle)
+_REPORTED = {"rad": ("deg", 180.0 / math.pi)}
+_CONVERSIONS = {("deg", "rad"): math.pi / 180.0, ("rad", "deg"): 180.0 / math.pi,
+                ("deg/s", "rad/s"): math.pi / 180.0, ("rad/s", "deg/s"): 180.0 / math.pi}
+_SCALED = ("rms", "mae", "max", "std", "bias", "truth_rms")
+
 __all__ = [
-    "MetricInputError", "ErrorStats", "error_stats", "mean_abs_error", "max_abs_error",
+    "MetricInputError", "DEFINITIONS", "reported_unit", "signal_report", "report_from_sums", "convert", "ErrorStats", "error_stats", "mean_abs_error", "max_abs_error",
     "std_error", "rms_error", "mae", "rmsd", "rmse_percent", "nmse_percent",
 ]
 
@@ -182,3 +235,91 @@ def error_stats(reference, estimate, *, degrees: bool = False, unit: str = "") -
     return ErrorStats(e_mean=float(a.mean()), e_max=float(a.max()), std=float(e.std()),
                       rms=float(np.sqrt(np.mean(e * e))), n=int(e.size),
                       unit="deg" if degrees else unit)
+
+
+def reported_unit(declared: str | None) -> tuple:
+    """(unit of the reported figures, factor from the declared unit, the declared unit where it was
+    converted else None): ``"rad"`` -> ``("deg", 180/pi, "rad")``; any other unit as declared (an
+    undeclared one is None)."""
+    from ..project.columns import normalize_unit
+    if not declared:
+        return None, 1.0, None
+    unit = normalize_unit(declared)
+    shown, factor = _REPORTED.get(unit, (unit, 1.0))
+    return shown, factor, (unit if shown != unit else None)
+
+
+def signal_report(reference, estimate, *, unit: str | None) -> dict:
+    """Every figure of the one definition (module docstring, :data:`DEFINITIONS`) of one signal.
+
+    Parameters
+    ----------
+    reference, estimate : array_like, 1-D, same length
+        Truth and estimate, in the model's declared unit ``unit``.
+    unit : str or None
+        The model's declared unit of the signal (None: undeclared; figures as given).
+
+    Returns
+    -------
+    dict
+        ``unit`` (and ``converted_from``), ``rms``, ``mae``, ``max``, ``std``, ``bias``,
+        ``truth_rms``, ``rms_percent``, ``nmse_percent``, ``samples``.
+
+    Raises
+    ------
+    MetricInputError
+        Empty, mismatched or non-finite input.
+    """
+    e = _errors(reference, estimate)
+    y = np.asarray(reference, dtype=float)
+    a = np.abs(e)
+    return report_from_sums(unit, n=e.size, abs_sum=float(a.sum()), abs_max=float(a.max()),
+                            sq_sum=float(np.sum(e * e)), mean=float(e.mean()),
+                            m2=float(np.sum((e - e.mean()) ** 2)), truth_sq_sum=float(np.sum(y * y)),
+                            truth_m2=float(np.sum((y - y.mean()) ** 2)))
+
+
+def report_from_sums(unit: str | None, *, n: int, abs_sum: float, abs_max: float, sq_sum: float, mean: float,
+                     m2: float, truth_sq_sum: float, truth_m2: float) -> dict:
+    """The :func:`signal_report` row from the sums of a stream (a log read in chunks gives the same
+    row as the whole arrays), all in the declared ``unit``: error ``e`` = estimate - truth with
+    ``abs_sum`` = Σ|e|, ``abs_max`` = max|e|, ``sq_sum`` = Σe², ``mean`` = mean(e), ``m2`` =
+    Σ(e - mean(e))²; ``truth_sq_sum`` = Σy², ``truth_m2`` = Σ(y - mean(y))².
+
+    Raises
+    ------
+    MetricInputError
+        no sample.
+    """
+    if n <= 0:
+        raise MetricInputError("metric input is empty")
+    shown, k, converted = reported_unit(unit)
+    rms = k * math.sqrt(sq_sum / n)
+    truth_rms = k * math.sqrt(truth_sq_sum / n)
+    row = {"unit": shown, "rms": rms, "mae": k * abs_sum / n, "max": k * abs_max, "std": k * math.sqrt(m2 / n),
+           "bias": k * mean, "truth_rms": truth_rms,
+           "rms_percent": 100.0 * rms / truth_rms if truth_rms > 0 else None,
+           "nmse_percent": 100.0 - 100.0 * sq_sum / truth_m2 if truth_m2 > 0 else None,
+           "samples": int(n)}
+    if converted is not None:
+        row["converted_from"] = converted
+    return row
+
+
+def convert(row: dict, unit: str) -> dict:
+    """A :func:`signal_report` row with its dimensional figures in ``unit`` (deg <-> rad, deg/s <->
+    rad/s), for a paper's table in the paper's units; the same row when it already is."""
+    have = row.get("unit")
+    if have == unit:
+        return row
+    factor = _CONVERSIONS.get((have, unit))
+    if factor is None:
+        raise MetricInputError(f"figures in {have!r} do not convert to {unit!r}")
+    out = {**row, **{k: (None if row.get(k) is None else row[k] * factor) for k in _SCALED if k in row},
+           "unit": unit}
+    declared = row.get("converted_from", have)
+    if declared == unit:
+        out.pop("converted_from", None)
+    else:
+        out["converted_from"] = declared
+    return out

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import metrics
 from . import run as validate
 
 PAGE = "index.html"
@@ -73,10 +74,6 @@ def _plt():
     return plt
 
 
-def _angle(units: dict, name: str) -> bool:
-    return str(units.get(name, "")).startswith("rad")
-
-
 def scenario_figure(result: dict, path: Path) -> Path:
     """Truth and estimates (and the peers' traces a family keeps in ``signals["baselines"]``),
     the errors below, flagged samples shaded; one row per signal that has a truth."""
@@ -88,8 +85,7 @@ def scenario_figure(result: dict, path: Path) -> Path:
     peers = sig.get("baselines", {})
     fig, axes = plt.subplots(len(names), 2, figsize=(12, 2.1 * len(names) + 0.8), sharex=True, squeeze=False)
     for row, n in zip(axes, names):
-        scale = 180 / np.pi if _angle(units, n) else 1.0
-        unit = str(units.get(n, "")).replace("rad", "deg", 1) if scale != 1.0 else units.get(n, "")
+        unit, scale, _ = metrics.reported_unit(units.get(n))      # the unit of the tables' rows
         truth, est = np.asarray(sig["truth"][n]) * scale, np.asarray(sig["estimate"][n]) * scale
         row[0].plot(t, truth, "k", lw=1.0, label="truth")
         row[0].plot(t, est, "r--", lw=1.0, label="observer (C step)", zorder=3)
@@ -219,6 +215,11 @@ def write_demo(report: dict, runs: dict, out_dir) -> Path:
     :func:`codegen.validation.demo.run_all`; ``runs``: {observer: its run on the shared log}, the
     demo's main real-data observer first."""
     from .. import families
+    from ..certificate import text
+    from ..certificate.certificate import Certificate
+
+    def entry_lines(entry):        # the design part of a demo entry, from its typed certificate
+        return text.demo_lines(families.get(entry["family"]), Certificate.from_json(entry["certificate"]))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     ranking = rank_real_data(runs)
@@ -240,14 +241,14 @@ def write_demo(report: dict, runs: dict, out_dir) -> Path:
         body.append(f'<h2 id="{_slug(n)}">{html.escape(n)} (real data)</h2>')
         body += data_section(n, runs[n], out_dir)
         if n in report:
-            body.append(_pre("\n".join(families.get(report[n]["family"]).demo_lines(report[n]))))
+            body.append(_pre("\n".join(entry_lines(report[n]))))
     for n, e in report.items():
         if n in order:
             continue
         family = families.get(e["family"])
         body.append(f'<h2 id="{_slug(n)}">{html.escape(n)}</h2>')
         body.append(f'<p class="note">{html.escape(family.title)}</p>')
-        body.append(_pre("\n".join(family.demo_lines(e))))
+        body.append(_pre("\n".join(entry_lines(e))))
         for r in e["scenarios"].values():
             body += scenario_section(n, r, out_dir)
     page = out_dir / PAGE

@@ -1,6 +1,6 @@
 """``uiogen validate``: an observer's errors on a plant it was not derived from, beside baselines.
 
-Simulated runs (``--scenario``) belong to the observer's family (``Family.validate``: its
+Simulated runs (``--scenario``) belong to the observer's family (``Scenarios.validate``: its
 plants, its paper's table format); logged runs (``--data``) are common to every observer that
 reads the log's signals. Measurements carry seeded white sensor noise where the family's paper
 does (:data:`codegen.validation.common.SENSOR_NOISE`); baselines see the same measurements, so
@@ -15,6 +15,7 @@ import numpy as np
 from .. import families
 from ..project import observer_file as observers
 from ..errors import SampleError
+from . import metrics
 from .common import SETTLE_TIME, signal_stats
 
 __all__ = ["SETTLE_TIME", "run_scenario", "format_table", "header", "plot", "to_json", "run_data",
@@ -49,8 +50,9 @@ def run_scenario(name, scenario, plant: str = "nominal", duration: float | None 
         from . import excitation
         return {"family": config.family, **excitation.run(config, duration, seed, progress=progress,
                                                           observer=observer)}
-    result = families.get(config.family).validate(config, scenario, plant, duration, seed, progress=progress,
-                                                  observer=observer)
+    from ..families.capabilities import Scenarios, require
+    family = require(families.get(config.family), Scenarios)
+    result = family.validate(config, scenario, plant, duration, seed, progress=progress, observer=observer)
     return {"family": config.family, **result}
 
 
@@ -60,14 +62,14 @@ def format_table(result: dict) -> str:
     if result.get("table_format") == "generic":
         from . import excitation
         return excitation.format_table(result)
-    return families.get(result["family"]).format_validation(result)
+    return families.get(result["family"]).validation_table(result)
 
 
 def header(name: str, result: dict) -> str:
-    """The line above the table: scenario, plant, samples, flagged samples."""
-    if result.get("table_format") == "generic":
-        return families.Family.validation_header(families.get(result["family"]), name, result)
-    return families.get(result["family"]).validation_header(name, result)
+    """The line above the table: scenario, plant, samples, flagged samples (:mod:`codegen.certificate.text`)."""
+    from ..certificate.text import validation_header
+    from .common import SETTLE_TIME
+    return validation_header(families.get(result["family"]), name, result, SETTLE_TIME)
 
 
 def plot(result: dict, path: str) -> None:
@@ -78,10 +80,10 @@ def plot(result: dict, path: str) -> None:
     names = [n for n in sig["estimate"] if n in sig["truth"]]
     fig, axes = plt.subplots(len(names), 1, figsize=(9, 2.2 * len(names)), sharex=True)
     for ax, n in zip(np.atleast_1d(axes), names):
-        scale = 180 / np.pi if result["units"].get(n, "").startswith("rad") else 1.0
+        unit, scale, _ = metrics.reported_unit(result["units"].get(n))
         ax.plot(sig["t"], sig["truth"][n] * scale, "k", lw=1.0, label="truth")
         ax.plot(sig["t"], sig["estimate"][n] * scale, "r--", lw=1.0, label="observer")
-        ax.set_ylabel(n + (" [deg]" if scale != 1.0 else ""))
+        ax.set_ylabel(n + (f" [{unit}]" if unit else ""))
     np.atleast_1d(axes)[0].legend(loc="upper right")
     np.atleast_1d(axes)[-1].set_xlabel("t [s]")
     fig.suptitle(f"{result['scenario']} on the {result['plant']} plant")
@@ -91,8 +93,12 @@ def plot(result: dict, path: str) -> None:
 
 
 def to_json(result: dict) -> str:
-    return json.dumps({k: result[k] for k in ("observer", "baselines", "plant", "plant_model", "scenario",
-                                              "status_flags", "samples", "max_abs_ay")}, indent=1, sort_keys=True)
+    """``uiogen validate --json``: every row in the one definition (``definitions`` says what each
+    key means and in which unit), and the family's paper format beside it (``paper_format``)."""
+    keys = ("observer", "baselines", "plant", "plant_model", "scenario", "status_flags", "samples", "max_abs_ay",
+            "paper_format")
+    return json.dumps({**{k: result[k] for k in keys if k in result}, "definitions": metrics.DEFINITIONS},
+                      indent=1, sort_keys=True)
 
 
 DATA_COLUMNS = {"delta": "delta", "y_r": "yaw_rate", "y_a_y": "ay", "v_x": "vx", "y_delta": "delta",
@@ -137,9 +143,11 @@ def run_data(name, path: str = "stanford", block_bytes: int | None = None) -> di
     units and the physics of the observer's model (:mod:`codegen.validation.log_checks`) before
     anything is returned.
 
-    Returns ``{"observer": {SIGNAL: {"rms", "mae", "max", "std"}}, "baselines": {...}}`` with
-    SIGNAL ``beta`` [deg] and ``vy`` [m/s] (v_y = v_x tan(beta)), plus the signals for plots,
-    ``log_checks`` (every check and its verdict) and ``warnings``.
+    Returns ``{"observer": {SIGNAL: row}, "baselines": {...}}``, rows in the one definition of
+    :func:`codegen.validation.metrics.signal_report` over the whole log, with SIGNAL ``beta`` (in
+    deg, converted from the log's rad) and ``vy`` [m/s] (v_y = v_x tan(beta)), plus the signals for
+    plots; ``splits`` (sideslip RMS per part of the log, in ``splits.unit``) where the log has an
+    evaluation part, ``log_checks`` (every check and its verdict) and ``warnings``.
     """
     from ..extension.build import load, require_current
     from ..model import load_parameters
@@ -167,8 +175,8 @@ def run_data(name, path: str = "stanford", block_bytes: int | None = None) -> di
                                   declared_by="format") for n in obs.input_names}, obs.sample_time)
     outputs = obs.output_names
     delta_unknown = "delta" in outputs and "y_delta" not in obs.input_names and "delta" not in obs.input_names
-    table = {"beta": streaming.ErrorStats(angle=True), "vy": streaming.ErrorStats()}
-    delta_stats, prev_delta = streaming.ErrorStats(angle=True), None
+    table = {"beta": streaming.ErrorStats("rad"), "vy": streaming.ErrorStats("m/s")}
+    delta_stats, prev_delta = streaming.ErrorStats("rad"), None
     split = _identification_split(config, stanford._resolve(path))
     parts = {"identification": _Rms(), "evaluation": _Rms()}
     peaks = {tp: _Peak() for tp in stanford.peak_times(path)}
@@ -226,7 +234,7 @@ def run_data(name, path: str = "stanford", block_bytes: int | None = None) -> di
                                        f"observer is reported alone")
     result["signals"], result["signals_stride"] = signals, kept.stride
     if split is not None and t_end is not None and t_end > split:
-        result["splits"] = {"t_split": split}
+        result["splits"] = {"t_split": split, "unit": "deg"}
         for part, m in (("identification", signals["t"] < split), ("evaluation", signals["t"] >= split)):
             row = {"samples": parts[part].n, "observer": parts[part].rms()}
             for k, b in estimates.items():
@@ -261,14 +269,17 @@ def _baselines(config, run) -> dict:
     from . import stanford
     kf, ekf = stanford.linear_kf(run), stanford.ekf(run)
     estimates = {"linear_kf": kf.beta, "ekf": ekf.beta}
-    # the family's peers of the observer's own model and parameter file, in the same run (Family.log_peers)
-    estimates.update(families.get(config.family).log_peers(config, run))
+    # the family's peers of the observer's own model and parameter file, in the same run (LogPeers)
+    from ..families.capabilities import LogPeers
+    family = families.get(config.family)
+    if isinstance(family, LogPeers):
+        estimates.update(family.log_peers(config, run))
     return estimates
 
 
 def _table(run, b) -> dict:
-    return {"beta": signal_stats(run.beta_true, b, angle=True),
-            "vy": signal_stats(run.vx * np.tan(run.beta_true), run.vx * np.tan(b))}
+    return {"beta": signal_stats(run.beta_true, b, unit="rad"),
+            "vy": signal_stats(run.vx * np.tan(run.beta_true), run.vx * np.tan(b), unit="m/s")}
 
 
 class _Rms:
@@ -386,6 +397,10 @@ def format_data_table(result: dict) -> str:
         for name, t in rows:
             lines.append(f"{name:18s} {t['beta']['rms']:10.4f} {t['beta']['max']:9.4f} {t['beta']['mae']:9.4f} "
                          f"{t['vy']['rms']:9.4f}")
+    truth = result["observer"]["beta"]
+    if truth.get("truth_rms"):
+        lines.append(f"beta truth RMS {truth['truth_rms']:.4f} deg on the whole log; its RMSE in % of it: "
+                     + ", ".join(f"{name} {t['beta']['rms_percent']:.1f} %" for name, t in rows))
     for pk in result.get("peaks", ()):
         lines.append(f"peak t = {pk['t']:g} s (truth peak {pk['truth_peak_deg']:.2f} deg), max |beta error| within "
                      f"+-{PEAK_HALF_WIDTH:g} s: " + ", ".join(f"{k} {v:.2f}" for k, v in pk.items()
@@ -402,11 +417,14 @@ def format_data_table(result: dict) -> str:
 
 def scenario_names(name) -> tuple:
     """The validation scenarios of an observer: for a built-in one those ``uiogen demo`` runs (its
-    family's ``demo_scenarios``, the papers' on the library's plants), for a project's observer
-    and a family without its own the generic excitation scenario on the model's own equations
-    (the library's plants are of the built-in models)."""
+    family's ``Scenarios.demo_scenarios``, the papers' on the library's plants), for a project's
+    observer and a family without its own the generic excitation scenario on the model's own
+    equations (the library's plants are of the built-in models)."""
+    from ..families.capabilities import Scenarios
     config = observers.get(name) if isinstance(name, str) else name
-    return (tuple(families.get(config.family).demo_scenarios) if config.builtin else ()) or ("excitation",)
+    family = families.get(config.family)
+    own = tuple(family.demo_scenarios) if isinstance(family, Scenarios) and config.builtin else ()
+    return own or ("excitation",)
 
 
 def scenario_inputs(name, scenario, plant: str = "nominal", duration: float | None = None) -> np.ndarray:

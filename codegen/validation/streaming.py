@@ -2,8 +2,9 @@
 bounded memory (:mod:`codegen.validation.csvlog` reads it in chunks).
 
 :class:`ErrorStats` gives what :func:`codegen.validation.common.signal_stats` gives on whole
-arrays (the same numbers on a log of one chunk; merged by the parallel formulas of Chan et al.
-1979 otherwise); :class:`Summary` the mean, std, min and max of an estimate without reference;
+arrays (the row of :func:`codegen.validation.metrics.signal_report`; the same numbers on a log
+of one chunk, merged by the parallel formulas of Chan et al. 1979 otherwise); :class:`Summary`
+the mean, std, min and max of an estimate without reference, in the same unit;
 :class:`Decimated` keeps a signal for plots: every sample up to :data:`KEEP_SAMPLES`, then every
 2nd, 4th, ... so that at most that many are held.
 """
@@ -14,6 +15,7 @@ import math
 import numpy as np
 
 from ..errors import MetricInputError
+from . import metrics
 
 KEEP_SAMPLES = 1_000_000
 """Samples of each signal kept for plots and the result's ``signals`` (more: every k-th)."""
@@ -43,16 +45,17 @@ class _Moments:
 
 
 class ErrorStats:
-    """Error statistics of an estimate against its reference, fed chunk by chunk.
+    """Error statistics of an estimate against its reference, fed chunk by chunk: the row of
+    :func:`codegen.validation.metrics.signal_report` (the one definition of every validation).
 
-    ``settle``: samples at t < settle (t from the log's start) are left out, as
-    :func:`~codegen.validation.common.signal_stats` does with its ``t``; ``angle``: radians in,
-    statistics in degrees.
+    ``unit``: the model's declared unit of the signal (a plane angle in rad is reported in deg,
+    marked so); ``settle``: samples at t < settle (t from the log's start) are left out, as
+    :func:`~codegen.validation.common.signal_stats` does with its ``t`` (the row's ``after_s``).
     """
 
-    def __init__(self, angle: bool = False, settle: float | None = None):
-        self.angle, self.settle = angle, settle
-        self.abs_sum, self.max_abs, self.sq_sum, self.sq_sum_raw = 0.0, 0.0, 0.0, 0.0
+    def __init__(self, unit: str | None, settle: float | None = None):
+        self.unit, self.settle = unit, settle
+        self.abs_sum, self.max_abs, self.sq_sum, self.truth_sq_sum = 0.0, 0.0, 0.0, 0.0
         self.err, self.ref = _Moments(), _Moments()
         self.nonfinite, self.first_nonfinite, self.seen = 0, None, 0
 
@@ -70,19 +73,19 @@ class ErrorStats:
                 self.first_nonfinite = offset + int(np.flatnonzero(bad)[0])
             self.nonfinite += int(bad.sum())
             return
-        raw = yh - y
-        e = np.degrees(raw) if self.angle else raw
+        e = yh - y
         a = np.abs(e)
         if a.size:
             self.abs_sum += float(a.sum())
             self.max_abs = max(self.max_abs, float(a.max()))
             self.sq_sum += float(np.sum(e * e))
-            self.sq_sum_raw += float(np.sum(raw * raw))
+            self.truth_sq_sum += float(np.sum(y * y))
         self.err.add(e)
         self.ref.add(y)
 
     def result(self) -> dict:
-        """``{"mae", "max", "std", "rms", "rmse_percent", "nmse_percent"}`` as signal_stats gives.
+        """The :func:`~codegen.validation.metrics.signal_report` row (and ``after_s``), as
+        :func:`~codegen.validation.common.signal_stats` gives it on the whole arrays.
 
         Raises
         ------
@@ -92,33 +95,34 @@ class ErrorStats:
         if self.nonfinite:
             raise MetricInputError(f"metric input holds {self.nonfinite} non-finite sample(s), first at index "
                                    f"{self.first_nonfinite}")
-        n = self.err.n
-        if not n:
-            raise MetricInputError("metric input is empty")
-        rms = math.sqrt(self.sq_sum / n)
-        nmse = None if self.ref.m2 == 0.0 else 100.0 - 100.0 * self.sq_sum_raw / self.ref.m2
-        return {"mae": self.abs_sum / n, "max": self.max_abs, "std": math.sqrt(self.err.m2 / n), "rms": rms,
-                "rmse_percent": 100.0 * rms, "nmse_percent": nmse}
+        row = metrics.report_from_sums(self.unit, n=self.err.n, abs_sum=self.abs_sum, abs_max=self.max_abs,
+                                       sq_sum=self.sq_sum, mean=self.err.mean, m2=self.err.m2,
+                                       truth_sq_sum=self.truth_sq_sum, truth_m2=self.ref.m2)
+        row["after_s"] = self.settle
+        return row
 
 
 class Summary:
-    """Mean, std, min and max of a stream (degrees for an angle)."""
+    """Mean, std, min and max of a stream, in the reported unit of its declared ``unit``
+    (:func:`codegen.validation.metrics.reported_unit`: a plane angle in deg, marked so)."""
 
-    def __init__(self, angle: bool = False):
-        self.angle, self.m = angle, _Moments()
+    def __init__(self, unit: str | None):
+        self.unit, self.factor, self.converted = metrics.reported_unit(unit)
+        self.m = _Moments()
         self.lo, self.hi = math.inf, -math.inf
 
     def add(self, x) -> None:
-        x = np.asarray(x, dtype=float)
-        if self.angle:
-            x = np.degrees(x)
+        x = np.asarray(x, dtype=float) * self.factor
         if x.size:
             self.lo, self.hi = min(self.lo, float(x.min())), max(self.hi, float(x.max()))
         self.m.add(x)
 
     def result(self) -> dict:
-        return {"mean": self.m.mean, "std": math.sqrt(self.m.m2 / self.m.n) if self.m.n else math.nan,
-                "min": self.lo, "max": self.hi}
+        row = {"unit": self.unit, "mean": self.m.mean, "std": math.sqrt(self.m.m2 / self.m.n) if self.m.n else math.nan,
+               "min": self.lo, "max": self.hi}
+        if self.converted is not None:
+            row["converted_from"] = self.converted
+        return row
 
 
 class Decimated:

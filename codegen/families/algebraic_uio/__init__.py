@@ -20,28 +20,26 @@ class AlgebraicUIO(Family):
     citation = "Ichalal, Mammar, IEEE T-IE 62(9), 2015"
     short_citation = "Ichalal and Mammar 2015"
     observer_keys = {"validation": Rule(dict, doc="scenarios [validation.NAME] (see the family's validation)")}
-    demo_scenarios = ("paper",)
     example = "algebraic_uio_example2"
+    # capabilities (codegen.families.capabilities): Scenarios, DemoFigures, BenchFigures, Applicability
+    demo_scenarios = ("paper",)
+    table_note = "the paper's examples, compiled C step"
 
     def applicability(self, subject, structure):
         from .applicability import assess
         return assess(self, subject, structure)
 
-    def build(self, config, tol=None):
+    def build(self, config, solver):
         from .build import build
-        return build(config, tol)
+        return build(config, solver)
 
     def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None, observer=None) -> dict:
         from .validation import run
         return run(config, scenario, plant, duration, seed, progress=progress, observer=observer)
 
-    def format_validation(self, result: dict) -> str:
+    def validation_table(self, result: dict) -> str:
         from .validation import format_table
         return format_table(result)
-
-    def validation_header(self, name: str, result: dict) -> str:
-        from .validation import header
-        return header(name, result)
 
     def bench_inputs(self, build):
         from .validation import periodic_inputs      # the paper's scenario, tiled (differentiators settle)
@@ -55,21 +53,10 @@ class AlgebraicUIO(Family):
                                             for s in specs.values()),
                 "differentiator_orders": {k: s.order for k, s in specs.items()}}
 
-    def bench_lines(self, figures: dict) -> list:
-        orders = ", ".join(f"{k}: {v}" for k, v in figures["differentiator_orders"].items())
-        return [f"of the flops, {figures['hosmd_flops_per_step']} in the HOSMD updates (orders {orders})"]
-
     def demo_report(self, art: dict) -> dict:
         return {"relative_degrees": art["decoupling"]["relative_degrees"],
                 "classical_uio_exists": art["classical_uio_11"]["exists"],
-                "worst_lmi_margin": art["certificate"]["recheck"]["worst_min_eig"], "discrete": art["discrete"]}
-
-    def demo_lines(self, e: dict) -> list:
-        d = e["discrete"]
-        return [f"{self.title} ({self.short_citation}): relative degree {e['relative_degrees']}, classical UIO (11) "
-                f"{'exists' if e['classical_uio_exists'] else 'does not exist'}; LMI (39) worst margin "
-                f"{e['worst_lmi_margin']:.3g}; Gauss-Legendre step: sqrt(V) contracts by <= "
-                f"{d['contraction_bound_per_step']:.6f}/step"]
+                "worst_lmi_margin": art["certificate"]["extras"]["recheck"]["worst_min_eig"], "discrete": art["discrete"]}
 
 
 FAMILY = AlgebraicUIO()

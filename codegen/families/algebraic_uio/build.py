@@ -28,7 +28,9 @@ import sympy as sp
 from scipy.linalg import expm
 
 from ...certificate.artifact import artifact_head, significant, solver_certificate
-from ..base import ObserverBuild
+from ...certificate.certificate import Certificate, Recheck, Step
+from ..base import ObserverBuild, StepNotes
+from ...certificate.contraction import ContractionMetric
 from . import representation as rdeg
 from . import design as alg
 from ...representation.differentiators import HosmdSpec, hosmd_step_numpy, hosmd_step_sx
@@ -60,7 +62,7 @@ class AlgebraicUIOBuild(ObserverBuild):
     settings: alg.AlgebraicSettings
     classical: dict
     design: alg.AlgebraicDesign
-    certificate: dict
+    recheck: dict
     dense: dict
     discrete: dict
     aux: dict | None
@@ -126,6 +128,14 @@ class AlgebraicUIOBuild(ObserverBuild):
     @property
     def n_state(self) -> int:
         return sum(size for _, size, _ in self.layout)
+
+    def contraction_metrics(self) -> list:
+        """V = e' X e of (39) over z_hat, the Gauss-Legendre step's B-stability bound per step."""
+        d = self.lpv.definition
+        return [ContractionMetric(float(self.discrete["contraction_bound_per_step"]), (self.design.X,),
+                                  tuple(f"zhat_{s}" if self.nu else str(s) for s in d.states),
+                                  f"(39) He(X (F - L C)) <= -2 alpha X on every vertex, alpha = {self.settings.alpha:g} "
+                                  f"1/s, 2-stage Gauss-Legendre step (B-stable)", knob="[design] alpha")]
 
     @property
     def state_names(self) -> list:
@@ -198,33 +208,45 @@ class AlgebraicUIOBuild(ObserverBuild):
         """A fresh LMI (39) problem of this design (benchmark: our path vs CVXPY on the same blocks)."""
         return alg.build_problem(self.dec, self.settings)[0]
 
-    def summary(self, path) -> dict:
-        return {**design_summary(self), "artifact": str(path)}
+    def figures(self) -> dict:
+        return design_summary(self)
 
-    def summary_lines(self, s: dict) -> list:
-        return summary_lines(self, s)
+    def step_notes(self) -> StepNotes:
+        return StepNotes(
+            notes=("Each call takes the sample at t_j and returns x_hat(t_j) and d_hat(t_j). Output and",
+                   "parameter derivatives come from Levant differentiators whose states are in the state",
+                   "struct (hosmd_*); the observer ODE is integrated over [t_{j-1}, t_j] with their",
+                   "Taylor polynomials at the Gauss stages."),
+            clamp=("A scheduling input outside its box, or a differentiator's estimate of a parameter derivative\n"
+                   " * outside its bound (converging differentiator, or Assumption 1 violated): clamped for the\n"
+                   " * step, which stays certified, but the decoupling uses the clamped value."),
+            warmup=("the differentiators start at (sample, 0, ..., 0); the observer state is\n"
+                    " * held and the unknown-input estimate of this sample is not meaningful."))
 
-    def emit_notes(self) -> dict:
-        dc = self.discrete
-        r = ", ".join(str(v) for v in self.dec.relative_degrees)
-        return {
-            "headline": (f"Ichalal and Mammar 2015, relative degree {r}, LMI (39) decay {self.settings.alpha:g}, "
-                         f"worst margin {self.certificate['worst_min_eig']:.3g}"),
-            "stability": (f"2-stage Gauss-Legendre on the observer ODE, B-stable: sqrt(V) contracts by at most "
-                          f"{dc['contraction_bound_per_step']:.6f} per step for any scheduling in the box"),
-            "step_notes": [
-                "Each call takes the sample at t_j and returns x_hat(t_j) and d_hat(t_j). Output and",
-                "parameter derivatives come from Levant differentiators whose states are in the state",
-                "struct (hosmd_*); the observer ODE is integrated over [t_{j-1}, t_j] with their",
-                "Taylor polynomials at the Gauss stages.",
-            ],
-            "clamp_doc": ("A scheduling input outside its box, or a differentiator's estimate of a parameter derivative\n"
-                          " * outside its bound (converging differentiator, or Assumption 1 violated): clamped for the\n"
-                          " * step, which stays certified, but the decoupling uses the clamped value."),
-            "warmup_doc": ("the differentiators start at (sample, 0, ..., 0); the observer state is\n"
-                           " * held and the unknown-input estimate of this sample is not meaningful."),
-            "has_warmup": True,
-        }
+    @property
+    def certificate(self) -> Certificate:
+        d, dec, r = self.design, self.dec, self.recheck
+        degrees = ", ".join(str(v) for v in dec.relative_degrees)
+        aux = "" if self.aux is None else f"; the known inputs' auxiliary system ({self.aux['mode']}) certified as well"
+        return Certificate(
+            family="algebraic_uio",
+            claim=(f"LMI (39) of Ichalal and Mammar 2015 (relative degree {degrees}, {d.form} form): the estimation "
+                   f"error of the decoupled states decays at rate alpha = {self.settings.alpha:g} 1/s for every "
+                   f"scheduling trajectory in the box whose derivatives stay within their bounds{aux}; the unknown "
+                   f"inputs are reconstructed algebraically from the output derivatives"),
+            plant_class=(f"the LPV model {self.lpv.definition.name} with the parameters of {self.config.parameters}, "
+                         f"its decoupled error system A - Q M - L C on the polytope of {d.gain_polytope.n_vertices} "
+                         f"gain vertices"),
+            noise=("noise-free outputs; their derivatives from Levant differentiators, taken as converged (the "
+                   "differentiators' error is not in the certificate)"),
+            region={str(k): tuple(v) for k, v in dec.boxes.items()},
+            region_note=("the scheduling signals and their derivatives within these bounds; SCHEDULING_CLAMPED flags an "
+                         "input or a differentiator's estimate of a derivative outside"),
+            recheck=Recheck(r["blocks"], r["worst_block"], r["worst_min_eig"], r["worst_relative_margin"]),
+            step=Step(self.config.sample_time, "2-stage Gauss-Legendre on the observer ODE (B-stable)",
+                      self.discrete["contraction_bound_per_step"]),
+            extras=solver_certificate(d.solution, recheck=self.recheck, dense_check=self.dense,
+                                      fixed_modes=d.fixed_modes, compare_gain=self.compare))
 
     def artifact(self) -> dict:
         return {
@@ -235,8 +257,6 @@ class AlgebraicUIOBuild(ObserverBuild):
             **significant(self.design.gains_json(), 12),
             "differentiators": {k: {"order": s.order, "lipschitz": s.lipschitz, "gains": list(s.gains)}
                                 for k, s in self.settings.differentiators.items()},
-            "certificate": solver_certificate(self.design.solution, recheck=self.certificate, dense_check=self.dense,
-                                              fixed_modes=self.design.fixed_modes, compare_gain=self.compare),
             "discrete": significant(self.discrete),
             "auxiliary_system": significant(self.aux),
         }
@@ -511,13 +531,14 @@ def _check_differentiators(lpv: LPVModel, dec: rdeg.Decoupling, settings: alg.Al
                                    + "; ".join(problems))
 
 
-def build(config, tol: float | None = None, lpv: LPVModel | None = None) -> AlgebraicUIOBuild:
-    """Ichalal and Mammar 2015: model -> relative degree, M, Q, P, Gamma -> classical check -> LMI (39) -> certificates.
+def build(config, solver, lpv: LPVModel | None = None) -> AlgebraicUIOBuild:
+    """Ichalal and Mammar 2015: model -> relative degree, M, Q, P, Gamma -> classical check -> LMI (39) -> certificates;
+    the LMIs answered by ``solver`` (:mod:`codegen.design.solver`).
 
     ``lpv`` overrides the configuration's model and parameter file (tests build models in memory)."""
     settings = alg.settings_from_config(config)
-    if tol is not None:
-        settings = replace(settings, tol=tol)
+    if solver.tol is not None:
+        settings = replace(settings, tol=solver.tol)
     t0 = time.perf_counter()
     if lpv is None:
         lpv = instantiate(config.design_model(), load_parameters(config.parameter_path))
@@ -530,7 +551,7 @@ def build(config, tol: float | None = None, lpv: LPVModel | None = None) -> Alge
                                    f"scheduling derived from the outputs")
     rdeg.check_structure(lpv)          # before anything evaluates the model's matrices
     boxes = rdeg.derivative_boxes(lpv)
-    aux = alg.aux_design(lpv, boxes, settings.auxiliary, settings.auxiliary_alpha, settings.tol)
+    aux = alg.aux_design(lpv, boxes, settings.auxiliary, settings.auxiliary_alpha, solver, settings.tol)
     lpv_obs = lpv
     if aux is not None and aux["K_s"] is not None:
         # z = x - s obeys z' = (A - K_s C) z + D d: the observer is derived for that system
@@ -540,7 +561,7 @@ def build(config, tol: float | None = None, lpv: LPVModel | None = None) -> Alge
     _check_differentiators(lpv, dec, settings, config)
     classical = alg.classical_uio(lpv, dec.boxes)
     t1 = time.perf_counter()
-    design = alg.design(dec, settings)
+    design = alg.design(dec, settings, solver)
     t2 = time.perf_counter()
     cert = alg.certify(design)
     dense = alg.dense_check(dec, design)
@@ -567,7 +588,7 @@ def _show(m) -> str:
 def design_summary(b: AlgebraicUIOBuild) -> dict:
     d, dec = b.design, b.dec
     return {
-        "observer": b.name, "relative_degrees": list(dec.relative_degrees),
+        "relative_degrees": list(dec.relative_degrees),
         "uniformity": dec.certificates,
         "M": {f"y_{o}": [_show(m) for m in dec.M[i]] for i, o in enumerate(b.lpv.definition.output_names)},
         "Gamma": _show(dec.Gamma), "Q": _show(dec.Q), "P": _show(dec.P), "F0": _show(dec.F0),
@@ -576,8 +597,8 @@ def design_summary(b: AlgebraicUIOBuild) -> dict:
         "premises": [f"{p.expr} in [{p.lower:.6g}, {p.upper:.6g}]" for p in d.gain_polytope.premises]
         + ([f"(P) {p.expr} in [{p.lower:.6g}, {p.upper:.6g}]" for p in d.factor_polytope.premises]
            if d.factor_polytope is not None else []),
-        "lmi_blocks": b.certificate["blocks"], "worst_block": b.certificate["worst_block"],
-        "worst_min_eig": b.certificate["worst_min_eig"], "alpha": b.settings.alpha,
+        "lmi_blocks": b.recheck["blocks"], "worst_block": b.recheck["worst_block"],
+        "worst_min_eig": b.recheck["worst_min_eig"], "alpha": b.settings.alpha,
         "dense_check_max_eig": b.dense["max_eig"], "fixed_modes": d.fixed_modes,
         "gains": [l.ravel().tolist() for l in d.L],
         "compare_gain": b.compare, "discrete": b.discrete, "auxiliary": b.aux,
@@ -585,49 +606,3 @@ def design_summary(b: AlgebraicUIOBuild) -> dict:
         "design_time_s": b.timings["derivation_s"] + b.timings["design_s"],
         "sample_time": b.config.sample_time,
     }
-
-
-def summary_lines(b: AlgebraicUIOBuild, s: dict) -> list:
-    """:func:`design_summary` as the lines `uiogen design` prints."""
-    out = []
-    out.append(f"observer {b.name}: algebraic LPV UIO (Ichalal and Mammar 2015), relative degree(s) {s['relative_degrees']} (uniform on the box)")
-    for output, rows in s["M"].items():
-        for j, row in enumerate(rows):
-            out.append(f"  M_{j} ({output}) = {row}")
-    for c in s["uniformity"]["uniform_relative_degree"]:
-        out.append(f"  M_(r-1) D = {c['M_D']} in [{c['bound'][0]:.6g}, {c['bound'][1]:.6g}] (sound bound: never 0)")
-    rc = s["uniformity"]["rank_condition_64"]
-    out.append(f"  rank condition (64): {rc['quantity']} in [{rc['bound'][0]:.6g}, {rc['bound'][1]:.6g}]")
-    out.append(f"  Gamma = {s['Gamma']}   Q = {s['Q']}")
-    out.append(f"  P = {s['P']}")
-    out.append(f"  A - Q M = {s['F0']}")
-    cl = s["classical_uio_11"]
-    out.append(f"  classical polytopic UIO (11): {'exists' if cl['exists'] else 'does NOT exist'}: {cl['reason']}")
-    out.append(f"  LMI (39), {s['lmi_form']} form, {s['gain_vertices']} gain vertices; premises {'; '.join(s['premises'])}")
-    out.append(f"    alpha = {s['alpha']:g}: {s['lmi_blocks']} blocks, worst margin {s['worst_min_eig']:.3e} in {s['worst_block']} "
-          f"(numpy re-check); dense check of the exact A - Q M - L C: max eig {s['dense_check_max_eig']:.3e}")
-    fm = s["fixed_modes"]
-    if fm["count"]:
-        out.append(f"    {fm['count']} mode(s) of A - Q M unobservable from C (invariant zeros of (A, D, C)), Re in "
-              f"[{fm['real_range'][0]:.4g}, {fm['real_range'][1]:.4g}]: no gain makes the error decay faster "
-              f"than exp(-{fm['decay_limit']:.4g} t)")
-    else:
-        out.append("    no gain-independent mode: the decay rate is limited only by the LMI")
-    for j, g in enumerate(s["gains"]):
-        out.append(f"    L_{j + 1} = {np.round(g, 6).tolist()}")
-    if s["compare_gain"] is not None:
-        c = s["compare_gain"]
-        verdict = f"certified, decay up to {c['alpha']:.4g}" if c["certified"] else "not certified by a common quadratic V"
-        out.append(f"    hand gain {c['L']}: {verdict}")
-    dc = s["discrete"]
-    out.append(f"  discrete step Ts={s['sample_time']:g}s: {dc['method']}; h a ||F||_X = {dc['h_a_f']:.4f}; sqrt(V) contracts "
-          f"by <= {dc['contraction_bound_per_step']:.6f}/step (proof), sampled {dc['sampled_amplification_X_norm_max']:.6f}")
-    if s["auxiliary"] is not None:
-        a = s["auxiliary"]
-        ks = "" if a["K_s"] is None else f", K_s = {np.round(np.array(a['K_s']).ravel(), 4).tolist()}"
-        out.append(f"  auxiliary system ({a['mode']}{ks}): common quadratic V_s on {a['vertices']} vertices, decay {a['decay']:g}, "
-              f"worst margin {a['worst_min_eig']:.3e}")
-    out.append(f"  differentiators: {'; '.join(f'{k}: {v}' for k, v in s['differentiators'].items())}")
-    out.append(f"  design time {s['design_time_s']:.2f} s")
-    out.append(f"artifact: {s['artifact']}")
-    return out

@@ -37,6 +37,7 @@ Discrete step (what the C runs), at the configured sample time h:
 from __future__ import annotations
 
 import math
+import dataclasses
 from dataclasses import dataclass
 
 import casadi as ca
@@ -55,6 +56,7 @@ from ...model import LPVModel
 from ...representation.polytope import (Premise, affine_decomposition, nonlinear_factors, sector_weights_product,
                                         vertex_matrices)
 from ...project.settings import Rule, number_matrix, parse_settings, parse_table, parse_value, setting
+from ...design.precision import margin_field, precision_field, required_margin
 from ...design import canonical
 from ...design.canonical import decimal_round
 
@@ -98,6 +100,8 @@ class AlgebraicSettings:
     compare_gain: tuple | None = setting(None, parse=number_matrix)
     auxiliary: str = setting("open_loop", choices=("open_loop", "output_injection"))
     auxiliary_alpha: float = setting(0.5, gt=0, doc="decay rate of the output-injected auxiliary system")
+    precision: str = precision_field()
+    float32_margin: float = margin_field()
 
     def __post_init__(self):
         if self.lmi not in ("product", "direct"):
@@ -120,7 +124,14 @@ def settings_from_config(config) -> AlgebraicSettings:
     for name, tbl in diffs.items():
         tbl = parse_table(tbl, DIFFERENTIATOR_RULES, source=config.source, section=f"design.differentiators.{name}")
         specs[name] = HosmdSpec(tbl["order"], tbl["lipschitz"], config.sample_time, name=name)
-    return parse_settings(AlgebraicSettings, d, source=config.source, section="design", differentiators=specs)
+    settings = parse_settings(AlgebraicSettings, d, source=config.source, section="design", differentiators=specs)
+    if required_margin(settings):
+        # precision = "float32": the Gauss step contracts by sqrt(1 - 2 h alpha (1 - g)^2), g >= 0 from the
+        # gains; alpha for g = 0 is the least that can do, the certificate then checks the margin
+        m = required_margin(settings)
+        need = (1.0 - (1.0 - m) ** 2) / (2.0 * config.sample_time)
+        settings = dataclasses.replace(settings, alpha=max(settings.alpha, need))
+    return settings
 
 
 # ---- exact polytopes of symbolic matrices -------------------------------------------------------------
@@ -314,13 +325,14 @@ def build_problem(dec: rdeg.Decoupling, settings: AlgebraicSettings) -> tuple:
     return prob, (form, gain_poly, factor_poly, blocks, S, Si, K, fixed)
 
 
-def design(dec: rdeg.Decoupling, settings: AlgebraicSettings) -> AlgebraicDesign:
-    """LMI (39) on Clarabel in balanced coordinates; rounded gains re-certified with numpy."""
+def design(dec: rdeg.Decoupling, settings: AlgebraicSettings, solver) -> AlgebraicDesign:
+    """LMI (39) in balanced coordinates, answered by ``solver`` (:mod:`codegen.design.solver`); rounded
+    gains re-certified with numpy."""
     lpv = dec.lpv
     n, ny = lpv.nx, lpv.ny
     C = np.array(lpv.C.evalf(), dtype=float)
     prob, (form, gain_poly, factor_poly, blocks, S, Si, K, fixed) = build_problem(dec, settings)
-    sol = prob.solve(tol=settings.tol)
+    sol = solver.solve(prob, tol=settings.tol)
     Xs = decimal_round(0.5 * (sol["X"] + sol["X"].T))
     # emitted: solved exactly (codegen.design.canonical), the same on every machine
     Ls = [canonical.solve(Xs, np.atleast_2d(sol[f"K{j + 1}"]).reshape(n, ny)) for j in range(len(K))]
@@ -506,7 +518,7 @@ def amplification(F_stages, h: float) -> np.ndarray:
     return I + h * (GL_B[0] * K[:n] + GL_B[1] * K[n:])
 
 
-def aux_design(lpv: LPVModel, boxes: dict, mode: str, alpha: float, tol: float = 1e-9) -> dict | None:
+def aux_design(lpv: LPVModel, boxes: dict, mode: str, alpha: float, solver, tol: float = 1e-9) -> dict | None:
     """The auxiliary system of the known inputs, integrated by the same Gauss method as the observer.
 
     ``mode = "open_loop"`` is the paper's (20), s' = A s + B u: it is non-expansive (B-stable) if A(rho) has a
@@ -549,7 +561,7 @@ def aux_design(lpv: LPVModel, boxes: dict, mode: str, alpha: float, tol: float =
     else:
         prob.minimize(trace(X))
     try:
-        sol = prob.solve(tol=tol)
+        sol = solver.solve(prob, tol=tol)
     except InfeasibleLMIError as exc:
         if inject:
             raise

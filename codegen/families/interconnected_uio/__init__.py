@@ -20,41 +20,32 @@ class InterconnectedUIO(Family):
     citation = "Sentouh, Fouka, Popieul, Sensors 23, 4236, 2023"
     short_citation = "Sentouh et al. 2023"
     observer_keys = {}
-    demo_scenarios = ("satory",)
     example = "interconnected_uio"
+    # capabilities (codegen.families.capabilities): Scenarios, DemoFigures, Applicability
+    demo_scenarios = ("satory",)
+    table_note = "the paper's Table 1 format"
 
     def applicability(self, subject, structure):
         from .applicability import assess
         return assess(self, subject, structure)
 
-    def build(self, config, tol=None):
+    def build(self, config, solver):
         from .build import build
-        return build(config, tol)
+        return build(config, solver)
 
     def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None, observer=None) -> dict:
         from .validation import run_scenario
         return run_scenario(config, scenario, plant, duration, progress=progress, observer=observer)
 
-    def format_validation(self, result: dict) -> str:
+    def validation_table(self, result: dict) -> str:
         from .validation import format_result
         return format_result(result)
 
-    def validation_header(self, name: str, result: dict) -> str:
-        from ...validation.common import SETTLE_TIME
-        return (f"{name}: scenario {result['scenario']} on the {result['plant']} plant ({result['plant_model']}), "
-                f"{result['samples']} samples, max |a_y| {result['max_abs_ay']:.2f} m/s^2, {result['status_flags']} "
-                f"flagged samples; errors after {SETTLE_TIME:g} s (the paper's Table 1 format)")
-
     def demo_report(self, art: dict) -> dict:
-        cert = art["certificate"]["recheck"]
+        extras = art["certificate"]["extras"]
+        cert = extras["recheck"]
         return {"worst_lmi_margin": cert["worst_min_eig"], "worst_lmi_block": cert["worst_block"],
-                "discrete": art["certificate"]["discrete"]}
-
-    def demo_lines(self, e: dict) -> list:
-        d = e["discrete"]
-        return [f"LMIs (27) ({self.short_citation}): worst margin {e['worst_lmi_margin']:.3g} in {e['worst_lmi_block']}; "
-                f"discrete step: sqrt(V) contracts by {d['longitudinal']['contraction_per_step']:.6f} "
-                f"(longitudinal), {d['lateral']['contraction_per_step']:.6f} (lateral) per step"]
+                "discrete": extras["discrete"]}
 
 
 FAMILY = InterconnectedUIO()

@@ -55,7 +55,7 @@ def assess(family, subject, structure):
 
     def figures(b) -> dict:
         subs = [s.name for s in b.ts.subsystems]
-        out = {f"eta_{s}": (b.certificate[s]["eta"], "-", f"ISS gain of the {s} error from the coupling signals "
+        out = {f"eta_{s}": (b.recheck[s]["eta"], "-", f"ISS gain of the {s} error from the coupling signals "
                             f"(27a)") for s in subs}
         out["contraction_per_step"] = (max(b.discrete[s]["contraction_per_step"] for s in subs), "-",
                                        "sqrt(V) per step, every membership sequence (matched premises)")

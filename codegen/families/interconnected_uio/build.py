@@ -3,6 +3,8 @@ pipeline build (:class:`InterconnectedBuild`); the LMIs and certificates are in 
 """
 from __future__ import annotations
 
+import dataclasses
+
 import time
 from dataclasses import dataclass
 from functools import cached_property
@@ -12,7 +14,10 @@ import numpy as np
 import sympy as sp
 
 from ...certificate.artifact import artifact_head, significant, solver_certificate
-from ..base import ObserverBuild
+from ...certificate.certificate import Certificate, Recheck, Step
+from ..base import ObserverBuild, StepNotes
+from ...certificate.contraction import ContractionMetric
+from ...design.precision import rate_for_backward_euler, required_margin
 from . import representation as icm
 from ...representation.differentiators import MAX_ORDER, HosmdSpec, hosmd_step_numpy, hosmd_step_sx
 from ...emit.stepgen import lambdify, solve_unpivoted
@@ -385,7 +390,7 @@ class InterconnectedBuild(ObserverBuild):
     ts: icm.InterconnectedTS
     design: ICDesign
     layout: StepLayout
-    certificate: dict
+    recheck: dict
     discrete: dict
     timings: dict
 
@@ -406,6 +411,17 @@ class InterconnectedBuild(ObserverBuild):
     def lmi_problem(self):
         """A fresh LMI problem of this design (benchmark: our path vs CVXPY on the same blocks)."""
         return build_problem(self.ts, self.design.settings)[0]
+
+    def contraction_metrics(self) -> list:
+        """Each subsystem's (27) Lyapunov matrix over its z (physical units: P is solved in z / S)."""
+        out = []
+        for sub, sd in zip(self.ts.subsystems, self.design.subsystems):
+            Si = np.diag(1.0 / np.asarray(sd.S, dtype=float))
+            c = float(self.discrete[sub.name]["certified_contraction"])
+            out.append(ContractionMetric(c, (Si @ sd.P @ Si,), tuple(f"z_{s}" for s in sub.states),
+                                         f"{sub.name}: (I - Ts N)' P (I - Ts N) >= (1 + alpha Ts) P at every membership "
+                                         f"(27b), backward Euler", knob="[design] alpha"))
+        return out
 
     @property
     def state_names(self) -> list:
@@ -455,30 +471,44 @@ class InterconnectedBuild(ObserverBuild):
         inputs = [{"name": f"y_{n}", "doc": f"measured {n} [{units.get(n, '-')}]"} for n in self.layout.measured]
         return state, inputs, outs
 
-    def emit_notes(self) -> dict:
-        cert = self.certificate
-        disc = self.discrete
-        subs = [s.name for s in self.ts.subsystems]
-        contraction = max(disc[s]["contraction_per_step"] for s in subs)
-        return {
-            "headline": "Sentouh et al. 2023 LMIs (27) worst margin " + f"{cert['worst_min_eig']:.3g}, eta " +
-                        ", ".join(f"{s} {cert[s]['eta']:.4g}" for s in subs),
-            "stability": (f"backward Euler, common P per subsystem from (27): sqrt(V) contracts by "
-                          f"<= {contraction:.6f} per step for every membership sequence (matched premises)"),
-            "step_notes": [
-                "Stages per call: differentiators (predictor values, then update), longitudinal UIO scheduled",
-                "on the previous v_x estimate, lateral UIO scheduled on the new one, inversion (30).",
-                "The state holds [z, differentiator states, primed, outputs]; the outputs are its last entries.",
-            ],
-            "clamp_doc": ("The v_x estimate or a premise outside its box (clamped for the memberships), or a measured\n"
-                          " * wheel speed or steering angle outside its box: the certificate does not cover this sample."),
-            "warmup_doc": ("the estimate and the differentiators start from this sample (v_x from the wheel\n"
-                           " * speeds); the unknown-input estimates need a few samples of differentiator convergence."),
-            "has_warmup": True,
-        }
+    def step_notes(self) -> StepNotes:
+        return StepNotes(
+            notes=("Stages per call: differentiators (predictor values, then update), longitudinal UIO scheduled",
+                   "on the previous v_x estimate, lateral UIO scheduled on the new one, inversion (30).",
+                   "The state holds [z, differentiator states, primed, outputs]; the outputs are its last entries."),
+            clamp=("The v_x estimate or a premise outside its box (clamped for the memberships), or a measured\n"
+                   " * wheel speed or steering angle outside its box: the certificate does not cover this sample."),
+            warmup=("the estimate and the differentiators start from this sample (v_x from the wheel\n"
+                    " * speeds); the unknown-input estimates need a few samples of differentiator convergence."))
 
-    def summary(self, path) -> dict:
-        """What `uiogen design` prints."""
+    @property
+    def certificate(self) -> Certificate:
+        subs = [s.name for s in self.ts.subsystems]
+        r, settings = self.recheck, self.design.settings
+        worst_sub = min(subs, key=lambda s: r[s]["worst_min_eig"])
+        etas = ", ".join(f"{s} {r[s]['eta']:.4g}" for s in subs)
+        return Certificate(
+            family="interconnected_uio",
+            claim=(f"Theorem 1 of Sentouh et al. 2023 (LMIs (27), one Lyapunov matrix per subsystem): the estimation "
+                   f"error of each subsystem ({', '.join(subs)}) decays at rate alpha = {settings.alpha:g} 1/s and is "
+                   f"input-to-state stable from the coupling signals' estimation error (eta: {etas}), for premises "
+                   f"matched between the plant and the observer; the unknown inputs are reconstructed by the "
+                   f"inversion (30)"),
+            plant_class=(f"the interconnected T-S model of {self.ts.definition.name} (parameters of "
+                         f"{self.config.parameters}), {len(subs)} subsystems at the vertices of their premises"),
+            noise=("noise-free measurements; the output derivatives of the inversion from Levant differentiators, "
+                   "taken as converged"),
+            region={str(k): tuple(v) for k, v in self.ts.state_box.items()},
+            region_note=("the premises of the v_x estimate and of the measured wheel speeds within their boxes; the "
+                         "premise mismatch of the estimated v_x is not in the certificate"),
+            recheck=Recheck(sum(r[s]["blocks"] for s in subs), r["worst_block"], r["worst_min_eig"],
+                            r[worst_sub]["worst_relative_margin"]),
+            step=Step(self.config.sample_time, "backward Euler, one common P per subsystem",
+                      max(self.discrete[s]["certified_contraction"] for s in subs)),
+            extras=solver_certificate(self.design.solution, recheck=self.recheck, discrete=self.discrete))
+
+    def figures(self) -> dict:
+        """What `uiogen design` prints beside the certificate."""
         subs = {}
         for sub, sd in zip(self.ts.subsystems, self.design.subsystems):
             subs[sub.name] = {
@@ -490,28 +520,12 @@ class InterconnectedBuild(ObserverBuild):
                 "error_poles_fastest": float(min(np.linalg.eigvals(n).real.min() for n in sd.N)),
                 "discrete_contraction_per_step": self.discrete[sub.name]["contraction_per_step"]}
         sol = self.design.solution
-        return {"observer": self.name, "artifact": str(path), "subsystems": subs,
-                "lmi_blocks": len(sol.checks), "worst_block": self.certificate["worst_block"],
-                "worst_min_eig": self.certificate["worst_min_eig"], "solve_time_s": sol.solve_time_s,
+        return {"subsystems": subs,
+                "lmi_blocks": len(sol.checks), "worst_block": self.recheck["worst_block"],
+                "worst_min_eig": self.recheck["worst_min_eig"], "solve_time_s": sol.solve_time_s,
                 "build_time_s": sol.build_time_s,
                 "total_design_time_s": self.timings["representation_s"] + self.timings["design_s"],
                 "certificates_time_s": self.timings["certificates_s"], "sample_time": self.config.sample_time}
-
-    def summary_lines(self, s: dict) -> list:
-        lines = [f"observer {self.name}: Sentouh et al. 2023 interconnected LPV UIO, {len(s['subsystems'])} subsystems"]
-        for name, d in s["subsystems"].items():
-            lines += [f"  {name}: states {', '.join(d['states'])}; unknown inputs {', '.join(d['unknown_inputs'])}",
-                      f"    outputs {', '.join(d['outputs'])}; coupling zeta_F {', '.join(d['coupling_signals'])}",
-                      f"    premises {'; '.join(d['premises'])} ({d['vertices']} vertices)",
-                      f"    eta {d['eta']:.6g}; error poles (vertices) {d['error_poles_fastest']:.1f} .. "
-                      f"{d['error_poles_slowest']:.2f} 1/s; discrete step: sqrt(V) contracts by "
-                      f"{d['discrete_contraction_per_step']:.6f}/step"]
-        lines += [f"  LMIs (27)               {s['lmi_blocks']} blocks; worst re-checked margin "
-                  f"{s['worst_min_eig']:.3e} in {s['worst_block']}",
-                  f"  design time             {s['total_design_time_s']:.2f} s (derivation + LMIs; solve "
-                  f"{1e3 * s['solve_time_s']:.0f} ms); certificates {s['certificates_time_s']:.2f} s",
-                  f"artifact: {s['artifact']}"]
-        return lines
 
     def artifact(self) -> dict:
         gains = {}
@@ -529,21 +543,23 @@ class InterconnectedBuild(ObserverBuild):
             "differentiators": {sig: {"order": s.order, "lipschitz": s.lipschitz, "gains": list(s.gains)}
                                 for sig, s in self.layout.hosmd},
             "gains": significant(gains, 12),
-            "certificate": solver_certificate(self.design.solution, recheck=self.certificate, discrete=self.discrete),
         }
 
 
-def build(config, tol: float | None = None) -> InterconnectedBuild:
+def build(config, solver) -> InterconnectedBuild:
     """Sentouh et al. 2023: model -> interconnected T-S form -> (16), (26), LMIs (27), (28) -> certificates -> step."""
     table = dict(config.design)
     settings = parse_settings(ICDesignSettings, table, source=config.source, section="design", extra=STEP_KEYS,
-                              **({"tol": tol} if tol is not None else {}))
+                              **({"tol": solver.tol} if solver.tol is not None else {}))
+    if required_margin(settings):      # precision = "float32": 1 / sqrt(1 + alpha Ts) <= 1 - margin
+        need = rate_for_backward_euler(required_margin(settings), config.sample_time, factor=1.0)
+        settings = dataclasses.replace(settings, alpha=max(settings.alpha, need))
     t0 = time.perf_counter()
     ts = icm.load(config)
     step = step_settings(ts, table, config.sample_time, config.source)
     layout = StepLayout(ts, step)
     t1 = time.perf_counter()
-    d = design(ts, settings)
+    d = design(ts, settings, solver)
     _needed_derivatives(ts, d, layout)
     t2 = time.perf_counter()
     cert = certify(ts, d)

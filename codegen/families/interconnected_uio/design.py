@@ -78,6 +78,7 @@ from . import representation as icm
 from ...errors import CertificateError, DiscretizationError, ModelDefinitionError, RankConditionError
 from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks
 from ...project.settings import setting
+from ...design.precision import margin_field, precision_field
 from ...design import canonical
 from ...design.canonical import decimal_round
 
@@ -117,6 +118,8 @@ class ICDesignSettings:
     tol: float = setting(1e-7, gt=0)
     gain_structure: str = setting("affine", choices=("affine", "vertex"))
     decoupling: str = setting("minimum_norm", choices=("minimum_norm", "measured_rows"))
+    precision: str = precision_field()
+    float32_margin: float = margin_field()
 
     def __post_init__(self):
         if self.gain_structure not in ("affine", "vertex"):
@@ -299,10 +302,10 @@ def build_problem(ts: icm.InterconnectedTS, settings: ICDesignSettings):
     return prob, parts
 
 
-def design(ts: icm.InterconnectedTS, settings: ICDesignSettings = ICDesignSettings()) -> ICDesign:
-    """Theorem 1: (26), LMIs (27) on Clarabel, rounded, gains (28)."""
+def design(ts: icm.InterconnectedTS, settings: ICDesignSettings, solver) -> ICDesign:
+    """Theorem 1: (26), LMIs (27) by ``solver`` (:mod:`codegen.design.solver`), rounded, gains (28)."""
     prob, parts = build_problem(ts, settings)
-    sol = prob.solve(tol=settings.tol)
+    sol = solver.solve(prob, tol=settings.tol)
     designs = []
     for sub, H, T, CBp, S, W, Z in parts:
         P = decimal_round(0.5 * (sol[f"P_{sub.name}"] + sol[f"P_{sub.name}"].T))

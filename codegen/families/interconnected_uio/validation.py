@@ -26,12 +26,15 @@ for r, w_f, w_r, T_Bf, a_x, a_y, delta, B_r, kappa, v_x, v_y, T_s (Table 1). Her
   ``model`` integrates the observer's own nonlinear model (1)-(7) with the same driver (no model
   mismatch: it separates observer error from model error).
 
-Metrics (:func:`table1_metrics`): NMSE% exactly as (32); RMSE% as (32) *normalized by max |y|*,
+Metrics of the paper's Table 1 (:func:`table1_metrics`, the ``paper_format`` of ``uiogen validate``):
+NMSE% exactly as (32); RMSE% as (32) *normalized by max |y|* (``rmse_percent_of_max``),
 100 sqrt(mean((y - y_hat)^2)) / max|y|, the convention of the paper's own Table 2 ("RMSE(e_x)/max(x)
 (%)"). Taken literally (no normalization, as :func:`codegen.validation.metrics.rmse_percent`),
 (32) would make the paper's T_Bf figure of 5.48 an error of 0.055 N m, which no estimator of
-braking torques reaches; the literal value is reported beside it. Errors after a 2 s settling
-time; unlike the paper ("we omitted the large picks") no sample is omitted.
+braking torques reaches; the literal value is reported beside it (``rmse_percent_literal``). Every
+run also has the rows of every validation (``observer``: :func:`codegen.validation.metrics.signal_report`,
+the error in % of the truth's RMS). Errors after a 2 s settling time; unlike the paper ("we omitted
+the large picks") no sample is omitted.
 """
 from __future__ import annotations
 
@@ -43,6 +46,7 @@ import numpy as np
 from ...errors import ModelDefinitionError, SampleError
 from ...validation.simulate import rk4_step
 from ...validation import metrics
+from ...validation.common import signal_stats
 
 G = 9.81
 SETTLE_TIME = 2.0
@@ -540,8 +544,10 @@ delta_dot = [-3.0, 3.0]
 
 # --- metrics and the run ---------------------------------------------------------------------------
 
-def table1_metrics(truth, est, t, settle: float = SETTLE_TIME) -> dict:
-    """RMSE% (normalized by max |y|, see the module docstring), literal RMSE% of (32), NMSE%."""
+def table1_metrics(truth, est, t, settle: float = SETTLE_TIME, unit: str | None = None) -> dict:
+    """Table 1's figures: RMSE% normalized by max |y| (``rmse_percent_of_max``, see the module
+    docstring), the literal RMSE% of (32), NMSE%; ``max_abs_truth`` and ``max_abs_error`` in the
+    declared ``unit`` (no conversion: the paper's percentages do not depend on it)."""
     mask = np.asarray(t) >= settle
     y, yh = np.asarray(truth, float)[mask], np.asarray(est, float)[mask]
     peak = float(np.abs(y).max())
@@ -550,8 +556,8 @@ def table1_metrics(truth, est, t, settle: float = SETTLE_TIME) -> dict:
         nmse = metrics.nmse_percent(y, yh)
     except metrics.MetricInputError:
         nmse = None
-    return {"rmse_percent": 100.0 * rms / peak if peak > 0 else None, "nmse_percent": nmse,
-            "rmse_percent_literal": metrics.rmse_percent(y, yh), "rms": rms, "max_abs_truth": peak,
+    return {"rmse_percent_of_max": 100.0 * rms / peak if peak > 0 else None, "nmse_percent": nmse,
+            "rmse_percent_literal": metrics.rmse_percent(y, yh), "unit": unit, "max_abs_truth": peak,
             "std_over_max_truth": float(np.std(y)) / peak if peak > 0 else None,
             "max_abs_error": float(np.abs(yh - y).max())}
 
@@ -567,6 +573,11 @@ def implied_std_over_max(rmse_percent: float, nmse_percent: float) -> float | No
     if nmse_percent is None or nmse_percent >= 100.0:
         return None
     return (rmse_percent / 100.0) / math.sqrt(1.0 - nmse_percent / 100.0)
+
+
+def _units(config) -> dict:
+    """The declared units of the interconnected model's signals (its MODEL.units)."""
+    return dict(getattr(config.load_model_module().MODEL, "units", {}) or {})
 
 
 def run(name: str, mu: float = 1.0, plant: str = "commonroad", duration: float | None = None,
@@ -605,10 +616,12 @@ def run(name: str, mu: float = 1.0, plant: str = "commonroad", duration: float |
     inputs = np.column_stack([truth[c[2:]] for c in obs.input_names])
     out, status, _ = obs.run(inputs)
     est = {n: out[:, obs.output_index(n)] for n in obs.output_names}
-    table = {sig: table1_metrics(truth[sig], est[sig], truth["t"]) for sig in TABLE1_SIGNALS}
+    units = _units(config)
+    table = {sig: table1_metrics(truth[sig], est[sig], truth["t"], unit=units.get(sig)) for sig in TABLE1_SIGNALS}
+    rows = {sig: signal_stats(truth[sig], est[sig], truth["t"], unit=units.get(sig)) for sig in TABLE1_SIGNALS}
     mask = truth["t"] >= SETTLE_TIME
     flags = status[mask]
-    return {"observer": name, "mu": mu, "plant": plant, "table": table, "samples": int(len(status)),
+    return {"observer": name, "mu": mu, "plant": plant, "table": table, "rows": rows, "samples": int(len(status)),
             "flagged_after_settle": int(np.count_nonzero(flags)),
             "max_abs_ax": float(np.abs(truth["a_x"]).max()), "min_ax": float(truth["a_x"].min()),
             "max_abs_ay": float(np.abs(truth["a_y"]).max()),
@@ -629,7 +642,7 @@ def format_table(results: list) -> str:
             for s in chunk:
                 row = r["table"][s]
                 ref = seed.get(s, (None, None))
-                rm = row["rmse_percent"]
+                rm = row["rmse_percent_of_max"]
                 nm = row["nmse_percent"]
                 cells.append(f"{rm:8.3f} ({ref[0] if ref[0] is not None else '-':>7}) "
                              f"{(f'{nm:7.2f}' if nm is not None else '      -')} ({ref[1] if ref[1] is not None else '-':>6})")
@@ -643,10 +656,10 @@ def check_targets(results: list) -> dict:
     out = {}
     for r in results:
         if r["mu"] == 1.0:
-            out["mu1_within_1.5x"] = {s: r["table"][s]["rmse_percent"] <= 1.5 * PAPER_TABLE1[1.0][s][0]
+            out["mu1_within_1.5x"] = {s: r["table"][s]["rmse_percent_of_max"] <= 1.5 * PAPER_TABLE1[1.0][s][0]
                                      for s in TABLE1_SIGNALS}
         if r["mu"] == 0.4:
-            rm = [r["table"][s]["rmse_percent"] for s in TABLE1_SIGNALS]
+            rm = [r["table"][s]["rmse_percent_of_max"] for s in TABLE1_SIGNALS]
             nm = [r["table"][s]["nmse_percent"] for s in TABLE1_SIGNALS if r["table"][s]["nmse_percent"] is not None]
             out["mu04_max_rmse"] = max(rm)
             out["mu04_min_nmse"] = min(nm)
@@ -672,16 +685,22 @@ def run_scenario(name: str, scenario: str, plant: str = "commonroad", duration: 
         twin = load_parameters(config.parameter_path).meta.get("commonroad_vehicle") in ("1", "2", "3")
         plant = "commonroad" if twin else "model"
     runs = [run(config, mu, plant, duration, progress=progress, observer=observer) for mu in SCENARIOS[scenario]]
-    last = runs[0]
-    observer = {s: last["table"][s] for s in TABLE1_SIGNALS}
-    for row in observer.values():
-        row.setdefault("mae", None)
-    return {"observer": observer, "baselines": {}, "status_flags": sum(r["flagged_after_settle"] for r in runs),
+    first = runs[0]
+    return {"observer": first["rows"], "baselines": {}, "status_flags": sum(r["flagged_after_settle"] for r in runs),
             "samples": sum(r["samples"] for r in runs), "max_abs_ay": max(r["max_abs_ay"] for r in runs),
             "plant": plant, "plant_model": ("CommonRoad multi-body (vehiclemodels), torque-steered column, PAC2002"
                                            if plant == "commonroad" else "the observer's own model (1)-(7)"),
-            "scenario": scenario, "runs": runs, "signals": last["signals"],
-            "units": {"v_x": "m/s", "v_y": "m/s", "r": "rad/s", "delta": "rad"}}
+            "scenario": scenario, "runs": runs, "signals": first["signals"],
+            "paper_format": {"table": PAPER_TABLE, "mu": {f"{r['mu']:g}": {
+                s: {**r["table"][s], "paper_rmse_percent": PAPER_TABLE1.get(r["mu"], {}).get(s, (None, None))[0],
+                    "paper_nmse_percent": PAPER_TABLE1.get(r["mu"], {}).get(s, (None, None))[1]}
+                for s in TABLE1_SIGNALS} for r in runs}},
+            "units": _units(config)}
+
+
+PAPER_TABLE = ("Sentouh et al. 2023 Table 1 per friction level mu: RMSE% normalized by max|truth| (rmse_percent_of_max, "
+               "the paper's Table 2 convention; rmse_percent_literal: (32) taken literally) and NMSE% of (32), the "
+               "paper's figures beside ours; observer: the rows of every validation at the first mu")
 
 
 def format_result(result: dict) -> str:
@@ -699,6 +718,9 @@ def format_result(result: dict) -> str:
                      f"{targets['mu04_max_rmse']:.3f}, min NMSE% {targets['mu04_min_nmse']:.2f} -> "
                      + ("met" if targets["mu04_met"] else "missed"))
     lines.append("(RMSE%: 100 RMS(error)/max|truth|, the paper's Table 2 convention; NMSE% as eq. (32))")
+    from ...validation.common import format_stats
+    lines.append(f"mu = {result['runs'][0]['mu']:g}, every figure:")
+    lines.append(format_stats(result["observer"]))
     return "\n".join(lines)
 
 

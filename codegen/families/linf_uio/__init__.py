@@ -27,8 +27,10 @@ class LinfUIO(Family):
     observer_keys = {"polytope": Rule(str, choices=("taylor_reduced", "sector"), required=True),
                      "rate_bounds": Rule(str, choices=("exact", "at_expansion_point", "none")),
                      "ui_filter": Rule(dict)}
-    demo_scenarios = ("track_varying_speed", "takeover_opposing_assist")
     example = "lpv_linf_driver_torque_sector"      # starters use the exact polytope (the paper's is an approximation)
+    # capabilities (codegen.families.capabilities): Scenarios, DemoFigures, Campaigns, Applicability, GainForms
+    demo_scenarios = ("track_varying_speed", "takeover_opposing_assist")
+    table_note = "angles in degrees"
     campaign_plant = "steering_torque"
     certified_gain_norm = "peak"
 
@@ -39,42 +41,32 @@ class LinfUIO(Family):
         from .applicability import assess
         return assess(self, subject, structure)
 
-    def build(self, config, tol=None):
+    def build(self, config, solver):
         from .build import build
-        return build(config, tol)
+        return build(config, solver)
 
     def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None, observer=None) -> dict:
         from .validation import run
         return run(config, scenario, plant, duration, seed, progress=progress, observer=observer)
 
-    def format_validation(self, result: dict) -> str:
+    def validation_table(self, result: dict) -> str:
         from .validation import format_table
         return format_table(result)
 
-    def validation_header(self, name: str, result: dict) -> str:
-        from ...validation.common import SETTLE_TIME
-        return (f"{name}: scenario {result['scenario']} on the {result['plant']} plant ({result['plant_model']}), "
-                f"{result['samples']} samples, max |a_y| {result['max_abs_ay']:.2f} m/s^2, {result['status_flags']} "
-                f"flagged samples; errors after {SETTLE_TIME:g} s (angles in degrees)")
+    def sensor_noise(self) -> dict:
+        from ...validation.common import SENSOR_NOISE
+        return dict(SENSOR_NOISE)
 
     def demo_report(self, art: dict) -> dict:
+        extras = art["certificate"]["extras"]
         return {"gamma": art["gamma"], "gamma_quadratic": art["quadratic"]["gamma"],
-                "worst_lmi_margin": art["certificate"]["worst_min_eig"],
-                "worst_lmi_block": art["certificate"]["worst_block"], "discrete": art["discrete"]}
+                "worst_lmi_margin": extras["worst_min_eig"], "worst_lmi_block": extras["worst_block"],
+                "discrete": art["discrete"]}
 
-    def demo_lines(self, e: dict) -> list:
-        d = e["discrete"]
-        return [f"gamma {e['gamma']:.6g} (quadratic {e['gamma_quadratic']:.6g}); worst LMI margin "
-                f"{e['worst_lmi_margin']:.3g} in {e['worst_lmi_block']}",
-                f"discrete step Ts={d['Ts']:g}s, certified: sqrt(V) contracts by {d['contraction_per_step']:.6f}/step "
-                f"(state error), {d['ui_loop_contraction_per_step']:.6f}/step with the UI filter loop; dense-grid "
-                f"spectral radius {d['dense_grid_augmented_spectral_radius_max']:.6f}"]
-
-    def check_gains(self, config, gains: dict) -> dict:
+    def check_gain_form(self, config, gains: dict, source: str):
         """P_i, X, L_i (the paper's printed form) against Theorem 1, with both rate bounds of the
-        Taylor-reduced polytope; anything else in the design-lock form (``lmi_solutions``)."""
-        if "lmi_solutions" in gains:
-            return super().check_gains(config, gains)
+        Taylor-reduced polytope (one case each)."""
+        from ...certificate.gains import GainsCheck
         from ...representation import polytope
         from .build import _settings, representation
         from .design import certify, performance_matrix
@@ -99,44 +91,23 @@ class LinfUIO(Family):
             if m.shape != shape:
                 raise ConfigurationError(f"gains: {label} has shape {m.shape}, expected {shape}", key=label)
         make = polytope.taylor_reduced_polytope if poly.kind == "taylor_reduced" else polytope.sector_polytope
-        out = {"observer": config.name, "alpha": alpha, "form": "theorem_1", "results": {},
-               "polytope": poly.kind, "polytope_form": polytope.FORMS[poly.kind],
-               "performance": list(performance) or [str(x) for x in lpv.definition.states]}
+        labels = {"exact": "sound rate bounds over the whole box",
+                  "at_expansion_point": "rate bounds of the paper's eq. (11)"}
+        cases = {}
         for mode in ("exact", "at_expansion_point") if poly.kind == "taylor_reduced" else ("exact",):
             p = make(lpv, mode)
             res = certify(p, P, X, L, alpha, F)
-            res["rate_bounds"] = p.rate_bounds.tolist()
-            out["results"][mode] = res
+            cases[mode] = {"conditions": labels[mode], "rate_bounds": p.rate_bounds.tolist(),
+                           **{k: res[k] for k in ("blocks", "feasible", "mu", "nu", "gamma")}}
         M = [np.linalg.solve(P[i] + X, L[i]) for i in range(N)]
-        out["gain_norm_max"] = max(float(np.linalg.norm(m, 2)) for m in M)
-        for key in ("gamma", "gamma_stated"):
-            if key in gains:
-                out[f"{key}_in_file"] = gains[key]
-        return out
-
-    def format_check_gains(self, res: dict, source: str) -> list:
-        if res.get("form") != "theorem_1":
-            return super().format_check_gains(res, source)
-        lines = [f"Theorem 1 ({self.short_citation}) check of {source} on observer {res['observer']} "
-                 f"(alpha = {res['alpha']:g}, performance output z = {', '.join(res.get('performance', []))})"]
-        for mode, r in res["results"].items():
-            label = {"exact": "sound rate bounds over the whole box",
-                     "at_expansion_point": "rate bounds of the paper's eq. (11)"}[mode]
-            lines.append(f"  [{label}: phi = {r['rate_bounds'][0]}]")
-            for blk in r["blocks"]:
-                if "min_eig" in blk:
-                    lines.append(f"    {blk['label']:45s} min eig {blk['min_eig']:.6g}")
-                else:
-                    lines.append(f"    {blk['label']:45s} max eig (state block) {blk['max_eig_state_block']:.6g}, "
-                                 f"needs nu >= {blk['nu_needed']:.6g}")
-            verdict = "PASS" if r["feasible"] else "FAIL"
-            lines.append(f"    {verdict}: certified gamma = sqrt(mu nu) = sqrt({r['mu']:.6g} * {r['nu']:.6g}) = "
-                         f"{r['gamma']:.6g}")
-        lines.append(f"  max ||M_i|| = {res['gain_norm_max']:.4g} 1/s")
-        for key in ("gamma_in_file", "gamma_stated_in_file"):
-            if key in res:
-                lines.append(f"  {key.replace('_in_file', '')} stated in the file: {res[key]}")
-        return lines
+        figures = {"alpha": alpha, "polytope": poly.kind, "polytope_form": polytope.FORMS[poly.kind],
+                   "performance": list(performance) or [str(x) for x in lpv.definition.states],
+                   "gain_norm_max_1_per_s": max(float(np.linalg.norm(m, 2)) for m in M),
+                   **{f"{key}_in_file": gains[key] for key in ("gamma", "gamma_stated") if key in gains}}
+        failed = [m for m, c in cases.items() if not c["feasible"]]
+        reason = "" if not failed else (f"Theorem 1 fails with the {' and the '.join(labels[m] for m in failed)}: "
+                                        f"a block's state part is not negative definite (blocks above)")
+        return GainsCheck(config.name, "theorem_1", str(source), not failed, reason, None, cases, figures)
 
 
 FAMILY = LinfUIO()

@@ -13,7 +13,7 @@ observer's exact model (``uiogen validate NAME --plant model``), with the numpy 
 * the sample time (the step at T_s / 10 on a plant sampled at T_s / 10: the continuous limit),
 * the published matrices (Sec. V) in place of ours.
 
-Every re-design is a measurement (solved inside :func:`codegen.design.lmi.recording`, nothing committed).
+Every re-design is a measurement (a fresh solve, nothing committed).
 Not part of the pipeline: ``build.py`` does not import it, so it is no design input.
 """
 from __future__ import annotations
@@ -24,10 +24,10 @@ import sys
 
 import numpy as np
 
-from ...design import lmi
 from ... import pipeline
+from ...design.solver import FreshSolver
 from ...representation import polytope
-from ...validation import simulate
+from ...validation import metrics, simulate
 from ...project.observer_file import get as get_observer
 from ...validation.common import SENSOR_NOISE, scenario_for, signal_stats
 from . import discrete
@@ -50,8 +50,7 @@ def _variant(config, polytope_kind=None, gain_bound=None, performance=None, samp
 
 
 def _build(config):
-    with lmi.recording():          # a measurement: nothing goes to a design lock
-        return pipeline.build(config, fresh=True)
+    return pipeline.build(config, FreshSolver())       # a measurement: nothing goes to a design lock
 
 
 def _exact_data(data, lpv):
@@ -85,7 +84,8 @@ def _run(b, truth, measured, step=None):
         z, _ = step(z, row[:nu], row[nu:nu + ny], row[nu + ny:])
         out[k] = z
     states = b.state_names
-    return {s: signal_stats(truth[s], out[:, i], truth["t"], angle=s != "T_d")
+    units = b.lpv.definition.units
+    return {s: signal_stats(truth[s], out[:, i], truth["t"], unit=units.get(s))
             for i, s in enumerate(states) if s in truth}
 
 
@@ -106,7 +106,7 @@ def run(name: str = "lpv_linf_driver_torque", published: dict | None = None) -> 
     def add(label, b, stats, note=""):
         gains = [np.linalg.norm(np.linalg.solve(q, l), 2) for q, l in zip(b.data.Q, b.data.L)]
         rows.append({"variant": label, "note": note, "beta_rms_deg": stats["beta"]["rms"],
-                     "T_d_rms_Nm": stats["T_d"]["rms"], "r_rms_degps": stats["r"]["rms"],
+                     "T_d_rms_Nm": stats["T_d"]["rms"], "r_rms_degps": metrics.convert(stats["r"], "deg/s")["rms"],
                      "gamma": getattr(b, "gamma_override", None) or b.design.gamma,
                      "gain_norm_max": float(max(gains))})
 

@@ -9,18 +9,18 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ...design import lmi
+from ...design.solver import FreshSolver
 from ...representation import polytope
 from ...certificate.artifact import artifact_head, significant
+from ...certificate.certificate import Bound, Certificate, Recheck, Step, unit_ratio
+from ...certificate.contraction import ContractionMetric
+from ...design.precision import required_margin
 from ...model import LPVModel, instantiate, load_parameters
 from ...project.observer_file import ObserverConfig
 from ...errors import ModelDefinitionError, RankConditionError, RepresentationError, UILoopError, UiogenError
-from ..base import ObserverBuild
+from ..base import ObserverBuild, StepNotes
 from . import design as linf_uio
 from . import discrete
-
-
-FAMILY_TITLE = "LPV L-infinity UIO (Nguyen et al. 2019)"
 
 
 @dataclass(frozen=True)
@@ -31,7 +31,7 @@ class LinfBuild(ObserverBuild):
     taylor_error: dict | None
     design: linf_uio.LinfDesign
     quadratic: linf_uio.LinfDesign
-    certificate: dict
+    recheck: dict
     data: discrete.ObserverData
     discrete_certificate: discrete.DiscreteCertificate
     timings: dict
@@ -72,19 +72,39 @@ class LinfBuild(ObserverBuild):
         return [(str(sym), lo, hi, sym not in self.data.raw_signals)
                 for sym, lo, hi in zip(self.poly.signals, self.poly.lowers, self.poly.uppers)]
 
-    def emit_notes(self) -> dict:
-        """Family-specific text of the C API."""
-        return {
-            "headline": f"gamma = {self.design.gamma:.6g}",
-            "stability": (f"backward Euler, certified over the whole scheduling box: sqrt(V) of the state error "
-                          f"contracts by {self.discrete_certificate.contraction:.6f} per step, and the full error "
-                          f"with the UI filter loop by {self.discrete_certificate.ui_loop.contraction:.6f}"),
-            "step_notes": [],
-            "clamp_doc": ("A scheduling signal outside its box: clamped for the membership functions and the "
-                          "step\n * taken; the stability certificate does not cover this sample."),
-            "warmup_doc": "never set by this observer (its step needs no previous sample).",
-            "has_warmup": False,
-        }
+    def step_notes(self) -> StepNotes:
+        return StepNotes(clamp=("A scheduling signal outside its box: clamped for the membership functions and the "
+                                "step\n * taken; the stability certificate does not cover this sample."),
+                         warmup="never set by this observer (its step needs no previous sample).")
+
+    @property
+    def certificate(self) -> Certificate:
+        d, poly, settings = self.lpv.definition, self.poly, self.design.settings
+        dc = self.discrete_certificate
+        units = d.units
+        perf = list(settings.performance) or [str(x) for x in d.states]
+        uis = [str(u) for u in d.unknown_inputs]
+        rates = ", ".join(f"[{lo:.4g}, {hi:.4g}]" for lo, hi in poly.rate_bounds)
+        return Certificate(
+            family="linf_uio",
+            claim=(f"Theorem 1 of Nguyen et al. 2019 ({settings.lyapunov} Lyapunov function): the estimation error "
+                   f"decays at rate alpha = {settings.alpha:g} 1/s and its performance output z = "
+                   f"({', '.join(perf)}) has the peak-to-peak gain gamma from the unknown-input estimate's error, "
+                   f"for every scheduling trajectory in the box whose membership rates stay within the rate bounds"),
+            plant_class=(f"the LPV model {d.name} with the parameters of {self.config.parameters}, on its "
+                         f"{poly.kind} polytope of {poly.n_vertices} vertices ({polytope.FORMS[poly.kind]})"),
+            noise="noise-free measurements; the unknown inputs any bounded signals",
+            region={str(sym): (lo, hi) for sym, lo, hi in zip(poly.signals, poly.lowers, poly.uppers)},
+            region_note=(f"membership rates within the {poly.rate_bound_mode} bounds {rates} 1/s; SCHEDULING_CLAMPED "
+                         f"flags a scheduling input outside its box"),
+            recheck=Recheck.of(self.design.solution.checks),
+            step=Step(self.config.sample_time, "backward Euler, the UI filter loop closed",
+                      max(dc.contraction, dc.ui_loop.contraction)),
+            bounds=(Bound("gamma", self.design.gamma, unit_ratio([units.get(p, "-") for p in perf],
+                                                                 [units.get(u, "-") for u in uis]),
+                          "peak", f"z = ({', '.join(perf)}), the performance output's estimation error",
+                          f"d - d_hat, the error of the unknown-input estimate ({', '.join(uis)})"),),
+            extras=_certificate_extras(self))
 
     def signal_docs(self) -> tuple:
         """(state, inputs, outputs) field docs of the C API; the outputs are the state."""
@@ -96,6 +116,14 @@ class LinfBuild(ObserverBuild):
                   + [{"name": str(s.symbol), "doc": f"scheduling signal [{s.unit or '-'}]"} for s in d.scheduling
                      if s.derived is None])
         return state, inputs, state
+
+    def contraction_metrics(self) -> list:
+        """The UI-filter loop's common Lyapunov function: the whole step state [x_hat; d_hat]."""
+        ui = self.discrete_certificate.ui_loop
+        return [ContractionMetric(ui.contraction, (ui.P,), tuple(self.state_names),
+                                  f"common Lyapunov function of the error with the UI filter loop, He(P Aa) <= "
+                                  f"-2 beta P over the polytope, beta = {ui.beta:g} 1/s, backward Euler at Ts",
+                                  knob="a faster certified UI-filter loop: [design] alpha, [ui_filter] time_constant")]
 
     def reference_step(self, z, u, y, rho):
         """Independent numpy step (tests, the benchmark's numpy peer)."""
@@ -118,10 +146,9 @@ class LinfBuild(ObserverBuild):
     def artifact(self) -> dict:
         return artifact(self)
 
-    def summary(self, path) -> dict:
+    def figures(self) -> dict:
         sol = self.design.solution
         return {
-            "observer": self.name, "artifact": str(path),
             "gamma": self.design.gamma, "gamma_quadratic": self.quadratic.gamma,
             "vertices": self.poly.n_vertices, "polytope": self.poly.kind, "polytope_form": polytope.FORMS[self.poly.kind],
             "lyapunov": self.design.settings.lyapunov,
@@ -130,7 +157,7 @@ class LinfBuild(ObserverBuild):
             "solver_iterations": sol.iterations,
             "worst_block": sol.worst.label, "worst_min_eig": sol.worst.min_eig,
             "worst_relative_margin": sol.worst.relative_margin,
-            "recheck_gamma": self.certificate["gamma"],
+            "recheck_gamma": self.recheck["gamma"],
             "discrete_kappa": self.discrete_certificate.kappa,
             "discrete_contraction_per_step": self.discrete_certificate.contraction,
             "discrete_spectral_radius_max": self.discrete_certificate.augmented_radius_max,
@@ -139,29 +166,6 @@ class LinfBuild(ObserverBuild):
             "sample_time": self.config.sample_time,
             "taylor_error": self.taylor_error,
         }
-
-    def summary_lines(self, s: dict) -> list:
-        exact = s["polytope"] == "sector"
-        lines = [f"observer {self.name}: {FAMILY_TITLE}, {s['polytope']} polytope "
-                 f"({'exact' if exact else polytope.APPROXIMATION}), {s['vertices']} vertices",
-                 f"  gamma ({s['lyapunov']:9s})      {s['gamma']:.6g}   (quadratic: {s['gamma_quadratic']:.6g})",
-                 f"  re-checked gamma        {s['recheck_gamma']:.6g}   (numpy, no solver)",
-                 f"  solve / build time      {1e3 * s['solve_time_s']:.1f} ms / {1e3 * s['build_time_s']:.1f} ms "
-                 f"({s['solver_iterations']} Clarabel iterations); whole design {s['total_design_time_s']:.2f} s",
-                 f"  worst LMI margin        {s['worst_min_eig']:.3e} (relative {s['worst_relative_margin']:.3e}) "
-                 f"in {s['worst_block']}",
-                 f"  discrete step Ts={s['sample_time']:g}s  kappa {s['discrete_kappa']:.6f} -> sqrt(V) contracts by "
-                 f"{s['discrete_contraction_per_step']:.6f}/step",
-                 f"  with the UI filter loop decay {s['ui_loop_decay_rate']:.3g} 1/s certified (common Lyapunov "
-                 f"function) -> {s['ui_loop_contraction_per_step']:.6f}/step; dense-grid spectral radius "
-                 f"{s['discrete_spectral_radius_max']:.6f}"]
-        if s["taylor_error"]:
-            te = s["taylor_error"]
-            lines.append(f"  Taylor-reduction error  {te['max_abs_error']:.4g} on A{tuple(te['entry'])} at "
-                         f"{self.poly.signal}={te['at']:g} ({100 * te['relative_error_there']:.1f}% of the entry): "
-                         f"{polytope.APPROXIMATION}; polytope = \"sector\" is the exact form")
-        lines.append(f"artifact: {s['artifact']}")
-        return lines
 
 
 def _settings(config: ObserverConfig, lyapunov: str | None = None) -> linf_uio.LinfDesignSettings:
@@ -203,14 +207,15 @@ def representation(config: ObserverConfig):
     return lpv, poly, err
 
 
-def build(config: ObserverConfig, tol: float | None = None) -> LinfBuild:
-    """Run model -> polytope -> LMI design -> certificate -> discrete certificate."""
+def build(config: ObserverConfig, solver) -> LinfBuild:
+    """Run model -> polytope -> LMI design -> certificate -> discrete certificate, the design
+    problems answered by ``solver`` (:mod:`codegen.design.solver`)."""
     t0 = time.perf_counter()
     lpv, poly, err = representation(config)
     t1 = time.perf_counter()
     settings = _settings(config)
-    if tol is not None:
-        settings = dataclasses.replace(settings, tol=tol)
+    if solver.tol is not None:
+        settings = dataclasses.replace(settings, tol=solver.tol)
     if err is not None and err["relative_error_there"] > settings.taylor_error_limit:
         raise RepresentationError(
             f"{config.source}: the Taylor-reduced polytope misses A(rho) by {100 * err['relative_error_there']:.1f} % "
@@ -218,11 +223,11 @@ def build(config: ObserverConfig, tol: float | None = None) -> LinfBuild:
             f"[design] taylor_error_limit = {settings.taylor_error_limit:g}; use the exact form, polytope = \"sector\" "
             f"({2 ** len(polytope.scheduling_nonlinearities(lpv))} vertices), or narrow the scheduling box")
     try:
-        design = linf_uio.design(poly, settings, lpv.definition.states)
+        design = linf_uio.design(poly, settings, solver, lpv.definition.states)
     except RankConditionError as exc:
         raise RankConditionError(f"{config.source}: {exc}") from None
     quadratic = design if settings.lyapunov == "quadratic" else \
-        linf_uio.design(poly, dataclasses.replace(settings, lyapunov="quadratic"), lpv.definition.states)
+        linf_uio.design(poly, dataclasses.replace(settings, lyapunov="quadratic"), solver, lpv.definition.states)
     if design.gamma > quadratic.gamma:
         # the quadratic design is a point of the PDLF problem (P_i = P, X = 0, the rate terms
         # cancel): PDLF never returns worse than what it contains
@@ -233,7 +238,7 @@ def build(config: ObserverConfig, tol: float | None = None) -> LinfBuild:
                                  float(config.ui_filter.get("time_constant", 0.005)), config.sample_time,
                                  lpv.derived, lpv.definition.output_symbols, lpv.derived_inputs)
     try:
-        dcert = discrete.certify_step(data, settings.alpha)
+        dcert = discrete.certify_step(data, settings.alpha, solver, min_margin=required_margin(settings))
     except UILoopError as exc:
         raise UILoopError(f"{config.source}: {exc}"
                           f"{_measured_remedies(poly, settings, data, config.sample_time, lpv.definition.states)}") from None
@@ -252,11 +257,10 @@ def _measured_remedies(poly, settings, data, sample_time: float, states: tuple =
              ("both", dataclasses.replace(settings, alpha=settings.alpha / 2, gain_bound=settings.gain_bound / 2)))
     works = []
     for label, s in tries:
-        with lmi.recording():          # a measurement: its solves stay out of the design lock
-            try:
-                d = linf_uio.design(poly, s, states)
-            except UiogenError:
-                continue
+        try:        # a measurement: its own solver, nothing goes to the design lock
+            d = linf_uio.design(poly, s, FreshSolver(), states)
+        except UiogenError:
+            continue
         if discrete.loop_is_certifiable(dataclasses.replace(data, Q=d.Q, L=d.L)):
             works.append({"alpha": f"alpha = {s.alpha:g}",
                           "gain_bound_times_sample_time": f"gain_bound_times_sample_time = {s.gain_bound * sample_time:g}",
@@ -267,10 +271,23 @@ def _measured_remedies(poly, settings, data, sample_time: float, states: tuple =
     return "; re-designed with [design] alpha, the gain bound, or both halved, it does not certify either"
 
 
-def artifact(b: LinfBuild) -> dict:
-    """The design artifact: everything needed to re-check the design without uiogen."""
+def _certificate_extras(b: LinfBuild) -> dict:
+    """The family's own figures of the certificate: every solver block, the numpy re-check of
+    Theorem 1 on the emitted matrices (mu, nu, gamma), the discrete step's certificates."""
     sol = b.design.solution
     worst = sol.worst
+    return {
+        "solver_blocks": [significant({"label": c.label, "min_eig": c.min_eig,
+                                       "relative_margin": c.relative_margin}) for c in sol.checks],
+        "worst_block": worst.label,
+        "worst_min_eig": significant(worst.min_eig),
+        "worst_relative_margin": significant(worst.relative_margin),
+        "recheck": significant(b.recheck),
+    }
+
+
+def artifact(b: LinfBuild) -> dict:
+    """The design artifact: everything needed to re-check the design without uiogen."""
     gains = {f"M{i + 1}": np.linalg.solve(q, l).tolist() for i, (q, l) in enumerate(zip(b.design.Q, b.design.L))}
     derived = ({"derived_inputs": {str(sym): str(expr) for sym, expr in b.lpv.derived_inputs}}
                if b.lpv.derived_inputs else {})
@@ -284,13 +301,5 @@ def artifact(b: LinfBuild) -> dict:
         "gains_at_vertices": gains,
         "quadratic": {"gamma": b.quadratic.gamma, "P": b.quadratic.P[0].tolist(),
                       "L": [l.tolist() for l in b.quadratic.L]},
-        "certificate": {
-            "solver_blocks": [significant({"label": c.label, "min_eig": c.min_eig,
-                                    "relative_margin": c.relative_margin}) for c in sol.checks],
-            "worst_block": worst.label,
-            "worst_min_eig": significant(worst.min_eig),
-            "worst_relative_margin": significant(worst.relative_margin),
-            "recheck": significant(b.certificate),
-        },
         "discrete": {"ui_filter_time_constant": b.data.Tf, **significant(b.discrete_certificate.to_json())},
     }

@@ -31,9 +31,10 @@ import numpy as np
 from ...design.canonical import decimal_round
 from ...errors import ConfigurationError, RankConditionError
 from ...errors import SolverError
-from ...design.lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks, committed_data
+from ...design.lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks
 from ...representation.polytope import Polytope
 from ...project.settings import Rule, setting
+from ...design.precision import margin_field, precision_field
 
 
 @dataclass(frozen=True)
@@ -65,6 +66,8 @@ class LinfDesignSettings:
     tol: float = setting(1e-8, gt=0)
     taylor_error_limit: float = setting(0.25, gt=0, doc="relative error a Taylor-reduced polytope may have")
     performance: tuple = setting((), items=Rule(str), doc="states of the performance output z = F e of (17); empty: all (Remark 4, z = e)")
+    precision: str = precision_field()
+    float32_margin: float = margin_field()
 
 
 def performance_matrix(states, performance: tuple = ()) -> np.ndarray | None:
@@ -261,7 +264,7 @@ def problem_name(settings: LinfDesignSettings) -> str:
     return f"Theorem 1 ({settings.lyapunov})"
 
 
-def ui_gain(poly: Polytope, settings: LinfDesignSettings, performance: np.ndarray | None = None,
+def ui_gain(poly: Polytope, settings: LinfDesignSettings, solver, performance: np.ndarray | None = None,
             states: tuple = ()) -> float:
     """Factor on the unknown-input units of :func:`ui_scaling` that puts the solver's nu near 1.
 
@@ -276,9 +279,9 @@ def ui_gain(poly: Polytope, settings: LinfDesignSettings, performance: np.ndarra
     there the least-norm stage's bound (the optimum rounded up to three significant digits,
     codegen.design.lmi.objective_bound) gives up at most 0.4 % of nu. k is a power of two: exact, and the
     same on machines whose nu differ in the last digits; any k within 8x of it gives the same
-    gamma to 3 digits (tests/test_design.py). Committed with the design (design lock) and read
-    back on replay."""
-    committed = committed_data(problem_name(settings))
+    gamma to 3 digits (tests/families/linf_uio/test_design.py). Committed with the design (design lock) and read
+    back on replay (``solver.committed_data``)."""
+    committed = solver.committed_data(problem_name(settings))
     if committed is not None and "ui_gain" in committed:
         return float(committed["ui_gain"])
     k = 1.0
@@ -294,16 +297,17 @@ def ui_gain(poly: Polytope, settings: LinfDesignSettings, performance: np.ndarra
     return k
 
 
-def design(poly: Polytope, settings: LinfDesignSettings, states: tuple = ()) -> LinfDesign:
-    """Solve Theorem 1 on Clarabel; the rounded matrices are re-certified independently.
-    ``settings.performance`` names the states of z (17); ``states`` are the model's."""
+def design(poly: Polytope, settings: LinfDesignSettings, solver, states: tuple = ()) -> LinfDesign:
+    """Solve Theorem 1 (``solver``: :mod:`codegen.design.solver`); the rounded matrices are
+    re-certified independently. ``settings.performance`` names the states of z (17); ``states``
+    are the model's."""
     try:
         F = performance_matrix(states, settings.performance)
     except ValueError as exc:
         raise ConfigurationError(f"[design] performance: {exc}", key="performance") from None
-    k = ui_gain(poly, settings, F, states)
+    k = ui_gain(poly, settings, solver, F, states)
     prob, var = build_problem(poly, settings, F, states, k)
-    sol = prob.solve(tol=settings.tol)
+    sol = solver.solve(prob, tol=settings.tol)
     N = poly.n_vertices
     if settings.lyapunov == "pdlf":
         P = tuple(decimal_round(sol[f"P{i + 1}"]) for i in range(N))

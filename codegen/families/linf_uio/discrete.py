@@ -36,7 +36,7 @@ import numpy as np
 import sympy as sp
 from scipy.linalg import eigh
 
-from ...design import canonical, lmi
+from ...design import canonical
 from ...errors import CertificateError, ConfigurationError, DiscretizationError, SolverError, UILoopError
 from ...design.lmi import LMIProblem
 from ...representation.polytope import Polytope, sector_weights_product
@@ -404,6 +404,7 @@ class UILoopCertificate:
     Ts: float
     blocks: int
     worst_relative_margin: float
+    P: np.ndarray = dataclasses.field(default=None, compare=False, repr=False)   # over [x; d], in their units
 
     @property
     def contraction(self) -> float:
@@ -502,14 +503,17 @@ def slowest_grid_decay(data: ObserverData, Tf: float | None = None, n_grid: int 
     return worst, at
 
 
-def certify_ui_loop(data: ObserverData) -> UILoopCertificate:
+def certify_ui_loop(data: ObserverData, solver, min_margin: float = 0.0) -> UILoopCertificate:
     """Prove that the observer's full error, UI filter loop closed, contracts over the whole box.
 
     At design time the largest decay rate beta a common Lyapunov function certifies is found by
     bisection (analysis solves below the dense grid's slowest decay, the ceiling), rounded down
     to two significant digits, and solved once more as a design problem: that solution goes to
     the design lock with its beta and Tf, and every later ``generate`` re-checks the committed
-    matrices block by block (numpy) instead of solving.
+    matrices block by block (numpy) instead of solving (``solver``: :mod:`codegen.design.solver`).
+
+    ``min_margin`` > 0 (``[design] precision = "float32"``): the decay must give a contraction
+    margin ``1 - c >= min_margin`` per step, else DiscretizationError with the largest one found.
 
     Raises
     ------
@@ -517,7 +521,9 @@ def certify_ui_loop(data: ObserverData) -> UILoopCertificate:
         when no common Lyapunov function exists at this filter constant: the message gives what
         was measured (the dense-grid decay, the filter constants that do certify).
     """
-    committed = lmi.committed_data(UI_LOOP_PROBLEM)
+    from ...design.precision import rate_for_backward_euler
+    need = rate_for_backward_euler(min_margin, data.Ts)
+    committed = solver.committed_data(UI_LOOP_PROBLEM)
     if committed is not None:
         beta = float(committed["beta"])
     else:
@@ -528,13 +534,23 @@ def certify_ui_loop(data: ObserverData) -> UILoopCertificate:
         for _ in range(14):
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if _ui_loop_feasible(data, mid, data.Tf) else (lo, mid)
+        if lo < need:
+            c = 1.0 / np.sqrt(1.0 + 2.0 * lo * data.Ts)
+            raise DiscretizationError(
+                f"[design] precision = \"float32\" needs the UI-filter loop to decay at {need:.4g} 1/s (a contraction "
+                f"margin {min_margin:g} per step at Ts = {data.Ts:g} s); its common Lyapunov function certifies at most "
+                f"{lo:.4g} 1/s (margin {1 - c:.4g}). Options: [design] alpha (the state error's decay), "
+                f"[ui_filter] time_constant, or a smaller [design] float32_margin")
         # committed inside the feasible set, not on its edge: the re-check keeps a margin
-        beta = _round_down(UI_LOOP_BACKOFF * lo)
+        beta = max(_round_down(UI_LOOP_BACKOFF * lo), need)
     try:
-        sol = _ui_loop_problem(data, beta, data.Tf, design=True).solve(tol=1e-9)
+        sol = solver.solve(_ui_loop_problem(data, beta, data.Tf, design=True), tol=1e-9)
     except (SolverError, CertificateError) as exc:
         raise DiscretizationError(f"the UI filter loop's certificate at decay {beta:g} 1/s failed: {exc}") from None
-    return UILoopCertificate(beta, data.Ts, len(sol.checks), float(sol.worst.relative_margin))
+    # the LMIs see the unknown inputs divided by ui_scaling: back to their own units
+    scale = np.concatenate([np.ones(data.nx), 1.0 / ui_scaling(data.poly)])
+    P = scale[:, None] * np.asarray(sol["P"], dtype=float) * scale[None, :]
+    return UILoopCertificate(beta, data.Ts, len(sol.checks), float(sol.worst.relative_margin), 0.5 * (P + P.T))
 
 
 def _ui_loop_advice(data: ObserverData, ceiling: float, at) -> str:
@@ -588,7 +604,7 @@ class DiscreteCertificate:
                 "ui_loop_lmi_blocks": self.ui_loop.blocks}
 
 
-def certify_step(data: ObserverData, alpha: float, n_grid: int = 2001) -> DiscreteCertificate:
+def certify_step(data: ObserverData, alpha: float, solver, n_grid: int = 2001, min_margin: float = 0.0) -> DiscreteCertificate:
     """Prove the backward-Euler error dynamics contract over the whole scheduling box.
 
     With V = e' Q(th) e, Q(th) = sum eta_i (P_i + X), the continuous certificate (the
@@ -630,7 +646,7 @@ def certify_step(data: ObserverData, alpha: float, n_grid: int = 2001) -> Discre
             f"cannot certify the Ts={Ts:g} s step: kappa = 1 + 2 alpha Ts - {worst:.4g} = {kappa:.6f} <= 1 "
             f"(the Lyapunov matrix varies too fast between samples); lower Ts, raise alpha, or use "
             f"the quadratic design")
-    ui_loop = certify_ui_loop(data)
+    ui_loop = certify_ui_loop(data, solver, min_margin)
     # the proof implies the evidence (He(P Aa) < 0 makes every backward-Euler step contract)
     if max(err_r) >= 1.0 or aug_r[k] >= 1.0:
         raise CertificateError(f"the certified Ts={Ts:g} s step has a dense-grid spectral radius "

@@ -1,11 +1,13 @@
 """Validation of the L-infinity UIO family: the compiled step on the nominal (Pacejka) plant,
 the observer's exact model or the CommonRoad multi-body plant, beside the linear KF and the
-Fiala EKF generated from ``model_defs/baselines.py``; the paper's Table II format."""
+Fiala EKF generated from ``model_defs/baselines.py``. Rows in the one definition of every
+validation (:func:`codegen.validation.metrics.signal_report`), and the paper's Table II format
+beside them (``paper_format``: E_mean, E_max, Std, RMS with angles in deg and their rates in deg/s)."""
 from __future__ import annotations
 
 import numpy as np
 
-from ...validation import simulate
+from ...validation import metrics, simulate
 from ...errors import ModelDefinitionError
 from ...validation.common import (SENSOR_NOISE, commonroad_vehicle, scenario_for, signal_stats,
                                   truth_plant)
@@ -20,10 +22,11 @@ def truth_commonroad(config, scn, progress=None):
             "v_y": gt.v_y}
 
 
-def baselines(config, truth, noisy, traces: dict | None = None) -> dict:
+def baselines(config, truth, noisy, units: dict, traces: dict | None = None) -> dict:
     """The source repository's linear KF and the Fiala EKF (generated from ``model_defs/baselines.py``
-    with the observer's car: axle stiffness = 2 x tyre stiffness, mu = 1), on the same noisy measurements.
-    ``traces``: a dict that receives each baseline's estimates ({name: {"beta": ..., "r": ...}}), for plots."""
+    with the observer's car: axle stiffness = 2 x tyre stiffness, mu = 1), on the same noisy measurements;
+    ``units``: the model's declared units of beta and r. ``traces``: a dict that receives each
+    baseline's estimates ({name: {"beta": ..., "r": ...}}), for plots."""
     from ...validation import stanford
     car_ = car(config)
     run = stanford.StanfordRun(t=truth["t"], vx=truth["v_x"], vy=np.tan(truth["beta"]) * truth["v_x"],
@@ -34,8 +37,8 @@ def baselines(config, truth, noisy, traces: dict | None = None) -> dict:
     out = {}
     for name, res in (("linear_kf", stanford.linear_kf(run, car_)),
                       ("ekf", stanford.ekf(run, car_, stanford.EKFConfig(mu=1.0)))):
-        out[name] = {"beta": signal_stats(truth["beta"], res.beta, truth["t"], angle=True),
-                     "r": signal_stats(truth["r"], res.r, truth["t"], angle=True)}
+        out[name] = {"beta": signal_stats(truth["beta"], res.beta, truth["t"], unit=units.get("beta", "rad")),
+                     "r": signal_stats(truth["r"], res.r, truth["t"], unit=units.get("r", "rad/s"))}
         if traces is not None:
             traces[name] = {"beta": res.beta, "r": res.r}
     return out
@@ -73,9 +76,10 @@ def run(config, scenario, plant: str = "nominal", duration: float | None = None,
     table = {}
     for i, sig in enumerate(obs.state_names):
         if sig in truth:
-            table[sig] = signal_stats(truth[sig], out[:, i], truth["t"], angle=d.units.get(sig, "").startswith("rad"))
+            table[sig] = signal_stats(truth[sig], out[:, i], truth["t"], unit=d.units.get(sig))
     peers = {}
-    return {"observer": table, "baselines": baselines(config, truth, noisy, peers),
+    base = baselines(config, truth, noisy, dict(d.units), peers)
+    return {"observer": table, "baselines": base, "paper_format": paper_format(table, base),
             "status_flags": int(np.count_nonzero(status)), "samples": int(len(status)),
             "max_abs_ay": float(np.abs(truth["a_y"]).max()), "plant": plant, "plant_model": plant_model,
             "scenario": scn.name,
@@ -84,17 +88,29 @@ def run(config, scenario, plant: str = "nominal", duration: float | None = None,
             "units": dict(d.units)}
 
 
+PAPER_TABLE = "Nguyen et al. 2019 Table II: E_mean (mean |error|), E_max, Std, RMS; angles in deg, their rates in deg/s"
+
+
+def _paper_row(row: dict) -> dict:
+    """A row in Table II's terms: angular rates in deg/s as the paper gives them."""
+    row = metrics.convert(row, "deg/s") if row.get("unit") == "rad/s" else row
+    return {"unit": row["unit"], "E_mean": row["mae"], "E_max": row["max"], "Std": row["std"], "RMS": row["rms"]}
+
+
+def paper_format(table: dict, base: dict) -> dict:
+    """The paper's Table II format of the observer's rows and the baselines' sideslip rows."""
+    rows = {sig: _paper_row(row) for sig, row in table.items()}
+    rows.update({f"beta {name}": _paper_row(b["beta"]) for name, b in base.items()})
+    return {"table": PAPER_TABLE, "rows": rows}
 
 
 def format_table(result: dict) -> str:
-    """The paper's Table II columns (E_mean, E_max, Std, RMS; angles in degrees), baselines below."""
-    lines = [f"{'signal':14s} {'E_mean':>9s} {'E_max':>9s} {'Std':>9s} {'RMS':>9s}"]
-    units = result["units"]
-    for sig, row in result["observer"].items():
-        u = units.get(sig, "")
-        u = ("deg" + ("/s" if u.endswith("/s") else "")) if u.startswith("rad") else u
-        lines.append(f"{sig + ' [' + u + ']':14s} {row['mae']:9.4f} {row['max']:9.4f} {row['std']:9.4f} {row['rms']:9.4f}")
-    for base, rows in result["baselines"].items():
-        b = rows["beta"]
-        lines.append(f"{'beta [deg] ' + base:14s} {b['mae']:9.4f} {b['max']:9.4f} {b['std']:9.4f} {b['rms']:9.4f}")
+    """The paper's Table II columns (E_mean, E_max, Std, RMS; angles in deg, rates in deg/s), baselines
+    below, then the one definition of every validation (the truth's RMS, the error in % of it)."""
+    from ...validation.common import format_stats
+    lines = [f"{'Table II format':22s} {'E_mean':>9s} {'E_max':>9s} {'Std':>9s} {'RMS':>9s}"]
+    for sig, row in result["paper_format"]["rows"].items():
+        label = f"{sig} [{row['unit']}]" if not sig.startswith("beta ") else f"beta [{row['unit']}] {sig[5:]}"
+        lines.append(f"{label:22s} {row['E_mean']:9.4f} {row['E_max']:9.4f} {row['Std']:9.4f} {row['RMS']:9.4f}")
+    lines.append(format_stats(result["observer"]))
     return "\n".join(lines)

@@ -19,29 +19,24 @@ class NonlinearTyreObserver(Family):
     short_citation = "nonlinear-tyre DMVT"
     observer_keys = {}
     bounds_settings = ("bounds_rel_tol",)
-    demo_scenarios = ()
+    # capabilities (codegen.families.capabilities): DemoFigures, Applicability, GainForms, LogPeers,
+    # Identification
     example = "stanford_sideslip_nonlinear_tyre"
 
     def applicability(self, subject, structure):
         from .applicability import assess
         return assess(self, subject, structure)
 
-    def build(self, config, tol=None):
+    def build(self, config, solver):
         from .build import build
-        return build(config, tol)
+        return build(config, solver)
 
     def demo_report(self, art: dict) -> dict:
-        c = art["certificate"]["recheck"]
+        c = art["certificate"]["extras"]["recheck"]
         return {"worst_lmi_margin": c["worst_min_eig"], "worst_lmi_block": c["worst_block"],
                 "contraction_per_step": c["contraction_per_step"], "time_constant_s": c["time_constant_s"],
                 "decay_rate": c["decay_rate"], "best_decay_rate": c["best_decay_rate"], "gamma_deg": c["gamma_deg"],
                 "bound_deg_at_levels": c["bound_deg_at_levels"], "gains": art["gains"]}
-
-    def demo_lines(self, e: dict) -> list:
-        return [f"gains {e['gains']}; vertex LMIs: worst margin {e['worst_lmi_margin']:.3g} in {e['worst_lmi_block']}; "
-                f"sqrt(V) contracts by {e['contraction_per_step']:.6f}/step (time constant {e['time_constant_s']:.3g} s); "
-                f"l2 gain {e['gamma_deg']:.4g} deg, RMS beta error <= {e['bound_deg_at_levels']:.4g} deg at the noise "
-                f"levels"]
 
     def log_peers(self, config, run) -> dict:
         """The EKF and UKF of the same symbolic model and parameter file
@@ -61,21 +56,20 @@ class NonlinearTyreObserver(Family):
         from .fit import files
         return files(config, result)
 
-    def fit_lines(self, result: dict, changed: dict) -> list:
+    def fit_table(self, result: dict, changed: dict) -> list:
         from .fit import lines
         return lines(result, changed)
 
-    def check_gains(self, config, gains: dict) -> dict:
+    def check_gain_form(self, config, gains: dict, source: str):
         """Gains given as ``{"L": [[L_vy_ay, L_vy_r], [L_r_ay, L_r_r]]}`` (rows v_y, r; columns a_y, r),
         certified like the observer file's given gains: the largest decay rate a common Lyapunov
-        matrix certifies, the l2 gain at the decay the design requires; anything else in the design
-        lock's form (``lmi_solutions``)."""
-        if "lmi_solutions" in gains:
-            return super().check_gains(config, gains)
+        matrix certifies, the l2 gain at the decay the design requires."""
         import dataclasses
 
         import numpy as np
 
+        from ...certificate.gains import GainsCheck
+        from ...design.solver import FreshSolver
         from ...errors import CertificateError, ConfigurationError, SolverError
         L = gains.get("L")
         try:
@@ -88,33 +82,14 @@ class NonlinearTyreObserver(Family):
                                      f"{gains.get('L')!r}", key="L")
         given = dict(zip(("gain_vy_ay", "gain_vy_r", "gain_r_ay", "gain_r_r"), L.ravel().tolist()))
         cfg = dataclasses.replace(config, design={**{k: v for k, v in config.design.items() if k != "decay"}, **given})
-        out = {"observer": config.name, "form": "L", "L": L.tolist()}
+        figures = {"L": L.tolist()}
         try:
-            b = self.build(cfg)
+            b = self.build(cfg, FreshSolver())
         except (CertificateError, SolverError) as exc:
-            out.update(feasible=False, reason=f"{type(exc).__name__}: {exc}")
-            return out
-        c = b.certificate
-        out.update(feasible=True, **{k: c[k] for k in ("blocks", "worst_block", "worst_min_eig", "contraction_per_step",
-                                                       "time_constant_s", "slowest_vertex", "best_decay_rate",
-                                                       "decay_rate", "gamma_deg", "bound_deg_at_levels")})
-        return out
-
-    def format_check_gains(self, res: dict, source: str) -> list:
-        if res.get("form") != "L":
-            return super().format_check_gains(res, source)
-        lines = [f"{self.title}: check of the gains L = {res['L']} ({source}) on observer {res['observer']}"]
-        if res["feasible"]:
-            lines += [f"  decay: largest certifiable rate {res['best_decay_rate']:.4g} 1/s; at {res['decay_rate']:.4g} 1/s "
-                      f"sqrt(V) contracts by {res['contraction_per_step']:.6f} per step at the slowest vertex "
-                      f"({res['slowest_vertex']}), time constant {res['time_constant_s']:.3g} s",
-                      f"  l2 gain {res['gamma_deg']:.4g} deg (RMS beta error <= {res['bound_deg_at_levels']:.4g} deg at "
-                      f"the noise levels); {res['blocks']} blocks re-checked with numpy, worst {res['worst_min_eig']:.3g} "
-                      f"in {res['worst_block']}",
-                      "  PASS: certified on the observer's sets"]
-        else:
-            lines.append(f"  FAIL: {res['reason']}")
-        return lines
+            return GainsCheck(config.name, "L", str(source), False, f"{type(exc).__name__}: {exc}", figures=figures)
+        c = b.recheck
+        case = {"blocks_checked": c["blocks"], **{k: c[k] for k in ("worst_block", "worst_min_eig", "slowest_vertex")}}
+        return GainsCheck(config.name, "L", str(source), True, "", b.certificate, {"vertex LMIs": case}, figures)
 
 
 FAMILY = NonlinearTyreObserver()

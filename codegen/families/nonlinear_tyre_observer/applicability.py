@@ -43,7 +43,7 @@ def assess(family, subject, structure):
            "design.decay_fraction": "the fraction of the largest certifiable decay rate the design requires"}
 
     def figures(b) -> dict:
-        c = b.certificate
+        c = b.recheck
         return {"contraction_per_step": (c["contraction_per_step"], "-", "sqrt(V) per step on the certified set"),
                 "gamma": (c["gamma_deg"], "deg", "l2 gain to the sideslip error at the noise levels")}
     return Applicability(family.name, True, "states_only", checked=tuple(checked), notes=tuple(notes),

@@ -41,8 +41,10 @@ import numpy as np
 import sympy as sp
 
 from ...certificate.artifact import artifact_head, significant, solver_certificate
+from ...certificate.certificate import Bound, Certificate, Recheck, Step
 from ...model import load_parameters
 from ...project.settings import Rule, parse_settings, setting
+from ...design.precision import margin_field, precision_field
 from ...emit.stepgen import lambdify
 from . import design as dsn
 from .representation import TyreRepresentation, represent
@@ -76,6 +78,8 @@ class NonlinearTyreSettings:
     margin: float = setting(1e-6, gt=0, doc="smallest eigenvalue imposed on every LMI block")
     tol: float = setting(1e-8, gt=0, doc="solver tolerance")
     bounds_rel_tol: float = setting(1e-3, gt=0, doc="tightness of the Jacobian bounds")
+    precision: str = precision_field()
+    float32_margin: float = margin_field()
 
     def __post_init__(self):
         gains = [self.gain_vy_ay, self.gain_vy_r, self.gain_r_ay, self.gain_r_r]
@@ -144,7 +148,7 @@ def step_parts(rep, L, Ts, z, u, y, rho, fns, xp=np):
 
 
 def _build_class():
-    from ..base import ObserverBuild
+    from ..base import ObserverBuild, StepNotes
 
     @dataclass(frozen=True)
     class Build(ObserverBuild):
@@ -157,7 +161,7 @@ def _build_class():
         synthesis: dsn.Design
         decay_verts: tuple
         gain_verts: tuple
-        certificate: dict
+        recheck: dict
         timings: dict
 
         @property
@@ -202,6 +206,16 @@ def _build_class():
                                              self.rep.numpy_functions, xp=np)
             return np.array([vy_n, r_n, z[0], z[1]], dtype=float), float(excess)
 
+        def contraction_metrics(self):
+            """The common P over the DMVT vertices of the certified set: the prediction (v_y, r)."""
+            from ...certificate.contraction import ContractionMetric
+            D = self.plant.D            # P is solved in the scaled state D x (certify: D' P D)
+            return [ContractionMetric(float(self.recheck["contraction_per_step"]), (D.T @ self.P @ D,),
+                                      ("v_y_next", "r_next"),
+                                      "common P over the DMVT vertices: A' P A <= c^2 P, on the certified slip set",
+                                      knob="[design] decay or decay_fraction (the rate the LMIs impose), a lower "
+                                           "sliding_fraction")]
+
         def lmi_problem(self):
             d = self.synthesis
             L_scaled = None if not d.given else self.plant.D @ d.L @ np.linalg.inv(self.plant.D)
@@ -227,27 +241,51 @@ def _build_class():
                        {"name": "v_x", "doc": "measured longitudinal speed [m/s]"}]
             return state, inputs, state[2:]
 
-        def emit_notes(self):
-            c = self.certificate
-            return {
-                "headline": f"DMVT vertex LMIs (designed gains) worst margin {c['worst_min_eig']:.3g}"
-                            if not self.synthesis.given else f"DMVT vertex LMIs (given gains) worst margin "
-                                                          f"{c['worst_min_eig']:.3g}",
-                "stability": (f"common quadratic Lyapunov matrix over the vertices of (1/v_x, theta_f, theta_r): sqrt(V) "
-                              f"contracts by {c['contraction_per_step']:.6f} per step while the true and the "
-                              f"estimated state stay in the certified set; l2 gain {c['gamma_deg']:.3g} deg from the "
-                              f"normalized disturbances to the sideslip error on the gain set"),
-                "step_notes": [
-                    "Each call takes the measurements of sample k and returns the estimate of sample k made",
-                    "from the samples before it; the state's head is the prediction for sample k+1.",
-                    "A flagged sample integrates the kinematics v_y' = a_y - r v_x (no tyre correction).",
-                ],
-                "clamp_doc": ("v_x, delta or a_x outside the certified set (v_x clamped for the model), or an estimated\n"
-                              " * axle slip beyond sliding_fraction of its sliding slip: the certificate does not cover this "
-                              "sample,\n * and the step integrates the kinematics instead of correcting by the tyre model."),
-                "warmup_doc": "never set.",
-                "has_warmup": False,
-            }
+        def step_notes(self):
+            return StepNotes(
+                notes=("Each call takes the measurements of sample k and returns the estimate of sample k made",
+                       "from the samples before it; the state's head is the prediction for sample k+1.",
+                       "A flagged sample integrates the kinematics v_y' = a_y - r v_x (no tyre correction)."),
+                clamp=("v_x, delta or a_x outside the certified set (v_x clamped for the model), or an estimated\n"
+                       " * axle slip beyond sliding_fraction of its sliding slip: the certificate does not cover this "
+                       "sample,\n * and the step integrates the kinematics instead of correcting by the tyre model."),
+                warmup="never set.")
+
+        @property
+        def certificate(self):
+            c, s = self.recheck, self.settings
+            lv = dict(zip(dsn.CHANNELS, s.sigma.tolist()))
+            ranges = ""
+            if list(s.stiffness_range) != [1.0, 1.0] or list(s.friction_range) != [1.0, 1.0]:
+                ranges = (f"; every axle's cornering stiffness x[{s.stiffness_range[0]:g}, {s.stiffness_range[1]:g}] "
+                          f"and friction x[{s.friction_range[0]:g}, {s.friction_range[1]:g}] of the parameter file")
+            gains = "given" if self.synthesis.given else "designed (LMIs, jointly with the Lyapunov matrix)"
+            return Certificate(
+                family="nonlinear_tyre_observer",
+                claim=(f"one quadratic Lyapunov matrix at every vertex of (1/v_x, theta_f, theta_r) (DMVT, gains "
+                       f"{gains}): the estimation error decays at {c['decay_rate']:.4g} 1/s (the largest certifiable: "
+                       f"{c['best_decay_rate']:.4g} 1/s), and on the gain set (|t_k| <= {s.gain_sliding_fraction:g} "
+                       f"t_sl,k) the sideslip error has the l2 gain gamma from the disturbances normalized by their "
+                       f"levels"),
+                plant_class=(f"the single-track model {self.config.model} with the tyre law of its AXLES per axle "
+                             f"(the capacity from the measured signals), Euler-discretized at Ts = "
+                             f"{self.config.sample_time:g} s, parameters of "
+                             f"{self.config.parameters}{ranges}"),
+                noise=(f"axle force residuals (sigma {lv['force_front']:.4g}, {lv['force_rear']:.4g} N), a_y sensor "
+                       f"error ({lv['ay']:.4g} m/s^2), yaw-rate sensor error ({lv['r']:.4g} rad/s), Euler residuals "
+                       f"({lv['euler_vy']:.4g} m/s^2, {lv['euler_r']:.4g} rad/s^2): any sequences"),
+                region={"v_x": tuple(self.rep.v_x_box), **{n: tuple(b) for n, b in self.rep.input_boxes}},
+                region_note=(f"|t_k| <= {s.sliding_fraction:g} t_sl,k on each axle (the sliding slip at the measured "
+                             f"signals) for the true AND the estimated state; SCHEDULING_CLAMPED flags the estimated "
+                             f"slip or a measured signal (delta, v_x, a_x where the law reads it) outside the set: the true slip is not seen (v_y is not measured)"),
+                recheck=Recheck(c["blocks"], c["worst_block"], c["worst_min_eig"], c["worst_relative_margin"]),
+                step=Step(self.config.sample_time, "Euler step of the observer (kinematic fallback outside the set)",
+                          c["contraction_per_step"]),
+                bounds=(Bound("gamma", c["gamma_deg"], "deg", "l2", "beta, the sideslip estimation error",
+                              "the disturbances w, each channel divided by its level sigma"),
+                        Bound("beta_rms", c["bound_deg_at_levels"], "deg", "rms", "beta, the sideslip estimation error",
+                              "every disturbance channel at its level sigma")),
+                extras=solver_certificate(self.solution, recheck=self.recheck))
 
         def _representation(self):
             rep = self.rep
@@ -270,13 +308,12 @@ def _build_class():
                     "representation": self._representation(),
                     "L": self.L.tolist(), "P": self.P.tolist(), "gains": "given" if self.synthesis.given else "designed",
                     "noise_levels": dict(zip(dsn.CHANNELS, self.settings.sigma.tolist())),
-                    "sliding_fraction": self.settings.sliding_fraction,
-                    "certificate": solver_certificate(self.solution, recheck=self.certificate)}
+                    "sliding_fraction": self.settings.sliding_fraction}
 
-        def summary(self, path):
-            c = self.certificate
+        def figures(self):
+            c = self.recheck
             s = self.settings
-            return {"observer": self.name, "artifact": str(path), "gains": "given" if self.synthesis.given else "designed",
+            return {"gains": "given" if self.synthesis.given else "designed",
                     "theta_bounds": [list(b.theta) for b in self.rep.decay_set],
                     "theta_gain_set": [list(b.theta) for b in self.rep.gain_set],
                     "slip_max": [b.slip_max for b in self.rep.decay_set], "L": self.L.tolist(), "P": self.P.tolist(),
@@ -292,42 +329,6 @@ def _build_class():
                     "input_boxes": {n: list(b) for n, b in self.rep.input_boxes}, "v_x_box": list(self.rep.v_x_box),
                     "sample_time": self.config.sample_time}
 
-        def summary_lines(self, s):
-            boxes = ", ".join(f"{n} in [{b[0]:g}, {b[1]:g}]" for n, b in s["input_boxes"].items())
-            ranges = ""
-            if s["stiffness_range"] != [1.0, 1.0] or s["friction_range"] != [1.0, 1.0]:
-                ranges = (f"; every axle stiffness x[{s['stiffness_range'][0]:g}, {s['stiffness_range'][1]:g}] and "
-                          f"friction x[{s['friction_range'][0]:g}, {s['friction_range'][1]:g}] of the parameter file")
-            lv = s["noise_levels"]
-            lines = [f"observer {s['observer']}: nonlinear single-track observer, the model's tyre law per axle "
-                     f"(AXLES), gains {s['gains']} (LMIs, Lyapunov matrix and gains jointly)",
-                     f"  plant class: the model Euler-discretized at T_s = {s['sample_time']:g} s, v_x in "
-                     f"[{s['v_x_box'][0]:g}, {s['v_x_box'][1]:g}] m/s, {boxes}{ranges}",
-                     f"  certified set S: |t_k| <= {s['sliding_fraction']:g} t_sl,k on each axle (t_sl from each "
-                     f"axle's capacity at the measured signals), for the true AND the estimated state"]
-            for name, b, tmax in zip(("front", "rear"), s["theta_bounds"], s["slip_max"]):
-                lines.append(f"    v_x dPhi_{name}/dv_y in [{b[0]:.6g}, {b[1]:.6g}] N on S (|t| <= {tmax:.4g}; sound, "
-                             f"interval arithmetic)")
-            lines += [
-                f"  decay (no disturbance): the largest certifiable rate is {s['best_decay_rate']:.4g} 1/s; required "
-                f"{s['decay_rate']:.4g} 1/s: sqrt(V) contracts by {s['contraction_per_step']:.6f} per step at the "
-                f"slowest vertex ({s['slowest_vertex']}), time constant {s['time_constant_s']:.3g} s",
-                f"  l2 gain on S_gain (|t_k| <= {s['gain_sliding_fraction']:g} t_sl,k, true and estimated state): "
-                f"sum_k beta_err^2 <= gamma^2 sum_k |w_k / sigma|^2 + V(e_0), gamma = {s['gamma_deg']:.4g} deg",
-                f"    w: axle force residuals (sigma {lv['force_front']:.4g}, {lv['force_rear']:.4g} N), a_y sensor error "
-                f"({lv['ay']:.4g} m/s^2), yaw-rate sensor error ({lv['r']:.4g} rad/s), Euler residuals "
-                f"({lv['euler_vy']:.4g} m/s^2, {lv['euler_r']:.4g} rad/s^2), any sequences",
-                f"    every channel at its level sigma: RMS beta error <= {s['bound_deg_at_levels']:.4g} deg (+ the decaying "
-                f"initial error)",
-                "  status bit SCHEDULING_CLAMPED: the ESTIMATED slip, delta, a_x or v_x outside S; the true slip is not "
-                "seen (v_y is not measured), so the true state can leave S unflagged; flagged samples integrate the "
-                "kinematics",
-                f"  L = {s['L']}",
-                f"  {s['lmi_blocks']} LMI blocks; worst margin {s['worst_min_eig']:.3e} (relative "
-                f"{s['worst_relative_margin']:.3e}) in {s['worst_block']} (numpy re-check)",
-                f"artifact: {s['artifact']}"]
-            return lines
-
     return Build
 
 
@@ -339,11 +340,11 @@ def parse(config, tol=None) -> NonlinearTyreSettings:
                           **({"tol": tol} if tol is not None else {}))
 
 
-def build(config, tol: float | None = None, params=None):
-    """model -> force form + sound axle Jacobian bounds on the sets -> vertex LMIs (gains and P) ->
-    numpy re-check -> step. ``params``: a :class:`~codegen.model.ParameterSet` instead of the
+def build(config, solver, params=None):
+    """model -> force form + sound axle Jacobian bounds on the sets -> vertex LMIs (gains and P,
+    answered by ``solver``: :mod:`codegen.design.solver`) -> numpy re-check -> step. ``params``: a :class:`~codegen.model.ParameterSet` instead of the
     observer's parameter file (identification: :mod:`.fit`)."""
-    settings = parse(config, tol)
+    settings = parse(config, solver.tol)
     t0 = time.perf_counter()
     params = load_parameters(config.parameter_path) if params is None else params
     rep = represent(config.load_model_module(), params, settings, config.source)
@@ -352,7 +353,7 @@ def build(config, tol: float | None = None, params=None):
     plant = dsn.Plant(config.sample_time, rep.G_f, rep.G_a, np.array(rep.lever), settings.sigma, np.diag([1.0, d]))
     decay_verts = tuple(dsn.vertices(rep, rep.decay_set, with_speed=False))
     gain_verts = tuple(dsn.vertices(rep, rep.gain_set, with_speed=True))
-    design = dsn.synthesize(plant, decay_verts, gain_verts, settings)
+    design = dsn.synthesize(plant, decay_verts, gain_verts, settings, solver)
     t2 = time.perf_counter()
     cert = dsn.certify(plant, decay_verts, gain_verts, design)
     t3 = time.perf_counter()

@@ -40,8 +40,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...design.canonical import decimal_round
+from ...design.precision import required_margin
 from ...errors import CertificateError, SolverError
-from ...design.lmi import LMIProblem, bmat, check_blocks, committed_data, objective_bound
+from ...design.lmi import LMIProblem, bmat, check_blocks, objective_bound
 
 DEG = 180.0 / np.pi
 CHANNELS = ("force_front", "force_rear", "ay", "r", "euler_vy", "euler_r")
@@ -195,13 +196,13 @@ class Design:
     solution: object
 
 
-def synthesize(plant, decay_verts, gain_verts, settings) -> Design:
-    """Bisection for a*, then the design problem (see the module docstring); replays the committed
-    constants from a design lock instead of searching again."""
+def synthesize(plant, decay_verts, gain_verts, settings, solver) -> Design:
+    """Bisection for a*, then the design problem (see the module docstring), answered by ``solver``
+    (:mod:`codegen.design.solver`); a replay's committed constants stand in for the search."""
     given = settings.given_gains
     D = plant.D
     L_scaled = None if not given else D @ settings.gain @ np.linalg.inv(D)
-    committed = committed_data(problem_name(given))
+    committed = solver.committed_data(problem_name(given))
     if committed is not None:
         best, rate = float(committed["best_decay_rate"]), float(committed["decay_rate"])
     else:
@@ -219,7 +220,17 @@ def synthesize(plant, decay_verts, gain_verts, settings) -> Design:
                                        f"{best:.4g} 1/s (decay {np.sqrt(1 - plant.Ts * best):.6f})")
         else:
             rate = _round_down(settings.decay_fraction * best)
-    sol = lmi_problem(plant, decay_verts, gain_verts, settings, rate, best, L_scaled).solve(tol=settings.tol)
+        # [design] precision = "float32": sqrt(1 - Ts rate) <= 1 - float32_margin
+        m = required_margin(settings)
+        need = (1.0 - (1.0 - m) ** 2) / plant.Ts if m else 0.0
+        if need > best:
+            raise CertificateError(f"nonlinear-tyre observer: [design] precision = \"float32\" needs the decay rate "
+                                   f"{need:.4g} 1/s (contraction margin {m:g} per step); the largest a common Lyapunov "
+                                   f"matrix certifies on the set is {best:.4g} 1/s (margin "
+                                   f"{1 - np.sqrt(1 - plant.Ts * best):.4g}): lower sliding_fraction, or a smaller "
+                                   f"[design] float32_margin")
+        rate = max(rate, need)
+    sol = solver.solve(lmi_problem(plant, decay_verts, gain_verts, settings, rate, best, L_scaled), tol=settings.tol)
     P = decimal_round(0.5 * (sol["P"] + sol["P"].T))
     if given:
         L = settings.gain

@@ -175,9 +175,10 @@ def _rounded(config, tyre: dict) -> np.ndarray:
 def observer_beta(config, params, design: dict, run, a: int, b: int) -> np.ndarray:
     """The sideslip estimate [rad] of the observer designed with ``params`` and ``design`` overrides
     over samples a..b-1 (the CasADi step, no files written)."""
+    from ...design.solver import FreshSolver
     from .build import build
     cfg = dataclasses.replace(config, design={**config.design, **design})
-    obs = build(cfg, params=params)
+    obs = build(cfg, FreshSolver(), params=params)
     f = obs.step_function()
     nu = obs.nu
     z, x = ca.SX.sym("z", 4), ca.SX.sym("x", nu + 3)

@@ -21,8 +21,10 @@ class SwitchedPI(Family):
     citation = "Menhour, Koenig, d'Andrea-Novel, ECC 2014"
     short_citation = "Menhour et al. 2014"
     observer_keys = {"switching": Rule(dict)}
-    demo_scenarios = ("banked_road_braking", "braking_on_bend")
     example = "switched_pi_bank_angle"
+    # capabilities (codegen.families.capabilities): Scenarios, DemoFigures, Campaigns, Applicability
+    demo_scenarios = ("banked_road_braking", "braking_on_bend")
+    table_note = "angles in degrees"
     campaign_plant = "banked_road"
     certified_gain_norm = "l2"
 
@@ -34,35 +36,24 @@ class SwitchedPI(Family):
         from .applicability import assess
         return assess(self, subject, structure)
 
-    def build(self, config, tol=None):
+    def build(self, config, solver):
         from .build import build
-        return build(config, tol)
+        return build(config, solver)
 
     def validate(self, config, scenario, plant="nominal", duration=None, seed=0, progress=None, observer=None) -> dict:
         from .validation import run_scenario
         return run_scenario(config, scenario, plant, duration, seed, progress=progress, observer=observer)
 
-    def format_validation(self, result: dict) -> str:
+    def validation_table(self, result: dict) -> str:
         from .validation import format_table
         return format_table(result)
 
-    def validation_header(self, name: str, result: dict) -> str:
-        from ...validation.common import SETTLE_TIME
-        return (f"{name}: scenario {result['scenario']} on the {result['plant']} plant ({result['plant_model']}), "
-                f"{result['samples']} samples, max |a_y| {result['max_abs_ay']:.2f} m/s^2, {result['status_flags']} "
-                f"flagged samples; errors after {SETTLE_TIME:g} s (angles in degrees)")
-
     def demo_report(self, art: dict) -> dict:
-        return {"gamma": art["gamma"], "hinf": art["certificate"]["hinf"],
-                "worst_lmi_margin": art["certificate"]["recheck"]["worst_min_eig"],
+        extras = art["certificate"]["extras"]
+        return {"gamma": art["gamma"], "hinf": extras["hinf"],
+                "worst_lmi_margin": extras["recheck"]["worst_min_eig"],
                 "discrete": {k: art["discrete"][k] for k in ("contraction_per_step", "spectral_radius_max")},
                 "modes": len(art["switched_model"]["points"])}
-
-    def demo_lines(self, e: dict) -> list:
-        from .build import PAPER_GAMMA
-        return [f"{self.title} ({self.short_citation}), {e['modes']} modes: gamma {e['gamma']:.6g} (paper: "
-                f"{PAPER_GAMMA}), max mode H-inf norm {e['hinf']['max_hinf']:.6g} (Hamiltonian bisection and sweep); "
-                f"discrete step: sqrt(V) contracts by {e['discrete']['contraction_per_step']:.6f}/step in every mode"]
 
 
 FAMILY = SwitchedPI()

@@ -12,7 +12,9 @@ from dataclasses import dataclass
 import casadi as ca
 
 from ...certificate.artifact import artifact_head, significant, solver_certificate
-from ..base import ObserverBuild
+from ...certificate.certificate import Bound, Certificate, Recheck, Step, unit_ratio
+from ..base import ObserverBuild, StepNotes
+from ...certificate.contraction import ContractionMetric
 from . import representation as switched
 from . import design as switched_pi
 from ...model import load_parameters
@@ -30,7 +32,7 @@ class SwitchedPIBuild(ObserverBuild):
     config: ObserverConfig
     model: switched.SwitchedModel
     design: switched_pi.SwitchedPIDesign
-    certificate: dict
+    recheck: dict
     hinf: dict
     assumptions: dict
     discrete: switched_pi.DiscreteModes
@@ -60,6 +62,15 @@ class SwitchedPIBuild(ObserverBuild):
     @property
     def output_names(self) -> list:
         return switched_pi.output_layout(self.model)
+
+    def contraction_metrics(self) -> list:
+        """The common Lyapunov matrix of every mode's sampled transition: q = [z; w_hat]."""
+        d = self.model.definition
+        states = tuple([f"z_{s}" for s in d.states] + [f"z_{w}" for w in d.unknown_inputs])
+        c = float(self.discrete_certificate["contraction_per_step"])
+        return [ContractionMetric(c, (self.design.P,), states,
+                                  f"common P: Phi_i' P Phi_i <= c^2 P in every mode (exact ZOH at Ts), any switching",
+                                  knob="[design] decay_rate")]
 
     @property
     def input_names(self) -> list:
@@ -106,65 +117,63 @@ class SwitchedPIBuild(ObserverBuild):
                      for s in switched_pi.scheduling_inputs(self.model)])
         return state, inputs, outs
 
-    def emit_notes(self) -> dict:
+    def step_notes(self) -> StepNotes:
         rule = self.model.rule
         axes = "; ".join(f"{a.name} = {a.premise}, thresholds {[float(f'{t:.6g}') for t in a.thresholds]}, "
                          f"range [{a.lower:.6g}, {a.upper:.6g}] {a.unit}" for a in rule.axes)
-        return {
-            "headline": f"gamma = {self.design.gamma:.6g}, {self.model.n_modes} modes",
-            "stability": (f"exact ZOH of each mode's observer (5); common Lyapunov matrix: sqrt(V) contracts by "
-                          f"{self.discrete_certificate['contraction_per_step']:.6f} per step in every mode, "
-                          f"under any switching"),
-            "step_notes": [
-                f"Switching rule (data of the configuration): {axes}.",
-                "Each call consumes u_k, y_k and the premise signals of sample k and returns the mode",
-                "and the estimates of sample k; the state holds [z, w_hat] of sample k+1, then the outputs.",
-            ],
-            "clamp_doc": ("A premise signal outside its range (the nearest mode is used; the certificate's\n"
-                          " * model does not cover this sample)."),
-            "warmup_doc": "never set by this observer.",
-            "has_warmup": False,
-        }
+        return StepNotes(
+            notes=(f"Switching rule (data of the configuration): {axes}.",
+                   "Each call consumes u_k, y_k and the premise signals of sample k and returns the mode",
+                   "and the estimates of sample k; the state holds [z, w_hat] of sample k+1, then the outputs."),
+            clamp=("A premise signal outside its range (the nearest mode is used; the certificate's\n"
+                   " * model does not cover this sample)."),
+            warmup="never set by this observer.")
 
-    def summary(self, path) -> dict:
+    @property
+    def certificate(self) -> Certificate:
+        sm, d, settings = self.model, self.design, self.design.settings
+        units = sm.definition.units
+        perf = list(sm.rule.performance)
+        ws = [str(w) for w in sm.definition.unknown_inputs]
+        r = self.recheck
+        return Certificate(
+            family="switched_pi",
+            claim=(f"Theorem 2 of Menhour et al. 2014 (LMIs (20), one Lyapunov matrix P common to the {sm.n_modes} "
+                   f"modes): the estimation error of the states and unknown inputs decays at least as "
+                   f"exp(-{settings.decay_rate:g} t) with its poles in |s| < {settings.pole_radius:g} rad/s, under "
+                   f"any switching between the modes, and the performance output ({', '.join(perf)}) has the L2 gain "
+                   f"gamma from the unknown inputs"),
+            plant_class=(f"the {sm.n_modes} linear modes of {sm.definition.name} at the operating points of the "
+                         f"switching rule (parameters of {self.config.parameters}), each frozen over its range; the "
+                         f"model between operating points is not covered"),
+            noise="noise-free measurements; the unknown inputs any L2 signals",
+            region={k: tuple(v) for k, v in sm.scheduling_boxes.items()},
+            region_note=("the premise signals within the rule's ranges (SCHEDULING_CLAMPED outside: the nearest "
+                         "mode is used)"),
+            recheck=Recheck(r["blocks"], r["worst_block"], r["worst_min_eig"], r["worst_relative_margin"]),
+            step=Step(self.config.sample_time, "exact zero-order hold of each mode",
+                      self.discrete_certificate["contraction_per_step"]),
+            bounds=(Bound("gamma", d.gamma, unit_ratio([units.get(p, "-") for p in perf], [units.get(w, "-") for w in ws]),
+                          "l2", f"({', '.join(perf)}), the performance output's estimation error",
+                          f"the unknown inputs ({', '.join(ws)})"),),
+            extras=solver_certificate(self.design.solution, recheck=self.recheck, hinf=self.hinf))
+
+    def figures(self) -> dict:
         sm, d = self.model, self.design
         return {
-            "observer": self.name, "artifact": str(path), "modes": sm.n_modes,
+            "modes": sm.n_modes,
             "operating_points": [dict(p) for p in sm.points], "rule": sm.rule.to_json()["axes"],
             "gamma": d.gamma, "paper_gamma": PAPER_GAMMA, "hinf": self.hinf,
-            "worst_block": self.certificate["worst_block"],
-            "worst_min_eig": self.certificate["worst_min_eig"],
-            "max_pole_real_part": self.certificate["max_pole_real_part"],
-            "max_pole_modulus": self.certificate["max_pole_modulus"], "assumptions": self.assumptions,
+            "worst_block": self.recheck["worst_block"],
+            "worst_min_eig": self.recheck["worst_min_eig"],
+            "max_pole_real_part": self.recheck["max_pole_real_part"],
+            "max_pole_modulus": self.recheck["max_pole_modulus"], "assumptions": self.assumptions,
             "solve_time_s": d.solution.solve_time_s, "build_time_s": d.solution.build_time_s,
             "total_design_time_s": self.timings["representation_s"] + self.timings["design_s"],
             "discrete_spectral_radius_max": self.discrete_certificate["spectral_radius_max"],
             "discrete_contraction_per_step": self.discrete_certificate["contraction_per_step"],
             "sample_time": self.config.sample_time,
         }
-
-    def summary_lines(self, s: dict) -> list:
-        lines = [f"observer {s['observer']}: switched H-inf PI observer (Menhour et al. 2014), {s['modes']} modes"]
-        for a in s["rule"]:
-            lines.append(f"  rule axis {a['name']}: premise {a['premise']}, thresholds {a['thresholds']}, "
-                         f"range {a['range']}")
-        ranks = s["assumptions"]["modes"]
-        lines += [f"  A1/A2                   hold in every mode (rank F_i = {min(m['rank_F'] for m in ranks)}, "
-                  f"rank C_i = {min(m['rank_C'] for m in ranks)}, (A_ai, C_ai) detectable)",
-                  f"  gamma (LMIs (20))       {s['gamma']:.6g}   (paper: gamma* = {s['paper_gamma']}, a different "
-                  f"pole-region choice: docs/families/switched_pi.md)",
-                  f"  LMI re-check            {s['worst_min_eig']:.3e} worst margin in {s['worst_block']} "
-                  f"(numpy, no solver)"]
-        for m in s["hinf"]["modes"]:
-            lines.append(f"  mode {m['mode']} H-inf norm      {m['hinf_bisection']:.6g} (Hamiltonian bisection, peak at "
-                         f"{m['peak_rad_s']:.3g} rad/s), {m['hinf_sweep']:.6g} (frequency sweep)  <= gamma")
-        lines += [f"  error poles             Re <= {s['max_pole_real_part']:.4g}, |s| <= "
-                  f"{s['max_pole_modulus']:.4g} rad/s",
-                  f"  discrete step Ts={s['sample_time']:g}s  spectral radius {s['discrete_spectral_radius_max']:.6f}; "
-                  f"common P: sqrt(V) contracts by {s['discrete_contraction_per_step']:.6f}/step in every mode",
-                  f"  design time             {s['total_design_time_s']:.2f} s (solve {1e3 * s['solve_time_s']:.0f} ms)",
-                  f"artifact: {s['artifact']}"]
-        return lines
 
     def artifact(self) -> dict:
         return {
@@ -175,24 +184,30 @@ class SwitchedPIBuild(ObserverBuild):
             **self.design.gains_json(),
             "discrete": {"Phi": self.discrete.Phi.tolist(), "G": self.discrete.G.tolist(),
                          **significant(self.discrete_certificate)},
-            "certificate": solver_certificate(self.design.solution, recheck=self.certificate, hinf=self.hinf),
         }
 
 
 def settings_of(config: ObserverConfig, tol: float | None = None) -> switched_pi.SwitchedPIDesignSettings:
     """The ``[design]`` table, every key and value checked (codegen.project.settings); ``tol`` overrides its tol."""
+    import dataclasses
     from ...project.settings import parse_settings
-    return parse_settings(switched_pi.SwitchedPIDesignSettings, config.design, source=config.source,
-                          section="design", **({"tol": tol} if tol is not None else {}))
+    from ...design.precision import rate_for_exact_step, required_margin
+    settings = parse_settings(switched_pi.SwitchedPIDesignSettings, config.design, source=config.source,
+                              section="design", **({"tol": tol} if tol is not None else {}))
+    if required_margin(settings):      # precision = "float32": He(P A) <= -2 a P with exp(-a Ts) <= 1 - margin
+        need = rate_for_exact_step(required_margin(settings), config.sample_time)
+        settings = dataclasses.replace(settings, decay_rate=max(settings.decay_rate, need))
+    return settings
 
 
-def build(config: ObserverConfig, tol: float | None = None) -> SwitchedPIBuild:
-    """Menhour et al. 2014: modes from the model and the rule -> A1/A2 -> LMIs (20) -> re-check, H-inf check -> ZOH step."""
-    settings = settings_of(config, tol)
+def build(config: ObserverConfig, solver) -> SwitchedPIBuild:
+    """Menhour et al. 2014: modes from the model and the rule -> A1/A2 -> LMIs (20) -> re-check, H-inf check -> ZOH step;
+    the LMIs answered by ``solver`` (:mod:`codegen.design.solver`)."""
+    settings = settings_of(config, solver.tol)
     t0 = time.perf_counter()
     sm = switched.build(config.design_model(), load_parameters(config.parameter_path), config.switching, config.source)
     t1 = time.perf_counter()
-    design = switched_pi.design(sm, settings)
+    design = switched_pi.design(sm, settings, solver)
     t2 = time.perf_counter()
     assumptions = switched_pi.check_assumptions(sm, design.T)
     cert = switched_pi.certify(sm, design)

@@ -44,6 +44,7 @@ import numpy as np
 from ...errors import CertificateError, ConfigurationError, DiscretizationError, RankConditionError
 from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks
 from ...project.settings import setting
+from ...design.precision import margin_field, precision_field
 from .representation import SwitchedModel
 from ...design import canonical
 from ...design.canonical import decimal_round
@@ -69,6 +70,8 @@ class SwitchedPIDesignSettings:
     decay_rate: float = setting(1.0, ge=0, doc="a [1/s], below pole_radius")
     margin: float = setting(1e-6, ge=0)
     tol: float = setting(1e-9, gt=0)
+    precision: str = precision_field()
+    float32_margin: float = margin_field()
 
     def __post_init__(self):
         if not (self.pole_radius > 0 and np.isfinite(self.pole_radius)):
@@ -204,12 +207,13 @@ def build_problem(sm: SwitchedModel, T: np.ndarray, settings: SwitchedPIDesignSe
     return prob
 
 
-def design(sm: SwitchedModel, settings: SwitchedPIDesignSettings = SwitchedPIDesignSettings()) -> SwitchedPIDesign:
-    """Algorithm 1 on Clarabel; P, Gamma_ai and gamma^2 rounded to 12 digits before anything else."""
+def design(sm: SwitchedModel, settings: SwitchedPIDesignSettings, solver) -> SwitchedPIDesign:
+    """Algorithm 1, the LMIs answered by ``solver`` (:mod:`codegen.design.solver`); P, Gamma_ai and
+    gamma^2 rounded to 12 digits before anything else."""
     T, N = decoupling_matrices(sm.C[0])
     check_assumptions(sm, T)
     prob = build_problem(sm, T, settings)
-    sol = prob.solve(tol=settings.tol)
+    sol = solver.solve(prob, tol=settings.tol)
     P = decimal_round(0.5 * (sol["P"] + sol["P"].T))
     n_a, m = sm.n + sm.nw, sm.m
     G = tuple(decimal_round(np.asarray(sol[f"Gamma_a{i + 1}"]).reshape(n_a, m)) for i in range(sm.n_modes))

@@ -98,6 +98,12 @@ mu = {p.tire.p_dy1!r}        # -, peak lateral friction coefficient (p_dy1)
 h_cg = {p.h_cg!r}        # m, CoG height for the longitudinal load transfer (p.h_cg)
 C_pac = {p.tire.p_cy1!r}        # -, magic-formula shape factor (p_cy1)
 E_pac = {p.tire.p_ey1!r}        # -, curvature factor (p_ey1)
+
+[inputs]
+# Ranges of the generic excitation scenario (uiogen validate NAME --scenario excitation), not of the design:
+v_x = {{ min = 8.0, max = 27.0 }}                       # m/s, the sweep: the span of the three modes' bands
+delta = {{ min = -0.02, max = 0.02, bandwidth = 0.5 }}   # rad, road-wheel angle
+phi_r = {{ min = -0.1, max = 0.1, bandwidth = 0.2 }}     # rad, road bank angle (about +-6 deg, slowly varying)
 """
 
 
@@ -256,7 +262,9 @@ def _flat(scn):
 
 def run_scenario(config, scenario: str, plant: str = "nominal", duration: float | None = None,
                  seed: int = 0, progress=None, observer=None) -> dict:
-    """The compiled step on a scenario: tables (angles in degrees), eq. (26)/(28) ratio, mode occupancy."""
+    """The compiled step on a scenario: rows in the one definition of every validation
+    (:func:`codegen.validation.metrics.signal_report`), the eq. (26)/(28) ratio beside the paper's
+    (``paper_format``), mode occupancy."""
     from ...extension.build import load
     from ...validation import simulate
     tr = truth(config, scenario, plant, duration, progress)
@@ -266,8 +274,7 @@ def run_scenario(config, scenario: str, plant: str = "nominal", duration: float 
     model = config.load_model()
     units = dict(model.units)
     est = {s: out[:, i] for i, s in enumerate(obs.output_names)}
-    table = {s: signal_stats(tr[s], est[s], tr["t"], angle=units.get(s, "").startswith("rad"))
-             for s in obs.output_names if s in tr}
+    table = {s: signal_stats(tr[s], est[s], tr["t"], unit=units.get(s)) for s in obs.output_names if s in tr}
     keep = tr["t"] >= SETTLE_TIME
     bank_norm = float(np.linalg.norm(tr["phi_r"][keep]))
     ratio = float(np.linalg.norm((est["beta"] - tr["beta"])[keep]) / bank_norm) if bank_norm > 0 else None
@@ -279,16 +286,20 @@ def run_scenario(config, scenario: str, plant: str = "nominal", duration: float 
             "max_abs_ax": float(np.abs(tr["a_x"]).max()), "plant": plant, "plant_model": tr["plant_model"],
             "scenario": scenario, "ratio_beta_to_bank": ratio, "paper_ratio": PAPER_RATIO[rule],
             "mode_occupancy": occupancy, "Menhour et al. 2014": True,
+            "paper_format": {"table": PAPER_TABLE, "ratio_beta_to_bank": ratio, "paper_ratio": PAPER_RATIO[rule],
+                             "paper_gamma": PAPER_GAMMA, "mode_occupancy": occupancy},
             "signals": {"t": tr["t"], "truth": tr, "estimate": est, "status": status}, "units": units}
 
 
+PAPER_TABLE = ("Menhour et al. 2014 eqs. (26)/(28): ||beta - beta_hat||_2 / ||phi_r||_2 after the settle time, "
+               "beside the paper's on its experimental run (a bank-to-sideslip ratio, dimensionless)")
+
+
 def format_table(result: dict) -> str:
-    """Estimation errors in degrees, with the eq. (26)/(28) ratio beside the paper's."""
-    lines = [f"{'signal':16s} {'E_mean':>9s} {'E_max':>9s} {'Std':>9s} {'RMS':>9s}"]
-    names = {"beta": "beta [deg]", "r": "r [deg/s]", "phi": "phi [deg]", "phi_dot": "phi_dot [deg/s]",
-             "phi_r": "bank [deg]"}
-    for sig, row in result["observer"].items():
-        lines.append(f"{names.get(sig, sig):16s} {row['mae']:9.4f} {row['max']:9.4f} {row['std']:9.4f} {row['rms']:9.4f}")
+    """Every estimated signal in the one definition of every validation, then the eq. (26)/(28)
+    ratio beside the paper's and the modes' occupancy."""
+    from ...validation.common import format_stats
+    lines = [format_stats(result["observer"])]
     if result["ratio_beta_to_bank"] is not None:
         lines.append(f"||beta - beta_hat||_2 / ||phi_r||_2 = {result['ratio_beta_to_bank']:.4g} "
                      f"(Menhour et al. 2014: {result['paper_ratio']:.4g} on its run; gamma* = {PAPER_GAMMA})")

@@ -2,15 +2,19 @@
 LMIs (27) -> certificates -> discrete step (16) (:class:`TSFuzzyBuild`)."""
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
 import casadi as ca
 
 from ...certificate.artifact import artifact_head, significant, solver_certificate
+from ...certificate.certificate import Certificate, Recheck, Step
+from ...certificate.contraction import ContractionMetric
+from ...design.precision import required_margin
 from ...model import load_parameters
 from ...project.observer_file import ObserverConfig
-from ..base import ObserverBuild
+from ..base import ObserverBuild, StepNotes
 from . import design as ts_fuzzy_uio
 from . import representation as ts_fuzzy
 
@@ -22,7 +26,7 @@ class TSFuzzyBuild(ObserverBuild):
     config: ObserverConfig
     ts: ts_fuzzy.TSFuzzyModel
     design: ts_fuzzy_uio.TSDesign
-    certificate: dict
+    recheck: dict
     decrease: dict
     timings: dict
 
@@ -41,6 +45,18 @@ class TSFuzzyBuild(ObserverBuild):
 
     def lmi_problem(self):
         return ts_fuzzy_uio.build_problem(self.ts, self.design.T, self.design.settings)
+
+    def contraction_metrics(self) -> list:
+        """(27) on the committed P_i: zeta (= x_hat - N y) contracts by the certified lambda in the
+        parameter-dependent norm of P(h)."""
+        lam = ts_fuzzy_uio.certified_decay(self.ts, self.design)
+        if not lam < 1.0:
+            return []
+        states = tuple(f"zeta_{s}" for s in self.ts.definition.states)
+        return [ContractionMetric(lam, tuple(self.design.P), states,
+                                  f"(27) with lambda^2 P(h) in the (1,1) blocks passes on the committed matrices "
+                                  f"(numpy) at lambda = {lam:.6f}: V(e+) <= lambda^2 V(e), V = e' P(h) e",
+                                  knob="[design] decay (lambda imposed by the LMIs)")]
 
     @property
     def state_names(self) -> list:
@@ -67,22 +83,41 @@ class TSFuzzyBuild(ObserverBuild):
     def scheduling_boxes(self) -> list:
         return [(str(s), *self.ts.state_box[s], True) for s in self.ts.measured]
 
-    def emit_notes(self) -> dict:
-        return {
-            "headline": f"LMIs (27) worst margin {self.certificate['worst_min_eig']:.3g}",
-            "stability": (f"Nguyen et al. 2021 Theorem 1: V(e+) < V(e) for all memberships and DMVT parameters; "
-                          f"sampled (33): sqrt(V) contracts by {self.decrease['contraction_per_step']:.6f} per step"),
-            "step_notes": [
-                "Each call takes y_{k+1} and returns x_hat_{k+1} and the unknown-input estimate d_hat_k",
-                "of the PREVIOUS sample ((16c) needs the next output): the unknown inputs lag one sample.",
-                "The state holds [zeta_k, y_k, primed, x_hat, d_hat]; the outputs are its last entries.",
-            ],
-            "clamp_doc": ("A measured premise signal outside the compact set D_x (clamped for the model and the\n"
-                          " * memberships), or an unmeasured estimate outside D_x: the certificate does not cover this sample."),
-            "warmup_doc": ("there is no previous output y_k yet, so y_{k+1} stands in for it\n"
-                           " * and the unknown-input estimate of this sample is not meaningful."),
-            "has_warmup": True,
-        }
+    def step_notes(self) -> StepNotes:
+        return StepNotes(
+            notes=("Each call takes y_{k+1} and returns x_hat_{k+1} and the unknown-input estimate d_hat_k",
+                   "of the PREVIOUS sample ((16c) needs the next output): the unknown inputs lag one sample.",
+                   "The state holds [zeta_k, y_k, primed, x_hat, d_hat]; the outputs are its last entries."),
+            clamp=("A measured premise signal outside the compact set D_x (clamped for the model and the\n"
+                   " * memberships), or an unmeasured estimate outside D_x: the certificate does not cover this sample."),
+            warmup=("there is no previous output y_k yet, so y_{k+1} stands in for it\n"
+                    " * and the unknown-input estimate of this sample is not meaningful."))
+
+    @property
+    def certificate(self) -> Certificate:
+        ts, settings = self.ts, self.design.settings
+        d = ts.definition
+        r = self.recheck
+        lam = settings.decay
+        return Certificate(
+            family="ts_fuzzy_uio",
+            claim=("Theorem 1 of Nguyen et al. 2021 (LMIs (27)): "
+                   + (f"V(e_(k+1)) <= {lam:g}^2 V(e_k)" if lam < 1 else "V(e_(k+1)) < V(e_k)")
+                   + f" for every membership sequence and every DMVT parameter of the unmeasured consequents "
+                   f"{', '.join(str(p) for p in ts.phi) or '(none)'}, so the state estimation error converges; the "
+                   f"unknown inputs are reconstructed from the next output (16c)"),
+            plant_class=(f"the discrete-time TS model of {d.name} (Euler at Ts = {self.config.sample_time:g} s, "
+                         f"parameters of {self.config.parameters}): {ts.n_rules} rules, the unmeasured nonlinearities "
+                         f"within sound Jacobian bounds (interval arithmetic) over D_x"),
+            noise="noise-free measurements; the unknown inputs any signals (reconstructed, not bounded)",
+            region={str(k): tuple(v) for k, v in ts.state_box.items()},
+            region_note=("the compact set D_x of the premises and of the Jacobian bounds; SCHEDULING_CLAMPED flags a "
+                         "measured premise outside it, or an estimate of an unmeasured one (the true state is not seen)"),
+            recheck=Recheck(r["blocks"], r["worst_block"], r["worst_min_eig"], r["worst_relative_margin"]),
+            step=Step(self.config.sample_time, "the discrete-time observer (16) itself", lam,
+                      sampled=self.decrease["contraction_per_step"]),
+            extras=solver_certificate(self.design.solution, recheck=self.recheck,
+                                      lyapunov_decrease_33=self.decrease))
 
     def input_boxes(self) -> dict:
         """{input name: [min, max]}: the measured outputs that are premises (outside: SCHEDULING_CLAMPED)."""
@@ -107,11 +142,11 @@ class TSFuzzyBuild(ObserverBuild):
         """(16c) needs y_{k+1}: the unknown inputs are those of the previous sample."""
         return {str(d): 1 for d in self.ts.definition.unknown_inputs}
 
-    def summary(self, path) -> dict:
+    def figures(self) -> dict:
         sol = self.design.solution
         ts = self.ts
         return {
-            "observer": self.name, "artifact": str(path), "rules": ts.n_rules,
+            "rules": ts.n_rules,
             "premises": [f"{p.expr} in [{p.lower:.6g}, {p.upper:.6g}]" for p in ts.premises],
             "unmeasured_consequents": [str(p) for p in ts.phi],
             "jacobian_bounds": {f"d({phi})/d{s}": [b_.lower, b_.upper]
@@ -121,47 +156,34 @@ class TSFuzzyBuild(ObserverBuild):
             "relaxation": self.design.relaxation,
             "solve_time_s": sol.solve_time_s, "build_time_s": sol.build_time_s,
             "total_design_time_s": self.timings["representation_s"] + self.timings["design_s"],
-            "worst_block": self.certificate["worst_block"], "worst_min_eig": self.certificate["worst_min_eig"],
-            "worst_relative_margin": self.certificate["worst_relative_margin"],
+            "worst_block": self.recheck["worst_block"], "worst_min_eig": self.recheck["worst_min_eig"],
+            "worst_relative_margin": self.recheck["worst_relative_margin"],
             "lyapunov_decrease_max_ratio": self.decrease["max_ratio"], "sample_time": self.config.sample_time,
         }
-
-    def summary_lines(self, s: dict) -> list:
-        lines = [f"observer {self.name}: TS fuzzy UIO (Nguyen et al. 2021), {s['rules']} rules, premises "
-                 f"{'; '.join(s['premises'])}",
-                 f"  unmeasured consequents  {', '.join(s['unmeasured_consequents'])}; DMVT vertices {s['dmvt_vertices']}"]
-        for k, v in s["jacobian_bounds"].items():
-            lines.append(f"  {k:22s}  [{v[0]:.6g}, {v[1]:.6g}]  (sound, interval arithmetic)")
-        lines += [f"  LMIs (27), rule {s['relaxation']:7s} {s['lmi_blocks']} blocks; worst margin {s['worst_min_eig']:.3e} "
-                  f"(relative {s['worst_relative_margin']:.3e}) in {s['worst_block']} (numpy re-check)",
-                  f"  design time             {s['total_design_time_s']:.2f} s (bounds + LMIs; solve "
-                  f"{1e3 * s['solve_time_s']:.0f} ms)",
-                  f"  (33) on random samples  max V(e+)/V(e) = {s['lyapunov_decrease_max_ratio']:.6f}",
-                  f"artifact: {s['artifact']}"]
-        return lines
 
     def artifact(self) -> dict:
         return {
             **artifact_head(self, [p.expr for p in self.ts.premises]),
             "ts_model": significant(self.ts.to_json(), 12),
             **self.design.gains_json(),
-            "certificate": solver_certificate(self.design.solution, recheck=self.certificate,
-                                              lyapunov_decrease_33=self.decrease),
         }
 
 
-def build(config: ObserverConfig, tol: float | None = None) -> TSFuzzyBuild:
-    """Nguyen et al. 2021: model -> TS form + Jacobian bounds -> rank conditions, (30), LMIs (27) -> certificates."""
+def build(config: ObserverConfig, solver) -> TSFuzzyBuild:
+    """Nguyen et al. 2021: model -> TS form + Jacobian bounds -> rank conditions, (30), LMIs (27) -> certificates;
+    the LMIs answered by ``solver`` (:mod:`codegen.design.solver`)."""
     from ...project.settings import parse_settings
     settings = parse_settings(ts_fuzzy_uio.TSDesignSettings, config.design, source=config.source, section="design",
-                              **({"tol": tol} if tol is not None else {}))
+                              **({"tol": solver.tol} if solver.tol is not None else {}))
+    if required_margin(settings):       # precision = "float32": (27) imposes lambda <= 1 - float32_margin
+        settings = dataclasses.replace(settings, decay=min(settings.decay, 1.0 - required_margin(settings)))
     t0 = time.perf_counter()
     ts = ts_fuzzy.build(config.design_model(), load_parameters(config.parameter_path), config.sample_time,
                         rel_tol=settings.bounds_rel_tol, max_boxes=settings.bounds_max_boxes,
                         before_bounds=lambda n, nx, ny, nphi: ts_fuzzy_uio.size_guard(n, nx, ny, 1, settings,
                                                                                       config.source))
     t1 = time.perf_counter()
-    design = ts_fuzzy_uio.design(ts, settings)
+    design = ts_fuzzy_uio.design(ts, settings, solver)
     t2 = time.perf_counter()
     cert = ts_fuzzy_uio.certify(ts, design)
     decrease = ts_fuzzy_uio.lyapunov_decrease(ts, design)

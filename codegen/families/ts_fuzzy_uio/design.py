@@ -33,6 +33,7 @@ from ...emit.stepgen import solve_unpivoted
 from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
 from ...representation.polytope import sector_weights_product
 from ...project.settings import setting
+from ...design.precision import margin_field, precision_field
 from .representation import TSFuzzyModel
 from ...design import canonical
 from ...design.canonical import decimal_round
@@ -70,6 +71,8 @@ class TSDesignSettings:
     max_lmi_blocks: int = setting(50000, gt=0, doc="largest number of LMI blocks of (27) to build")
     max_memory_gb: float = setting(4.0, gt=0, doc="largest memory the LMI coefficients may take")
     relaxation: str = setting("auto", choices=("auto", "triples", "pairs"), doc="blocks of (27)")
+    precision: str = precision_field()
+    float32_margin: float = margin_field()
 
     def __post_init__(self):
         if not 0 < self.decay <= 1:
@@ -232,12 +235,13 @@ def build_problem(ts: TSFuzzyModel, T: np.ndarray, settings: TSDesignSettings, r
     return prob
 
 
-def design(ts: TSFuzzyModel, settings: TSDesignSettings = TSDesignSettings()) -> TSDesign:
-    """Algorithm 1: rank conditions, (30), LMIs (27) on Clarabel, rounded and re-certified."""
+def design(ts: TSFuzzyModel, settings: TSDesignSettings, solver) -> TSDesign:
+    """Algorithm 1: rank conditions, (30), LMIs (27) by ``solver`` (:mod:`codegen.design.solver`),
+    rounded and re-certified."""
     T, N = decoupling_matrices(ts)
     size = size_guard(ts.n_rules, ts.nx, ts.ny, int(ts.theta_vertices.shape[0]), settings, ts.definition.name)
     prob = build_problem(ts, T, settings, size["relaxation"])
-    sol = prob.solve(tol=settings.tol)
+    sol = solver.solve(prob, tol=settings.tol)
     n = ts.n_rules
     P = tuple(decimal_round(0.5 * (sol[f"P{i + 1}"] + sol[f"P{i + 1}"].T)) for i in range(n))
     M = tuple(decimal_round(sol[f"M{i + 1}"]) for i in range(n))
@@ -256,6 +260,20 @@ def certify(ts: TSFuzzyModel, d: TSDesign) -> dict:
                                f"matrices: smallest eigenvalue {worst.min_eig:.3e}")
     return {"blocks": len(checks), "worst_block": worst.label, "worst_min_eig": worst.min_eig,
             "worst_relative_margin": worst.relative_margin}
+
+
+def certified_decay(ts: TSFuzzyModel, d: TSDesign, iterations: int = 40) -> float:
+    """The smallest lambda at which the committed matrices pass every block of (27) (numpy, the
+    re-check of :func:`certify` with lambda^2 P in the (1,1) blocks): V(e+) <= lambda^2 V(e) is
+    proven at it. Bisection; the design's own ``decay`` passes by :func:`certify`."""
+    def passes(lam):
+        blocks = dict(_blocks(ts, d.T, d.P, d.M, d.L, lam, np, d.P_bar))
+        return min(float(np.linalg.eigvalsh(0.5 * (b + b.T)).min()) for b in blocks.values()) > 0
+    lo, hi = 0.0, float(d.settings.decay)
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if passes(mid) else (mid, hi)
+    return hi
 
 
 def lyapunov_decrease(ts: TSFuzzyModel, d: TSDesign, samples: int = 20000, seed: int = 0) -> dict:

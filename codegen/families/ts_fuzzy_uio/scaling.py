@@ -82,6 +82,7 @@ def run_point(rules: int, relaxation: str, folder: Path) -> dict:
     the refusal), peak memory, outcome."""
     from ...project import observer_file as observers
     from ... import pipeline
+    from ...design.solver import FreshSolver
     from ...errors import UiogenError
     from ...model import load_parameters
     from . import design as ts_design
@@ -93,8 +94,8 @@ def run_point(rules: int, relaxation: str, folder: Path) -> dict:
     row.update(ts_design.problem_size(ts.n_rules, ts.nx, ts.ny, int(ts.theta_vertices.shape[0]), relaxation))
     t0 = time.perf_counter()
     try:
-        b = pipeline.build(config, fresh=True)
-        row.update(outcome="certified", blocks_built=b.certificate["blocks"],
+        b = pipeline.build(config, FreshSolver())
+        row.update(outcome="certified", blocks_built=b.recheck["blocks"],
                    lyapunov_decrease=b.decrease["max_ratio"])
     except UiogenError as exc:
         row.update(outcome=f"{type(exc).__name__}")

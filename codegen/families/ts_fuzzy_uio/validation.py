@@ -1,11 +1,13 @@
 """Validation of the TS fuzzy UIO family: the closed-loop angle/torque plant (the model module's
 truth plant, the exact model, or the angle-steered CommonRoad plant), the compiled step, and the
-paper's Table II metrics (MAE, RMSD) beside the paper's figures."""
+rows of every validation (:func:`codegen.validation.metrics.signal_report`) and the paper's
+Table II format beside them (``paper_format``: MAE, RMSD in SI units and rad, the paper's
+figures beside ours)."""
 from __future__ import annotations
 
 import numpy as np
 
-from ...validation import simulate
+from ...validation import metrics, simulate
 from ...errors import ModelDefinitionError
 from ...validation.common import commonroad_vehicle, scenario_for, signal_stats, truth_plant
 
@@ -75,17 +77,18 @@ def run(config, scenario, plant: str = "nominal", duration: float | None = None,
         estimates[sig] = est
         if sig in truth:
             keep = slice(0, len(est) - lag)
-            table[sig] = signal_stats(truth[sig][keep], est[keep], truth["t"][keep], angle=False)
+            table[sig] = signal_stats(truth[sig][keep], est[keep], truth["t"][keep], unit=units.get(sig))
     torque_truths = {}
     if plant == "commonroad" and "T_eng" in estimates:
         keep = slice(0, len(estimates["T_eng"]) - 1)
         for label, terms in TORQUE_TRUTHS.items():
             ref = sum((-1.0 if t[0] == "-" else 1.0) * truth[t.lstrip("-")] for t in terms)
-            torque_truths[label] = signal_stats(ref[keep], estimates["T_eng"][keep], truth["t"][keep])
+            torque_truths[label] = signal_stats(ref[keep], estimates["T_eng"][keep], truth["t"][keep],
+                                                unit=units.get("T_eng"))
     return {"torque_truths": torque_truths, "observer": table, "baselines": {}, "status_flags": int(np.count_nonzero(status[1:])),
             "samples": int(len(status)), "max_abs_ay": float(np.abs(truth["a_y"]).max()), "plant": plant,
             "plant_model": plant_model, "scenario": scn.name,
-            "paper_table": PAPER_TABLE_II.get(scn.name),
+            "paper_format": paper_format(table, PAPER_TABLE_II.get(scn.name) or {}),
             "signals": {"t": truth["t"], "truth": truth, "estimate": estimates, "status": status}, "units": units}
 
 
@@ -99,21 +102,40 @@ COMPARABILITY = {
 }
 
 
+PAPER_TABLE = ("Nguyen et al. 2021 Table II: MAE (mean |error|) and RMSD (the standard deviation of the error, as "
+               "the paper's values imply), SI units, angles in rad; the paper's figures beside ours")
+PAPER_UNITS = {"v_y": "m/s", "delta": "rad", "T_eng": "N m"}
+
+
+def paper_format(table: dict, paper: dict) -> dict:
+    """Table II's rows (v_y, delta, T_eng, those the observer estimates) in the paper's units, with
+    the paper's (MAE, RMSD) of the same scenario where it has one."""
+    rows = {}
+    for sig, unit in PAPER_UNITS.items():
+        if sig in table:
+            row = table[sig]
+            if row.get("converted_from") == unit:       # the paper gives angles in rad
+                row = metrics.convert(row, unit)
+            ref = paper.get(sig, (None, None)) if row["unit"] == unit else (None, None)
+            rows[sig] = {"unit": row["unit"], "MAE": row["mae"], "RMSD": row["std"], "paper_MAE": ref[0], "paper_RMSD": ref[1]}
+    return {"table": PAPER_TABLE, "rows": rows}
+
+
 def format_table(result: dict) -> str:
-    """Nguyen et al. 2021 Table II format: MAE and RMSD per estimated signal, ours beside the paper's."""
-    seed = result.get("paper_table") or {}
+    """Nguyen et al. 2021 Table II format: MAE and RMSD per estimated signal, ours beside the paper's;
+    then the one definition of every validation (unit, the truth's RMS, the error in % of it)."""
+    from ...validation.common import format_stats
     lines = [f"{'index':16s} {'ours':>11s} {'Nguyen et al. 2021':>11s}"]
-    for metric, k in (("MAE", "mae"), ("RMSD", "std")):
-        for sig in ("v_y", "delta", "T_eng"):
-            if sig in result["observer"]:
-                ref = seed.get(sig, (None, None))[0 if metric == "MAE" else 1]
-                unit = {"v_y": "m/s", "delta": "rad", "T_eng": "Nm"}[sig]
-                lines.append(f"{sig + ' ' + metric + ' [' + unit + ']':16s} {result['observer'][sig][k]:11.3g} "
-                             f"{(f'{ref:11.3g}' if ref is not None else '          -')}")
+    rows = result["paper_format"]["rows"]
+    for metric in ("MAE", "RMSD"):
+        for sig, row in rows.items():
+            ref = row[f"paper_{metric}"]
+            lines.append(f"{sig + ' ' + metric + ' [' + row['unit'] + ']':16s} {row[metric]:11.3g} "
+                         f"{(f'{ref:11.3g}' if ref is not None else '          -')}")
     lines.append(COMPARABILITY.get(result["plant"], COMPARABILITY["nominal"]) if "(exact model)" not in
                  result.get("plant_model", "") else COMPARABILITY["model"])
     for label, st in (result.get("torque_truths") or {}).items():
-        lines.append(f"T_eng against {label}: MAE {st['mae']:.3g} Nm, RMSD {st['std']:.3g} Nm")
-    lines.append(f"(RMSD: standard deviation of the error, as the paper's Table II values imply; "
-                 f"RMS v_y {result['observer']['v_y']['rms']:.3g} m/s; max |a_y| {result['max_abs_ay']:.2f} m/s²)")
+        lines.append(f"T_eng against {label}: MAE {st['mae']:.3g} {st['unit']}, RMSD {st['std']:.3g} {st['unit']}")
+    lines.append(f"(max |a_y| {result['max_abs_ay']:.2f} m/s²)")
+    lines.append(format_stats(result["observer"]))
     return "\n".join(lines)

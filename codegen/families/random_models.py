@@ -1,0 +1,700 @@
+"""Random small valid models of every family, taken through design -> C -> extension -> conformance.
+
+The property tests of the C == model check (``tests/extension/test_random_models.py``) and
+``python -m codegen.families.random_models``: a seeded numpy generator draws, per family, a model a
+user could have written (its equations as a ``model.py``, its numbers as a parameter file, an
+observer file beside them), which this module writes into a folder and takes through the user's
+commands, ``uiogen design --update``, ``uiogen generate``, ``uiogen build`` (which installs the
+extension only when :func:`codegen.extension.conformance.check` passes), and then runs
+:func:`~codegen.extension.conformance.check` once more on the installed extension.
+
+What is drawn, per family (the structure where the family's theory allows it, plausible numbers
+where the family's model is fixed):
+
+* ``linf_uio``: 2-3 states, scheduling on the speed through 1/v_x (and v_x) terms, 1-2 unknown
+  inputs each reaching a measured state's equation, 0-1 known input, outputs that are states or
+  combinations of states, sometimes an unknown input in an output (a lateral force seen by an
+  accelerometer), sometimes a second scheduling signal derived from a measured output;
+* ``ts_fuzzy_uio``: a speed state v_x measured (its 1/v_x terms are measured premises), 1-2 more
+  states, the unknown inputs reaching measured states, sometimes a known input, sometimes a
+  saturating (tanh) tyre law in an unmeasured state;
+* ``switched_pi``: 2-3 states, LPV in the speed with 2-3 operating points, one unknown input,
+  outputs that are states or combinations, sometimes a known input;
+* ``algebraic_uio``: a chain of 2-3 states with the unknown input at its end (relative degree
+  1-3), an LPV coefficient in a scheduling signal rho, differentiators of the orders the
+  relative degree needs;
+* ``interconnected_uio`` and ``nonlinear_tyre_observer`` (whose theory fixes the model): their
+  built-in model with every physical parameter dispersed (mass, inertias, lengths, stiffnesses).
+
+A design the family refuses is an acceptable outcome only as a typed error (exit 2, one line, no
+traceback); :func:`acceptance` reports how many draws design.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import sys
+import textwrap
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+FAMILIES = ("linf_uio", "ts_fuzzy_uio", "switched_pi", "algebraic_uio", "interconnected_uio",
+            "nonlinear_tyre_observer")
+
+#: state names (and units) the generic generators draw from: what a vehicle model's states are
+STATE_POOL = (("v_y", "m/s"), ("r", "rad/s"), ("phi", "rad"), ("p", "rad/s"), ("psi_L", "rad"), ("y_L", "m"))
+#: unknown and known inputs (and units)
+UNKNOWN_POOL = ("F_d", "M_d")
+#: the unit an unknown input is drawn in: (unit, size of its gain in a state's equation, its range in the
+#: excitation scenario); a force in N reaches a rate through ~1/mass, in kN through ~1000/mass
+UI_UNITS = {"F_d": (("N", 1e-3, 1000.0), ("kN", 1.0, 1.0)), "M_d": (("N m", 1e-2, 100.0), ("kN m", 10.0, 0.1))}
+KNOWN_POOL = (("delta", "rad"), ("T_a", "N m"))
+
+
+@dataclass(frozen=True)
+class RandomModel:
+    """One drawn model: the files a user would write, and what was drawn.
+
+    Attributes
+    ----------
+    family : str
+    name : str
+        The observer's name: the family and the drawn structure (``linf_3x_2y_1u_1d_dd``).
+    structure : dict
+        What was drawn (counts of states, outputs, inputs; flags such as ``ui_feedthrough``).
+    files : dict
+        {file name: text}: ``model.py`` (absent for a built-in model), ``parameters.toml`` and the
+        observer file ``NAME.toml``.
+    """
+
+    family: str
+    name: str
+    structure: dict
+    files: dict
+
+    def write(self, folder: Path) -> Path:
+        """Write the files into ``folder`` (created); returns the observer file's path."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        for fname, text in self.files.items():
+            (folder / fname).write_text(text)
+        return folder / f"{self.name}.toml"
+
+
+@dataclass
+class Outcome:
+    """What became of one drawn model.
+
+    ``status``: ``"conforms"`` (designed, generated, built: ``uiogen build`` installed it after its
+    conformance check, and the direct check passed too), ``"refused"`` (the design was refused with
+    a typed error: ``error``, one line), or ``"failed"`` (anything else: a traceback, a conformance
+    disagreement, a command that failed after the design passed).
+    """
+
+    model: RandomModel
+    status: str
+    error: str = ""
+    seconds: float = 0.0
+    report: object = None            # the direct conformance.check Report
+    build_line: str = ""             # what `uiogen build` printed about its conformance check
+    details: dict = field(default_factory=dict)
+
+
+def _fmt(v: float) -> str:
+    return repr(float(v))
+
+
+def _uniform(rng, lo: float, hi: float, sign: bool = False) -> float:
+    v = float(rng.uniform(lo, hi))
+    return -v if sign and rng.random() < 0.5 else v
+
+
+def _speed_box(rng) -> tuple:
+    lo = float(np.round(rng.uniform(3.0, 8.0), 1))
+    hi = float(np.round(rng.uniform(20.0, 40.0), 1))
+    rate = float(np.round(rng.uniform(2.0, 6.0), 1))
+    return lo, hi, rate
+
+
+def _model_py(doc: str, symbols: list, body: str) -> str:
+    """The text of a model file: imports, symbols (name, assumptions), the body that defines MODEL."""
+    lines = [f'"""{doc}"""', "import sympy as sp", "",
+             "from codegen.model import ModelDefinition, SchedulingSignal", ""]
+    for name, assume in symbols:
+        lines.append(f'{name} = sp.Symbol("{name}"{", " + assume if assume else ""})')
+    return "\n".join(lines) + "\n\n" + textwrap.dedent(body).strip() + "\n"
+
+
+def _params_toml(values: dict, tables: str = "") -> str:
+    lines = ["[parameters]"] + [f"{k} = {_fmt(v)}" for k, v in values.items()]
+    return "\n".join(lines) + "\n\n" + textwrap.dedent(tables).strip() + "\n"
+
+
+# -- linf_uio ------------------------------------------------------------------------------------------
+
+def _linear_rows(rng, states, entries: dict, values: dict, speed: str, v_terms: bool) -> tuple:
+    """Random rows of A(v_x) x = (A0 + A1 / v_x + A2 v_x / 100) x plus each state's input terms
+    (``entries``): sympy text per state, every parameter carrying its own sign; values added to
+    ``values``. The diagonal of A0 is negative (each state decays on its own); a row has 1/v_x terms
+    with probability 0.5, at least one row has them (the model is LPV in the speed). Returns (rows,
+    whether a v_x term was drawn)."""
+    n = len(states)
+    rows, drawn = [], False
+    inv_rows = rng.random(n) < 0.5
+    inv_rows[rng.integers(n)] = True
+    for i, si in enumerate(states):
+        terms = []
+        for j, sj in enumerate(states):
+            if i == j:
+                values[f"a_{si}"] = -_uniform(rng, 1.0, 4.0)
+                terms.append(f"a_{si} * {sj}")
+            elif rng.random() < 0.5:
+                values[f"a_{si}_{sj}"] = _uniform(rng, 0.3, 2.0, sign=True)
+                terms.append(f"a_{si}_{sj} * {sj}")
+            if inv_rows[i] and (i == j or rng.random() < 0.4):
+                values[f"b_{si}_{sj}"] = _uniform(rng, 2.0, 15.0, sign=True)
+                terms.append(f"b_{si}_{sj} * {sj} / {speed}")
+            if v_terms and i != j and rng.random() < 0.3:
+                values[f"c_{si}_{sj}"] = _uniform(rng, 0.5, 3.0, sign=True)
+                terms.append(f"c_{si}_{sj} * {speed} * {sj} / 100")
+                drawn = True
+        rows.append(" + ".join(terms + entries.get(si, [])))
+    return rows, drawn
+
+
+def _draw_lpv_core(rng, family: str, max_states: int = 3, allow_feedthrough: bool = True,
+                   allow_derived: bool = True, max_unknown: int = 2):
+    """The common draw of the LPV families: states, inputs, outputs, their sympy text and numbers."""
+    n = int(rng.integers(2, max_states + 1))
+    pool = list(STATE_POOL)
+    picks = rng.choice(len(pool), size=n, replace=False)
+    states = [pool[k] for k in sorted(picks)]
+    names = [s for s, _ in states]
+    n_d = 1 if n == 2 else int(rng.integers(1, max_unknown + 1))
+    scale = {}
+    for d in UNKNOWN_POOL[:n_d]:
+        unit, gain, half = UI_UNITS[d][int(rng.integers(2))]
+        scale[d] = (unit, gain, half)
+    unknown = [(d, scale[d][0]) for d in UNKNOWN_POOL[:n_d]]
+    n_u = int(rng.integers(0, 2))
+    known = [KNOWN_POOL[0]] if n_u else []
+    values: dict = {}
+    entries: dict = {s: [] for s in names}
+    # each unknown input reaches its own state's equation (the state its first output sees)
+    ui_states = [names[k] for k in rng.choice(n, size=n_d, replace=False)]
+    for (d, _), s in zip(unknown, ui_states):
+        k = f"g_{s}_{d}"
+        values[k] = _uniform(rng, 0.5, 3.0, sign=True) * scale[d][1]
+        entries[s].append(f"{k} * {d}")
+        if rng.random() < 0.3:                        # and sometimes another state's
+            other = names[int(rng.integers(n))]
+            if other != s:
+                k = f"g_{other}_{d}"
+                values[k] = _uniform(rng, 0.2, 1.0, sign=True) * scale[d][1]
+                entries[other].append(f"{k} * {d}")
+    for u, _ in known:
+        s = names[int(rng.integers(n))]
+        k = f"h_{s}_{u}"
+        values[k] = _uniform(rng, 0.5, 5.0, sign=True)
+        entries[s].append(f"{k} * {u}")
+    # outputs: the states the unknown inputs reach (sometimes mixed with another state), then others
+    outputs, combos = [], 0
+    measured = list(ui_states)
+    extra = [s for s in names if s not in measured]
+    n_extra = int(rng.integers(0, len(extra) + 1))
+    measured += [extra[k] for k in rng.choice(len(extra), size=n_extra, replace=False)] if n_extra else []
+    for s in measured:
+        expr = s
+        if rng.random() < 0.35:
+            other = names[int(rng.integers(n))]
+            if other != s:
+                k = f"c_y_{s}_{other}"
+                values[k] = _uniform(rng, 0.2, 1.0, sign=True)
+                expr = f"{s} + {k} * {other}"
+                combos += 1
+        outputs.append((s if expr == s else f"{s}_plus_{other}", expr))
+    feedthrough = False
+    if allow_feedthrough and rng.random() < 0.25:
+        d = unknown[0][0]
+        k = f"e_{d}"
+        values[k] = _uniform(rng, 0.5, 2.0) * scale[d][1]
+        name, expr = outputs[0]
+        outputs[0] = (f"{name}_with_{d}", f"{expr} + {k} * {d}")
+        feedthrough = True
+    derived = allow_derived and rng.random() < 0.3
+    return {"n": n, "states": states, "ui_scale": scale, "names": names, "unknown": unknown, "known": known, "values": values,
+            "entries": entries, "outputs": outputs, "combos": combos, "feedthrough": feedthrough, "derived": derived}
+
+
+def _ui_ranges(core) -> str:
+    """The ``[inputs]`` rows of the unknown inputs: the excitation scenario's range in their unit."""
+    return "".join(f"{d} = {{ min = {-core['ui_scale'][d][2]}, max = {core['ui_scale'][d][2]}, bandwidth = 0.5 }}\n"
+                   for d, _ in core["unknown"])
+
+
+def _signal_units(core) -> dict:
+    units = {s: u for s, u in core["states"]}
+    units.update({d: u for d, u in core["unknown"]})
+    units.update({u: un for u, un in core["known"]})
+    return units
+
+
+def draw_linf(rng) -> RandomModel:
+    core = _draw_lpv_core(rng, "linf_uio")
+    names, values = core["names"], core["values"]
+    lo, hi, rate = _speed_box(rng)
+    rows, v_terms = _linear_rows(rng, names, core["entries"], values, "v_x", rng.random() < 0.5)
+    scheduling = ['SchedulingSignal(v_x, "m/s")']
+    tables = f"[scheduling.v_x]\nmin = {lo}\nmax = {hi}\nrate_min = {-rate}\nrate_max = {rate}\n"
+    derived_note = ""
+    if core["derived"]:
+        # a gain scheduled on the measured first output: s = 1 / (1 + (y / k_s)^2), in [s_min, 1]
+        y0, expr0 = core["outputs"][0]
+        values["k_s"] = _uniform(rng, 0.5, 2.0)
+        scheduling.append(f'SchedulingSignal(s, "-", derived=1 / (1 + (sp.Symbol("y_{y0}") / k_s) ** 2))')
+        tables += "\n[scheduling.s]\nmin = 0.2\nmax = 1.0\nrate_min = -50.0\nrate_max = 50.0\n"
+        # the scheduled gain multiplies one coupling: a softening spring on the first state
+        k = f"q_{names[0]}"
+        values[k] = -_uniform(rng, 0.5, 2.0)
+        rows[0] = f"{rows[0]} + {k} * s * {names[0]}"
+        derived_note = ", a gain scheduled on the measured first output"
+    units = _signal_units(core)
+    symbols = [(s, "") for s in names] + [(d, "") for d, _ in core["unknown"]] + [(u, "") for u, _ in core["known"]]
+    symbols += [("v_x", "positive=True")] + ([("s", "positive=True")] if core["derived"] else [])
+    symbols += [(k, "real=True") for k in values]
+    body = f"""
+    MODEL = ModelDefinition(
+        name="random_lpv",
+        states=({", ".join(names)},),
+        known_inputs=({"".join(u + ", " for u, _ in core["known"])}),
+        unknown_inputs=({"".join(d + ", " for d, _ in core["unknown"])}),
+        dynamics=sp.Matrix([{", ".join(rows)}]),
+        outputs=({"".join(f'("{y}", {e}), ' for y, e in core["outputs"])}),
+        scheduling=({"".join(s + ", " for s in scheduling)}),
+        parameters=({"".join(k + ", " for k in values)}),
+        units={units!r})
+    """
+    structure = {"states": core["n"], "outputs": len(core["outputs"]), "known_inputs": len(core["known"]),
+                 "unknown_inputs": len(core["unknown"]), "output_combinations": core["combos"],
+                 "ui_feedthrough": core["feedthrough"], "derived_scheduling": core["derived"],
+                 "v_x_terms": v_terms, "ui_units": [u for _, u in core["unknown"]]}
+    name = _name("linf", structure)
+    inputs = "\n[inputs]\n" + _ui_ranges(core)
+    inputs += "".join(f"{u} = {{ min = -0.05, max = 0.05, bandwidth = 0.5 }}\n" for u, _ in core["known"])
+    observer = (f'family = "linf_uio"\nmodel = "model.py"\nparameters = "parameters.toml"\npolytope = "sector"\n'
+                f'rate_bounds = "{"none" if core["derived"] else "exact"}"\nsample_time = 0.01\n\n'
+                f'[design]\nalpha = 2.0\nlyapunov = "{"quadratic" if core["derived"] else "pdlf"}"\n'
+                f'gain_bound_times_sample_time = 1.0\n\n[ui_filter]\ntime_constant = 0.02\n')
+    model = _model_py(f"Random LPV model (linf_uio): {_describe(structure)}{derived_note}.", symbols, body)
+    return RandomModel("linf_uio", name, structure,
+                       {"model.py": model, "parameters.toml": _params_toml(values, tables + inputs),
+                        f"{name}.toml": observer})
+
+
+# -- switched_pi ------------------------------------------------------------------------------------
+
+def draw_switched(rng) -> RandomModel:
+    """An LPV model in the speed, as :func:`draw_linf` draws it (no unknown input in an output, no
+    derived scheduling: Menhour et al. 2014's y = C x), one unknown input, modes at 2-3 speeds."""
+    core = _draw_lpv_core(rng, "switched_pi", allow_feedthrough=False, allow_derived=False, max_unknown=1)
+    names, values = core["names"], core["values"]
+    lo, hi, rate = _speed_box(rng)
+    rows, v_terms = _linear_rows(rng, names, core["entries"], values, "v_x", rng.random() < 0.5)
+    n_modes = int(rng.integers(2, 4))
+    centres = [float(np.round(c, 2)) for c in np.linspace(lo + 0.2 * (hi - lo), hi - 0.2 * (hi - lo), n_modes)]
+    units = _signal_units(core)
+    symbols = [(s_, "") for s_ in names] + [(d, "") for d, _ in core["unknown"]] + [(u, "") for u, _ in core["known"]]
+    symbols += [("v_x", "positive=True")] + [(k, "real=True") for k in values]
+    body = f"""
+    MODEL = ModelDefinition(
+        name="random_switched",
+        states=({", ".join(names)},),
+        known_inputs=({"".join(u + ", " for u, _ in core["known"])}),
+        unknown_inputs=({"".join(d + ", " for d, _ in core["unknown"])}),
+        dynamics=sp.Matrix([{", ".join(rows)}]),
+        outputs=({"".join(f'("{y}", {e}), ' for y, e in core["outputs"])}),
+        scheduling=(SchedulingSignal(v_x, "m/s"),),
+        parameters=({"".join(k + ", " for k in values)}),
+        units={units!r})
+    """
+    structure = {"states": core["n"], "outputs": len(core["outputs"]), "known_inputs": len(core["known"]),
+                 "unknown_inputs": 1, "output_combinations": core["combos"], "modes": n_modes, "v_x_terms": v_terms,
+                 "ui_units": [u for _, u in core["unknown"]]}
+    name = _name("switched", structure) + f"_{n_modes}m"
+    tables = f"[scheduling.v_x]\nmin = {lo}\nmax = {hi}\nrate_min = {-rate}\nrate_max = {rate}\n"
+    tables += "\n[inputs]\n" + _ui_ranges(core)
+    tables += "".join(f"{u} = {{ min = -0.05, max = 0.05, bandwidth = 0.5 }}\n" for u, _ in core["known"])
+    points = ", ".join(f"{{ v_x = {c} }}" for c in centres)
+    observer = (f'family = "switched_pi"\nmodel = "model.py"\nparameters = "parameters.toml"\nsample_time = 0.01\n\n'
+                f'[design]\npole_radius = 50.0\ndecay_rate = 0.5\n\n[switching]\nperformance = ["{names[0]}"]\n'
+                f'[[switching.axis]]\nname = "v_x"\npremise = "v_x"\nunit = "m/s"\ncentres = {centres}\n'
+                f'points = [{points}]\n')
+    model = _model_py(f"Random LPV model (switched_pi): {_describe(structure)}, {n_modes} speed modes.", symbols, body)
+    return RandomModel("switched_pi", name, structure,
+                       {"model.py": model, "parameters.toml": _params_toml(values, tables), f"{name}.toml": observer})
+
+
+# -- algebraic_uio ----------------------------------------------------------------------------------
+
+def draw_algebraic(rng) -> RandomModel:
+    """A lateral-offset chain of Ichalal and Mammar 2015's shape: y_L' = c(v_x) psi_L + ...,
+    psi_L' = c(v_x) r + ..., r' = ... with the unknown yaw moment entering the chain at a drawn
+    position (relative degree 1-3 of the measured first state), every coupling of the chain and the
+    unknown input's gain affine in the scheduling speed (its derivatives then enter the observer),
+    sometimes a known input; differentiators of the orders the relative degree needs."""
+    chain = [("y_L", "m"), ("psi_L", "rad"), ("r", "rad/s")]
+    n = int(rng.integers(2, 4))
+    states = chain[3 - n:]
+    names = [s_ for s_, _ in states]
+    degree = int(rng.integers(1, n + 1))                      # the unknown input enters state `degree`
+    values: dict = {}
+    rows = []
+    for i, si in enumerate(names):
+        terms = []
+        for j in range(i + 1):
+            if j == i:
+                values[f"a_{si}"] = -_uniform(rng, 0.5, 3.0)
+                terms.append(f"a_{si} * {si}")
+            elif rng.random() < 0.5:
+                values[f"a_{si}_{names[j]}"] = _uniform(rng, 0.2, 1.5, sign=True)
+                terms.append(f"a_{si}_{names[j]} * {names[j]}")
+        if i + 1 < n:                      # the chain: a coupling that never vanishes on the speed box
+            values[f"k_{si}"] = _uniform(rng, 0.5, 2.0)
+            values[f"m_{si}"] = _uniform(rng, 0.0, 0.1)
+            terms.append(f"(k_{si} + m_{si} * v_x) * {names[i + 1]}")
+        rows.append(terms)
+    target = names[degree - 1]
+    values["g_0"] = _uniform(rng, 0.5, 2.0)
+    values["g_1"] = _uniform(rng, 0.0, 0.05)
+    rows[degree - 1].append("(g_0 + g_1 * v_x) * M_d")
+    known = []
+    if rng.random() < 0.3:
+        known = [("delta", "rad")]
+        at = names[int(rng.integers(n))]
+        values[f"h_{at}"] = _uniform(rng, 1.0, 5.0, sign=True)
+        rows[names.index(at)].append(f"h_{at} * delta")
+    lo, hi, rate = _speed_box(rng)
+    order = degree + 2
+    units = {**dict(states), "M_d": "kN m", **dict(known)}
+    symbols = [(s_, "") for s_ in names] + [("M_d", "")] + [(u, "") for u, _ in known]
+    symbols += [("v_x", "positive=True")] + [(k, "real=True") for k in values]
+    body = f"""
+    MODEL = ModelDefinition(
+        name="random_chain",
+        states=({", ".join(names)},),
+        known_inputs=({"".join(u + ", " for u, _ in known)}),
+        unknown_inputs=(M_d,),
+        dynamics=sp.Matrix([{", ".join(" + ".join(r_) for r_ in rows)}]),
+        outputs=(("{names[0]}", {names[0]}),),
+        scheduling=(SchedulingSignal(v_x, "m/s"),),
+        parameters=({"".join(k + ", " for k in values)}),
+        units={units!r})
+    """
+    structure = {"states": n, "outputs": 1, "known_inputs": len(known), "unknown_inputs": 1,
+                 "relative_degree": degree}
+    name = _name("algebraic", structure) + f"_r{degree}"
+    bounds = ", ".join(f"[{-10.0 ** m}, {10.0 ** m}]" for m in range(1, order + 1))
+    tables = (f"[scheduling.v_x]\nmin = {lo}\nmax = {hi}\nrate_min = {-rate}\nrate_max = {rate}\n"
+              f"derivative_bounds = [{bounds}]\n\n[inputs]\nM_d = {{ min = -1.0, max = 1.0, bandwidth = 0.5 }}\n")
+    tables += "".join("delta = { min = -0.05, max = 0.05, bandwidth = 0.5 }\n" for _ in known)
+    observer = (f'family = "algebraic_uio"\nmodel = "model.py"\nparameters = "parameters.toml"\nsample_time = 0.002\n\n'
+                f'[design]\nlmi = "direct"\nalpha = 1.0\nmargin = 1e-4\n\n'
+                f'[design.differentiators.y_{names[0]}]\norder = {order}\nlipschitz = 1000.0\n\n'
+                f'[design.differentiators.v_x]\norder = {order}\nlipschitz = 100.0\n')
+    model = _model_py(f"Random chain (algebraic_uio): {_describe(structure)}, relative degree {degree}.", symbols, body)
+    return RandomModel("algebraic_uio", name, structure,
+                       {"model.py": model, "parameters.toml": _params_toml(values, tables), f"{name}.toml": observer})
+
+
+# -- ts_fuzzy_uio -----------------------------------------------------------------------------------
+
+def draw_ts(rng) -> RandomModel:
+    """A longitudinal-lateral model of Nguyen et al. 2021's shape, its structure drawn: the speed
+    v_x a measured state (the 1/v_x of the other rows a measured premise), 1-2 more states of which
+    some are measured, 1-2 unknown inputs each reaching a measured state, sometimes a known input,
+    sometimes a saturating tyre law (tanh) of an unmeasured state, sometimes a v_y r coupling in the
+    speed's row (a premise in the measured one of the two)."""
+    extra = [("v_y", "m/s"), ("r", "rad/s"), ("p", "rad/s")]
+    n_extra = int(rng.integers(1, 3))
+    others = [extra[k] for k in sorted(rng.choice(len(extra), size=n_extra, replace=False))]
+    states = [("v_x", "m/s")] + others
+    names = [s for s, _ in states]
+    # measured: v_x and, with two more states, one of them; at least one state is not measured
+    measured = ["v_x"] + ([others[int(rng.integers(2))][0]] if n_extra == 2 else [])
+    unmeasured = [s for s in names if s not in measured]
+    n_d = int(rng.integers(1, len(measured) + 1))
+    ui_states = [measured[k] for k in sorted(rng.choice(len(measured), size=n_d, replace=False))]
+    # the unknown input a state's balance takes: engine torque in the speed's, a yaw or roll moment
+    # in a rate's, a lateral force in v_y's (gains: the inverse inertias of a car, roughly)
+    kinds = {"v_x": ("T_eng", "N m", 2e-3), "r": ("M_d", "N m", 5e-4), "p": ("M_x", "N m", 1e-3),
+             "v_y": ("F_d", "N", 1e-3)}
+    unknown = [kinds[s][:2] for s in ui_states]
+    values: dict = {}
+    entries: dict = {s: [] for s in names}
+    for (d, _), s in zip(unknown, ui_states):
+        values[f"g_{s}"] = _uniform(rng, 0.5, 2.0, sign=s != "v_x") * kinds[s][2]
+        entries[s].append(f"g_{s} * {d}")
+    known = []
+    if rng.random() < 0.5:
+        known = [("delta", "rad")]
+        target = [s for s in names if s != "v_x"][int(rng.integers(n_extra))]
+        values[f"h_{target}"] = _uniform(rng, 5.0, 40.0)
+        entries[target].append(f"h_{target} * delta")
+    values["k_drag"] = -_uniform(rng, 0.005, 0.05)          # rolling and air resistance, linearized
+    rows = {"v_x": ["k_drag * v_x"]}
+    coupling = len(others) == 2 and rng.random() < 0.5
+    if coupling:
+        a, b = others[0][0], others[1][0]
+        rows["v_x"].append(f"{a} * {b}")
+    for si in names[1:]:
+        terms = []
+        for sj in names[1:]:
+            if si == sj:
+                values[f"b_{si}"] = -_uniform(rng, 10.0, 40.0)
+                terms.append(f"b_{si} * {sj} / v_x")
+                values[f"a_{si}"] = -_uniform(rng, 0.2, 1.0)
+                terms.append(f"a_{si} * {sj}")
+            elif rng.random() < 0.6:
+                values[f"b_{si}_{sj}"] = _uniform(rng, 2.0, 15.0, sign=True)
+                terms.append(f"b_{si}_{sj} * {sj} / v_x")
+        if si == "v_y" and "r" in names and rng.random() < 0.5:
+            terms.append("-v_x * r")                    # the kinematic coupling of the lateral balance
+        rows[si] = terms
+    saturating = bool(unmeasured) and rng.random() < 0.5
+    if saturating:
+        u_state = unmeasured[0]
+        target = measured[-1] if measured[-1] != "v_x" else names[1]
+        values["F_sat"] = _uniform(rng, 2.0, 6.0)
+        values["k_sat"] = _uniform(rng, 1.0, 4.0)
+        rows[target].append(f"-F_sat * sp.tanh(k_sat * {u_state} / F_sat)")
+    for s_ in names:
+        rows[s_] = rows[s_] + entries[s_]
+    dynamics = [" + ".join(rows[s_]) or "0" for s_ in names]
+    lo, hi, _ = _speed_box(rng)
+    bounds = {"v_x": [lo, hi], "v_y": [-1.5, 1.5], "r": [-0.6, 0.6], "p": [-0.6, 0.6]}
+    tables = "[state_bounds]\n" + "".join(f"{s_} = [{bounds[s_][0]}, {bounds[s_][1]}]\n" for s_ in names)
+    tables += "\n[inputs]\n" + "".join(f"{d} = {{ min = {-200.0}, max = {200.0}, bandwidth = 0.5 }}\n"
+                                        for d, _ in unknown)
+    tables += "".join("delta = { min = -0.03, max = 0.03, bandwidth = 0.5 }\n" for _ in known)
+    units = {**dict(states), **dict(unknown), **dict(known)}
+    symbols = [(s_, "positive=True" if s_ == "v_x" else "") for s_ in names]
+    symbols += [(d, "") for d, _ in unknown] + [(u, "") for u, _ in known] + [(k, "real=True") for k in values]
+    outputs = [(m, m) for m in measured]
+    body = f"""
+    MODEL = ModelDefinition(
+        name="random_ts",
+        states=({", ".join(names)},),
+        known_inputs=({"".join(u + ", " for u, _ in known)}),
+        unknown_inputs=({"".join(d + ", " for d, _ in unknown)}),
+        dynamics=sp.Matrix([{", ".join(dynamics)}]),
+        outputs=({"".join(f'("{y}", {e}), ' for y, e in outputs)}),
+        scheduling=(),
+        parameters=({"".join(k + ", " for k in values)}),
+        units={units!r})
+    """
+    structure = {"states": len(names), "outputs": len(outputs), "known_inputs": len(known),
+                 "unknown_inputs": len(unknown), "saturating_tyre": saturating, "coupling": coupling,
+                 "derived_scheduling": True}
+    name = _name("ts", structure)
+    observer = ('family = "ts_fuzzy_uio"\nmodel = "model.py"\nparameters = "parameters.toml"\nsample_time = 0.01\n\n'
+                '[design]\ndecay = 1.0\nmargin = 1e-4\n')
+    model = _model_py(f"Random TS model (ts_fuzzy_uio): {_describe(structure)}; the 1/v_x premise from the "
+                      f"measured speed.", symbols, body)
+    return RandomModel("ts_fuzzy_uio", name, structure,
+                       {"model.py": model, "parameters.toml": _params_toml(values, tables), f"{name}.toml": observer})
+
+
+# -- interconnected_uio, nonlinear_tyre_observer: their built-in model, its parameters dispersed ------
+
+#: {family: (built-in observer file, {parameter: relative half-width of its dispersion}, parameters drawn
+#: with the same factor as another (mu_r as mu_f))}: the physical parameters of the car; a gravity,
+#: a force share or a floor is no property of another car
+DISPERSED = {
+    "interconnected_uio": ("interconnected_uio", dict.fromkeys(
+        ("m", "I_z", "C_f", "C_r", "C_lf", "C_lr", "I_wf", "I_wr", "I_s", "B_s", "t_sb", "c_a", "sigma", "l_w"), 0.2)
+        | dict.fromkeys(("l_f", "l_r", "R", "l_s", "R_s"), 0.1), {}),
+    "nonlinear_tyre_observer": ("stanford_sideslip_nonlinear_tyre", dict.fromkeys(
+        ("m", "I_z", "C_f", "C_r"), 0.2) | {"l_f": 0.1, "l_r": 0.1, "mu_f": 0.15}, {"mu_r": "mu_f"}),
+}
+
+
+def _disperse(text: str, rng, spread: dict, tied: dict) -> tuple:
+    """The parameter file ``text`` with each ``[parameters]`` value named in ``spread`` multiplied
+    by a factor drawn uniformly in 1 +- its half-width (``tied``: parameters taking another's
+    factor); comments and every other table kept. Returns (text, {parameter: factor})."""
+    out, section, factors = [], None, {}
+    for line in text.splitlines():
+        head = line.strip()
+        if head.startswith("[") and head.endswith("]") or head.startswith("[") and "#" in head:
+            section = head.split("#")[0].strip()
+        key, _, rest = line.partition("=")
+        key = key.strip()
+        if section == "[parameters]" and (key in spread or key in tied) and rest:
+            value, _, comment = rest.partition("#")
+            k = factors.get(tied[key]) if key in tied else None
+            if k is None:
+                k = float(rng.uniform(1.0 - spread[key], 1.0 + spread[key]))
+            factors[key] = k
+            line = f"{key} = {_fmt(float(value) * k)}" + (f"  # {comment.strip()} (x {k:.3f})" if comment else "")
+        out.append(line)
+    missing = sorted(set(spread) - set(factors))
+    if missing:
+        raise KeyError(f"not in the [parameters] of the built-in file: {missing}")
+    return "\n".join(out) + "\n", factors
+
+
+def _draw_dispersed(family: str, rng) -> RandomModel:
+    """The family's built-in observer on a car whose physical parameters are drawn around the
+    built-in car's (:data:`DISPERSED`); the model and every design setting are the built-in ones."""
+    from ..project import observer_file as observers
+    builtin, spread, tied = DISPERSED[family]
+    config = observers.get(builtin)
+    params, factors = _disperse(Path(config.parameter_path).read_text(), rng, spread, tied)
+    if family == "nonlinear_tyre_observer":
+        # the braking share is the static front load share l_r / (l_f + l_r) of the drawn car
+        vals = {}
+        for line in params.splitlines():
+            key, _, rest = line.partition("=")
+            if key.strip() in ("l_f", "l_r") and rest:
+                vals[key.strip()] = float(rest.split("#")[0])
+        share = vals["l_r"] / (vals["l_f"] + vals["l_r"])
+        params = "\n".join(f"brake_front = {_fmt(share)}  # l_r / (l_f + l_r) of the drawn car"
+                           if ln.startswith("brake_front") else ln for ln in params.splitlines()) + "\n"
+    lines = Path(config.source).read_text().splitlines()
+    observer = "\n".join(f'parameters = "parameters.toml"' if ln.startswith("parameters =") else ln for ln in lines)
+    structure = {"states": None, "dispersed": {k: round(v, 4) for k, v in factors.items()}}
+    name = f"{builtin}_dispersed_{int(rng.integers(10 ** 6)):06d}"
+    return RandomModel(family, name, structure, {"parameters.toml": params, f"{name}.toml": observer + "\n"})
+
+
+def draw_interconnected(rng) -> RandomModel:
+    """Sentouh et al. 2023's interconnected model (fixed by its theory) on a drawn car."""
+    return _draw_dispersed("interconnected_uio", rng)
+
+
+def draw_nonlinear_tyre(rng) -> RandomModel:
+    """The nonlinear-tyre single-track observer (fixed model) on a drawn car."""
+    return _draw_dispersed("nonlinear_tyre_observer", rng)
+
+
+def _name(prefix: str, s: dict) -> str:
+    parts = [prefix, f"{s['states']}x", f"{s['outputs']}y", f"{s['known_inputs']}u", f"{s['unknown_inputs']}d"]
+    parts += [tag for key, tag in (("output_combinations", "mix"), ("ui_feedthrough", "ff"),
+                                   ("derived_scheduling", "der"), ("saturating_tyre", "sat"),
+                                   ("v_x_terms", "vx")) if s.get(key)]
+    if any(u.startswith("kN") for u in s.get("ui_units", ())):
+        parts.append("kN")
+    return "_".join(parts)
+
+
+def _describe(s: dict) -> str:
+    out = (f"{s['states']} states, {s['outputs']} outputs ({s.get('output_combinations', 0)} of them combinations "
+           f"of states), {s['known_inputs']} known and {s['unknown_inputs']} unknown inputs")
+    if s.get("ui_feedthrough"):
+        out += ", an unknown input in an output"
+    if s.get("saturating_tyre"):
+        out += ", a saturating tyre law"
+    return out
+
+
+# -- running a draw ----------------------------------------------------------------------------------
+
+DRAWERS = {"linf_uio": draw_linf, "ts_fuzzy_uio": draw_ts, "switched_pi": draw_switched,
+           "algebraic_uio": draw_algebraic, "interconnected_uio": draw_interconnected,
+           "nonlinear_tyre_observer": draw_nonlinear_tyre}
+
+
+def draw(family: str, seed: int) -> RandomModel:
+    """The model drawn for ``family`` from ``numpy.random.default_rng(seed)``."""
+    return DRAWERS[family](np.random.default_rng(seed))
+
+
+def _cli(argv: list) -> tuple:
+    """(exit code, stdout, stderr) of ``uiogen ARGV`` in this process."""
+    from .. import cli
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = cli.main([str(a) for a in argv])
+        except SystemExit as exc:           # argparse
+            code = exc.code if isinstance(exc.code, int) else 2
+    return code, out.getvalue(), err.getvalue()
+
+
+def run(model: RandomModel, folder: Path) -> Outcome:
+    """Write ``model`` into ``folder`` and take it through design, generate, build; then check the
+    installed extension against its model once more (:func:`codegen.extension.conformance.check`)."""
+    from .. import pipeline
+    from ..design import lock as design_lock
+    from ..extension import conformance
+    from ..extension.build import load
+    from ..project import observer_file as observers
+    t0 = time.perf_counter()
+    path = model.write(folder)
+    code, out, err = _cli(["design", path, "--update"])
+    if code != 0:
+        one_line = err.strip()
+        typed = code == 2 and "Traceback" not in err and len(one_line.splitlines()) == 1
+        return Outcome(model, "refused" if typed else "failed", one_line, time.perf_counter() - t0)
+    for argv in (["generate", path], ["build", path]):
+        code, out, err = _cli(argv)
+        if code != 0:
+            return Outcome(model, "failed", f"uiogen {argv[0]}: {err.strip()}", time.perf_counter() - t0)
+    line = next((ln for ln in out.splitlines() if "conformance:" in ln), "")
+    config = observers.get(str(path))
+    lock_path = design_lock.path(config)
+    report = conformance.check(pipeline.build(config), load(config).module, lock_path.parent,
+                               json.loads(lock_path.read_text()))
+    return Outcome(model, "conforms", "", time.perf_counter() - t0, report, line)
+
+
+def acceptance(outcomes: list) -> dict:
+    """{family: {"draws", "conforms", "refused", "failed", "rate"}}: the fraction of draws designed."""
+    out: dict = {}
+    for o in outcomes:
+        row = out.setdefault(o.model.family, {"draws": 0, "conforms": 0, "refused": 0, "failed": 0})
+        row["draws"] += 1
+        row[o.status] += 1
+    for row in out.values():
+        row["rate"] = row["conforms"] / row["draws"]
+    return out
+
+
+def main(argv=None) -> int:
+    """``python -m codegen.families.random_models [--family F ...] [--draws N] [--first SEED] --dir DIR``:
+    draw, design, build and check; one line per draw and the acceptance rate per family."""
+    ap = argparse.ArgumentParser(prog="python -m codegen.families.random_models")
+    ap.add_argument("--family", action="append", choices=sorted(DRAWERS))
+    ap.add_argument("--draws", type=int, default=10)
+    ap.add_argument("--first", type=int, default=0, help="the first seed (draws first, first + 1, ...)")
+    ap.add_argument("--dir", required=True, help="a folder for the drawn projects")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+    outcomes = []
+    for family in args.family or sorted(DRAWERS):
+        for seed in range(args.first, args.first + args.draws):
+            m = draw(family, seed)
+            o = run(m, Path(args.dir) / family / f"seed{seed}")
+            o.details["seed"] = seed
+            outcomes.append(o)
+            print(f"{family} seed {seed} {m.name}: {o.status} ({o.seconds:.1f} s) {o.error or o.build_line}",
+                  file=sys.stderr, flush=True)
+    rates = acceptance(outcomes)
+    if args.json:
+        print(json.dumps({"acceptance": rates, "draws": [
+            {"family": o.model.family, "seed": o.details["seed"], "name": o.model.name, "structure": o.model.structure,
+             "status": o.status, "error": o.error, "seconds": o.seconds} for o in outcomes]}, indent=1))
+    else:
+        for family, row in rates.items():
+            print(f"{family}: {row['conforms']} of {row['draws']} designed and conform ({100 * row['rate']:.0f} %), "
+                  f"{row['refused']} refused with a typed error, {row['failed']} failed")
+    return 1 if any(o.status == "failed" for o in outcomes) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,55 @@
+"""The ``[precision]`` table of an observer file: what the float32 build is held to.
+
+``uiogen build --float32`` (:mod:`codegen.targets.float32`) bounds, per output signal and in its
+unit, how far the single-precision step's estimate can drift from the double step's, and
+accepts the float build when every bound is within that signal's tolerance. The tolerance is
+physical: a declared fraction of what the sensors' noise already does to the estimate::
+
+    [precision]
+    fraction = 0.1                       # tolerance = 0.1 x the estimate's RMS response to the sensor noise
+    noise = { y_r = 8.7e-4 }             # input -> standard deviation of its sensor noise [its unit]
+    tolerance = { T_d = 0.05 }           # output -> absolute tolerance [its unit], instead of the rule
+    uncertified_states = "measured"      # or "refuse" (the default), see below
+
+The sensor noise of an input not in ``noise`` is the family's validation noise for that signal
+(:meth:`Family.sensor_noise`, a measured ``y_NAME`` or a raw input ``NAME``); an input with
+neither is taken noise free. An output whose estimate no declared noise moves needs a
+``tolerance``: the build says which.
+
+State with dynamics of its own that no certificate covers (the sliding-mode differentiators:
+they converge in finite time but do not contract, so no norm bounds how far two runs drift
+apart) has no bound, only its measured deviation. By default such an observer's float build is
+refused; ``uncertified_states = "measured"`` accepts it on the measured deviation of that state
+(every output it reaches is still bounded from there, and the report says which are).
+
+Not part of the design: editing this table never re-solves.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .settings import Rule, parse_settings, setting
+
+DEFAULT_FRACTION = 0.1
+
+_POSITIVE = Rule(float, gt=0)
+
+
+@dataclass(frozen=True)
+class PrecisionSettings:
+    """The float32 build's tolerances (see the module docstring)."""
+
+    fraction: float = setting(DEFAULT_FRACTION, gt=0, le=1,
+                              doc="tolerance as a fraction of the estimate's RMS response to the sensor noise")
+    noise: dict = setting(default_factory=dict, items=_POSITIVE,
+                          doc="input name -> standard deviation of its sensor noise, in its unit")
+    tolerance: dict = setting(default_factory=dict, items=_POSITIVE,
+                              doc="output name -> absolute tolerance of the float32 deviation, in its unit")
+    uncertified_states: str = setting("refuse", choices=("refuse", "measured"),
+                                      doc="state with own dynamics no certificate covers (a sliding-mode "
+                                          "differentiator): refuse the float build, or take its measured deviation")
+
+
+def parse(table, source: str) -> PrecisionSettings:
+    """The ``[precision]`` table, every key and value checked (ConfigurationError naming the file)."""
+    return parse_settings(PrecisionSettings, table or {}, source=source, section="precision")

@@ -1,0 +1,351 @@
+"""``uiogen analyze``: structural facts against hand-derived answers, the ranking of the built-in
+observers, the three refusals of issue 28 end to end through ``uiogen design``, and
+``uiogen new --from-model``.
+
+The three cases live in ``tests/analysis/models/`` (README there): each ``uiogen design`` fails; the
+analysis printed above the error names the signal and the fix in that one run; the test applies
+the fix the analysis names and the design passes.
+"""
+import json
+import re
+import shutil
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from codegen import analysis, cli, families, pipeline
+from codegen.project import observer_file as observers
+from codegen.analysis import ranking, structure, subject
+from codegen.errors import ConfigurationError
+
+MODELS = Path(__file__).resolve().parent / "models"
+
+LTI_HEAD = '''
+import sympy as sp
+from codegen.model import ModelDefinition
+x1, x2, d = sp.symbols("x1 x2 d")
+'''
+
+
+def _subject(tmp_path, model_text: str, params: str = "[parameters]\n", **kw):
+    (tmp_path / "m.py").write_text(LTI_HEAD + textwrap.dedent(model_text))
+    (tmp_path / "p.toml").write_text(params)
+    return subject.load(str(tmp_path / "m.py"), str(tmp_path / "p.toml"), **kw)
+
+
+def _facts(st) -> dict:
+    return {f.key: f for f in st.facts}
+
+
+# ---- structure against hand-derived answers --------------------------------------------------------------
+
+def test_invariant_zero_of_ichalal_example_1_follows_the_formula_at_every_sample():
+    """Example 1: det [[s I - A, -D], [C, 0]] = (1 + rho)^2 + rho (s + 2), so the one invariant zero is
+    s = -((1 + rho)^2 + 2 rho) / rho: -6 at rho = 1, -9.2 at rho = 5. The family's own fixed modes
+    (eigenvalues of A - Q M unobservable from C, computed on the decoupled form) agree."""
+    from codegen.families.algebraic_uio import design as alg, representation as rdeg
+    from codegen.model import instantiate, load_parameters
+    st = structure.analyze(subject.load("algebraic_uio_example1"))
+    rho = st.lin.samples.values[:, 0]
+    zeros = np.array([p.zeros[0].real for p in st.points])
+    assert all(p.zeros.size == 1 for p in st.points)
+    np.testing.assert_allclose(zeros, -((1 + rho) ** 2 + 2 * rho) / rho, rtol=1e-9)
+    f = _facts(st)
+    assert f["invariant_zeros"].detail["real_range"] == pytest.approx([-9.2, -6.0], rel=1e-9)
+    assert f["strong_detectability"].holds and f["matching"].holds and f["left_invertibility"].holds
+    assert st.relative_degrees == {"x1": {"d": 1}} and f["relative_degree"].basis == "exact"
+    assert st.estimable["states_exactly"] == ["x1"] and st.estimable["states_asymptotically"] == ["x1", "x2"]
+    cfg = observers.get("algebraic_uio_example1")
+    dec = rdeg.derive(instantiate(cfg.load_model(), load_parameters(cfg.parameter_path)))
+    assert alg.fixed_modes(dec)["real_range"] == pytest.approx([-9.2, -6.0], rel=1e-6)
+
+
+def test_an_unstable_invariant_zero_is_found_and_a_sensor_that_removes_it_is_named(tmp_path):
+    """x1' = x2, x2' = -x2 + d, y = x1 - x2: C (sI - A)^-1 D = (1 - s) / (s (s + 1)), one zero at s = 1.
+    No observer that decouples d converges; V* = span [1, 1], so neither state is reconstructible.
+    Measuring x1 or x2 besides removes the zero (no common zero of (1 - s) and 1)."""
+    st = structure.analyze(_subject(tmp_path, '''
+        MODEL = ModelDefinition(name="lti_zero", states=(x1, x2), known_inputs=(), unknown_inputs=(d,),
+                                dynamics=sp.Matrix([x2, -x2 + d]), outputs=(("y", x1 - x2),), scheduling=(),
+                                parameters=())
+        '''))
+    f = _facts(st)
+    assert st.basis == "constant" and f["strong_detectability"].basis == "constant"
+    assert st.points[0].zeros == pytest.approx([1.0], abs=1e-9)
+    assert f["strong_detectability"].holds is False and "s = 1" in f["strong_detectability"].statement
+    assert "measure x1" in f["strong_detectability"].fix and "measure x2" in f["strong_detectability"].fix
+    assert st.estimable["states_exactly"] == [] and st.estimable["states_not"] == ["x1", "x2"]
+    assert st.relative_degrees == {"y": {"d": 1}} and f["matching"].holds
+
+
+def test_an_undetectable_state_is_named_with_the_sensor_that_sees_it(tmp_path):
+    """x1' = x1 (unstable, seen by nothing), x2' = -x2 + d, y = x2: x1 is unobservable, mode +1."""
+    st = structure.analyze(_subject(tmp_path, '''
+        MODEL = ModelDefinition(name="lti_unobservable", states=(x1, x2), known_inputs=(), unknown_inputs=(d,),
+                                dynamics=sp.Matrix([x1, -x2 + d]), outputs=(("y", x2),), scheduling=(),
+                                parameters=())
+        '''))
+    f = _facts(st)["observability"]
+    assert f.holds is False and f.detail["unobservable_states"] == ["x1"]
+    assert f.detail["slowest_real_part"] == pytest.approx(1.0) and "NOT detectable" in f.statement
+    assert f.fix.startswith("measure x1")
+    assert st.estimable["states_unobservable_without_unknown_inputs"] == ["x1"]
+
+
+def test_relative_degrees_of_the_steering_model_are_those_of_its_equations():
+    """Nguyen et al. 2019 (5): T_d enters delta_dot' (degree 1 on delta_dot); delta' = delta_dot (2 on
+    delta); r' depends on delta, so r''' on T_d (3). Exact (symbolic) and the same at every sample."""
+    st = structure.analyze(subject.load("lpv_linf_driver_torque"))
+    assert st.relative_degrees == {"r": {"T_d": 3}, "delta": {"T_d": 2}, "delta_dot": {"T_d": 1}}
+    assert st.hosmd_orders == {"y_r": 3, "y_delta": 2, "y_delta_dot": 1}
+    f = _facts(st)
+    assert f["relative_degree"].basis == "exact" and f["matching"].holds and f["strong_detectability"].holds
+    assert "invariant zeros" in f["invariant_zeros"].statement and not any(p.zeros.size for p in st.points)
+
+
+def test_a_force_seen_by_the_accelerometer_has_relative_degree_zero():
+    """The tutorial's model: F in a_y itself (feedthrough, degree 0), in r only through r'' (degree 2)."""
+    s = subject.load(str(MODELS / "lateral_no_ay" / "lateral.py"), str(MODELS / "lateral_no_ay" / "car.toml"))
+    st = structure.analyze(s.with_outputs((("a_y", _ay(s)),)))
+    assert st.relative_degrees == {"r": {"F": 2}, "a_y": {"F": 0}}
+    assert st.hosmd_orders == {"y_r": 2, "y_a_y": 0} and _facts(st)["matching"].holds
+
+
+def _ay(s):
+    import sympy as sp
+    mod = s.module
+    return (mod.F_yf + mod.F_yr + mod.F) / mod.M
+
+
+def test_outputs_and_unknown_inputs_options_select_and_name_the_left_out_sensors(tmp_path):
+    """--outputs r on a model that declares a_y: the matching fix names a_y, the declared output;
+    --unknown-inputs moves a known input to the unknown ones; a wrong name is a typed error."""
+    model = (MODELS / "lateral_no_ay" / "lateral.py").read_text().replace(
+        'outputs=(("r", r),)', 'outputs=(("r", r), ("a_y", (F_yf + F_yr + F) / M))')
+    (tmp_path / "lateral.py").write_text(model)
+    shutil.copy(MODELS / "lateral_no_ay" / "car.toml", tmp_path / "car.toml")
+    s = subject.load(str(tmp_path / "lateral.py"), str(tmp_path / "car.toml"), outputs=["r"])
+    assert s.outputs == ("r",) and s.unmeasured_declared_outputs() == ("a_y",)
+    fix = _facts(structure.analyze(s))["matching"].fix
+    assert fix.startswith("measure a_y (an output the model declares, left out by --outputs)"), fix
+    s2 = subject.load(str(tmp_path / "lateral.py"), str(tmp_path / "car.toml"), unknown_inputs=["delta,F"])
+    assert s2.unknown_inputs == ("delta", "F") and s2.known_inputs == ()
+    with pytest.raises(ConfigurationError, match=r"--outputs a_x: not an output .* did you mean 'a_y'"):
+        subject.load(str(tmp_path / "lateral.py"), str(tmp_path / "car.toml"), outputs=["a_x"])
+    with pytest.raises(ConfigurationError, match=r"needs its parameter file.*--parameters"):
+        subject.load(str(tmp_path / "lateral.py"))
+
+
+# ---- the ranking --------------------------------------------------------------------------------------------
+
+def test_a_family_without_applicability_is_ranked_last_and_says_so():
+    """The ranking iterates the registry: a family registered without ``applicability`` answers
+    "no applicability check", never a name comparison."""
+    from codegen.families.base import Family
+
+    class Silent(Family):
+        name = "silent_family_for_test"
+        title = "a family that does not say"
+
+        def build(self, config, solver):
+            raise NotImplementedError
+
+    families.register(Silent())
+    try:
+        a = analysis.analyze("algebraic_uio_example1", design=False)
+    finally:
+        families.unregister("silent_family_for_test")
+    app, trial = a.ranking.entries[-1]
+    assert app.family == "silent_family_for_test" and not app.applies and "no applicability check" in app.condition
+    assert trial.status == "not tried"
+
+
+REPRESENTATIVES = ["algebraic_uio_example1", "interconnected_uio", "lpv_linf_driver_torque",
+                   "stanford_sideslip_nonlinear_tyre", "switched_pi_bank_angle", "ts_fuzzy_uio"]
+
+
+def _ranks_own_family_first(name):
+    a = analysis.analyze(name)
+    own = observers.get(name).family
+    first, trial = a.ranking.entries[0]
+    text = a.text()
+    assert first.family == own, text
+    assert trial.status == "certified" and trial.settings == "the observer file's settings", text
+    assert "it is the observer file's own family" in text
+    return a
+
+
+# the trial designs of these take 5-17 s of CPU each: the full lane's
+HEAVY_TRIALS = ("lpv_linf_driver_torque", "stanford_sideslip_nonlinear_tyre", "switched_pi_bank_angle")
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in HEAVY_TRIALS else n
+                                  for n in REPRESENTATIVES])
+def test_a_builtin_observer_ranks_its_own_family_first(name):
+    """One built-in per family, with trial designs: the own family is first and its design (the file's
+    own settings) certified; every other applicable family is designed too (side by side)."""
+    a = _ranks_own_family_first(name)
+    for app, trial in a.ranking.entries:
+        assert (trial.status != "not tried") == app.applies, (app.family, trial)
+        if trial.status == "certified":
+            assert trial.figures and all(np.isfinite(v) for v, _, _ in trial.figures.values())
+
+
+@pytest.mark.reliability
+@pytest.mark.parametrize("name", [n for n in observers.names() if n not in REPRESENTATIVES])
+def test_every_other_builtin_observer_ranks_its_own_family_first(name):
+    """The built-ins not above (their other families' trials are mostly those of a sibling observer on
+    the same model and parameters, designed once per process)."""
+    _ranks_own_family_first(name)
+
+
+@pytest.mark.slow       # 20 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
+def test_switched_pi_bank_angle_explains_the_other_families_with_what_it_measured():
+    """The roll model: the L-infinity UIO and the algebraic UIO apply structurally (and would rank above
+    by their guarantee), but their trial designs fail, with the reason measured."""
+    a = analysis.analyze("switched_pi_bank_angle")
+    entries = {app.family: (app, trial) for app, trial in a.ranking.entries}
+    assert entries["linf_uio"][0].applies and entries["linf_uio"][1].status == "failed"
+    assert "UILoopError" in entries["linf_uio"][1].reason and "time_constant" in entries["linf_uio"][1].reason
+    assert entries["algebraic_uio"][1].status == "failed"
+    assert a.ranking.position("switched_pi") == 0
+
+
+# ---- the three refusals of issue 28, end to end ----------------------------------------------------------
+
+def _copy(case: str, tmp_path: Path) -> Path:
+    shutil.copytree(MODELS / case, tmp_path / case)
+    return tmp_path / case
+
+
+def _design_fails_with_the_analysis_on_top(obs: Path, capsys) -> tuple:
+    assert cli.main(["design", str(obs)]) == 2
+    out = capsys.readouterr()
+    err = out.err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in out.err, out.err
+    assert out.out.startswith(f"uiogen design {obs.stem} failed; uiogen analyze {obs}:"), out.out[:300]
+    return out.out, err[0]
+
+
+@pytest.mark.slow       # 4 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
+def test_ts_model_with_the_speed_only_names_the_steering_angle_and_the_sensor(tmp_path, capsys):
+    """rank(C D) = 1 != rank(D) = 2: the report names delta (it reaches v_x only in its second derivative),
+    the states it drives and the sensors that restore the rank; measuring the first one, design passes."""
+    case = _copy("ts_speed_only", tmp_path)
+    report, error = _design_fails_with_the_analysis_on_top(case / "observer.toml", capsys)
+    assert "rank(CD) = 1 != rank(D) = 2" in error
+    assert "delta reaches y_v_x only in derivative 2" in report
+    assert re.search(r"fix: measure (r|v_y) or measure (r|v_y)", report), report
+    assert "delta cannot: drop it or treat it as known" in report
+    a = analysis.analyze(str(case / "observer.toml"), design=False)
+    state = a.structure.candidates["matching"][0]["sensor"]
+    assert state in ("r", "v_y")
+    _follow(case, "car.py", 'outputs=(("v_x", v_x),)', f'outputs=(("v_x", v_x), ("{state}", {state}))')
+    b, _ = pipeline.solve(observers.get(str(case / "observer.toml")))
+    assert b.recheck["worst_min_eig"] > 0 and b.decrease["contraction_per_step"] < 1
+
+
+@pytest.mark.slow       # 11 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
+def test_linf_model_without_the_accelerometer_names_the_force_and_its_equation(tmp_path, capsys):
+    """Only r measured: F reaches it in r'' and the UI filter loop does not certify at T_f = 5 ms (the
+    design's suggestion is a 20 times slower filter). The report names F, its relative degree 2 and the
+    equation it enters (dv_y/dt, what an accelerometer measures); with a_y = (F_yf + F_yr + F)/M
+    measured, the same file designs and certifies at T_f = 5 ms."""
+    case = _copy("lateral_no_ay", tmp_path)
+    report, error = _design_fails_with_the_analysis_on_top(case / "observer.toml", capsys)
+    assert error.startswith("uiogen: error: UILoopError:")
+    assert "F reaches y_r only in derivative 2" in report
+    assert "F enters dv_y/dt = " in report and "+ F)/M" in report
+    assert "Theorem 1 attenuates it (gamma) without seeing its effect directly" in report
+    _follow(case, "lateral.py", 'outputs=(("r", r),)', 'outputs=(("r", r), ("a_y", (F_yf + F_yr + F) / M))')
+    b, _ = pipeline.solve(observers.get(str(case / "observer.toml")))
+    assert b.data.Tf == 0.005 and b.discrete_certificate.ui_loop.contraction < 1
+
+
+def test_algebraic_model_without_differentiators_lists_every_one_in_one_run(tmp_path, capsys):
+    """The design names one missing differentiator per run; the analysis on top names all of them (y_x1
+    up to order 2, its relative degree; rho up to order 1, its derivative in A - Q M), and the settings
+    it proposes make the design pass."""
+    case = _copy("algebraic_no_differentiators", tmp_path)
+    report, error = _design_fails_with_the_analysis_on_top(case / "observer.toml", capsys)
+    assert "[design.differentiators.y_x1] is missing" in error
+    assert "differentiators: y_x1 order 2, rho order 1" in report
+    app = next(app for app in ranking.assess(*_subject_and_structure(case / "observer.toml"))
+               if app.family == "algebraic_uio")
+    diffs = app.observer["design"]["differentiators"]
+    assert {k: v["order"] for k, v in diffs.items()} == {"y_x1": 2, "rho": 1}
+    text = (case / "observer.toml").read_text() + "".join(
+        f"\n[design.differentiators.{k}]\norder = {v['order']}\nlipschitz = {v['lipschitz']!r}\n" for k, v in diffs.items())
+    (case / "observer.toml").write_text(text)
+    b, _ = pipeline.solve(observers.get(str(case / "observer.toml")))
+    assert b.recheck["worst_min_eig"] > 0
+
+
+def test_the_analysis_measures_the_settings_it_completes(tmp_path):
+    """With trial designs, the file's own design fails for the missing differentiators; the analysis
+    completes the file with its proposal, designs it (certified) and ranks the family by that."""
+    a = analysis.analyze(str(MODELS / "algebraic_no_differentiators" / "observer.toml"))
+    done = a.ranking.completed
+    assert done is not None and set(done["added"]) == {"design.differentiators"}
+    assert done["file_trial"].status == "failed" and "y_x1] is missing" in done["file_trial"].reason
+    assert done["trial"].status == "certified" and a.ranking.entries[0][0].family == "algebraic_uio"
+    assert "the fix, measured: the observer file's settings completed with design.differentiators" in a.text()
+
+
+def _follow(case: Path, model: str, old: str, new: str) -> None:
+    """Apply a fix to the model: a new file beside it (a model module is imported once per process and
+    path), and the observer file pointed at it."""
+    text = (case / model).read_text()
+    assert old in text
+    (case / f"fixed_{model}").write_text(text.replace(old, new))
+    obs = case / "observer.toml"
+    obs.write_text(obs.read_text().replace(f'model = "{model}"', f'model = "fixed_{model}"'))
+
+
+def _subject_and_structure(path):
+    s = subject.load(str(path))
+    return s, structure.analyze(s)
+
+
+# ---- the command line ---------------------------------------------------------------------------------------
+
+def test_analyze_json_names_the_facts_and_the_ranking(capsys):
+    assert cli.main(["analyze", "algebraic_uio_example2", "--json", "--no-design"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    facts = {f["key"]: f for f in data["structure"]["facts"]}
+    assert facts["matching"]["holds"] is False and facts["relative_degree"]["basis"] == "exact"
+    assert data["structure"]["hosmd_orders"] == {"y_x1": 2}
+    assert data["ranking"]["best"] == "algebraic_uio" and data["ranking"]["order"][0] == "algebraic_uio"
+    assert all(f["trial"]["status"] == "not tried" for f in data["ranking"]["families"])
+
+
+def test_analyze_a_model_file_without_parameters_is_one_line(capsys):
+    assert cli.main(["analyze", str(MODELS / "lateral_no_ay" / "lateral.py")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--parameters" in err[0] and err[0].startswith("uiogen: error: ConfigurationError")
+
+
+@pytest.mark.slow       # 11 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
+def test_new_from_model_writes_the_best_family_and_it_designs(tmp_path, capsys):
+    """uiogen new --from-model: the observer file of the best-ranked family (here the algebraic UIO: the
+    lateral force is decoupled through r'', with its differentiators), commented, designs as written;
+    a built-in's name or an existing file is refused."""
+    case = _copy("lateral_no_ay", tmp_path)
+    assert cli.main(["new", str(tmp_path / "proj"), "--from-model", str(case / "lateral.py"),
+                     "--parameters", str(case / "car.toml")]) == 0
+    written = sorted((tmp_path / "proj").glob("*.toml"))
+    assert [p.name for p in written] == ["lateral_no_ay_algebraic_uio.toml"]
+    text = written[0].read_text()
+    assert 'model = "../lateral_no_ay/lateral.py"' in text
+    assert "[design.differentiators.y_r]" in text and "PLACEHOLDER" in text
+    capsys.readouterr()
+    assert cli.main(["design", str(written[0])]) == 0
+    assert cli.main(["new", str(tmp_path / "proj"), "--from-model", str(case / "lateral.py"),
+                     "--parameters", str(case / "car.toml")]) == 2
+    assert "would overwrite" in capsys.readouterr().err
+    assert cli.main(["new", str(tmp_path / "p2"), "--from-model", str(case / "lateral.py"), "--parameters",
+                     str(case / "car.toml"), "--name", "ts_fuzzy_uio"]) == 2
+    assert "is a built-in observer" in capsys.readouterr().err
+    assert cli.main(["new", str(tmp_path / "p3")]) == 2

@@ -1,0 +1,128 @@
+"""The runtime apart from the toolchain: python_bindings loads and steps a compiled observer with
+numpy and the extension only; the extension carries its names, units, sample time and design
+hash; a stale extension is refused; recording is an explicit wrapper."""
+import hashlib
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from codegen import errors
+from codegen.emit.header import signals as header_signals
+from codegen.extension.build import generated_names
+from python_bindings import Recorder, StaleExtensionError, UnknownObserverError, load
+from python_bindings.workspace import Workspace
+
+pytestmark = pytest.mark.slow          # the compiled extensions
+
+ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
+NAME = "lpv_linf_driver_torque"
+TOOLCHAIN = ("codegen", "sympy", "casadi", "clarabel", "scipy", "jinja2")
+NAMES = generated_names()
+
+
+def _probe(body: str, cwd: Path) -> list:
+    """Run ``body`` in a fresh interpreter; the toolchain packages it imported."""
+    code = (f"import sys\n{body}\n"
+            f"print('imported:' + ','.join(m for m in {TOOLCHAIN!r} if m in sys.modules))")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    return [m for m in proc.stdout.strip().splitlines()[-1].removeprefix("imported:").split(",") if m]
+
+
+STEP = ("import numpy as np\nfrom python_bindings import load\nobs = load({arg!r})\n"
+        "status = obs.step(obs.initial_state(), np.full(obs.n_input, 0.1), np.empty(obs.n_output))\n"
+        "assert obs.step is obs.module.step and status in (0, 1), status\n")
+
+
+def test_load_and_step_import_nothing_of_the_toolchain(tmp_path):
+    assert _probe(STEP.format(arg=NAME), tmp_path) == []
+    # the probe can fail: importing the toolchain shows
+    assert _probe("import codegen.cli", tmp_path) == list(TOOLCHAIN)
+
+
+@pytest.fixture
+def project(tmp_path):
+    """A project folder holding a copy of the built-in observer's generated C, lock and
+    extension, and its observer file."""
+    checkout = Workspace.locate(NAME)[0]
+    ws = Workspace.of(tmp_path)
+    shutil.copytree(checkout.observer_dir(NAME), ws.observer_dir(NAME))
+    ws.extensions.mkdir(parents=True)
+    shutil.copy(checkout.extension(NAME), ws.extension(NAME))
+    shutil.copy(ROOT / "model_defs" / "observers" / f"{NAME}.toml", tmp_path / f"{NAME}.toml")
+    return ws
+
+
+def test_an_observer_file_loads_by_its_folder_and_stem_without_the_toolchain(project):
+    path = project.root / f"{NAME}.toml"
+    assert _probe(STEP.format(arg=str(path)), project.root) == []
+    obs = load(path)
+    assert obs.path == project.extension(NAME) and obs.name == NAME
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_the_extension_carries_the_names_units_sample_time_and_hash_of_its_c_and_lock(name):
+    obs = load(name)
+    ws = Workspace.locate(name)[0]
+    art = json.loads(ws.design_lock(name).read_text())
+    sig = art["signals"]
+    assert obs.state_names == tuple(sig["state"]) and obs.input_names == tuple(sig["input"])
+    assert obs.output_names == tuple(sig.get("output", sig["state"]))
+    assert obs.sample_time == art["config"]["sample_time"]
+    assert obs.design_sha256 == hashlib.sha256(ws.design_lock(name).read_bytes()).hexdigest()
+    header = header_signals((ws.observer_dir(name) / f"{name}.h").read_text(), name)
+    for part, units in (("state", obs.state_units), ("input", obs.input_units), ("output", obs.output_units)):
+        assert units == tuple(f[2] for f in header[part])
+    assert (obs.n_state, obs.n_input, obs.n_output) == (len(obs.state_names), len(obs.input_names),
+                                                        len(obs.output_names))
+
+
+def test_units_are_those_the_family_documents(built):
+    """Independent of the header: the build's own signal docs."""
+    from codegen.emit.header import unit_of
+    b = built(NAME)
+    state, inputs, outputs = b.signal_docs()
+    obs = load(NAME)
+    assert obs.input_units == tuple(unit_of(s["doc"]) for s in inputs) == ("N m", "rad/s", "rad", "rad/s", "m/s")
+    assert obs.output_units == tuple(unit_of(s["doc"]) for s in outputs)
+
+
+def test_a_stale_extension_is_refused_with_the_command_to_run(project):
+    lock = project.design_lock(NAME)
+    load(NAME, project=project.root)                       # the copy is current
+    data = json.loads(lock.read_text())
+    data["design_note"] = "changed after the build"
+    lock.write_text(json.dumps(data))
+    with pytest.raises(StaleExtensionError, match=re.escape(f"run `uiogen build {NAME} --project {project.root}`")):
+        load(NAME, project=project.root)
+    with pytest.raises(errors.UiogenError):               # the toolchain's base class catches it
+        load(project.root / f"{NAME}.toml")
+
+
+def test_a_missing_extension_or_lock_names_the_command(project):
+    project.extension(NAME).unlink()
+    with pytest.raises(UnknownObserverError, match=r"not compiled .* run `uiogen build .*lpv_linf_driver_torque.toml`"):
+        load(project.root / f"{NAME}.toml")
+    shutil.rmtree(project.observer_dir(NAME))
+    with pytest.raises(UnknownObserverError, match=r"not been generated .* run `uiogen generate "):
+        load(project.root / f"{NAME}.toml")
+
+
+def test_the_recorder_records_what_it_runs_and_changes_nothing():
+    obs = load(NAME)
+    rng = np.random.default_rng(0)
+    inputs = np.column_stack([rng.standard_normal((50, 4)) * 0.01, np.full(50, 20.0)])
+    rec = Recorder(obs)
+    out, status, final = rec.run(inputs)
+    ref = obs.run(inputs)
+    assert np.array_equal(out, ref[0]) and np.array_equal(status, ref[1]) and np.array_equal(final, ref[2])
+    state, row_out = obs.initial_state(), np.empty(obs.n_output)
+    rec.step(state, inputs[0], row_out)
+    assert len(rec.calls) == 2 and np.array_equal(rec.calls[0][0], inputs) and rec.calls[1][1] is None
+    assert np.array_equal(rec.calls[1][0], inputs[0]) and rec.input_names == obs.input_names

@@ -1,0 +1,94 @@
+"""The uiogen command line: JSON outputs for scripts and typed errors with exit code 2."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
+
+
+def uiogen(*args):
+    return subprocess.run([sys.executable, "-m", "codegen.cli", *args], capture_output=True, text=True, cwd=ROOT)
+
+
+def test_list_json():
+    proc = uiogen("list", "--json")
+    assert proc.returncode == 0
+    assert "lpv_linf_driver_torque" in [r["name"] for r in json.loads(proc.stdout)]
+
+
+@pytest.mark.slow       # 15 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
+def test_design_json_and_artifact(tmp_path):
+    out = tmp_path / "design.json"
+    proc = uiogen("design", "lpv_linf_driver_torque", "--json", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(proc.stdout)
+    for key in ("gamma", "gamma_quadratic", "solve_time_s", "vertices", "worst_min_eig",
+                "discrete_contraction_per_step", "discrete_spectral_radius_max"):
+        assert key in s
+    art = json.loads(out.read_text())
+    assert {"P1", "P2", "X", "L1", "L2", "gamma", "polytope", "certificate"} <= set(art)
+    # our own artifact passes the external checker, with its own gamma
+    proc = uiogen("check-gains", "lpv_linf_driver_torque", "--gains", str(out), "--json")
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads(proc.stdout)
+    assert res["cases"]["exact"]["gamma"] <= art["gamma"] * (1 + 1e-6)
+
+
+@pytest.mark.slow       # 4 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
+def test_check_gains_published(published):
+    proc = uiogen("check-gains", "lpv_linf_driver_torque", "--gains",
+                  str(ROOT.parent / "shared" / "reference" / "seed000_published_design.json"))
+    assert proc.returncode == 0 and "PASS" in proc.stdout and "0.00951" in proc.stdout
+
+
+@pytest.mark.slow       # 6 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
+def test_errors_are_typed(tmp_path):
+    proc = uiogen("design", "no_such_observer")
+    assert proc.returncode == 2 and "UnknownObserverError" in proc.stderr
+    bad = tmp_path / "g.json"
+    bad.write_text(json.dumps({"P1": [[1]]}))
+    proc = uiogen("check-gains", "lpv_linf_driver_torque", "--gains", str(bad))
+    assert proc.returncode == 2 and "lack" in proc.stderr
+
+
+@pytest.mark.slow       # 10 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
+def test_sweep_json_and_mistakes():
+    proc = uiogen("sweep", "switched_pi_bank_angle", "--set", "design.pole_radius=[29, 100]",
+                  "--set", "design.decay_rate=[0]", "--show", "gamma,max_pole_modulus", "--json")
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads(proc.stdout)
+    assert [p["outcome"] for p in res["points"]] == ["InfeasibleLMIError", "certified"]
+    assert res["points"][1]["gamma"] < 0.013 and res["show"] == ["gamma", "max_pole_modulus"]
+    proc = uiogen("sweep", "switched_pi_bank_angle", "--set", "design.pole_radus=[50]")
+    assert proc.returncode == 2 and "pole_radus" in proc.stderr and "did you mean 'pole_radius'" in proc.stderr
+    assert "Traceback" not in proc.stderr and proc.stdout == ""
+    proc = uiogen("sweep", "switched_pi_bank_angle", "--set", "design.pole_radius=[50,")
+    assert proc.returncode == 2 and "not a TOML value" in proc.stderr and "Traceback" not in proc.stderr
+
+
+@pytest.mark.slow          # a float32 build
+def test_build_float32_accepted_and_refused():
+    """`uiogen build --float32`: an observer whose certified contraction bounds the float
+    rounding within every output's tolerance is built (exit 0, its library on disk, the figures
+    per signal printed); one whose margin does not is refused with exit 2 and a one-line typed
+    error, the reason (signal, bound, tolerance, margin, the setting that would fix it) above it."""
+    ok = uiogen("build", "--float32", "lpv_linf_driver_torque")
+    assert ok.returncode == 0, ok.stderr
+    assert "lpv_linf_driver_torque: float32 accepted" in ok.stdout
+    assert "T_d            bound" in ok.stdout and "N m" in ok.stdout
+    from codegen.project import observer_file
+    lib = (observer_file.get("lpv_linf_driver_torque").workspace.float32 / "lpv_linf_driver_torque"
+           / "liblpv_linf_driver_torque_f32.so")
+    assert lib.exists() and f"built {lib}" in ok.stdout
+    bad = uiogen("build", "--float32", "stanford_sideslip_nonlinear_tyre")
+    assert bad.returncode == 2
+    assert "Traceback" not in bad.stderr
+    lines = bad.stderr.strip().splitlines()
+    assert lines == ["uiogen: error: CertificateError: float32 build refused for stanford_sideslip_nonlinear_tyre "
+                     "(the reasons and figures above)"]
+    assert "stanford_sideslip_nonlinear_tyre: float32 REFUSED: v_y on stanford log: bound" in bad.stdout
+    assert "margin 1 - c = " in bad.stdout and "sliding_fraction" in bad.stdout
+    assert "outside the certified set (SCHEDULING_CLAMPED)" in bad.stdout

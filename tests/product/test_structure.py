@@ -1,0 +1,167 @@
+"""The code's structure, read from the code: no import cycles, the family boundary, derived hashes.
+
+* Import cycles: every ``import`` statement of the project's modules (also inside functions),
+  resolved to the module it loads, as a graph; no strongly connected component may have more
+  than one module, and no two of the top-level packages may import each other.
+* The family boundary: outside ``codegen/families/`` no code names a family (string literals
+  equal to a registered family's name), so the toolchain can only reach a family through the
+  registry.
+* The generation hash covers the sources: derived from the imports, it lists every module the
+  family's pipeline imports.
+"""
+import ast
+from pathlib import Path
+
+import pytest
+
+from codegen.design import lock as design_lock, sources
+from codegen import families
+from codegen.project import observer_file as observers
+
+ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
+PACKAGES = ("codegen", "model_defs", "python_bindings")
+
+
+def _modules() -> dict:
+    out = {}
+    for pkg in PACKAGES:
+        for p in (ROOT / pkg).rglob("*.py"):
+            parts = list(p.relative_to(ROOT).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join(parts)] = p
+    return out
+
+
+def _graph() -> dict:
+    mods = _modules()
+
+    def resolve(name):
+        while name and name not in mods:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    edges = {m: set() for m in mods}
+    for m, p in mods.items():
+        pkg = m.split(".") if p.name == "__init__.py" else m.split(".")[:-1]
+        for node in ast.walk(ast.parse(p.read_text())):
+            targets = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = pkg[:len(pkg) - node.level + 1] if node.level else []
+                mod = ".".join(base + ([node.module] if node.module else []))
+                targets = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in mods else mod for a in node.names]
+            for t in targets:
+                r = resolve(t) if t.split(".")[0] in PACKAGES else None
+                if r and r != m:
+                    edges[m].add(r)
+    return edges
+
+
+def _cycles(edges: dict) -> list:
+    """Strongly connected components with more than one node (Tarjan, iterative)."""
+    index, low, on, stack, out, counter = {}, {}, set(), [], [], [0]
+    for root in edges:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(edges[root])))]
+        index[root] = low[root] = counter[0]
+        counter[0] += 1
+        stack.append(root)
+        on.add(root)
+        while work:
+            v, it = work[-1]
+            nxt = next(it, None)
+            if nxt is not None:
+                if nxt not in index:
+                    index[nxt] = low[nxt] = counter[0]
+                    counter[0] += 1
+                    stack.append(nxt)
+                    on.add(nxt)
+                    work.append((nxt, iter(sorted(edges[nxt]))))
+                elif nxt in on:
+                    low[v] = min(low[v], index[nxt])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    w = stack.pop()
+                    on.discard(w)
+                    comp.append(w)
+                    if w == v:
+                        break
+                if len(comp) > 1:
+                    out.append(sorted(comp))
+    return out
+
+
+def test_the_cycle_finder_finds_a_cycle():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_import_cycle_between_modules():
+    assert _cycles(_graph()) == []
+
+
+def test_no_import_cycle_between_packages():
+    edges = _graph()
+    pkg_edges = {(m.split(".")[0], t.split(".")[0]) for m, ts in edges.items() for t in ts}
+    pairs = sorted((a, b) for a, b in pkg_edges if a != b and (b, a) in pkg_edges)
+    assert not pairs, f"top-level packages import each other: {pairs}"
+
+
+def test_no_family_name_outside_the_families_folder():
+    names = set(families.names())
+    hits = []
+    for p in (ROOT / "codegen").rglob("*.py"):
+        if "families" in p.relative_to(ROOT / "codegen").parts:
+            continue
+        for node in ast.walk(ast.parse(p.read_text())):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in names:
+                hits.append(f"{p.relative_to(ROOT)}:{node.lineno}: {node.value!r}")
+    assert not hits, "family names outside codegen/families/ (ask the registry instead):\n" + "\n".join(hits)
+
+
+@pytest.mark.parametrize("NAME", ["lpv_linf_driver_torque", "ts_fuzzy_uio", "switched_pi_bank_angle",
+                                  "algebraic_uio_example2", "interconnected_uio"])
+def test_design_hash_covers_every_module_the_pipeline_imports(NAME):
+    config = observers.get(NAME)
+    covered = set(design_lock.design_sources(config))
+    package = ROOT / "codegen" / "families" / config.family
+    for f in ("__init__.py", "build.py", "design.py"):
+        assert package / f in covered, f
+    assert ROOT / "codegen" / "design" / "lmi.py" in covered and config.model_path in covered
+    # validation code is not a design input: editing a plot does not re-solve a design
+    assert package / "validation.py" not in covered
+
+
+
+@pytest.mark.parametrize("NAME", ["lpv_linf_driver_torque", "interconnected_uio"])
+def test_the_c_hash_covers_the_design_the_emitters_and_the_templates(NAME, monkeypatch):
+    # the files emission_inputs really hashes (read off sources.digest as it is called)
+    from codegen.emit import generate as emit
+    from codegen.emit.toolchain import TEMPLATES
+    config = observers.get(NAME)
+    lock = design_lock.path(config).read_text()
+    hashed, real_digest = [], sources.digest
+
+    def spy(files, extra=None):
+        hashed.append(([Path(f) for f in files], dict(extra or {})))
+        return real_digest(files, extra)
+    monkeypatch.setattr(sources, "digest", spy)
+    emit.emission_inputs(config, lock)
+    (files, extra), = [h for h in hashed if "lock" in h[1]]
+    design = set(design_lock.design_sources(config))
+    assert design <= set(files)                                   # a change that re-solves also regenerates
+    emitter = ROOT / "codegen" / "emit" / "generate.py"
+    assert emitter in files and emitter not in design             # emission code: new C, not a new design
+    assert set(TEMPLATES.glob("observer.*.j2")) <= set(files)
+    assert {"casadi", "jinja2"} <= set(extra) and extra["lock"] != ""
+    monkeypatch.undo()
+    # and the hash moves with the lock's text
+    assert emit.emission_inputs(config, lock) != emit.emission_inputs(config, lock + " ")

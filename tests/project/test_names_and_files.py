@@ -1,0 +1,238 @@
+"""Names, files and arrays that were tracebacks, silent losses or undefined behaviour (issue 25,
+probe 6), each a typed error or a refusal now:
+
+* an observer name that is not a C identifier (``my obs``, ``1abc``, a C keyword) or longer than 64
+  characters: refused before any design (was a CasADi traceback after the whole LMI solve, or at
+  ``load``);
+* a model file that calls ``sys.exit(0)``: a ModelDefinitionError (``design`` exited 0 having done
+  nothing);
+* a full or read-only output folder: an OutputError naming the path, no ``*.tmp`` or partial file
+  left (was an OSError traceback and a partial file);
+* generated folders with the user's umask (were 0700, ``tempfile.mkdtemp``'s mode);
+* ``run`` with complex or string arrays: refused (the complex part was dropped, strings parsed);
+* a step or run whose output buffer overlaps its input buffer: refused (ts_fuzzy_uio gave
+  results off by 1e295); a state that a run() of another thread is using: refused.
+"""
+import os
+import resource
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from codegen.errors import ConfigurationError, SampleError
+from codegen.project import observer_file as observers
+from python_bindings import load
+
+ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
+OBSERVER_FILE = (ROOT / "model_defs" / "observers" / "algebraic_uio_example1.toml").read_text()
+DESIGNED = "ts_fuzzy_uio"          # designs in seconds; its lock (10.5 kB) does not fit 8 kB
+
+
+def _cli(*args, cwd=ROOT, preexec=None, timeout=600) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "codegen.cli", *args], capture_output=True, text=True, cwd=cwd,
+                          preexec_fn=preexec, timeout=timeout)
+
+
+def _one_line(proc) -> str:
+    assert proc.returncode == 2, (proc.stdout[-500:], proc.stderr[-2000:])
+    err = proc.stderr.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    return err
+
+
+# --- observer names ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name, why", [("my obs", "is not a C identifier"), ("1abc", "is not a C identifier"),
+                                       ("my-obs", "is not a C identifier"), ("double", "is a C keyword"),
+                                       ("a" * 65, "has 65 characters"), ("a" * 200, "has 200 characters")])
+def test_an_observer_name_that_is_not_a_c_identifier_is_refused_before_any_design(tmp_path, name, why):
+    path = tmp_path / f"{name}.toml"
+    path.write_text(OBSERVER_FILE)
+    with pytest.raises(ConfigurationError, match=why) as e:
+        observers.get(str(path))
+    assert "rename the file" in str(e.value) and "64 characters" in str(e.value)
+    err = _one_line(_cli("design", str(path)))
+    assert why in err and "ConfigurationError" in err
+
+
+def test_names_up_to_the_limit_are_accepted(tmp_path):
+    for name in ("a" * 64, "_x1", "obs_2"):
+        path = tmp_path / f"{name}.toml"
+        path.write_text(OBSERVER_FILE)
+        assert observers.get(str(path)).name == name
+
+
+def test_uiogen_new_refuses_a_bad_name_and_writes_nothing(tmp_path):
+    err = _one_line(_cli("new", str(tmp_path / "p"), "--family", "linf_uio", "--name", "my obs"))
+    assert "an observer name is a C identifier" in err and not (tmp_path / "p").exists()
+
+
+# --- a model file that exits ----------------------------------------------------------------------
+
+@pytest.mark.parametrize("code", ["0", "3", "None"])
+def test_a_model_file_calling_sys_exit_is_an_error(tmp_path, code):
+    (tmp_path / "exits.py").write_text(f"import sys\nsys.exit({code})\n")
+    (tmp_path / "params.toml").write_text("[parameters]\n")
+    (tmp_path / "obs.toml").write_text('family = "linf_uio"\nmodel = "exits.py"\nparameters = "params.toml"\n'
+                                       'sample_time = 0.01\npolytope = "sector"\n')
+    err = _one_line(_cli("design", str(tmp_path / "obs.toml")))
+    assert f"called sys.exit({code})" in err and "ModelDefinitionError" in err
+
+
+# --- output folders ----------------------------------------------------------------------------------
+
+def _file_size_limit(limit: int):
+    def apply():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))     # writes beyond: EFBIG (SIGXFSZ ignored)
+    return apply
+
+
+def _leftovers(folder: Path) -> list:
+    return sorted(p.name for p in folder.rglob("*") if ".tmp" in p.name or ".new-" in p.name or ".old-" in p.name)
+
+
+def _mounted(tmp_path, options: str) -> Path:
+    """A tmpfs mounted with ``options`` (root only: skip otherwise)."""
+    folder = tmp_path / options.replace(",", "_").replace("=", "")
+    folder.mkdir()
+    if os.geteuid() != 0:
+        pytest.skip("a small or read-only file system needs root (mount)")
+    proc = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(folder)], capture_output=True)
+    if proc.returncode != 0:
+        pytest.skip(f"no tmpfs mount here: {proc.stderr.decode().strip()}")
+    return folder
+
+
+@pytest.fixture
+def mounts(tmp_path):
+    made = []
+
+    def mount(options):
+        made.append(_mounted(tmp_path, options))
+        return made[-1]
+    yield mount
+    for folder in made:
+        subprocess.run(["umount", str(folder)], capture_output=True)
+
+
+def _generate_error(proc, folder: Path) -> None:
+    """generate goes on with the other observers: the failure on stdout, one line at the end."""
+    assert "GenerationError" in _one_line(proc) and "(OutputError)" in proc.stderr
+    assert f"FAILED: OutputError: cannot write {folder}" in proc.stdout, proc.stdout
+
+
+def test_a_file_size_limit_is_an_output_error_and_leaves_nothing(tmp_path):
+    """RLIMIT_FSIZE: any user can make a write fail (EFBIG) as a full disk does."""
+    lock = tmp_path / "lock" / "d.json"
+    err = _one_line(_cli("design", DESIGNED, "--out", str(lock), preexec=_file_size_limit(2000)))
+    assert f"OutputError: cannot write {lock}" in err and "EFBIG" in err, err
+    assert _leftovers(lock.parent) == [] and not lock.exists()
+
+
+@pytest.mark.slow       # 5 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
+def test_a_full_output_folder_is_an_output_error_and_leaves_nothing(mounts):
+    full = mounts("size=8k")
+    err = _one_line(_cli("design", DESIGNED, "--out", str(full / "d.json")))
+    assert "OutputError" in err and "No space left on device (ENOSPC)" in err, err
+    proc = _cli("generate", DESIGNED, "--out", str(full), "--force")
+    _generate_error(proc, full)
+    assert _leftovers(full) == [] and not (full / DESIGNED).exists() and not (full / "d.json").exists()
+
+
+@pytest.mark.slow       # 7 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
+def test_a_read_only_output_folder_is_an_output_error(mounts):
+    ro = mounts("ro,size=16k")
+    err = _one_line(_cli("design", DESIGNED, "--out", str(ro / "d.json")))
+    assert "OutputError" in err and "Read-only file system (EROFS)" in err, err
+    _generate_error(_cli("generate", DESIGNED, "--out", str(ro), "--force"), ro)
+    err = _one_line(_cli("validate", "stanford_sideslip", "--data", "stanford", "--plot", str(ro / "p.png")))
+    assert f"OutputError: cannot write {ro / 'p.png'}" in err, err
+
+
+@pytest.mark.parametrize("mask", [0o022, 0o027])
+def test_generated_folders_follow_the_umask(tmp_path, mask):
+    out = tmp_path / "out"
+    proc = _cli("generate", DESIGNED, "--out", str(out), "--force", preexec=lambda: os.umask(mask))
+    assert proc.returncode == 0, proc.stderr
+    folder = out / DESIGNED
+    assert folder.stat().st_mode & 0o777 == 0o777 & ~mask                      # was 0700
+    assert (folder / f"{DESIGNED}.c").stat().st_mode & 0o777 == 0o666 & ~mask
+
+
+# --- arrays the compiled step is given --------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def ts():
+    return load("ts_fuzzy_uio")
+
+
+@pytest.mark.parametrize("bad", ["complex", "string", "bool", "object"])
+def test_run_refuses_arrays_that_are_not_real_numbers(ts, bad):
+    rows = np.tile([20.0, 0.01], (10, 1))
+    arr = {"complex": rows + 1e-3j, "string": rows.astype(str), "bool": rows > 1,
+           "object": rows.astype(object)}[bad]
+    with pytest.raises(SampleError, match="must be real numbers"):
+        ts.run(arr)
+    with pytest.raises(SampleError, match="state must be real numbers"):
+        ts.run(rows, state=np.zeros(ts.n_state, dtype=complex))
+    out, status, _ = ts.run(rows.astype(np.float32))                # real dtypes are converted
+    assert np.isfinite(out).all()
+
+
+def test_an_output_overlapping_the_inputs_is_refused(ts):
+    buf = np.zeros(ts.n_input + ts.n_output)
+    buf[:ts.n_input] = [20.0, 0.01]
+    inputs, out = buf[:ts.n_input], buf[1:1 + ts.n_output]          # out starts inside the inputs
+    state = ts.initial_state()
+    with pytest.raises(ValueError, match="inputs and out overlap in memory"):
+        ts.step(state, inputs, out)
+    big = np.zeros(ts.n_state + ts.n_input)
+    with pytest.raises(ValueError, match="state and inputs overlap"):
+        ts.step(big[:ts.n_state], big[ts.n_state - 1:ts.n_state - 1 + ts.n_input], np.empty(ts.n_output))
+    n = 50
+    block = np.zeros(n * (ts.n_input + ts.n_output))
+    rows, outs = block[:n * ts.n_input].reshape(n, ts.n_input), block[n:n + n * ts.n_output].reshape(n, ts.n_output)
+    with pytest.raises(ValueError, match="inputs and outputs overlap"):
+        ts.module.run(ts.initial_state(), rows, outs, np.empty(n, np.int32), n)
+    good = np.empty(ts.n_output)                                     # separate arrays still work
+    ts.step(state, buf[:ts.n_input].copy(), good)
+    assert np.isfinite(good).all()
+
+
+def test_one_state_in_two_threads_is_refused_and_separate_states_run_together(ts):
+    n = 1_000_000
+    rows = np.tile([20.0, 0.01], (n, 1))
+    shared = ts.initial_state()
+    outcomes, busy = {}, threading.Event()
+
+    def long_run():
+        busy.set()
+        outcomes["first"] = ts.module.run(shared, rows, np.empty((n, ts.n_output)), np.empty(n, np.int32), n)
+
+    first = threading.Thread(target=long_run)
+    first.start()
+    busy.wait()
+    refused = 0
+    while first.is_alive():
+        try:
+            ts.module.run(shared, rows[:10], np.empty((10, ts.n_output)), np.empty(10, np.int32), 10)
+        except RuntimeError as exc:
+            assert "state is in use" in str(exc)
+            refused += 1
+    first.join()
+    assert refused > 0, "the second thread never met the first one's run"
+    # separate states: two threads at once give what one thread gives
+    ref, _, _ = ts.run(rows[:200_000])
+    results = [None, None]
+
+    def own(k):
+        results[k] = ts.run(rows[:200_000])[0]
+
+    threads = [threading.Thread(target=own, args=(k,)) for k in range(2)]
+    [t.start() for t in threads]
+    [t.join() for t in threads]
+    assert all(np.array_equal(r, ref) for r in results)
