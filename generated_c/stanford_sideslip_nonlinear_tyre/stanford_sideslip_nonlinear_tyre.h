@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of stanford_sideslip_nonlinear_tyre_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define STANFORD_SIDESLIP_NONLINEAR_TYRE_DESIGN_HASH "d5ae56502088cc8975343e4e150d06726075db5e4dd0391c1d440fddfccf2c56"
+#define STANFORD_SIDESLIP_NONLINEAR_TYRE_DESIGN_HASH "a22be39d5edfa57474dae2c22782ac57ddc5e9b56e4f7286707398b3c98a9d7b"
 
 /* Status bits returned by stanford_sideslip_nonlinear_tyre_step; a sample's status is their OR (stanford_sideslip_nonlinear_tyre_status). */
 typedef enum {
