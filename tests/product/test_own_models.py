@@ -294,6 +294,13 @@ def test_a_sedan_with_its_own_tyre_law_in_the_nonlinear_tyre_family(tmp_path, ca
     text, result = _every_verb(path, capsys)
     assert "the tyre law of its AXLES per axle" in text and "Fiala" not in text   # not the built-in's law
     assert "decays at 1.9 1/s (the largest certifiable: 9.51 1/s)" in text       # the design's measured figures
+    assert "contracts by 0.990454 per step" in text
+    # check-gains of the committed lock states the lock's figures (it stated 0.992677 per step at 0.38 1/s:
+    # the family's given-gains form took decay_fraction of the committed rate again)
+    lock = tmp_path / "generated_c" / "own" / "own_design.json"
+    assert cli.main(["check-gains", str(path), "--gains", str(lock)]) == 0
+    out = capsys.readouterr().out
+    assert "contracts by 0.990454 per step" in out and "PASS" in out
     assert result["status_flags"] == 0
     v_y = result["observer"]["v_y"]
     assert v_y["unit"] == "m/s" and v_y["rms"] < 1e-3        # measured 6.55e-4 m/s of a 0.332 m/s RMS
