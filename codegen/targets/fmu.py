@@ -102,20 +102,17 @@ def _zip(out: Path, files: dict) -> None:
     outputs.write_atomic(out, buf.getvalue())
 
 
-def export_fmu(observer, out, log=print, fmi_version: str = "2.0") -> Path:
-    """Write the FMU of ``observer`` (a built-in name, an observer file or a config) to ``out``:
-    FMI 2.0 co-simulation, or FMI 3.0 with ``fmi_version="3.0"`` (:func:`export_fmu3`)."""
-    if fmi_version == "3.0":
-        return export_fmu3(observer, out, log)
-    if fmi_version != "2.0":
-        raise UnsupportedError(f"FMI version {fmi_version!r}: uiogen exports 2.0 and 3.0 co-simulation FMUs")
+def _current_sources(observer, out, fmt: str, binary: str) -> tuple:
+    """(config, build, name, C file names, {file: text}) of an observer whose generated C is current:
+    the checks both FMI versions make before anything is written (the .fmu suffix, the host the
+    binary is built for, the generated files, the committed design and the C's stamp)."""
     from ..extension.build import check_generated, generated_dir, require_current
     config = observer if isinstance(observer, observers.ObserverConfig) else observers.get(str(observer))
     out = Path(out)
     if out.suffix != ".fmu":
-        raise ConfigurationError(f"uiogen export --format fmu: --out must name a .fmu file, got {out}")
+        raise ConfigurationError(f"uiogen export --format {fmt}: --out must name a .fmu file, got {out}")
     if platform.system() != "Linux" or platform.machine() not in ("x86_64", "AMD64"):
-        raise UnsupportedError(f"the FMU carries a linux64 binary built by the host compiler; this host is "
+        raise UnsupportedError(f"the FMU carries {binary} built by the host compiler; this host is "
                                f"{platform.system()} {platform.machine()}")
     name = config.name
     src_dir = generated_dir(config)
@@ -126,8 +123,17 @@ def export_fmu(observer, out, log=print, fmi_version: str = "2.0") -> Path:
                                    f"run `uiogen generate {name if config.builtin else config.source}`")
     require_current(config)        # the committed design is the current one,
     check_generated(config)        # and the C is what generate wrote from it (its stamp), never as found
-    b = pipeline.build(config)
-    sources = {f: (src_dir / f).read_text() for f in c_files}
+    return config, pipeline.build(config), name, c_files, {f: (src_dir / f).read_text() for f in c_files}
+
+def export_fmu(observer, out, log=print, fmi_version: str = "2.0") -> Path:
+    """Write the FMU of ``observer`` (a built-in name, an observer file or a config) to ``out``:
+    FMI 2.0 co-simulation, or FMI 3.0 with ``fmi_version="3.0"`` (:func:`export_fmu3`)."""
+    if fmi_version == "3.0":
+        return export_fmu3(observer, out, log)
+    if fmi_version != "2.0":
+        raise UnsupportedError(f"FMI version {fmi_version!r}: uiogen exports 2.0 and 3.0 co-simulation FMUs")
+    config, b, name, c_files, sources = _current_sources(observer, out, "fmu", "a linux64 binary")
+    out = Path(out)
     digest = hashlib.sha256("".join(f + sources[f] for f in c_files).encode())
     guid = "{" + str(uuid.UUID(hex=digest.hexdigest()[:32])) + "}"
     sources[f"{name}_fmu.c"] = render_template("fmu.c.j2", name=name, NAME=name.upper(), ts=repr(config.sample_time),
@@ -276,25 +282,8 @@ def export_fmu3(observer, out, log=print) -> Path:
     fmu3``): ``modelDescription.xml``, ``sources/`` (the generated C, the wrapper rendered from
     ``fmu3.c.j2``, the FMI 3.0 headers and ``buildDescription.xml``) and
     ``binaries/x86_64-linux/NAME.so``, compiled with the strict flags like the FMI 2.0 FMU."""
-    from ..extension.build import check_generated, generated_dir, require_current
-    config = observer if isinstance(observer, observers.ObserverConfig) else observers.get(str(observer))
+    config, b, name, c_files, sources = _current_sources(observer, out, "fmu3", "an x86_64-linux binary")
     out = Path(out)
-    if out.suffix != ".fmu":
-        raise ConfigurationError(f"uiogen export --format fmu3: --out must name a .fmu file, got {out}")
-    if platform.system() != "Linux" or platform.machine() not in ("x86_64", "AMD64"):
-        raise UnsupportedError(f"the FMU carries an x86_64-linux binary built by the host compiler; this host is "
-                               f"{platform.system()} {platform.machine()}")
-    name = config.name
-    src_dir = generated_dir(config)
-    c_files = [f"{name}_kernel.c", f"{name}.c", f"{name}_kernel.h", f"{name}.h"]
-    missing = [f for f in c_files if not (src_dir / f).is_file()]
-    if missing:
-        raise UnknownObserverError(f"observer {name!r} has not been generated (no {src_dir / missing[0]}); "
-                                   f"run `uiogen generate {name if config.builtin else config.source}`")
-    require_current(config)        # the committed design is the current one,
-    check_generated(config)        # and the C is what generate wrote from it (its stamp), never as found
-    b = pipeline.build(config)
-    sources = {f: (src_dir / f).read_text() for f in c_files}
     digest = hashlib.sha256(("fmi3" + "".join(f + sources[f] for f in c_files)).encode())
     token = "{" + str(uuid.UUID(hex=digest.hexdigest()[:32])) + "}"
     sources[f"{name}_fmu3.c"] = render_template("fmu3.c.j2", name=name, NAME=name.upper(), ts=repr(config.sample_time),
