@@ -74,10 +74,8 @@ def default_noise(config) -> dict:
     """The sensor noise of the family's own validation (std per measured signal): the family's
     (``Campaigns.sensor_noise``), else the common one of the library's validations."""
     from .. import families
-    from ..families.capabilities import Campaigns
-    from ..validation.common import SENSOR_NOISE
-    family = families.get(config.family)
-    return family.sensor_noise() if isinstance(family, Campaigns) else dict(SENSOR_NOISE)
+    from ..families.capabilities import sensor_noise
+    return sensor_noise(families.get(config.family))
 
 
 def draw(spec, run: int) -> dict:

@@ -198,6 +198,7 @@ def parse(data: dict, source: str) -> CampaignSpec:
     from ..errors import UnknownObserverError
     from ..validation import scenarios as scn_lib
     from .. import families
+    from ..families.capabilities import sensor_noise
     from ..model.definition import parameter_conditions
     from .plants import BANKED_DRIVER_KEYS, DRIVER_KEYS, EXCITATION, KINDS, families_with_plants, plant_kind
     top = parse_table(data, TOP, source=source)
@@ -259,7 +260,7 @@ def parse(data: dict, source: str) -> CampaignSpec:
         for f in (f for f in SENSOR_KEYS if f in table):
             d = parse_dist(table[f], source=source, section=sec, key=f)
             if f in ("noise", "delay"):
-                nominal = families.get(config.family).sensor_noise().get(sig, 0.0) if f == "noise" else 0.0
+                nominal = sensor_noise(families.get(config.family)).get(sig, 0.0) if f == "noise" else 0.0
                 check_support(d, nominal, [(">=", 0.0, "")], source=source, section=sec, key=f,
                               what=f"the {'standard deviation' if f == 'noise' else 'delay'} of sensor {sig}")
             fields.append((f, d))

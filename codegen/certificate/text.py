@@ -147,7 +147,7 @@ def validation_header(family, name: str, result: dict, settle_time: float) -> st
     model = result.get("plant_model", result.get("plant"))
     parts = [f"{name}: scenario {result['scenario']} on the {result['plant']} plant ({model}), "
              f"{result['samples']} samples"]
-    if "max_abs_ay" in result:
+    if result.get("max_abs_ay") is not None:      # None: a model without a lateral acceleration
         parts.append(f"max |a_y| {result['max_abs_ay']:.2f} m/s^2")
     if "relative_degrees" in result:
         parts.append(f"relative degree {result['relative_degrees']}")

@@ -97,6 +97,15 @@ class Campaigns(Protocol):
         """Standard deviation per measured signal of the family's validation runs."""
 
 
+def sensor_noise(family) -> dict:
+    """Standard deviation per measured signal of ``family``'s validation runs: its own
+    (:class:`Campaigns`), else the common one of the library's validations."""
+    if isinstance(family, Campaigns):
+        return family.sensor_noise()
+    from ..validation.common import SENSOR_NOISE
+    return dict(SENSOR_NOISE)
+
+
 @runtime_checkable
 class Applicability(Protocol):
     """The family's answer to ``uiogen analyze``."""

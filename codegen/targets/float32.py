@@ -310,7 +310,8 @@ def input_noise(config, b) -> dict:
             raise ConfigurationError(f"{source}: [precision.noise] {key}: not an input of {config.name}; its inputs: "
                                      f"{', '.join(inputs)}", source=source, section="precision.noise", key=key,
                                      allowed=", ".join(inputs))
-    family = families.get(config.family).sensor_noise()
+    from ..families.capabilities import sensor_noise
+    family = sensor_noise(families.get(config.family))
     out = {}
     for name in inputs:
         if name in spec.noise:

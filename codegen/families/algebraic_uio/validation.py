@@ -292,7 +292,8 @@ def format_table(result: dict) -> str:
     for sig, row in rows.items():
         lines.append(f"{sig:10s}" + "".join(f" {row[k]:30.3e}" for k in keys))
     if result["noise"]:
-        lines.append(f"(white output noise, std {result['noise']}; max |a_y| {result['max_abs_ay']:.2f} m/s^2)")
+        ay = f"; max |a_y| {result['max_abs_ay']:.2f} m/s^2" if result.get("max_abs_ay") is not None else ""
+        lines.append(f"(white output noise, std {result['noise']}{ay})")
     from ...validation.common import format_stats
     lines.append(format_stats(result["observer"]))
     return "\n".join(lines)
