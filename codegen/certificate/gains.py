@@ -65,13 +65,14 @@ def check(family, config, gains: dict, source: str) -> GainsCheck:
         the problem and the variable).
     """
     from ..families.capabilities import GainForms
-    # a design lock file (its solutions under "lock") is re-checked as committed, whatever the family's
-    # printed form: the family's form re-derives its requirements from the settings (the nonlinear-tyre
-    # family took decay_fraction of the committed rate again and stated 0.38 1/s for a 1.9 1/s lock)
-    lock_file = isinstance(gains.get("lock"), dict) and "lmi_solutions" in gains["lock"]
-    if isinstance(family, GainForms) and "lmi_solutions" not in gains and not lock_file:
+    if isinstance(family, GainForms) and "lmi_solutions" not in gains:
         return family.check_gain_form(config, gains, source)
     return check_lock_form(family, config, gains, source)
+
+
+def is_lock_file(gains: dict) -> bool:
+    """Whether ``gains`` is a design lock file (its LMI solutions under ``lock``)."""
+    return isinstance(gains.get("lock"), dict) and "lmi_solutions" in gains["lock"]
 
 
 def check_lock_form(family, config, gains: dict, source: str) -> GainsCheck:
