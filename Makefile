@@ -1,7 +1,7 @@
 # uiogen — every target installs what it needs into .venv/ first.
 #   make demo    main job: design + generate + build + runs; the page build/report/index.html (README)
 #   make test    the test suite (CI runs this through .ci/run)
-#   make test-fast  the fast lane: no build, compiler, QEMU, Dask or browser (pytest -m "not slow"; about 6 min today)
+#   make test-fast  the fast lane: no build, compiler, QEMU, Dask or browser (pytest -m "not slow")
 #   make misra   cppcheck's MISRA C:2012 addon on the generated C, against misra/kernel_deviations.toml
 #   make embedded-tools  cppcheck, arm-none-eabi-gcc, qemu-system-arm (apt-get where available)
 #   make check   reliability suite (hostile input, sanitizers, static facts, determinism, long runs)
@@ -45,14 +45,16 @@ embedded-tools:
 # The full suite: every lane. The reliability suite is in it too (make check runs it alone):
 # CI runs make test only, and hostile input, sanitizers and determinism are what a merge must keep.
 # Two workers (pytest-xdist) on a 2-core machine, a test module per worker at a time: module fixtures
-# stay in one process, and the CPU-bound solves and compiles use both cores.
+# stay in one process, and the CPU-bound solves and compiles use both cores. The longest modules
+# start first (tests/durations.json, in the order tests/conftest.py gives; xdist's own reorder is off).
 test: build embedded-tools
-	$(BIN)/python -m pytest -q -n auto --dist loadfile tests
+	$(BIN)/python -m pytest -q -n auto --dist loadfile --no-loadscope-reorder tests
 
-# The fast lane: the venv only (no generate, no build): what a developer runs while working (598 tests, about 6 min on 2 cores today).
-# A test that needs a compiled extension, a compiler, QEMU, Dask, mkdocs or a browser is marked slow.
+# The fast lane: the venv only (no generate, no build): what a developer runs while working, on two
+# workers like make test. A test that needs a compiled extension, a compiler, QEMU, Dask, mkdocs or a
+# browser, or that runs for more than a few seconds, is marked slow.
 test-fast: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not slow" tests
+	$(BIN)/python -m pytest -q -m "not slow" -n auto --dist loadfile --no-loadscope-reorder tests
 
 misra: generate embedded-tools
 	$(BIN)/python -m codegen.targets.misra

@@ -89,3 +89,8 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.get_closest_marker("reliability") is not None and item.get_closest_marker("slow") is None:
             item.add_marker(pytest.mark.slow)
+    # the longest modules first (tests/durations.json, codegen/tools/durations.py): with a module per
+    # xdist worker at a time, a long module started last runs alone at the end; the order within a
+    # module is kept (a stable sort), a module without a record goes last
+    record = json.loads((ROOT / "tests" / "durations.json").read_text())
+    items.sort(key=lambda item: -record.get(item.nodeid.split("::")[0], 0.0))

@@ -110,7 +110,9 @@ def deviations(path: Path = DEVIATIONS) -> dict:
     return {d["rule"]: (int(d["count"]), d["reason"]) for d in data.get("deviation", [])}
 
 
-def run(names=None, log=print, deviations_path: Path = DEVIATIONS) -> dict:
+def findings(names=None, log=print) -> dict:
+    """cppcheck's MISRA findings of the generated C of ``names`` (default: every generated
+    observer): {"observers", "template": [(name, file, line, rule)], "kernel": Counter of rules}."""
     from ..extension.build import generated_names
     names = list(names or generated_names())
     template, kernel = [], Counter()
@@ -119,16 +121,27 @@ def run(names=None, log=print, deviations_path: Path = DEVIATIONS) -> dict:
         template += [(name, *f) for f in c["template"]]
         kernel.update(rule for _, _, rule in c["kernel"])
         log(f"{name}: {len(c['template'])} findings in the template code, {len(c['kernel'])} in the CasADi kernel")
+    return {"observers": names, "template": template, "kernel": kernel}
+
+
+def judge(found: dict, deviations_path: Path = DEVIATIONS) -> dict:
+    """The findings of :func:`findings` against the deviations file: no finding in template code, and
+    the kernel's count of each rule exactly the one listed."""
+    template, kernel = found["template"], found["kernel"]
     listed = deviations(deviations_path)
     problems = [f"{n}: {f}:{line}: MISRA C:2012 rule {rule} in code our templates write"
                 for n, f, line, rule in template]
     for rule in sorted(set(kernel) | set(listed), key=lambda r: [int(x) for x in r.split(".")]):
-        found, (allowed, _) = kernel.get(rule, 0), listed.get(rule, (0, ""))
-        if found != allowed:
-            problems.append(f"kernel rule {rule}: {found} findings, deviations file lists {allowed}"
-                            + (" (new finding)" if found > allowed else " (stale entry: lower the count)"))
-    return {"observers": names, "template_findings": len(template), "kernel_findings": dict(kernel),
+        count, (allowed, _) = kernel.get(rule, 0), listed.get(rule, (0, ""))
+        if count != allowed:
+            problems.append(f"kernel rule {rule}: {count} findings, deviations file lists {allowed}"
+                            + (" (new finding)" if count > allowed else " (stale entry: lower the count)"))
+    return {"observers": found["observers"], "template_findings": len(template), "kernel_findings": dict(kernel),
             "deviations": {r: c for r, (c, _) in listed.items()}, "problems": problems}
+
+
+def run(names=None, log=print, deviations_path: Path = DEVIATIONS) -> dict:
+    return judge(findings(names, log), deviations_path)
 
 
 def main(argv=None) -> int:

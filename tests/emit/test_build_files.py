@@ -62,6 +62,7 @@ def build(root, target: str, extra=()):
     return out
 
 
+@pytest.mark.slow       # cmake + a C compiler (50 s)
 def test_every_observer_builds_with_werror_on_the_host_and_runs_a_log(projects, tmp_path):
     root, folders = projects
     out = build(root, "host")
@@ -95,6 +96,7 @@ def test_every_observer_builds_with_werror_on_the_host_and_runs_a_log(projects, 
     assert proc.returncode == 1 and "no column y_delta" in proc.stderr
 
 
+@pytest.mark.slow       # cmake + arm-none-eabi-gcc (20 s)
 def test_every_observer_cross_builds_with_werror_for_the_cortex_m4f(projects):
     require(cortexm.available(), cortexm.CC)
     root, folders = projects

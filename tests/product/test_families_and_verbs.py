@@ -40,6 +40,7 @@ def test_the_starter_takes_every_verb(family, base):
     assert r["campaign"]["note"] == f"{verbs.CAMPAIGN_RUNS}/{verbs.CAMPAIGN_RUNS} runs"
 
 
+@pytest.mark.slow       # runs the whole matrix when the starters' tests above are deselected (180 s)
 def test_the_record_of_every_family(base, tmp_path):
     """The committed record (docs/data, rendered into docs/families_and_verbs.md) says what this run
     measured: the same outcome in every cell. The test writes its own copy, never the docs; the
