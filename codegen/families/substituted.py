@@ -157,6 +157,13 @@ class RecoveredInputs(ObserverBuild):
         return (np.concatenate([nxt, recovered]), excess, *res[2:])
 
     # -- everything else is the family's ------------------------------------------------------------
+    def contraction_metrics(self) -> list:
+        # the family's certificate, over the family's own state entries (same names here); a
+        # recovered input is a function of the next state with no dynamics of its own, so the float32
+        # bound reaches it through the step's Jacobian (ObserverBuild's [] would leave the
+        # substituted observer with no certificate at all)
+        return self.inner.contraction_metrics()
+
     def lmi_problem(self):
         return self.inner.lmi_problem()
 

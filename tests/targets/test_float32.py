@@ -187,3 +187,24 @@ def test_tyre_contraction_metric_is_the_certified_one_in_the_physical_state():
     assert gain[clamped].max() > 1.0
     scaled = ContractionMetric(m.contraction, (b.P,), m.states, m.source)
     assert scaled.self_gain(J)[~clamped].max() > m.contraction
+
+
+def test_stanford_ts_observer_is_accepted_on_the_log_through_its_float32_design(tmp_path):
+    """ts_fuzzy_uio_stanford's observer file asks for [design] precision = "float32": (27) is solved
+    with lambda <= 1 - float32_margin (0.01), and the certified margin (1.3e-4 per step at decay = 1,
+    whose bounds on the log were 3.5x the tolerance of delta) now covers the rounding on the shared
+    log, every signal's bound within its tolerance and above its measured deviation."""
+    name = "ts_fuzzy_uio_stanford"
+    config = observers.get(name)
+    assert config.design["precision"] == "float32"
+    build_extension(name)
+    r = precision.compare(name, out_dir=tmp_path)
+    assert r["passes"], r["reason"]
+    (m,) = r["metrics"]
+    assert m["margin"] >= 0.01 * (1 - 1e-6)
+    log = r["scenarios"]["stanford log"]
+    assert log["samples"] == 27500 and log["outside_certified_set"] == 0 and log["status_equal"]
+    for s in log["signals"].values():
+        assert s["deviation"] <= s["bound"] <= s["tolerance"]
+    # the delta bound is an order of magnitude inside its tolerance, not at its edge
+    assert log["signals"]["delta"]["bound"] < 0.2 * log["signals"]["delta"]["tolerance"]

@@ -186,3 +186,67 @@ def test_fmu_step_size_nan_or_huge_is_refused_without_undefined_behaviour(fmus, 
     proc = subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0 and "runtime error" not in proc.stderr, proc.stderr
     assert "refused 6, then 1" in proc.stdout, proc.stdout
+
+
+DRIVER3 = r"""
+#include <math.h>
+#include <stdio.h>
+#include "fmi3Functions.h"
+static void logger(fmi3InstanceEnvironment e, fmi3Status s, fmi3String category, fmi3String message)
+{ (void)e; (void)s; printf("log %s: %s\n", category, message); }
+int main(void)
+{
+    double steps[] = {NAN, -NAN, INFINITY, -INFINITY, 1e300, -1e300, -1.0, 0.0,
+                      0.5 * SAMPLE_TIME, 1.5 * SAMPLE_TIME, 2.25 * SAMPLE_TIME, 2e9 * SAMPLE_TIME};
+    const int n_steps = (int)(sizeof steps / sizeof steps[0]);
+    const fmi3ValueReference time_ref[1] = {0u};
+    fmi3Boolean event, terminate, early;
+    fmi3Float64 last, t;
+    int i, refused = 0, held = 0;
+    fmi3Instance c = fmi3InstantiateCoSimulation("x", TOKEN, "", fmi3False, fmi3False, fmi3False, fmi3False, NULL, 0u,
+                                                 NULL, logger, NULL);
+    if (c == NULL) return 2;
+    if (fmi3EnterInitializationMode(c, fmi3False, 0.0, 0.0, fmi3False, 0.0) != fmi3OK) return 3;
+    if (fmi3ExitInitializationMode(c) != fmi3OK) return 4;
+    for (i = 0; i < n_steps; ++i) {
+        last = -1.0;
+        refused += fmi3DoStep(c, 0.0, steps[i], fmi3True, &event, &terminate, &early, &last) == fmi3Error;
+        /* a refused step leaves the time where it was and says so */
+        if (fmi3GetFloat64(c, time_ref, 1u, &t, 1u) != fmi3OK) return 5;
+        held += (t == 0.0 && last == 0.0 && !event && !terminate && !early);
+    }
+    printf("refused %d of %d, held %d\n", refused, n_steps, held);
+    printf("then %d", fmi3DoStep(c, 0.0, 2 * SAMPLE_TIME, fmi3True, &event, &terminate, &early, &last) == fmi3OK);
+    if (fmi3GetFloat64(c, time_ref, 1u, &t, 1u) != fmi3OK) return 6;
+    printf(" at %d\n", t == 2 * SAMPLE_TIME && last == t);
+    fmi3FreeInstance(c);
+    return 0;
+}
+"""
+
+
+def test_fmu3_step_size_nan_huge_or_off_the_sample_grid_is_refused_without_undefined_behaviour(fmus, tmp_path):
+    """fmi3DoStep with a NaN, an infinite, a huge (1e300, or 2e9 samples), a non-positive or a
+    communication step that is no whole number of sample times: fmi3Error, the time held, before
+    any conversion to an integer (UBSan's float-cast-overflow would report a NaN or 1e300 cast to
+    long); a whole number of samples afterwards is taken. The FMI 2.0 test's counterpart."""
+    import subprocess
+    from codegen.emit.toolchain import compiler
+    name = NAMES[0]
+    with zipfile.ZipFile(fmus[name, "fmu3"]) as z:
+        for f in z.namelist():
+            if f.startswith("sources/"):
+                (tmp_path / f[len("sources/"):]).write_bytes(z.read(f))
+        token = ET.fromstring(z.read("modelDescription.xml")).get("instantiationToken")
+    assert token
+    (tmp_path / "driver.c").write_text(DRIVER3)
+    exe = tmp_path / "driver"
+    srcs = [str(tmp_path / f) for f in (f"{name}_kernel.c", f"{name}.c", f"{name}_fmu3.c", "driver.c")]
+    subprocess.run([compiler(), "-O1", "-fsanitize=float-cast-overflow,undefined", "-fno-sanitize-recover=all",
+                    f"-DTOKEN=\"{token}\"", f"-DSAMPLE_TIME={load(name).sample_time!r}", "-I", str(tmp_path), *srcs,
+                    "-o", str(exe), "-lm"], check=True, capture_output=True)
+    proc = subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and "runtime error" not in proc.stderr, (proc.returncode, proc.stderr)
+    assert "refused 12 of 12, held 12" in proc.stdout, proc.stdout
+    assert "then 1 at 1" in proc.stdout, proc.stdout
+    assert proc.stdout.count("log logStatusError: fmi3DoStep") == 12, proc.stdout
