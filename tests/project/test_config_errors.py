@@ -526,7 +526,11 @@ def test_committed_observers_parse_as_before(name, monkeypatch):
     # the [precision] table (the float32 build's tolerances, checked in tests/targets/test_float32.py)
     assert config == dataclasses.replace(_old_parse(path), project=config.project, precision=config.precision)
     assert config.workspace.generated == next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file()) / "generated_c"
-    assert new_settings(config, monkeypatch) == _old_settings(config)
+    new = new_settings(config, monkeypatch)
+    # the float32 design option (issue 27) postdates the old parsers: taken as parsed (its own tests:
+    # tests/targets/test_float32.py, tests/design/)
+    newer = {f: getattr(new, f) for f in ("precision", "float32_margin") if hasattr(new, f)}
+    assert new == dataclasses.replace(_old_settings(config), **newer)
 
 
 def test_settings_by_hand(monkeypatch):

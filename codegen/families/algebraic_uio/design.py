@@ -374,7 +374,8 @@ def dense_check(dec: rdeg.Decoupling, d: AlgebraicDesign, samples: int = 4000, s
     points = [[rng.uniform(*dec.boxes[s]) if k % 4 else dec.boxes[s][rng.integers(2)] for s in syms]
               for k in range(samples)]
     theta = np.array([[f(*vals) for f in prem] for vals in points], dtype=float).reshape(samples, len(prem))
-    mu = sector_weights_product(theta, d.gain_polytope.premises)
+    # (samples, vertices); a polytope without premises (one vertex) gives the weight 1 for every sample
+    mu = np.broadcast_to(sector_weights_product(theta, d.gain_polytope.premises), (samples, len(d.L)))
     # the interpolated gain at every sample at once, vertex by vertex in the order of a plain sum
     # (the same roundings): a polytope of 2^p vertices makes a per-sample Python sum the cost of the check
     gains = np.zeros((samples,) + np.shape(d.L[0]))
