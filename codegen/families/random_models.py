@@ -627,12 +627,11 @@ def _cli(argv: list) -> tuple:
 
 
 def run(model: RandomModel, folder: Path) -> Outcome:
-    """Write ``model`` into ``folder`` and take it through design, generate, build; then check the
-    installed extension against its model once more (:func:`codegen.extension.conformance.check`)."""
-    from .. import pipeline
-    from ..design import lock as design_lock
+    """Write ``model`` into ``folder`` and take it through design, generate, build; the outcome carries
+    the report of the conformance check that installed the extension (:func:`codegen.extension.conformance.check`,
+    recorded by the build for the installed design)."""
     from ..extension import conformance
-    from ..extension.build import load
+    from ..extension.build import conformance_record, load
     from ..project import observer_file as observers
     t0 = time.perf_counter()
     path = model.write(folder)
@@ -647,9 +646,16 @@ def run(model: RandomModel, folder: Path) -> Outcome:
             return Outcome(model, "failed", f"uiogen {argv[0]}: {err.strip()}", time.perf_counter() - t0)
     line = next((ln for ln in out.splitlines() if "conformance:" in ln), "")
     config = observers.get(str(path))
-    lock_path = design_lock.path(config)
-    report = conformance.check(pipeline.build(config), load(config).module, lock_path.parent,
-                               json.loads(lock_path.read_text()))
+    # the check that installed the extension, as `uiogen build` recorded it; it must be of the installed
+    # module's design (not a record left by an earlier build)
+    record = conformance_record(config)
+    installed = load(config).design_sha256
+    if record.get("design_sha256") != installed:
+        return Outcome(model, "failed", f"uiogen build: no conformance record of the installed design {installed[:12]}",
+                       time.perf_counter() - t0)
+    report = conformance.Report(observer=record["observer"], samples=record["samples"],
+                                worst={who: (w["error"], w["signal"], w["sample"]) for who, w in record["worst"].items()},
+                                status_samples={int(bits): n for bits, n in record["status_samples"].items()})
     return Outcome(model, "conforms", "", time.perf_counter() - t0, report, line)
 
 

@@ -22,7 +22,7 @@ from codegen.design import lock as design_lock
 from codegen.emit import generate as emit
 from codegen.errors import ConformanceError
 from codegen.extension import conformance
-from codegen.extension.build import build_extension, load
+from codegen.extension.build import build_extension, conformance_record, load
 from codegen.project import observer_file as observers
 
 BUILTIN = observers.names()
@@ -103,6 +103,10 @@ def test_a_known_input_is_read_where_the_model_puts_it(known_input_project, caps
     layout = conformance.header_layout(header, "steered")
     assert layout["N_INPUT"] == 3 and layout["input"] == ["delta", "y_v_x", "y_r"]
     assert obs.n_input == 3
+    # the build recorded the check that installed it, for the installed design
+    record = conformance_record(config)
+    assert record["design_sha256"] == obs.design_sha256 and record["samples"] >= 1000
+    assert set(record["worst"]) == {"numpy", "casadi"} and record["line"].startswith("conformance: ")
     # the estimates on the model's own equations: the unknown engine torque is recovered
     assert cli.main(["validate", str(known_input_project), "--scenario", "excitation", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
@@ -127,6 +131,7 @@ def test_a_kernel_that_swaps_two_inputs_is_refused(known_input_project, capsys):
     kernel = folder / "steered_kernel.c"
     installed = next(config.workspace.extensions.glob("_steered.*"))
     before = installed.read_bytes()
+    record_before = conformance_record(config)
     original = kernel.read_text()
     try:
         # arg[2] is the measured outputs (y_v_x, y_r): read them the other way round
@@ -139,6 +144,7 @@ def test_a_kernel_that_swaps_two_inputs_is_refused(known_input_project, capsys):
         assert "ConformanceError" in err and "sample" in err and "signal" in err and "not installed" in err
         assert "Traceback" not in err
         assert installed.read_bytes() == before          # the previous extension is left as it was
+        assert conformance_record(config) == record_before   # and the record of the check that installed it
         with pytest.raises(ConformanceError, match="disagrees"):
             build_extension(config)
     finally:
