@@ -169,23 +169,31 @@ int main(void)
 def test_fmu_step_size_nan_or_huge_is_refused_without_undefined_behaviour(fmus, tmp_path):
     """fmi2DoStep(NaN), (+-inf), (1e300): refused before any conversion to an integer (converting
     them to long is undefined behaviour: UBSan's float-cast-overflow reported it before the fix)."""
+    proc = _sanitized_driver(fmus, "fmu", DRIVER, tmp_path)
+    assert proc.returncode == 0 and "runtime error" not in proc.stderr, proc.stderr
+    assert "refused 6, then 1" in proc.stdout, proc.stdout
+
+
+def _sanitized_driver(fmus, kind: str, driver: str, folder):
+    """Compile the C sources of the core observer's FMU (``kind`` "fmu" or "fmu3") with ``driver``
+    under UBSan (its GUID or instantiation token and the sample time as macros) and run it."""
     import subprocess
     from codegen.emit.toolchain import compiler
     name = NAMES[0]
-    with zipfile.ZipFile(fmus[name, "fmu"]) as z:
+    with zipfile.ZipFile(fmus[name, kind]) as z:
         for f in z.namelist():
             if f.startswith("sources/"):
-                (tmp_path / f[len("sources/"):]).write_bytes(z.read(f))
-        guid = ET.fromstring(z.read("modelDescription.xml")).get("guid")
-    (tmp_path / "driver.c").write_text(DRIVER)
-    exe = tmp_path / "driver"
-    srcs = [str(tmp_path / f) for f in (f"{name}_kernel.c", f"{name}.c", f"{name}_fmu.c", "driver.c")]
+                (folder / f[len("sources/"):]).write_bytes(z.read(f))
+        root = ET.fromstring(z.read("modelDescription.xml"))
+    token = (f'-DGUID="{root.get("guid")}"' if kind == "fmu" else f'-DTOKEN="{root.get("instantiationToken")}"')
+    assert "None" not in token, token
+    (folder / "driver.c").write_text(driver)
+    exe = folder / "driver"
+    srcs = [str(folder / f) for f in (f"{name}_kernel.c", f"{name}.c", f"{name}_{kind}.c", "driver.c")]
     subprocess.run([compiler(), "-O1", "-fsanitize=float-cast-overflow,undefined", "-fno-sanitize-recover=all",
-                    f"-DGUID=\"{guid}\"", f"-DSAMPLE_TIME={load(name).sample_time!r}", "-I", str(tmp_path), *srcs,
+                    token, f"-DSAMPLE_TIME={load(name).sample_time!r}", "-I", str(folder), *srcs,
                     "-o", str(exe), "-lm"], check=True, capture_output=True)
-    proc = subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)
-    assert proc.returncode == 0 and "runtime error" not in proc.stderr, proc.stderr
-    assert "refused 6, then 1" in proc.stdout, proc.stdout
+    return subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)
 
 
 DRIVER3 = r"""
@@ -230,22 +238,7 @@ def test_fmu3_step_size_nan_huge_or_off_the_sample_grid_is_refused_without_undef
     communication step that is no whole number of sample times: fmi3Error, the time held, before
     any conversion to an integer (UBSan's float-cast-overflow would report a NaN or 1e300 cast to
     long); a whole number of samples afterwards is taken. The FMI 2.0 test's counterpart."""
-    import subprocess
-    from codegen.emit.toolchain import compiler
-    name = NAMES[0]
-    with zipfile.ZipFile(fmus[name, "fmu3"]) as z:
-        for f in z.namelist():
-            if f.startswith("sources/"):
-                (tmp_path / f[len("sources/"):]).write_bytes(z.read(f))
-        token = ET.fromstring(z.read("modelDescription.xml")).get("instantiationToken")
-    assert token
-    (tmp_path / "driver.c").write_text(DRIVER3)
-    exe = tmp_path / "driver"
-    srcs = [str(tmp_path / f) for f in (f"{name}_kernel.c", f"{name}.c", f"{name}_fmu3.c", "driver.c")]
-    subprocess.run([compiler(), "-O1", "-fsanitize=float-cast-overflow,undefined", "-fno-sanitize-recover=all",
-                    f"-DTOKEN=\"{token}\"", f"-DSAMPLE_TIME={load(name).sample_time!r}", "-I", str(tmp_path), *srcs,
-                    "-o", str(exe), "-lm"], check=True, capture_output=True)
-    proc = subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)
+    proc = _sanitized_driver(fmus, "fmu3", DRIVER3, tmp_path)
     assert proc.returncode == 0 and "runtime error" not in proc.stderr, (proc.returncode, proc.stderr)
     assert "refused 12 of 12, held 12" in proc.stdout, proc.stdout
     assert "then 1 at 1" in proc.stdout, proc.stdout
