@@ -170,6 +170,7 @@ def ts():
     return load("ts_fuzzy_uio")
 
 
+@pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 @pytest.mark.parametrize("bad", ["complex", "string", "bool", "object"])
 def test_run_refuses_arrays_that_are_not_real_numbers(ts, bad):
     rows = np.tile([20.0, 0.01], (10, 1))
@@ -183,6 +184,7 @@ def test_run_refuses_arrays_that_are_not_real_numbers(ts, bad):
     assert np.isfinite(out).all()
 
 
+@pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 def test_an_output_overlapping_the_inputs_is_refused(ts):
     buf = np.zeros(ts.n_input + ts.n_output)
     buf[:ts.n_input] = [20.0, 0.01]
@@ -203,6 +205,7 @@ def test_an_output_overlapping_the_inputs_is_refused(ts):
     assert np.isfinite(good).all()
 
 
+@pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 def test_one_state_in_two_threads_is_refused_and_separate_states_run_together(ts):
     n = 1_000_000
     rows = np.tile([20.0, 0.01], (n, 1))

@@ -128,17 +128,20 @@ def test_the_column_map_and_the_shared_format_agree(tmp_path):
 
 # --- the probes: one column wrong -----------------------------------------------------------------
 
+@pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 def test_ay_declared_in_g_on_a_log_in_m_s2(tmp_path, log):
     err = _one_line_error(_validate(_observer(tmp_path, y_a_y='{ column = "ay", unit = "g" }'), log))
     assert "column 'ay' (y_a_y, declared g)" in err and 'unit = "m/s^2"' in err, err
 
 
+@pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 def test_delta_declared_in_degrees_on_a_log_in_radians(tmp_path, log):
     err = _one_line_error(_validate(_observer(tmp_path, delta='{ column = "delta", unit = "deg" }'), log))
     assert "column 'delta' (delta, declared deg)" in err and "steady state" in err, err
     assert "'delta' is in rad, not deg" in err and 'unit = "rad"' in err, err
 
 
+@pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 def test_yaw_rate_mapped_to_the_yaw_acceleration(tmp_path, log):
     err = _one_line_error(_validate(_observer(tmp_path, y_r='{ column = "yaw_acc", unit = "rad/s" }'), log))
     assert err.count("column '") == 1 and "column 'yaw_acc' (y_r" in err, err
@@ -150,6 +153,7 @@ def test_yaw_rate_mapped_to_the_yaw_acceleration(tmp_path, log):
     (dict(y_r='{ column = "yaw_rate", unit = "deg/s" }'), "yaw_rate", "'yaw_rate' is in rad/s, not deg/s"),
     (dict(y_a_y='{ column = "ay", unit = "m/s^2", scale = -1.0 }'), "ay", "'ay' has the opposite sign"),
 ], ids=["speed-in-kmh", "yaw-rate-deg-s", "ay-sign"])
+@pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 def test_other_single_column_mistakes_name_the_column_and_cause(tmp_path, log, change, column, cause):
     err = _one_line_error(_validate(_observer(tmp_path, **change), log))
     assert f"column {column!r}" in err and cause in err, err
@@ -169,6 +173,7 @@ def test_a_steering_ratio_slip_is_a_flagged_warning(tmp_path, log):
     assert text.returncode == 0 and "1 warning(s) below" in text.stdout and "warning: " in text.stdout
 
 
+@pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 def test_a_steering_ratio_slip_in_the_shared_format(tmp_path, log):
     run = S.load(log)
     cols = {c: np.array(getattr(run, c)) for c in S.COLUMNS}

@@ -73,6 +73,7 @@ def test_errors_name_the_same_row_whatever_the_chunking(tmp_path, block):
         S.load(bad, block_bytes=block)
 
 
+@pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 def test_validation_does_not_depend_on_the_chunking(tmp_path):
     p = _log(tmp_path)
     whole = validate.run_data("stanford_sideslip", str(p))
@@ -86,6 +87,7 @@ def test_validation_does_not_depend_on_the_chunking(tmp_path):
     assert [c["verdict"] for c in parts["log_checks"]] == [c["verdict"] for c in whole["log_checks"]]
 
 
+@pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 def test_a_long_log_runs_without_the_baselines_and_keeps_every_kth_sample(tmp_path, monkeypatch):
     p = _log(tmp_path)
     whole = validate.run_data("stanford_sideslip", str(p))
@@ -139,6 +141,7 @@ def test_a_gzip_log_in_small_chunks(tmp_path):
     assert all(np.array_equal(getattr(S.load(gz, block_bytes=SMALL), c), getattr(S.load(p), c)) for c in S.COLUMNS)
 
 
+@pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 @pytest.mark.parametrize("kind", ["dev-zero", "fifo", "directory"])
 def test_non_regular_files_are_refused_as_such(tmp_path, kind):
     if kind == "dev-zero":
