@@ -156,12 +156,8 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
         shutil.rmtree(staging, ignore_errors=True)
     # the evidence the extension was installed on, beside its objects: a reader checks that its
     # design hash is the installed module's (a build killed between the two writes leaves them apart)
-    outputs.write_atomic(build_dir / CONFORMANCE_RECORD, json.dumps({
-        "observer": name, "extension": module_file, "design_sha256": module.DESIGN_SHA256,
-        "samples": report.samples,
-        "worst": {who: {"error": err, "signal": sig, "sample": k} for who, (err, sig, k) in report.worst.items()},
-        "status_samples": {str(bits): n for bits, n in sorted(report.status_samples.items())},
-        "line": report.line()}, indent=1) + "\n")
+    record = {"extension": module_file, "design_sha256": module.DESIGN_SHA256, **report.as_record()}
+    outputs.write_atomic(build_dir / CONFORMANCE_RECORD, json.dumps(record, indent=1) + "\n")
     if log is not None:
         log(f"{name}: {report.line()}")
     return target

@@ -74,6 +74,20 @@ class Report:
     status_samples: dict = field(default_factory=dict)   # {status bits: count}
     carriers: tuple = ()     # names of substituted carriers, whose inverse also flags SCHEDULING_CLAMPED
 
+    def as_record(self) -> dict:
+        """The report as JSON data (what ``uiogen build`` records beside the extension it installed)."""
+        return {"observer": self.observer, "samples": self.samples,
+                "worst": {who: {"error": err, "signal": sig, "sample": k} for who, (err, sig, k) in self.worst.items()},
+                "status_samples": {str(bits): n for bits, n in sorted(self.status_samples.items())},
+                "line": self.line()}
+
+    @classmethod
+    def from_record(cls, record: dict) -> "Report":
+        """The report :meth:`as_record` wrote (its sampled boxes are not recorded)."""
+        return cls(observer=record["observer"], samples=record["samples"],
+                   worst={who: (w["error"], w["signal"], w["sample"]) for who, w in record["worst"].items()},
+                   status_samples={int(bits): n for bits, n in record["status_samples"].items()})
+
     def line(self) -> str:
         parts = [f"{who} {err:.1e} ({sig})" for who, (err, sig, _) in self.worst.items()]
         clamped = sum(n for bits, n in self.status_samples.items() if bits & 1)

@@ -653,10 +653,7 @@ def run(model: RandomModel, folder: Path) -> Outcome:
     if record.get("design_sha256") != installed:
         return Outcome(model, "failed", f"uiogen build: no conformance record of the installed design {installed[:12]}",
                        time.perf_counter() - t0)
-    report = conformance.Report(observer=record["observer"], samples=record["samples"],
-                                worst={who: (w["error"], w["signal"], w["sample"]) for who, w in record["worst"].items()},
-                                status_samples={int(bits): n for bits, n in record["status_samples"].items()})
-    return Outcome(model, "conforms", "", time.perf_counter() - t0, report, line)
+    return Outcome(model, "conforms", "", time.perf_counter() - t0, conformance.Report.from_record(record), line)
 
 
 def acceptance(outcomes: list) -> dict:
