@@ -198,8 +198,8 @@ def bench_observer(name: str) -> dict:
     step = obs.step
     s = state.copy()
     t_c = _per_call(lambda: step(s, inp, out), number=20000)
-    # as the README writes it (the attribute looked up per call) against the extension's own
-    # function bound once: CompiledObserver.step is that function, so only the lookup differs
+    # as the README writes it (the method looked up per call) against the extension's module
+    # function bound once: the same C function, so only the lookup and the call path differ
     bare = obs.module.step
     t_bare, t_attr = _per_call_pair(lambda: bare(s, inp, out), lambda: obs.step(s, inp, out))
     t_casadi = _per_call(lambda: f(state, u, y, rho), number=2000)
