@@ -417,7 +417,11 @@ class LMIProblem:
         column-major blocks)].
         """
         nvar = len(self._names)
-        tri_a, tri_b, full_c, full_a, blocks, cones = [], [], [], [], [], []
+        # Built sparse: a block involves a few of the variables (a polytope's vertex its own gains),
+        # and dense rows of every variable grew as blocks x variables (2.5 GB for a 2048-vertex one).
+        tri_rows, tri_cols, tri_vals, tri_b = [], [], [], []
+        full_rows, full_cols, full_vals, full_c = [], [], [], []
+        blocks, cones = [], []
         index = {}   # triangle index arrays by block size, within this compilation
         offset = full_offset = 0
         for con in self._constraints:
@@ -428,7 +432,8 @@ class LMIProblem:
                     f"{self.name}: LMI {con.label!r} is not affine in the decision variables "
                     f"(products involving {', '.join(bad)}); fix one factor or use a change of variables")
             n = expr.shape[0]
-            coef = _pad(expr.coef, nvar)
+            used = np.flatnonzero(expr.coef.any(axis=(0, 1)))
+            coef = expr.coef[:, :, used]          # the variables this block involves
             const = expr.const
             if (np.abs(const - const.T) > 1e-12 * (1 + np.abs(const))).any() or \
                     (np.abs(coef - coef.transpose(1, 0, 2)) > 1e-12 * (1 + np.abs(coef))).any():
@@ -436,22 +441,37 @@ class LMIProblem:
             if n not in index:
                 index[n] = _triu_index(n)
             rows, cols, scale = index[n]
-            tri_a.append(coef[rows, cols] * scale[:, None])
+            tri = coef[rows, cols] * scale[:, None]
+            tri[np.abs(tri) < 1e-300] = 0.0
+            r, c = np.nonzero(tri)
+            tri_rows.append(offset + r)
+            tri_cols.append(used[c])
+            tri_vals.append(-tri[r, c])
             tri_b.append(const[rows, cols] * scale - con.margin * np.where(rows == cols, 1.0, 0.0))
             # column-major full blocks, for the independent re-check
+            full = coef.transpose(1, 0, 2).reshape(n * n, used.size)
+            r, c = np.nonzero(full)
+            full_rows.append(full_offset + r)
+            full_cols.append(used[c])
+            full_vals.append(full[r, c])
             full_c.append(const.T.ravel())
-            full_a.append(coef.transpose(1, 0, 2).reshape(n * n, nvar))
             blocks.append((con, slice(offset, offset + rows.size), slice(full_offset, full_offset + n * n)))
             cones.append(clarabel.PSDTriangleConeT(n))
             offset += rows.size
             full_offset += n * n
-        J = np.concatenate(tri_a) if tri_a else np.zeros((0, nvar))
-        J[np.abs(J) < 1e-300] = 0.0
-        A = -sparse.csc_matrix(J)
+
+        def stacked(rows, cols, vals, shape, fmt):
+            if not rows:
+                return sparse.csc_matrix(shape) if fmt == "csc" else sparse.csr_matrix(shape)
+            coo = sparse.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=shape)
+            return coo.tocsc() if fmt == "csc" else coo.tocsr()
+
+        A = stacked(tri_rows, tri_cols, tri_vals, (offset, nvar), "csc")
         b = np.concatenate(tri_b) if tri_b else np.zeros(0)
         full_const = np.concatenate(full_c) if full_c else np.zeros(0)
-        full_coef = np.concatenate(full_a) if full_a else np.zeros((0, nvar))
-        # the original block expressions, for the independent re-check
+        full_coef = stacked(full_rows, full_cols, full_vals, (full_offset, nvar), "csr")
+        # the original block expressions, for the independent re-check (each entry the sum of its
+        # terms in the order of the variables)
         self._evaluate = lambda xv: full_const + full_coef @ np.asarray(xv, dtype=float)
         self._compiled = blocks
         if self._objective is None:
