@@ -26,7 +26,8 @@ one double step per sample) and ``J_k`` (exact where the step is affine in its s
 report checks against the certified ``c``; first order in the deviation elsewhere). What is
 proven: the accumulation. State entries with their own dynamics that no certificate covers
 (the sliding-mode differentiators, which converge in finite time but do not contract) get
-their measured deviation instead of a bound; the report names them and every output they
+their measured deviation instead of a bound, as do the entries without dynamics they read (the
+sample a differentiator holds); the report names them and every output they
 reach, and such an output is accepted only where the observer file says so (``[precision]
 uncertified_states = "measured"``). On a sample outside the certified set (SCHEDULING_CLAMPED:
 the certificate does not cover it) the step's own gain in the norm replaces ``c`` where it is
