@@ -245,11 +245,12 @@ def _polymul(a: list, b: list) -> list:
     return out
 
 
-def _step_sx(spec: HosmdSpec, z: list, f) -> list:
-    """The step on SX scalars (real arithmetic only, constants folded in)."""
+def _step_sx(spec: HosmdSpec, z: list, sigma) -> list:
+    """The step on SX scalars (real arithmetic only, constants folded in), given sigma = z_0 - f;
+    z[0] is z_0 itself (Taylor coordinates) or sigma (error coordinates: the first entry of the
+    result is then z_0+ - f, see :func:`hosmd_step_sx`)."""
     k = spec.order
     K = _constants(spec)
-    sigma = z[0] - f
     mag = ca.fabs(sigma)
     root = ca.sqrt(mag) if k == 1 else ca.sqrt(ca.sqrt(mag)) if k == 3 else mag ** (1.0 / (k + 1))
     q = K.c / ca.fmax(root, K.q_floor)
@@ -289,7 +290,7 @@ def _reference_constants(spec: HosmdSpec):
     return Phi_s * np.outer(scale, 1.0 / scale), np.column_stack(powers) * scale[:, None]
 
 
-def hosmd_step_numpy(spec: HosmdSpec, z, f: float) -> np.ndarray:
+def hosmd_step_numpy(spec: HosmdSpec, z, f: float, held: float | None = None) -> np.ndarray:
     """Reference step in numpy: the next differentiator state.
 
     An independent implementation of the same step (complex eigenvalues, ``numpy.poly``, matrices
@@ -299,9 +300,13 @@ def hosmd_step_numpy(spec: HosmdSpec, z, f: float) -> np.ndarray:
     ----------
     spec : HosmdSpec
     z : array_like, shape (k+1,)
-        Current state, the estimates of (f, f', ..., f^(k)) at the current sample.
+        Current state, the estimates of (f, f', ..., f^(k)) at the current sample; in error
+        coordinates (``held`` given) its first entry is the estimate of f less ``held``.
     f : float
         Current sample of the signal.
+    held : float, optional
+        Error coordinates (:func:`hosmd_step_sx`): the sample the first entry is measured from;
+        the result's first entry is then measured from ``f``.
 
     Returns
     -------
@@ -312,13 +317,17 @@ def hosmd_step_numpy(spec: HosmdSpec, z, f: float) -> np.ndarray:
     SampleError
         If ``z`` has the wrong shape.
     """
-    z = np.asarray(z, dtype=np.float64)
+    z = np.array(z, dtype=np.float64)
     if z.shape != (spec.n_state,):
         raise SampleError(f"differentiator {spec.name!r}: state must have shape ({spec.n_state},), got {z.shape}")
     n = spec.n_state
     Phi, V = _reference_constants(spec)
     nu = np.array(spec._roots)
-    sigma = float(z[0] - f)
+    if held is None:
+        sigma = float(z[0] - f)
+    else:
+        sigma = float(z[0] + (held - f))
+        z[0] = sigma                     # Phi's first column is e_0: the result's first entry is z_0+ - f
     c = spec.sample_time * spec.lipschitz ** (1.0 / n)
     q = c / max(abs(sigma) ** (1.0 / n), c * np.max(nu.real) / -_UNDERFLOW_EXPONENT)
     delta = -np.expm1(q * nu)                          # complex; 1 - (discrete eigenvalue)
@@ -340,8 +349,18 @@ def hosmd_run(spec: HosmdSpec, samples, z0=None) -> np.ndarray:
     return np.vstack([z[None, :], after[:-1]])
 
 
-def hosmd_step_sx(spec: HosmdSpec, z, f) -> ca.SX:
+def hosmd_step_sx(spec: HosmdSpec, z, f, held=None) -> ca.SX:
     """Next differentiator state as a CasADi SX expression, for embedding in an observer step.
+
+    Error coordinates (``held`` given): the first state entry is the estimate of f less the
+    sample the differentiator consumed last (``held``), and the result's first entry is the new
+    estimate less ``f``; the other entries are the derivative estimates as in Taylor coordinates.
+    The step is the same; what changes is its rounding. In Taylor coordinates z_0 is stored at
+    the signal's scale, so in float32 it carries half a unit in the last place of |f| (6e-8 for a
+    signal of order 1), and sigma = z_0 - f, the tracking error the gains multiply by up to
+    tau^-k, inherits that whole error. In error coordinates the stored entry is the increment
+    over one sample (of order tau |f'|), sigma = z[0] + (held - f) is formed from it and from an
+    exact difference of two input samples, and its rounding is that of the increment's scale.
 
     Parameters
     ----------
@@ -350,6 +369,8 @@ def hosmd_step_sx(spec: HosmdSpec, z, f) -> ca.SX:
         Current differentiator state (part of the observer's state vector).
     f : casadi.SX, scalar
         Current sample of the differentiated signal.
+    held : casadi.SX, scalar, optional
+        The sample the first entry is measured from (error coordinates); default Taylor coordinates.
 
     Returns
     -------
@@ -358,7 +379,13 @@ def hosmd_step_sx(spec: HosmdSpec, z, f) -> ca.SX:
     if z.shape != (spec.n_state, 1):
         raise SampleError(f"differentiator {spec.name!r}: state must be SX of shape ({spec.n_state}, 1), "
                           f"got {z.shape}")
-    return ca.vertcat(*_step_sx(spec, [z[i] for i in range(spec.n_state)], f))
+    zs = [z[i] for i in range(spec.n_state)]
+    if held is None:
+        sigma = zs[0] - f
+    else:
+        sigma = zs[0] + (held - f)
+        zs[0] = sigma                    # Phi's first column is e_0: the result's first entry is z_0+ - f
+    return ca.vertcat(*_step_sx(spec, zs, sigma))
 
 
 @functools.lru_cache(maxsize=64)

@@ -26,7 +26,8 @@ one double step per sample) and ``J_k`` (exact where the step is affine in its s
 report checks against the certified ``c``; first order in the deviation elsewhere). What is
 proven: the accumulation. State entries with their own dynamics that no certificate covers
 (the sliding-mode differentiators, which converge in finite time but do not contract) get
-their measured deviation instead of a bound; the report names them and every output they
+their measured deviation instead of a bound, as do the entries without dynamics they read (the
+sample a differentiator holds); the report names them and every output they
 reach, and such an output is accepted only where the observer file says so (``[precision]
 uncertified_states = "measured"``). On a sample outside the certified set (SCHEDULING_CLAMPED:
 the certificate does not cover it) the step's own gain in the norm replaces ``c`` where it is
@@ -186,7 +187,8 @@ def _uncertified_dynamics(J: np.ndarray, rest: list) -> list:
     """Entries of ``rest`` (not covered by a metric) whose dependencies among themselves do not
     contract: a strongly connected group whose largest entrywise slope matrix over the run has a
     spectral radius >= 1 (or an unbounded slope), i.e. state with its own dynamics and no
-    certificate, such as a sliding-mode differentiator. A group that does contract (an estimate
+    certificate, such as a sliding-mode differentiator, and the entries without dynamics that such
+    a group reads (the sample a differentiator holds). A group that does contract (an estimate
     fed back through a scheduling signal, say) is bounded by the recursion like the others."""
     from scipy.sparse.csgraph import connected_components
     if not rest:
@@ -202,8 +204,16 @@ def _uncertified_dynamics(J: np.ndarray, rest: list) -> list:
         if not block.any():
             continue
         if not np.all(np.isfinite(block)) or max(abs(np.linalg.eigvals(block))) >= 1.0:
-            free += [rest[i] for i in members]
-    return sorted(free)
+            free += list(members)
+    # Entries without dynamics of their own (on no cycle: a held input sample, a start flag) that
+    # such a group reads are measured with it: the group reads them through its own unbounded slope
+    # (a differentiator in error coordinates reads the sample it holds through sigma, exactly as it
+    # reads its first entry), which no Jacobian carries, so their deviation enters by the exact
+    # coupling as the group's does. Their measured deviation is what the recursion would bound them
+    # by where they hold an input (its rounding).
+    memoryless = [i for i in range(len(rest)) if np.count_nonzero(label == label[i]) == 1 and not pattern[i, i]]
+    free += [i for i in memoryless if free and np.any(pattern[free, i])]
+    return sorted(rest[i] for i in set(free))
 
 
 def partition(metrics: list, state_names: list, J: np.ndarray) -> tuple:

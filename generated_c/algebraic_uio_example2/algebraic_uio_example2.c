@@ -15,7 +15,7 @@
 #define ALGEBRAIC_UIO_EXAMPLE2_SZ_ARG 4
 #define ALGEBRAIC_UIO_EXAMPLE2_SZ_RES 3
 #define ALGEBRAIC_UIO_EXAMPLE2_SZ_IW 1
-#define ALGEBRAIC_UIO_EXAMPLE2_SZ_W 67
+#define ALGEBRAIC_UIO_EXAMPLE2_SZ_W 68
 
 void algebraic_uio_example2_init(algebraic_uio_example2_state *s)
 {
@@ -26,12 +26,14 @@ void algebraic_uio_example2_init(algebraic_uio_example2_state *s)
     s->hosmd_y_x1_d3 = 0.0;
     s->hosmd_y_x1_d4 = 0.0;
     s->hosmd_y_x1_d5 = 0.0;
+    s->held_y_x1 = 0.0;
     s->hosmd_rho_d0 = 0.0;
     s->hosmd_rho_d1 = 0.0;
     s->hosmd_rho_d2 = 0.0;
     s->hosmd_rho_d3 = 0.0;
     s->hosmd_rho_d4 = 0.0;
     s->hosmd_rho_d5 = 0.0;
+    s->held_rho = 0.0;
     s->x1 = 0.0;
     s->x2 = 0.0;
     s->d = 0.0;
@@ -106,12 +108,12 @@ void algebraic_uio_example2_run_flat(double *state, const double *inputs, size_t
         if (((nonfinite_bit(&input[0]) | nonfinite_bit(&input[1])) >> 63) != 0u) {
             /* a NaN or infinite input: the state is held and the outputs repeat it */
             for (i = 0; i < ALGEBRAIC_UIO_EXAMPLE2_N_OUTPUT; ++i) {
-                out[i] = state[i + 13];
+                out[i] = state[i + 15];
             }
             status[k] = (algebraic_uio_example2_status)ALGEBRAIC_UIO_EXAMPLE2_NONFINITE_INPUT;
             continue;
         }
-        if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2]) | nonfinite_bit(&next[3]) | nonfinite_bit(&next[4]) | nonfinite_bit(&next[5]) | nonfinite_bit(&next[6]) | nonfinite_bit(&next[7]) | nonfinite_bit(&next[8]) | nonfinite_bit(&next[9]) | nonfinite_bit(&next[10]) | nonfinite_bit(&next[11]) | nonfinite_bit(&next[12]) | nonfinite_bit(&next[13]) | nonfinite_bit(&next[14]) | nonfinite_bit(&next[15])) >> 63) != 0u)) {
+        if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2]) | nonfinite_bit(&next[3]) | nonfinite_bit(&next[4]) | nonfinite_bit(&next[5]) | nonfinite_bit(&next[6]) | nonfinite_bit(&next[7]) | nonfinite_bit(&next[8]) | nonfinite_bit(&next[9]) | nonfinite_bit(&next[10]) | nonfinite_bit(&next[11]) | nonfinite_bit(&next[12]) | nonfinite_bit(&next[13]) | nonfinite_bit(&next[14]) | nonfinite_bit(&next[15]) | nonfinite_bit(&next[16]) | nonfinite_bit(&next[17])) >> 63) != 0u)) {
             status[k] = (algebraic_uio_example2_status)ALGEBRAIC_UIO_EXAMPLE2_NUMERICAL_FAILURE;
         } else {
             status[k] = (algebraic_uio_example2_status)ALGEBRAIC_UIO_EXAMPLE2_OK;
@@ -135,7 +137,7 @@ void algebraic_uio_example2_run_flat(double *state, const double *inputs, size_t
             state[i] = next[i];
         }
         for (i = 0; i < ALGEBRAIC_UIO_EXAMPLE2_N_OUTPUT; ++i) {
-            out[i] = state[i + 13];
+            out[i] = state[i + 15];
         }
     }
 }
@@ -160,15 +162,17 @@ algebraic_uio_example2_status algebraic_uio_example2_step(algebraic_uio_example2
     state[4] = s->hosmd_y_x1_d3;
     state[5] = s->hosmd_y_x1_d4;
     state[6] = s->hosmd_y_x1_d5;
-    state[7] = s->hosmd_rho_d0;
-    state[8] = s->hosmd_rho_d1;
-    state[9] = s->hosmd_rho_d2;
-    state[10] = s->hosmd_rho_d3;
-    state[11] = s->hosmd_rho_d4;
-    state[12] = s->hosmd_rho_d5;
-    state[13] = s->x1;
-    state[14] = s->x2;
-    state[15] = s->d;
+    state[7] = s->held_y_x1;
+    state[8] = s->hosmd_rho_d0;
+    state[9] = s->hosmd_rho_d1;
+    state[10] = s->hosmd_rho_d2;
+    state[11] = s->hosmd_rho_d3;
+    state[12] = s->hosmd_rho_d4;
+    state[13] = s->hosmd_rho_d5;
+    state[14] = s->held_rho;
+    state[15] = s->x1;
+    state[16] = s->x2;
+    state[17] = s->d;
     input[0] = in->y_x1;
     input[1] = in->rho;
     status = algebraic_uio_example2_step_flat(state, input, flat_out);
@@ -179,15 +183,17 @@ algebraic_uio_example2_status algebraic_uio_example2_step(algebraic_uio_example2
     s->hosmd_y_x1_d3 = state[4];
     s->hosmd_y_x1_d4 = state[5];
     s->hosmd_y_x1_d5 = state[6];
-    s->hosmd_rho_d0 = state[7];
-    s->hosmd_rho_d1 = state[8];
-    s->hosmd_rho_d2 = state[9];
-    s->hosmd_rho_d3 = state[10];
-    s->hosmd_rho_d4 = state[11];
-    s->hosmd_rho_d5 = state[12];
-    s->x1 = state[13];
-    s->x2 = state[14];
-    s->d = state[15];
+    s->held_y_x1 = state[7];
+    s->hosmd_rho_d0 = state[8];
+    s->hosmd_rho_d1 = state[9];
+    s->hosmd_rho_d2 = state[10];
+    s->hosmd_rho_d3 = state[11];
+    s->hosmd_rho_d4 = state[12];
+    s->hosmd_rho_d5 = state[13];
+    s->held_rho = state[14];
+    s->x1 = state[15];
+    s->x2 = state[16];
+    s->d = state[17];
     out->x1 = flat_out[0];
     out->x2 = flat_out[1];
     out->d = flat_out[2];

@@ -22,7 +22,7 @@ extern "C" {
  * Reentrant: all state is in algebraic_uio_example2_state; no globals, no malloc.
  */
 
-#define ALGEBRAIC_UIO_EXAMPLE2_N_STATE 16
+#define ALGEBRAIC_UIO_EXAMPLE2_N_STATE 18
 #define ALGEBRAIC_UIO_EXAMPLE2_N_INPUT 2
 #define ALGEBRAIC_UIO_EXAMPLE2_N_OUTPUT 3
 #define ALGEBRAIC_UIO_EXAMPLE2_SAMPLE_TIME 0.001
@@ -35,7 +35,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of algebraic_uio_example2_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define ALGEBRAIC_UIO_EXAMPLE2_DESIGN_HASH "94b204aa697f023ac01e5b1b9d135bc9c6fa4599730994edc69c2bf701bf9016"
+#define ALGEBRAIC_UIO_EXAMPLE2_DESIGN_HASH "2b811c4121765fd172121992b634c918ab1021ac3a75fdf91ddd9ed8d64a8f9a"
 
 /* Status bits returned by algebraic_uio_example2_step; a sample's status is their OR (algebraic_uio_example2_status). */
 typedef enum {
@@ -61,18 +61,20 @@ typedef int algebraic_uio_example2_status;
 
 typedef struct {
     double primed; /* 1 once the differentiators are started, else 0 */
-    double hosmd_y_x1_d0; /* differentiator of y_x1: derivative 0 at the next sample time (Taylor state) */
+    double hosmd_y_x1_d0; /* differentiator of y_x1: its value at the next sample time less held_y_x1 (error coordinates) */
     double hosmd_y_x1_d1; /* differentiator of y_x1: derivative 1 at the next sample time (Taylor state) */
     double hosmd_y_x1_d2; /* differentiator of y_x1: derivative 2 at the next sample time (Taylor state) */
     double hosmd_y_x1_d3; /* differentiator of y_x1: derivative 3 at the next sample time (Taylor state) */
     double hosmd_y_x1_d4; /* differentiator of y_x1: derivative 4 at the next sample time (Taylor state) */
     double hosmd_y_x1_d5; /* differentiator of y_x1: derivative 5 at the next sample time (Taylor state) */
-    double hosmd_rho_d0; /* differentiator of rho: derivative 0 at the next sample time (Taylor state) */
+    double held_y_x1; /* the last sample the differentiator of y_x1 consumed */
+    double hosmd_rho_d0; /* differentiator of rho: its value at the next sample time less held_rho (error coordinates) */
     double hosmd_rho_d1; /* differentiator of rho: derivative 1 at the next sample time (Taylor state) */
     double hosmd_rho_d2; /* differentiator of rho: derivative 2 at the next sample time (Taylor state) */
     double hosmd_rho_d3; /* differentiator of rho: derivative 3 at the next sample time (Taylor state) */
     double hosmd_rho_d4; /* differentiator of rho: derivative 4 at the next sample time (Taylor state) */
     double hosmd_rho_d5; /* differentiator of rho: derivative 5 at the next sample time (Taylor state) */
+    double held_rho; /* the last sample the differentiator of rho consumed */
     double x1; /* estimate of x1 [-] */
     double x2; /* estimate of x2 [-] */
     double d; /* estimate of d [-] */

@@ -15,7 +15,7 @@
 #define ALGEBRAIC_UIO_LATERAL_FORCE_SZ_ARG 4
 #define ALGEBRAIC_UIO_LATERAL_FORCE_SZ_RES 3
 #define ALGEBRAIC_UIO_LATERAL_FORCE_SZ_IW 1
-#define ALGEBRAIC_UIO_LATERAL_FORCE_SZ_W 127
+#define ALGEBRAIC_UIO_LATERAL_FORCE_SZ_W 128
 
 void algebraic_uio_lateral_force_init(algebraic_uio_lateral_force_state *s)
 {
@@ -24,11 +24,13 @@ void algebraic_uio_lateral_force_init(algebraic_uio_lateral_force_state *s)
     s->hosmd_y_v_y_d1 = 0.0;
     s->hosmd_y_v_y_d2 = 0.0;
     s->hosmd_y_v_y_d3 = 0.0;
+    s->held_y_v_y = 0.0;
     s->hosmd_v_x_d0 = 0.0;
     s->hosmd_v_x_d1 = 0.0;
     s->hosmd_v_x_d2 = 0.0;
     s->hosmd_v_x_d3 = 0.0;
     s->hosmd_v_x_d4 = 0.0;
+    s->held_v_x = 0.0;
     s->aux_v_y = 0.0;
     s->aux_r = 0.0;
     s->aux_F_yr = 0.0;
@@ -112,12 +114,12 @@ void algebraic_uio_lateral_force_run_flat(double *state, const double *inputs, s
         if (((nonfinite_bit(&input[0]) | nonfinite_bit(&input[1]) | nonfinite_bit(&input[2])) >> 63) != 0u) {
             /* a NaN or infinite input: the state is held and the outputs repeat it */
             for (i = 0; i < ALGEBRAIC_UIO_LATERAL_FORCE_N_OUTPUT; ++i) {
-                out[i] = state[i + 18];
+                out[i] = state[i + 20];
             }
             status[k] = (algebraic_uio_lateral_force_status)ALGEBRAIC_UIO_LATERAL_FORCE_NONFINITE_INPUT;
             continue;
         }
-        if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2]) | nonfinite_bit(&next[3]) | nonfinite_bit(&next[4]) | nonfinite_bit(&next[5]) | nonfinite_bit(&next[6]) | nonfinite_bit(&next[7]) | nonfinite_bit(&next[8]) | nonfinite_bit(&next[9]) | nonfinite_bit(&next[10]) | nonfinite_bit(&next[11]) | nonfinite_bit(&next[12]) | nonfinite_bit(&next[13]) | nonfinite_bit(&next[14]) | nonfinite_bit(&next[15]) | nonfinite_bit(&next[16]) | nonfinite_bit(&next[17]) | nonfinite_bit(&next[18]) | nonfinite_bit(&next[19]) | nonfinite_bit(&next[20]) | nonfinite_bit(&next[21])) >> 63) != 0u)) {
+        if ((failed != 0) || (((nonfinite_bit(&next[0]) | nonfinite_bit(&next[1]) | nonfinite_bit(&next[2]) | nonfinite_bit(&next[3]) | nonfinite_bit(&next[4]) | nonfinite_bit(&next[5]) | nonfinite_bit(&next[6]) | nonfinite_bit(&next[7]) | nonfinite_bit(&next[8]) | nonfinite_bit(&next[9]) | nonfinite_bit(&next[10]) | nonfinite_bit(&next[11]) | nonfinite_bit(&next[12]) | nonfinite_bit(&next[13]) | nonfinite_bit(&next[14]) | nonfinite_bit(&next[15]) | nonfinite_bit(&next[16]) | nonfinite_bit(&next[17]) | nonfinite_bit(&next[18]) | nonfinite_bit(&next[19]) | nonfinite_bit(&next[20]) | nonfinite_bit(&next[21]) | nonfinite_bit(&next[22]) | nonfinite_bit(&next[23])) >> 63) != 0u)) {
             status[k] = (algebraic_uio_lateral_force_status)ALGEBRAIC_UIO_LATERAL_FORCE_NUMERICAL_FAILURE;
         } else {
             status[k] = (algebraic_uio_lateral_force_status)ALGEBRAIC_UIO_LATERAL_FORCE_OK;
@@ -141,7 +143,7 @@ void algebraic_uio_lateral_force_run_flat(double *state, const double *inputs, s
             state[i] = next[i];
         }
         for (i = 0; i < ALGEBRAIC_UIO_LATERAL_FORCE_N_OUTPUT; ++i) {
-            out[i] = state[i + 18];
+            out[i] = state[i + 20];
         }
     }
 }
@@ -164,23 +166,25 @@ algebraic_uio_lateral_force_status algebraic_uio_lateral_force_step(algebraic_ui
     state[2] = s->hosmd_y_v_y_d1;
     state[3] = s->hosmd_y_v_y_d2;
     state[4] = s->hosmd_y_v_y_d3;
-    state[5] = s->hosmd_v_x_d0;
-    state[6] = s->hosmd_v_x_d1;
-    state[7] = s->hosmd_v_x_d2;
-    state[8] = s->hosmd_v_x_d3;
-    state[9] = s->hosmd_v_x_d4;
-    state[10] = s->aux_v_y;
-    state[11] = s->aux_r;
-    state[12] = s->aux_F_yr;
-    state[13] = s->u_prev_a_y;
-    state[14] = s->y_prev_v_y;
-    state[15] = s->zhat_v_y;
-    state[16] = s->zhat_r;
-    state[17] = s->zhat_F_yr;
-    state[18] = s->v_y;
-    state[19] = s->r;
-    state[20] = s->F_yr;
-    state[21] = s->xi;
+    state[5] = s->held_y_v_y;
+    state[6] = s->hosmd_v_x_d0;
+    state[7] = s->hosmd_v_x_d1;
+    state[8] = s->hosmd_v_x_d2;
+    state[9] = s->hosmd_v_x_d3;
+    state[10] = s->hosmd_v_x_d4;
+    state[11] = s->held_v_x;
+    state[12] = s->aux_v_y;
+    state[13] = s->aux_r;
+    state[14] = s->aux_F_yr;
+    state[15] = s->u_prev_a_y;
+    state[16] = s->y_prev_v_y;
+    state[17] = s->zhat_v_y;
+    state[18] = s->zhat_r;
+    state[19] = s->zhat_F_yr;
+    state[20] = s->v_y;
+    state[21] = s->r;
+    state[22] = s->F_yr;
+    state[23] = s->xi;
     input[0] = in->a_y;
     input[1] = in->y_v_y;
     input[2] = in->v_x;
@@ -190,23 +194,25 @@ algebraic_uio_lateral_force_status algebraic_uio_lateral_force_step(algebraic_ui
     s->hosmd_y_v_y_d1 = state[2];
     s->hosmd_y_v_y_d2 = state[3];
     s->hosmd_y_v_y_d3 = state[4];
-    s->hosmd_v_x_d0 = state[5];
-    s->hosmd_v_x_d1 = state[6];
-    s->hosmd_v_x_d2 = state[7];
-    s->hosmd_v_x_d3 = state[8];
-    s->hosmd_v_x_d4 = state[9];
-    s->aux_v_y = state[10];
-    s->aux_r = state[11];
-    s->aux_F_yr = state[12];
-    s->u_prev_a_y = state[13];
-    s->y_prev_v_y = state[14];
-    s->zhat_v_y = state[15];
-    s->zhat_r = state[16];
-    s->zhat_F_yr = state[17];
-    s->v_y = state[18];
-    s->r = state[19];
-    s->F_yr = state[20];
-    s->xi = state[21];
+    s->held_y_v_y = state[5];
+    s->hosmd_v_x_d0 = state[6];
+    s->hosmd_v_x_d1 = state[7];
+    s->hosmd_v_x_d2 = state[8];
+    s->hosmd_v_x_d3 = state[9];
+    s->hosmd_v_x_d4 = state[10];
+    s->held_v_x = state[11];
+    s->aux_v_y = state[12];
+    s->aux_r = state[13];
+    s->aux_F_yr = state[14];
+    s->u_prev_a_y = state[15];
+    s->y_prev_v_y = state[16];
+    s->zhat_v_y = state[17];
+    s->zhat_r = state[18];
+    s->zhat_F_yr = state[19];
+    s->v_y = state[20];
+    s->r = state[21];
+    s->F_yr = state[22];
+    s->xi = state[23];
     out->v_y = flat_out[0];
     out->r = flat_out[1];
     out->F_yr = flat_out[2];

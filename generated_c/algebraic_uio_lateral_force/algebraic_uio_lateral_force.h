@@ -22,7 +22,7 @@ extern "C" {
  * Reentrant: all state is in algebraic_uio_lateral_force_state; no globals, no malloc.
  */
 
-#define ALGEBRAIC_UIO_LATERAL_FORCE_N_STATE 22
+#define ALGEBRAIC_UIO_LATERAL_FORCE_N_STATE 24
 #define ALGEBRAIC_UIO_LATERAL_FORCE_N_INPUT 3
 #define ALGEBRAIC_UIO_LATERAL_FORCE_N_OUTPUT 4
 #define ALGEBRAIC_UIO_LATERAL_FORCE_SAMPLE_TIME 0.01
@@ -38,7 +38,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of algebraic_uio_lateral_force_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define ALGEBRAIC_UIO_LATERAL_FORCE_DESIGN_HASH "3f2333a6f214f50f03132ef31b3921475598a003945bf858752d7518caad9ffb"
+#define ALGEBRAIC_UIO_LATERAL_FORCE_DESIGN_HASH "9bb16e320dd1186fc1bd8ab097ff6e5badbe86083bc90e1583e642e4d630e2b6"
 
 /* Status bits returned by algebraic_uio_lateral_force_step; a sample's status is their OR (algebraic_uio_lateral_force_status). */
 typedef enum {
@@ -64,15 +64,17 @@ typedef int algebraic_uio_lateral_force_status;
 
 typedef struct {
     double primed; /* 1 once the differentiators are started, else 0 */
-    double hosmd_y_v_y_d0; /* differentiator of y_v_y: derivative 0 at the next sample time (Taylor state) */
+    double hosmd_y_v_y_d0; /* differentiator of y_v_y: its value at the next sample time less held_y_v_y (error coordinates) */
     double hosmd_y_v_y_d1; /* differentiator of y_v_y: derivative 1 at the next sample time (Taylor state) */
     double hosmd_y_v_y_d2; /* differentiator of y_v_y: derivative 2 at the next sample time (Taylor state) */
     double hosmd_y_v_y_d3; /* differentiator of y_v_y: derivative 3 at the next sample time (Taylor state) */
-    double hosmd_v_x_d0; /* differentiator of v_x: derivative 0 at the next sample time (Taylor state) */
+    double held_y_v_y; /* the last sample the differentiator of y_v_y consumed */
+    double hosmd_v_x_d0; /* differentiator of v_x: its value at the next sample time less held_v_x (error coordinates) */
     double hosmd_v_x_d1; /* differentiator of v_x: derivative 1 at the next sample time (Taylor state) */
     double hosmd_v_x_d2; /* differentiator of v_x: derivative 2 at the next sample time (Taylor state) */
     double hosmd_v_x_d3; /* differentiator of v_x: derivative 3 at the next sample time (Taylor state) */
     double hosmd_v_x_d4; /* differentiator of v_x: derivative 4 at the next sample time (Taylor state) */
+    double held_v_x; /* the last sample the differentiator of v_x consumed */
     double aux_v_y; /* auxiliary system (20) s' = A s + B u (entry 0) */
     double aux_r; /* auxiliary system (20) s' = A s + B u (entry 1) */
     double aux_F_yr; /* auxiliary system (20) s' = A s + B u (entry 2) */

@@ -7,9 +7,14 @@ B-stability, auxiliary system) and returns an :class:`AlgebraicUIOBuild`, which 
 
 The step's state vector (names from :attr:`AlgebraicUIOBuild.state_names`)::
 
-    [primed, HOSMD of each output (k_i + 1), HOSMD of each scheduling signal (k + 1),
-     (known inputs only:) s of (20) (n), u of the previous sample (n_u), z_hat (n),
-     x_hat (n), d_hat (n_d)]
+    [primed, HOSMD of each output (k_i + 1) and its held sample (1), HOSMD of each scheduling
+     signal (k + 1) and its held sample (1), (known inputs only:) s of (20) (n), u of the previous
+     sample (n_u), z_hat (n), x_hat (n), d_hat (n_d)]
+
+The differentiators run in error coordinates (:func:`codegen.representation.differentiators.hosmd_step_sx`):
+the first entry of each is its estimate of the signal less the sample it consumed last, which is
+held beside it, so that in float32 the tracking error sigma is formed from small quantities
+(the estimate itself is held + that entry).
 
 The last n + n_d entries are the outputs: the estimates at the time of the sample just consumed
 (x_hat(t_j), d_hat(t_j)). The first call after init (primed = 0) starts every differentiator at
@@ -106,7 +111,9 @@ class AlgebraicUIOBuild(ObserverBuild):
         out = [("primed", 1, "1 once the differentiators are started, else 0")]
         for name in [f"y_{n}" for n in d.output_names] + [str(s) for s in self.base]:
             k = self.spec(name).order
-            out.append((f"hosmd_{name}", k + 1, f"Levant differentiator of {name}: estimates of its derivatives 0..{k}"))
+            out.append((f"hosmd_{name}", k + 1, f"Levant differentiator of {name}: estimates of its derivatives 0..{k}, "
+                                                f"the 0th less held_{name}"))
+            out.append((f"held_{name}", 1, f"the last sample the differentiator of {name} consumed"))
         if self.nu:
             out.append(("aux", self.lpv.nx, "auxiliary system (20) s' = A s + B u"))
             out.append(("u_prev", self.nu, "known inputs of the previous sample"))
@@ -146,6 +153,8 @@ class AlgebraicUIOBuild(ObserverBuild):
                 names.append("primed")
             elif name.startswith("hosmd_"):
                 names += [f"{name}_d{m}" for m in range(size)]
+            elif name.startswith("held_"):
+                names.append(name)
             elif name == "aux":
                 names += [f"aux_{s}" for s in d.states]
             elif name == "u_prev":
@@ -167,7 +176,9 @@ class AlgebraicUIOBuild(ObserverBuild):
                     state.append({"name": field_name, "doc": f"estimate of {field_name} [{units.get(field_name, '-')}]"})
                 elif name.startswith("hosmd_"):
                     state.append({"name": field_name, "doc": f"differentiator of {name[6:]}: derivative {k} at the next "
-                                                             f"sample time (Taylor state)"})
+                                                             f"sample time (Taylor state)" if k else
+                                                             f"differentiator of {name[6:]}: its value at the next sample "
+                                                             f"time less held_{name[6:]} (error coordinates)"})
                 else:
                     state.append({"name": field_name, "doc": doc + (f" (entry {k})" if size > 1 else "")})
         inputs = ([{"name": str(s), "doc": f"known input [{units.get(str(s), '-')}]"} for s in d.known_inputs]
@@ -331,13 +342,19 @@ def step_casadi(b: AlgebraicUIOBuild, name: str) -> ca.Function:
     zr = []
     for k, sym in enumerate(b.base):
         spec = b.spec(str(sym))
-        start = ca.vertcat(rho[k], ca.SX.zeros(spec.order))
-        zr.append(hosmd_step_sx(spec, pick(z[sl[f"hosmd_{sym}"]], start), rho[k]))
+        # started at (rho, 0, ..., 0): error coordinates 0 from the held sample rho
+        zr.append(hosmd_step_sx(spec, primed * z[sl[f"hosmd_{sym}"]], rho[k], pick(z[sl[f"held_{sym}"]], rho[k])))
         _, e = clamp(rho[k], dec.boxes[sym])
         excess += e
     stages, now = _stage_offsets(h)
 
     est_excess = ca.SX(0)
+
+    def taylor(zn, spec, offset, m, held):
+        """f^(m)(t + offset) of a differentiator in error coordinates: the held sample enters f itself
+        only, added last to the small sum."""
+        small = sum(c * zn[l] for l, c in enumerate(_taylor_coeffs(spec.order, offset, m)) if c != 0.0)
+        return held + small if m == 0 else small
 
     def sched(offset):
         nonlocal est_excess
@@ -345,15 +362,11 @@ def step_casadi(b: AlgebraicUIOBuild, name: str) -> ca.Function:
         for k, sym in enumerate(b.base):
             spec = b.spec(str(sym))
             for m in range(b.sched_orders[sym] + 1):
-                coeff = _taylor_coeffs(spec.order, offset, m)
-                v = sum(c * zr[k][l] for l, c in enumerate(coeff) if c != 0.0)
+                v = taylor(zr[k], spec, offset, m, rho[k])
                 c_, e = clamp(v, dec.boxes[rdeg.derivative_symbol(sym, m)])
                 est_excess += e
                 vals.append(c_)
         return vals
-
-    def taylor(zn, spec, offset, m):
-        return sum(c * zn[l] for l, c in enumerate(_taylor_coeffs(spec.order, offset, m)) if c != 0.0)
 
     stage_vals = [sched(o) for o in stages]
     vals_now = sched(now)
@@ -376,13 +389,12 @@ def step_casadi(b: AlgebraicUIOBuild, name: str) -> ca.Function:
     zy, ynames = [], [f"y_{o}" for o in lpv.definition.output_names]
     for i, nm in enumerate(ynames):
         spec = b.spec(nm)
-        start = ca.vertcat(y_t[i], ca.SX.zeros(spec.order))
-        zy.append(hosmd_step_sx(spec, pick(z[sl[f"hosmd_{nm}"]], start), y_t[i]))
+        zy.append(hosmd_step_sx(spec, primed * z[sl[f"hosmd_{nm}"]], y_t[i], pick(z[sl[f"held_{nm}"]], y_t[i])))
     r = dec.relative_degrees
 
     def outputs_at(offset):
-        Y = ca.vertcat(*[taylor(zy[i], b.spec(ynames[i]), offset, r[i]) for i in range(ny)])
-        yv = ca.vertcat(*[taylor(zy[i], b.spec(ynames[i]), offset, 0) for i in range(ny)])
+        Y = ca.vertcat(*[taylor(zy[i], b.spec(ynames[i]), offset, r[i], y_t[i]) for i in range(ny)])
+        yv = ca.vertcat(*[taylor(zy[i], b.spec(ynames[i]), offset, 0, y_t[i]) for i in range(ny)])
         return Y, yv
 
     def gain(vals):
@@ -401,7 +413,9 @@ def step_casadi(b: AlgebraicUIOBuild, name: str) -> ca.Function:
     Y_now, _ = outputs_at(now)
     d_hat = comp.Ginv(*vals_now) @ (Y_now - comp.Mcal(*vals_now) @ x_new)
     x_hat = x_new + s_new
-    parts = [ca.SX(1.0), *zy, *zr]
+    parts = [ca.SX(1.0)]
+    for zn, held in [*zip(zy, ca.vertsplit(y_t)), *zip(zr, ca.vertsplit(rho))]:
+        parts += [zn, held]
     if nu:
         parts += [s_new, u] + ([y] if b.injection is not None else []) + [x_new]
     z_next = ca.vertcat(*parts, x_hat, d_hat)
@@ -438,8 +452,8 @@ def step_numpy(b: AlgebraicUIOBuild, z, u, y, rho):
     zr = []
     for k, sym in enumerate(b.base):
         spec = b.spec(str(sym))
-        zc = z[sl[f"hosmd_{sym}"]] if primed else spec.initial_state(rho[k])
-        zr.append(hosmd_step_numpy(spec, zc, rho[k]))
+        zc, held = (z[sl[f"hosmd_{sym}"]], z[sl[f"held_{sym}"]][0]) if primed else (np.zeros(spec.n_state), rho[k])
+        zr.append(hosmd_step_numpy(spec, zc, rho[k], held))
         lo, hi = dec.boxes[sym]
         excess += abs(rho[k] - min(max(rho[k], lo), hi))
     stages, now = _stage_offsets(h)
@@ -449,6 +463,7 @@ def step_numpy(b: AlgebraicUIOBuild, z, u, y, rho):
         vals = []
         for k, sym in enumerate(b.base):
             w = _shift_matrix(b.spec(str(sym)).order, offset) @ zr[k]
+            w[0] += rho[k]                         # error coordinates: the value is held + the first entry
             for m in range(b.sched_orders[sym] + 1):
                 lo, hi = dec.boxes[rdeg.derivative_symbol(sym, m)]
                 c = min(max(w[m], lo), hi)
@@ -478,12 +493,13 @@ def step_numpy(b: AlgebraicUIOBuild, z, u, y, rho):
     zy = []
     for i, nm in enumerate(ynames):
         spec = b.spec(nm)
-        zc = z[sl[f"hosmd_{nm}"]] if primed else spec.initial_state(y_t[i])
-        zy.append(hosmd_step_numpy(spec, zc, y_t[i]))
+        zc, held = (z[sl[f"hosmd_{nm}"]], z[sl[f"held_{nm}"]][0]) if primed else (np.zeros(spec.n_state), y_t[i])
+        zy.append(hosmd_step_numpy(spec, zc, y_t[i], held))
     r = dec.relative_degrees
 
     def outputs_at(offset):
-        ws = [_shift_matrix(b.spec(nm).order, offset) @ zy[i] for i, nm in enumerate(ynames)]
+        ws = [_shift_matrix(b.spec(nm).order, offset) @ zy[i] + np.eye(b.spec(nm).n_state)[0] * y_t[i]
+              for i, nm in enumerate(ynames)]
         return np.array([w[r[i]] for i, w in enumerate(ws)]), np.array([w[0] for w in ws])
 
     def gain(vals):
@@ -501,7 +517,7 @@ def step_numpy(b: AlgebraicUIOBuild, z, u, y, rho):
     x_new = _gl2(xs, F, g, h, np) if primed else xs.copy()
     Y_now, _ = outputs_at(now)
     d_hat = comp.Ginv(*vals_now) @ (Y_now - comp.Mcal(*vals_now) @ x_new)
-    parts = [[1.0], *zy, *zr] + ([s_new, u] + ([y] if b.injection is not None else []) + [x_new] if nu else [])
+    parts = [[1.0]] + [p for zn, held in [*zip(zy, y_t), *zip(zr, rho)] for p in (zn, [held])] + ([s_new, u] + ([y] if b.injection is not None else []) + [x_new] if nu else [])
     return np.concatenate([*parts, x_new + s_new, d_hat]), float(excess), 0.0 if primed else 1.0
 
 

@@ -234,7 +234,8 @@ def run(config, scenario_name: str, plant: str = "nominal", duration: float | No
         if not (name.startswith("y_") or name in map(str, b.base)) or result["noise"]:
             continue
         spec = b.spec(name)
-        zs = states[:, b.slices[f"hosmd_{name}"]]
+        zs = states[:, b.slices[f"hosmd_{name}"]].copy()
+        zs[:, 0] += states[:, b.slices[f"held_{name}"]][:, 0]       # error coordinates: the value is held + d0
         # the state after sample j is the Taylor polynomial at t_{j+1}: shift back one sample
         back = np.array([[(-spec.sample_time) ** (l - m) / math.factorial(l - m) if l >= m else 0.0
                           for l in range(spec.order + 1)] for m in range(spec.order + 1)])
