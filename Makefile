@@ -4,7 +4,7 @@
 #   make test-fast  the fast lane: no build, compiler, QEMU, Dask or browser (pytest -m "not slow")
 #   make misra   cppcheck's MISRA C:2012 addon on the generated C, against misra/kernel_deviations.toml
 #   make embedded-tools  cppcheck, arm-none-eabi-gcc, qemu-system-arm (apt-get where available)
-#   make check   reliability suite (hostile input, sanitizers, static facts, determinism, long runs)
+#   make check   reliability suite (hostile input, sanitizers, static facts, determinism) and the long runs
 #   make docs    re-run demo and bench into docs/data/, rewrite the docs' tables, build the site
 #   make generate | build | bench | clean   (bench: also campaign runs/s, 1 and 2 workers, 10,000 runs)
 #   make lock    refresh constraints.txt (exact versions of everything the targets install)
@@ -42,13 +42,15 @@ demo: build
 embedded-tools:
 	sh scripts/install_embedded_tools.sh
 
-# The full suite: every lane. The reliability suite is in it too (make check runs it alone):
-# CI runs make test only, and hostile input, sanitizers and determinism are what a merge must keep.
+# The suite CI runs: everything but the long runs (`long`: 10^7 steps per observer, the random-model
+# acceptance rate, every built-in through analyze; make check runs them). The reliability tests stay in
+# it: CI runs make test only, and hostile input, sanitizers, determinism and a generate killed at every
+# file operation are what a merge must keep.
 # Two workers (pytest-xdist) on a 2-core machine, a test module per worker at a time: module fixtures
 # stay in one process, and the CPU-bound solves and compiles use both cores. The longest modules
 # start first (tests/durations.json, in the order tests/conftest.py gives; xdist's own reorder is off).
 test: build embedded-tools
-	$(BIN)/python -m pytest -q -n auto --dist loadfile --no-loadscope-reorder tests
+	$(BIN)/python -m pytest -q -m "not long" -n auto --dist loadfile --no-loadscope-reorder tests
 
 # The fast lane: the venv only (no generate, no build): what a developer runs while working, on two
 # workers like make test. A test that needs a compiled extension, a compiler, QEMU, Dask, mkdocs or a
@@ -59,8 +61,8 @@ test-fast: $(STAMP)
 misra: generate embedded-tools
 	$(BIN)/python -m codegen.targets.misra
 
-check: build
-	$(BIN)/python -m pytest -q -m reliability tests
+check: build embedded-tools
+	$(BIN)/python -m pytest -q -m "reliability or long" -n auto --dist loadfile --no-loadscope-reorder tests
 
 bench: build
 	$(PIP) install --quiet $(PIN) --no-build-isolation -e '.[bench]'

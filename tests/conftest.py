@@ -83,11 +83,13 @@ def published():
 # `make test-fast` runs `pytest -m "not slow"`: no generate, no build, no compiler, QEMU, Dask, mkdocs
 # or browser. A test that needs one of them (a compiled extension above all) carries
 # @pytest.mark.slow, or its module `pytestmark = pytest.mark.slow`, with the reason beside it.
-# The reliability suite (make check) is slow by definition.
+# The reliability suite and the long runs (make check) are slow by definition; `make test` leaves
+# out the long runs only (`-m "not long"`).
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
-        if item.get_closest_marker("reliability") is not None and item.get_closest_marker("slow") is None:
+        if (item.get_closest_marker("reliability") is not None or item.get_closest_marker("long") is not None) \
+                and item.get_closest_marker("slow") is None:
             item.add_marker(pytest.mark.slow)
     # the longest modules first (tests/durations.json, codegen/tools/durations.py): with a module per
     # xdist worker at a time, a long module started last runs alone at the end; the order within a

@@ -193,7 +193,7 @@ def test_a_builtin_observer_ranks_its_own_family_first(name):
             assert trial.figures and all(np.isfinite(v) for v, _, _ in trial.figures.values())
 
 
-@pytest.mark.reliability
+@pytest.mark.long           # the breadth run: the representatives above stay in make test
 @pytest.mark.parametrize("name", [n for n in observers.names() if n not in REPRESENTATIVES])
 def test_every_other_builtin_observer_ranks_its_own_family_first(name):
     """The built-ins not above (their other families' trials are mostly those of a sibling observer on

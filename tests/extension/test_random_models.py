@@ -108,7 +108,7 @@ LONG_DRAWS = {"linf_uio": 6, "ts_fuzzy_uio": 6, "switched_pi": 6, "algebraic_uio
 
 
 @pytest.mark.slow
-@pytest.mark.reliability    # a long run: every family, several draws each
+@pytest.mark.long           # every family, several draws each: about 4 min of CPU
 def test_acceptance_rate_and_every_designed_model_conforms(tmp_path):
     """Most draws design (a refusal only as a typed one-line error) and every designed one conforms."""
     outcomes = []

@@ -1,5 +1,6 @@
-"""`make check`: every generated observer against hostile input, sanitizers, static facts,
-determinism and long runs. Parametrized over generated_c/, so new observers are covered."""
+"""Every generated observer against hostile input, sanitizers, static facts, determinism (in
+`make test`: what every merge must keep) and long runs (`long`: `make check` only). Parametrized
+over generated_c/, so new observers are covered."""
 import hashlib
 import os
 import re
@@ -271,6 +272,7 @@ def realistic_inputs(name, obs):
                                           simulate.add_sensor_noise(truth, common.SENSOR_NOISE, seed=5))
 
 
+@pytest.mark.long       # 10^7 steps twice per observer: about 5 min of CPU for all
 @pytest.mark.parametrize("name", NAMES)
 def test_long_run(name):
     """10^7 steps of a realistic trajectory: no flags (but the first sample's WARMING_UP of observers
