@@ -30,7 +30,7 @@ numbers), and the step adds ``dz + c`` to the state ``z`` by TwoSum, keeping the
 that addition in a compensation entry ``c`` (``NAME_comp``, the first entries of the float32 state
 vector). The estimate the step carries is then ``z + c``, not ``z`` rounded to float: the half-ulp
 storage rounding of every sample is no longer accumulated. The outputs are ``z`` (within ``|c|``
-of it). What it costs: one more float of state and five additions per certified entry and
+of it). What it costs: per certified entry, one more float of state and seven additions per
 sample. Only a family whose step has such an increment form offers it
 (:meth:`ObserverBuild.increment_function`); another is a ``ConfigurationError``.
 
