@@ -22,7 +22,7 @@ from ..design import lock as design_lock, sources
 from .. import families, pipeline
 from ..project import observer_file as observers
 from ..project import outputs
-from ..errors import GenerationError, UiogenError
+from ..errors import ConfigurationError, GenerationError, UiogenError
 from ..families import ObserverBuild
 from .toolchain import TEMPLATES, casadi_sources, render_template
 
@@ -106,9 +106,12 @@ def render(b: ObserverBuild, precision: str = "double", lock_text: str | None = 
         lock_text = design_lock.path(b.config).read_text()
     name = b.name + fp["suffix"]
     f = b.step_function()
+    kernel, compensated = f, []
+    if precision == "float32" and b.config.precision.accumulation == "compensated":
+        kernel, compensated = compensated_kernel(b)
     if precision == "float32":
         from .floatgen import casadi_float_sources
-        kernel_c, kernel_h = casadi_float_sources(f)
+        kernel_c, kernel_h = casadi_float_sources(kernel)
     else:
         kernel_c, kernel_h = casadi_sources(f)
     if fp["suffix"]:
@@ -119,6 +122,12 @@ def render(b: ObserverBuild, precision: str = "double", lock_text: str | None = 
         what = what[:-1] + f", {fp['real']} (casadi_real) variant."
     kernel_c, kernel_h = banner(b, what) + "\n" + kernel_c, banner(b, what) + "\n" + kernel_h
     state, inputs, outputs = signal_fields(b, f)
+    n_comp = len(compensated)
+    comp_index = [[i, list(b.state_names).index(s) + n_comp] for i, s in enumerate(compensated)]
+    if compensated:
+        # the compensation entries first, so that the outputs stay the last entries of the state
+        state = [{"name": f"{s}_comp", "doc": f"rounding error carried for {s} (its estimate is {s} + {s}_comp)"}
+                 for s in compensated] + state
     nu, ny = b.nu, b.ny
     notes = b.step_notes()
     api = f"C API of observer {b.name}." if not fp["suffix"] else f"C API of observer {b.name}, {fp['real']} variant."
@@ -130,12 +139,13 @@ def render(b: ObserverBuild, precision: str = "double", lock_text: str | None = 
         "clamp_doc": notes.clamp, "warmup_doc": notes.warmup, "has_warmup": int(f.n_out()) > 2,
         "state": state, "inputs": inputs, "outputs": outputs, "outputs_are_state": outputs is state,
         "output_offset": len(state) - len(outputs),
+        "n_comp": n_comp, "comp_index": comp_index, "n_kernel_state": len(state) - n_comp,
         "scheduling": [{"name": n, "min": repr(lo), "max": repr(hi), "derived": derived}
                        for n, lo, hi, derived in b.scheduling_boxes()],
         "derived_inputs": b.derived_input_docs(),
         "offset_u": 0, "offset_y": nu, "offset_rho": nu + ny,
-        "sz_arg": max(int(f.sz_arg()), 1), "sz_res": max(int(f.sz_res()), 1),
-        "sz_iw": max(int(f.sz_iw()), 1), "sz_w": max(int(f.sz_w()), 1),
+        "sz_arg": max(int(kernel.sz_arg()), 1), "sz_res": max(int(kernel.sz_res()), 1),
+        "sz_iw": max(int(kernel.sz_iw()), 1), "sz_w": max(int(kernel.sz_w()), 1),
         "design_hash": design_hash(lock_text), "lock_name": design_lock.path(b.config).name,
     }
     return {
@@ -146,6 +156,18 @@ def render(b: ObserverBuild, precision: str = "double", lock_text: str | None = 
         f"{name}_example.c": render_template("observer.example.c.j2", **ctx),
         "CMakeLists.txt": render_template("observer.CMakeLists.txt.j2", **ctx),
     }
+
+
+def compensated_kernel(b: ObserverBuild) -> tuple:
+    """(the step with the increment ``dz`` of the compensated entries as its fourth output, those
+    entries' names) for ``[precision] accumulation = "compensated"`` (float32 only)."""
+    pair = b.increment_function()
+    if pair is None:
+        source = b.config.source or f"{b.name}.toml"
+        raise ConfigurationError(f"{source}: [precision] accumulation = \"compensated\": the step of family "
+                                 f"{b.config.family!r} has no increment form to compensate; allowed here: \"plain\"",
+                                 source=source, section="precision", key="accumulation", allowed="plain")
+    return pair
 
 
 def _fields(b: ObserverBuild, what: str, names: list, docs: list) -> list:

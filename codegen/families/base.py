@@ -119,6 +119,13 @@ class ObserverBuild(abc.ABC):
         float32 step's deviation (:mod:`codegen.targets.float32`); [] for none."""
         return []
 
+    def increment_function(self):
+        """(the step with a fourth output ``dz``, the increment of some state entries computed at
+        its own scale, not as ``z_next - z``; those entries' names), or None: what a compensated
+        float32 update adds to the state by TwoSum (:mod:`codegen.project.precision`,
+        ``accumulation``). Its first three outputs are :meth:`step_function`'s."""
+        return None
+
     def output_lags(self) -> dict:
         """{output name: samples} by which an estimate lags the sample it is returned with (a
         step whose unknown-input estimate needs the next output returns the previous one)."""

@@ -10,6 +10,7 @@ physical: a declared fraction of what the sensors' noise already does to the est
     noise = { y_r = 8.7e-4 }             # input -> standard deviation of its sensor noise [its unit]
     tolerance = { T_d = 0.05 }           # output -> absolute tolerance [its unit], instead of the rule
     uncertified_states = "measured"      # or "refuse" (the default), see below
+    accumulation = "compensated"         # or "plain" (the default), see below
 
 The sensor noise of an input not in ``noise`` is the family's validation noise for that signal
 (:meth:`Family.sensor_noise`, a measured ``y_NAME`` or a raw input ``NAME``); an input with
@@ -21,6 +22,17 @@ they converge in finite time but do not contract, so no norm bounds how far two 
 apart) has no bound, only its measured deviation. By default such an observer's float build is
 refused; ``uncertified_states = "measured"`` accepts it on the measured deviation of that state
 (every output it reaches is still bounded from there, and the report says which are).
+
+``accumulation = "compensated"`` changes the float32 C, not the design (and not the double C): the
+kernel also returns the increment ``dz`` of the certified state as the step forms it (the
+Gauss-Legendre step's ``h (b1 K1 + b2 K2)``, at its own scale: never a difference of state-sized
+numbers), and the step adds ``dz + c`` to the state ``z`` by TwoSum, keeping the rounding error of
+that addition in a compensation entry ``c`` (``NAME_comp``, the first entries of the float32 state
+vector). The estimate the step carries is then ``z + c``, not ``z`` rounded to float: the half-ulp
+storage rounding of every sample is no longer accumulated. The outputs are ``z`` (within ``|c|``
+of it). What it costs: per certified entry, one more float of state and seven additions per
+sample. Only a family whose step has such an increment form offers it
+(:meth:`ObserverBuild.increment_function`); another is a ``ConfigurationError``.
 
 Not part of the design: editing this table never re-solves.
 """
@@ -48,6 +60,9 @@ class PrecisionSettings:
     uncertified_states: str = setting("refuse", choices=("refuse", "measured"),
                                       doc="state with own dynamics no certificate covers (a sliding-mode "
                                           "differentiator): refuse the float build, or take its measured deviation")
+    accumulation: str = setting("plain", choices=("plain", "compensated"),
+                                doc="the float32 update of the certified state: z + dz rounded (plain), or dz added "
+                                    "by TwoSum with its rounding error carried in compensation entries of the state")
 
 
 def parse(table, source: str) -> PrecisionSettings:

@@ -129,6 +129,7 @@ def test_a_tolerance_below_the_bound_is_refused_with_the_margin_and_the_option(t
     ({"fraction": 2.0}, r"\[precision\] fraction = 2\.0: must be a finite number in \(0, 1\]"),
     ({"noise": {"y_r": -1.0}}, r"\[precision\.noise\] y_r = -1\.0: must be a finite number > 0"),
     ({"uncertified_states": "ignore"}, r"uncertified_states = \"ignore\": must be one of \"refuse\", \"measured\""),
+    ({"accumulation": "kahan"}, r"accumulation = \"kahan\": must be one of \"plain\", \"compensated\""),
     ({"tolerances": {}}, r"unknown \[precision\] keys \['tolerances'\] \(did you mean 'tolerance'\?\)"),
 ])
 def test_bad_precision_tables_are_typed_errors_naming_the_file_and_key(table, match):
@@ -216,7 +217,8 @@ def test_algebraic_uio_differentiators_keep_their_digits_in_float32(tmp_path):
     a differentiator's second derivative deviates from the double run on the same (float-rounded)
     inputs by its own rounding only: rms 1.0e-4 (y_x1) and 2.2e-5 (rho) where the Taylor form's
     z_0 - y lost 4.4e-3 and 3.6e-3. Through the exact coupling, x2's bound falls from 2.24e-4 to
-    1.26e-4 (tolerance 1.03e-4: still refused, on the rounding of the certified states themselves)."""
+    1.26e-4 (tolerance 1.03e-4), what is left being the rounding of the certified states themselves
+    (the compensated update below removes it)."""
     name = "algebraic_uio_example1"
     config = observers.get(name)
     build_extension(name)
@@ -224,7 +226,8 @@ def test_algebraic_uio_differentiators_keep_their_digits_in_float32(tmp_path):
     fobs = precision.load_float(name, tmp_path / "f32")
     inputs = precision.scenario_inputs(config, obs)["paper"]
     z_r, status_r = precision.double_states(obs, inputs.astype(np.float32).astype(np.float64))
-    z_f, status_f = fobs.states(inputs)
+    states_f, status_f = fobs.states(inputs)
+    _, z_f = precision.own_state(fobs, states_f)          # the observer's entries, past the _comp ones
     assert np.array_equal(status_r, status_f)
     names = list(pipeline.build(config).state_names)
     for entry, measured in (("hosmd_y_x1_d2", 1.0e-4), ("hosmd_rho_d2", 2.2e-5)):
@@ -236,3 +239,44 @@ def test_algebraic_uio_differentiators_keep_their_digits_in_float32(tmp_path):
     assert {"held_y_x1", "held_rho", "hosmd_y_x1_d0"} <= set(paper["measured_entries"])
     x2 = paper["signals"]["x2"]
     assert x2["deviation"] <= x2["bound"] <= 1.6e-4          # 2.24e-4 in Taylor coordinates
+
+
+def test_compensated_update_carries_the_storage_rounding_of_the_certified_state(tmp_path):
+    """algebraic_uio_example1 asks for [precision] accumulation = "compensated": its float32 step adds
+    the Gauss step's increment h (b1 K1 + b2 K2), formed at its own scale, to x1 and x2 by TwoSum and
+    carries the rounding error in x1_comp and x2_comp (the first entries of the float state). The
+    recursion runs on z + c, the outputs' bounds add |c|. Measured on the paper scenario: the
+    one-sample error of x2 rms 1.61e-8 -> 8.4e-9 (of x1 2.78e-8 -> 6.0e-9), and x2's bound
+    1.26e-4 -> 2.83e-5 against its tolerance 1.03e-4: accepted, where the plain update is refused."""
+    name = "algebraic_uio_example1"
+    config = observers.get(name)
+    assert config.precision.accumulation == "compensated"
+    b = pipeline.build(config)
+    files = emit.render(b, "float32")
+    h, c = files[f"{name}_f32.h"], files[f"{name}_f32.c"]
+    assert "    float x1_comp;" in h and "    float x2_comp;" in h
+    assert "inc = dz[1] + state[1];" in c and "arg[0] = &state[2];" in c
+    # the double C is the committed one, compensated or not
+    home = design_lock.path(config).parent
+    for fname, text in emit.render(b).items():
+        assert (home / fname).read_text() == text
+    build_extension(name)
+    r = precision.compare(name, out_dir=tmp_path / "comp")
+    assert r["passes"], r["reason"]
+    assert r["compensated"] == ["x1", "x2"]
+    paper = r["scenarios"]["paper"]
+    assert paper["status_equal"]
+    x2 = paper["signals"]["x2"]
+    assert x2["deviation"] <= x2["bound"] <= 0.4 * x2["tolerance"]          # 2.83e-5 / 1.03e-4
+    plain = precision.compare(observers.get(name, overrides={"precision.accumulation": "plain"}),
+                              out_dir=tmp_path / "plain")
+    assert not plain["passes"] and plain["compensated"] == []
+    x2p = plain["scenarios"]["paper"]["signals"]["x2"]
+    assert x2p["bound"] > x2p["tolerance"] and x2p["bound"] > 4 * x2["bound"]   # 1.26e-4
+
+
+def test_compensated_update_needs_a_step_with_an_increment_form():
+    config = observers.get(NAME, overrides={"precision.accumulation": "compensated"})
+    with pytest.raises(ConfigurationError, match=r"lpv_linf_driver_torque.toml: \[precision\] accumulation = "
+                                                 r"\"compensated\": the step of family 'linf_uio' has no increment form"):
+        emit.render(pipeline.build(config), "float32")

@@ -209,6 +209,11 @@ class AlgebraicUIOBuild(ObserverBuild):
     def step_function(self) -> ca.Function:
         return step_casadi(self, f"{self.name}_kernel")
 
+    def increment_function(self):
+        """The step with the Gauss increment of the certified state as a fourth output, and that
+        state's names (:meth:`ObserverBuild.increment_function`)."""
+        return step_casadi(self, f"{self.name}_kernel", increments=True), list(self.contraction_metrics()[0].states)
+
     def step_numpy(self, z, u, y, rho):
         return step_numpy(self, z, u, y, rho)
 
@@ -302,6 +307,12 @@ class _Compiled:
 
 
 def _gl2(x, F, g, h, xp, unpivoted=False):
+    return x + _gl2_increment(x, F, g, h, xp, unpivoted)
+
+
+def _gl2_increment(x, F, g, h, xp, unpivoted=False):
+    """h (b1 K1 + b2 K2) of the Gauss step x+ = x + h (b1 K1 + b2 K2): the increment at its own
+    scale (the compensated float32 update adds it to x by TwoSum)."""
     n = x.shape[0]
     a = alg.GL_A
     if xp is ca:
@@ -314,13 +325,16 @@ def _gl2(x, F, g, h, xp, unpivoted=False):
         I = np.eye(n)
         big = np.block([[I - h * a[0][0] * F[0], -h * a[0][1] * F[0]], [-h * a[1][0] * F[1], I - h * a[1][1] * F[1]]])
         K = np.linalg.solve(big, np.concatenate([F[0] @ x + g[0], F[1] @ x + g[1]]))
-    return x + h * (alg.GL_B[0] * K[:n] + alg.GL_B[1] * K[n:])
+    return h * (alg.GL_B[0] * K[:n] + alg.GL_B[1] * K[n:])
 
 
 # ---- CasADi step (becomes the C) -----------------------------------------------------------------------
 
-def step_casadi(b: AlgebraicUIOBuild, name: str) -> ca.Function:
-    """(z, u, y, rho) -> (z_next, excess, warmup); see the module docstring for z."""
+def step_casadi(b: AlgebraicUIOBuild, name: str, increments: bool = False) -> ca.Function:
+    """(z, u, y, rho) -> (z_next, excess, warmup); see the module docstring for z. ``increments``:
+    a fourth output ``dz``, the Gauss step's increment of the certified state (z_hat, or x_hat
+    without known inputs) as the step forms it, h (b1 K1 + b2 K2), before it is added to the state
+    (0 while the observer is held)."""
     dec, lpv, sl = b.dec, b.lpv, b.slices
     n, nd, ny, nu, nr = lpv.nx, lpv.nd, lpv.ny, lpv.nu, len(b.base)
     h = b.config.sample_time
@@ -409,7 +423,8 @@ def step_casadi(b: AlgebraicUIOBuild, name: str) -> ca.Function:
         Y, yv = outputs_at(off)
         F.append(comp.F0(*vals) - L @ C)
         g.append(comp.Q(*vals) @ Y + L @ yv)
-    x_new = pick(_gl2(xs, F, g, h, ca, b.discrete["stage_system_diagonal_dominance"] > 0), xs)
+    dx = _gl2_increment(xs, F, g, h, ca, b.discrete["stage_system_diagonal_dominance"] > 0)
+    x_new = pick(xs + dx, xs)
     Y_now, _ = outputs_at(now)
     d_hat = comp.Ginv(*vals_now) @ (Y_now - comp.Mcal(*vals_now) @ x_new)
     x_hat = x_new + s_new
@@ -422,6 +437,9 @@ def step_casadi(b: AlgebraicUIOBuild, name: str) -> ca.Function:
     # the inputs' own excess stays finite for any finite input; the estimates' may be NaN after an overflow
     # (that sample is a NUMERICAL_FAILURE), and fmax(NaN, 0) = 0 keeps it from masking the inputs' flag
     excess = excess + ca.fmax(est_excess, 0.0)
+    if increments:
+        return ca.Function(name, [z, u, y, rho], [z_next, excess, 1.0 - primed, primed * dx],
+                           ["z", "u", "y", "rho"], ["z_next", "excess", "warmup", "dz"])
     return ca.Function(name, [z, u, y, rho], [z_next, excess, 1.0 - primed],
                        ["z", "u", "y", "rho"], ["z_next", "excess", "warmup"])
 
