@@ -476,12 +476,18 @@ def step_numpy(b: AlgebraicUIOBuild, z, u, y, rho):
         excess += abs(rho[k] - min(max(rho[k], lo), hi))
     stages, now = _stage_offsets(h)
 
+    def derivatives_at(zn, name, offset, held):
+        """(f, f', ..., f^(k)) at t + offset of a differentiator in error coordinates: the value is
+        the held sample plus the first entry."""
+        w = _shift_matrix(b.spec(name).order, offset) @ zn
+        w[0] += held
+        return w
+
     def sched(offset):
         nonlocal excess
         vals = []
         for k, sym in enumerate(b.base):
-            w = _shift_matrix(b.spec(str(sym)).order, offset) @ zr[k]
-            w[0] += rho[k]                         # error coordinates: the value is held + the first entry
+            w = derivatives_at(zr[k], str(sym), offset, rho[k])
             for m in range(b.sched_orders[sym] + 1):
                 lo, hi = dec.boxes[rdeg.derivative_symbol(sym, m)]
                 c = min(max(w[m], lo), hi)
@@ -516,8 +522,7 @@ def step_numpy(b: AlgebraicUIOBuild, z, u, y, rho):
     r = dec.relative_degrees
 
     def outputs_at(offset):
-        ws = [_shift_matrix(b.spec(nm).order, offset) @ zy[i] + np.eye(b.spec(nm).n_state)[0] * y_t[i]
-              for i, nm in enumerate(ynames)]
+        ws = [derivatives_at(zy[i], nm, offset, y_t[i]) for i, nm in enumerate(ynames)]
         return np.array([w[r[i]] for i, w in enumerate(ws)]), np.array([w[0] for w in ws])
 
     def gain(vals):
