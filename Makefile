@@ -42,15 +42,16 @@ demo: build
 embedded-tools:
 	sh scripts/install_embedded_tools.sh
 
-# The suite CI runs: everything but the long runs (`long`: 10^7 steps per observer, the random-model
-# acceptance rate, every built-in through analyze; make check runs them). The reliability tests stay in
-# it: CI runs make test only, and hostile input, sanitizers, determinism and a generate killed at every
-# file operation are what a merge must keep.
+# The suite CI runs: everything but the reliability suite and the long runs (make check runs those:
+# hostile input to the compiled steps, sanitizers, static facts, byte-identical generation under another
+# hash seed and another CPU, a generate killed at every file operation; 10^7 steps per observer, the
+# random-model acceptance rate, every built-in through analyze). The typed-error tests of every user
+# file, the killed-at-each-rename and concurrent-generate tests and the conformance checks stay here.
 # Two workers (pytest-xdist) on a 2-core machine, a test module per worker at a time: module fixtures
 # stay in one process, and the CPU-bound solves and compiles use both cores. The longest modules
 # start first (tests/durations.json, in the order tests/conftest.py gives; xdist's own reorder is off).
 test: build embedded-tools
-	$(BIN)/python -m pytest -q -m "not long" -n auto --dist loadfile --no-loadscope-reorder tests
+	$(BIN)/python -m pytest -q -m "not long and not reliability" -n auto --dist loadfile --no-loadscope-reorder tests
 
 # The fast lane: the venv only (no generate, no build): what a developer runs while working, on two
 # workers like make test. A test that needs a compiled extension, a compiler, QEMU, Dask, mkdocs or a

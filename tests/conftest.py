@@ -84,7 +84,7 @@ def published():
 # or browser. A test that needs one of them (a compiled extension above all) carries
 # @pytest.mark.slow, or its module `pytestmark = pytest.mark.slow`, with the reason beside it.
 # The reliability suite and the long runs (make check) are slow by definition; `make test` leaves
-# out the long runs only (`-m "not long"`).
+# both out (`-m "not long and not reliability"`).
 
 def pytest_collection_modifyitems(config, items):
     for item in items:

@@ -201,7 +201,7 @@ def test_exact_operations_are_correctly_rounded():
 QEMU = shutil.which("qemu-x86_64")
 
 
-@pytest.mark.slow          # QEMU user-mode
+@pytest.mark.reliability   # QEMU user-mode, a whole generate under emulation: make check
 @pytest.mark.skipif(os.uname().machine != "x86_64", reason="the emulated CPU models are x86-64")
 @pytest.mark.parametrize("cpu", ["Nehalem"])
 def test_generation_is_byte_identical_on_another_cpu(tmp_path, cpu):
