@@ -7,7 +7,6 @@ saturating tyre; ``uiogen new``.
 """
 import dataclasses
 import textwrap
-import time
 
 import numpy as np
 import pytest
@@ -72,9 +71,8 @@ def test_a_saturating_tanh_tyre_designs_fast(tmp_path):
     or not by the last bits of the Jacobian bound (8000 N: infeasible)."""
     path = _ts_project(tmp_path, "F_r * sp.tanh(2 * C_r * (l_r * r - v_y) / (v_x * F_r))",
                        'F_r = sp.Symbol("F_r", positive=True)\n', "F_r = 15000.0\n")
-    t0 = time.perf_counter()
+    # its time (bounds + LMIs; the issue's target was 30 s) is a figure for `uiogen bench`, not a test
     b = pipeline.build(observers.get(str(path)))
-    assert time.perf_counter() - t0 < 30                     # issue target: bounds + LMIs <= 30 s
     assert b.recheck["worst_min_eig"] > 0 and b.decrease["max_ratio"] < 1
     # d(phi)/d v_x is not bounded: v_x is measured and phi is evaluated with the measurement
     for phi, row in zip(b.ts.phi, b.ts.jacobian_bounds):
@@ -99,9 +97,7 @@ def test_atan_and_magic_formula_tyres_bound_soundly_within_seconds(tmp_path, law
     path = _ts_project(tmp_path, law, symbols, params)
     cfg = observers.get(str(path))
     model, par = cfg.load_model(), load_parameters(cfg.parameter_path)
-    t0 = time.perf_counter()
     ts = representation.build(model, par, cfg.sample_time)
-    assert time.perf_counter() - t0 < 10
     subs = parameter_substitution(model, par)
     states = model.states
     rng = np.random.default_rng(0)
@@ -118,15 +114,18 @@ def test_atan_and_magic_formula_tyres_bound_soundly_within_seconds(tmp_path, law
 
 
 @pytest.mark.slow       # 6 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
-def test_a_too_large_ts_design_is_refused_within_a_second(tmp_path):
+def test_a_too_large_ts_design_is_refused_before_the_bounds(tmp_path, monkeypatch):
     """Cubic rear slip: 5 premises, 32 rules; the paper's rule triples would need ~1e5 blocks of
-    (27): refused before the bounds."""
+    (27): refused before the Jacobian bounds (the expensive part) are computed."""
+    from codegen.families.ts_fuzzy_uio import representation
+
+    def no_bounds(*args, **kwargs):
+        raise AssertionError("the Jacobian bounds were computed before the size guard refused the design")
+    monkeypatch.setattr(representation, "derivative", no_bounds)
     path = _ts_project(tmp_path, "2 * C_r * ((l_r * r - v_y) / v_x - k3 * ((l_r * r - v_y) / v_x) ** 3)",
                        'k3 = sp.Symbol("k3", positive=True)\n', "k3 = 3.0\n", design='relaxation = "triples"\n')
-    t0 = time.perf_counter()
     with pytest.raises(RepresentationError, match=r"32 rules .* LMI blocks .*max_lmi_blocks") as exc:
         pipeline.build(observers.get(str(path)))
-    assert time.perf_counter() - t0 < 5       # model parsing and the TS split, then the guard
     assert "fewer premises" in str(exc.value)
     assert cli.main(["design", str(path)]) == 2
 
