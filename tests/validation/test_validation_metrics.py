@@ -119,3 +119,47 @@ def test_the_sums_of_a_stream_give_the_same_row():
     whole = M.signal_report(Y, YH, unit="rad")
     assert row.keys() == whole.keys()
     assert all(row[k] == pytest.approx(whole[k]) for k in row if k not in ("unit", "converted_from"))
+
+
+# --- the paired moving-block bootstrap of an RMS difference ---------------------------------------
+
+def _bootstrap_by_loop(a, b, block, draws, seed):
+    """The same resampling written plainly: k blocks at the generator's starts, both errors."""
+    n = a.size
+    k = n // block
+    starts = np.random.default_rng(seed).integers(0, n - block + 1, size=(draws, k))
+    d = []
+    for row in starts:
+        idx = np.concatenate([np.arange(s, s + block) for s in row])
+        d.append(math.sqrt(np.mean(a[idx] ** 2)) - math.sqrt(np.mean(b[idx] ** 2)))
+    return np.array(d)
+
+
+def test_rms_difference_interval_against_a_plain_loop():
+    rng = np.random.default_rng(7)
+    a = np.convolve(rng.normal(size=700), np.ones(20) / 20, mode="same")       # correlated errors
+    b = a + 0.05 * rng.normal(size=700)
+    r = M.rms_difference_interval(a, b, block=50, draws=300, seed=3)
+    d = _bootstrap_by_loop(a, b, 50, 300, 3)
+    assert r["difference"] == pytest.approx(math.sqrt(np.mean(a ** 2)) - math.sqrt(np.mean(b ** 2)), rel=1e-12)
+    assert r["low"] == pytest.approx(np.percentile(d, 2.5), rel=1e-9, abs=1e-15)
+    assert r["high"] == pytest.approx(np.percentile(d, 97.5), rel=1e-9, abs=1e-15)
+    assert r["share_below_zero"] == np.mean(d < 0)
+    assert (r["block"], r["draws"], r["samples"], r["level"]) == (50, 300, 700, 0.95)
+    assert M.rms_difference_interval(a, b, block=50, draws=300, seed=3) == r          # deterministic
+
+
+def test_rms_difference_interval_of_equal_and_of_scaled_errors():
+    e = np.sin(np.linspace(0.0, 20.0, 1000))
+    same = M.rms_difference_interval(e, e.copy(), block=100)
+    assert same["difference"] == same["low"] == same["high"] == 0.0 and same["share_below_zero"] == 0.0
+    half = M.rms_difference_interval(0.5 * e, e, block=100)       # a is lower in every draw
+    assert half["high"] < 0.0 and half["share_below_zero"] == 1.0
+    assert half["low"] <= half["difference"] <= half["high"]
+
+
+@pytest.mark.parametrize("a, b, block", [(np.ones(10), np.ones(9), 2), (np.ones(10), np.ones(10), 0),
+                                         (np.ones(10), np.ones(10), 11), (np.ones((2, 5)), np.ones((2, 5)), 2)])
+def test_rms_difference_interval_refuses_bad_arguments(a, b, block):
+    with pytest.raises(ValueError):
+        M.rms_difference_interval(a, b, block=block)

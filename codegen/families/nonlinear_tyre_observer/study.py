@@ -1,4 +1,6 @@
-"""The nonlinear-tyre observer across the parameter range its certificate covers, on a log.
+"""Two studies of the nonlinear-tyre observer on a log: across its parameter range, and against its peers.
+
+**The parameter range.**
 
 ``stiffness_range`` and ``friction_range`` of the observer file declare factors on each axle's
 cornering stiffness and friction coefficient; the vertex LMIs hold for every law in that range, so
@@ -10,6 +12,13 @@ identification part, the evaluation part and the whole log::
     python -m codegen.families.nonlinear_tyre_observer.study [OBSERVER] > docs/data/nonlinear_tyre_range.json
 
 Each point is certified again (the gains given, :func:`.build.build`) before it runs.
+
+**The peers** (``--peers``): the sideslip RMS of the committed observer against the same-tyre EKF
+and UKF (:func:`codegen.validation.stanford.nonlinear_tyre_peers`) on the evaluation part, with
+the paired moving-block bootstrap interval of the difference
+(:func:`codegen.validation.metrics.rms_difference_interval`) for blocks of 5, 10 and 20 s::
+
+    python -m codegen.families.nonlinear_tyre_observer.study --peers > docs/data/nonlinear_tyre_peers.json
 """
 from __future__ import annotations
 
@@ -22,15 +31,21 @@ import numpy as np
 from ...design import lock as design_lock
 from ...project import observer_file as observers
 from ...model import load_parameters
-from ...validation import stanford
+from ...validation import metrics, stanford
+
+BLOCKS_S = (5.0, 10.0, 20.0)
+"""Bootstrap block lengths [s]: a cornering manoeuvre of the log lasts a few seconds."""
+
+
+def _committed_gains(config) -> tuple:
+    L = json.loads(design_lock.path(config).read_text())["L"]
+    return L, dict(zip(("gain_vy_ay", "gain_vy_r", "gain_r_ay", "gain_r_r"), [L[0][0], L[0][1], L[1][0], L[1][1]]))
 
 
 def parameter_range(name: str = "stanford_sideslip_nonlinear_tyre", path="stanford") -> dict:
     from .fit import observer_beta
     config = observers.get(name)
-    art = json.loads(design_lock.path(config).read_text())
-    L = art["L"]
-    gains = dict(zip(("gain_vy_ay", "gain_vy_r", "gain_r_ay", "gain_r_r"), [L[0][0], L[0][1], L[1][0], L[1][1]]))
+    L, gains = _committed_gains(config)
     params = load_parameters(config.parameter_path)
     axles = config.load_model_module().AXLES
     s_rng, f_rng = config.design.get("stiffness_range", [1.0, 1.0]), config.design.get("friction_range", [1.0, 1.0])
@@ -63,5 +78,46 @@ def parameter_range(name: str = "stanford_sideslip_nonlinear_tyre", path="stanfo
             "t_split": split, "points": rows, "table": table}
 
 
+def peer_comparison(name: str = "stanford_sideslip_nonlinear_tyre", path="stanford") -> dict:
+    """The committed observer against the same-tyre EKF and UKF on the evaluation part: each RMS and
+    the bootstrap interval of observer minus peer for each block length of :data:`BLOCKS_S`."""
+    from .fit import observer_beta
+    config = observers.get(name)
+    L, gains = _committed_gains(config)
+    params = load_parameters(config.parameter_path)
+    run = stanford.load(path, sample_time=config.sample_time)
+    t = run.t - run.t[0]
+    split = float(params.meta.get("identification_t_end", stanford.EVALUATION_T_START))
+    part = t >= split
+    errors = {"observer": np.degrees(observer_beta(config, params, gains, run, 0, run.n) - run.beta_true)[part]}
+    for peer, res in stanford.nonlinear_tyre_peers(run, config.parameter_path).items():
+        errors[peer] = np.degrees(res.beta - run.beta_true)[part]
+    rms = {k: float(np.sqrt(np.mean(e ** 2))) for k, e in errors.items()}
+    rows = []
+    for peer in (k for k in errors if k != "observer"):
+        for block_s in BLOCKS_S:
+            r = metrics.rms_difference_interval(errors["observer"], errors[peer], block=int(round(block_s / run.dt)))
+            rows.append({"peer": peer, "block_s": block_s, **r})
+    table = {"header": ["peer", "block [s]", "observer − peer, β RMSE evaluation part [deg]", "95 % interval low",
+                        "high", "share of draws where the observer is lower"],
+             "rows": [[r["peer"], r["block_s"], r["difference"], r["low"], r["high"], r["share_below_zero"]]
+                      for r in rows]}
+    return {"observer": name, "data": str(path), "L": L, "t_split": split, "samples": int(part.sum()), "rms": rms,
+            "comparisons": rows, "table": table}
+
+
+def main(argv=None) -> int:
+    import argparse
+    ap = argparse.ArgumentParser(prog="python -m codegen.families.nonlinear_tyre_observer.study",
+                                 description=__doc__.split("\n")[0])
+    ap.add_argument("observer", nargs="?", default="stanford_sideslip_nonlinear_tyre")
+    ap.add_argument("--peers", action="store_true", help="the comparison with the same-tyre EKF and UKF instead of "
+                                                         "the parameter range")
+    args = ap.parse_args(argv)
+    study = peer_comparison if args.peers else parameter_range
+    print(json.dumps(study(args.observer), indent=1, sort_keys=True))
+    return 0
+
+
 if __name__ == "__main__":
-    print(json.dumps(parameter_range(*sys.argv[1:2]), indent=1, sort_keys=True))
+    sys.exit(main())

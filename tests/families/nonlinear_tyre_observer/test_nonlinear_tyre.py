@@ -322,3 +322,23 @@ def test_parameter_range_record_reproduces():
     assert all(p["evaluation"] >= nominal["evaluation"] - 0.03 for p in rec["points"])
     art = _lock()
     assert rec["L"] == art["L"]
+
+
+@pytest.mark.slow       # the observer, the EKF and the UKF over the whole log, then 24,000 bootstrap draws
+def test_peer_comparison_record_reproduces():
+    """docs/data/nonlinear_tyre_peers.json (observer minus same-tyre EKF/UKF on the evaluation part,
+    with the bootstrap intervals) re-run from the committed design: the same numbers."""
+    from codegen.tools import docs
+    from codegen.families.nonlinear_tyre_observer import study
+    _run()
+    rec = json.loads((docs.DATA / "nonlinear_tyre_peers.json").read_text())
+    new = study.peer_comparison(NAME)
+    assert rec["L"] == _lock()["L"] == new["L"] and rec["samples"] == new["samples"] == 13750
+    for k, v in rec["rms"].items():
+        assert new["rms"][k] == pytest.approx(v, rel=1e-9)
+    assert rec["rms"]["observer"] == pytest.approx(0.2690, abs=5e-4)
+    for old, row in zip(rec["comparisons"], new["comparisons"], strict=True):
+        assert (old["peer"], old["block_s"]) == (row["peer"], row["block_s"])
+        for key in ("difference", "low", "high", "share_below_zero"):
+            assert row[key] == pytest.approx(old[key], rel=1e-6, abs=1e-9), (row["peer"], row["block_s"], key)
+        assert row["low"] <= row["difference"] <= row["high"]
