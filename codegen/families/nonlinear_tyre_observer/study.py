@@ -37,21 +37,35 @@ BLOCKS_S = (5.0, 10.0, 20.0)
 """Bootstrap block lengths [s]: a cornering manoeuvre of the log lasts a few seconds."""
 
 
-def _committed_gains(config) -> tuple:
+@dataclasses.dataclass(frozen=True)
+class _Setup:
+    """The committed observer and the log both studies run it on."""
+
+    config: object
+    L: list                  # the committed gains (rows v_y, r; columns a_y, r)
+    gains: dict              # the same as the observer file's given-gain keys
+    params: object
+    run: object
+    t: np.ndarray            # t - t_0 [s]
+    split: float             # start of the evaluation part [s]
+
+
+def _setup(name: str, path) -> _Setup:
+    config = observers.get(name)
     L = json.loads(design_lock.path(config).read_text())["L"]
-    return L, dict(zip(("gain_vy_ay", "gain_vy_r", "gain_r_ay", "gain_r_r"), [L[0][0], L[0][1], L[1][0], L[1][1]]))
+    gains = dict(zip(("gain_vy_ay", "gain_vy_r", "gain_r_ay", "gain_r_r"), [L[0][0], L[0][1], L[1][0], L[1][1]]))
+    params = load_parameters(config.parameter_path)
+    run = stanford.load(path, sample_time=config.sample_time)
+    split = float(params.meta.get("identification_t_end", stanford.EVALUATION_T_START))
+    return _Setup(config, L, gains, params, run, run.t - run.t[0], split)
 
 
 def parameter_range(name: str = "stanford_sideslip_nonlinear_tyre", path="stanford") -> dict:
     from .fit import observer_beta
-    config = observers.get(name)
-    L, gains = _committed_gains(config)
-    params = load_parameters(config.parameter_path)
+    su = _setup(name, path)
+    config, L, gains, params, run, t, split = su.config, su.L, su.gains, su.params, su.run, su.t, su.split
     axles = config.load_model_module().AXLES
     s_rng, f_rng = config.design.get("stiffness_range", [1.0, 1.0]), config.design.get("friction_range", [1.0, 1.0])
-    run = stanford.load(path, sample_time=config.sample_time)
-    t = run.t - run.t[0]
-    split = float(params.meta.get("identification_t_end", stanford.EVALUATION_T_START))
     rows = []
     for cs in (s_rng[0], 1.0, s_rng[1]):
         for fs in (f_rng[0], 1.0, f_rng[1]):
@@ -82,15 +96,11 @@ def peer_comparison(name: str = "stanford_sideslip_nonlinear_tyre", path="stanfo
     """The committed observer against the same-tyre EKF and UKF on the evaluation part: each RMS and
     the bootstrap interval of observer minus peer for each block length of :data:`BLOCKS_S`."""
     from .fit import observer_beta
-    config = observers.get(name)
-    L, gains = _committed_gains(config)
-    params = load_parameters(config.parameter_path)
-    run = stanford.load(path, sample_time=config.sample_time)
-    t = run.t - run.t[0]
-    split = float(params.meta.get("identification_t_end", stanford.EVALUATION_T_START))
-    part = t >= split
-    errors = {"observer": np.degrees(observer_beta(config, params, gains, run, 0, run.n) - run.beta_true)[part]}
-    for peer, res in stanford.nonlinear_tyre_peers(run, config.parameter_path).items():
+    su = _setup(name, path)
+    run, part = su.run, su.t >= su.split
+    beta = observer_beta(su.config, su.params, su.gains, run, 0, run.n)
+    errors = {"observer": np.degrees(beta - run.beta_true)[part]}
+    for peer, res in stanford.nonlinear_tyre_peers(run, su.config.parameter_path).items():
         errors[peer] = np.degrees(res.beta - run.beta_true)[part]
     rms = {k: float(np.sqrt(np.mean(e ** 2))) for k, e in errors.items()}
     rows = []
@@ -102,7 +112,7 @@ def peer_comparison(name: str = "stanford_sideslip_nonlinear_tyre", path="stanfo
                         "high", "share of draws where the observer is lower"],
              "rows": [[r["peer"], r["block_s"], r["difference"], r["low"], r["high"], r["share_below_zero"]]
                       for r in rows]}
-    return {"observer": name, "data": str(path), "L": L, "t_split": split, "samples": int(part.sum()), "rms": rms,
+    return {"observer": name, "data": str(path), "L": su.L, "t_split": su.split, "samples": int(part.sum()), "rms": rms,
             "comparisons": rows, "table": table}
 
 
