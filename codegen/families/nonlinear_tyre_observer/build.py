@@ -159,6 +159,7 @@ def _build_class():
         settings: NonlinearTyreSettings
         plant: dsn.Plant
         synthesis: dsn.Design
+        level: dsn.LevelBound
         decay_verts: tuple
         gain_verts: tuple
         recheck: dict
@@ -266,7 +267,8 @@ def _build_class():
                        f"{gains}): the estimation error decays at {c['decay_rate']:.4g} 1/s (the largest certifiable: "
                        f"{c['best_decay_rate']:.4g} 1/s), and on the gain set (|t_k| <= {s.gain_sliding_fraction:g} "
                        f"t_sl,k) the sideslip error has the l2 gain gamma from the disturbances normalized by their "
-                       f"levels"),
+                       f"levels, and (per-channel multipliers, a second Lyapunov matrix) an RMS bound with every "
+                       f"channel at its level"),
                 plant_class=(f"the single-track model {self.config.model} with the tyre law of its AXLES per axle "
                              f"(the capacity from the measured signals), Euler-discretized at Ts = "
                              f"{self.config.sample_time:g} s, parameters of "
@@ -284,7 +286,9 @@ def _build_class():
                 bounds=(Bound("gamma", c["gamma_deg"], "deg", "l2", "beta, the sideslip estimation error",
                               "the disturbances w, each channel divided by its level sigma"),
                         Bound("beta_rms", c["bound_deg_at_levels"], "deg", "rms", "beta, the sideslip estimation error",
-                              "every disturbance channel at its level sigma")),
+                              "every disturbance channel at its level sigma, on the gain set (per-channel "
+                              "multipliers: " + ", ".join(f"{k} {v:.3g}" for k, v in c["bound_deg_by_channel"].items())
+                              + " deg)")),
                 extras=solver_certificate(self.solution, recheck=self.recheck))
 
         def _representation(self):
@@ -322,7 +326,7 @@ def _build_class():
                     "contraction_per_step": c["contraction_per_step"], "time_constant_s": c["time_constant_s"],
                     "slowest_vertex": c["slowest_vertex"], "decay_rate": c["decay_rate"],
                     "best_decay_rate": c["best_decay_rate"], "gamma_deg": c["gamma_deg"],
-                    "bound_deg_at_levels": c["bound_deg_at_levels"],
+                    "bound_deg_at_levels": c["bound_deg_at_levels"], "bound_deg_by_channel": c["bound_deg_by_channel"],
                     "sliding_fraction": s.sliding_fraction, "gain_sliding_fraction": s.gain_sliding_fraction,
                     "stiffness_range": list(s.stiffness_range), "friction_range": list(s.friction_range),
                     "noise_levels": dict(zip(dsn.CHANNELS, s.sigma.tolist())),
@@ -354,9 +358,10 @@ def build(config, solver, params=None):
     decay_verts = tuple(dsn.vertices(rep, rep.decay_set, with_speed=False))
     gain_verts = tuple(dsn.vertices(rep, rep.gain_set, with_speed=True))
     design = dsn.synthesize(plant, decay_verts, gain_verts, settings, solver)
+    level = dsn.level_bound(plant, gain_verts, settings, design, solver)
     t2 = time.perf_counter()
-    cert = dsn.certify(plant, decay_verts, gain_verts, design)
+    cert = dsn.certify(plant, decay_verts, gain_verts, design, level)
     t3 = time.perf_counter()
-    return Build(config, rep, settings, plant, design, decay_verts, gain_verts, cert,
+    return Build(config, rep, settings, plant, design, level, decay_verts, gain_verts, cert,
                  {"representation_s": t1 - t0, "design_s": t2 - t1, "solve_s": design.solution.solve_time_s,
                   "certificates_s": t3 - t2})

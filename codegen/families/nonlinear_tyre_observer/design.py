@@ -26,7 +26,12 @@ a decay near 1 leaves the solver a difference of nearly equal numbers):
 
 Design: the largest certifiable decay rate a* by bisection (analysis problems), then one design
 problem: the decay rate ``decay_fraction`` a* (or the observer file's ``decay``) required, the
-gain minimized; L = P^-1 Y. Given gains instead (the four ``gain_*`` keys): the same two steps
+gain minimized; L = P^-1 Y. Then, with L fixed, the RMS bound at the noise levels: the same
+bounded-real block at the same vertices with its own Lyapunov matrix Q and one multiplier per
+channel, eta I -> diag(mu), sum(mu) minimized. Summed over a trajectory in the gain set it gives
+sum_k z_k^2 <= T_s sum_i mu_i sum_k (w_i,k / sigma_i)^2 + V_Q(e_0): every channel at its level, the
+RMS of z is at most sqrt(T_s sum(mu)), never above gamma sqrt(6) (mu_i = eta is feasible), and each
+channel's share sqrt(T_s mu_i) says which disturbance the bound is made of. Given gains instead (the four ``gain_*`` keys): the same two steps
 with L fixed (P alone is free). A, C'C and the blocks are multi-affine in (s, theta) except C'C
 (s^2, concave), so the vertices suffice. States and outputs are scaled by D = S = diag(1, d),
 d = sqrt(v_min v_max) [m/s] (r times a speed is a lateral speed, or an acceleration).
@@ -121,6 +126,9 @@ class Plant:
         return PF, PG, C @ Di
 
 
+LEVEL_PROBLEM = "nonlinear-tyre observer: RMS bound at the noise levels (per-channel multipliers, gains fixed)"
+
+
 def decay_block(plant, x, P, Y, rate, xp=np):
     PF = plant.delta_form(x, P, Y)[0]
     cat = np.block if xp is np else bmat
@@ -129,14 +137,14 @@ def decay_block(plant, x, P, Y, rate, xp=np):
 
 
 def gain_block(plant, x, P, Y, eta, xp=np):
+    """The bounded-real block at a vertex; ``eta``: a scalar (gamma^2 = eta T_s, every channel alike)
+    or an (n_w, n_w) matrix of per-channel multipliers diag(mu)."""
     PF, PG, C = plant.delta_form(x, P, Y)
     nw = PG.shape[1]
+    W = eta * np.eye(nw) if getattr(eta, "shape", ()) in ((), (1, 1)) else eta
     r = np.sqrt(plant.Ts)
-    if xp is np:
-        return np.block([[-(PF + PF.T) - C.T @ C / plant.Ts, -PG, r * PF.T],
-                         [-PG.T, eta * np.eye(nw), r * PG.T], [r * PF, r * PG, P]])
-    return bmat([[-(PF + PF.T) - C.T @ C / plant.Ts, -PG, r * PF.T],
-                 [-PG.T, eta * np.eye(nw), r * PG.T], [r * PF, r * PG, P]])
+    cat = np.block if xp is np else bmat
+    return cat([[-(PF + PF.T) - C.T @ C / plant.Ts, -PG, r * PF.T], [-PG.T, W, r * PG.T], [r * PF, r * PG, P]])
 
 
 def _decay_feasible(plant, verts, rate, L_scaled, settings) -> bool:
@@ -241,7 +249,45 @@ def synthesize(plant, decay_verts, gain_verts, settings, solver) -> Design:
     return Design(L, P, eta, best, rate, given, sol)
 
 
-def certify(plant, decay_verts, gain_verts, design: Design) -> dict:
+def level_bound_problem(plant, gain_verts, settings, L_scaled) -> LMIProblem:
+    """min sum(mu) over Q and the per-channel multipliers at ``gain_verts``, the (scaled) gains fixed."""
+    prob = LMIProblem(LEVEL_PROBLEM)
+    Q = prob.symmetric("Q", 2)
+    nw = len(CHANNELS)
+    mus = [prob.scalar(f"mu_{c}") for c in CHANNELS]
+    M, total = None, None
+    for i, m in enumerate(mus):
+        E = np.zeros((nw, nw))
+        E[i, i] = 1.0
+        M = m * E if M is None else M + m * E
+        total = m if total is None else total + m
+    prob.require_psd("Q > 0", Q, margin=settings.margin)
+    for x in gain_verts:
+        prob.require_psd(f"level bound {x.label}", gain_block(plant, x, Q, Q @ L_scaled, M, LMIProblem),
+                         margin=settings.margin, hint="lower gain_sliding_fraction")
+    prob.minimize(total)
+    return prob
+
+
+@dataclass(frozen=True)
+class LevelBound:
+    """The RMS bound at the noise levels of the emitted gains (see the module docstring)."""
+
+    Q: np.ndarray            # its Lyapunov matrix, scaled coordinates (rounded)
+    mu: np.ndarray           # per-channel multipliers (CHANNELS order), each rounded up
+    solution: object
+
+
+def level_bound(plant, gain_verts, settings, design: Design, solver) -> LevelBound:
+    """The per-channel multipliers of the emitted L (answered by ``solver``, recorded in the design lock)."""
+    L_scaled = plant.D @ design.L @ np.linalg.inv(plant.D)
+    sol = solver.solve(level_bound_problem(plant, gain_verts, settings, L_scaled), tol=settings.tol)
+    Q = decimal_round(0.5 * (sol["Q"] + sol["Q"].T))
+    mu = np.array([objective_bound(float(sol[f"mu_{c}"])) for c in CHANNELS])
+    return LevelBound(Q, mu, sol)
+
+
+def certify(plant, decay_verts, gain_verts, design: Design, level: LevelBound) -> dict:
     """Independent numpy re-check of every block on the emitted (rounded) P and L; the contraction
     per step at the decay vertices and the certified gain."""
     D = plant.D
@@ -249,6 +295,9 @@ def certify(plant, decay_verts, gain_verts, design: Design) -> dict:
     blocks = {"P >= I": design.P - np.eye(2)}
     blocks.update({f"decay {x.label}": decay_block(plant, x, design.P, Y, design.rate) for x in decay_verts})
     blocks.update({f"l2 gain {x.label}": gain_block(plant, x, design.P, Y, design.eta) for x in gain_verts})
+    blocks["Q > 0"] = level.Q
+    YQ = level.Q @ (D @ design.L @ np.linalg.inv(D))
+    blocks.update({f"level bound {x.label}": gain_block(plant, x, level.Q, YQ, np.diag(level.mu)) for x in gain_verts})
     checks = check_blocks(blocks)
     worst = min(checks, key=lambda c: c.relative_margin)
     if worst.min_eig < 0:
@@ -272,4 +321,5 @@ def certify(plant, decay_verts, gain_verts, design: Design) -> dict:
             "contraction_per_step": float(np.sqrt(ratio)), "slowest_vertex": slowest,
             "time_constant_s": float(-plant.Ts / np.log(np.sqrt(ratio))),
             "decay_rate": design.rate, "best_decay_rate": design.best_rate,
-            "gamma_deg": gamma, "bound_deg_at_levels": float(gamma * np.sqrt(len(CHANNELS)))}
+            "gamma_deg": gamma, "bound_deg_at_levels": float(np.sqrt(plant.Ts * level.mu.sum())),
+            "bound_deg_by_channel": {c: float(np.sqrt(plant.Ts * m)) for c, m in zip(CHANNELS, level.mu)}}
