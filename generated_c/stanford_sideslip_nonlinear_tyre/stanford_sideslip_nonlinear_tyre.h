@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of stanford_sideslip_nonlinear_tyre_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define STANFORD_SIDESLIP_NONLINEAR_TYRE_DESIGN_HASH "a22be39d5edfa57474dae2c22782ac57ddc5e9b56e4f7286707398b3c98a9d7b"
+#define STANFORD_SIDESLIP_NONLINEAR_TYRE_DESIGN_HASH "e9af8b310589446974f101eb3b767d17e07f2787f6580f232456746bbacc50d0"
 
 /* Status bits returned by stanford_sideslip_nonlinear_tyre_step; a sample's status is their OR (stanford_sideslip_nonlinear_tyre_status). */
 typedef enum {
