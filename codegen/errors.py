@@ -151,3 +151,10 @@ class OutputError(UiogenError, OSError):
 class CampaignError(UiogenError, RuntimeError):
     """A campaign could not finish or continue: its workers were lost, or ``--resume`` found the
     results of another campaign; the runs already finished are kept (the message says where)."""
+
+
+def brief(expr, limit: int = 160) -> str:
+    """``expr`` as text for an error message: whole when short, else its head and its length (the
+    derivative of a user's tyre law can run to thousands of characters, which no reader needs)."""
+    text = str(expr)
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"

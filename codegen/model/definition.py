@@ -18,7 +18,7 @@ from typing import Mapping
 import sympy as sp
 
 from ..errors import (MissingParameterError, ModelDefinitionError, NotAffineError, SchedulingBoundsError,
-                      UnknownParameterError)
+                      UnknownParameterError, brief)
 from ..project.settings import Rule, check_keys, config_error, parse_table, parse_value, suggest
 
 
@@ -367,7 +367,7 @@ def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str, 
     for (i, j), entry in zip(((i, j) for i in range(jac.shape[0]) for j in range(jac.shape[1])), jac):
         if entry.free_symbols & set(symbols):
             raise NotAffineError(
-                f"model {model!r}: row {i} is not affine in {what} (d/d{symbols[j]} = {entry} "
+                f"model {model!r}: row {i} is not affine in {what} (d/d{symbols[j]} = {brief(entry)} "
                 f"still depends on {', '.join(sorted(map(str, entry.free_symbols & set(symbols))))})"
                 + (f"; {hint(symbols[j])}" if hint is not None else ""))
     return jac

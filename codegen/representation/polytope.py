@@ -27,7 +27,7 @@ from functools import cached_property
 import numpy as np
 import sympy as sp
 
-from ..errors import ModelDefinitionError, SchedulingBoundsError
+from ..errors import ModelDefinitionError, SchedulingBoundsError, brief
 from ..model import LPVModel
 
 APPROXIMATION = "approximation, error not in the LMI"
@@ -219,7 +219,7 @@ def affine_decomposition(matrices: dict, symbols, nonlinearities: tuple) -> dict
                 c, dep = term.as_independent(*symbols, as_Add=False)
                 k = index.get(sp.srepr(dep))
                 if k is None or c.free_symbols:
-                    raise ModelDefinitionError(f"{label}[{i},{j}] term {term} is not affine in the detected "
+                    raise ModelDefinitionError(f"{label}[{i},{j}] term {brief(term)} is not affine in the detected "
                                                f"nonlinearities {nonlinearities}")
                 coeffs[k][i, j] += float(c)
         out[label] = (base, coeffs)

@@ -1,4 +1,5 @@
 """Model layer: the Nguyen et al. 2019 equations come out as eq. (5), and bad definitions fail precisely."""
+import re
 import textwrap
 
 import numpy as np
@@ -109,6 +110,18 @@ def test_non_affine_dynamics_rejected(tmp_path):
     path = _write(tmp_path, "[parameters]\nk = 1.0\n[scheduling.v]\nmin=1\nmax=2\nrate_min=-1\nrate_max=1\n")
     with pytest.raises(NotAffineError, match="not affine in the states"):
         instantiate(model, load_parameters(path))
+
+
+def test_a_long_non_affine_derivative_is_cut_short_in_the_message(tmp_path):
+    """A user's tyre law differentiates to thousands of characters (13,609 for a rational law of the
+    wheel-frame slip): the message keeps its head, its length and the symbols it depends on."""
+    law = lambda x1, x2, u, d, v, k: sp.Matrix([x2, sum(sp.atan(k * x1 / (v + j)) / (1 + sp.Abs(x1 - j))
+                                                         for j in range(12)) + u + d])
+    path = _write(tmp_path, "[parameters]\nk = 1.0\n[scheduling.v]\nmin=1\nmax=2\nrate_min=-1\nrate_max=1\n")
+    with pytest.raises(NotAffineError, match="not affine in the states") as exc:
+        instantiate(_toy(law), load_parameters(path))
+    msg = str(exc.value)
+    assert re.search(r"\.\.\. \(\d{3,} characters\) still depends on x1", msg) and len(msg) < 400
 
 
 def test_wrong_shape_and_undeclared_symbols():

@@ -43,7 +43,7 @@ import sympy as sp
 
 from ...representation.bounds import range_bound
 from ...errors import (MissingParameterError, ModelDefinitionError, NotAffineError, SchedulingBoundsError,
-                     UnknownParameterError)
+                     UnknownParameterError, brief)
 from ...model import ParameterSet, load_parameters, parameter_substitution
 from ...representation.polytope import (Premise, affine_decomposition, nonlinear_factors, sector_weights_product,
                                         vertex_matrices)
@@ -296,7 +296,7 @@ def _classify_drift(entry, own, own_sched, uis, sched, others, subsystem, state)
         ui_here = [u for u in uis if u in syms]
         if ui_here:
             if len(ui_here) > 1:
-                raise NotAffineError(f"{subsystem}: d{state}/dt term {term} multiplies two unknown inputs")
+                raise NotAffineError(f"{subsystem}: d{state}/dt term {brief(term)} multiplies two unknown inputs")
             u = ui_here[0]
             coeff = sp.simplify(term / u)
             if coeff.free_symbols - set(sched):
@@ -322,7 +322,7 @@ def _classify_drift(entry, own, own_sched, uis, sched, others, subsystem, state)
             continue
         coeff, dep = term.as_independent(*others, as_Add=False)
         if dep == 1 or coeff.free_symbols - set(sched):
-            raise NotAffineError(f"{subsystem}: term {term} of d{state}/dt is neither a premise times one own "
+            raise NotAffineError(f"{subsystem}: term {brief(term)} of d{state}/dt is neither a premise times one own "
                                  f"state or unknown input, nor a premise times a coupling signal")
         coupling.append((coeff, dep))
     return arow, brow, coupling
@@ -415,7 +415,7 @@ def build(model: InterconnectedModelDefinition, params: ParameterSet) -> Interco
                     continue
                 if any(u in term.free_symbols for u in model.unknown_inputs):
                     raise NotAffineError(f"output {nm!r}: unknown inputs may not reach the outputs of the interconnected "
-                                         f"UIO (term {term}); the L-infinity UIO (family linf_uio) takes that "
+                                         f"UIO (term {brief(term)}); the L-infinity UIO (family linf_uio) takes that "
                                          f"feedthrough")
                 lin = [s for s in own if s in term.free_symbols]
                 if len(lin) == 1 and not (term / lin[0]).free_symbols:
@@ -423,7 +423,7 @@ def build(model: InterconnectedModelDefinition, params: ParameterSet) -> Interco
                     continue
                 coeff, dep = term.as_independent(*others, as_Add=False)
                 if coeff.free_symbols:
-                    raise NotAffineError(f"output {nm!r}: term {term} has a non-constant coefficient {coeff}")
+                    raise NotAffineError(f"output {nm!r}: term {brief(term)} has a non-constant coefficient {brief(coeff)}")
                 add_coupling(k, coeff, dep, emap)
         nz = len(coupling)
         D_sym = sp.zeros(n, nz)
