@@ -265,11 +265,11 @@ def cmd_fit(args) -> int:
     family = require(families.get(cfg.family), Identification)
     result = family.fit(cfg, args.data, args.samples, folds=args.folds)
     texts = family.fit_files(cfg, result)
-    changed = {path: path.read_text() != text for path, text in texts.items()}
+    changed = {path: path.read_text() != body for path, body in texts.items()}
     if args.write:
-        for path, text in texts.items():
+        for path, body in texts.items():
             if changed[path]:
-                path.write_text(text)
+                outputs.write_atomic(path, body)     # each file the old one or the new one, never a part
     if args.json:
         _print_json({**result, "files": {_shown(p): ("written" if args.write and c else "differs" if c else "equal")
                                          for p, c in changed.items()}})

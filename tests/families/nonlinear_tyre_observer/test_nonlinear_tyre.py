@@ -309,6 +309,25 @@ def test_fit_on_a_short_range_is_deterministic_and_typed(capsys):
     assert "no identification" in capsys.readouterr().err
 
 
+@pytest.mark.slow       # two fits with the peers' grid on 3000 samples
+def test_fit_write_puts_the_numbers_in_a_starter_and_then_finds_them_equal(tmp_path, capsys):
+    """`uiogen fit OBSERVER --write` in a user's folder (text output, then JSON): the parameter and
+    observer files are rewritten whole, and a second fit finds both equal."""
+    _run()
+    folder = tmp_path / "car"
+    assert cli.main(["new", str(folder), "--family", "nonlinear_tyre_observer", "--name", "mine"]) == 0
+    obs, params = folder / "mine.toml", folder / "parameters.toml"
+    before = params.read_text()
+    capsys.readouterr()
+    assert cli.main(["fit", str(obs), "--data", "stanford", "--samples", "9000:12000", "--write"]) == 0
+    out = capsys.readouterr().out
+    assert "written: " in out and str(params) in out and params.read_text() != before
+    assert not list(folder.glob(".*.tmp-*"))                   # no temporary left beside the files
+    assert cli.main(["fit", str(obs), "--data", "stanford", "--samples", "9000:12000", "--json"]) == 0
+    files = json.loads(capsys.readouterr().out)["files"]
+    assert set(files.values()) == {"equal"} and len(files) == 2
+
+
 @pytest.mark.slow       # 15 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_the_starter_designs_its_own_gains_for_another_car(tmp_path, capsys):
     folder = tmp_path / "my_car"
