@@ -270,13 +270,11 @@ def cmd_fit(args) -> int:
         for path, body in texts.items():
             if changed[path]:
                 outputs.write_atomic(path, body)     # each file the old one or the new one, never a part
+    files = {_shown(p): ("written" if args.write and c else "differs" if c else "equal") for p, c in changed.items()}
     if args.json:
-        _print_json({**result, "files": {_shown(p): ("written" if args.write and c else "differs" if c else "equal")
-                                         for p, c in changed.items()}})
+        _print_json({**result, "files": files})
     else:
-        print("\n".join(text.fit_lines(family, result, changed)))
-        if args.write and any(changed.values()):
-            print("written: " + ", ".join(str(p) for p, c in changed.items() if c))
+        print("\n".join(text.fit_lines(family, result, files)))
     return 0
 
 

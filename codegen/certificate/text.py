@@ -168,6 +168,8 @@ def bench_study_lines(family, rows: list) -> list:
     return [f"{family.title}: family study", *family.bench_family_table(rows)]
 
 
-def fit_lines(family, result: dict, changed: dict) -> list:
-    """``uiogen fit``'s result, in the family's table format (``Identification.fit_table``)."""
-    return family.fit_table(result, changed)
+def fit_lines(family, result: dict, files: dict) -> list:
+    """``uiogen fit``'s result, in the family's table format (``Identification.fit_table``), then each
+    file's state ({path: "written" | "differs" | "equal"})."""
+    said = {"written": "written", "differs": "differs from the fit (--write puts it there)", "equal": "equals the fit"}
+    return [*family.fit_table(result), *(f"  {path}: {said[state]}" for path, state in files.items())]

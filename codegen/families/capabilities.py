@@ -145,8 +145,8 @@ class Identification(Protocol):
     def fit_files(self, config, result: dict) -> dict:
         """{path: text} of the files that hold the fitted numbers."""
 
-    def fit_table(self, result: dict, changed: dict) -> list:
-        """The identification's result as text lines (its own table format)."""
+    def fit_table(self, result: dict) -> list:
+        """The identification's result as text lines (its own table format; the files' state is the verb's)."""
 
 
 CAPABILITIES = (Scenarios, DemoPlant, DemoFigures, BenchFigures, BenchStudy, Campaigns, Applicability, GainForms,

@@ -56,9 +56,9 @@ class NonlinearTyreObserver(Family):
         from .fit import files
         return files(config, result)
 
-    def fit_table(self, result: dict, changed: dict) -> list:
+    def fit_table(self, result: dict) -> list:
         from .fit import lines
-        return lines(result, changed)
+        return lines(result)
 
     def check_gain_form(self, config, gains: dict, source: str):
         """Gains given as ``{"L": [[L_vy_ay, L_vy_r], [L_r_ay, L_r_r]]}`` (rows v_y, r; columns a_y, r),

@@ -314,7 +314,7 @@ def files(config, result: dict) -> dict:
             Path(config.source): _set_values(Path(config.source).read_text(), "design", result["design"])}
 
 
-def lines(result: dict, changed: dict) -> list:
+def lines(result: dict) -> list:
     a, b = result["samples"]
     t0, t1 = result["t_range"]
     p = result["parameters"]
@@ -337,6 +337,4 @@ def lines(result: dict, changed: dict) -> list:
                    f"{row['training_rms_deg']:.4f})")
     if "cross_validation" in result:
         out.append(f"  cross-validated beta RMS (folds pooled): {result['cross_validated_rms_deg']:.4f} deg")
-    for path, differs in changed.items():
-        out.append(f"  {path}: {'differs from the fit' if differs else 'equals the fit'}")
     return out
