@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 
+from ..project import outputs
+
 PCTS = (50, 90, 99)
 
 
@@ -116,7 +118,7 @@ def format_row(row: dict) -> str:
 
 def _save(fig, out_dir, name: str) -> str:
     """Lay out, write ``out_dir/NAME.png`` and close a figure; its path."""
-    import matplotlib.pyplot as plt
+    plt = outputs.pyplot()
     fig.tight_layout()
     path = f"{out_dir}/{name}.png"
     fig.savefig(path, dpi=100)
@@ -127,9 +129,7 @@ def _save(fig, out_dir, name: str) -> str:
 def plots(spec, rows, traces: dict, out_dir) -> list:
     """error_cdf.png (per signal, overall and by third of the most influential dispersion),
     sensitivity.png (Spearman heat map), worst_runs.png (errors over time of the worst runs)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = outputs.pyplot()
     ok = _ok(rows)
     sigs = error_signals(ok)
     paths = []

@@ -15,7 +15,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from ..errors import OutputError
+from ..errors import OutputError, UnsupportedError
 
 DISK_ERRORS = frozenset({errno.EROFS, errno.ENOSPC, errno.EDQUOT, errno.EACCES, errno.EPERM, errno.EFBIG,
                          errno.EIO})
@@ -88,3 +88,17 @@ def write_atomic(path, data) -> Path:
             tmp.unlink()
         raise
     return path
+
+
+def pyplot():
+    """matplotlib's pyplot on the Agg backend (every figure goes to a file), or an
+    :class:`UnsupportedError` saying which extra installs it (a wheel installs no plotting library)."""
+    try:
+        import matplotlib
+    except ImportError:
+        raise UnsupportedError("figures (--plot, --report, a campaign's plots) need matplotlib, which is not installed: "
+                               "pip install 'uiogen[validation]' (in a checkout: pip install -c constraints.txt -e "
+                               "'.[validation]')") from None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt

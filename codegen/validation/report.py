@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..project import outputs
 from . import metrics
 from . import run as validate
 
@@ -67,17 +68,10 @@ def _flag_spans(axes, t, status) -> None:
                         transform=ax.get_xaxis_transform(), zorder=0)
 
 
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
 def scenario_figure(result: dict, path: Path) -> Path:
     """Truth and estimates (and the peers' traces a family keeps in ``signals["baselines"]``),
     the errors below, flagged samples shaded; one row per signal that has a truth."""
-    plt = _plt()
+    plt = outputs.pyplot()
     sig = result["signals"]
     units = result.get("units", {})
     t = np.asarray(sig["t"])
@@ -120,7 +114,7 @@ def data_figure(result: dict, path: Path) -> Path:
     if result.get("kind") == "column_map":
         validate.plot_data(result, str(path))
         return path
-    plt = _plt()
+    plt = outputs.pyplot()
     sig = result["signals"]
     t = np.asarray(sig["t"])
     deg = 180 / np.pi

@@ -9,12 +9,14 @@ every figure is a ratio measured in one run.
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 
 from .. import families
 from ..project import observer_file as observers
-from ..errors import SampleError
+from ..project import outputs
+from ..errors import ConfigurationError, SampleError
 from . import metrics
 from .common import SETTLE_TIME, signal_stats
 
@@ -45,6 +47,14 @@ def run_scenario(name, scenario, plant: str = "nominal", duration: float | None 
     :class:`python_bindings.Recorder` of it."""
     from ..extension.build import require_current
     config = observers.get(name) if isinstance(name, str) else name
+    if duration is not None and not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
+        raise ConfigurationError(f"--duration {duration!r}: allowed: a positive number of seconds (the scenario is "
+                                 f"truncated there)", source="--duration", key="--duration", value=duration)
+    if scenario == "excitation" and plant == "commonroad":
+        raise ConfigurationError("--plant commonroad: the excitation scenario runs on the observer's own model (the "
+                                 "model plant); CommonRoad's vehicle models drive a family's named scenarios (uiogen "
+                                 "validate NAME --scenario S --plant commonroad)", source="--plant", key="--plant",
+                                 value=plant)
     require_current(config)                 # never the compiled step of an older design
     if scenario == "excitation":            # every model: its own equations, swept and excited
         from . import excitation
@@ -73,9 +83,7 @@ def header(name: str, result: dict) -> str:
 
 
 def plot(result: dict, path: str) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = outputs.pyplot()
     sig = result["signals"]
     names = [n for n in sig["estimate"] if n in sig["truth"]]
     fig, axes = plt.subplots(len(names), 1, figsize=(9, 2.2 * len(names)), sharex=True)
@@ -331,9 +339,7 @@ def _identification_split(config, path=None):
 
 
 def plot_data(result: dict, path: str) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = outputs.pyplot()
     sig = result["signals"]
     if result.get("kind") == "column_map":       # a user's log: every estimate, with its reference
         names = [k for k in sig if k != "t" and not k.endswith("_truth")]

@@ -492,7 +492,8 @@ def make(name: str, seed: int | None = None, sample_rate: float = 100.0) -> Scen
         Unknown name, negative seed or non-positive rate.
     """
     if name not in SCENARIOS:
-        raise ScenarioError(f"unknown scenario {name!r}; known: {', '.join(SCENARIOS)}")
+        raise ScenarioError(f"unknown scenario {name!r}; known: {', '.join(SCENARIOS)} (and, in uiogen validate, "
+                            f"excitation: any model on its own equations)")
     builder, default = SCENARIOS[name]
     s = default if seed is None else seed
     if not isinstance(s, (int, np.integer)) or s < 0:

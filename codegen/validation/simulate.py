@@ -74,7 +74,8 @@ def nominal_plant(config, lpv: LPVModel, scn, definition=None, progress=None) ->
     names = d.state_names
     if not {"beta", "r", "delta", "delta_dot"} <= set(names):
         raise ModelDefinitionError(f"the nominal closed-loop plant needs states beta, r, delta, delta_dot; "
-                                   f"model {d.name!r} has {names}")
+                                   f"model {d.name!r} has {names}: a model of your own runs on its own equations "
+                                   f"(uiogen validate NAME --scenario excitation)")
     rhs, nx, _, _ = plant_rhs(lpv, definition)
     # scheduling signals a plant may use, by name: the speed and its derivative (load transfer)
     known = ("v_x", "a_x")

@@ -92,3 +92,26 @@ def test_build_float32_accepted_and_refused():
     assert "stanford_sideslip_nonlinear_tyre: float32 REFUSED: v_y on stanford log: bound" in bad.stdout
     assert "margin 1 - c = " in bad.stdout and "sliding_fraction" in bad.stdout
     assert "outside the certified set (SCHEDULING_CLAMPED)" in bad.stdout
+
+
+@pytest.mark.slow       # two short excitation runs of a compiled observer
+def test_validate_refuses_what_it_cannot_do_with_a_typed_error(tmp_path, capsys, monkeypatch):
+    """A non-positive or non-finite --duration, --plant commonroad on the excitation scenario (which
+    runs the model's own equations: the option was silently ignored) and --plot without matplotlib
+    (a wheel installs none) are typed errors naming the option, never a traceback."""
+    from codegen import cli
+    name = "lpv_linf_driver_torque"
+    for args, match in ((["--duration", "-3"], "--duration -3.0: allowed: a positive number"),
+                        (["--duration", "nan"], "--duration nan"),
+                        (["--plant", "commonroad"], "--plant commonroad: the excitation scenario runs on")):
+        assert cli.main(["validate", name, "--scenario", "excitation", *args]) == 2
+        err = capsys.readouterr().err
+        assert "ConfigurationError" in err and match in err and "Traceback" not in err
+    assert cli.main(["validate", name, "--scenario", "excitation", "--duration", "3"]) == 0
+    capsys.readouterr()
+    monkeypatch.setitem(sys.modules, "matplotlib", None)         # import matplotlib raises ImportError
+    plot = tmp_path / "x.png"
+    assert cli.main(["validate", name, "--scenario", "excitation", "--duration", "3", "--plot", str(plot)]) == 2
+    err = capsys.readouterr().err
+    assert "UnsupportedError" in err and "uiogen[validation]" in err and "Traceback" not in err
+    assert not plot.exists()
