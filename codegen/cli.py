@@ -377,11 +377,11 @@ def _new_from_model(args) -> int:
     if target.exists():
         raise ConfigurationError(f"uiogen new {folder}: would overwrite {target}; choose an empty folder or --name",
                                  key="dir")
-    folder.mkdir(parents=True, exist_ok=True)
-    target.write_text(starter_text(result.subject, best, folder.resolve()).replace("THIS_FILE", str(target)))
+    outputs.make_folder(folder)
+    outputs.write_atomic(target, starter_text(result.subject, best, folder.resolve()).replace("THIS_FILE", str(target)))
     print(result.text())
     print(f"wrote {target} ({best.family}, ranked first)")
-    print(f"next: uiogen design {target} --update; uiogen generate {target}; uiogen build {target}")
+    print("next: " + "; ".join(starter.next_steps(target)))
     return 0
 
 

@@ -14,6 +14,7 @@ extensions would be ``_NAME``. Every hint printed names the file by its path.
 from __future__ import annotations
 
 import re
+import shlex
 from pathlib import Path
 
 from ..errors import ConfigurationError
@@ -77,5 +78,6 @@ def write(folder: Path, family, name: str | None = None) -> Path:
 
 def next_steps(target: Path) -> list:
     """The commands that take a starter from its files to a validated compiled step."""
-    return [f"uiogen design {target} --update", f"uiogen generate {target}", f"uiogen build {target}",
-            f"uiogen validate {target} --scenario excitation"]
+    t = shlex.quote(str(target))            # a folder named "my car" pastes back into a shell as one word
+    return [f"uiogen design {t} --update", f"uiogen generate {t}", f"uiogen build {t}",
+            f"uiogen validate {t} --scenario excitation"]

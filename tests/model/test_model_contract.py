@@ -109,6 +109,23 @@ def test_new_refuses_a_built_in_name_and_prints_paths(tmp_path, capsys):
     assert 'model = "model.py"' in target.read_text() and 'parameters = "parameters.toml"' in target.read_text()
 
 
+def test_new_prints_commands_that_paste_back_into_a_shell(tmp_path, capsys):
+    """A folder with a space: every printed command splits (as a shell would) into the verb and the
+    whole path, for --family and --from-model alike."""
+    import shlex
+    folder = tmp_path / "my car"
+    assert cli.main(["new", str(folder), "--family", "switched_pi"]) == 0
+    line = next(l for l in capsys.readouterr().out.splitlines() if l.startswith("next: "))
+    for cmd in line[len("next: "):].split("; "):
+        assert shlex.split(cmd)[2] == str(folder / "my_switched_pi.toml"), cmd
+    other = tmp_path / "from model"
+    assert cli.main(["new", str(other), "--from-model", str(folder / "model.py"), "--parameters",
+                     str(folder / "parameters.toml")]) == 0
+    line = next(l for l in capsys.readouterr().out.splitlines() if l.startswith("next: "))
+    paths = {shlex.split(cmd)[2] for cmd in line[len("next: "):].split("; ")}
+    assert len(paths) == 1 and paths.pop().startswith(str(other) + "/")
+
+
 @pytest.mark.slow       # 4 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_the_design_hint_names_the_file(tmp_path, capsys):
     obs = project(tmp_path, "linf_uio", extra='polytope = "sector"\n')
