@@ -9,6 +9,7 @@ design hash is not that of the design lock beside it.
 """
 from __future__ import annotations
 
+import difflib
 import hashlib
 import importlib.util
 import sys
@@ -17,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SampleError, StaleExtensionError, UnknownObserverError
-from .workspace import Workspace
+from .workspace import BUILTIN_OBSERVERS, Workspace
 
 STATUS_BITS = ("OK", "SCHEDULING_CLAMPED", "NONFINITE_INPUT", "NUMERICAL_FAILURE", "WARMING_UP")
 
@@ -152,7 +153,23 @@ def load(observer, project: str | Path | None = None) -> CompiledObserver:
     observer file (built by ``uiogen build``); ``project``: its project folder when it is not
     the default (:mod:`python_bindings.workspace`)."""
     workspace, name = Workspace.locate(observer, project)
+    if not workspace.design_lock(name).is_file():
+        _refuse_unknown(str(observer), workspace.design_lock(name))
     return open_observer(workspace, name, str(observer) + (f" --project {project}" if project is not None else ""))
+
+
+def _refuse_unknown(text: str, lock: Path) -> None:
+    """A path to no observer file, or a name no built-in observer has, said as such (not as an
+    observer that was never generated)."""
+    if text.endswith(".toml") or "/" in text:
+        if not Path(text).is_file():
+            raise UnknownObserverError(f"no observer file {text} (and no generated design {lock}): check the path")
+    elif not (BUILTIN_OBSERVERS / f"{text}.toml").is_file():
+        known = sorted(p.stem for p in BUILTIN_OBSERVERS.glob("*.toml"))
+        close = difflib.get_close_matches(text, known, n=1)
+        raise UnknownObserverError(f"{text!r} is not a built-in observer"
+                                   + (f" (did you mean {close[0]!r}?)" if close else f" (built-in: {', '.join(known)})")
+                                   + "; for an observer of your own, pass the path of its observer file (.toml)")
 
 
 def open_observer(workspace: Workspace, name: str, argument: str | None = None) -> CompiledObserver:

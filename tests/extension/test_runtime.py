@@ -117,6 +117,18 @@ def test_a_missing_extension_or_lock_names_the_command(project):
         load(project.root / f"{NAME}.toml")
 
 
+def test_a_wrong_path_or_name_is_said_as_such(tmp_path):
+    """load() of a path to no file, or of a name no built-in observer has, says that, not that the
+    observer was never generated (which sends the user to run generate on a file that is not there)."""
+    with pytest.raises(UnknownObserverError, match=r"no observer file .*nope\.toml .*check the path"):
+        load(tmp_path / "nope.toml")
+    with pytest.raises(UnknownObserverError, match=r"'lpv_linf_driver_torqe' is not a built-in observer \(did you "
+                                                   r"mean 'lpv_linf_driver_torque'\?\); .*path of its observer file"):
+        load("lpv_linf_driver_torqe")
+    with pytest.raises(UnknownObserverError, match=r"'my_car' is not a built-in observer \(built-in: .*stanford_sideslip"):
+        load("my_car")
+
+
 def test_the_recorder_records_what_it_runs_and_changes_nothing():
     obs = load(NAME)
     rng = np.random.default_rng(0)
