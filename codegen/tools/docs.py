@@ -26,7 +26,7 @@ import json
 import re
 from pathlib import Path
 
-from ..errors import ConfigurationError
+from ..errors import ConfigurationError, UnsupportedError
 from ..design.sources import ROOT
 
 DOCS = ROOT / "docs"
@@ -244,6 +244,9 @@ def update(check: bool = False, demo_path: Path | None = None, bench_path: Path 
 
 
 def main(check: bool = False) -> int:
+    if not DOCS.is_dir():        # an installed uiogen: the docs are the repository's, not the package's
+        raise UnsupportedError(f"uiogen docs rewrites the docs of a source checkout, and there is none here ({DOCS} "
+                               f"does not exist: this uiogen is installed); run it in a clone of the repository")
     changed = update(check=check)
     for p in changed:
         print(f"{'differs' if check else 'updated'}: {p.relative_to(ROOT)}")

@@ -17,6 +17,17 @@ def test_tables_match_the_recorded_runs():
     assert not changed, f"docs differ from docs/data/*.json (run `uiogen docs`): {changed}"
 
 
+def test_docs_from_an_installed_uiogen_is_refused_not_a_traceback(tmp_path, monkeypatch, capsys):
+    """A wheel ships no docs/: `uiogen docs` there said nothing useful (FileNotFoundError traceback; with
+    --check, 'the docs differ')."""
+    from codegen import cli
+    monkeypatch.setattr(docs, "DOCS", tmp_path / "site-packages" / "docs")
+    for args in (["docs"], ["docs", "--check"]):
+        assert cli.main(args) == 2
+        err = capsys.readouterr().err
+        assert "UnsupportedError" in err and "source checkout" in err and "Traceback" not in err
+
+
 def test_a_changed_record_changes_the_page(tmp_path):
     import json
     demo = json.loads((docs.DATA / "demo.json").read_text())
