@@ -27,7 +27,7 @@ from python_bindings.workspace import Workspace, source_checkout
 from ..design import lock as design_lock
 from ..emit.header import signals as header_signals
 from ..emit.toolchain import STRICT_CFLAGS, compile_and_link, compiler, render_template, run
-from ..errors import DesignLockError, UnknownObserverError
+from ..errors import DesignLockError, UnknownObserverError, UnsupportedError
 from ..project import observer_file as observers
 from ..project import outputs
 
@@ -203,6 +203,18 @@ def load(observer) -> CompiledObserver:
     if config.workspace != Workspace.locate(argument)[0]:
         argument += f" --project {config.workspace.root}"
     return open_observer(config.workspace, config.name, argument)
+
+
+def require_built(verb: str, make_target: str) -> list:
+    """The built-in observers' names, once every one has its extension here; else one
+    UnsupportedError before any work (an installed uiogen in an empty folder has none of them)."""
+    names = observers.names()
+    missing = [n for n in names if not observers.get(n).workspace.extension(n).is_file()]
+    if missing:
+        raise UnsupportedError(f"uiogen {verb} runs every built-in observer; {len(missing)} of {len(names)} are not "
+                               f"built here ({', '.join(missing[:3])}{', ...' if len(missing) > 3 else ''}): run "
+                               f"`uiogen generate` and `uiogen build` first (in a checkout: make {make_target})")
+    return names
 
 
 def require_current(config: observers.ObserverConfig) -> None:

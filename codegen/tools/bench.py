@@ -32,7 +32,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..errors import InaccurateSolveError, UnsupportedError
+from ..errors import InaccurateSolveError
 
 from ..certificate import text
 from ..design import lock as design_lock
@@ -469,12 +469,8 @@ def bench_runtime(name: str = "lpv_linf_driver_torque", repeats: int = 9) -> dic
 
 
 def main(json_output: bool = False) -> int:
-    names = observers.names()
-    missing = [n for n in names if not observers.get(n).workspace.extension(n).is_file()]
-    if missing:      # say it once, before minutes of timing, not one observer at a time
-        raise UnsupportedError(f"uiogen bench times every built-in observer; {len(missing)} of {len(names)} are not "
-                               f"built here ({', '.join(missing[:3])}{', ...' if len(missing) > 3 else ''}): run "
-                               f"`uiogen generate` and `uiogen build` first (in a checkout: make bench)")
+    from ..extension.build import require_built
+    names = require_built("bench", "bench")      # said once, before minutes of timing
     res = {"observers": {name: bench_observer(name) for name in names},
            "runtime": bench_runtime(),
            "toolchain": bench_toolchain(), "hosmd": bench_hosmd(), "cortex_m": bench_cortexm()}

@@ -53,6 +53,8 @@ def entry_lines(entry: dict) -> list:
 def main(json_output: bool = False, report_dir=None) -> int:
     """``uiogen demo``: the text tables (or ``--json``); with ``report_dir`` the HTML page
     (:mod:`codegen.validation.report`) and a summary of a few lines pointing at it."""
+    from ..extension.build import require_built
+    require_built("demo", "demo")                 # said once, before minutes of simulation
     report = run_all()
     real, others = run_real_data()
     if json_output:

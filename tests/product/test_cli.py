@@ -117,14 +117,17 @@ def test_validate_refuses_what_it_cannot_do_with_a_typed_error(tmp_path, capsys,
     assert not plot.exists()
 
 
-def test_bench_without_the_built_observers_says_so_once(tmp_path, monkeypatch, capsys):
-    """An installed uiogen in an empty folder has no built-in observer built: `uiogen bench` says so
-    before timing anything, instead of failing on the first observer with 'run uiogen generate X'."""
+def test_bench_and_demo_without_the_built_observers_say_so_once(tmp_path, monkeypatch, capsys):
+    """An installed uiogen in an empty folder has none of the built-in observers built: `uiogen bench`
+    and `uiogen demo` say so once, before any work (bench failed on the first observer with 'run uiogen
+    generate X', demo with a FileNotFoundError traceback)."""
     from codegen import cli
+    from codegen.project import observer_file as observers
     from python_bindings.workspace import Workspace
     monkeypatch.setattr(Workspace, "extension", lambda self, name: tmp_path / f"_{name}.so")
-    assert cli.main(["bench"]) == 2
-    err = capsys.readouterr().err
-    from codegen.project import observer_file as observers
     n = len(observers.names())
-    assert "UnsupportedError" in err and f"{n} of {n} are not built here" in err and "uiogen build" in err
+    for verb in ("bench", "demo"):
+        assert cli.main([verb]) == 2
+        err = capsys.readouterr().err
+        assert f"UnsupportedError: uiogen {verb} runs every built-in observer; {n} of {n} are not built here" in err
+        assert "`uiogen generate` and `uiogen build` first" in err and "Traceback" not in err
