@@ -35,6 +35,10 @@ from .project import outputs
 from .errors import (CertificateError, ConfigurationError, DesignLockError, MissingParameterError,
                      SchedulingBoundsError, UiogenError, UnknownObserverError, UnknownParameterError)
 
+OPTIONAL_MODULES = {"vehiclemodels": "validation", "matplotlib": "validation", "dask": "validation",
+                    "distributed": "validation", "fmpy": "fmu", "cvxpy": "bench", "scs": "bench", "AlgDiff": "bench"}
+"""The modules of pyproject's extras: a verb that needs one a wheel did not install says which extra installs it."""
+
 
 def _print_json(obj) -> None:
     print(json.dumps(obj, indent=1, sort_keys=True, default=_jsonable))
@@ -564,6 +568,15 @@ def main(argv=None) -> int:
         return args.func(args)
     except UiogenError as exc:
         print(f"uiogen: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as exc:    # an optional dependency the command needs: which extra installs it
+        package = (exc.name or "").split(".")[0]
+        extra = OPTIONAL_MODULES.get(package)
+        if extra is None:
+            raise
+        print(f"uiogen: error: UnsupportedError: {package} is not installed, and uiogen {args.command} needs it here: "
+              f"pip install 'uiogen[{extra}]' (in a checkout: pip install -c constraints.txt -e '.[{extra}]')",
+              file=sys.stderr)
         return 2
     except OSError as exc:        # a disk that does not take an output the command writes: one line, no traceback
         if exc.errno not in outputs.DISK_ERRORS:

@@ -47,9 +47,11 @@ def run_scenario(name, scenario, plant: str = "nominal", duration: float | None 
     :class:`python_bindings.Recorder` of it."""
     from ..extension.build import require_current
     config = observers.get(name) if isinstance(name, str) else name
-    if duration is not None and not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
-        raise ConfigurationError(f"--duration {duration!r}: allowed: a positive number of seconds (the scenario is "
-                                 f"truncated there)", source="--duration", key="--duration", value=duration)
+    if duration is not None and not (isinstance(duration, (int, float)) and math.isfinite(duration)
+                                     and duration > SETTLE_TIME):
+        raise ConfigurationError(f"--duration {duration!r}: allowed: a number of seconds above {SETTLE_TIME:g} (the "
+                                 f"scenario is truncated there, and the errors are taken after the first "
+                                 f"{SETTLE_TIME:g} s)", source="--duration", key="--duration", value=duration)
     if scenario == "excitation" and plant == "commonroad":
         raise ConfigurationError("--plant commonroad: the excitation scenario runs on the observer's own model (the "
                                  "model plant); CommonRoad's vehicle models drive a family's named scenarios (uiogen "

@@ -96,12 +96,13 @@ def test_build_float32_accepted_and_refused():
 
 @pytest.mark.slow       # two short excitation runs of a compiled observer
 def test_validate_refuses_what_it_cannot_do_with_a_typed_error(tmp_path, capsys, monkeypatch):
-    """A non-positive or non-finite --duration, --plant commonroad on the excitation scenario (which
+    """A --duration too short for the metrics (or not finite), --plant commonroad on the excitation scenario (which
     runs the model's own equations: the option was silently ignored) and --plot without matplotlib
     (a wheel installs none) are typed errors naming the option, never a traceback."""
     from codegen import cli
     name = "lpv_linf_driver_torque"
-    for args, match in ((["--duration", "-3"], "--duration -3.0: allowed: a positive number"),
+    for args, match in ((["--duration", "-3"], "--duration -3.0: allowed: a number of seconds above 2"),
+                        (["--duration", "1.5"], "--duration 1.5: allowed: a number of seconds above 2"),
                         (["--duration", "nan"], "--duration nan"),
                         (["--plant", "commonroad"], "--plant commonroad: the excitation scenario runs on")):
         assert cli.main(["validate", name, "--scenario", "excitation", *args]) == 2
@@ -131,3 +132,26 @@ def test_bench_and_demo_without_the_built_observers_say_so_once(tmp_path, monkey
         err = capsys.readouterr().err
         assert f"UnsupportedError: uiogen {verb} runs every built-in observer; {n} of {n} are not built here" in err
         assert "`uiogen generate` and `uiogen build` first" in err and "Traceback" not in err
+
+
+def test_a_verb_that_needs_an_extra_names_it(monkeypatch, capsys):
+    """A wheel installs no extra: a verb whose run imports CommonRoad's vehicle models (uiogen demo,
+    validate on a named scenario) said ModuleNotFoundError in a traceback; now the extra to install."""
+    from codegen import cli
+    monkeypatch.setitem(sys.modules, "vehiclemodels", None)        # import vehiclemodels raises ImportError
+    assert cli.main(["validate", "interconnected_uio_ford_escort", "--scenario", "satory", "--plant", "commonroad",
+                     "--duration", "3"]) == 2
+    err = capsys.readouterr().err
+    assert "UnsupportedError: vehiclemodels is not installed" in err and "uiogen[validation]" in err
+    assert "Traceback" not in err
+
+
+@pytest.mark.slow       # a 3 s run of the interconnected observer
+def test_a_run_cut_short_prints_a_dash_where_a_figure_is_undefined(capsys):
+    """Cut to 3 s, the Satory run leaves 1 s after the settle time with several truths at 0: their
+    RMSE % of max |truth| is undefined, and the table and the paper targets skip them (a TypeError
+    traceback before)."""
+    from codegen import cli
+    assert cli.main(["validate", "interconnected_uio", "--scenario", "satory", "--duration", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "       - (" in out and "issue target mu = 1" in out
