@@ -16,7 +16,8 @@ from ..design import lock as design_lock
 from .. import families
 from ..families.capabilities import DemoFigures, DemoPlant, Scenarios
 from ..project import observer_file as observers
-from . import run as validate
+from ..errors import UnsupportedError
+from . import run as validate, stanford
 
 REAL_DATA_OBSERVER = "stanford_sideslip"
 REAL_DATA_OTHERS = ("ts_fuzzy_uio_stanford", "stanford_sideslip_nonlinear_tyre")     # same log, other families
@@ -55,6 +56,10 @@ def main(json_output: bool = False, report_dir=None) -> int:
     (:mod:`codegen.validation.report`) and a summary of a few lines pointing at it."""
     from ..extension.build import require_built
     require_built("demo", "demo")                 # said once, before minutes of simulation
+    if not stanford.STANFORD_PATH.is_file():
+        raise UnsupportedError(f"uiogen demo ends on the shared Stanford log ({stanford.STANFORD_PATH}), which is "
+                               f"not there: run it in a source checkout beside ../shared (make demo); an observer "
+                               f"of your own runs on a log with uiogen validate NAME --data PATH")
     report = run_all()
     real, others = run_real_data()
     if json_output:

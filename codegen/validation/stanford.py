@@ -171,6 +171,9 @@ class StanfordRun:
 
 def _resolve(path) -> Path:
     if isinstance(path, str) and path.strip().lower() == "stanford":
+        if not STANFORD_PATH.is_file():     # an installed uiogen: the shorthand names a checkout's neighbour
+            raise DatasetError(f"'stanford' is the shared log beside a source checkout ({STANFORD_PATH}), which is "
+                               f"not there: pass the log's own path (a CSV, plain or .gz)")
         return STANFORD_PATH
     return Path(path)
 

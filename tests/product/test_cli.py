@@ -155,3 +155,17 @@ def test_a_run_cut_short_prints_a_dash_where_a_figure_is_undefined(capsys):
     assert cli.main(["validate", "interconnected_uio", "--scenario", "satory", "--duration", "3"]) == 0
     out = capsys.readouterr().out
     assert "       - (" in out and "issue target mu = 1" in out
+
+
+def test_without_the_shared_log_the_stanford_shorthand_and_the_demo_say_so(tmp_path, monkeypatch, capsys):
+    """An installed uiogen has no ../shared beside it: `--data stanford` and `uiogen demo` (which ends
+    on that log, after minutes of simulation) say where the log was looked for, before any work."""
+    from codegen import cli
+    from codegen.validation import stanford
+    monkeypatch.setattr(stanford, "STANFORD_PATH", tmp_path / "shared" / "run.csv.gz")
+    assert cli.main(["validate", "stanford_sideslip", "--data", "stanford"]) == 2
+    err = capsys.readouterr().err
+    assert "DatasetError: 'stanford' is the shared log beside a source checkout" in err and "own path" in err
+    assert cli.main(["demo"]) == 2
+    err = capsys.readouterr().err
+    assert "UnsupportedError: uiogen demo ends on the shared Stanford log" in err and "Traceback" not in err
