@@ -33,7 +33,7 @@ from . import families, pipeline
 from .project import observer_file as observers
 from .project import outputs
 from .errors import (CertificateError, ConfigurationError, DesignLockError, MissingParameterError,
-                     SchedulingBoundsError, UiogenError, UnknownObserverError, UnknownParameterError)
+                     SchedulingBoundsError, UiogenError, UnknownObserverError, UnknownParameterError, install_hint)
 
 OPTIONAL_MODULES = {"vehiclemodels": "validation", "matplotlib": "validation", "dask": "validation",
                     "distributed": "validation", "fmpy": "fmu", "cvxpy": "bench", "scs": "bench", "AlgDiff": "bench"}
@@ -575,8 +575,7 @@ def main(argv=None) -> int:
         if extra is None:
             raise
         print(f"uiogen: error: UnsupportedError: {package} is not installed, and uiogen {args.command} needs it here: "
-              f"pip install 'uiogen[{extra}]' (in a checkout: pip install -c constraints.txt -e '.[{extra}]')",
-              file=sys.stderr)
+              f"{install_hint(extra)}", file=sys.stderr)
         return 2
     except OSError as exc:        # a disk that does not take an output the command writes: one line, no traceback
         if exc.errno not in outputs.DISK_ERRORS:

@@ -158,3 +158,9 @@ def brief(expr, limit: int = 160) -> str:
     derivative of a user's tyre law can run to thousands of characters, which no reader needs)."""
     text = str(expr)
     return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
+
+
+def install_hint(extra: str) -> str:
+    """How to install one of pyproject's extras, from a wheel and in a checkout (for the message of
+    a verb whose optional dependency is missing)."""
+    return f"pip install 'uiogen[{extra}]' (in a checkout: pip install -c constraints.txt -e '.[{extra}]')"

@@ -15,7 +15,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from ..errors import OutputError, UnsupportedError
+from ..errors import OutputError, UnsupportedError, install_hint
 
 DISK_ERRORS = frozenset({errno.EROFS, errno.ENOSPC, errno.EDQUOT, errno.EACCES, errno.EPERM, errno.EFBIG,
                          errno.EIO})
@@ -97,8 +97,7 @@ def pyplot():
         import matplotlib
     except ImportError:
         raise UnsupportedError("figures (--plot, --report, a campaign's plots) need matplotlib, which is not installed: "
-                               "pip install 'uiogen[validation]' (in a checkout: pip install -c constraints.txt -e "
-                               "'.[validation]')") from None
+                               + install_hint("validation")) from None
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt

@@ -24,7 +24,7 @@ from .. import __version__ as UIOGEN_VERSION
 from ..project import observer_file as observers
 from ..project import outputs
 from .. import pipeline
-from ..errors import ConfigurationError, UnknownObserverError, UnsupportedError
+from ..errors import ConfigurationError, UnknownObserverError, UnsupportedError, install_hint
 from ..emit.header import unit_of
 from ..emit.toolchain import STRICT_CFLAGS, compile_and_link, render_template
 
@@ -165,7 +165,7 @@ def run_fmu(path, inputs, input_names, output_names):
     try:
         import fmpy
     except ImportError:
-        raise UnsupportedError("FMPy is not installed: pip install -c constraints.txt '.[fmu]'") from None
+        raise UnsupportedError(f"FMPy is not installed: {install_hint('fmu')}") from None
     import numpy as np
     md = fmpy.read_model_description(str(path))
     ts = float(md.defaultExperiment.stepSize)

@@ -46,7 +46,7 @@ def test_nominal_plant_short_run():
 def test_commonroad_requires_a_twin_designed_for_that_car():
     pytest.importorskip("vehiclemodels")
     with pytest.raises(ModelDefinitionError, match="lpv_linf_driver_torque_bmw320i"):
-        validate.run_scenario("lpv_linf_driver_torque", "circular_path", "commonroad", duration=1.0)
+        validate.run_scenario("lpv_linf_driver_torque", "circular_path", "commonroad", duration=3.0)
 
 
 @pytest.mark.slow          # the compiled observer

@@ -32,8 +32,8 @@ channel, eta I -> diag(mu), sum(mu) minimized. Summed over a trajectory in the g
 sum_k z_k^2 <= T_s sum_i mu_i sum_k (w_i,k / sigma_i)^2 + V_Q(e_0): every channel at its level, the
 RMS of z is at most sqrt(T_s sum(mu)), never above gamma sqrt(6) (mu_i = eta is feasible), and each
 channel's share sqrt(T_s mu_i) says which disturbance the bound is made of. Given gains instead (the
-four ``gain_*`` keys): the same steps with L fixed (P alone is free). A, C'C and the blocks are multi-affine in (s, theta) except C'C
-(s^2, concave), so the vertices suffice. States and outputs are scaled by D = S = diag(1, d),
+four ``gain_*`` keys): the same steps with L fixed (P alone is free). A, C'C and the blocks are
+multi-affine in (s, theta) except C'C (s^2, concave), so the vertices suffice. States and outputs are scaled by D = S = diag(1, d),
 d = sqrt(v_min v_max) [m/s] (r times a speed is a lateral speed, or an acceleration).
 """
 from __future__ import annotations
