@@ -215,6 +215,8 @@ def fit(config, path="stanford", samples: str = "", folds: int = 0, peers: bool 
     run = stanford.load(path, sample_time=config.sample_time)
     a, b = parse_samples(samples, run.n)
     params = load_parameters(config.parameter_path)
+    if folds:
+        _check_folds(folds, a, b)
     prob = _problem(config, params, run, a, b)
     half = WINDOW // 2
     full = np.ones(b - a - 2 * half, bool)
@@ -245,10 +247,36 @@ def fit(config, path="stanford", samples: str = "", folds: int = 0, peers: bool 
     return out
 
 
+def _fold_edges(a: int, b: int, folds: int) -> list:
+    return [a + ((b - a) * k) // folds for k in range(folds + 1)]
+
+
+def _fold_sizes(a: int, b: int, folds: int) -> tuple:
+    """(smallest held-out fold, smallest training set) in samples; a training set is the range less its
+    fold and the WINDOW guard on each side of it (no average on one side may see the other)."""
+    edges = _fold_edges(a, b, folds)
+    held = [hi - lo for lo, hi in zip(edges, edges[1:])]
+    train = [(b - a) - h - WINDOW * ((lo > a) + (hi < b)) for h, lo, hi in zip(held, edges, edges[1:])]
+    return min(held), min(train)
+
+
+def _check_folds(folds: int, a: int, b: int) -> None:
+    """Every held-out fold and every training set at least MIN_SAMPLES, as for a fit (ConfigurationError)."""
+    held, train = _fold_sizes(a, b, folds)
+    if held >= MIN_SAMPLES and train >= MIN_SAMPLES:
+        return
+    most = max((k for k in range(2, (b - a) // MIN_SAMPLES + 1) if min(_fold_sizes(a, b, k)) >= MIN_SAMPLES),
+               default=None)
+    allowed = (f"2..{most} for samples {a}:{b}" if most else
+               f"none for samples {a}:{b}: cross-validation needs at least {2 * MIN_SAMPLES + WINDOW} samples")
+    raise ConfigurationError(f"--folds {folds}: the smallest held-out fold has {held} samples and the smallest "
+                             f"training set {train}; each needs at least {MIN_SAMPLES} ({MIN_SAMPLES / 100:g} s at "
+                             f"100 Hz); allowed: {allowed}", source="--folds", key="--folds", value=folds)
+
+
 def _cross_validate(config, params, prob, run, a, b, folds) -> list:
     half = WINDOW // 2
-    n = b - a
-    edges = [a + (n * k) // folds for k in range(folds + 1)]
+    edges = _fold_edges(a, b, folds)
     idx = np.arange(a + half, b - half)              # samples the averages cover
     rows = []
     for k in range(folds):

@@ -309,6 +309,35 @@ def test_fit_on_a_short_range_is_deterministic_and_typed(capsys):
     assert "no identification" in capsys.readouterr().err
 
 
+@pytest.mark.slow       # a 2-fold cross-validation and two fits on 1500 samples, 12 s
+def test_cross_validation_fits_each_fold_on_the_rest_only():
+    """`--folds 2` on 9000:12000: each held-out fold's numbers equal a plain fit on the samples its
+    training set may read (the range less the fold and a WINDOW guard), so no fold sees itself; the
+    pooled figure is the RMS over the folds; too many folds for the range is a typed error."""
+    from codegen.families.nonlinear_tyre_observer import fit
+    _run()
+    cfg = observers.get(NAME)
+    r = fit.fit(cfg, "stanford", "9000:12000", folds=2, peers=False)
+    first, second = r["cross_validation"]
+    assert first["fold"] == [9000, 10500] and second["fold"] == [10500, 12000]
+    # fit.fit reads samples A+WINDOW//2 .. B-1-WINDOW//2 of the averages; the training set of the second
+    # fold ends WINDOW before it, of the first starts WINDOW after it
+    half = fit.WINDOW // 2
+    alone = {0: fit.fit(cfg, "stanford", f"{10500 + fit.WINDOW - half}:12000", peers=False),
+             1: fit.fit(cfg, "stanford", f"9000:{10500 - fit.WINDOW + half}", peers=False)}
+    for k, row in enumerate((first, second)):
+        assert row["parameters"] == alone[k]["parameters"] and row["design"] == alone[k]["design"]
+    assert first["parameters"] != second["parameters"]
+    assert r["cross_validated_rms_deg"] == pytest.approx(
+        np.sqrt((first["held_out_rms_deg"] ** 2 + second["held_out_rms_deg"] ** 2) / 2), rel=1e-12)
+    assert 0.05 < first["held_out_rms_deg"] < 1 and 0.05 < second["held_out_rms_deg"] < 1
+    for folds, allowed in ((7, "allowed: 2..6 for samples 9000:12000"), (3000, "allowed: 2..6")):
+        with pytest.raises(ConfigurationError, match=re.escape(allowed)):
+            fit.fit(cfg, "stanford", "9000:12000", folds=folds, peers=False)
+    with pytest.raises(ConfigurationError, match="needs at least 1021 samples"):
+        fit.fit(cfg, "stanford", "9000:10000", folds=2, peers=False)
+
+
 @pytest.mark.slow       # two fits with the peers' grid on 3000 samples
 def test_fit_write_puts_the_numbers_in_a_starter_and_then_finds_them_equal(tmp_path, capsys):
     """`uiogen fit OBSERVER --write` in a user's folder (text output, then JSON): the parameter and
