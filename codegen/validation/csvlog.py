@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DatasetError
+from ..project.settings import suggest
 
 PERIOD_RTOL = 0.01
 """Relative tolerance of ``load(..., sample_time=Ts)``: the log's median period must be Ts (1 ± 0.01)."""
@@ -154,7 +155,11 @@ class LogReader:
             raise DatasetError(f"{p}: duplicated column(s) {dup}")
         missing = [c for c in self.units if c not in self.header]
         if missing:
-            raise DatasetError(f"{p}: missing column(s) {missing}; found {self.header} (fields separated by "
+            spare = [h for h in self.header if h not in self.units]
+            hints = [f"{m!r}: did you mean {s!r}?" for m in missing
+                     for s in [next((h for h in spare if h.lower() == m.lower()), None) or suggest(m, spare)] if s]
+            raise DatasetError(f"{p}: missing column(s) {missing}; found {self.header}"
+                               + (f" ({'; '.join(hints)})" if hints else "") + " (fields separated by "
                                f"{_SEPARATORS[self.sep]}; allowed separators: comma, semicolon or tab)")
         self.rows = 0                # data rows delivered so far
 

@@ -53,6 +53,8 @@ def test_plain_and_gzip(tmp_path, gz):
 
 @pytest.mark.parametrize("lines,match", [
     ([HEADER.replace("ay,", "")] + ["0"] * 2, "missing column"),
+    ([HEADER.replace("vx,", "Vx,").replace("yaw_rate", "yawrate")] + ["0"] * 2,
+     r"'vx': did you mean 'Vx'\?; 'yaw_rate': did you mean 'yawrate'\?"),
     ([HEADER, _row(t=0.0)], "at least 2"),
     ([HEADER, _row(t=0.0), _row(t=0.01, ay="nan")], "non-finite"),
     ([HEADER, _row(t=0.0), _row(t=0.01, ay="abc")], "non-numeric"),
