@@ -494,7 +494,9 @@ def main(argv=None) -> int:
     p.set_defaults(func=cmd_build)
     p = sub.add_parser("check-gains", help="verify external gains against an observer's LMIs")
     p.add_argument("name")
-    p.add_argument("--gains", required=True, help="JSON with P1, P2, X, L1, L2 (nested lists)")
+    p.add_argument("--gains", required=True,
+                   help="JSON: a design lock (or its lmi_solutions), or the family's printed form: "
+                        "P1..PN, L1..LN [, X, alpha] (linf_uio), L (nonlinear_tyre_observer)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_check_gains)
     p = sub.add_parser("fit", help="identify an observer's numbers (tyre, noise levels) on a sample range of a log")

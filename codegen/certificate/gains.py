@@ -84,7 +84,8 @@ def check_lock_form(family, config, gains: dict, source: str) -> GainsCheck:
         raw = gains["lock"].get("lmi_solutions")
     if not isinstance(raw, list):
         raise ConfigurationError(
-            f"gains: family {family.name!r} checks gains given as the design lock gives them: "
+            f"gains file {source}: no lmi_solutions; allowed: family {family.name!r} checks gains given as the design "
+            f"lock gives them: "
             f'{{"lmi_solutions": [{{"problem", "variables", "objective", "iterations"}}, ...]}} '
             f"(see generated_c/{config.name}/{config.name}_design.json)", key="lmi_solutions", source=str(source))
     records = [SolveRecord.from_json(r, str(source)) for r in raw]

@@ -313,10 +313,21 @@ class SolveRecord:
     @classmethod
     def from_json(cls, data: dict, source: str = "") -> "SolveRecord":
         try:
-            return cls(str(data["problem"]), dict(data["variables"]), float(data["objective"]),
-                       int(data["iterations"]), dict(data.get("data", {})))
+            rec = cls(str(data["problem"]), dict(data["variables"]), float(data["objective"]),
+                      int(data["iterations"]), dict(data.get("data", {})))
         except (KeyError, TypeError, ValueError) as exc:
             raise DesignLockError(f"{source}: malformed LMI solution record ({exc})") from None
+        for name, value in rec.variables.items():
+            # a hand-edited or damaged record: re-checking it would end in LinAlgError, not in a verdict
+            try:
+                finite = np.all(np.isfinite(np.array(value, dtype=float)))
+            except (TypeError, ValueError):
+                finite = None
+            if not finite:
+                raise DesignLockError(f"{source}: LMI solution record {rec.problem!r}: variable {name!r} is "
+                                      + ("not a matrix of numbers" if finite is None else "not finite")
+                                      + "; allowed: finite numbers, a matrix as nested lists")
+        return rec
 
 
 @dataclass(frozen=True)

@@ -252,6 +252,13 @@ def test_check_gains_works_for_every_family_in_the_lock_form(tmp_path, capsys):
     bad.write_text(json.dumps({"lmi_solutions": data["lock"]["lmi_solutions"]}))
     assert cli.main(["check-gains", "ts_fuzzy_uio", "--gains", str(bad)]) == 2
     assert "L1" in capsys.readouterr().err
+    # a damaged record (a non-finite or ragged variable): a typed error naming the file, not LinAlgError
+    for value in ([[float("inf")]], [[1.0, 2.0], [3.0]]):
+        rec["variables"]["L1"] = value
+        bad.write_text(json.dumps({"lmi_solutions": data["lock"]["lmi_solutions"]}))
+        assert cli.main(["check-gains", "ts_fuzzy_uio", "--gains", str(bad)]) == 2
+        err = capsys.readouterr().err
+        assert f"{bad}: LMI solution record" in err and "'L1' is not" in err and "Traceback" not in err
 
 
 # --- the lock verified and never lost (issue 25) -----------------------------------------------------------

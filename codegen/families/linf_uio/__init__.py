@@ -10,9 +10,12 @@ Theorem 1; ``discrete``: the backward-Euler step and its certificate; ``build``:
 """
 from __future__ import annotations
 
+import math
+import re
+
 import numpy as np
 
-from ...errors import ConfigurationError
+from ...errors import ConfigurationError, brief
 from ...project.settings import Rule, parse_table
 from ..base import Family
 
@@ -73,23 +76,43 @@ class LinfUIO(Family):
         lpv, poly, _ = representation(config)
         performance = _settings(config).performance
         F = performance_matrix(lpv.definition.states, performance)
-        alpha = float(gains.get("alpha", config.design.get("alpha", 5.0)))
         N = poly.n_vertices
+        try:
+            alpha = float(gains.get("alpha", config.design.get("alpha", 5.0)))
+        except (TypeError, ValueError):
+            alpha = math.nan
+        if not (math.isfinite(alpha) and alpha > 0):
+            raise ConfigurationError(f"gains file {source}: alpha = {gains.get('alpha')!r}; allowed: a positive "
+                                     f"number (the decay rate in 1/s)", source=str(source), key="alpha")
+        form = f"P1..P{N}, L1..L{N} and optionally X, alpha (observer {config.name} has {N} vertices)"
+
+        def refuse(message, key):
+            raise ConfigurationError(f"gains file {source}: {message}; allowed: {form}", source=str(source), key=key)
+
         missing = [k for k in [*(f"P{i + 1}" for i in range(N)), *(f"L{i + 1}" for i in range(N))] if k not in gains]
         if missing:
-            raise ConfigurationError(f"gains lack {', '.join(missing)} (observer {config.name} has {N} vertices: "
-                                     f"P1..P{N}, L1..L{N} and optionally X)", key=missing[0])
-        try:
-            P = [np.array(gains[f"P{i + 1}"], float) for i in range(N)]
-            L = [np.array(gains[f"L{i + 1}"], float) for i in range(N)]
-            X = np.array(gains.get("X", np.zeros_like(P[0])), float)
-        except (TypeError, ValueError) as exc:
-            raise ConfigurationError(f"gains: a matrix is not an array of numbers ({exc})") from None
-        shapes = [("X", X, (lpv.nx, lpv.nx))] + [(f"P{i + 1}", p, (lpv.nx, lpv.nx)) for i, p in enumerate(P)] \
-            + [(f"L{i + 1}", m, (lpv.nx, lpv.ny)) for i, m in enumerate(L)]
-        for label, m, shape in shapes:
+            refuse(f"lacks {', '.join(missing)}", missing[0])
+        beyond = sorted(k for k in gains if re.fullmatch(r"[PL]\d+", k) and not 1 <= int(k[1:]) <= N)
+        if beyond:              # a gain of a vertex this observer does not have: the file is for another polytope
+            refuse(f"has {', '.join(beyond)}", beyond[0])
+        matrices = {}
+        for key, shape in [("X", (lpv.nx, lpv.nx)), *((f"P{i + 1}", (lpv.nx, lpv.nx)) for i in range(N)),
+                           *((f"L{i + 1}", (lpv.nx, lpv.ny)) for i in range(N))]:
+            if key not in gains:            # X only: the common-plus-vertex split is optional
+                matrices[key] = np.zeros(shape)
+                continue
+            try:
+                m = np.array(gains[key], float)
+            except (TypeError, ValueError):
+                refuse(f"{key} = {brief(repr(gains[key]))} is not a matrix of numbers", key)
             if m.shape != shape:
-                raise ConfigurationError(f"gains: {label} has shape {m.shape}, expected {shape}", key=label)
+                refuse(f"{key} has shape {m.shape}, expected {shape}", key)
+            if not np.all(np.isfinite(m)):
+                refuse(f"{key} has non-finite entries", key)
+            matrices[key] = m
+        P = [matrices[f"P{i + 1}"] for i in range(N)]
+        L = [matrices[f"L{i + 1}"] for i in range(N)]
+        X = matrices["X"]
         make = polytope.taylor_reduced_polytope if poly.kind == "taylor_reduced" else polytope.sector_polytope
         labels = {"exact": "sound rate bounds over the whole box",
                   "at_expansion_point": "rate bounds of the paper's eq. (11)"}

@@ -70,7 +70,7 @@ class NonlinearTyreObserver(Family):
 
         from ...certificate.gains import GainsCheck, check_lock_form, is_lock_file
         from ...design.solver import FreshSolver
-        from ...errors import CertificateError, ConfigurationError, SolverError
+        from ...errors import CertificateError, ConfigurationError, SolverError, brief
         if is_lock_file(gains):
             # a design lock is re-checked as committed: this form re-derives the decay from the settings
             # (decay_fraction of the committed rate again: 0.38 1/s stated for a lock certified at 1.9 1/s)
@@ -81,9 +81,14 @@ class NonlinearTyreObserver(Family):
         except (TypeError, ValueError):
             L = None
         if L is None or L.shape != (2, 2) or not np.all(np.isfinite(L)):
-            raise ConfigurationError(f"gains: expected {{\"L\": [[L_vy_ay, L_vy_r], [L_r_ay, L_r_r]]}} (finite numbers; "
-                                     f"rows v_y, r; columns a_y, r) or the design lock's lmi_solutions, got "
-                                     f"{gains.get('L')!r}", key="L")
+            raise ConfigurationError(f"gains file {source}: L = {brief(repr(gains.get('L')))}; allowed: "
+                                     f"{{\"L\": [[L_vy_ay, L_vy_r], [L_r_ay, L_r_r]]}} (finite numbers; rows v_y, r; "
+                                     f"columns a_y, r) or the design lock's lmi_solutions", source=str(source), key="L")
+        stray = sorted(set(gains) - {"L"})
+        if stray:               # the printed form is the gain alone: a decay or P here would be silently unused
+            raise ConfigurationError(f"gains file {source}: key {stray[0]!r} is not read; allowed: only \"L\" (the "
+                                     f"decay and the Lyapunov matrix are re-derived from the observer file's "
+                                     f"[design]), or the design lock's lmi_solutions", source=str(source), key=stray[0])
         given = dict(zip(("gain_vy_ay", "gain_vy_r", "gain_r_ay", "gain_r_r"), L.ravel().tolist()))
         cfg = dataclasses.replace(config, design={**{k: v for k, v in config.design.items() if k != "decay"}, **given})
         figures = {"L": L.tolist()}

@@ -171,3 +171,27 @@ def test_infeasible_design_is_a_typed_error(lpv):
     poly = polytope.taylor_reduced_polytope(lpv)
     with pytest.raises(InfeasibleLMIError, match="\\(21\\)|gain bound|\\(20\\)"):
         linf_uio.design(poly, linf_uio.LinfDesignSettings(alpha=200.0, gain_bound=1.0), FreshSolver())
+
+
+def test_printed_gains_are_checked_for_what_they_hold(published, tmp_path):
+    """The paper's printed form (P_i, X, L_i, alpha): a matrix missing, of a vertex the polytope lacks,
+    of the wrong shape, not finite, or a non-positive alpha is a ConfigurationError naming the file
+    and the key; the published gains themselves pass."""
+    import math
+    from codegen import families
+    from codegen.project import observer_file as observers
+    cfg = observers.get("lpv_linf_driver_torque")
+    family = families.get(cfg.family)
+    assert family.check_gain_form(cfg, published, "pub.json").feasible
+    eye = np.eye(len(published["P1"])).tolist()
+    cases = [({k: v for k, v in published.items() if k != "L2"}, "L2", "lacks L2"),
+             ({**published, "P3": eye}, "P3", "has P3"),
+             ({**published, "X": [[1.0]]}, "X", "X has shape (1, 1)"),
+             ({**published, "P2": "identity"}, "P2", "P2 = 'identity' is not a matrix of numbers"),
+             ({**published, "L1": (math.inf * np.asarray(published["L1"])).tolist()}, "L1", "L1 has non-finite"),
+             ({**published, "alpha": 0}, "alpha", "alpha = 0; allowed: a positive number")]
+    for gains, key, message in cases:
+        with pytest.raises(ConfigurationError, match="gains file g.json: " + message.replace("(", r"\(")
+                           .replace(")", r"\)")) as exc:
+            family.check_gain_form(cfg, gains, "g.json")
+        assert exc.value.key == key and exc.value.source == "g.json"

@@ -216,6 +216,11 @@ def test_check_gains_cli(tmp_path, capsys):
     assert cli.main(["check-gains", NAME, "--gains", str(wrong)]) == 2
     err = capsys.readouterr().err
     assert "ConfigurationError" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert f"gains file {wrong}: L = [[0.0, 0.0]]" in err
+    # a key the printed form does not read (a decay here would be silently unused): refused, named
+    wrong.write_text(json.dumps({"L": art["L"], "decay": 0.5}))
+    assert cli.main(["check-gains", NAME, "--gains", str(wrong)]) == 2
+    assert "key 'decay' is not read" in capsys.readouterr().err
 
 
 def test_full_sliding_cannot_be_certified():
