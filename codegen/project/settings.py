@@ -191,10 +191,14 @@ def toml_repr(value, limit: int = 60) -> str:
 
 
 def suggest(word, candidates) -> str | None:
-    """The closest candidate to a misspelt key or choice (difflib; else one that extends it), or None."""
+    """The closest candidate to a misspelt key or choice (one that differs in case only; else difflib;
+    else one that extends it), or None."""
     if not isinstance(word, str):
         return None
     candidates = [str(c) for c in candidates]
+    same = [c for c in candidates if c.lower() == word.lower()]
+    if same:                # 'Vx' for 'vx': difflib's ratio of two-letter names is too low to find it
+        return same[0]
     close = difflib.get_close_matches(word, candidates, n=1, cutoff=0.6)
     if close:
         return close[0]

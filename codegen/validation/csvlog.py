@@ -156,8 +156,7 @@ class LogReader:
         missing = [c for c in self.units if c not in self.header]
         if missing:
             spare = [h for h in self.header if h not in self.units]
-            hints = [f"{m!r}: did you mean {s!r}?" for m in missing
-                     for s in [next((h for h in spare if h.lower() == m.lower()), None) or suggest(m, spare)] if s]
+            hints = [f"{m!r}: did you mean {s!r}?" for m in missing for s in [suggest(m, spare)] if s]
             raise DatasetError(f"{p}: missing column(s) {missing}; found {self.header}"
                                + (f" ({'; '.join(hints)})" if hints else "") + " (fields separated by "
                                f"{_SEPARATORS[self.sep]}; allowed separators: comma, semicolon or tab)")
