@@ -36,6 +36,11 @@ class UnknownParameterError(ModelDefinitionError):
     """The parameter file sets a name the model does not use (likely a typo)."""
 
 
+class UnitError(ModelDefinitionError):
+    """A model's equations contradict the units it declares (a term of another dimension, an
+    output declared in a unit its expression is not in)."""
+
+
 class NotAffineError(ModelDefinitionError):
     """The dynamics are not affine in states/inputs, so no LPV form exists."""
 

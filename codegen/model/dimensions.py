@@ -6,7 +6,18 @@ consistent: each term of ``x_i' = f_i`` has the unit of ``x_i`` per second, each
 of the output, the argument of ``sin``, ``tanh``, ``exp`` ... is dimensionless, the terms of a sum
 agree. Those rules are linear in the (log-)dimensions of the parameters, so :func:`infer` solves
 them exactly (rational arithmetic) for every parameter's dimension in the base quantities
-length, mass and time. Angles are dimensionless, as in SI.
+length, mass and time. Angles are dimensionless, as in SI. A signal whose unit the model does
+not declare is an unknown of the same system, so it constrains nothing by itself; a literal 0
+fits any unit (``Min(a_x, 0)``).
+
+:func:`check_units` refuses a model whose equations contradict its declared units, naming the
+term or the declaration. It reads every number but 1 and -1 as one that may carry a unit (a
+``3000 * sin(...)`` in newtons, a time constant ``(u - x) / 10``), so it refuses only what no
+reading of the numbers makes consistent: ``- r`` in an acceleration, a time constant declared
+in metres. An output declared in a unit of the same dimension as its signal but another scale
+(``deg/s`` for a yaw rate in ``rad/s``) is refused too, since the step does not convert. (The
+plausibility checks read numbers as pure, which infers more: ``2 * C_f`` and ``2 * C_r`` are of
+one kind.)
 
 Equations alone fix only *relative* dimensions when the model has a scaling symmetry (a
 single-track model is unchanged if mass and every stiffness are scaled together): the front and
@@ -34,7 +45,7 @@ from fractions import Fraction
 
 import sympy as sp
 
-from ..errors import ModelDefinitionError
+from ..errors import ModelDefinitionError, UnitError
 
 BASE = ("L", "M", "T")          # length [m], mass [kg], time [s]
 
@@ -146,18 +157,34 @@ def _dimensionless(f: _Form, where: str, constraints: list) -> None:
         constraints.append((f, where))
 
 
-def _form(expr, known: dict, params: set, constraints: list, where: str) -> _Form:
-    """The dimension of ``expr`` as a form in the parameters' unknown dimensions; rules that must
-    hold (sum terms equal, function arguments dimensionless) go to ``constraints``."""
+class _Unknowns(set):
+    """Names of the unknown dimensions: parameters, signals without a declared unit, and with
+    ``free_numbers`` one per number other than 0, 1, -1 (:meth:`fresh`)."""
+
+    def __init__(self, names=(), free_numbers: bool = False):
+        super().__init__(names)
+        self.free_numbers = free_numbers
+
+    def fresh(self, label: str) -> str:
+        name = f"{label} #{len(self)}"
+        self.add(name)
+        return name
+
+
+def _form(expr, known: dict, params: _Unknowns, constraints: list, where: str) -> _Form:
+    """The dimension of ``expr`` as a form in the unknown dimensions (``params``: parameters,
+    signals without a unit, numbers if ``params.free_numbers``); rules that must hold (sum terms
+    equal, function arguments dimensionless) go to ``constraints``."""
     if expr.is_Number or expr in (sp.pi, sp.E) or expr.is_number:
+        if params.free_numbers and not (expr.is_zero or expr in (sp.S.One, sp.S.NegativeOne)):
+            return _Form((0, 0, 0), {params.fresh(f"number {expr}"): 1})
         return _Form()
     if expr.is_Symbol:
         name = str(expr)
         if name in known:
             return _Form(known[name])
-        if name in params:
-            return _Form((0, 0, 0), {name: 1})
-        return _Form()               # a symbol without a unit (an unlabelled signal): no information
+        params.add(name)             # a parameter, or a signal without a declared unit: unknown
+        return _Form((0, 0, 0), {name: 1})
     if expr.is_Add:
         forms = [_form(a, known, params, constraints, where) for a in expr.args]
         for f in forms[1:]:
@@ -170,6 +197,8 @@ def _form(expr, known: dict, params: set, constraints: list, where: str) -> _For
         return out
     if expr.is_Pow:
         base, exp = expr.args
+        if exp.is_Float and sp.nsimplify(exp).is_Rational and sp.nsimplify(exp).q <= 12:
+            exp = sp.nsimplify(exp)          # v**0.5 is v**(1/2)
         if exp.is_Rational:
             return _form(base, known, params, constraints, where).scale(Fraction(int(exp.p), int(exp.q)))
         _dimensionless(_form(base, known, params, constraints, where), f"{where}: base of {expr}", constraints)
@@ -177,19 +206,20 @@ def _form(expr, known: dict, params: set, constraints: list, where: str) -> _For
         return _Form()
     if isinstance(expr, (sp.Abs, sp.re, sp.im)):
         return _form(expr.args[0], known, params, constraints, where)
-    if isinstance(expr, (sp.Min, sp.Max)):
-        forms = [_form(a, known, params, constraints, where) for a in expr.args]
+    if isinstance(expr, (sp.Min, sp.Max)):           # a literal 0 fits any unit: Min(a_x, 0)
+        forms = [_form(a, known, params, constraints, where) for a in expr.args if not a.is_zero]
         for f in forms[1:]:
             _dimensionless(f - forms[0], f"{where}: arguments of {expr.func.__name__}", constraints)
-        return forms[0]
+        return forms[0] if forms else _Form()
     if isinstance(expr, sp.Piecewise):
         forms = []
         for value, cond in expr.args:
-            forms.append(_form(value, known, params, constraints, where))
+            if not value.is_zero:
+                forms.append(_form(value, known, params, constraints, where))
             _relational(cond, known, params, constraints, where)
         for f in forms[1:]:
             _dimensionless(f - forms[0], f"{where}: branches of a Piecewise", constraints)
-        return forms[0]
+        return forms[0] if forms else _Form()
     if isinstance(expr, sp.atan2):
         a, b = (_form(x, known, params, constraints, where) for x in expr.args)
         _dimensionless(a - b, f"{where}: arguments of atan2", constraints)
@@ -236,38 +266,113 @@ def _equations(model) -> list:
     return out
 
 
-def infer(model) -> Analysis:
-    """Every parameter's dimension from the model's equations and declared units (module docstring)."""
-    units = dict(getattr(model, "units", None) or {})
-    params = [str(p) for p in model.parameters]
-    known = {}
-    for name, text in units.items():
-        if name not in params:
-            known[name] = parse_unit(text)
+def _signal_units(model, scale: bool = False) -> dict:
+    """{signal name: (L, M, T) exponents} of every signal with a declared unit (the model's
+    ``units`` less its parameters, and the scheduling signals' own units); ``scale=True``: the
+    :func:`unit` pairs, exponents and factor to SI."""
+    params = {str(p) for p in model.parameters}
+    read = unit if scale else parse_unit
+    known = {name: read(text) for name, text in (getattr(model, "units", None) or {}).items() if name not in params}
     for g in getattr(model, "scheduling", ()):
         if getattr(g, "unit", "") and str(g.symbol) not in known:
-            known[str(g.symbol)] = parse_unit(g.unit)
-    constraints = []
+            known[str(g.symbol)] = read(g.unit)
+    return known
+
+
+def check_units(model) -> None:
+    """Refuse a model whose equations contradict the units it declares (module docstring).
+
+    Raises
+    ------
+    UnitError
+        naming the model, each term in another unit than its equation needs (or each declared
+        parameter unit the equations contradict), and each output declared at another scale than
+        the signal it is.
+    """
+    problems, analysis = [], analysis_of(model, free_numbers=True)
+    if analysis.inconsistencies:
+        problems = _term_mismatches(model) or _declaration_mismatches(model) or [
+            f"the units do not agree in {', '.join(analysis.inconsistencies)}"]
+    problems += _scale_mismatches(model)
+    if problems:
+        raise UnitError(f"model {model.name!r}: its equations contradict its declared units: {'; '.join(problems)} "
+                        f"(each term of d x/dt must be in the unit of x per second, an output in its declared unit, "
+                        f"the argument of sin, exp, ... dimensionless; angles are dimensionless; a model in "
+                        f"normalized time declares no unit for its states)")
+
+
+def _term_mismatches(model) -> list:
+    """The terms of an equation made of signals with declared units and pure numbers alone, whose
+    unit is not the one the equation needs (``- r`` in an acceleration)."""
+    known, params, out = _signal_units(model), [str(p) for p in model.parameters], []
     for what, dims, expr in _equations(model):
-        f = _form(sp.expand(expr) if not expr.has(sp.Piecewise) else expr, known, set(params), constraints, what)
+        e = sp.expand(expr) if not expr.has(sp.Piecewise) else expr
+        for term in (e.args if e.is_Add else (e,)):
+            f = _form(term, known, _Unknowns(params, free_numbers=True), [], what)
+            if not f.coef and tuple(f.const) != tuple(dims):
+                out.append(f"{what}: the term {term} is in {format_dims(f.const)}, the equation needs "
+                           f"{format_dims(dims)}")
+    return out
+
+
+def _declaration_mismatches(model) -> list:
+    """Declared parameter units that the equations and the signals' units contradict."""
+    free, out = infer(model, declared_parameters=False, free_numbers=True), []
+    for name, text in (getattr(model, "units", None) or {}).items():
+        d = free.dims.get(name)
+        if d is not None and tuple(d) != tuple(parse_unit(text)):
+            out.append(f"the declared unit of {name} is {text}, the equations make it {format_dims(d)}")
+    return out
+
+
+def _scale_mismatches(model) -> list:
+    """Outputs that are a signal (times a number) declared in a unit of the signal's dimension but
+    another scale, the number not converting: a gyro in deg/s equal to a yaw rate in rad/s."""
+    import math
+    units, known, out = getattr(model, "units", None) or {}, _signal_units(model, scale=True), []
+    for name, expr in model.outputs:
+        coeff, rest = sp.sympify(expr).as_coeff_Mul()
+        if name not in units or not rest.is_Symbol or str(rest) not in known or not coeff.is_number:
+            continue
+        (d_out, f_out), (d_sig, f_sig) = unit(units[name]), known[str(rest)]
+        ratio = f_sig / f_out
+        if d_out == d_sig and not math.isclose(ratio, 1.0, rel_tol=1e-9) \
+                and not math.isclose(float(coeff), ratio, rel_tol=1e-6):
+            declared = units.get(str(rest)) or next(g.unit for g in model.scheduling if str(g.symbol) == str(rest))
+            out.append(f"output {name} = {expr} is declared in {units[name]}, {rest} is in {declared}, and the step "
+                       f"does not convert: declare {name} in {declared}, or write it as {ratio:.10g}*{rest}")
+    return out
+
+
+def infer(model, declared_parameters: bool = True, free_numbers: bool = False) -> Analysis:
+    """Every parameter's dimension from the model's equations and declared units (module docstring);
+    ``declared_parameters=False``: from the equations and the signals' units alone;
+    ``free_numbers``: every number but 0, 1, -1 may carry a unit (:func:`check_units`)."""
+    units = dict(getattr(model, "units", None) or {})
+    params = [str(p) for p in model.parameters]
+    known = _signal_units(model)
+    constraints, unknowns = [], _Unknowns(params, free_numbers)
+    for what, dims, expr in _equations(model):
+        f = _form(sp.expand(expr) if not expr.has(sp.Piecewise) else expr, known, unknowns, constraints, what)
         _dimensionless(f - _Form(dims), what, constraints)
     for name, text in units.items():           # declared parameter units fix the free scales
-        if name in params:
+        if name in params and declared_parameters:
             _dimensionless(_Form((0, 0, 0), {name: 1}) - _Form(parse_unit(text)), f"declared unit of {name}",
                            constraints)
-    index = {p: k for k, p in enumerate(params)}
-    system, inconsistencies = _Echelon(len(params)), []
+    names = params + sorted(unknowns - set(params))
+    index = {p: k for k, p in enumerate(names)}
+    system, inconsistencies = _Echelon(len(names)), []
     for f, where in constraints:            # sum coef d_p = -const, one system for the three bases
-        row = [Fraction(0)] * len(params)
+        row = [Fraction(0)] * len(names)
         for p, c in f.coef.items():
             row[index[p]] += Fraction(c)
         if not system.add(row, [-Fraction(c) for c in f.const]) and where not in inconsistencies:
             inconsistencies.append(where)
-    dims = {p: system.value(_unit_row(len(params), index[p])) for p in params}
+    dims = {p: system.value(_unit_row(len(names), index[p])) for p in params}
     same = []
     for i, p in enumerate(params):
         for q in params[i + 1:]:
-            diff = _unit_row(len(params), index[p])
+            diff = _unit_row(len(names), index[p])
             diff[index[q]] -= 1
             d = system.value(diff)
             if d is not None and not any(d) and not (dims[p] is not None and not any(dims[p])):
@@ -373,11 +478,12 @@ def check_plausibility(model, values: dict, source: str, accepted=()) -> None:
 _CACHE: dict = {}
 
 
-def analysis_of(model) -> Analysis:
-    """:func:`infer`, once per model object (the analysis is exact and costs a few sympy solves)."""
-    key = id(model)
+def analysis_of(model, free_numbers: bool = False) -> Analysis:
+    """:func:`infer`, once per model object and reading of the numbers (the analysis is exact and
+    costs a few sympy solves)."""
+    key = (id(model), free_numbers)
     hit = _CACHE.get(key)
     if hit is None or hit[0] is not model:
-        hit = (model, infer(model))
+        hit = (model, infer(model, free_numbers=free_numbers))
         _CACHE[key] = hit
     return hit[1]

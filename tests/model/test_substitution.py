@@ -164,7 +164,7 @@ def test_a_steering_angle_inside_a_saturating_tyre(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("bank, lo, why", [
-    ("sp.sin(phi_r) + sp.cos(phi_r)", "-0.15", "enters through 2 different expressions"),
+    ("(sp.sin(phi_r) + sp.cos(phi_r))", "-0.15", "enters through 2 different expressions"),
     ("(sp.sin(phi_r) + phi_r)", "-0.15", r"enters both directly and through sin\(phi_r\)"),
     ("sp.cos(phi_r)", "-0.15", "not monotone in phi_r on the box"),
 ])

@@ -92,9 +92,11 @@ def test_model_errors_are_clear(tmp_path):
     path.write_text(text.split("[premise_bounds]")[0])
     with pytest.raises(SchedulingBoundsError, match="premise_bounds"):
         icm.build(m, load_parameters(path))
-    # an unknown input entering both subsystems has no owner
+    # an unknown input entering both subsystems has no owner (its coefficient 3 may carry the unit
+    # that makes the term an angular acceleration, so the units check lets the structure check speak)
     kappa, T_Bf = sp.Symbol("kappa"), sp.Symbol("T_Bf")
-    both = dataclasses.replace(m, dynamics=tuple((s, e + kappa if str(s) == "omega_f" else e) for s, e in m.dynamics))
+    both = dataclasses.replace(m, dynamics=tuple((s, e + 3 * kappa if str(s) == "omega_f" else e)
+                                                 for s, e in m.dynamics))
     with pytest.raises(ModelDefinitionError, match="each must enter exactly one"):
         icm.build(both, _params())
     del T_Bf

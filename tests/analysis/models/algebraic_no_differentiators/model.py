@@ -9,4 +9,4 @@ MODEL = ModelDefinition(
     name="relative_degree_two", states=(x1, x2), known_inputs=(), unknown_inputs=(d,),
     dynamics=sp.Matrix([(1 + rho) * x2, -rho * x1 - 2 * x2 + (1 + rho) * d]),
     outputs=(("x1", x1),), scheduling=(SchedulingSignal(rho, "-"),), parameters=(),
-    units={"x1": "-", "x2": "-", "d": "-", "rho": "-"})
+    units={"d": "-", "rho": "-"})     # normalized time: the states declare no unit
