@@ -29,6 +29,9 @@ def _family_build(config: ObserverConfig, solver):
     the boxes of the parameter file it was bounded over, and the family's bounds settings
     (``Family.bounds_settings``) where it has them."""
     family = families.get(config.family)
+    from .model import load_parameters
+    from .model.definition import check_signal_tables
+    check_signal_tables(config.load_model(), load_parameters(config.parameter_path))
     try:
         return family.build(config, solver)
     except BoundsError as exc:

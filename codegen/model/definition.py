@@ -443,6 +443,29 @@ def check_parameter_values(model, values: Mapping[str, float], source: str, sect
                                + (f" (model {model.name!r} declares {p}: {reasons})" if reasons else ""))
 
 
+def check_signal_tables(model: ModelDefinition, params: ParameterSet) -> None:
+    """Refuse an entry of the parameter file's ``[scheduling.NAME]``, ``[state_bounds]`` or
+    ``[inputs.NAME]`` tables that names no signal of the model (a misspelt signal would otherwise
+    be silently unused, its box never applied). Whether a signal may have the entry (a state's
+    ``[inputs]`` range, a box for an input the family wants scheduled) is the family's and the
+    excitation scenario's to say, with what the model needs instead.
+
+    Raises
+    ------
+    ConfigurationError
+        naming the file, the table, the key, the model's signals and the nearest one.
+    """
+    from ..project.settings import check_keys
+    signals = {*model.state_names, *(str(s) for s in (*model.known_inputs, *model.unknown_inputs)),
+               *(str(g.symbol) for g in model.scheduling), *model.output_names,
+               *(str(w.symbol) for w in model.derived_inputs)}
+    what = f"(the signals of model {model.name!r})"
+    check_keys({k: {"min": b.lower, "max": b.upper} for k, b in params.scheduling.items()}, signals,
+               source=params.source, section="scheduling", what=what)
+    check_keys(params.inputs, signals, source=params.source, section="inputs", what=what)
+    check_keys(params.state_bounds, signals, source=params.source, section="state_bounds", what=what)
+
+
 def parameter_substitution(model: ModelDefinition, params: ParameterSet) -> dict:
     """{parameter symbol: value}, after checking the file sets exactly the model's parameters.
 
@@ -469,7 +492,8 @@ def parameter_substitution(model: ModelDefinition, params: ParameterSet) -> dict
             f"parameter file {params.source} sets {', '.join(unknown)}, which model "
             f"{model.name!r} does not use (declared: {', '.join(needed)})")
     check_parameter_values(model, params.values, params.source)
-    from .dimensions import check_plausibility
+    from .dimensions import check_plausibility, check_units
+    check_units(model)
     check_plausibility(model, params.values, params.source, params.accepted)
     return {p: params.values[str(p)] for p in model.parameters}
 

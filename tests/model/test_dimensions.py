@@ -152,3 +152,92 @@ def test_every_builtin_parameter_file_is_plausible_and_consistent():
     analysis = dimensions.infer(core)
     assert not analysis.inconsistencies
     assert all(d is not None for d in analysis.dims.values())     # every parameter's dimension is fixed
+
+
+# --- a model whose equations contradict its declared units is refused before any design ----------
+
+def _truck(extra_term=0, gyro_unit="rad/s", gyro=None, units=None) -> ModelDefinition:
+    """A single-track truck with a first-order steering actuator: every signal and parameter unit declared."""
+    v_y, r, steer, cmd, F_w = sp.symbols("v_y r steer cmd F_w")
+    u = sp.Symbol("u", positive=True)
+    m, J, a, b, C_f, C_r, tau = sp.symbols("m J a b C_f C_r tau", positive=True)
+    F_f, F_r = C_f * (steer - (v_y + a * r) / u), C_r * (b * r - v_y) / u
+    terms = {"r": r}
+    return ModelDefinition(
+        "truck_actuator", (v_y, r, steer), (cmd,), (F_w,),
+        sp.Matrix([(F_f + F_r + F_w) / m - u * r + sp.sympify(extra_term).subs(terms),
+                   (a * F_f - b * F_r) / J, (cmd - steer) / tau]),
+        (("gyro", gyro if gyro is not None else r), ("steer_meas", steer)), (SchedulingSignal(u, "m/s"),),
+        (m, J, a, b, C_f, C_r, tau),
+        units={"v_y": "m/s", "r": "rad/s", "steer": "rad", "cmd": "rad", "F_w": "N", "gyro": gyro_unit,
+               "steer_meas": "rad", "m": "kg", "J": "kg m^2", "a": "m", "b": "m", "C_f": "N/rad", "C_r": "N/rad",
+               "tau": "s", **(units or {})})
+
+
+def test_a_consistent_model_passes_the_units_check():
+    dimensions.check_units(_truck())
+    dimensions.check_units(_single_track({"M": "kg"}))
+
+
+def test_a_term_of_another_unit_is_named():
+    # - r (rad/s) written into an acceleration: no reading of the numbers makes it one
+    with pytest.raises(dimensions.UnitError, match=r"dv_y/dt: the term -r is in s\^-1, the equation needs m s\^-2"):
+        dimensions.check_units(_truck(extra_term="-r"))
+
+
+def test_a_declared_parameter_unit_the_equations_contradict_is_named():
+    with pytest.raises(dimensions.UnitError, match=r"the declared unit of tau is m, the equations make it s"):
+        dimensions.check_units(_truck(units={"tau": "m"}))
+
+
+def test_an_output_declared_at_another_scale_is_refused_unless_converted():
+    # a gyro declared in deg/s that is the yaw rate in rad/s: the step would read degrees as radians
+    with pytest.raises(dimensions.UnitError, match=r"output gyro = r is declared in deg/s, r is in rad/s, and the "
+                                                   r"step does not convert: .*57.29577951\*r"):
+        dimensions.check_units(_truck(gyro_unit="deg/s"))
+    r = sp.Symbol("r")
+    dimensions.check_units(_truck(gyro_unit="deg/s", gyro=180 / sp.pi * r))     # converted: accepted
+
+
+def test_numbers_may_carry_units_and_zero_fits_any():
+    """3000 N written as a number, a time constant as a number, Min(a_x, 0): consistent readings exist."""
+    x, v, a_x, F = sp.symbols("x v a_x F")
+    m = sp.Symbol("m", positive=True)
+    model = ModelDefinition(
+        "numbers_with_units", (x, v), (a_x,), (F,),
+        sp.Matrix([v, 3000 * sp.sin(sp.Rational(13, 10) * sp.atan(x / 2)) / m + sp.Min(a_x, 0) + F / m
+                   + (a_x - v) / 10]),
+        (("x", x),), (), (m,), units={"x": "m", "v": "m/s", "a_x": "m/s^2", "F": "N", "m": "kg"})
+    dimensions.check_units(model)
+
+
+def test_every_builtin_model_passes_the_units_check():
+    for name in observers.names():
+        dimensions.check_units(observers.get(name).load_model())
+
+
+def test_the_units_check_runs_before_any_design(tmp_path, capsys):
+    path = _project(tmp_path, extra=', "I_e": "kg m^2"')      # T_eng / I_e is an acceleration: I_e in kg m
+    assert cli.main(["design", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("uiogen: error: UnitError: model 'unit_slip_car'") and "the declared unit of" in err
+
+
+@pytest.mark.parametrize("table, text, message", [
+    ("state_bounds", "[state_bounds]\nv_yy = [-1.5, 1.5]\n", r"\[state_bounds\] v_yy = \[-1.5, 1.5\]: unknown .*did you "
+                                                            r"mean 'v_y'.*allowed \(the signals of model 'unit_slip_car'\)"),
+    ("inputs", "[inputs]\nT_en = { min = 0.0, max = 1.0 }\n", r"\[inputs\] T_en = .*did you mean 'T_eng'"),
+    ("scheduling", "[scheduling.v_z]\nmin = 5.0\nmax = 30.0\nrate_min = -1.0\nrate_max = 1.0\n",
+     r"\[scheduling\] v_z = .*unknown .*did you mean 'v_[xy]'.*allowed \(the signals of model 'unit_slip_car'\)"),
+])
+def test_a_table_entry_naming_no_signal_of_the_model_is_refused(tmp_path, capsys, table, text, message):
+    """A misspelt [state_bounds] / [inputs] / [scheduling.NAME] entry would be silently unused."""
+    path = _project(tmp_path)
+    params = tmp_path / "car.toml"
+    params.write_text(params.read_text().replace("[state_bounds]\n", text + "[state_bounds]\n", 1)
+                      if table != "state_bounds" else params.read_text() + text.split("\n", 1)[1])
+    assert cli.main(["design", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "ConfigurationError" in err and "car.toml" in err and "Traceback" not in err
+    import re
+    assert re.search(message, err), err

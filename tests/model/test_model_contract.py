@@ -170,7 +170,8 @@ def test_ts_takes_a_scheduling_speed_derived_from_a_measured_output(tmp_path):
     ("interconnected_uio", DERIVED_SPEED, "", r"InterconnectedModelDefinition.*other families take"),
 ])
 def test_a_structure_a_family_cannot_take_names_the_family_that_can(tmp_path, capsys, family, model, extra, message):
-    params = PARAMS + INPUTS.replace("Mz =", "F = { min = -1.0, max = 1.0 }\nMz =")
+    params = (PARAMS.replace("v = [5.0, 40.0]\n", "") + "\n[inputs]\ndelta = { min = -0.03, max = 0.03 }\n"
+              "F = { min = -1.0, max = 1.0 }\n") if model == FEEDTHROUGH else PARAMS + INPUTS
     obs = project(tmp_path, family, model, params, extra)
     assert cli.main(["design", str(obs)]) == 2
     err = capsys.readouterr().err.strip()
@@ -181,7 +182,8 @@ def test_a_structure_a_family_cannot_take_names_the_family_that_can(tmp_path, ca
 def test_ts_refuses_a_scheduling_input_naming_the_family_that_takes_it(tmp_path):
     model = FEEDTHROUGH.replace('("a_y", (F_yf + F_yr + F) / M)', '("beta", beta)').replace("+ F) / (M * v_x)",
                                                                                              ") / (M * v_x) + F")
-    obs = project(tmp_path, "ts_fuzzy_uio", model, PARAMS + "\n[inputs]\ndelta = { min = -0.03, max = 0.03 }\n")
+    obs = project(tmp_path, "ts_fuzzy_uio", model, PARAMS.replace("v = [5.0, 40.0]\n", "")
+                  + "\n[inputs]\ndelta = { min = -0.03, max = 0.03 }\n")
     with pytest.raises(ModelDefinitionError, match=r"scheduling signal\(s\) v_x given as inputs.*linf_uio"):
         pipeline.build(observers.get(str(obs)))
 
