@@ -166,7 +166,7 @@ def test_ts_takes_a_scheduling_speed_derived_from_a_measured_output(tmp_path):
      r"unknown inputs reach the outputs \(a_y <- F\).*\(family linf_uio\) takes this feedthrough"),
     ("algebraic_uio", DERIVED_SPEED, "", r"derived scheduling signal\(s\) v_x.*\(family linf_uio\) and the TS fuzzy"),
     ("nonlinear_tyre_observer", DERIVED_SPEED, "[design]\nsigma_force_front = 1.0\nsigma_force_rear = 1.0\n",
-     r"needs states \(v_y, r\).*\(family linf_uio\)"),
+     r"has 3 state\(s\).*needs two states \(the lateral speed, then the yaw rate\).*\(family linf_uio\)"),
     ("interconnected_uio", DERIVED_SPEED, "", r"InterconnectedModelDefinition.*other families take"),
 ])
 def test_a_structure_a_family_cannot_take_names_the_family_that_can(tmp_path, capsys, family, model, extra, message):

@@ -4,7 +4,8 @@ The family designs the gains of a nonlinear single-track observer of (v_y, r) wi
 tyre per axle, jointly with one Lyapunov matrix, over a set of slip angles below sliding; it needs
 the model file's description of the axles (``AXLES``, ``FORCES``, ``DYNAMICS_IN_FORCES``,
 ``A_Y_IN_FORCES``), outputs (a_y, r), the boxes of v_x and of the known inputs, and a tyre slope
-bounded away from 0 on the set (else v_y is unobservable there). Its unknown inputs are the
+bounded away from 0 on the set (else v_y is unobservable there). These are roles, read from the
+model's structure under its own names (:func:`.representation.signals`). Its unknown inputs are the
 unmodelled axle forces: it estimates the states only.
 """
 from __future__ import annotations

@@ -123,11 +123,12 @@ def _functions(rep: TyreRepresentation, xp):
 
 
 def step_parts(rep, L, Ts, z, u, y, rho, fns, xp=np):
-    """(x_next, excess): z = [x_hat_k (prediction from k-1)]; u = [delta, a_x], y = [a_y, r], rho = [v_x]."""
+    """(x_next, excess): z = [x_hat_k (prediction from k-1)]; u = the known inputs (delta, a_x), y = the
+    outputs in the model's order (a_y and r), rho = [v_x]."""
     f_fn, ay_fn, lim_fn, t_fn = fns
     fmin, fmax, fabs = (ca.fmin, ca.fmax, ca.fabs) if xp is ca else (min, max, abs)
     vy, rh = z[0], z[1]
-    a_m, r_m, v = y[0], y[1], rho[0]
+    a_m, r_m, v = y[rep.signals.a_y_index], y[rep.signals.yaw_rate_index], rho[0]
     vc = fmin(fmax(v, rep.v_x_box[0]), rep.v_x_box[1])
     excess = fabs(v - vc)
     for k, (_, (lo, hi)) in enumerate(rep.input_boxes):
@@ -183,11 +184,13 @@ def _build_class():
 
         @property
         def known_inputs(self) -> list:
-            return [n for n, _ in self.rep.input_boxes]
+            return list(self.rep.signals.known_inputs)
 
-        state_names = property(lambda self: ["v_y_next", "r_next", "v_y", "r"])
-        output_names = property(lambda self: ["v_y", "r"])
-        input_names = property(lambda self: [*self.known_inputs, "y_a_y", "y_r", "v_x"])
+        # every name is the model's (representation.Signals): states, known inputs, outputs, speed
+        state_names = property(lambda self: [f"{n}_next" for n in self.output_names] + self.output_names)
+        output_names = property(lambda self: [self.rep.signals.lateral_speed, self.rep.signals.yaw_rate])
+        input_names = property(lambda self: [*self.known_inputs, *(f"y_{n}" for n in self.rep.signals.outputs),
+                                             self.rep.signals.speed])
         nu = property(lambda self: len(self.rep.input_boxes))
         ny = property(lambda self: 2)
 
@@ -212,7 +215,7 @@ def _build_class():
             from ...certificate.contraction import ContractionMetric
             D = self.plant.D            # P is solved in the scaled state D x (certify: D' P D)
             return [ContractionMetric(float(self.recheck["contraction_per_step"]), (D.T @ self.P @ D,),
-                                      ("v_y_next", "r_next"),
+                                      tuple(self.state_names[:2]),
                                       "common P over the DMVT vertices: A' P A <= c^2 P, on the certified slip set",
                                       knob="[design] decay or decay_fraction (the rate the LMIs impose), a lower "
                                            "sliding_fraction")]
@@ -224,30 +227,40 @@ def _build_class():
                                    L_scaled)
 
         def input_boxes(self):
-            return {"v_x": list(self.rep.v_x_box), **{n: list(b) for n, b in self.rep.input_boxes}}
+            return {self.rep.signals.speed: list(self.rep.v_x_box), **{n: list(b) for n, b in self.rep.input_boxes}}
 
         def scheduling_boxes(self):
-            return [("v_x", *self.rep.v_x_box, False)]
+            return [(self.rep.signals.speed, *self.rep.v_x_box, False)]
 
         def signal_docs(self):
-            state = [{"name": "v_y_next", "doc": "predicted lateral speed for the next sample [m/s]"},
-                     {"name": "r_next", "doc": "predicted yaw rate for the next sample [rad/s]"},
-                     {"name": "v_y", "doc": "estimate of v_y at this sample, from the samples before it [m/s]"},
-                     {"name": "r", "doc": "estimate of r at this sample, from the samples before it [rad/s]"}]
-            docs = {"delta": "road-wheel steering angle [rad]", "a_x": "measured longitudinal acceleration at the CoG "
-                    "[m/s^2] (combined slip: the axles' lateral capacity)"}
-            inputs = [{"name": n, "doc": docs.get(n, "known input")} for n in self.known_inputs]
-            inputs += [{"name": "y_a_y", "doc": "measured lateral acceleration at the CoG [m/s^2]"},
-                       {"name": "y_r", "doc": "measured yaw rate [rad/s]"},
-                       {"name": "v_x", "doc": "measured longitudinal speed [m/s]"}]
+            s = self.rep.signals
+            vy, r, u = s.lateral_speed, s.yaw_rate, s.unit
+            state = [{"name": f"{vy}_next", "doc": f"predicted lateral speed for the next sample [{u(vy)}]"},
+                     {"name": f"{r}_next", "doc": f"predicted yaw rate for the next sample [{u(r)}]"},
+                     {"name": vy, "doc": f"estimate of {vy} at this sample, from the samples before it [{u(vy)}]"},
+                     {"name": r, "doc": f"estimate of {r} at this sample, from the samples before it [{u(r)}]"}]
+            docs = {s.steering: f"road-wheel steering angle [{u(s.steering)}]"}
+            if "a_x" in s.known_inputs and s.steering != "a_x":     # the built-in model's combined slip
+                docs["a_x"] = (f"measured longitudinal acceleration at the CoG [{u('a_x')}] (combined slip: the "
+                               f"axles' lateral capacity)")
+            inputs = [{"name": n, "doc": docs.get(n, f"measured {n}, read by the axles' lateral capacity [{u(n)}]")}
+                      for n in self.known_inputs]
+            measured = {s.a_y: f"measured lateral acceleration at the CoG [{u(s.a_y)}]",
+                        s.yaw_rate_output: f"measured yaw rate [{u(s.yaw_rate_output)}]"}
+            inputs += [{"name": f"y_{n}", "doc": measured[n]} for n in s.outputs]
+            inputs += [{"name": s.speed, "doc": f"measured longitudinal speed [{u(s.speed)}]"}]
             return state, inputs, state[2:]
 
         def step_notes(self):
+            s = self.rep.signals
+            measured = [s.speed, *s.known_inputs]
+            which = ", ".join(measured[:-1]) + " or " + measured[-1]
             return StepNotes(
                 notes=("Each call takes the measurements of sample k and returns the estimate of sample k made",
                        "from the samples before it; the state's head is the prediction for sample k+1.",
-                       "A flagged sample integrates the kinematics v_y' = a_y - r v_x (no tyre correction)."),
-                clamp=("v_x, delta or a_x outside the certified set (v_x clamped for the model), or an estimated\n"
+                       f"A flagged sample integrates the kinematics {s.lateral_speed}' = {s.a_y} - {s.yaw_rate} "
+                       f"{s.speed} (no tyre correction)."),
+                clamp=(f"{which} outside the certified set ({s.speed} clamped for the model), or an estimated\n"
                        " * axle slip beyond sliding_fraction of its sliding slip: the certificate does not cover this "
                        "sample,\n * and the step integrates the kinematics instead of correcting by the tyre model."),
                 warmup="never set.")
@@ -261,6 +274,8 @@ def _build_class():
                 ranges = (f"; every axle's cornering stiffness x[{s.stiffness_range[0]:g}, {s.stiffness_range[1]:g}] "
                           f"and friction x[{s.friction_range[0]:g}, {s.friction_range[1]:g}] of the parameter file")
             gains = "given" if self.synthesis.given else "designed (LMIs, jointly with the Lyapunov matrix)"
+            names = self.rep.signals
+            measured = ", ".join([names.steering, names.speed, *(n for n in names.known_inputs if n != names.steering)])
             return Certificate(
                 family="nonlinear_tyre_observer",
                 claim=(f"one quadratic Lyapunov matrix at every vertex of (1/v_x, theta_f, theta_r) (DMVT, gains "
@@ -276,10 +291,12 @@ def _build_class():
                 noise=(f"axle force residuals (sigma {lv['force_front']:.4g}, {lv['force_rear']:.4g} N), a_y sensor "
                        f"error ({lv['ay']:.4g} m/s^2), yaw-rate sensor error ({lv['r']:.4g} rad/s), Euler residuals "
                        f"({lv['euler_vy']:.4g} m/s^2, {lv['euler_r']:.4g} rad/s^2): any sequences"),
-                region={"v_x": tuple(self.rep.v_x_box), **{n: tuple(b) for n, b in self.rep.input_boxes}},
+                region={self.rep.signals.speed: tuple(self.rep.v_x_box),
+                        **{n: tuple(b) for n, b in self.rep.input_boxes}},
                 region_note=(f"|t_k| <= {s.sliding_fraction:g} t_sl,k on each axle (the sliding slip at the measured "
                              f"signals) for the true AND the estimated state; SCHEDULING_CLAMPED flags the estimated "
-                             f"slip or a measured signal (delta, v_x, a_x where the law reads it) outside the set: the true slip is not seen (v_y is not measured)"),
+                             f"slip or a measured signal ({measured} where the law reads it) outside the set: the "
+                             f"true slip is not seen ({self.rep.signals.lateral_speed} is not measured)"),
                 recheck=Recheck(c["blocks"], c["worst_block"], c["worst_min_eig"], c["worst_relative_margin"]),
                 step=Step(self.config.sample_time, "Euler step of the observer (kinematic fallback outside the set)",
                           c["contraction_per_step"]),
@@ -308,7 +325,7 @@ def _build_class():
                     "friction_range": list(self.settings.friction_range)}
 
         def artifact(self):
-            return {**artifact_head(self, ["v_x"], flags_from_inputs_only=False),
+            return {**artifact_head(self, [self.rep.signals.speed], flags_from_inputs_only=False),
                     "representation": self._representation(),
                     "L": self.L.tolist(), "P": self.P.tolist(), "gains": "given" if self.synthesis.given else "designed",
                     "noise_levels": dict(zip(dsn.CHANNELS, self.settings.sigma.tolist())),

@@ -87,6 +87,18 @@ class _Problem:
     G2: np.ndarray
 
 
+def log_columns(module, source: str) -> dict:
+    """{the model's signal (states, known inputs, speed, ``y_`` outputs): the shared log's column},
+    by role (:func:`.representation.signals`): the lateral speed ``vy``, the yaw rate ``yaw_rate``,
+    the forward speed ``vx``, the steering angle ``delta``, the lateral acceleration ``ay``; a further
+    known input only by the built-in model's name ``a_x`` (``ax``: nothing in the structure says a
+    measured signal is the longitudinal acceleration)."""
+    from .representation import signals
+    s = signals(module, getattr(module, "__file__", None) or source)
+    return {s.lateral_speed: "vy", s.yaw_rate: "yaw_rate", s.speed: "vx", s.steering: "delta", "a_x": "ax",
+            f"y_{s.a_y}": "ay", f"y_{s.yaw_rate_output}": "yaw_rate"}
+
+
 def _problem(config, params, run, a: int, b: int) -> _Problem:
     module = config.load_model_module()
     model = module.MODEL
@@ -100,12 +112,13 @@ def _problem(config, params, run, a: int, b: int) -> _Problem:
     zero_w = {w: 0 for w in model.unknown_inputs}
     vy, r = model.states
     vx = model.scheduling[0].symbol
-    columns = {str(vy): "vy", str(r): "yaw_rate", str(vx): "vx", "delta": "delta", "a_x": "ax"}
+    columns = log_columns(module, config.source)
     symbols = (vy, r, *model.known_inputs, vx)
     missing = [str(s) for s in symbols if str(s) not in columns]
     if missing:
         raise SampleError(f"{config.name}: the fit reads the shared log's columns; the model's signals "
-                          f"{', '.join(missing)} are not among them ({', '.join(sorted(columns))})")
+                          f"{', '.join(missing)} are not among them (the log's {', '.join(sorted(set(columns.values())))}"
+                          f" are read as the model's {', '.join(k for k in columns if not k.startswith('y_'))})")
     signals = {s: np.asarray(getattr(run, columns[str(s)]), float)[a:b] for s in symbols}
     in_forces = [sp.sympify(e).subs(subs) for e in (module.A_Y_IN_FORCES, module.DYNAMICS_IN_FORCES[1])]
     G2 = np.array(sp.Matrix(in_forces).jacobian(sp.Matrix(module.FORCES)).tolist(), dtype=float)
@@ -117,8 +130,8 @@ def _problem(config, params, run, a: int, b: int) -> _Problem:
 
     def forces(x):
         return np.column_stack([fn(*args, *x) for fn in fns])
-    static = [float(numeric(ax.peak, {**subs, **{f: 1 for f in fric}, **{u: 0 for u in model.known_inputs[1:]}}))
-              for ax in axles]
+    others = {u: 0 for u in model.known_inputs if columns[str(u)] != "delta"}     # the static capacity: a_x = 0
+    static = [float(numeric(ax.peak, {**subs, **{f: 1 for f in fric}, **others})) for ax in axles]
     start = np.array([15.0 * fz for fz in static] + [1.0])       # 15 F_z per rad, mu = 1: a physical prior
     return _Problem(signals, meas, forces, (*stiff, mu), start, G2)
 
@@ -183,8 +196,8 @@ def observer_beta(config, params, design: dict, run, a: int, b: int) -> np.ndarr
     nu = obs.nu
     z, x = ca.SX.sym("z", 4), ca.SX.sym("x", nu + 3)
     step = ca.Function("step", [z, x], [f(z, x[:nu], x[nu:nu + 2], x[nu + 2:])[0]])
-    cols = {"delta": run.delta, "a_x": run.ax, "y_a_y": run.ay, "y_r": run.yaw_rate, "v_x": run.vx}
-    X = np.column_stack([np.asarray(cols[n], float)[a:b] for n in obs.input_names])
+    cols = log_columns(config.load_model_module(), config.source)
+    X = np.column_stack([np.asarray(getattr(run, cols[n]), float)[a:b] for n in obs.input_names])
     zs = np.array(step.mapaccum(b - a)(np.zeros(4), X.T).full())
     return np.arctan2(zs[2], np.asarray(run.vx, float)[a:b])
 

@@ -1,10 +1,17 @@
 """The numbers of a nonlinear-tyre model: force-affine dynamics and sound axle-slope bounds on a slip set.
 
 Model (``model_defs/single_track_nonlinear_tyre.py``): x = (v_y, r), known inputs delta (the
-steering angle, first) and any further measured signals the tyre laws read (a_x: combined slip),
+steering angle) and any further measured signals the tyre laws read (a_x: combined slip),
 measured v_x, outputs a_y and r; the dynamics and a_y are *affine in the body-frame axle forces*
 Phi_k with constant coefficients, and Phi_k depends on the unmeasured v_y only through the
 axle's slip t_k (``AXLES``).
+
+The names are the model's own (:class:`Signals`): v_y, r, delta, v_x and a_y above name *roles*,
+read from the model's structure (:func:`signals`): the yaw rate is the state an output measures
+as itself (the second state; the lateral speed, unmeasured, the first), the lateral acceleration
+the other output (checked to be ``A_Y_IN_FORCES``), the steering angle the one known input the
+axle slips read, the forward speed the one scheduling signal (its box ``[scheduling.NAME]``).
+A model whose structure leaves a role open is refused, naming the role and how to declare it.
 
 The slope bound of an axle (theta_k = v_x dPhi_k/dv_y) on the set |t_k| <= rho t_sl,k is the
 product of two factors bounded soundly on their own (interval arithmetic, :mod:`codegen.representation.bounds`):
@@ -65,9 +72,10 @@ class TyreRepresentation:
     sliding: tuple            # sympy t_sl,k in ``symbols`` (nominal parameters; a_x where the capacity reads it)
     rho: float                # sliding_fraction
     v_x_box: tuple
-    input_boxes: tuple        # ((name, (lo, hi)), ...) of every known input, delta first
+    input_boxes: tuple        # ((name, (lo, hi)), ...) of every known input, in the model's order
     symbols: tuple            # (v_y, r, known inputs..., v_x)
     lever: tuple              # (l_f, -l_r): slip t_k depends on v_y + lever_k r (yaw-rate noise enters there)
+    signals: "Signals"        # the model's names of the roles, and their units
 
     @property
     def theta(self) -> tuple:
@@ -75,7 +83,7 @@ class TyreRepresentation:
 
     @property
     def delta_box(self) -> tuple:
-        return self.input_boxes[0][1]
+        return self.input_boxes[self.signals.steering_index][1]
 
     @functools.cached_property
     def numpy_functions(self) -> tuple:
@@ -87,14 +95,100 @@ class TyreRepresentation:
                 [sp.lambdify(self.symbols, t, mods) for t in self.slips])
 
 
+STRUCTURE = ("two states (the lateral speed, then the yaw rate), known inputs (the steering angle and any further "
+             "measured signal the tyre laws read, e.g. the longitudinal acceleration), one scheduling signal (the "
+             "forward speed, measured) and two outputs (the lateral acceleration and the yaw rate itself), under the "
+             "model's own names")
+
+
 def _check_structure(model, source):
-    if len(model.states) != 2 or not model.known_inputs or len(model.scheduling) != 1 \
-            or [n for n, _ in model.outputs] != ["a_y", str(model.states[1])]:
-        raise ModelDefinitionError(f"{source}: model {model.name!r}: the nonlinear-tyre observer needs states "
-                                   f"(v_y, r), known inputs (delta first, then any measured signal the tyre laws "
-                                   f"read, e.g. a_x), one scheduling signal (v_x) and outputs (a_y, r). Another "
-                                   f"structure: the L-infinity UIO (family linf_uio) takes outputs C(rho) x + "
-                                   f"Du(rho) u, the TS fuzzy UIO (ts_fuzzy_uio) tyre laws of measured states")
+    counts = (len(model.states), len(model.known_inputs), len(model.scheduling), len(model.outputs))
+    if counts[0] != 2 or not counts[1] or counts[2] != 1 or counts[3] != 2:
+        raise ModelDefinitionError(f"{source}: model {model.name!r} has {counts[0]} state(s), {counts[1]} known "
+                                   f"input(s), {counts[2]} scheduling signal(s) and {counts[3]} output(s); the "
+                                   f"nonlinear-tyre observer needs {STRUCTURE}. Another structure: the L-infinity UIO "
+                                   f"(family linf_uio) takes outputs C(rho) x + Du(rho) u, the TS fuzzy UIO "
+                                   f"(ts_fuzzy_uio) tyre laws of measured states")
+
+
+@dataclass(frozen=True)
+class Signals:
+    """The model's own names of what the family reads, by role, and their units (the model's ``units``;
+    a scheduling signal's own unit). Every signal of the observer is named from these."""
+
+    lateral_speed: str        # the first state (unmeasured)
+    yaw_rate: str             # the second state, measured as itself by an output
+    known_inputs: tuple       # every known input, in the model's order
+    steering_index: int       # the known input the axle slips read
+    speed: str                # the scheduling signal: the measured forward speed
+    outputs: tuple            # the model's output names, in its order
+    a_y_index: int            # the output that is the lateral acceleration (A_Y_IN_FORCES)
+    yaw_rate_index: int       # the output that is the yaw-rate state
+    units: dict               # {name: unit} of the above ("" where the model declares none)
+
+    @property
+    def steering(self) -> str:
+        return self.known_inputs[self.steering_index]
+
+    @property
+    def a_y(self) -> str:
+        return self.outputs[self.a_y_index]
+
+    @property
+    def yaw_rate_output(self) -> str:
+        return self.outputs[self.yaw_rate_index]
+
+    def unit(self, name: str) -> str:
+        return self.units.get(name, "") or "-"
+
+
+def signals(module, source: str) -> Signals:
+    """The roles of the model's signals, read from its structure (see the module docstring); a
+    :class:`~codegen.errors.ModelDefinitionError` naming the role the structure leaves open and how
+    to declare it."""
+    model = module.MODEL
+    _check_structure(model, source)
+    where = f"{source}: model {model.name!r}"
+    states = [str(x) for x in model.states]
+    names = [n for n, _ in model.outputs]
+    measured = [(k, str(e)) for k, (_, e) in enumerate(model.outputs)
+                if isinstance(sp.sympify(e), sp.Symbol) and sp.sympify(e) in model.states]
+    if len(measured) != 1:
+        found = ("no output is a state itself" if not measured else
+                 f"both outputs {names} are states themselves (the lateral speed must stay unmeasured)")
+        raise ModelDefinitionError(f"{where}: the yaw-rate role is open: {found}. The nonlinear-tyre observer "
+                                   f"needs the yaw rate measured as it is: in MODEL.outputs, declare one output as the "
+                                   f"yaw-rate state itself, e.g. (\"{states[1]}\", {states[1]}), and the other as the "
+                                   f"lateral acceleration (A_Y_IN_FORCES with the axle forces substituted)")
+    r_out, r_state = measured[0]
+    if r_state != states[1]:
+        raise ModelDefinitionError(f"{where}: output {names[r_out]!r} measures the state {r_state}, the yaw rate; the "
+                                   f"nonlinear-tyre observer takes the states in the order (lateral speed, yaw rate): "
+                                   f"declare states = ({states[1]}, {states[0]}) in MODEL")
+    axles = getattr(module, "AXLES", None) or ()
+    inputs = [str(u) for u in model.known_inputs]
+    read = [k for k, u in enumerate(model.known_inputs)
+            if any(u in sp.sympify(a.slip).free_symbols for a in axles)]
+    if len(read) != 1:
+        found = ("no known input enters an axle slip (AXLES[k].slip)" if not read else
+                 f"the known inputs {[inputs[k] for k in read]} all enter the axle slips (AXLES[k].slip)")
+        raise ModelDefinitionError(f"{where}: the steering-angle role is open: {found}. The nonlinear-tyre observer "
+                                   f"needs one known input, the road-wheel steering angle, in the slips (e.g. the front "
+                                   f"slip tan(delta - atan((v_y + l_f r)/v_x))); further known inputs may enter the "
+                                   f"axles' lateral capacity only (AXLES[k].peak, e.g. a_x of the friction circle)")
+    sched = model.scheduling[0]
+    if sched.derived is not None:
+        raise ModelDefinitionError(f"{where}: the forward-speed role: the scheduling signal {sched.symbol} is derived "
+                                   f"from outputs ({sched.derived}); the nonlinear-tyre observer reads the forward "
+                                   f"speed as a measured input: declare SchedulingSignal({sched.symbol}, unit) "
+                                   f"without derived")
+    speed = str(sched.symbol)
+    units = {k: str(v) for k, v in (model.units or {}).items()}
+    if getattr(sched, "unit", ""):
+        units[speed] = sched.unit
+    y_r = names[r_out]
+    units.setdefault(y_r, units.get(r_state, ""))
+    return Signals(states[0], states[1], tuple(inputs), read[0], speed, tuple(names), 1 - r_out, r_out, units)
 
 
 def _axle_bounds(k, a, subs, measured_boxes, rho, delta, d_box, t_sym, vx, vy, stiffness_range, friction_range,
@@ -177,39 +271,54 @@ def _axle_bounds(k, a, subs, measured_boxes, rho, delta, d_box, t_sym, vx, vy, s
 def represent(module, params, settings, source: str) -> TyreRepresentation:
     """model -> force form, the two slip sets' slope bounds, the boxes (see the module docstring)."""
     model = module.MODEL
-    _check_structure(model, source)
+    model_file = getattr(module, "__file__", None) or source       # where a structure error is the model's
+    _check_structure(model, model_file)
     axles = getattr(module, "AXLES", None)
     if not axles:
-        raise ModelDefinitionError(f"{source}: model module of {model.name!r} has no AXLES (how each axle force "
-                                   f"depends on v_y; see model_defs/single_track_nonlinear_tyre.py)")
+        raise ModelDefinitionError(f"{model_file}: model module of {model.name!r} has no AXLES (how each axle force "
+                                   f"depends on the lateral speed; see model_defs/single_track_nonlinear_tyre.py)")
+    lacking = [k for k in ("FORCES", "DYNAMICS_IN_FORCES", "A_Y_IN_FORCES", "Phi_f", "Phi_r", "t_sym")
+               if not hasattr(module, k)]
+    if lacking:
+        raise ModelDefinitionError(f"{model_file}: model module of {model.name!r} lacks {', '.join(lacking)}: the "
+                                   f"nonlinear-tyre observer reads the equations written in the axle forces (FORCES, "
+                                   f"DYNAMICS_IN_FORCES, A_Y_IN_FORCES), the forces themselves (Phi_f, Phi_r) and the "
+                                   f"slip symbol of the tyre laws (t_sym), as model_defs/single_track_nonlinear_tyre.py "
+                                   f"defines them")
+    names = signals(module, model_file)
     vy, r = model.states
-    delta, measured = model.known_inputs[0], model.known_inputs[1:]
+    delta = model.known_inputs[names.steering_index]
+    measured = tuple(u for u in model.known_inputs if u != delta)
     vx = model.scheduling[0].symbol
     subs = parameter_substitution(model, params)
     zero_w = {w: 0 for w in model.unknown_inputs}
-    if "v_x" not in params.scheduling:
-        raise SchedulingBoundsError(f"{params.source}: no [scheduling.v_x] box")
+    speed = names.speed
+    if speed not in params.scheduling:
+        others = sorted(set(params.scheduling))
+        raise SchedulingBoundsError(
+            f"{params.source}: no [scheduling.{speed}] table (min, max, rate_min, rate_max): the box of the forward "
+            f"speed {speed}, the scheduling signal of model {model.name!r}"
+            + (f"; the file's [scheduling] has {', '.join(others)}, which the model does not schedule on" if others
+               else ""))
     boxes = []
     for u in model.known_inputs:
         if str(u) not in params.state_bounds:
             raise SchedulingBoundsError(f"{params.source}: no [state_bounds] {u} = [min, max] (the certified set "
                                         f"covers the known inputs' box)")
         boxes.append((str(u), tuple(params.state_bounds[str(u)])))
-    v_box = (params.scheduling["v_x"].lower, params.scheduling["v_x"].upper)
+    v_box = (params.scheduling[speed].lower, params.scheduling[speed].upper)
     if not v_box[0] > 0:
-        raise SchedulingBoundsError(f"{params.source}: [scheduling.v_x] min must be > 0, got {v_box[0]}")
-    if not hasattr(module, "FORCES") or not hasattr(module, "DYNAMICS_IN_FORCES"):
-        raise ModelDefinitionError(f"{source}: model module of {model.name!r} needs FORCES, DYNAMICS_IN_FORCES and "
-                                   f"A_Y_IN_FORCES (the equations written in the axle forces)")
+        raise SchedulingBoundsError(f"{params.source}: [scheduling.{speed}] min must be > 0 (the forward speed "
+                                    f"divides the slips), got {v_box[0]}")
     Phi = tuple(module.FORCES)
     in_forces = [sp.sympify(e).subs(subs) for e in (*module.DYNAMICS_IN_FORCES, module.A_Y_IN_FORCES)]
     G = sp.Matrix(in_forces).jacobian(sp.Matrix(Phi))
     if any(e.free_symbols for e in G) or any(sp.diff(e, vy) != 0 for e in in_forces):
         raise ModelDefinitionError(f"{source}: the equations in the axle forces must be affine in them with constant "
-                                   f"coefficients and free of v_y elsewhere")
+                                   f"coefficients and free of the lateral speed {vy} elsewhere")
     G = np.array(G.tolist(), dtype=float)
     measured_boxes = {u: dict(boxes)[str(u)] for u in measured}
-    d_box = boxes[0][1]
+    d_box = boxes[names.steering_index][1]
     t = module.t_sym
     sets = []
     for rho in (settings.sliding_fraction, settings.gain_sliding_fraction):
@@ -217,7 +326,7 @@ def represent(module, params, settings, source: str) -> TyreRepresentation:
                                        settings.stiffness_range, settings.friction_range, source,
                                        settings.bounds_rel_tol) for k, a in enumerate(axles)))
     f = tuple(numeric(e, {**subs, **zero_w}) for e in model.dynamics)
-    a_y = numeric(dict(model.outputs)["a_y"], {**subs, **zero_w})
+    a_y = numeric(dict(model.outputs)[names.a_y], {**subs, **zero_w})
     slips = tuple(sp.sympify(a.slip).subs(subs) for a in axles)
     sliding = tuple(numeric(numeric(a.sliding, {a.peak_symbol: a.peak}), subs) for a in axles)
     # slip t_k depends on v_y + lever_k r: read from the slip expressions (checked, not assumed)
@@ -238,9 +347,13 @@ def represent(module, params, settings, source: str) -> TyreRepresentation:
     for _ in range(5):
         pt = [rng.uniform(-1, 1), rng.uniform(-0.5, 0.5), *[rng.uniform(*b) for _, b in boxes], rng.uniform(*v_box)]
         fp = [F_(*pt) for F_ in model_forces]
-        for e_model, e_force in zip(model_fns, in_force_fns):
+        for row, (e_model, e_force) in enumerate(zip(model_fns, in_force_fns)):
             a_, b_ = float(e_model(*pt)), float(e_force(*pt, *fp))
             if not abs(a_ - b_) <= 1e-9 * max(1.0, abs(a_)):
+                if row == len(f):
+                    raise ModelDefinitionError(f"{source}: the output {names.a_y!r} of MODEL (the lateral acceleration: "
+                                               f"the output that is not the yaw rate) is not A_Y_IN_FORCES with the "
+                                               f"axle forces substituted")
                 raise ModelDefinitionError(f"{source}: MODEL is not DYNAMICS_IN_FORCES with the axle forces substituted")
     return TyreRepresentation(f, a_y, G[:2], G[2], sets[0], sets[1], slips, sliding, settings.sliding_fraction,
-                              v_box, tuple(boxes), symbols, tuple(lever))
+                              v_box, tuple(boxes), symbols, tuple(lever), names)
