@@ -381,10 +381,15 @@ def _new_from_model(args) -> int:
     if target.exists():
         raise ConfigurationError(f"uiogen new {folder}: would overwrite {target}; choose an empty folder or --name",
                                  key="dir")
+    tried = result.ranking.entries[0][1]
     outputs.make_folder(folder)
-    outputs.write_atomic(target, starter_text(result.subject, best, folder.resolve()).replace("THIS_FILE", str(target)))
+    text = starter_text(result.subject, best, folder.resolve(), trial=tried).replace("THIS_FILE", str(target))
+    outputs.write_atomic(target, text)
     print(result.text())
     print(f"wrote {target} ({best.family}, ranked first)")
+    if tried.status == "failed":        # the file is written as proposed, but say plainly it does not design
+        print(f"warning: the analysis's trial design of these settings failed ({tried.reason}); "
+              f"uiogen design {target} fails the same way until you change what it names", file=sys.stderr)
     print("next: " + "; ".join(starter.next_steps(target)))
     return 0
 

@@ -81,7 +81,16 @@ class DiscretizationError(UiogenError, RuntimeError):
 
 
 class UILoopError(DiscretizationError):
-    """The observer's error with its unknown-input filter loop closed cannot be certified."""
+    """The observer's error with its unknown-input filter loop closed cannot be certified.
+
+    ``remedy``: {dotted observer-file key: value} that a measurement found to certify the loop
+    (``{"ui_filter.time_constant": 0.1}``), or empty when none was found; ``uiogen analyze`` designs
+    its trial again with it and ``uiogen new --from-model`` writes it.
+    """
+
+    def __init__(self, message: str, *, remedy: dict | None = None):
+        super().__init__(message)
+        self.remedy = dict(remedy or {})
 
 
 class DesignLockError(UiogenError, ValueError):
