@@ -75,3 +75,49 @@ def test_committed_commonroad_parameters_are_derived_not_typed():
     from codegen.validation import commonroad_plant
     text = (ROOT / "model_defs" / "params" / "commonroad_bmw320i.toml").read_text()
     assert text == commonroad_plant.params_toml(2)
+
+
+class _ZeroObserver:
+    """A stand-in compiled step: reads the model's outputs, estimates zero."""
+    input_names = ("dw", "y_r", "y_ay", "y_p")
+    output_names = ("phir",)
+
+    def run(self, inputs):
+        n = len(inputs)
+        return np.zeros((n, 1)), np.zeros(n, dtype=int), None
+
+
+@pytest.mark.parametrize("output_name", ["ay", "a_y"])
+def test_excitation_reports_max_abs_ay_only_for_an_output_named_a_y(tmp_path, monkeypatch, output_name):
+    """A model whose lateral acceleration is not an output named a_y (a user's roll model names it
+    ``ay``): the JSON's max_abs_ay is null and the header has no ``max |a_y|`` (it printed 0.00, a
+    made-up figure, for any such model); with the output named a_y, its peak."""
+    from codegen import pipeline
+    from codegen.project import observer_file as observers
+    from codegen.validation import excitation
+    case = ROOT / "tests" / "analysis" / "models" / "roll_bank"
+    model = (case / "roll.py").read_text()
+    if output_name != "ay":
+        model = model.replace('("ay", ay)', f'("{output_name}", ay)')
+    (tmp_path / "roll.py").write_text(model)
+    (tmp_path / "roll_params.toml").write_text((case / "roll_params.toml").read_text())
+    (tmp_path / "obs.toml").write_text('family = "linf_uio"\nmodel = "roll.py"\nparameters = "roll_params.toml"\n'
+                                       'sample_time = 0.01\npolytope = "sector"\n')
+    config = observers.get(str(tmp_path / "obs.toml"))
+
+    class Build:
+        def output_lags(self):
+            return {}
+
+    monkeypatch.setattr(pipeline, "build", lambda config: Build())
+    obs = _ZeroObserver()
+    obs.input_names = tuple(n.replace("y_ay", f"y_{output_name}") for n in obs.input_names)
+    r = {"family": "linf_uio", **excitation.run(config, 3.0, observer=obs)}
+    head = validate.header("roll", r)
+    data = json.loads(validate.to_json(r))
+    if output_name == "ay":
+        assert r["max_abs_ay"] is None and data["max_abs_ay"] is None and "a_y" not in head, head
+    else:
+        assert r["max_abs_ay"] > 0.01 and data["max_abs_ay"] == r["max_abs_ay"]
+        assert f"max |a_y| {r['max_abs_ay']:.2f} m/s^2" in head
+    assert "max_abs_ay" in data["definitions"]
