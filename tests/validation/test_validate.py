@@ -121,3 +121,34 @@ def test_excitation_reports_max_abs_ay_only_for_an_output_named_a_y(tmp_path, mo
         assert r["max_abs_ay"] > 0.01 and data["max_abs_ay"] == r["max_abs_ay"]
         assert f"max |a_y| {r['max_abs_ay']:.2f} m/s^2" in head
     assert "max_abs_ay" in data["definitions"]
+
+
+@pytest.mark.parametrize("entries, message", [
+    # a misspelt input: named, with the input it meant (it said 'y_gyro = None ... missing: y_gyro')
+    ({"y_gyr": "gyro_dps", "y_ay": "ay", "y_p": "p", "dw": "dw"},
+     r"obs.toml: \[data.inputs\] y_gyr = \{column = \"gyro_dps\", unit = \"deg/s\"\}: not an input of observer obs: "
+     r"one of dw, y_r, y_ay, y_p; missing: y_r \(did you mean 'y_r'\?\)"),
+    ({"y_r": "gyro_dps", "y_ay": "ay", "dw": "dw"},
+     r"obs.toml: \[data.inputs\] y_p is missing: a column for every observer input \(dw, y_r, y_ay, y_p\); missing: y_p$"),
+])
+def test_a_misspelt_data_input_is_named_with_a_did_you_mean(tmp_path, monkeypatch, capsys, entries, message):
+    import re
+    from codegen import cli
+    from codegen.extension import build as extension
+    case = ROOT / "tests" / "analysis" / "models" / "roll_bank"
+    for f in ("roll.py", "roll_params.toml"):
+        (tmp_path / f).write_text((case / f).read_text())
+    rows = "".join(f'{k} = {{ column = "{c}", unit = "{"deg/s" if c == "gyro_dps" else "1"}" }}\n'
+                   for k, c in entries.items())
+    (tmp_path / "obs.toml").write_text('family = "linf_uio"\nmodel = "roll.py"\nparameters = "roll_params.toml"\n'
+                                       'sample_time = 0.01\npolytope = "sector"\n\n[data]\ntime = "t"\n\n'
+                                       f'[data.inputs]\n{rows}')
+    obs = _ZeroObserver()
+    obs.input_names = ("dw", "y_r", "y_ay", "y_p")
+    monkeypatch.setattr(extension, "load", lambda config: obs)
+    monkeypatch.setattr(extension, "require_current", lambda config: None)
+    (tmp_path / "log.csv").write_text("t,gyro_dps,ay,p,dw\n0,0,0,0,0\n")
+    assert cli.main(["validate", str(tmp_path / "obs.toml"), "--data", str(tmp_path / "log.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert re.search(message, err), err
