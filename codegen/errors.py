@@ -123,7 +123,16 @@ class PlantError(UiogenError, RuntimeError):
 
 
 class BoundsError(ModelDefinitionError):
-    """An expression cannot be bounded over the box (singularity, unsupported function)."""
+    """An expression cannot be bounded over the box (singularity, unsupported function).
+
+    ``singular``: the box's signals (names) over which a division reaches 0, e.g. ``("vx",)`` for
+    ``1/vx`` with ``vx = [0, 20]``: no refinement of the bound can fix that, only their boxes
+    (empty for the other causes).
+    """
+
+    def __init__(self, message: str, *, singular: tuple = ()):
+        super().__init__(message)
+        self.singular = tuple(singular)
 
 
 class ToolchainError(UiogenError, RuntimeError):
