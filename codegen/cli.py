@@ -177,20 +177,38 @@ def _print_design(b, path, as_json: bool, compare: dict) -> int:
 
 
 def cmd_sweep(args) -> int:
+    """The figure columns are checked against the first certified point's figures (a family's are
+    known once it has designed): an unknown ``--show`` name is a ConfigurationError with a
+    did-you-mean; without ``--show``, the default columns the family reports. Rows before the
+    columns are known (refusals) wait for them, so the table has one header."""
     from .design import sweep
     grid = [sweep.parse_set(text) for text in args.sets]
-    columns = [c.strip() for c in args.show.split(",") if c.strip()]
-    if args.json:
-        _print_json({**sweep.run(args.name, grid), "show": columns})
-        return 0
+    requested = None if args.show is None else [c.strip() for c in args.show.split(",") if c.strip()]
     result = {"observer": args.name, "grid": dict(grid), "points": []}
-    shown = []
+    state = {"columns": None, "waiting": [], "printed": False}
 
-    def show(row):                  # the header with the first row: a mistake is one error line, no table
-        head, line = sweep.lines({**result, "points": [row]}, columns)
-        print(line if shown else f"{head}\n{line}", flush=True)
-        shown.append(row)
-    sweep.run(args.name, grid, log=show)
+    def flush(rows):
+        if args.json:
+            return
+        for row in rows:            # the header with the first row: a mistake is one error line, no table
+            head, line = sweep.lines({**result, "points": [row]}, state["columns"])
+            print(line if state["printed"] else f"{head}\n{line}", flush=True)
+            state["printed"] = True
+
+    def show(row):
+        if state["columns"] is None and row["outcome"] == "certified":
+            state["columns"] = sweep.columns(args.name, row, requested)
+        if state["columns"] is None:
+            state["waiting"].append(row)
+            return
+        rows, state["waiting"] = state["waiting"] + [row], []
+        flush(rows)
+    done = sweep.run(args.name, grid, log=show)
+    if state["columns"] is None:    # no point certified: no figures to show
+        state["columns"] = []
+        flush(state["waiting"])
+    if args.json:
+        _print_json({**done, "show": state["columns"]})
     return 0
 
 
@@ -381,10 +399,15 @@ def _new_from_model(args) -> int:
     if target.exists():
         raise ConfigurationError(f"uiogen new {folder}: would overwrite {target}; choose an empty folder or --name",
                                  key="dir")
+    tried = result.ranking.entries[0][1]
     outputs.make_folder(folder)
-    outputs.write_atomic(target, starter_text(result.subject, best, folder.resolve()).replace("THIS_FILE", str(target)))
+    text = starter_text(result.subject, best, folder.resolve(), trial=tried).replace("THIS_FILE", str(target))
+    outputs.write_atomic(target, text)
     print(result.text())
     print(f"wrote {target} ({best.family}, ranked first)")
+    if tried.status == "failed":        # the file is written as proposed, but say plainly it does not design
+        print(f"warning: the analysis's trial design of these settings failed ({tried.reason}); "
+              f"uiogen design {target} fails the same way until you change what it names", file=sys.stderr)
     print("next: " + "; ".join(starter.next_steps(target)))
     return 0
 
@@ -477,7 +500,10 @@ def main(argv=None) -> int:
     p.add_argument("--set", dest="sets", action="append", required=True, metavar="KEY=[V, ...]",
                    help="a dotted key of the observer file and a TOML array of values to try, e.g. "
                         "design.pole_radius=[50,100,300]; repeat for a grid (every combination)")
-    p.add_argument("--show", default="gamma", help="comma-separated summary figures in the text table (default gamma)")
+    p.add_argument("--show", default=None,
+                   help="comma-separated figures of the design summary in the text table (default gamma where the "
+                        "family reports it, else certified_contraction_per_step); a name the family does not "
+                        "report is an error that lists those it does")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_sweep)
     p = sub.add_parser("generate", parents=[project], help="emit C for observers whose inputs changed")

@@ -86,7 +86,16 @@ class DiscretizationError(UiogenError, RuntimeError):
 
 
 class UILoopError(DiscretizationError):
-    """The observer's error with its unknown-input filter loop closed cannot be certified."""
+    """The observer's error with its unknown-input filter loop closed cannot be certified.
+
+    ``remedy``: {dotted observer-file key: value} that a measurement found to certify the loop
+    (``{"ui_filter.time_constant": 0.1}``), or empty when none was found; ``uiogen analyze`` designs
+    its trial again with it and ``uiogen new --from-model`` writes it.
+    """
+
+    def __init__(self, message: str, *, remedy: dict | None = None):
+        super().__init__(message)
+        self.remedy = dict(remedy or {})
 
 
 class DesignLockError(UiogenError, ValueError):
@@ -119,7 +128,16 @@ class PlantError(UiogenError, RuntimeError):
 
 
 class BoundsError(ModelDefinitionError):
-    """An expression cannot be bounded over the box (singularity, unsupported function)."""
+    """An expression cannot be bounded over the box (singularity, unsupported function).
+
+    ``singular``: the box's signals (names) over which a division reaches 0, e.g. ``("vx",)`` for
+    ``1/vx`` with ``vx = [0, 20]``: no refinement of the bound can fix that, only their boxes
+    (empty for the other causes).
+    """
+
+    def __init__(self, message: str, *, singular: tuple = ()):
+        super().__init__(message)
+        self.singular = tuple(singular)
 
 
 class ToolchainError(UiogenError, RuntimeError):

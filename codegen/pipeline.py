@@ -35,11 +35,40 @@ def _family_build(config: ObserverConfig, solver):
     try:
         return family.build(config, solver)
     except BoundsError as exc:
+        if exc.singular:            # a division reaching 0 on the box: only the boxes can change that
+            raise BoundsError(f"{config.parameter_path}: {exc}. A division needs its denominator nonzero on the "
+                              f"whole box: {_boxes_to_move(config, exc.singular)} (observer {config.command_name})",
+                              singular=exc.singular) from exc
         keys = " or ".join(f"[design] {k}" for k in family.bounds_settings)
         raise BoundsError(f"{config.parameter_path}: {exc}. The expression is bounded over the boxes this file "
                           f"declares ([scheduling.NAME], [state_bounds]): narrow those of the variables it ranges "
                           f"over" + (f", or loosen {keys} of {config.source}" if keys else "")
                           + f" (observer {config.command_name})") from exc
+
+
+def _boxes_to_move(config: ObserverConfig, names: tuple) -> str:
+    """Where the parameter file declares the boxes of ``names`` and what to set: a min above 0 for a
+    box from 0 up (a speed), else a box that excludes 0."""
+    from .model import load_parameters
+    try:
+        params = load_parameters(config.parameter_path)
+        declared = {**{k: (f"[scheduling.{k}]", (b.lower, b.upper)) for k, b in params.scheduling.items()},
+                    **{k: (f"[state_bounds] {k}", tuple(v)) for k, v in params.state_bounds.items()}}
+    except Exception:           # the message stays useful without the file's tables
+        declared = {}
+    parts = []
+    for name in names:
+        table, (lo, hi) = declared.get(name, (f"the box of {name}", (None, None)))
+        if lo is not None and lo >= 0:
+            parts.append(f"{table} = [{lo:g}, {hi:g}] reaches 0: its min must be above 0")
+        elif hi is not None and hi <= 0:
+            parts.append(f"{table} = [{lo:g}, {hi:g}] reaches 0: its max must be below 0")
+        elif lo is not None:
+            parts.append(f"{table} = [{lo:g}, {hi:g}] contains 0: the box must exclude 0 (min above 0 or max "
+                         f"below 0)")
+        else:
+            parts.append(f"{table} reaches 0: it must exclude 0 (min above 0 or max below 0)")
+    return "; ".join(parts)
 
 
 def build(config: ObserverConfig, solver=None):

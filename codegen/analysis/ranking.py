@@ -19,6 +19,7 @@ The ranking puts first what guarantees most (:data:`GUARANTEES`), among what app
 """
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 import time
 import tomllib
@@ -109,6 +110,7 @@ class Trial:
     figures: dict = field(default_factory=dict)
     reason: str = ""
     error: type | None = None       # the exception class of a failed design
+    remedy: dict = field(default_factory=dict)  # a failed design's measured fix {dotted key: value} (UILoopError)
 
     def to_json(self) -> dict:
         return {"family": self.family, "status": self.status, "settings": self.settings, "seconds": self.seconds,
@@ -344,7 +346,8 @@ def _solve(path: Path, app: Applicability, label: str) -> Trial:
         b, _ = pipeline.solve(config)
     except UiogenError as exc:
         return Trial(app.family, "failed", label, time.perf_counter() - t0,
-                     reason=f"{type(exc).__name__}: {str(exc).replace(str(path), label)}", error=type(exc))
+                     reason=f"{type(exc).__name__}: {str(exc).replace(str(path), label)}", error=type(exc),
+                     remedy=dict(getattr(exc, "remedy", None) or {}))
     figures = app.figures(b) if app.figures is not None else {}
     from ..certificate.text import headline
     return Trial(app.family, "certified", label, time.perf_counter() - t0, headline(b.certificate), figures)
@@ -355,16 +358,18 @@ def rank(subject: Subject, structure, design: bool = True, progress=None) -> Ran
     t0 = time.perf_counter()
     apps = assess(subject, structure)
     trials = {}
+    own = subject.config.family if subject.config is not None else None
     with tempfile.TemporaryDirectory(prefix="uiogen_analyze_") as tmp:
-        for app in apps:
+        for k, app in enumerate(apps):
             if design and app.applies:
                 if progress is not None:
                     progress(f"designing {app.family} ...")
                 trials[app.family] = trial(subject, app, Path(tmp))
+                if app.family != own:
+                    apps[k], trials[app.family] = _remedied(subject, app, trials[app.family], Path(tmp), progress)
             else:
                 reason = "does not apply" if not app.applies else "no trial designs requested"
                 trials[app.family] = Trial(app.family, "not tried", "", reason=reason)
-        own = subject.config.family if subject.config is not None else None
         what_if = completed = None
         if design and own is not None and trials[own].status != "certified":
             own_app = next(a for a in apps if a.family == own)
@@ -376,6 +381,43 @@ def rank(subject: Subject, structure, design: bool = True, progress=None) -> Ran
     order = sorted(range(len(apps)), key=lambda k: sort_key(apps[k], trials[apps[k].family], k))
     return Ranking([(apps[k], trials[apps[k].family]) for k in order], own, time.perf_counter() - t0, what_if,
                    completed)
+
+
+def _set_dotted(table: dict, key: str, value) -> dict:
+    """A copy of ``table`` with the dotted ``key`` ("ui_filter.time_constant") set to ``value``."""
+    head, _, rest = key.partition(".")
+    out = dict(table)
+    out[head] = _set_dotted(dict(out.get(head) or {}), rest, value) if rest else value
+    return out
+
+
+def _remedied(subject: Subject, app: Applicability, failed: Trial, folder: Path, progress=None) -> tuple:
+    """(app, trial): when the trial of the analysis's proposal failed with a measured fix (a
+    UILoopError names the UI filter constant that certifies), the proposal with that fix, designed
+    again; certified, it replaces the proposal (what ``uiogen new --from-model`` writes, with a
+    comment that says so), else the first trial stands."""
+    if failed.status != "failed" or not failed.remedy or not app.observer:
+        return app, failed
+    observer, why = dict(app.observer), dict(app.why)
+    changes = []
+    for key, value in failed.remedy.items():
+        section, _, name = key.rpartition(".")
+        old = observer.get(section, {}).get(name) if section else observer.get(name)
+        observer = _set_dotted(observer, key, value)
+        shown = f"[{section}] {name}" if section else name
+        changes.append(f"{shown} = {toml_repr(value, 10 ** 9)}")
+        why[key] = ((f"{app.why[key]}; " if key in app.why else "") +
+                    f"measured by uiogen analyze: the proposed {toml_repr(old, 10 ** 9)} failed "
+                    f"({failed.error.__name__ if failed.error else 'the design failed'}), this value certifies")
+    if progress is not None:
+        progress(f"designing {app.family} again with {', '.join(changes)} ...")
+    fixed = dataclasses.replace(app, observer=observer, why=why)
+    second = trial(subject, fixed, folder)
+    if second.status != "certified":
+        return app, failed
+    label = (f"the analysis's settings with {', '.join(changes)}, measured: the first trial failed with "
+             f"{failed.error.__name__ if failed.error else 'an error'}")
+    return fixed, dataclasses.replace(second, settings=label)
 
 
 def _completed(subject: Subject, app: Applicability, failed: Trial, folder: Path, progress=None) -> dict | None:
@@ -411,9 +453,11 @@ def _with_sensor(subject: Subject, structure, app: Applicability, folder: Path, 
     return None
 
 
-def starter_text(subject: Subject, app: Applicability, folder: Path, structure=None) -> str:
+def starter_text(subject: Subject, app: Applicability, folder: Path, structure=None, trial: Trial | None = None) -> str:
     """The observer file ``uiogen new --from-model`` writes for ``app``: its settings with the
-    reasons as comments, the model and parameter file by paths relative to ``folder``."""
+    reasons as comments, the model and parameter file by paths relative to ``folder``; ``trial``,
+    the analysis's trial design of these settings, is said in the header (certified, or the failure
+    that ``uiogen design`` will repeat)."""
     import os
     table = {"family": app.family, "model": os.path.relpath(subject.model_path, folder),
              "parameters": os.path.relpath(subject.parameter_path, folder),
@@ -424,6 +468,10 @@ def starter_text(subject: Subject, app: Applicability, folder: Path, structure=N
             f"# (the best-ranked family that applies to these sensors: {', '.join(subject.outputs)};",
             f"# unknown inputs {', '.join(subject.unknown_inputs) or 'none'}).",
             "# next: uiogen design THIS_FILE --update && uiogen generate THIS_FILE && uiogen build THIS_FILE"]
+    if trial is not None and trial.status == "certified":
+        head.append(f"# trial design by uiogen analyze ({trial.settings}): certified")
+    elif trial is not None and trial.status == "failed":
+        head.append(f"# WARNING: uiogen analyze's trial design of these settings failed: {trial.reason}")
     for note in app.notes:
         head.append(f"# note: {note}")
     return "\n".join(head + [""] + toml_lines(table, why)) + "\n"

@@ -81,6 +81,38 @@ def run(name: str, grid: list, log=None) -> dict:
     return {"observer": name, "grid": {k: v for k, v in grid}, "points": rows}
 
 
+#: the table's figure columns without --show: those of these a family reports, else the certified
+#: contraction every certified point has (ts_fuzzy_uio reports no gamma)
+DEFAULT_COLUMNS = ("gamma",)
+FALLBACK_COLUMN = "certified_contraction_per_step"
+_NOT_FIGURES = ("settings", "outcome", "message")
+
+
+def figure_names(row: dict) -> list:
+    """The figures a certified point reports (what ``--show`` may name)."""
+    return [k for k in row if k not in _NOT_FIGURES]
+
+
+def columns(name: str, row: dict, requested=None) -> list:
+    """The table's figure columns, checked against the figures of the first certified point ``row``
+    (a family's figures are known once it has designed): ``requested`` (``--show``) when every one
+    is a figure of it, else ConfigurationError naming the unknown one, a did-you-mean and the
+    figures there are; None: :data:`DEFAULT_COLUMNS` the family reports, else :data:`FALLBACK_COLUMN`."""
+    from ..project.settings import suggest
+    names = figure_names(row)
+    if requested is None:
+        return [c for c in DEFAULT_COLUMNS if c in names] or [FALLBACK_COLUMN]
+    for c in requested:
+        if c not in names:
+            near = suggest(c, names)
+            family = observers.get(name).family
+            raise ConfigurationError(f"--show {c}: observer {name} ({family}) reports no figure {c!r}"
+                                     + (f" (did you mean {near!r}?)" if near else "")
+                                     + f"; its figures: {', '.join(names)}",
+                                     source="--show", key="--show", value=c, allowed=", ".join(names))
+    return list(requested)
+
+
 def lines(result: dict, columns=("gamma",)) -> list:
     """A text table of a sweep: the settings, the outcome and the chosen summary figures."""
     keys = list(result["grid"])

@@ -25,7 +25,7 @@ from pathlib import Path
 from ..errors import ConfigurationError, ModelDefinitionError, UnknownObserverError
 from ..model import ModelDefinition
 from . import columns, precision
-from .settings import Rule, config_error, parse_table, suggest
+from .settings import Rule, config_error, parse_table, suggest, toml_error
 from python_bindings.workspace import PACKAGE_ROOT, Workspace
 
 MODELS_DIR = PACKAGE_ROOT / "model_defs"
@@ -286,7 +286,7 @@ def _parse(path: Path, overrides: dict | None = None, project: str | Path | None
     except FileNotFoundError:
         raise UnknownObserverError(f"no observer file {path}") from None
     except tomllib.TOMLDecodeError as exc:
-        raise ModelDefinitionError(f"{path}: not valid TOML: {exc}") from None
+        raise toml_error(str(path), path.read_text(encoding="utf-8", errors="replace"), exc) from None
     except UnicodeDecodeError as exc:
         raise ModelDefinitionError(f"{path}: not UTF-8 text: {exc}") from None
     source = str(path)

@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import re
 import types
 import typing
 from dataclasses import MISSING, dataclass
@@ -204,6 +205,44 @@ def suggest(word, candidates) -> str | None:
         return close[0]
     longer = sorted((c for c in candidates if len(word) >= 4 and c.startswith(word)), key=len)
     return longer[0] if longer else None
+
+
+_TOML_AT = re.compile(r"\s*\(at line (\d+), column (\d+)\)\s*$")
+_TOML_HEADER = re.compile(r"^\s*\[\[?\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
+_TOML_TWICE = re.compile(r"Cannot declare \((.*)\) twice")
+
+
+def toml_error(source: str, text: str, exc: Exception) -> ConfigurationError:
+    """A ConfigurationError for a TOML syntax error of ``source`` (its ``text``): the file, the line,
+    and for a key or table given twice, which one (tomllib says only 'Cannot overwrite a value')."""
+    message = str(exc)
+    at = _TOML_AT.search(message)
+    what = _TOML_AT.sub("", message) if at else message
+    if at is None:
+        return ConfigurationError(f"{source}: not valid TOML: {message}", source=source)
+    line = int(at.group(1))
+    lines = text.splitlines()
+    row = lines[line - 1] if 0 < line <= len(lines) else ""
+    section = None
+    for above in reversed(lines[:line - 1]):
+        m = _TOML_HEADER.match(above)
+        if m:
+            section = m.group(1)
+            break
+    twice = _TOML_TWICE.search(what)
+    if twice:
+        table = ".".join(p.strip().strip("'\"") for p in twice.group(1).split(",") if p.strip())
+        return ConfigurationError(f"{source}: line {line}: table [{table}] is declared twice (each table once; "
+                                  f"merge the two)", source=source, section=table, key=table,
+                                  allowed="each table declared once")
+    if what.startswith("Cannot overwrite a value") and "=" in row:
+        key = row.split("=", 1)[0].strip()
+        where = f"[{section}] " if section else ""
+        return ConfigurationError(f"{source}: line {line}: {where}{key} is set twice (a duplicate key: TOML allows "
+                                  f"each key once per table; keep one)", source=source, section=section, key=key,
+                                  allowed="each key once per table")
+    return ConfigurationError(f"{source}: line {line}: not valid TOML: {what}: {row.strip()}", source=source,
+                              section=section)
 
 
 def _where(source: str, section: str | None) -> str:

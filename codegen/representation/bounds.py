@@ -545,7 +545,15 @@ def _compile(expr):
         fb = _compile(base)
         if exp.is_Integer or (exp.is_Float and float(exp).is_integer() and abs(float(exp)) < 2 ** 31):
             n = int(exp)
-            return lambda env: fb(env).power(n)
+            if n >= 0:
+                return lambda env: fb(env).power(n)
+
+            def inverse(env):
+                b = fb(env)
+                if b.contains_zero():
+                    raise _division_by_zero(expr, base, b, env)
+                return b.power(n)
+            return inverse
         if exp.is_Rational or exp.is_Float:
             e = _constant(exp)
             return lambda env: _const_pow(fb(env), e, expr)
@@ -584,6 +592,21 @@ def _compile(expr):
         fa, rule = _compile(args[0]), _UNARY[fn]
         return lambda env: rule(fa(env), expr)
     return _refuse(f"no interval rule for {getattr(fn, '__name__', fn)} in {expr}")
+
+
+def _division_by_zero(expr, base, b: Interval, env: dict) -> BoundsError:
+    """The error of ``expr`` = ``base`` ** -n where ``base`` encloses 0 on the box ``env``: it names
+    the denominator, its range, and the box's signals of the denominator whose range reaches 0
+    (``singular``; else every signal it depends on)."""
+    from ..errors import brief
+    free = sorted(base.free_symbols, key=str)
+    ranges = {s: env[s] for s in free if s in env}
+    reach = [s for s, (lo, hi) in ranges.items() if lo <= 0.0 <= hi] or list(ranges)
+    where = ", ".join(f"{s} in [{ranges[s][0]:.6g}, {ranges[s][1]:.6g}]" for s in reach)
+    return BoundsError(f"division by an interval containing 0: {brief(expr)} divides by {brief(base)}, whose range "
+                       f"[{b.lo:.6g}, {b.hi:.6g}] contains 0" + (f" where {where}" if where and not base.is_Symbol
+                                                                 else ""),
+                       singular=tuple(str(s) for s in reach))
 
 
 def _eval(expr, box: dict) -> Interval:

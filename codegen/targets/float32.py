@@ -462,7 +462,9 @@ def compare(observer, scenarios=None, out_dir: Path | None = None) -> dict:
     terms = StepTerms(b)
     rows = {sc: compare_scenario(b, obs, fobs, terms, metrics, inputs, noise, config.precision)
             for sc, inputs in scenario_inputs(config, obs, scenarios).items()}
-    report = {"observer": config.name, "fraction": config.precision.fraction, "noise": noise,
+    report = {"observer": config.name, "source": config.source or f"{config.name}.toml",
+              "fraction": config.precision.fraction, "noise": noise,
+              "noiseless_inputs": [n for n in b.input_names if n not in noise],
               "uncertified_states": config.precision.uncertified_states,
               "accumulation": config.precision.accumulation,
               "compensated": [list(b.state_names)[j] for j in fobs.compensated],
@@ -497,6 +499,16 @@ def _verdict(report: dict) -> dict:
                   f"only measured; [precision] uncertified_states = \"measured\" accepts it on the measured figures"
                   + ("" if within else f" (then: {worst['signal']} bound {worst['bound']:.3g} {worst['unit']} > "
                                        f"tolerance {worst['tolerance']:.3g} {worst['unit']})"))
+    elif not within and worst["tolerance"] == 0 and worst["tolerance_rule"] != "declared":
+        # no sensor noise known: the rule's tolerance is 0, and no contraction margin can meet it
+        quiet = report.get("noiseless_inputs") or []
+        first = quiet[0] if quiet else "INPUT"
+        reason = (f"{worst['signal']} on {worst['scenario']}: tolerance 0 {worst['unit']} ({worst['tolerance_rule']}): "
+                  f"no sensor noise of {'its inputs ' + ', '.join(quiet) if quiet else 'its inputs'} is known, so "
+                  f"the tolerance rule gives 0 and no certified margin can meet it; declare it in "
+                  f"{report.get('source', report['observer'])}: [precision] noise = {{ {first} = SIGMA, ... }} "
+                  f"(each input's sensor-noise standard deviation, in its unit; docs/embedding.md), or an absolute "
+                  f"[precision] tolerance = {{ {worst['signal']} = ... }}")
     elif not within:
         m = min(report["metrics"], key=lambda m: m["margin"])
         need = m["margin"] * worst["ratio"]

@@ -35,6 +35,66 @@ FORMATS = {"fmu": "2.0", "fmu3": "3.0"}
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 
 
+# a line of the observer file's header that is a command or a hint, not a description
+_NOT_DESCRIPTION = re.compile(r"^(next:|then:|note:|uiogen |trial design by uiogen|WARNING:)")
+
+
+def description(b) -> str:
+    """The FMU's ``description``: the first paragraph of the observer file's header comment without
+    its commands and notes (a ``next: uiogen design ...`` line, ``note:`` lines, the starter's ``then:`` and
+    its command lines); when nothing is left, the family and the observer's name."""
+    from .. import families
+    lines = []
+    try:
+        with open(b.config.source, encoding="utf-8") as fh:
+            for line in fh:
+                if not line.startswith("#"):
+                    break
+                text = line.lstrip("#").strip()
+                if not text:
+                    if lines:
+                        break           # the first paragraph only
+                    continue
+                if not _NOT_DESCRIPTION.match(text):
+                    lines.append(text)
+    except OSError:
+        lines = [b.config.doc] if b.config.doc else []
+    sentences = re.split(r"(?<=\.)\s+", " ".join(lines))
+    text = " ".join(s for s in sentences if s and not re.search(r"\b(then|next):\s*$", s)).strip()
+    if text:
+        return text
+    family = families.get(b.config.family)
+    return f"observer {b.name}: {family.title} ({family.short_citation or family.citation})".strip()
+
+
+def input_starts(b) -> dict:
+    """{input: start value} of the FMU's inputs: 0.0, except for an input with a box that excludes 0
+    (a scheduling signal's ``[scheduling.NAME]``, a measured state's ``[state_bounds] NAME`` for an
+    input ``y_NAME`` of an output that is the state NAME): the midpoint of its box, so an FMU whose
+    importer has not set it yet starts inside the box (at 0.0, outside a speed's [5, 25], the step
+    clamps it and flags SCHEDULING_CLAMPED)."""
+    from ..model import load_parameters
+    params = load_parameters(b.config.parameter_path)
+    boxes = {k: (box.lower, box.upper) for k, box in params.scheduling.items()}
+    model = b.config.load_model()
+    states = {str(s) for s in getattr(model, "states", ())}
+    for name, expr in getattr(model, "outputs", ()):
+        sym = str(expr)
+        if sym in states and sym in params.state_bounds:
+            boxes.setdefault(f"y_{name}", tuple(params.state_bounds[sym]))
+    out = {}
+    for n in b.input_names:
+        lo, hi = (float(v) for v in boxes.get(n, (0.0, 0.0)))
+        out[n] = 0.0 if lo <= 0.0 <= hi else 0.5 * (lo + hi)
+    return out
+
+
+def _c_starts(b) -> str:
+    """The C initializer of the wrapper's INPUT_START (the same values as the XML's start)."""
+    starts = input_starts(b)
+    return ", ".join(repr(float(starts[n])) for n in b.input_names)
+
+
 def variables(b) -> list:
     """The FMI variables: (name, value reference, causality, type, unit, description)."""
     from ..emit.generate import signal_fields
@@ -57,7 +117,7 @@ def model_description(b, guid: str, source_files: list) -> str:
     units = sorted({r[4] for r in rows if r[4]})
     out = ['<?xml version="1.0" encoding="UTF-8"?>',
            f'<fmiModelDescription fmiVersion="2.0" modelName={quoteattr(b.name)} guid="{guid}"',
-           f'  description={quoteattr(b.config.doc)}',
+           f'  description={quoteattr(description(b))}',
            f'  generationTool="uiogen {UIOGEN_VERSION}" variableNamingConvention="flat" numberOfEventIndicators="0">',
            f'  <CoSimulation modelIdentifier={quoteattr(b.name)} canHandleVariableCommunicationStepSize="false"',
            '    canInterpolateInputs="false" canBeInstantiatedOnlyOncePerProcess="false"',
@@ -71,12 +131,13 @@ def model_description(b, guid: str, source_files: list) -> str:
         out.append('  </UnitDefinitions>')
     out.append(f'  <DefaultExperiment startTime="0.0" stepSize="{b.config.sample_time!r}"/>')
     out.append('  <ModelVariables>')
+    starts = input_starts(b)
     for name, vr, causality, typ, unit, doc in rows:
         unit_attr = f" unit={quoteattr(unit)}" if unit else ""
         if causality == "input":
             out.append(f'    <ScalarVariable name={quoteattr(name)} valueReference="{vr}" description={quoteattr(doc)} '
                        f'causality="input" variability="discrete">')
-            out.append(f'      <Real{unit_attr} start="0.0"/>')
+            out.append(f'      <Real{unit_attr} start="{starts[name]!r}"/>')
         else:
             start = "0.0" if typ == "Real" else "0"
             out.append(f'    <ScalarVariable name={quoteattr(name)} valueReference="{vr}" description={quoteattr(doc)} '
@@ -137,6 +198,7 @@ def export_fmu(observer, out, log=print, fmi_version: str = "2.0") -> Path:
     digest = hashlib.sha256("".join(f + sources[f] for f in c_files).encode())
     guid = "{" + str(uuid.UUID(hex=digest.hexdigest()[:32])) + "}"
     sources[f"{name}_fmu.c"] = render_template("fmu.c.j2", name=name, NAME=name.upper(), ts=repr(config.sample_time),
+                                               input_start=_c_starts(b),
                                                guid=guid, vr_status=len(variables(b)) - 1)
     for h in sorted(FMI2_HEADERS.glob("fmi2*.h")):
         sources[h.name] = h.read_text()
@@ -241,7 +303,7 @@ def model_description3(b, token: str) -> str:
     units = sorted({r[4] for r in rows if r[4]})
     out = ['<?xml version="1.0" encoding="UTF-8"?>',
            f'<fmiModelDescription fmiVersion="3.0" modelName={quoteattr(b.name)} instantiationToken="{token}"',
-           f'  description={quoteattr(b.config.doc)}',
+           f'  description={quoteattr(description(b))}',
            f'  generationTool="uiogen {UIOGEN_VERSION}" variableNamingConvention="flat">',
            f'  <CoSimulation modelIdentifier={quoteattr(b.name)} canHandleVariableCommunicationStepSize="false"',
            '    canGetAndSetFMUState="false" canSerializeFMUState="false" providesDirectionalDerivatives="false"',
@@ -255,10 +317,11 @@ def model_description3(b, token: str) -> str:
     out.append('  <ModelVariables>')
     out.append('    <Float64 name="time" valueReference="0" causality="independent" variability="continuous" '
                'description="simulation time"/>')
+    starts = input_starts(b)
     for name, vr, causality, typ, unit, doc in rows:
         unit_attr = f" unit={quoteattr(unit)}" if unit else ""
         kind = "Float64" if typ == "Real" else "Int32"
-        start = "0.0" if typ == "Real" else "0"
+        start = repr(starts[name]) if causality == "input" else "0.0" if typ == "Real" else "0"
         extra = ' initial="exact"' if causality == "output" else ""
         out.append(f'    <{kind} name={quoteattr(name)} valueReference="{vr + 1}" description={quoteattr(doc)} '
                    f'causality="{causality}" variability="discrete"{extra}{unit_attr} start="{start}"/>')
@@ -287,6 +350,7 @@ def export_fmu3(observer, out, log=print) -> Path:
     digest = hashlib.sha256(("fmi3" + "".join(f + sources[f] for f in c_files)).encode())
     token = "{" + str(uuid.UUID(hex=digest.hexdigest()[:32])) + "}"
     sources[f"{name}_fmu3.c"] = render_template("fmu3.c.j2", name=name, NAME=name.upper(), ts=repr(config.sample_time),
+                                                input_start=_c_starts(b),
                                                 guid=token, stubs=fmi3_stubs())
     for h in sorted(FMI3_HEADERS.glob("fmi3*.h")):
         sources[h.name] = h.read_text()

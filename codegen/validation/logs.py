@@ -40,6 +40,16 @@ from . import csvlog, log_checks, streaming
 from .common import SETTLE_TIME, format_stats
 
 
+def _spec(col) -> dict:
+    """A mapped column as the observer file writes it (for a message)."""
+    spec = {"column": col.column}
+    if col.unit is not None:
+        spec["unit"] = col.unit
+    if col.scale != 1.0:
+        spec["scale"] = col.scale
+    return spec
+
+
 def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
     """The compiled step over a logged run mapped by the observer file's ``[data]`` table.
 
@@ -66,15 +76,22 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
     obs = load(config)
     model = config.load_model()
     missing = [n for n in obs.input_names if n not in cmap.inputs]
-    if missing:
-        raise config_error(cmap.source, "data.inputs", missing[0], None,
-                           f"a column for every observer input ({', '.join(obs.input_names)}); missing: "
-                           f"{', '.join(missing)}")
-    for section, mapped, allowed in (("data.inputs", cmap.inputs, obs.input_names),
-                                     ("data.truth", cmap.truth, obs.output_names)):
-        for k in mapped:
+    # a key that is no signal first: a misspelt input ('y_gyr') is named, with the input it meant,
+    # rather than reported as the input it left missing
+    for section, mapped, allowed, what in (("data.inputs", cmap.inputs, obs.input_names, "input"),
+                                           ("data.truth", cmap.truth, obs.output_names, "output")):
+        for k, col in mapped.items():
             if k not in allowed:
-                raise config_error(cmap.source, section, k, None, f"one of {', '.join(allowed)}", suggest(k, allowed))
+                near = suggest(k, [n for n in missing if n in allowed] or allowed) if what == "input" else None
+                raise config_error(cmap.source, section, k, _spec(col),
+                                   f"not an {what} of observer {config.name}: one of {', '.join(allowed)}"
+                                   + (f"; missing: {', '.join(missing)}" if what == "input" and missing else ""),
+                                   near or suggest(k, allowed))
+    if missing:
+        raise ConfigurationError(f"{cmap.source}: [data.inputs] {missing[0]} is missing: a column for every observer "
+                                 f"input ({', '.join(obs.input_names)}); missing: {', '.join(missing)}",
+                                 source=cmap.source, section="data.inputs", key=missing[0],
+                                 allowed="a column for every observer input")
     scale = {k: factor(c, model_unit(model, k), cmap.source, "data.inputs", k) for k, c in cmap.inputs.items()}
     scale.update({f"truth:{k}": factor(c, model_unit(model, k), cmap.source, "data.truth", k)
                   for k, c in cmap.truth.items()})

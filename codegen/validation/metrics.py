@@ -69,6 +69,8 @@ DEFINITIONS = {
                     "0 no better than the truth's mean (null for a constant truth)",
     "samples": "samples compared",
     "after_s": "the samples compared are those at t >= after_s [s] (the settle time); null: every sample",
+    "max_abs_ay": "(top level) max |a_y| [m/s^2] of the simulated truth's lateral acceleration, the model's output "
+                  "named a_y; null when the model has no output of that name (no value is made up)",
 }
 
 #: declared unit -> (reported unit, factor): plane angles in degrees, as the field and the papers' tables

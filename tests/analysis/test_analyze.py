@@ -6,6 +6,7 @@ The three cases live in ``tests/analysis/models/`` (README there): each ``uiogen
 analysis printed above the error names the signal and the fix in that one run; the test applies
 the fix the analysis names and the design passes.
 """
+import dataclasses
 import json
 import re
 import shutil
@@ -349,3 +350,59 @@ def test_new_from_model_writes_the_best_family_and_it_designs(tmp_path, capsys):
                      str(case / "car.toml"), "--name", "ts_fuzzy_uio"]) == 2
     assert "is a built-in observer" in capsys.readouterr().err
     assert cli.main(["new", str(tmp_path / "p3")]) == 2
+
+
+def test_a_failed_proposal_with_a_measured_fix_is_designed_again_and_written(tmp_path, monkeypatch):
+    """A trial of the analysis's proposal that fails with a measured fix (a UILoopError's remedy,
+    the UI filter constant that certifies) is designed again with it; certified, the fix is the
+    proposal (what ``uiogen new --from-model`` writes, with a comment that says so). Before, the
+    report named the constant and the file kept the failing one."""
+    from codegen.errors import UILoopError
+    s = _subject(tmp_path, '''
+        MODEL = ModelDefinition(name="toy", states=(x1, x2), known_inputs=(), unknown_inputs=(d,),
+                                dynamics=sp.Matrix([-x1 + x2, -x2 + d]), outputs=(("y", x1),),
+                                scheduling=(), parameters=())
+        ''')
+    app = ranking.Applicability("toy_family", True, "attenuated_box",
+                                observer={"family": "toy_family", "ui_filter": {"time_constant": 0.005}},
+                                why={"ui_filter.time_constant": "s, T_f"})
+    seen = []
+
+    def fake_trial(subject, app, folder, **kw):
+        tf = app.observer["ui_filter"]["time_constant"]
+        seen.append(tf)
+        return ranking.Trial(app.family, "certified", "the analysis's settings", headline="ok")
+
+    monkeypatch.setattr(ranking, "trial", fake_trial)
+    failed = ranking.Trial("toy_family", "failed", "the analysis's settings", reason="UILoopError: no", error=UILoopError,
+                           remedy={"ui_filter.time_constant": 0.1})
+    fixed, t = ranking._remedied(s, app, failed, tmp_path)
+    assert seen == [0.1] and t.status == "certified" and "time_constant = 0.1" in t.settings
+    assert fixed.observer["ui_filter"]["time_constant"] == 0.1 and app.observer["ui_filter"]["time_constant"] == 0.005
+    text = ranking.starter_text(s, fixed, tmp_path, trial=t)
+    assert re.search(r"^time_constant = 0\.1 .*the proposed 0\.005 failed \(UILoopError\), this value certifies", text, re.M)
+    assert "# trial design by uiogen analyze (the analysis's settings with [ui_filter] time_constant = 0.1" in text
+    # no fix measured, or the fix fails too: the first trial stands, and the file says it failed
+    bare = dataclasses.replace(failed, remedy={})
+    assert ranking._remedied(s, app, bare, tmp_path) == (app, bare)
+    monkeypatch.setattr(ranking, "trial", lambda *a, **k: failed)
+    assert ranking._remedied(s, app, failed, tmp_path) == (app, failed)
+    text = ranking.starter_text(s, app, tmp_path, trial=failed)
+    assert "# WARNING: uiogen analyze's trial design of these settings failed: UILoopError: no" in text
+
+
+@pytest.mark.slow       # two linf_uio trial designs, about 12 s
+def test_new_from_model_writes_the_ui_filter_constant_the_analysis_measured(tmp_path, capsys):
+    """A user's roll model (tests/analysis/models/roll_bank): the proposed T_f = 5 ms does not certify
+    the UI filter loop and the UILoopError measures 10 ms. The written file has 10 ms, says why, and
+    designs as written (it had 5 ms and ``uiogen design --update`` failed with the same error)."""
+    case = _copy("roll_bank", tmp_path)
+    assert cli.main(["new", str(tmp_path / "proj"), "--from-model", str(case / "roll.py"),
+                     "--parameters", str(case / "roll_params.toml")]) == 0
+    out = capsys.readouterr()
+    assert "warning" not in out.err
+    written = tmp_path / "proj" / "roll_bank_linf_uio.toml"
+    text = written.read_text()
+    assert re.search(r"^time_constant = 0\.01 .*the proposed 0\.005 failed \(UILoopError\)", text, re.M), text
+    b, _ = pipeline.solve(observers.get(str(written)))
+    assert b.data.Tf == 0.01 and b.discrete_certificate.ui_loop.contraction < 1

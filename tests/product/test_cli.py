@@ -169,3 +169,41 @@ def test_without_the_shared_log_the_stanford_shorthand_and_the_demo_say_so(tmp_p
     assert cli.main(["demo"]) == 2
     err = capsys.readouterr().err
     assert "UnsupportedError: uiogen demo ends on the shared Stanford log" in err and "Traceback" not in err
+
+
+def _fake_sweep(monkeypatch, figures):
+    """sweep.point answers at once: the first point refused, the others certified with ``figures``."""
+    from codegen.design import sweep
+    calls = []
+
+    def point(name, overrides):
+        calls.append(overrides)
+        if len(calls) == 1:
+            return {"settings": overrides, "outcome": "InfeasibleLMIError", "message": "no", "seconds": 0.0}
+        return {"settings": overrides, "outcome": "certified", **figures, "certified_contraction_per_step": 0.9,
+                "seconds": 0.0}
+    monkeypatch.setattr(sweep, "point", point)
+    return calls
+
+
+def test_sweep_show_names_an_unknown_figure_and_defaults_to_what_the_family_reports(monkeypatch, capsys):
+    """--show gama printed an empty column (and the default gamma column was empty for ts_fuzzy_uio,
+    which reports no gamma): a name the family does not report is a ConfigurationError with a
+    did-you-mean and the figures there are; without --show, gamma only where the family has it."""
+    from codegen import cli
+    _fake_sweep(monkeypatch, {"gamma": 0.5, "rules": 4})
+    assert cli.main(["sweep", "lpv_linf_driver_torque", "--set", "design.alpha=[1, 2]", "--show", "gama"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("uiogen: error: ConfigurationError: --show gama: observer "
+                                               "lpv_linf_driver_torque (linf_uio) reports no figure 'gama'")
+    assert "(did you mean 'gamma'?)" in err[0] and "its figures: gamma, rules, certified_contraction_per_step" in err[0]
+    # ts_fuzzy_uio reports no gamma: the default column is the certified contraction, the header printed once
+    _fake_sweep(monkeypatch, {"rules": 4})
+    assert cli.main(["sweep", "ts_fuzzy_uio", "--set", "design.alpha=[1, 2]"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert len(out) == 3 and "certified_contraction_per_step" in out[0] and "gamma" not in out[0]
+    assert "InfeasibleLMIError" in out[1]
+    assert out[2].split()[-1] == "0.9"
+    _fake_sweep(monkeypatch, {"gamma": 0.5})
+    assert cli.main(["sweep", "lpv_linf_driver_torque", "--set", "design.alpha=[1, 2]", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["show"] == ["gamma"]

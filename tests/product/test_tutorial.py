@@ -123,7 +123,7 @@ def mapped(tutorial):
 @pytest.mark.parametrize("old, new, message", [
     ('unit = "km/h"', 'unit = "kmh"', r"\[data.inputs.v_x\] unit = \"kmh\": one of .* \(did you mean 'km/h'\?\)"),
     ('unit = "km/h"', 'unit = "deg"', r"\[data.inputs.v_x\] unit = \"deg\": a unit of speed like the model's 'm/s' \(got a unit of angle\)"),
-    ('v_x = { column = "speed_kmh", unit = "km/h" }\n', '', r"\[data.inputs\] v_x = .*missing: v_x"),
+    ('v_x = { column = "speed_kmh", unit = "km/h" }\n', '', r"\[data.inputs\] v_x is missing: .*missing: v_x"),
     ('F = { column = "wind_kN"', 'Fz = { column = "wind_kN"', r"\[data.truth\] Fz = .*one of v_y, r, F \(did you mean 'F'\?\)"),
     ('column = "speed_kmh"', 'column = "speed"', r"log.csv: missing column\(s\) \['speed'\]"),
     ('time = { column = "time_ms", unit = "ms" }', 'time = { column = "time_ms" }', r"column 'time_ms'.*looks like milliseconds"),

@@ -629,3 +629,24 @@ def test_parse_settings_types_ranges_and_aliases():
 def test_errors_are_uiogen_value_errors():
     assert issubclass(ConfigurationError, ModelDefinitionError)
     assert issubclass(ConfigurationError, ValueError) and issubclass(ConfigurationError, UiogenError)
+
+
+@pytest.mark.parametrize("pattern, repl, expected", [
+    # a key set twice in one table: it said 'ModelDefinitionError ... not valid TOML: Cannot overwrite a value'
+    (r"^(time_constant = .*)$", r"\1\ntime_constant = 0.1",
+     r"line (\d+): \[ui_filter\] time_constant is set twice \(a duplicate key"),
+    (r"^\[ui_filter\]", "[design]\nalpha = 1.0\n\n[ui_filter]", r"line (\d+): table \[design\] is declared twice"),
+    (r"^(time_constant = ).*$", r"\1", r"line (\d+): not valid TOML: Invalid value: time_constant ="),
+])
+def test_a_toml_mistake_in_an_observer_file_names_the_line_and_the_key(tmp_path, capsys, pattern, repl, expected):
+    path = observer_file(tmp_path, "lpv_linf_driver_torque", pattern, repl)
+    with pytest.raises(ConfigurationError) as info:
+        observers._parse(path)
+    msg = _names_file_and_key(info.value, path, "line")
+    found = re.search(expected, msg)
+    assert found, msg
+    line = path.read_text().splitlines()[int(found.group(1)) - 1]
+    assert line.startswith(("time_constant", "[design]")), line
+    assert cli.main(["design", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("uiogen: error: ConfigurationError: ") and "Traceback" not in err

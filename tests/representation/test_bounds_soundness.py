@@ -337,3 +337,17 @@ def test_arithmetic_is_rounded_outward():
                             (x ** 3, fa ** 3), (x ** -2, 1 / fa ** 2)):
             iv = bounds.evaluate(expr, {x: (a, a), y: (b, b)})
             assert Fraction(iv.lo) <= exact <= Fraction(iv.hi), (expr, a, b)
+
+
+def test_a_division_by_a_range_reaching_zero_names_the_denominator_and_its_signal():
+    """1/x over x in [0, 20] said only 'division by an interval containing 0: [0.0, 20.0]': it names the
+    denominator and the signals whose range reaches 0 (``singular``, which a caller turns into 'its min
+    must be above 0'; no refinement of the bound can fix it)."""
+    with pytest.raises(BoundsError) as err:
+        bounds.evaluate(3 / x, {x: (0.0, 20.0)})
+    assert err.value.singular == ("x",)
+    assert "divides by x, whose range [0, 20] contains 0" in str(err.value)
+    with pytest.raises(BoundsError) as err:
+        bounds.evaluate(1 / (x + y) ** 2, {x: (-3.0, 1.0), y: (2.0, 3.0)})
+    assert err.value.singular == ("x",) and "where x in [-3, 1]" in str(err.value)
+    assert bounds.evaluate(1 / x, {x: (2.0, 4.0)}).lo >= 0.25 - 1e-12      # away from 0: bounded as before

@@ -75,3 +75,80 @@ def test_committed_commonroad_parameters_are_derived_not_typed():
     from codegen.validation import commonroad_plant
     text = (ROOT / "model_defs" / "params" / "commonroad_bmw320i.toml").read_text()
     assert text == commonroad_plant.params_toml(2)
+
+
+class _ZeroObserver:
+    """A stand-in compiled step: reads the model's outputs, estimates zero."""
+    input_names = ("dw", "y_r", "y_ay", "y_p")
+    output_names = ("phir",)
+
+    def run(self, inputs):
+        n = len(inputs)
+        return np.zeros((n, 1)), np.zeros(n, dtype=int), None
+
+
+@pytest.mark.parametrize("output_name", ["ay", "a_y"])
+def test_excitation_reports_max_abs_ay_only_for_an_output_named_a_y(tmp_path, monkeypatch, output_name):
+    """A model whose lateral acceleration is not an output named a_y (a user's roll model names it
+    ``ay``): the JSON's max_abs_ay is null and the header has no ``max |a_y|`` (it printed 0.00, a
+    made-up figure, for any such model); with the output named a_y, its peak."""
+    from codegen import pipeline
+    from codegen.project import observer_file as observers
+    from codegen.validation import excitation
+    case = ROOT / "tests" / "analysis" / "models" / "roll_bank"
+    model = (case / "roll.py").read_text()
+    if output_name != "ay":
+        model = model.replace('("ay", ay)', f'("{output_name}", ay)')
+    (tmp_path / "roll.py").write_text(model)
+    (tmp_path / "roll_params.toml").write_text((case / "roll_params.toml").read_text())
+    (tmp_path / "obs.toml").write_text('family = "linf_uio"\nmodel = "roll.py"\nparameters = "roll_params.toml"\n'
+                                       'sample_time = 0.01\npolytope = "sector"\n')
+    config = observers.get(str(tmp_path / "obs.toml"))
+
+    class Build:
+        def output_lags(self):
+            return {}
+
+    monkeypatch.setattr(pipeline, "build", lambda config: Build())
+    obs = _ZeroObserver()
+    obs.input_names = tuple(n.replace("y_ay", f"y_{output_name}") for n in obs.input_names)
+    r = {"family": "linf_uio", **excitation.run(config, 3.0, observer=obs)}
+    head = validate.header("roll", r)
+    data = json.loads(validate.to_json(r))
+    if output_name == "ay":
+        assert r["max_abs_ay"] is None and data["max_abs_ay"] is None and "a_y" not in head, head
+    else:
+        assert r["max_abs_ay"] > 0.01 and data["max_abs_ay"] == r["max_abs_ay"]
+        assert f"max |a_y| {r['max_abs_ay']:.2f} m/s^2" in head
+    assert "max_abs_ay" in data["definitions"]
+
+
+@pytest.mark.parametrize("entries, message", [
+    # a misspelt input: named, with the input it meant (it said 'y_gyro = None ... missing: y_gyro')
+    ({"y_gyr": "gyro_dps", "y_ay": "ay", "y_p": "p", "dw": "dw"},
+     r"obs.toml: \[data.inputs\] y_gyr = \{column = \"gyro_dps\", unit = \"deg/s\"\}: not an input of observer obs: "
+     r"one of dw, y_r, y_ay, y_p; missing: y_r \(did you mean 'y_r'\?\)"),
+    ({"y_r": "gyro_dps", "y_ay": "ay", "dw": "dw"},
+     r"obs.toml: \[data.inputs\] y_p is missing: a column for every observer input \(dw, y_r, y_ay, y_p\); missing: y_p$"),
+])
+def test_a_misspelt_data_input_is_named_with_a_did_you_mean(tmp_path, monkeypatch, capsys, entries, message):
+    import re
+    from codegen import cli
+    from codegen.extension import build as extension
+    case = ROOT / "tests" / "analysis" / "models" / "roll_bank"
+    for f in ("roll.py", "roll_params.toml"):
+        (tmp_path / f).write_text((case / f).read_text())
+    rows = "".join(f'{k} = {{ column = "{c}", unit = "{"deg/s" if c == "gyro_dps" else "1"}" }}\n'
+                   for k, c in entries.items())
+    (tmp_path / "obs.toml").write_text('family = "linf_uio"\nmodel = "roll.py"\nparameters = "roll_params.toml"\n'
+                                       'sample_time = 0.01\npolytope = "sector"\n\n[data]\ntime = "t"\n\n'
+                                       f'[data.inputs]\n{rows}')
+    obs = _ZeroObserver()
+    obs.input_names = ("dw", "y_r", "y_ay", "y_p")
+    monkeypatch.setattr(extension, "load", lambda config: obs)
+    monkeypatch.setattr(extension, "require_current", lambda config: None)
+    (tmp_path / "log.csv").write_text("t,gyro_dps,ay,p,dw\n0,0,0,0,0\n")
+    assert cli.main(["validate", str(tmp_path / "obs.toml"), "--data", str(tmp_path / "log.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert re.search(message, err), err

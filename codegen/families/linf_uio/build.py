@@ -241,7 +241,8 @@ def build(config: ObserverConfig, solver) -> LinfBuild:
         dcert = discrete.certify_step(data, settings.alpha, solver, min_margin=required_margin(settings))
     except UILoopError as exc:
         raise UILoopError(f"{config.source}: {exc}"
-                          f"{_measured_remedies(poly, settings, data, config.sample_time, lpv.definition.states)}") from None
+                          f"{_measured_remedies(poly, settings, data, config.sample_time, lpv.definition.states)}",
+                          remedy=exc.remedy) from None
     t3 = time.perf_counter()
     timings = {"representation_s": t1 - t0, "design_s": t2 - t1,
                "solve_s": design.solution.solve_time_s, "build_s": design.solution.build_time_s,

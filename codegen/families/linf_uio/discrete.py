@@ -529,7 +529,8 @@ def certify_ui_loop(data: ObserverData, solver, min_margin: float = 0.0) -> UILo
     else:
         ceiling, at = slowest_grid_decay(data)
         if ceiling <= 0 or not _ui_loop_feasible(data, 0.0, data.Tf):
-            raise UILoopError(_ui_loop_advice(data, ceiling, at))
+            message, remedy = _ui_loop_advice(data, ceiling, at)
+            raise UILoopError(message, remedy=remedy)
         lo, hi = 0.0, ceiling
         for _ in range(14):
             mid = 0.5 * (lo + hi)
@@ -553,9 +554,10 @@ def certify_ui_loop(data: ObserverData, solver, min_margin: float = 0.0) -> UILo
     return UILoopCertificate(beta, data.Ts, len(sol.checks), float(sol.worst.relative_margin), 0.5 * (P + P.T))
 
 
-def _ui_loop_advice(data: ObserverData, ceiling: float, at) -> str:
-    """What would certify the UI filter loop, measured: the filter constants tried, and where
-    the loop is unstable on the dense grid."""
+def _ui_loop_advice(data: ObserverData, ceiling: float, at) -> tuple:
+    """(message, remedy) of what would certify the UI filter loop, measured: the filter constants
+    tried, and where the loop is unstable on the dense grid; remedy {"ui_filter.time_constant": T_f}
+    the slowest-but-first constant that certifies, or {} when none does."""
     where = ", ".join(f"{sym} = {v:.4g}" for sym, v in zip(data.poly.signals, np.atleast_1d(at)))
     head = (f"the observer's error with the UI filter loop (Tf = {data.Tf:g} s) has no common Lyapunov function "
             f"over the scheduling box")
@@ -564,9 +566,10 @@ def _ui_loop_advice(data: ObserverData, ceiling: float, at) -> str:
     for factor in (2, 5, 10, 20, 50):
         Tf = data.Tf * factor
         if slowest_grid_decay(data, Tf, n_grid=101)[0] > 0 and _ui_loop_feasible(data, 0.0, Tf):
-            return f"{head}; measured: [ui_filter] time_constant = {Tf:g} s certifies it (a slower unknown-input estimate)"
+            return (f"{head}; measured: [ui_filter] time_constant = {Tf:g} s certifies it (a slower unknown-input "
+                    f"estimate)", {"ui_filter.time_constant": float(f"{Tf:g}")})
     return (f"{head}; measured: no filter constant up to {50 * data.Tf:g} s certifies it (the gains close an "
-            f"unstable loop through the UI filter)")
+            f"unstable loop through the UI filter)", {})
 
 
 def loop_is_certifiable(data: ObserverData) -> bool:

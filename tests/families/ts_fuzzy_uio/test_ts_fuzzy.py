@@ -334,3 +334,24 @@ def test_real_data_with_delta_as_unknown_input():
     assert beta["rms"] <= 1.02 * kf["rms"]          # the same linear tyre model as the KF
     assert delta["unit"] == "deg" and delta["rms"] < 1.5     # delta is reconstructed, not measured
     assert res["status_flags"] <= 1                  # the warm-up sample
+
+
+def test_a_speed_box_from_zero_says_its_min_must_be_above_zero(tmp_path):
+    """[state_bounds] v_x = [0, 30]: the TS form divides by v_x. It said 'division by an interval
+    containing 0' and to loosen bounds_rel_tol / bounds_max_boxes, which cannot fix it; it names the
+    signal's box in the parameter file and that its min must be above 0."""
+    import re
+    from codegen.errors import BoundsError
+    config = observers.get(NAME)
+    params = open(config.parameter_path).read()
+    assert "\nv_x = [5.0, 30.0]" in params
+    (tmp_path / "p.toml").write_text(params.replace("\nv_x = [5.0, 30.0]", "\nv_x = [0.0, 30.0]"))
+    text = open(config.source).read()
+    (tmp_path / "o.toml").write_text(re.sub(r'(?m)^parameters = .*$', 'parameters = "p.toml"', text))
+    with pytest.raises(BoundsError) as err:
+        pipeline.solve(observers.get(str(tmp_path / "o.toml")))
+    msg = str(err.value)
+    assert err.value.singular == ("v_x",)
+    assert "1/v_x divides by v_x, whose range [0, 30] contains 0" in msg
+    assert "[state_bounds] v_x = [0, 30] reaches 0: its min must be above 0" in msg
+    assert "bounds_rel_tol" not in msg and "bounds_max_boxes" not in msg

@@ -1,0 +1,28 @@
+"""The float32 build's verdict on a report (codegen.targets.float32._verdict), without a build."""
+from codegen.targets import float32 as precision
+
+
+def _report(tolerance: float, rule: str, noise: dict, noiseless: list) -> dict:
+    signal = {"unit": "N", "bound": 2.3, "deviation": 1.0, "tolerance": tolerance, "tolerance_rule": rule,
+              "noise_response": 0.0, "certified": True, "within": 2.3 <= tolerance}
+    return {"observer": "wheel", "source": "proj/wheel.toml", "fraction": 0.1, "noise": noise,
+            "noiseless_inputs": noiseless, "uncertified_states": "refuse",
+            "metrics": [{"states": ["x"], "contraction": 0.74, "margin": 0.257, "source": "[design] alpha",
+                         "knob": "[design] alpha"}],
+            "scenarios": {"excitation": {"signals": {"F_d": signal}, "measured_entries": [], "status_equal": True,
+                                         "outside_certified_set": 0}}}
+
+
+def test_a_zero_tolerance_for_want_of_sensor_noise_names_the_precision_noise_table():
+    """No sensor noise known for the inputs: the rule's tolerance is 0 and the refusal said only 'a
+    declared [precision] tolerance' and a contraction margin that 'cannot reach' it. It names the
+    [precision] noise table (in the observer file) with the inputs that lack it."""
+    v = precision._verdict(_report(0.0, "0.1 x noise response 0", {}, ["y_omega", "y_a_x"]))
+    assert not v["passes"]
+    r = v["reason"]
+    assert "F_d on excitation: tolerance 0 N" in r and "no sensor noise of its inputs y_omega, y_a_x is known" in r
+    assert "proj/wheel.toml: [precision] noise = { y_omega = SIGMA, ... }" in r and "docs/embedding.md" in r
+    assert "[precision] tolerance = { F_d = ... }" in r and "margin 1 - c" not in r
+    # a declared tolerance of its own, too small: the margin advice as before
+    v = precision._verdict(_report(1.0, "declared", {"y_omega": 0.05}, ["y_a_x"]))
+    assert "margin 1 - c = 0.257" in v["reason"] and "[precision] noise" not in v["reason"]
