@@ -439,6 +439,31 @@ def cmd_campaign(args) -> int:
     return 0
 
 
+def _file_of(tb) -> str | None:
+    """The file a failed read was reading: the innermost frame's ``path`` (or ``file``, ``source``)."""
+    frames = []
+    while tb is not None:
+        frames.append(tb.tb_frame)
+        tb = tb.tb_next
+    for frame in reversed(frames):
+        for key in ("path", "file", "filename", "source"):
+            value = frame.f_locals.get(key)
+            if isinstance(value, (str, Path)) and str(value):
+                return str(value)
+        value = frame.f_locals.get("self")
+        if isinstance(getattr(value, "path", None), (str, Path)):
+            return str(value.path)
+    return None
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the process is (a campaign stops as on Ctrl-C, its runs kept)."""
+
+
+def _terminate(signum, frame):
+    raise _Terminated()
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="uiogen", description="Certified unknown-input observers, "
                                      "from symbolic vehicle equations to embeddable C.")
@@ -568,6 +593,15 @@ def main(argv=None) -> int:
         parser.error("--workers must be >= 1")
     try:
         return args.func(args)
+    except KeyboardInterrupt:     # Ctrl-C: every output is written whole or not at all (outputs, generate)
+        print(f"uiogen: interrupted: uiogen {args.command} stopped before it finished (the previous state is kept)",
+              file=sys.stderr)
+        return 130
+    except UnicodeDecodeError as exc:     # a text file read where no reader names it: the file, if we can tell
+        where = _file_of(exc.__traceback__)
+        print(f"uiogen: error: ConfigurationError: {where or 'an input file'}: not UTF-8 text ({exc.reason} at byte "
+              f"{exc.start}); save it as UTF-8", file=sys.stderr)
+        return 2
     except UiogenError as exc:
         print(f"uiogen: error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 2
