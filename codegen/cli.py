@@ -423,13 +423,18 @@ def cmd_campaign(args) -> int:
             print(report.format_row(row))
         return 0
     out = Path(args.out) if args.out else observers.get(spec.observer).workspace.campaigns / Path(args.spec).stem
+    import signal
+    previous = signal.signal(signal.SIGTERM, _terminate)       # SIGTERM: as Ctrl-C, with the --resume hint
     try:
         summary = engine.run(spec, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
                              progress=None if args.json else engine.progress_bar())
-    except KeyboardInterrupt:
-        print(f"uiogen: interrupted: the finished runs are kept in {out / engine.JOURNAL}; `uiogen campaign "
-              f"{args.spec} --resume --out {out}` continues the campaign", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        print(f"uiogen: {'terminated' if isinstance(exc, _Terminated) else 'interrupted'}: the finished runs are "
+              f"kept in {out / engine.JOURNAL}; `uiogen campaign {args.spec} --resume --out {out}` continues the "
+              f"campaign", file=sys.stderr)
+        return 143 if isinstance(exc, _Terminated) else 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     if args.json:
         _print_json(summary)
     else:
