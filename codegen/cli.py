@@ -270,10 +270,8 @@ def cmd_fit(args) -> int:
     result = family.fit(cfg, args.data, args.samples, folds=args.folds)
     texts = family.fit_files(cfg, result)
     changed = {path: path.read_text() != body for path, body in texts.items()}
-    if args.write:
-        for path, body in texts.items():
-            if changed[path]:
-                outputs.write_atomic(path, body)     # each file the old one or the new one, never a part
+    if args.write and any(changed.values()):     # all the old files or all the new ones, never a mixture
+        outputs.write_together({path: body for path, body in texts.items() if changed[path]}, cfg.source)
     files = {_shown(p): ("written" if args.write and c else "differs" if c else "equal") for p, c in changed.items()}
     if args.json:
         _print_json({**result, "files": files})
