@@ -283,6 +283,8 @@ def cmd_fit(args) -> int:
 def cmd_validate(args) -> int:
     from .validation import run as validate
     config = observers.get(args.name, project=args.project)
+    if args.plot and not Path(args.plot).suffix:        # matplotlib adds .png: say the file it writes
+        args.plot = f"{args.plot}.png"
     if args.data:
         result = validate.run_data(config, args.data)
         if args.plot:
