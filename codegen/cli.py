@@ -288,10 +288,8 @@ def cmd_fit(args) -> int:
     result = family.fit(cfg, args.data, args.samples, folds=args.folds)
     texts = family.fit_files(cfg, result)
     changed = {path: path.read_text() != body for path, body in texts.items()}
-    if args.write:
-        for path, body in texts.items():
-            if changed[path]:
-                outputs.write_atomic(path, body)     # each file the old one or the new one, never a part
+    if args.write and any(changed.values()):     # all the old files or all the new ones, never a mixture
+        outputs.write_together({path: body for path, body in texts.items() if changed[path]}, cfg.source)
     files = {_shown(p): ("written" if args.write and c else "differs" if c else "equal") for p, c in changed.items()}
     if args.json:
         _print_json({**result, "files": files})
@@ -303,6 +301,8 @@ def cmd_fit(args) -> int:
 def cmd_validate(args) -> int:
     from .validation import run as validate
     config = observers.get(args.name, project=args.project)
+    if args.plot and not Path(args.plot).suffix:        # matplotlib adds .png: say the file it writes
+        args.plot = f"{args.plot}.png"
     if args.data:
         result = validate.run_data(config, args.data)
         if args.plot:
@@ -446,13 +446,18 @@ def cmd_campaign(args) -> int:
             print(report.format_row(row))
         return 0
     out = Path(args.out) if args.out else observers.get(spec.observer).workspace.campaigns / Path(args.spec).stem
+    import signal
+    previous = signal.signal(signal.SIGTERM, _terminate)       # SIGTERM: as Ctrl-C, with the --resume hint
     try:
         summary = engine.run(spec, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
                              progress=None if args.json else engine.progress_bar())
-    except KeyboardInterrupt:
-        print(f"uiogen: interrupted: the finished runs are kept in {out / engine.JOURNAL}; `uiogen campaign "
-              f"{args.spec} --resume --out {out}` continues the campaign", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        print(f"uiogen: {'terminated' if isinstance(exc, _Terminated) else 'interrupted'}: the finished runs are "
+              f"kept in {out / engine.JOURNAL}; `uiogen campaign {args.spec} --resume --out {out}` continues the "
+              f"campaign", file=sys.stderr)
+        return 143 if isinstance(exc, _Terminated) else 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     if args.json:
         _print_json(summary)
     else:
@@ -460,6 +465,31 @@ def cmd_campaign(args) -> int:
         print(f"wrote {summary['files']['runs']}, {summary['files']['summary']}, "
               f"{', '.join(summary['files']['plots'])}")
     return 0
+
+
+def _file_of(tb) -> str | None:
+    """The file a failed read was reading: the innermost frame's ``path`` (or ``file``, ``source``)."""
+    frames = []
+    while tb is not None:
+        frames.append(tb.tb_frame)
+        tb = tb.tb_next
+    for frame in reversed(frames):
+        for key in ("path", "file", "filename", "source"):
+            value = frame.f_locals.get(key)
+            if isinstance(value, (str, Path)) and str(value):
+                return str(value)
+        value = frame.f_locals.get("self")
+        if isinstance(getattr(value, "path", None), (str, Path)):
+            return str(value.path)
+    return None
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the process is (a campaign stops as on Ctrl-C, its runs kept)."""
+
+
+def _terminate(signum, frame):
+    raise _Terminated()
 
 
 def main(argv=None) -> int:
@@ -594,6 +624,15 @@ def main(argv=None) -> int:
         parser.error("--workers must be >= 1")
     try:
         return args.func(args)
+    except KeyboardInterrupt:     # Ctrl-C: every output is written whole or not at all (outputs, generate)
+        print(f"uiogen: interrupted: uiogen {args.command} stopped before it finished (the previous state is kept)",
+              file=sys.stderr)
+        return 130
+    except UnicodeDecodeError as exc:     # a text file read where no reader names it: the file, if we can tell
+        where = _file_of(exc.__traceback__)
+        print(f"uiogen: error: ConfigurationError: {where or 'an input file'}: not UTF-8 text ({exc.reason} at byte "
+              f"{exc.start}); save it as UTF-8", file=sys.stderr)
+        return 2
     except UiogenError as exc:
         print(f"uiogen: error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 2

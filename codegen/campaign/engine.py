@@ -12,7 +12,10 @@ the per-run timeout, stops the campaign with a typed error instead of waiting fo
 """
 from __future__ import annotations
 
+import contextlib
 import csv
+import errno
+import fcntl
 import hashlib
 import json
 import logging
@@ -23,7 +26,8 @@ import time
 from pathlib import Path
 
 from . import runner
-from ..errors import CampaignError
+from ..errors import CampaignError, OutputError
+from ..project import outputs
 
 
 def local_workers() -> int:
@@ -38,7 +42,12 @@ def client_for(scheduler: str | None = None, workers: int | None = None):
     """(client, cluster or None): ``Client(scheduler)``, else a local cluster of processes."""
     from dask.distributed import Client, LocalCluster
     if scheduler:
-        return Client(scheduler), None
+        try:
+            return Client(scheduler), None
+        except (OSError, TimeoutError) as exc:        # no scheduler there (distributed waits 30 s, then this)
+            cause = " ".join(str(exc).split()) or type(exc).__name__
+            raise CampaignError(f"cannot reach the Dask scheduler at {scheduler} ({cause}); start it (`dask "
+                                f"scheduler`, then workers) or leave out --scheduler for a local cluster") from None
     n = workers or local_workers()
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
                            silence_logs=40)
@@ -52,6 +61,7 @@ def _chunks(spec, runs, n_workers: int) -> list:
 
 
 JOURNAL = "runs.jsonl"
+LOCK = ".campaign.lock"
 JOURNAL_FORMAT = 1
 GATHER_TIMEOUT = 5.0       # s to fetch a finished task's rows before looking at the cluster again
 
@@ -76,8 +86,9 @@ class Journal:
     """
 
     def __init__(self, path: Path, header: dict, resume: bool, source: str = "SPEC"):
-        self.path, self.header = Path(path), header
+        self.path, self.header, self.source = Path(path), header, source
         self.rows: dict = {}
+        self._fd = None
         resume_hint = f"`uiogen campaign {source} --resume` continues it"
         if self.path.exists():
             found, rows, complete = self._read()
@@ -88,12 +99,17 @@ class Journal:
                                         f"differ: the campaign file or the observer's design changed since); "
                                         f"run without --resume into another --out folder, or delete {self.path}")
                 self.rows = rows
-            elif not complete:
+            elif not complete and rows:         # a header alone: nothing was run, nothing to lose
                 raise CampaignError(f"{self.path}: holds {len(rows)} finished runs of an interrupted campaign; "
-                                    f"{resume_hint}, or delete {self.path.parent} to start over")
+                                    f"{resume_hint}, or delete {self.path} to start over")
+
+    def start(self) -> None:
+        """Open the journal for appending (a new one, or one without runs, gets its header first):
+        called once the campaign has a cluster, so a campaign that never ran leaves no journal."""
         if not self.rows:
-            self._write_all([header])
-        self._fh = open(self.path, "a")
+            self._write_all([self.header])
+        with outputs.writing(self.path, "open"):
+            self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND)
 
     def _read(self) -> tuple:
         """(header, {run: row}, complete) of an existing journal; a torn last line (the process
@@ -125,30 +141,94 @@ class Journal:
 
     def _write_all(self, entries) -> None:
         tmp = self.path.with_name(self.path.name + ".tmp")
-        with open(tmp, "w") as fh:
-            fh.write("".join(json.dumps(e) + "\n" for e in entries))
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, self.path)
+        try:
+            with outputs.writing(self.path):
+                with open(tmp, "w") as fh:
+                    fh.write("".join(json.dumps(e) + "\n" for e in entries))
+                    fh.flush()
+                    os.fsync(fh.fileno())
+                os.replace(tmp, self.path)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+            raise
+
+    def _append(self, text: str) -> None:
+        """Append whole lines and sync them; a write the disk refuses is cut off again (the journal
+        keeps every line before it) and is an :class:`OutputError` saying what is kept and how to go on."""
+        data = text.encode()
+        end = os.lseek(self._fd, 0, os.SEEK_END)
+        try:
+            while data:
+                data = data[os.write(self._fd, data):]
+            os.fsync(self._fd)
+        except OSError as exc:
+            with contextlib.suppress(OSError):
+                os.ftruncate(self._fd, end)
+            if exc.errno not in outputs.DISK_ERRORS:
+                raise
+            name = errno.errorcode.get(exc.errno, "")
+            raise OutputError(f"cannot write {self.path}: {exc.strerror}{f' ({name})' if name else ''}; the "
+                              f"{len(self.rows)} runs finished before are kept there: free space (or make it "
+                              f"writable), then `uiogen campaign {self.source} --resume --out {self.path.parent}` "
+                              f"continues the campaign") from None
 
     def append(self, rows) -> None:
         """Keep ``rows`` (one write, then synced to disk)."""
         if not rows:
             return
-        self._fh.write("".join(json.dumps(r) + "\n" for r in rows))
-        self._fh.flush()
-        os.fsync(self._fh.fileno())
+        self._append("".join(json.dumps(r) + "\n" for r in rows))
         for r in rows:
             self.rows.setdefault(int(r["run"]), r)
 
     def complete(self, runs: int) -> None:
         """Mark the campaign finished (a later campaign into the same folder may start over)."""
-        self._fh.write(json.dumps({"complete": runs}) + "\n")
-        self._fh.flush()
-        os.fsync(self._fh.fileno())
+        self._append(json.dumps({"complete": runs}) + "\n")
 
     def close(self) -> None:
-        self._fh.close()
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
+@contextlib.contextmanager
+def exclusive(out_dir: Path, source: str = "SPEC"):
+    """Hold ``out_dir/.campaign.lock`` (``flock``, released when the process ends however it ends):
+    a second campaign into the same folder is refused instead of sharing (or deleting) its journal."""
+    path = out_dir / LOCK
+    with outputs.writing(path, "open"):
+        fh = open(path, "a+")
+    with fh:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            fh.seek(0)
+            pid = fh.read().strip() or "?"
+            raise CampaignError(f"another campaign is running into {out_dir} (pid {pid}); wait for it, or stop it "
+                                f"(its finished runs are kept: `uiogen campaign {source} --resume --out {out_dir}` "
+                                f"continues it), or choose another --out") from None
+        with contextlib.suppress(OSError):          # who holds it, for the message above (best effort)
+            fh.seek(0)
+            fh.truncate()
+            fh.write(f"{os.getpid()}\n")
+            fh.flush()
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def make_out_dir(out_dir: Path) -> Path:
+    """``mkdir -p`` of a campaign's folder: a file in the way (``--out`` an existing file, a file named
+    ``build`` in the project) is an :class:`OutputError` naming it."""
+    out_dir = Path(out_dir)
+    for folder in (out_dir, *out_dir.parents):
+        if folder.exists():
+            if not folder.is_dir():
+                raise OutputError(f"cannot create the campaign folder {out_dir}: {folder} is a file, not a folder; "
+                                  f"move it away or choose another --out")
+            break
+    return outputs.make_folder(out_dir)
 
 
 def _failed_rows(spec, runs, status: str, error: str) -> list:
@@ -254,24 +334,31 @@ def run(spec, out_dir, scheduler: str | None = None, workers: int | None = None,
     every worker is gone, or no run finishes within ``run_timeout``, the campaign stops and
     raises :class:`CampaignError` naming the runs it kept and the command that continues it.
     """
-    from . import report
     log = log or (lambda text: print(text, file=sys.stderr))
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = make_out_dir(out_dir)
+    with exclusive(out_dir, spec.source):
+        return _run(spec, out_dir, scheduler, workers, progress, client, resume, log)
+
+
+def _run(spec, out_dir: Path, scheduler, workers, progress, client, resume: bool, log) -> dict:
     design = runner.prepare(spec)           # the design is current; the plant compiled once, here
     journal = Journal(out_dir / JOURNAL, identity(spec, design), resume, source=spec.source)
-    if not resume:
-        for stale in ("runs.csv", "summary.json"):
-            (out_dir / stale).unlink(missing_ok=True)   # never beside the results of another campaign
     try:
         todo = [k for k in range(spec.runs) if k not in journal.rows]
         wall, n_workers, left = 0.0, 0, []
-        if todo:
+        if not todo:
+            journal.start()
+        else:
             own = client is None
             cluster = None
             if own:
                 client, cluster = client_for(scheduler, workers)
             try:
+                journal.start()                 # a cluster exists: from here on the campaign has run
+                if not resume:
+                    with outputs.writing(out_dir):
+                        for stale in ("runs.csv", "summary.json"):
+                            (out_dir / stale).unlink(missing_ok=True)   # never beside another campaign's results
                 n_workers = max(len(client.scheduler_info(n_workers=-1)["workers"]), 1)
                 t0 = time.perf_counter()
                 left = _execute(client, spec, todo, n_workers, journal, progress, spec.runs - len(todo), log)
@@ -288,23 +375,60 @@ def run(spec, out_dir, scheduler: str | None = None, workers: int | None = None,
         journal.complete(spec.runs)
     finally:
         journal.close()
+    writing = [out_dir]                 # the file being written, for the message
+    try:
+        return _reports(spec, out_dir, journal, scheduler, wall, n_workers, len(todo), writing)
+    except OSError as exc:           # a full disk after the last run: every run is in the journal
+        if exc.errno not in outputs.DISK_ERRORS:
+            raise
+        name = errno.errorcode.get(exc.errno, "")
+        where = writing[-1]
+        raise OutputError(f"cannot write {where}: {exc.strerror}{f' ({name})' if name else ''}; all {spec.runs} runs "
+                          f"finished and are kept in {journal.path}: free space, then `uiogen campaign {spec.source} "
+                          f"--resume --out {out_dir}` writes the reports without running them again") from None
+
+
+def _reports(spec, out_dir: Path, journal: Journal, scheduler, wall: float, n_workers: int, ran: int,
+             writing: list) -> dict:
+    """runs.csv, the worst runs' traces, the plots and summary.json of a finished campaign (``writing``
+    gets each file as it is written)."""
+    from . import report
     rows = sorted((journal.rows[k] for k in range(spec.runs)), key=lambda r: r["run"])
     # the worst runs' traces: re-run here (a row re-runs bit for bit from its index alone)
     worst = report.worst_runs(spec, rows)
     traces = {k: runner.run_traces(spec, k)[1] for k in worst}
     summary = report.summarize(spec, rows, wall_s=wall, workers=n_workers,
                                scheduler=scheduler or f"LocalCluster({n_workers} processes)")
-    summary["resumed_runs"] = spec.runs - len(todo)
-    summary["runs_per_s"] = len(todo) / wall if wall > 0 else None       # the runs this call ran
+    summary["resumed_runs"] = spec.runs - ran
+    summary["runs_per_s"] = ran / wall if wall > 0 else None       # the runs this call ran
+    writing.append(out_dir / "runs.csv")
     write_rows(rows, out_dir / "runs.csv")
     for k, tr in traces.items():
+        writing.append(out_dir / f"worst_run_{k}.csv")
         write_trace(tr, out_dir / f"worst_run_{k}.csv")
+    writing.append(out_dir)                      # the plots: PNG files in it
     summary["files"] = {"runs": str(out_dir / "runs.csv"), "journal": str(journal.path),
                         "summary": str(out_dir / "summary.json"),
                         "traces": [str(out_dir / f"worst_run_{k}.csv") for k in traces],
                         "plots": report.plots(spec, rows, traces, out_dir)}
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=1, sort_keys=True))
+    writing.append(out_dir / "summary.json")
+    with _replacing(out_dir / "summary.json") as tmp:
+        tmp.write_text(json.dumps(summary, indent=1, sort_keys=True))
     return summary
+
+
+@contextlib.contextmanager
+def _replacing(path: Path):
+    """A temporary sibling of ``path`` to write, renamed onto it when the block succeeds and
+    removed when it does not (a full disk leaves the previous file, never a part)."""
+    tmp = Path(str(path) + ".tmp")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
 
 
 def _ranges(runs: list) -> str:
@@ -336,13 +460,11 @@ def _cell(v) -> str:
 
 def write_rows(rows, path) -> None:
     cols = columns(rows)
-    tmp = Path(str(path) + ".tmp")
-    with open(tmp, "w", newline="") as fh:
+    with _replacing(Path(path)) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(cols)
         for r in rows:
             w.writerow([_cell(r.get(c, "")) for c in cols])
-    os.replace(tmp, path)
 
 
 def read_rows(path) -> list:
@@ -367,7 +489,7 @@ def read_rows(path) -> list:
 
 def write_trace(trace: dict, path) -> None:
     keys = list(trace)
-    with open(path, "w", newline="") as fh:
+    with _replacing(Path(path)) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(keys)
         for i in range(len(trace["t"])):

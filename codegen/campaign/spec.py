@@ -190,6 +190,11 @@ def load(path) -> CampaignSpec:
         raise ConfigurationError(f"{source}: no such campaign file", source=source) from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigurationError(f"{source}: not valid TOML ({exc})", source=source) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigurationError(f"{source}: not UTF-8 text ({exc.reason} at byte {exc.start}); save it as UTF-8",
+                                 source=source) from None
+    except IsADirectoryError:
+        raise ConfigurationError(f"{source}: a folder, not a campaign file", source=source) from None
     return parse(data, source)
 
 

@@ -38,7 +38,12 @@ def _module_file(module: str) -> Path | None:
 def _imports(path: Path, module_level: bool = False) -> tuple:
     """Project modules imported in ``path`` (absolute names): anywhere, or with ``module_level``
     only the statements that run when the module is imported."""
-    tree = ast.parse(path.read_text(), str(path))
+    try:
+        tree = ast.parse(path.read_text(), str(path))
+    except UnicodeDecodeError as exc:       # a user's model with a stray byte: name the file, not the codec
+        from ..errors import ModelDefinitionError
+        raise ModelDefinitionError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start}); save it as "
+                                   f"UTF-8") from None
     try:
         rel = path.relative_to(ROOT).with_suffix("")
         package = list(rel.parts[:-1])      # the package a relative import starts from

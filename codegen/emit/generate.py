@@ -211,9 +211,21 @@ def signal_fields(b: ObserverBuild, f) -> tuple:
 def _exclusive(out_dir: Path):
     """One writer at a time per output folder: ``generate`` and ``design --update`` (a second one
     waits for the first, so neither loses the other's design lock)."""
-    outputs.make_folder(out_dir)
-    with outputs.writing(out_dir / ".generate.lock"):
-        fh = open(out_dir / ".generate.lock", "w")
+    lock = out_dir / ".generate.lock"
+    if not out_dir.is_dir():
+        outputs.make_folder(out_dir)
+    try:
+        fh = open(lock, "a")
+    except OSError as exc:
+        if exc.errno not in outputs.DISK_ERRORS:
+            raise outputs.error(lock, exc, "open") from None
+        fh = None
+    if fh is None:                  # a read-only project: a reader's lock (flock needs no write access), or none
+        try:
+            fh = open(lock)
+        except OSError:             # no lock file, and none can be made: nobody can write here either
+            yield
+            return
     with fh:
         fcntl.flock(fh, fcntl.LOCK_EX)
         try:

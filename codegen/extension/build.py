@@ -99,7 +99,7 @@ def check_generated(config: observers.ObserverConfig) -> str:
     lock = design_lock.path(config)
     try:
         lock_text = lock.read_text()
-    except OSError:
+    except (OSError, UnicodeDecodeError):
         raise UnknownObserverError(f"observer {name!r} has no design lock {lock}; run `uiogen generate {how}`") from None
     if not emit.stamp_matches(src_dir, emit.emission_inputs(config, lock_text)):
         raise GenerationError(f"{src_dir} does not match its stamp {emit.STAMP}: its C was edited, or the design, "

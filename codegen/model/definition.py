@@ -298,6 +298,9 @@ def load_parameters(path: str | Path) -> ParameterSet:
         raise ModelDefinitionError(f"parameter file not found: {path}") from None
     except tomllib.TOMLDecodeError as exc:
         raise ModelDefinitionError(f"parameter file {path} is not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ModelDefinitionError(f"parameter file {path} is not UTF-8 text ({exc.reason} at byte {exc.start}); "
+                                   f"save it as UTF-8") from None
     check_keys(data, PARAMETER_TABLES, source=str(path), what="tables")
     raw = data.get("parameters")
     if not isinstance(raw, dict):

@@ -280,6 +280,8 @@ def _suggest_name(name: str) -> str:
 def _parse(path: Path, overrides: dict | None = None, project: str | Path | None = None) -> ObserverConfig:
     from .. import families
     path = Path(path)
+    from . import outputs           # a `uiogen fit --write` killed half-way: its files all new, first
+    outputs.finish_pending(path, log=lambda text: print(f"uiogen: {text}", file=sys.stderr))
     try:
         with path.open("rb") as fh:
             data = tomllib.load(fh)

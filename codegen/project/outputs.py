@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import json
 import os
+import stat
 import tempfile
 from pathlib import Path
 
@@ -73,15 +75,26 @@ def make_temp_folder(prefix: str, parent) -> Path:
     return tmp
 
 
+def _write_temporary(path: Path, tmp: Path, data, sync: bool = False) -> None:
+    """``data`` into ``tmp``, with the mode of the file ``path`` it will replace (a 0600 file stays 0600)."""
+    with open(tmp, "wb" if isinstance(data, bytes) else "w") as fh:
+        fh.write(data)
+        if sync:
+            fh.flush()
+            os.fsync(fh.fileno())
+    with contextlib.suppress(FileNotFoundError):
+        os.chmod(tmp, stat.S_IMODE(os.stat(path).st_mode))
+
+
 def write_atomic(path, data) -> Path:
     """Write ``data`` (str or bytes) to ``path`` through a temporary sibling and one rename: the
-    target is the old file or the new one, never a part; the temporary never stays."""
+    target is the old file or the new one, never a part, with the old one's permission mode; the
+    temporary never stays."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
         with writing(path):
-            with open(tmp, "wb" if isinstance(data, bytes) else "w") as fh:
-                fh.write(data)
+            _write_temporary(path, tmp, data)
             os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -101,3 +114,65 @@ def pyplot():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt
+
+
+def pending_path(anchor) -> Path:
+    """The record of a :func:`write_together` in progress, beside the file ``anchor`` it belongs to."""
+    anchor = Path(anchor)
+    return anchor.with_name(f".{anchor.name}.pending")
+
+
+def write_together(files: dict, anchor) -> list:
+    """Write several files ``{path: text}`` as one change (``uiogen fit --write``: a parameter file
+    and an observer file): every new text is written to a temporary sibling and synced first, then
+    a record of the renames (:func:`pending_path` of ``anchor``) is committed in one rename, then the
+    files are renamed into place and the record removed. Killed before the record exists: every
+    file is the old one; after: :func:`finish_pending` (run by the next command that reads
+    ``anchor``) completes the renames, so no reader ever works from one new file and one old one.
+    Each file keeps its permission mode. Returns the paths written."""
+    record = pending_path(anchor)
+    temps = {}
+    try:
+        for path, data in files.items():
+            path = Path(path)
+            tmp = path.with_name(f".{path.name}.new-{os.getpid()}")
+            temps[path] = tmp
+            with writing(path):
+                _write_temporary(path, tmp, data, sync=True)
+        write_atomic(record, json.dumps([[str(t.resolve()), str(p.resolve())] for p, t in temps.items()]))
+    except BaseException:
+        for tmp in temps.values():
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+        raise
+    finish_pending(anchor)
+    return list(temps)
+
+
+def finish_pending(anchor, log=None) -> list:
+    """Complete the renames of an interrupted :func:`write_together` recorded beside ``anchor`` (none:
+    nothing to do); returns the files it completed and says so through ``log``."""
+    record = pending_path(anchor)
+    try:
+        pairs = json.loads(record.read_text())
+    except FileNotFoundError:
+        return []
+    except (ValueError, UnicodeDecodeError):      # never written whole (write_atomic): a stray file
+        record.unlink(missing_ok=True)
+        return []
+    done = []
+    with writing(record, "complete the interrupted write recorded in"):
+        for tmp, target in pairs:
+            if os.path.exists(tmp):
+                os.replace(tmp, target)
+                done.append(target)
+        for folder in {os.path.dirname(t) for _, t in pairs}:
+            fd = os.open(folder, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+        record.unlink()
+    if done and log is not None:
+        log(f"completed an interrupted write of {', '.join(done)} (recorded in {record})")
+    return done
