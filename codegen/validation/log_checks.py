@@ -53,6 +53,9 @@ PLAUSIBLE = {"angle": 4 * math.pi, "speed": 150.0, "acceleration": 60.0}
 """Largest |value| of a vehicle signal of each dimension, in SI units (two steering-wheel turns,
 540 km/h, 6 g); dimensions without one (angular rates: yaw rate and wheel speed differ 100-fold)
 rely on the model's boxes and the physics."""
+#: a column spanning less than 1/SMALL_FACTOR of its box, which another unit brings to the box's
+#: scale, is named in a warning (a kN column declared in N)
+SMALL_FACTOR = 100.0
 BOX_FACTOR = 2.0
 """A column beyond BOX_FACTOR x the largest |bound| of the model's box for it is a unit mistake
 when another unit of its dimension brings it inside the box."""
@@ -243,12 +246,14 @@ class Column:
     model_unit: str | None
     scale: float = 1.0
     declared_by: str = "map"       # "map": [data.inputs] (unit/scale can be fixed there); "format": the shared format
+    table: str = "data.inputs"     # the observer file's table that maps it ([data.truth] for a reference)
 
     def describe(self, signal: str) -> str:
         unit = self.unit or self.model_unit or "no unit"
         how = "declared" if self.declared_by == "map" else "the shared format's unit"
         scale = f", scale {self.scale:g}" if self.scale != 1.0 else ""
-        return f"column {self.column!r} ({signal}, {how} {unit}{scale})"
+        what = f"reference of {signal.removeprefix('truth:')}" if signal.startswith("truth:") else signal
+        return f"column {self.column!r} ({what}, {how} {unit}{scale})"
 
 
 def _dimension(unit: str | None) -> str | None:
@@ -564,16 +569,21 @@ class LogChecks:
         Where each input comes from.
     sample_time : float
         The log's period [s] (the averaging window).
+    truth : mapping of str to Column, optional
+        Where each estimate's reference comes from (``[data.truth]``): checked for its unit like an
+        input (:meth:`feed_truth`), in no physical relation.
     """
 
-    def __init__(self, source, model, params, input_names, columns: dict, sample_time: float):
+    def __init__(self, source, model, params, input_names, columns: dict, sample_time: float, truth=None):
         self.source, self.model, self.params = source, model, params
         self.columns = dict(columns)
         self.names = [n for n in input_names if n in self.columns]
+        self.truth = [f"truth:{n}" for n in (truth or {})]
+        self.columns.update({f"truth:{n}": c for n, c in (truth or {}).items()})
         self.h = max(1, int(round(SMOOTH_S / sample_time)))
         self.relations = derive(model, params, input_names)
         self.window = Window(self.h)
-        self.ranges = {n: _Range() for n in self.names}
+        self.ranges = {n: _Range() for n in (*self.names, *self.truth)}
         self.derivatives = {s for r in self.relations for s in r.derivatives}
         self.functions = tuple({f[0]: f for r in self.relations for f in r.derived}.values())
         self.sample = []             # a few averaged rows of the log: the points the exponents are taken at
@@ -595,15 +605,22 @@ class LogChecks:
             return p.inputs[name]["min"], p.inputs[name]["max"]
         return None
 
+    def _extend(self, n: str, a: np.ndarray) -> None:
+        r = self.ranges[n]
+        r.lo, r.hi = min(r.lo, float(a.min())), max(r.hi, float(a.max()))
+        limit = PLAUSIBLE.get(_dimension(self.columns[n].model_unit))
+        if limit is not None:
+            r.beyond += int(np.count_nonzero(np.abs(a) > limit))
+
+    def feed_truth(self, values: dict) -> None:
+        """One chunk of the references: ``values[ESTIMATE]`` in the model's units."""
+        for n, a in values.items():
+            self._extend(f"truth:{n}", np.asarray(a, dtype=float))
+
     def feed(self, t: np.ndarray, values: dict) -> None:
         """One chunk: ``t`` [s] and ``values[INPUT]`` in the model's units."""
         for n in self.names:
-            a = values[n]
-            r = self.ranges[n]
-            r.lo, r.hi = min(r.lo, float(a.min())), max(r.hi, float(a.max()))
-            limit = PLAUSIBLE.get(_dimension(self.columns[n].model_unit))
-            if limit is not None:
-                r.beyond += int(np.count_nonzero(np.abs(a) > limit))
+            self._extend(n, values[n])
         if not self.relations:
             return
         w = self.window.join({"t": np.asarray(t, dtype=float), **{n: values[n] for n in self.names}})
@@ -648,12 +665,13 @@ class LogChecks:
 
     def _units(self) -> list:
         warnings = []
-        for n in self.names:
+        for n in (*self.names, *self.truth):
             col, r = self.columns[n], self.ranges[n]
             unit_model = col.model_unit or "model units"
             dim = _dimension(col.model_unit)
             limit = PLAUSIBLE.get(dim)
-            bounds = self.box_of(n)
+            signal = n.removeprefix("truth:")
+            bounds = self.box_of(signal)
             if limit is not None and r.beyond:
                 fits = [(f, u) for f, u in self._alternatives(n) if max(abs(r.lo), abs(r.hi)) * f <= limit
                         and (bounds is None or self._inside(r, f, bounds))]
@@ -672,11 +690,24 @@ class LogChecks:
                     if fits:
                         raise DatasetError(
                             f"{self.source}: {col.describe(n)} spans [{r.lo:.4g}, {r.hi:.4g}] {unit_model}, beyond "
-                            f"{BOX_FACTOR:g} x the model's box [{bounds[0]:g}, {bounds[1]:g}] for {n}"
+                            f"{BOX_FACTOR:g} x the model's box [{bounds[0]:g}, {bounds[1]:g}] for {signal}"
                             + self._cause(n, fits))
                     warnings.append(f"{col.describe(n)} spans [{r.lo:.4g}, {r.hi:.4g}] {unit_model}, beyond "
-                                    f"{BOX_FACTOR:g} x the model's box [{bounds[0]:g}, {bounds[1]:g}] for {n}, and no "
+                                    f"{BOX_FACTOR:g} x the model's box [{bounds[0]:g}, {bounds[1]:g}] for {signal}, and no "
                                     f"other unit brings it inside: check the column and the box")
+                elif abs(r.hi - r.lo) * SMALL_FACTOR < bounds[1] - bounds[0]:
+                    # the other way round (a kN column declared in N) the values stay inside the box, so
+                    # it is only a warning: a log may hardly excite a signal; a unit that brings the
+                    # column to the box's scale is named
+                    fits = [(f, u) for f, u in self._alternatives(n) if f >= SMALL_FACTOR and self._inside(r, f, bounds)
+                            and abs(r.hi - r.lo) * f >= FILL * (bounds[1] - bounds[0])]
+                    if fits:
+                        f, u = fits[0]
+                        warnings.append(f"{col.describe(n)} spans [{r.lo:.4g}, {r.hi:.4g}] {unit_model}, under "
+                                        f"1/{SMALL_FACTOR:g} of the model's box [{bounds[0]:g}, {bounds[1]:g}] for {signal}; "
+                                        f"in {u} (x {f:.4g}) it would span [{r.lo * f:.4g}, {r.hi * f:.4g}]"
+                                        + self._fix(col, f"unit = \"{u}\"", f"convert the column from {u}")
+                                        + " if that is its unit")
         return warnings
 
     @staticmethod
@@ -695,7 +726,7 @@ class LogChecks:
 
     @staticmethod
     def _fix(col: Column, key: str, convert: str) -> str:
-        return (f": declare {key} for {col.column!r} in [data.inputs]" if col.declared_by == "map"
+        return (f": declare {key} for {col.column!r} in [{col.table}]" if col.declared_by == "map"
                 else f": {convert} to {col.model_unit}")
 
     def _physics(self, results) -> list:

@@ -106,7 +106,9 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
     checks = log_checks.LogChecks(
         p, model, load_parameters(config.parameter_path), obs.input_names,
         {n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale) for n, c in cmap.inputs.items()},
-        obs.sample_time)
+        obs.sample_time,
+        truth={n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale, table="data.truth")
+               for n, c in cmap.truth.items()})
     declared = {n: model_unit(model, n) for n in obs.output_names}
     compared = {n: streaming.ErrorStats(declared[n], settle=SETTLE_TIME) for n in cmap.truth}
     summary = {n: streaming.Summary(declared[n]) for n in obs.output_names if n not in cmap.truth}
@@ -117,6 +119,7 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
         time.feed(t)
         inputs = np.column_stack([cols[cmap.inputs[n].column] * scale[n] for n in obs.input_names])
         checks.feed(t, {n: inputs[:, j] for j, n in enumerate(obs.input_names)})
+        checks.feed_truth({n: cols[c.column] * scale[f"truth:{n}"] for n, c in cmap.truth.items()})
         out, status, state = obs.run(inputs, state)
         flags += int(np.count_nonzero(status))
         t0 = t[0] if t0 is None else t0

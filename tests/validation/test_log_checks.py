@@ -11,6 +11,7 @@ exited 0: a_y declared in g on a log in m/s^2 gave beta RMS 42.8 deg and "0 flag
 import json
 import math
 import subprocess
+import re
 import sys
 from pathlib import Path
 
@@ -253,3 +254,32 @@ def test_every_builtin_model_derives_without_error():
     assert seen["switched_pi_bank_angle"] == {"kinematic", "steady state"}      # d phi/dt = phi_dot; r(delta)
     assert seen["stanford_sideslip_nonlinear_tyre"] == {"identity", "steady state"}
     assert seen["ts_fuzzy_uio"] == set()               # delta unknown: no known input drives a steady state
+
+
+def _truth_checks(unit: str):
+    checks = _checks()
+    model = observers.get(NAME).load_model()
+    truth = {"beta": L.Column("beta_true", unit, model_unit(model, "beta"), table="data.truth")}
+    import dataclasses
+    params = dataclasses.replace(checks.params, state_bounds={"beta": (-0.1, 0.1)})    # the box the design certifies
+    return L.LogChecks("log.csv", model, params, checks.names, {n: checks.columns[n] for n in checks.names},
+                       0.01, truth=truth)
+
+
+def _feed_truth(checks, cols: dict, scale: float):
+    checks.feed(cols["t"], {k: cols[MAP[k][0]] for k in checks.names})
+    checks.feed_truth({"beta": cols["beta_true"] * scale})
+    return checks.finish()
+
+
+def test_a_reference_column_is_checked_for_its_unit_too():
+    """[data.truth] columns get the unit checks of the inputs: a reference in degrees declared in radians
+    is an error naming [data.truth]; one in radians declared in mrad (1000 x too small) a warning."""
+    cols = _synthetic()
+    assert _feed_truth(_truth_checks("rad"), cols, 1.0)["warnings"] == []
+    with pytest.raises(DatasetError, match=r"column 'beta_true' \(reference of beta, declared rad\).*beyond 2 x the "
+                                           r"model's box .* for beta; it looks like deg.*in \[data.truth\]"):
+        _feed_truth(_truth_checks("rad"), cols, 180 / np.pi)
+    warnings = _feed_truth(_truth_checks("mrad"), cols, 1e-3)["warnings"]
+    assert len(warnings) == 1 and re.search(r"column 'beta_true' \(reference of beta, declared mrad\).* under 1/100 of "
+                                            r"the model's box .* for beta; in rad \(x 1000\).*\[data.truth\]", warnings[0])
