@@ -7,7 +7,8 @@ precisely what they expect and the message names the cause.
 from __future__ import annotations
 
 # The runtime's errors (python_bindings needs no toolchain to raise them), re-exported here.
-from python_bindings.errors import SampleError, StaleExtensionError, UiogenError, UnknownObserverError  # noqa: F401
+from python_bindings.errors import (ChangedSourceError, DamagedExtensionError, SampleError, SourceFileError,  # noqa: F401
+                                    StaleExtensionError, UiogenError, UnknownObserverError)
 
 
 class ModelDefinitionError(UiogenError, ValueError):

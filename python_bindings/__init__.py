@@ -14,8 +14,9 @@ are built by ``uiogen build`` (:mod:`codegen.extension.build`, C glue
 ``codegen/emit/templates/pymodule.c.j2``) into the observer's project's ``build/extensions/``
 (:mod:`python_bindings.workspace`); errors are :mod:`python_bindings.errors`.
 """
-from .errors import SampleError, StaleExtensionError, UiogenError, UnknownObserverError
+from .errors import (ChangedSourceError, DamagedExtensionError, SampleError, SourceFileError, StaleExtensionError,
+                     UiogenError, UnknownObserverError)
 from .runtime import CompiledObserver, Recorder, load
 
-__all__ = ["CompiledObserver", "Recorder", "SampleError", "StaleExtensionError", "UiogenError",
-           "UnknownObserverError", "load"]
+__all__ = ["ChangedSourceError", "CompiledObserver", "DamagedExtensionError", "Recorder", "SampleError",
+           "SourceFileError", "StaleExtensionError", "UiogenError", "UnknownObserverError", "load"]

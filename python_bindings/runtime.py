@@ -4,8 +4,16 @@ The extension module carries everything :class:`CompiledObserver` shows (compile
 ``uiogen build`` from the generated C and its design lock): its signal names and units, the
 sample time, and the SHA-256 of the design lock it was built from. :func:`load` finds the
 extension by the workspace rule (:mod:`python_bindings.workspace`: the folder and stem of the
-observer file, or a built-in name) without reading the observer file, and refuses one whose
-design hash is not that of the design lock beside it.
+observer file, or a built-in name) and refuses, before the extension is used:
+
+* one whose bytes are not those ``uiogen build`` recorded beside it (truncated, overwritten:
+  :class:`~python_bindings.errors.DamagedExtensionError`, checked before it is loaded);
+* one whose design hash is not that of the design lock beside it
+  (:class:`~python_bindings.errors.StaleExtensionError`);
+* one whose observer file, parameter file or model changed since it was built
+  (:class:`~python_bindings.errors.ChangedSourceError`; a source file that is absent, as in a
+  deployment of the extension and its lock alone, is not checked: :mod:`python_bindings.integrity`);
+* an observer file that is not UTF-8 TOML (:class:`~python_bindings.errors.SourceFileError`).
 """
 from __future__ import annotations
 
@@ -17,7 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import SampleError, StaleExtensionError, UnknownObserverError
+from . import integrity
+from .errors import (ChangedSourceError, DamagedExtensionError, SampleError, SourceFileError, StaleExtensionError,
+                     UnknownObserverError)
 from .workspace import BUILTIN_OBSERVERS, Workspace
 
 STATUS_BITS = ("OK", "SCHEDULING_CLAMPED", "NONFINITE_INPUT", "NUMERICAL_FAILURE", "WARMING_UP")
@@ -155,7 +165,10 @@ def load(observer, project: str | Path | None = None) -> CompiledObserver:
     workspace, name = Workspace.locate(observer, project)
     if not workspace.design_lock(name).is_file():
         _refuse_unknown(str(observer), workspace.design_lock(name))
-    return open_observer(workspace, name, str(observer) + (f" --project {project}" if project is not None else ""))
+    text = str(observer)
+    source = Path(text) if text.endswith(".toml") or "/" in text else BUILTIN_OBSERVERS / f"{text}.toml"
+    return open_observer(workspace, name, text + (f" --project {project}" if project is not None else ""),
+                         observer_file=source)
 
 
 def _refuse_unknown(text: str, lock: Path) -> None:
@@ -172,9 +185,12 @@ def _refuse_unknown(text: str, lock: Path) -> None:
                                    + "; for an observer of your own, pass the path of its observer file (.toml)")
 
 
-def open_observer(workspace: Workspace, name: str, argument: str | None = None) -> CompiledObserver:
+def open_observer(workspace: Workspace, name: str, argument: str | None = None,
+                  observer_file: str | Path | None = None) -> CompiledObserver:
     """The compiled observer ``name`` of ``workspace``; ``argument``: how the commands the
-    errors suggest name it (default ``name``)."""
+    errors suggest name it (default ``name``); ``observer_file``: the observer file it was built
+    from, whose sources are checked against those the extension records (module docstring);
+    None checks none."""
     argument = argument or name
     lock = workspace.design_lock(name)
     if not lock.is_file():
@@ -187,6 +203,9 @@ def open_observer(workspace: Workspace, name: str, argument: str | None = None) 
         if not path.is_file():
             raise UnknownObserverError(f"observer {name!r} is generated but not compiled (no {path}); "
                                        f"run `uiogen build {argument}`")
+        damage = integrity.binary_mismatch(path)      # before dlopen: a truncated object dies of SIGBUS
+        if damage:
+            raise DamagedExtensionError(f"the extension {path} is not loaded: {damage}; run `uiogen build {argument}`")
         spec = importlib.util.spec_from_file_location(f"_{name}", path)
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
@@ -195,7 +214,34 @@ def open_observer(workspace: Workspace, name: str, argument: str | None = None) 
     if getattr(module, "DESIGN_SHA256", None) != design:
         raise StaleExtensionError(f"the extension {path} was built from another design than {lock} (the design "
                                   f"changed since the last build); run `uiogen build {argument}`")
-    if not hasattr(module, "observer_type"):
-        raise StaleExtensionError(f"the extension {path} was built by an older uiogen (it has no observer_type); "
+    if not hasattr(module, "observer_type") or not hasattr(module, "SOURCES"):
+        raise StaleExtensionError(f"the extension {path} was built by an older uiogen (it has no "
+                                  f"{'observer_type' if not hasattr(module, 'observer_type') else 'SOURCES'}); "
                                   f"run `uiogen build {argument}`")
+    if observer_file is not None:
+        _check_sources(module, path, Path(observer_file), argument)
     return observer_class(module)(module, path)
+
+
+def _check_sources(module, path: Path, observer_file: Path, argument: str) -> None:
+    """Refuse ``module`` when a file it was built from changed since (:mod:`python_bindings.integrity`)."""
+    import json
+    try:
+        recorded = json.loads(module.SOURCES)
+        changed = integrity.changed_sources(recorded, observer_file)
+    except integrity.SourceFileUnreadable as exc:
+        raise SourceFileError(f"{exc.args[1]}: the observer file cannot be read: {exc.args[0]}; fix or restore it "
+                              f"(an observer file is UTF-8 TOML)") from None
+    except (ValueError, KeyError, TypeError):
+        raise StaleExtensionError(f"the extension {path} has no readable record of its sources; "
+                                  f"run `uiogen build {argument}`") from None
+    except OSError as exc:
+        raise SourceFileError(f"{exc.filename}: cannot be read ({exc.strerror}); the extension {path} is "
+                              f"checked against it") from None
+    if changed:
+        role, file = changed[0]
+        others = "".join(f", and {r} {f}" for r, f in changed[1:])
+        raise ChangedSourceError(f"{file} (the {role} of {module.NAME}){others} changed since the extension {path} "
+                                 f"was built: its compiled step is of the old files, so it is not used; run "
+                                 f"`uiogen generate {argument}` (it re-solves the design where it changed) and "
+                                 f"`uiogen build {argument}`", path=file)

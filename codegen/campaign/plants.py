@@ -365,7 +365,11 @@ class CompiledPlant:
 
 def _compile(f: ca.Function, where: Path) -> Path:
     """The shared object of ``f``'s C, compiled once per source hash (atomic rename: safe for
-    several worker processes compiling at once)."""
+    several worker processes compiling at once). The SHA-256 of its bytes is recorded beside it
+    (``plant_KEY.so.sha256``, :mod:`python_bindings.integrity`) and checked before it is reused: a
+    cached object that is truncated, altered or unrecorded is compiled again, never loaded (a
+    truncated shared object dies of SIGBUS when loaded)."""
+    from python_bindings import integrity
     from ..emit.toolchain import compiler, run
     with tempfile.TemporaryDirectory() as tmp:
         cg = ca.CodeGenerator("plant_run.c", {"with_header": False})
@@ -376,7 +380,7 @@ def _compile(f: ca.Function, where: Path) -> Path:
     flags = ["-O2", "-fPIC", "-shared", "-fno-fast-math"]
     key = hashlib.sha256("\0".join([code, cc, *flags, ca.__version__]).encode()).hexdigest()[:20]
     out = Path(where) / f"plant_{key}.so"
-    if out.is_file():
+    if out.is_file() and not integrity.binary_mismatch(out):
         return out
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
@@ -384,5 +388,8 @@ def _compile(f: ca.Function, where: Path) -> Path:
         src.write_text(code)
         so = Path(tmp, out.name)
         run([cc, *flags, str(src), "-o", str(so), "-lm"])
+        record = integrity.record_path(so)
+        record.write_text(integrity.record_text(so.read_bytes(), out.name))
+        os.replace(record, integrity.record_path(out))
         os.replace(so, out)
     return out

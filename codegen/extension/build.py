@@ -5,13 +5,20 @@ no fast-math, ``-ffp-contract=off`` so results do not depend on FMA availability
 flags below; the Python glue is rendered from ``codegen/emit/templates/pymodule.c.j2`` and
 linked with it. The glue compiles in what the runtime shows (:mod:`python_bindings`): the signal
 names and units of the header's structs, the sample time, and the SHA-256 of the design lock the
-C was generated from, so that :func:`python_bindings.load` refuses an extension older than its lock.
+C was generated from, so that :func:`python_bindings.load` refuses an extension older than its lock,
+and the hashes of the observer file, parameter file and model it was made from, so that ``load``
+refuses it once one of them changed (:mod:`python_bindings.integrity`). The SHA-256 of the
+extension's bytes is written beside it (``_NAME.<abi>.so.sha256``): ``load`` checks it before the
+extension is loaded. Everything is compiled from one snapshot of the generated folder
+(:func:`snapshot_generated`), so the design hash compiled in is that of the C compiled.
 
 Where things go: the observer's project (:mod:`python_bindings.workspace`): the extension in
 ``build/extensions/``, its objects in ``build/objects/NAME/``.
 """
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import hashlib
 import importlib.util
 import json
@@ -21,6 +28,7 @@ import sysconfig
 import tempfile
 from pathlib import Path
 
+from python_bindings import integrity
 from python_bindings.runtime import CompiledObserver, open_observer
 from python_bindings.workspace import Workspace, source_checkout
 
@@ -88,24 +96,82 @@ def check_generated(config: observers.ObserverConfig) -> str:
     GenerationError
         the folder does not match its stamp (names the command that regenerates it).
     """
+    return _verify_generated(config, generated_dir(config))
+
+
+def _verify_generated(config: observers.ObserverConfig, folder: Path, where: Path | None = None) -> str:
+    """:func:`check_generated` of the generated files in ``folder`` (the generated folder itself,
+    or a snapshot of it); ``where``: the generated folder the messages name (default ``folder``)."""
     from ..emit import generate as emit
     from ..errors import GenerationError
     name = config.name
-    src_dir = generated_dir(config)
+    where = where or folder
     how = config.source if not config.builtin else name
-    if not (src_dir / f"{name}.h").is_file():
-        raise UnknownObserverError(f"observer {name!r} has not been generated (no {src_dir / (name + '.h')}); "
+    if not (folder / f"{name}.h").is_file():
+        raise UnknownObserverError(f"observer {name!r} has not been generated (no {where / (name + '.h')}); "
                                    f"run `uiogen generate {how}`")
-    lock = design_lock.path(config)
+    lock = folder / design_lock.path(config).name
     try:
         lock_text = lock.read_text()
     except (OSError, UnicodeDecodeError):
-        raise UnknownObserverError(f"observer {name!r} has no design lock {lock}; run `uiogen generate {how}`") from None
-    if not emit.stamp_matches(src_dir, emit.emission_inputs(config, lock_text)):
-        raise GenerationError(f"{src_dir} does not match its stamp {emit.STAMP}: its C was edited, or the design, "
+        raise UnknownObserverError(f"observer {name!r} has no readable design lock {where / lock.name}; "
+                                   f"run `uiogen generate {how}`") from None
+    if not emit.stamp_matches(folder, emit.emission_inputs(config, lock_text)):
+        raise GenerationError(f"{where} does not match its stamp {emit.STAMP}: its C was edited, or the design, "
                               f"model or toolchain changed since it was generated; run `uiogen generate {how}` "
                               f"(the C is never compiled as found)")
     return lock_text
+
+
+@contextlib.contextmanager
+def _flock(path: Path, mode: int):
+    """Hold ``flock(mode)`` on ``path`` (created if missing); a folder that does not take the lock
+    file (read-only) is used without it."""
+    try:
+        fh = open(path, "a")
+    except OSError:
+        yield
+        return
+    with fh:
+        fcntl.flock(fh, mode)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def snapshot_generated(config: observers.ObserverConfig, dest: Path) -> str:
+    """Copy the generated folder of ``config`` into ``dest`` (each file read once), holding the
+    lock ``generate`` and ``design --update`` write under (shared: they wait for the copy, and
+    the copy for them), then check the copy against its stamp (:func:`check_generated`);
+    returns the copy's lock text. What is compiled, checked and hashed afterwards is this copy
+    alone: a design changed on disk while the extension builds cannot mix into it."""
+    src_dir = generated_dir(config)
+    outputs.make_folder(dest)
+    with _flock(src_dir.parent / ".generate.lock", fcntl.LOCK_SH):
+        try:
+            files = [p for p in src_dir.iterdir() if p.is_file()] if src_dir.is_dir() else []
+            for p in files:
+                (dest / p.name).write_bytes(p.read_bytes())
+        except FileNotFoundError:      # the folder swapped by a generate without the lock: its stamp says
+            pass
+    return _verify_generated(config, dest, where=src_dir)
+
+
+BUILD_LOCK = ".build.lock"
+
+
+def remove_leftovers(ext_dir: Path, name: str) -> list:
+    """Remove the staging folders (``.NAME.new-*``) of ``ext_dir`` that builds of ``name`` killed
+    before they finished left behind; call it holding the build lock of ``name`` (no live build
+    of ``name`` has one then). Returns the folders removed."""
+    import shutil
+    gone = []
+    for leftover in sorted(Path(ext_dir).glob(f".{name}.new-*")):
+        if leftover.is_dir():
+            shutil.rmtree(leftover, ignore_errors=True)
+            gone.append(leftover)
+    return gone
 
 
 def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | None = None,
@@ -113,12 +179,19 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
     """Compile observer ``observer`` (a name, an observer-file path or a config) and install the
     extension module only if its step conforms to the model; returns the installed path.
 
-    1. The generated folder matches its stamp (:func:`check_generated`).
-    2. The C is compiled into a temporary folder beside the target.
-    3. The module is loaded from there and checked against independent evaluations of its model
-       (:func:`codegen.extension.conformance.check`: signal layout, then numbers across every declared box).
-    4. Only then it replaces the installed module (one rename): a failed check leaves the previous
-       extension as it was and raises :class:`~codegen.errors.ConformanceError`.
+    1. The hashes of the observer file, the parameter file and the model are taken (compiled
+       into the extension: :mod:`python_bindings.integrity`).
+    2. The generated folder is copied into a staging folder beside the target, holding the lock
+       of ``generate`` (:func:`snapshot_generated`), and the copy is checked against its stamp.
+    3. The copy's C is compiled there, with the SHA-256 of the copy's design lock.
+    4. The module is loaded from there and checked against independent evaluations of the copy's
+       design (:func:`codegen.extension.conformance.check`: signal layout, then numbers across every declared box).
+    5. Only then the SHA-256 of its bytes is recorded beside the target, and it replaces the
+       installed module (one rename): a failed check leaves the previous extension as it was and
+       raises :class:`~codegen.errors.ConformanceError`.
+
+    One build of an observer at a time (a second waits: ``build/objects/NAME/.build.lock``); it
+    removes the staging folders of builds killed before they finished.
     """
     import shutil
     from .. import pipeline
@@ -126,41 +199,67 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
     config = _config(observer)
     name = config.name
     src_dir = generated_dir(config)
-    lock_text = check_generated(config)
     extra = SPEED_FLAGS + (LTO_FLAGS if lto_supported() else []) + list(extra_flags or [])
     workspace = config.workspace
     ext_dir = Path(ext_dir) if ext_dir is not None else workspace.extensions
     build_dir = outputs.make_folder(workspace.objects(name))
     outputs.make_folder(ext_dir)
-    signals = header_signals((src_dir / f"{name}.h").read_text(), name)
-    lock = design_lock.path(config)
-    glue = outputs.write_atomic(build_dir / f"{name}_pymodule.c", render_template(
-        "pymodule.c.j2", name=name, NAME=name.upper(), signals=signals, c_string=c_string,
-        design_sha256=hashlib.sha256(lock.read_bytes()).hexdigest()))
-    import numpy
-    glue_flags = [*GLUE_FLAGS, "-I", sysconfig.get_paths()["include"], "-I", numpy.get_include()]
     module_file = workspace.extension(name).name
-    staging = outputs.make_temp_folder(f".{name}.new-", ext_dir)
-    try:
-        candidate = compile_and_link(observer_sources(config) + [glue], staging / module_file, include=[src_dir],
-                                     flags=STRICT_FLAGS, extra_flags=extra, source_flags={glue: glue_flags},
-                                     shared=True, object_dir=build_dir, suffix=suffix)
-        spec = importlib.util.spec_from_file_location(f"_{name}", candidate)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        report = conformance.check(pipeline.build(config), module, src_dir, json.loads(lock_text))
-        target = ext_dir / module_file
-        with outputs.writing(target):
-            os.replace(candidate, target)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-    # the evidence the extension was installed on, beside its objects: a reader checks that its
-    # design hash is the installed module's (a build killed between the two writes leaves them apart)
-    record = {"extension": module_file, "design_sha256": module.DESIGN_SHA256, **report.as_record()}
-    outputs.write_atomic(build_dir / CONFORMANCE_RECORD, json.dumps(record, indent=1) + "\n")
+    target = ext_dir / module_file
+    with _flock(build_dir / BUILD_LOCK, fcntl.LOCK_EX):
+        remove_leftovers(ext_dir, name)
+        # the sources before the stamp check: one edited after it differs from what is recorded
+        sources = json.dumps(source_record(config), sort_keys=True)
+        staging = outputs.make_temp_folder(f".{name}.new-", ext_dir)
+        try:
+            snap = staging / "generated"
+            lock_text = snapshot_generated(config, snap)
+            lock_name = design_lock.path(config).name
+            signals = header_signals((snap / f"{name}.h").read_text(), name)
+            glue = outputs.write_atomic(build_dir / f"{name}_pymodule.c", render_template(
+                "pymodule.c.j2", name=name, NAME=name.upper(), signals=signals, c_string=c_string,
+                design_sha256=hashlib.sha256((snap / lock_name).read_bytes()).hexdigest(), sources=sources))
+            import numpy
+            glue_flags = [*GLUE_FLAGS, "-I", sysconfig.get_paths()["include"], "-I", numpy.get_include()]
+            candidate = compile_and_link([snap / f"{name}_kernel.c", snap / f"{name}.c", glue],
+                                         staging / module_file, include=[snap], flags=STRICT_FLAGS,
+                                         extra_flags=extra, source_flags={glue: glue_flags}, shared=True,
+                                         object_dir=build_dir, suffix=suffix)
+            spec = importlib.util.spec_from_file_location(f"_{name}", candidate)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            data = json.loads(lock_text)
+            where = str(src_dir / lock_name)
+            design_lock.verify(data, where, config.name if config.builtin else config.source)
+            report = conformance.check(pipeline.build(config, design_lock.replay(data, where)), module, snap, data)
+            with outputs.writing(target):
+                outputs.write_atomic(integrity.record_path(target),
+                                     integrity.record_text(candidate.read_bytes(), module_file))
+                os.replace(candidate, target)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+        # the evidence the extension was installed on, beside its objects: a reader checks that its
+        # design hash is the installed module's (a build killed between the two writes leaves them apart)
+        record = {"extension": module_file, "design_sha256": module.DESIGN_SHA256, **report.as_record()}
+        outputs.write_atomic(build_dir / CONFORMANCE_RECORD, json.dumps(record, indent=1) + "\n")
     if log is not None:
         log(f"{name}: {report.line()}")
     return target
+
+
+def source_record(config: observers.ObserverConfig) -> dict:
+    """The hashes of the files ``config``'s design is made from, as the extension records them
+    (:func:`python_bindings.integrity.source_digests`); {} for a configuration without a file."""
+    if not config.source:
+        return {}
+    try:
+        return integrity.source_digests(config.source, config.parameter_path, config.model_path)
+    except integrity.SourceFileUnreadable as exc:
+        from ..errors import ConfigurationError
+        raise ConfigurationError(f"{config.source}: {exc.args[0]}", source=str(config.source)) from None
+    except OSError as exc:
+        raise UnknownObserverError(f"{exc.filename}: cannot be read ({exc.strerror}); the extension of "
+                                   f"{config.name} records it") from None
 
 
 CONFORMANCE_RECORD = "conformance.json"
@@ -202,7 +301,7 @@ def load(observer) -> CompiledObserver:
     argument = config.name if config.builtin else config.source
     if config.workspace != Workspace.locate(argument)[0]:
         argument += f" --project {config.workspace.root}"
-    return open_observer(config.workspace, config.name, argument)
+    return open_observer(config.workspace, config.name, argument, observer_file=config.source)
 
 
 def require_built(verb: str, make_target: str) -> list:

@@ -16,6 +16,7 @@ from codegen import errors
 from codegen.emit.header import signals as header_signals
 from codegen.extension.build import generated_names
 from python_bindings import Recorder, StaleExtensionError, UnknownObserverError, load
+from python_bindings.integrity import record_path
 from python_bindings.workspace import Workspace
 
 pytestmark = pytest.mark.slow          # the compiled extensions
@@ -52,12 +53,13 @@ def test_load_and_step_import_nothing_of_the_toolchain(tmp_path):
 @pytest.fixture
 def project(tmp_path):
     """A project folder holding a copy of the built-in observer's generated C, lock and
-    extension, and its observer file."""
+    extension (with the record of its bytes), and its observer file."""
     checkout = Workspace.locate(NAME)[0]
     ws = Workspace.of(tmp_path)
     shutil.copytree(checkout.observer_dir(NAME), ws.observer_dir(NAME))
     ws.extensions.mkdir(parents=True)
     shutil.copy(checkout.extension(NAME), ws.extension(NAME))
+    shutil.copy(record_path(checkout.extension(NAME)), record_path(ws.extension(NAME)))   # its bytes' hash
     shutil.copy(ROOT / "model_defs" / "observers" / f"{NAME}.toml", tmp_path / f"{NAME}.toml")
     return ws
 
