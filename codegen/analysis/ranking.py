@@ -365,7 +365,7 @@ def rank(subject: Subject, structure, design: bool = True, progress=None) -> Ran
                 if progress is not None:
                     progress(f"designing {app.family} ...")
                 trials[app.family] = trial(subject, app, Path(tmp))
-                if app.family != own:
+                if own is None:          # from a model alone: the proposal new --from-model writes
                     apps[k], trials[app.family] = _remedied(subject, app, trials[app.family], Path(tmp), progress)
             else:
                 reason = "does not apply" if not app.applies else "no trial designs requested"
@@ -395,7 +395,10 @@ def _remedied(subject: Subject, app: Applicability, failed: Trial, folder: Path,
     """(app, trial): when the trial of the analysis's proposal failed with a measured fix (a
     UILoopError names the UI filter constant that certifies), the proposal with that fix, designed
     again; certified, it replaces the proposal (what ``uiogen new --from-model`` writes, with a
-    comment that says so), else the first trial stands."""
+    comment that says so), else the first trial stands. Only for a model analysed alone: beside an
+    observer file the other families' trials are of the analysis's proposal as it is, their
+    failure reported with the fix it measured (the reason names it), so the file's own family is
+    compared with what the analysis proposes, not with a second, tuned attempt."""
     if failed.status != "failed" or not failed.remedy or not app.observer:
         return app, failed
     observer, why = dict(app.observer), dict(app.why)
