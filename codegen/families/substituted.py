@@ -185,7 +185,9 @@ class RecoveredInputs(ObserverBuild):
 
     def signal_docs(self) -> tuple:
         state, inputs, outputs = self.inner.signal_docs()
-        extra = [{"name": str(s.unknown), "doc": f"estimate of {s.unknown}, recovered from {s.symbol} = {s.carrier}"}
+        units = self.config.load_model().units       # the recovered input keeps the unit its model declares
+        extra = [{"name": str(s.unknown), "doc": f"estimate of {s.unknown}, recovered from {s.symbol} = {s.carrier} "
+                                                 f"[{units.get(str(s.unknown), '-')}]"}
                  for s in self.substitutions]
         return [*state, *extra], inputs, [*outputs, *extra]
 

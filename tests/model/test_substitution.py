@@ -108,6 +108,7 @@ def test_the_bank_angle_is_designed_through_its_sine_and_recovered(tmp_path, cap
     from python_bindings import load
     obs = load(str(path))
     assert obs.output_names[-1] == "phi_r" and "sin_phi_r" in obs.output_names
+    assert obs.output_units[-1] == "rad"             # the recovered input keeps its model unit
 
 
 TS_MODEL = '''
