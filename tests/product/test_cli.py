@@ -138,7 +138,11 @@ def test_a_verb_that_needs_an_extra_names_it(monkeypatch, capsys):
     """A wheel installs no extra: a verb whose run imports CommonRoad's vehicle models (uiogen demo,
     validate on a named scenario) said ModuleNotFoundError in a traceback; now the extra to install."""
     from codegen import cli
-    monkeypatch.setitem(sys.modules, "vehiclemodels", None)        # import vehiclemodels raises ImportError
+    # every import of vehiclemodels raises ImportError: its submodules too, which an earlier test in the
+    # same worker may have imported (``from vehiclemodels.init_mb import ...`` finds a cached submodule
+    # without looking at its package)
+    for name in [m for m in sys.modules if m == "vehiclemodels" or m.startswith("vehiclemodels.")] + ["vehiclemodels"]:
+        monkeypatch.setitem(sys.modules, name, None)
     assert cli.main(["validate", "interconnected_uio_ford_escort", "--scenario", "satory", "--plant", "commonroad",
                      "--duration", "3"]) == 2
     err = capsys.readouterr().err
