@@ -36,8 +36,10 @@ def file_sha256(path) -> str:
         return hashlib.sha256(fh.read()).hexdigest()
 
 
-def observer_file_sha256(path) -> str:
-    """The hash of an observer file as parsed, less ``[data]`` and ``[precision]``.
+def design_table(raw: bytes) -> dict:
+    """An observer file's table as parsed, less ``[data]`` and ``[precision]`` (no design or C
+    derives from them): what both the design lock's hash (``codegen.design.lock``) and the
+    runtime's source check take of the file.
 
     Raises
     ------
@@ -45,8 +47,6 @@ def observer_file_sha256(path) -> str:
         The file is not UTF-8 or not TOML.
     """
     import tomllib
-    with open(path, "rb") as fh:
-        raw = fh.read()
     try:
         table = tomllib.loads(raw.decode("utf-8"))
     except UnicodeDecodeError as exc:
@@ -56,6 +56,19 @@ def observer_file_sha256(path) -> str:
         raise SourceFileUnreadable(f"it is not valid TOML ({exc})") from None
     table.pop("data", None)
     table.pop("precision", None)
+    return table
+
+
+def observer_file_sha256(path) -> str:
+    """The hash of an observer file's :func:`design_table`.
+
+    Raises
+    ------
+    SourceFileUnreadable
+        The file is not UTF-8 or not TOML.
+    """
+    with open(path, "rb") as fh:
+        table = design_table(fh.read())
     return hashlib.sha256(json.dumps(table, sort_keys=True, default=str).encode()).hexdigest()
 
 

@@ -74,11 +74,9 @@ def observer_file_digest(config: ObserverConfig) -> str:
     with its leading comment (the C's description): editing them or a comment inside the file
     never re-solves a design."""
     import hashlib
-    import tomllib
+    from python_bindings.integrity import design_table       # the one rule, shared with load's source check
     with open(config.source, "rb") as fh:
-        table = tomllib.load(fh)
-    table.pop("data", None)
-    table.pop("precision", None)
+        table = design_table(fh.read())
     text = json.dumps({"table": table, "doc": config.doc}, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 
