@@ -88,6 +88,7 @@ class Journal:
     def __init__(self, path: Path, header: dict, resume: bool, source: str = "SPEC"):
         self.path, self.header, self.source = Path(path), header, source
         self.rows: dict = {}
+        self.finished = False               # the end mark is in the file (a resumed, finished campaign)
         self._fd = None
         resume_hint = f"`uiogen campaign {source} --resume` continues it"
         if self.path.exists():
@@ -98,7 +99,7 @@ class Journal:
                     raise CampaignError(f"{self.path}: --resume: these results are of another campaign ({diff} "
                                         f"differ: the campaign file or the observer's design changed since); "
                                         f"run without --resume into another --out folder, or delete {self.path}")
-                self.rows = rows
+                self.rows, self.finished = rows, complete
             elif not complete and rows:         # a header alone: nothing was run, nothing to lose
                 raise CampaignError(f"{self.path}: holds {len(rows)} finished runs of an interrupted campaign; "
                                     f"{resume_hint}, or delete {self.path} to start over")
@@ -182,8 +183,11 @@ class Journal:
             self.rows.setdefault(int(r["run"]), r)
 
     def complete(self, runs: int) -> None:
-        """Mark the campaign finished (a later campaign into the same folder may start over)."""
-        self._append(json.dumps({"complete": runs}) + "\n")
+        """Mark the campaign finished (a later campaign into the same folder may start over); once:
+        resuming a finished campaign only re-writes its reports."""
+        if not self.finished:
+            self._append(json.dumps({"complete": runs}) + "\n")
+            self.finished = True
 
     def close(self) -> None:
         if self._fd is not None:

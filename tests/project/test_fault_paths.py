@@ -156,6 +156,23 @@ def test_the_journal_is_written_only_once_started(tmp_path):
     engine.Journal(path, HEADER, resume=False).close()
 
 
+def test_resuming_a_finished_campaign_marks_it_finished_once(tmp_path):
+    path = tmp_path / engine.JOURNAL
+    journal = engine.Journal(path, HEADER, resume=False)
+    journal.start()
+    journal.append([{"run": 0, "status": "ok"}])
+    journal.complete(1)
+    journal.close()
+    for _ in range(2):               # --resume of a finished campaign re-writes its reports only
+        again = engine.Journal(path, HEADER, resume=True)
+        assert again.finished and set(again.rows) == {0}
+        again.start()
+        again.complete(1)
+        again.close()
+    lines = path.read_text().splitlines()
+    assert lines == [json.dumps(HEADER), json.dumps({"run": 0, "status": "ok"}), json.dumps({"complete": 1})]
+
+
 def test_a_journal_the_disk_refuses_keeps_its_whole_lines(tmp_path, monkeypatch):
     path = tmp_path / engine.JOURNAL
     journal = engine.Journal(path, HEADER, resume=False, source="c.toml")
