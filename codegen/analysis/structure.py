@@ -235,7 +235,11 @@ def point_facts(A, D, C, Dd, rtol: float = RTOL) -> PointFacts:
     left = True
     for s0 in (0.613 + 1.271j, -0.417 + 2.113j):
         s = s0 * scale
-        R = np.block([[A - s * np.eye(n), D], [C, Dd]]).astype(complex)
+        # at |s| ~ scale the input-output part of R shrinks like |C D| / |s|: a stiff point (scale
+        # 6e3) put a left-invertible system's smallest singular value (1e-4) under the tolerance.
+        # Scaling the unknown inputs' columns and the outputs' rows by |s| (no change of rank)
+        # keeps every block of R of the size of A - s I.
+        R = np.block([[A - s * np.eye(n), scale * D], [scale * C, scale * scale * Dd]]).astype(complex)
         Nr = _null(R, tol * 10)
         if Nr.shape[1]:
             left = False

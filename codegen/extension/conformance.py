@@ -249,7 +249,17 @@ def _split(build, inputs):
 def _reference(build, z, row) -> tuple:
     """(z_next, excess, warmup) of the numpy reference step."""
     u, y, rho = _split(build, row)
-    res = build.reference_step(np.array(z, float), u, y, rho)
+    try:
+        res = build.reference_step(np.array(z, float), u, y, rho)
+    except (TypeError, ValueError, ZeroDivisionError, FloatingPointError, OverflowError) as exc:
+        # the model cannot be evaluated at a point of its declared boxes (a power of a negative is
+        # complex in Python, a division by an exact 0 raises): the C would step through NaN there
+        values = ", ".join(f"{n}={v:.6g}" for n, v in zip(build.input_names, row))
+        raise ConformanceError(
+            f"{build.name}: the numpy reference step of the model cannot be evaluated inside the declared boxes "
+            f"({type(exc).__name__}: {exc}); inputs {values}: the model is not a finite real number there (a "
+            f"sqrt or power of a negative, a division by 0): narrow the box or change the equation; the "
+            f"extension is not installed") from None
     if isinstance(res, tuple):
         z_next = np.asarray(res[0], float).ravel()
         excess = float(np.asarray(res[1]).ravel()[0]) if len(res) > 1 else 0.0

@@ -108,6 +108,7 @@ class ModelDefinition:
     parameter_ranges: Mapping[str, tuple] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        _check_field_types(self)
         _check_parameter_ranges(self)
         for w in self.derived_inputs:
             if not isinstance(w, DerivedInput):
@@ -379,6 +380,77 @@ def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str, 
 _BRACKETS = ("[]", "[)", "(]", "()")
 _OPS = {">": lambda v, b: v > b, ">=": lambda v, b: v >= b, "<": lambda v, b: v < b, "<=": lambda v, b: v <= b,
         "!=": lambda v, b: v != b}
+
+
+_SYMBOL_FIELDS = ("states", "known_inputs", "unknown_inputs", "parameters")
+
+
+def _check_field_types(model) -> None:
+    """Refuse a field of the wrong type with the field's name and what it takes.
+
+    Without this, a misplaced type surfaced as whatever Python raised first (``not enough values
+    to unpack`` for outputs given as a dict, an AttributeError traceback for a parameter given as
+    a string), and a state given as the string "v_x" became a symbol without the assumptions
+    (``positive=True``) of the ``v_x`` the equations use: another symbol of the same name.
+    """
+    who = f"model {model.name!r}" if isinstance(model.name, str) else "model"
+    if not isinstance(model.name, str) or not model.name:
+        raise ModelDefinitionError(f"model: name must be a non-empty string, got {model.name!r}")
+    for key in _SYMBOL_FIELDS:
+        value = getattr(model, key)
+        if not isinstance(value, (tuple, list)):
+            raise ModelDefinitionError(f"{who}: {key} must be a tuple of sympy symbols, got {type(value).__name__} "
+                                       f"{value!r}")
+        for item in value:
+            if not isinstance(item, sp.Symbol):
+                hint = (f"; declare it with sp.symbols({str(item)!r}) (with the assumptions the equations use, "
+                        f"e.g. positive=True)" if isinstance(item, str) else "")
+                raise ModelDefinitionError(f"{who}: {key} must hold sympy symbols, got {type(item).__name__} "
+                                           f"{item!r}{hint}")
+    if not isinstance(model.outputs, (tuple, list)) or not all(
+            isinstance(o, (tuple, list)) and len(o) == 2 and isinstance(o[0], str) for o in model.outputs):
+        raise ModelDefinitionError(f"{who}: outputs must be a tuple of (name, expression) pairs, e.g. "
+                                   f"((\"r\", r), (\"a_y\", F / m)), got {model.outputs!r}"[:400])
+    for name, expr in model.outputs:
+        if not isinstance(expr, (sp.Expr, int, float)):
+            raise ModelDefinitionError(f"{who}: output {name!r} must be a sympy expression, got "
+                                       f"{type(expr).__name__} {expr!r}")
+    if not isinstance(model.scheduling, (tuple, list)):
+        raise ModelDefinitionError(f"{who}: scheduling must be a tuple of SchedulingSignal, got "
+                                   f"{type(model.scheduling).__name__}")
+    for g in model.scheduling:
+        if not isinstance(g, SchedulingSignal) or not isinstance(g.symbol, sp.Symbol):
+            raise ModelDefinitionError(f"{who}: scheduling must hold SchedulingSignal(symbol, unit), got "
+                                       f"{type(g).__name__} {g!r}" + (f"; write SchedulingSignal({g}, \"UNIT\")"
+                                                                       if isinstance(g, sp.Symbol) else ""))
+    if not isinstance(model.dynamics, sp.MatrixBase):
+        raise ModelDefinitionError(f"{who}: dynamics must be a sympy Matrix, one row per state "
+                                   f"(sp.Matrix([...])), got {type(model.dynamics).__name__}")
+    if not isinstance(model.units, Mapping) or not all(
+            isinstance(k, str) and isinstance(v, str) for k, v in model.units.items()):
+        raise ModelDefinitionError(f"{who}: units must map signal or parameter names to unit strings, e.g. "
+                                   f"{{\"v_x\": \"m/s\"}}, got {model.units!r}"[:400])
+
+
+def check_unit_keys(model) -> None:
+    """Refuse a units key that looks misspelt (called on a model read from a user's file: models
+    derived inside the toolchain keep the units of signals they replaced, a substituted input's).
+
+    A units key that looks like a misspelt name of the model ("vy" beside a state "v_y" that has
+    no unit of its own) declares nothing: the signal would silently stay without its unit, and its
+    dimensions, plausibility and the data map's conversions unchecked. Other keys are kept: a model
+    may name the units of signals its plants and logs use (a roll model's "a_x")."""
+    known = {str(x) for x in (*model.states, *model.known_inputs, *model.unknown_inputs, *model.parameters,
+                              *(g.symbol for g in model.scheduling), *(w.symbol for w in model.derived_inputs))}
+    known |= {n for n, _ in model.outputs}
+    for k in model.units:
+        if k in known:
+            continue
+        near = suggest(k, sorted(known))
+        if near is not None and near not in model.units:
+            raise ModelDefinitionError(
+                f"model {model.name!r}: units[{k!r}] names no signal or parameter of the model (did you mean "
+                f"{near!r}? it has no unit); allowed: {', '.join(sorted(known))}")
 
 
 def _check_parameter_ranges(model) -> None:

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from ..errors import ConfigurationError, ModelDefinitionError, UnknownObserverError
 from ..model import ModelDefinition
+from ..model.definition import check_unit_keys
 from . import columns, precision
 from .settings import Rule, config_error, parse_table, suggest, toml_error
 from python_bindings.workspace import PACKAGE_ROOT, Workspace
@@ -198,8 +199,11 @@ def load_module(path: Path, name: str):
     sys.modules[name] = module
     try:
         spec.loader.exec_module(module)
-    except ModelDefinitionError:
+    except ModelDefinitionError as exc:
         del sys.modules[name]
+        # a check of ModelDefinition itself (a field of the wrong type): name the file it is in
+        if exc.args and isinstance(exc.args[0], str) and str(path) not in exc.args[0]:
+            exc.args = (f"{path}: {exc.args[0]}", *exc.args[1:])
         raise
     except Exception as exc:       # a user's module that does not run: say where, keep the cause
         del sys.modules[name]
@@ -208,6 +212,12 @@ def load_module(path: Path, name: str):
         del sys.modules[name]
         raise ModelDefinitionError(f"{path}: importing the model called sys.exit({exc.code!r}); a model file "
                                    f"defines MODEL = ModelDefinition(...) and returns") from None
+    if isinstance(getattr(module, "MODEL", None), ModelDefinition):
+        try:
+            check_unit_keys(module.MODEL)
+        except ModelDefinitionError as exc:
+            del sys.modules[name]
+            raise ModelDefinitionError(f"{path}: {exc.args[0]}") from None
     return module
 
 

@@ -406,3 +406,18 @@ def test_new_from_model_writes_the_ui_filter_constant_the_analysis_measured(tmp_
     assert re.search(r"^time_constant = 0\.01 .*the proposed 0\.005 failed \(UILoopError\)", text, re.M), text
     b, _ = pipeline.solve(observers.get(str(written)))
     assert b.data.Tf == 0.01 and b.discrete_certificate.ui_loop.contraction < 1
+
+
+def test_left_invertibility_holds_at_a_stiff_point():
+    """A wheel whose tyre is stiff at standstill (longitudinal model, v = w = 0: entries 6e3 beside
+    a unit input column) with both states measured is left invertible: C = I sees every input
+    through the state it drives. The Rosenbrock test at |s| ~ 6e3 found a smallest singular value
+    of 8e-5 under its tolerance and reported T_e inseparable; its input and output blocks are
+    now scaled with |s|. A stiff system with fewer outputs than unknown inputs stays refused."""
+    from codegen.analysis.structure import point_facts
+    A = np.array([[-51.5463, 446.4], [664.2857, -5766.0]])
+    D, C = np.array([[0.0], [1.0]]), np.eye(2)
+    facts = point_facts(A, D, C, np.zeros((2, 1)))
+    assert facts.left_invertible and facts.inseparable == ()
+    two = point_facts(A, np.eye(2), np.array([[1.0, 0.0]]), np.zeros((1, 2)))
+    assert not two.left_invertible and set(two.inseparable) == {0, 1}

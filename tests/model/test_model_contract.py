@@ -348,3 +348,60 @@ def test_a_bound_out_of_reach_names_the_files_settings(tmp_path):
     with pytest.raises(BoundsError, match=r"car.toml: .*narrow those of the variables it ranges over, or loosen "
                                           r"\[design\] bounds_rel_tol or \[design\] bounds_max_boxes of .*obs_ts_fuzzy_uio"):
         pipeline.build(observers.get(str(obs)))
+
+
+_FIELDS_MODEL = '''
+import sympy as sp
+from codegen.model import ModelDefinition, SchedulingSignal
+
+v_y, r, delta, F = sp.symbols("v_y r delta F")
+v_x = sp.Symbol("v_x", positive=True)
+M, C_f = sp.symbols("M C_f", positive=True)
+MODEL = ModelDefinition(
+    name="fields", states=STATES, known_inputs=(delta,), unknown_inputs=(F,),
+    dynamics=DYNAMICS, outputs=OUTPUTS, scheduling=SCHEDULING, parameters=PARAMETERS,
+    units=UNITS)
+'''
+_FIELDS_OK = {"STATES": "(v_y, r)", "DYNAMICS": "sp.Matrix([C_f * (delta - v_y / v_x) / M + F / M - v_x * r, -3 * r])",
+              "OUTPUTS": '(("r", r), ("v_y", v_y))', "SCHEDULING": '(SchedulingSignal(v_x, "m/s"),)',
+              "PARAMETERS": "(M, C_f)", "UNITS": '{"v_y": "m/s", "r": "rad/s", "v_x": "m/s"}'}
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("OUTPUTS", '{"r": r, "v_y": v_y}', r"outputs must be a tuple of \(name, expression\) pairs"),
+    ("OUTPUTS", "(r, v_y)", r"outputs must be a tuple of \(name, expression\) pairs"),
+    ("PARAMETERS", '("M", C_f)', r"parameters must hold sympy symbols, got str 'M'; declare it with sp.symbols"),
+    ("STATES", '("v_y", r)', r"states must hold sympy symbols, got str 'v_y'"),
+    ("SCHEDULING", "(v_x,)", r"scheduling must hold SchedulingSignal\(symbol, unit\), got Symbol v_x; write "
+                             r"SchedulingSignal\(v_x, \"UNIT\"\)"),
+    ("DYNAMICS", "[-r, -r]", r"dynamics must be a sympy Matrix, one row per state .*got list"),
+    ("UNITS", '{"vy": "m/s", "r": "rad/s"}', r"units\['vy'\] names no signal .*did you mean 'v_y'\? it has no unit"),
+])
+def test_a_model_field_of_the_wrong_type_is_one_line_naming_the_file_and_field(tmp_path, capsys, field, value,
+                                                                                 message):
+    """A field of the wrong type was whatever Python raised first: 'ValueError: not enough values
+    to unpack' for outputs as a dict, an AttributeError traceback ('str' object has no attribute
+    'is_positive') for a parameter given as a string; a misspelt units key was ignored. Each is now
+    a ModelDefinitionError naming the model file and the field, exit code 2."""
+    text = _FIELDS_MODEL
+    for k, v in {**_FIELDS_OK, field: value}.items():
+        text = text.replace(k, v, 1) if k != "UNITS" else text.replace("units=UNITS", f"units={v}")
+    (tmp_path / "m.py").write_text(text)
+    (tmp_path / "car.toml").write_text("[parameters]\nM = 1500.0\nC_f = 1e5\n\n[scheduling.v_x]\nmin = 5.0\n"
+                                       "max = 30.0\nrate_min = -1.0\nrate_max = 1.0\n")
+    rc = cli.main(["analyze", str(tmp_path / "m.py"), "--parameters", str(tmp_path / "car.toml"), "--no-design"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1 and "Traceback" not in err
+    assert f"ModelDefinitionError: {tmp_path / 'm.py'}: model 'fields': " in err
+    assert re.search(message, err), err
+
+
+def test_a_model_with_every_field_right_loads(tmp_path, capsys):
+    text = _FIELDS_MODEL
+    for k, v in _FIELDS_OK.items():
+        text = text.replace(k, v, 1) if k != "UNITS" else text.replace("units=UNITS", f"units={v}")
+    (tmp_path / "m.py").write_text(text)
+    (tmp_path / "car.toml").write_text("[parameters]\nM = 1500.0\nC_f = 1e5\n\n[scheduling.v_x]\nmin = 5.0\n"
+                                       "max = 30.0\nrate_min = -1.0\nrate_max = 1.0\n")
+    assert cli.main(["analyze", str(tmp_path / "m.py"), "--parameters", str(tmp_path / "car.toml"),
+                     "--no-design"]) == 0

@@ -386,8 +386,33 @@ def _step_casadi_full(data: ObserverData, name: str) -> ca.Function:
                                                   [y[k] for k in range(ny)], xp=ca))
         Bw, Duw = blend(poly.Bw), blend(poly.Duw)
         drive = drive + ca.vertcat(Bw @ w + M @ (Duw @ w), K @ (Duw @ w))
-    z_next = ca.solve(ca.DM.eye(nz) - Ts * Aa, z + Ts * drive)
+    # CasADi's symbolic solve factors without pivoting, so it loses what the badly scaled system
+    # loses: the d-rows carry 1/Tf and every entry the units of its signal (newtons beside
+    # radians), a condition number of 1e10 where the equilibrated one is below 1e2. Constant
+    # power-of-two row and column scales (exact: they round nothing) undo that before the solve.
+    rows, cols = full_system_scaling(data)
+    G = ca.diag(ca.DM(rows)) @ (ca.DM.eye(nz) - Ts * Aa) @ ca.diag(ca.DM(cols))
+    z_next = ca.DM(cols) * ca.solve(G, ca.DM(rows) * (z + Ts * drive))
     return ca.Function(name, [z, u, y, rho], [z_next, excess], ["z", "u", "y", "rho"], ["z_next", "excess"])
+
+
+def full_system_scaling(data: ObserverData) -> tuple:
+    """(rows, cols): powers of two that equilibrate I - Ts Aa(th) over the scheduling box.
+
+    The column scales bring each column's largest entry (over the box's corners and centre) near
+    1, then the row scales do the same for the rows of the column-scaled matrix. Powers of two
+    keep the scaled system's entries exact, so the solve is unchanged up to its conditioning.
+    """
+    grid = signal_grid(data.poly, n_single=5, n_multi=3)
+    G = np.array([np.abs(np.eye(data.nz) - data.Ts * augmented_matrices(
+        data, np.array(premise_of_signal(data.poly, rho), float))[0]) for rho in grid]).max(axis=0)
+
+    def power_of_two(v):
+        return np.array([2.0 ** -np.frexp(x)[1] if x > 0 else 1.0 for x in v])
+
+    cols = power_of_two(G.max(axis=0))
+    rows = power_of_two((G * cols).max(axis=1))
+    return rows, cols
 
 
 @dataclass(frozen=True)

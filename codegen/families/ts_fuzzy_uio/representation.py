@@ -225,6 +225,51 @@ def split_consequents(model: ModelDefinition, subs: dict) -> dict:
             "unmeasured": unmeasured}
 
 
+#: points of D_x at which the measured consequent is evaluated (beside every corner, up to 2^10)
+DEFINED_SAMPLES = 500
+
+
+def check_defined_on_box(model: ModelDefinition, f: sp.Matrix, symbols: tuple, box: dict, source: str) -> None:
+    """Refuse a measured consequent that is not a finite real number somewhere in D_x.
+
+    The step evaluates f_v(xi, u) at the measured values, clamped to D_x, and nothing bounds f_v
+    (only A_v, G_v and the Jacobians of phi are bounded), so a sqrt or a fractional power of a
+    range reaching below 0, or a division by a measured state whose box holds 0, would give the
+    compiled step NaN (and the numpy reference a complex number) inside the certified set. This
+    is evidence (every corner and seeded points between them), not a proof, and it never refuses
+    a model that is defined: it refuses only at a point where the value is not finite and real.
+
+    Raises
+    ------
+    SchedulingBoundsError
+        naming the row, the point and the parameter file whose box holds it.
+    """
+    used = tuple(s for s in symbols if any(s in e.free_symbols for e in f))
+    rng = np.random.default_rng(0)
+    lo = np.array([box[s][0] for s in used], float)
+    hi = np.array([box[s][1] for s in used], float)
+    corners = (np.array(list(itertools.product(*zip(lo, hi))), float) if len(used) <= 10
+               else np.zeros((0, len(used))))
+    points = np.vstack([corners, rng.uniform(lo, hi, size=(DEFINED_SAMPLES, len(used)))])
+    for i, e in enumerate(f):
+        if not e.free_symbols:
+            continue
+        fn = sp.lambdify(used, e, "mpmath")
+        for pt in points:
+            try:
+                v = complex(fn(*pt))
+            except (ZeroDivisionError, ValueError, OverflowError):
+                v = complex(float("nan"))
+            if v.imag != 0 or not np.isfinite(v.real):
+                where = ", ".join(f"{s} = {float(x):.6g}" for s, x in zip(used, pt))
+                kind = "a complex number" if np.isfinite(v.imag) and v.imag != 0 else "not finite"
+                raise SchedulingBoundsError(
+                    f"model {model.name!r}: d{model.states[i]}/dt is {kind} at {where}, inside the set D_x of "
+                    f"{source} ([state_bounds], [inputs]) the observer is certified on (a sqrt or power of a "
+                    f"negative, a log of 0, a division by 0: {sp.sstr(e)[:200]}); narrow the box or write the "
+                    f"equation so that it is defined on all of it")
+
+
 def build(model: ModelDefinition, params: ParameterSet, sample_time: float,
           rel_tol: float = 1e-3, max_boxes: int = 20000, before_bounds=None) -> TSFuzzyModel:
     """Derive the discrete TS fuzzy model (10) from ``model`` and its parameter file.
@@ -275,6 +320,8 @@ def build(model: ModelDefinition, params: ParameterSet, sample_time: float,
             raise SchedulingBoundsError(f"premise {g} is constant on D_x")
         premises.append(Premise(f"xi{k}", g, rb.lower, rb.upper))
     premises = tuple(premises)
+    # after the premises: a division by a measured state is named there, with its box's key
+    check_defined_on_box(model, parts["f"], premise_symbols, box, params.source)
     if before_bounds is not None:
         before_bounds(2 ** len(premises), len(x), len(parts["measured"]), len(parts["phi"]))
     decomp = affine_decomposition({"A": parts["A"], "G": parts["G"]}, premise_symbols, tuple(factors))

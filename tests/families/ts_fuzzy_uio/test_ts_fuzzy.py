@@ -355,3 +355,36 @@ def test_a_speed_box_from_zero_says_its_min_must_be_above_zero(tmp_path):
     assert "1/v_x divides by v_x, whose range [0, 30] contains 0" in msg
     assert "[state_bounds] v_x = [0, 30] reaches 0: its min must be above 0" in msg
     assert "bounds_rel_tol" not in msg and "bounds_max_boxes" not in msg
+
+
+def _wheel_model(drag):
+    """Longitudinal speed v and wheel speed w, both measured: every nonlinearity is a measured
+    consequent f_v, which the step evaluates and nothing bounds."""
+    v, w, T_e, T_b = sp.symbols("v w T_e T_b")
+    m, J, R, F, k, c, v0 = sp.symbols("m J R F k c v0", positive=True)
+    F_x = F * sp.tanh(k * (R * w - v) / sp.Max(sp.Abs(v), v0))
+    return ModelDefinition("wheel", (v, w), (T_b,), (T_e,),
+                           sp.Matrix([(F_x - c * drag(v)) / m, (T_e - T_b - R * F_x) / J]),
+                           (("v", v), ("w", w)), (), (m, J, R, F, k, c, v0))
+
+
+def _wheel_params(v_box):
+    from codegen.model.definition import ParameterSet
+    return ParameterSet("car.toml", {"m": 1400.0, "J": 1.2, "R": 0.31, "F": 6000.0, "k": 12.0, "c": 0.4,
+                                     "v0": 1.0}, {}, {}, state_bounds={"v": v_box, "w": (0.0, 140.0)},
+                        inputs={"T_b": {"min": 0.0, "max": 800.0}})
+
+
+def test_a_measured_consequent_undefined_inside_the_box_is_refused():
+    """v sqrt(v) with v in [-2, 40] is complex for v < 0: the design was certified, generated, and
+    `uiogen build` died with a TypeError traceback in the numpy reference (the C gives NaN there).
+    It is refused before any design, naming the row and a point; the same law on a box where it
+    is defined, and |v| v on the wider box, are accepted."""
+    undefined = _wheel_model(lambda v: v * sp.sqrt(v))
+    with pytest.raises(SchedulingBoundsError, match=r"dv/dt is a complex number at v = -2, .*car\.toml"):
+        ts_fuzzy.build(undefined, _wheel_params((-2.0, 40.0)), 0.01)
+    ts_fuzzy.build(undefined, _wheel_params((0.0, 40.0)), 0.01)
+    ts_fuzzy.build(_wheel_model(lambda v: v * sp.Abs(v)), _wheel_params((-2.0, 40.0)), 0.01)
+    division = _wheel_model(lambda v: 1 / v)
+    with pytest.raises(SchedulingBoundsError, match=r"dv/dt is not finite at v = 0, "):
+        ts_fuzzy.build(division, _wheel_params((0.0, 40.0)), 0.01)
