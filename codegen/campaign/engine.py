@@ -89,7 +89,8 @@ class Journal:
         self.path, self.header, self.source = Path(path), header, source
         self.rows: dict = {}
         self._fd = None
-        resume_hint = f"`uiogen campaign {source} --resume` continues it"
+        # the folder too: without --out the command would continue the default folder, not this one
+        resume_hint = f"`uiogen campaign {source} --resume --out {self.path.parent}` continues it"
         if self.path.exists():
             found, rows, complete = self._read()
             if resume:

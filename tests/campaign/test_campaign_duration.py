@@ -24,3 +24,18 @@ def test_a_duration_that_fits_gives_its_run():
     config = observers.get("lpv_linf_driver_torque")
     run = runner._excitation(types.SimpleNamespace(source="short.toml", duration=3.0), config, 0)
     assert run.t.size == 301                   # t = 0, 0.01, ..., 3
+
+
+def test_the_refusal_of_an_interrupted_folder_names_the_folder_to_resume(tmp_path):
+    """The hint was `uiogen campaign SPEC --resume`, which continues the default folder
+    (build/campaigns/SPEC_STEM), not the --out folder that holds the interrupted runs."""
+    import json
+    from codegen.campaign import engine
+    from codegen.errors import CampaignError
+    out = tmp_path / "my_out"
+    out.mkdir()
+    header = {"format": 1, "observer": "obs.toml", "design": "d", "spec_sha256": "s"}
+    (out / engine.JOURNAL).write_text(json.dumps(header) + "\n" + json.dumps({"run": 0, "status": "ok"}) + "\n")
+    with pytest.raises(CampaignError, match=rf"holds 1 finished runs of an interrupted campaign; `uiogen campaign "
+                                            rf"c.toml --resume --out {out}` continues it"):
+        engine.Journal(out / engine.JOURNAL, header, resume=False, source="c.toml")
