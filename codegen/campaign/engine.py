@@ -90,7 +90,8 @@ class Journal:
         self.rows: dict = {}
         self.finished = False               # the end mark is in the file (a resumed, finished campaign)
         self._fd = None
-        resume_hint = f"`uiogen campaign {source} --resume` continues it"
+        # the folder too: without --out the command would continue the default folder, not this one
+        resume_hint = f"`uiogen campaign {source} --resume --out {self.path.parent}` continues it"
         if self.path.exists():
             found, rows, complete = self._read()
             if resume:

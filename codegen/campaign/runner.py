@@ -57,17 +57,41 @@ def _scenario(spec, name: str, seed: int | None):
     from ..validation import scenarios
     from .plants import EXCITATION
     if name == EXCITATION:             # the model's own plant: the generic scenario, its seed drawn or 0
-        from ..validation import excitation
         config = _config(spec)
         if seed is not None:
-            return excitation.scenario(config, spec.duration or excitation.DURATION, seed)
-        return _cached(("scn", spec.observer, name, spec.duration),
-                       lambda: excitation.scenario(config, spec.duration or excitation.DURATION, 0))
+            return _excitation(spec, config, seed)
+        return _cached(("scn", spec.observer, name, spec.duration), lambda: _excitation(spec, config, 0))
     rate = 1.0 / _config(spec).sample_time
     if seed is not None:       # drawn per run: not kept (10,000 of them would fill a worker's memory)
         return truncate(scenarios.make(name, seed=seed, sample_rate=rate), spec.duration)
     return _cached(("scn", name, rate, spec.duration),
                    lambda: truncate(scenarios.make(name, sample_rate=rate), spec.duration))
+
+
+def _excitation(spec, config, seed: int):
+    """The excitation run of ``spec``; a ``duration`` whose run does not fit in memory (a run is
+    held whole: its stage inputs, the plant's trajectory) is the campaign file's mistake, named."""
+    import os
+    from ..project.settings import config_error
+    from ..validation import excitation, model_plant
+    duration = spec.duration or excitation.DURATION
+    samples = duration / config.sample_time
+    model = config.load_model()
+    signals = len(model.known_inputs) + len(model.unknown_inputs) + sum(g.derived is None for g in model.scheduling)
+    # a lower bound of what the run holds: its stage times and each external signal at them (float64)
+    held = 8.0 * samples * (2 * model_plant.SUBSTEPS + 1) * (signals + 1)
+    memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    why = None
+    if held > memory:       # refused before the allocation: one this large may succeed and then exhaust the machine
+        why = f"its stage inputs alone take {held / 2**30:.3g} GiB, the machine has {memory / 2**30:.3g} GiB"
+    else:
+        try:
+            return excitation.scenario(config, duration, seed)
+        except MemoryError as exc:
+            why = str(exc) or "MemoryError"
+    raise config_error(spec.source, None, "duration", duration,
+                       f"a run that fits in memory ({samples:.3g} samples at the sample time {config.sample_time:g} s: "
+                       f"{why}); a campaign holds each run whole, so take more, shorter runs")
 
 
 def default_noise(config) -> dict:

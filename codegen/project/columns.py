@@ -60,19 +60,30 @@ class ColumnMap:
     truth: dict = field(default_factory=dict)
 
 
-def _column(value, source: str, section: str, key: str) -> Column:
+def _column(value, source: str, section: str, key: str, units=tuple(UNITS)) -> Column:
+    """One column spec; ``units``: the units allowed for it (the time column: s, ms)."""
     if isinstance(value, str):
-        return Column(value)
+        value = {"column": value}
     if not isinstance(value, dict):
         raise config_error(source, section, key, value, '"COLUMN" or an inline table { column = "...", unit = "..." }')
     parsed = parse_table(value, COLUMN_KEYS, source=source, section=f"{section}.{key}")
+    if not parsed["column"].strip():
+        # an empty header would otherwise surface later as a "missing column ['']" of the log
+        raise config_error(source, f"{section}.{key}", "column", parsed["column"], "the (non-empty) header of a column "
+                           "of the log")
     unit = parsed.get("unit")
     if unit is not None:
         unit = normalize_unit(unit)
-        if unit not in UNITS:
+        if unit not in units:
             raise config_error(source, f"{section}.{key}", "unit", value["unit"],
-                               f"one of {', '.join(UNITS)}", suggest(unit, list(UNITS)))
-    return Column(parsed["column"], unit, float(parsed.get("scale", 1.0)))
+                               f"one of {', '.join(units)}", suggest(unit, list(units)))
+    scale = float(parsed.get("scale", 1.0))
+    if scale == 0.0:
+        # a zero factor turns the column into zeros: the step would run on a signal the log does not hold
+        raise config_error(source, f"{section}.{key}", "scale", value["scale"],
+                           "a finite number other than 0 (a factor applied after the unit: a steering ratio, -1 for "
+                           "the opposite sign)")
+    return Column(parsed["column"], unit, scale)
 
 
 def parse(table, source: str) -> ColumnMap:
@@ -85,9 +96,8 @@ def parse(table, source: str) -> ColumnMap:
         naming the file, the key and what is allowed.
     """
     parse_table(table, DATA_KEYS, source=source, section="data")
-    time = _column(table["time"], source, "data", "time")
-    if time.unit is not None and UNITS[time.unit][0] != "time":
-        raise config_error(source, "data.time", "unit", time.unit, "s or ms")
+    time = _column(table["time"], source, "data", "time", units=tuple(u for u, (dim, _) in UNITS.items()
+                                                                    if dim == "time"))
     inputs = {k: _column(v, source, "data.inputs", k) for k, v in table["inputs"].items()}
     truth = {k: _column(v, source, "data.truth", k) for k, v in table.get("truth", {}).items()}
     return ColumnMap(source, time, inputs, truth)

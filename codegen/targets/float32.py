@@ -340,8 +340,8 @@ def input_noise(config, b) -> dict:
     for key in spec.noise:
         if key not in inputs:
             raise ConfigurationError(f"{source}: [precision.noise] {key}: not an input of {config.name}; its inputs: "
-                                     f"{', '.join(inputs)}", source=source, section="precision.noise", key=key,
-                                     allowed=", ".join(inputs))
+                                     f"{', '.join(inputs)}{_did_you_mean(key, inputs)}", source=source,
+                                     section="precision.noise", key=key, allowed=", ".join(inputs))
     from ..families.capabilities import sensor_noise
     family = sensor_noise(families.get(config.family))
     out = {}
@@ -366,13 +366,20 @@ def noise_response(obs, inputs: np.ndarray, noise: dict, out_d: np.ndarray) -> n
     return np.sqrt(np.mean((np.asarray(out_n) - out_d) ** 2, axis=0))
 
 
+def _did_you_mean(key: str, names) -> str:
+    """" (did you mean 'y_r'?)" for a misspelt signal name (the measured yawr is the input y_yawr), or ""."""
+    from ..project.settings import suggest
+    near = suggest(key, list(names)) or suggest(f"y_{key}", list(names))
+    return f" (did you mean {near!r}?)" if near else ""
+
+
 def _check_tolerance_keys(config, outputs) -> None:
     source = config.source or f"{config.name}.toml"
     for key in config.precision.tolerance:
         if key not in outputs:
             raise ConfigurationError(f"{source}: [precision.tolerance] {key}: not an output of {config.name}; its "
-                                     f"outputs: {', '.join(outputs)}", source=source, section="precision.tolerance",
-                                     key=key, allowed=", ".join(outputs))
+                                     f"outputs: {', '.join(outputs)}{_did_you_mean(key, outputs)}", source=source,
+                                     section="precision.tolerance", key=key, allowed=", ".join(outputs))
 
 
 # ---- the comparison ---------------------------------------------------------------------------------

@@ -43,6 +43,8 @@ BLOCK_BYTES = 1 << 22
 """Text per chunk (4 MiB, about 26,000 rows of 11 columns; pyarrow reads a few ahead)."""
 
 _SEPARATORS = {",": "comma ','", ";": "semicolon ';'", "\t": "tab"}
+_BINARY_FORMATS = {b"PAR1": "Parquet", b"\x89HDF\r\n\x1a\n": "HDF5", b"MDF     ": "MDF (ASAM measurement data)",
+                   b"PK\x03\x04": "zip (or xlsx)", b"ARROW1": "Arrow IPC (Feather)", b"\xd0\xcf\x11\xe0": "legacy Excel (xls)"}
 _HEAD_BYTES = 1 << 20           # a header line longer than 1 MiB is not a CSV header
 _SLOW_ROWS = 50_000             # rows per chunk of the csv-module reader
 
@@ -138,6 +140,12 @@ class LogReader:
                 head = fh.read(_HEAD_BYTES)
         except (OSError, EOFError) as exc:
             raise DatasetError(f"cannot read {p}: {exc}") from None
+        kind = next((name for magic, name in _BINARY_FORMATS.items() if head.startswith(magic)), None)
+        if kind:
+            # named here: decoding it as text would only say "not UTF-8" at some byte
+            how = (", e.g. pyarrow.csv.write_csv(pyarrow.parquet.read_table(path), out)" if kind == "Parquet" else "")
+            raise DatasetError(f"cannot read {p}: it is a {kind} file; allowed: a CSV log (plain or gzip); export "
+                               f"it as CSV{how}")
         if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
             raise DatasetError(f"cannot read {p}: the file is UTF-16 encoded (byte-order mark {head[:2]!r}); "
                                f"allowed: UTF-8 or ASCII text; save it as UTF-8")

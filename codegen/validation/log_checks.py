@@ -390,9 +390,11 @@ def derive(model, params, input_names) -> list:
         if ysym in chained:                       # a derivative of a measured state: 0 in steady state
             continue
         unknowns = unmeasured + [x]
-        eqs = [sp.sympify(model.dynamics[model.states.index(s)]).xreplace({d: 0 for d in model.unknown_inputs})
+        # sp.S.Zero, not 0: xreplace returns the replacement itself when the whole equation is one
+        # of the replaced symbols (d roll/dt = roll_rate), and a Python int has no .has
+        eqs = [sp.sympify(model.dynamics[model.states.index(s)]).xreplace({d: sp.S.Zero for d in model.unknown_inputs})
                .xreplace({s: y for s, y in measured_state.items() if s != x}) for s in unknowns]
-        if any(hides(e.xreplace({s: 0 for s in unknowns})) or not (e.free_symbols - set(unknowns)) <= allowed
+        if any(hides(e.xreplace({s: sp.S.Zero for s in unknowns})) or not (e.free_symbols - set(unknowns)) <= allowed
                for e in eqs):
             continue
         pred = _SteadyState([numeric(e) for e in eqs], unknowns, len(unknowns) - 1,

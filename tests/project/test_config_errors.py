@@ -650,3 +650,27 @@ def test_a_toml_mistake_in_an_observer_file_names_the_line_and_the_key(tmp_path,
     assert cli.main(["design", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("uiogen: error: ConfigurationError: ") and "Traceback" not in err
+
+
+_DATA = {"time": {"column": "t", "unit": "ms"}, "inputs": {"delta": {"column": "steer", "unit": "deg"}}}
+
+
+@pytest.mark.parametrize("edit, pattern", [
+    # a zero scale made every sample of the column 0 and the run went on (a silently wrong estimate)
+    (lambda d: d["inputs"]["delta"].update(scale=0.0), r"\[data.inputs.delta\] scale = 0.0: a finite number other than 0"),
+    (lambda d: d["inputs"]["delta"].update(scale=0), r"\[data.inputs.delta\] scale = 0: a finite number other than 0"),
+    # an empty header was reported later as the log's "missing column ['']"
+    (lambda d: d["inputs"]["delta"].update(column=" "), r"\[data.inputs.delta\] column = \" \": the \(non-empty\) header"),
+    (lambda d: d.update(time=""), r"\[data.time\] column = \"\": the \(non-empty\) header"),
+    # the time column's unit lists the time units only (it listed rad, deg, ..., km)
+    (lambda d: d["time"].update(unit="min"), r"\[data.time\] unit = \"min\": one of s, ms$"),
+    (lambda d: d["time"].update(unit="deg"), r"\[data.time\] unit = \"deg\": one of s, ms$"),
+])
+def test_data_table_values_that_cannot_be_meant(edit, pattern):
+    from codegen.project import columns
+    import copy
+    table = copy.deepcopy(_DATA)
+    edit(table)
+    with pytest.raises(ConfigurationError, match=pattern):
+        columns.parse(table, "obs.toml")
+    assert columns.parse(copy.deepcopy(_DATA), "obs.toml").inputs["delta"].scale == 1.0

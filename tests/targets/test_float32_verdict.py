@@ -26,3 +26,19 @@ def test_a_zero_tolerance_for_want_of_sensor_noise_names_the_precision_noise_tab
     # a declared tolerance of its own, too small: the margin advice as before
     v = precision._verdict(_report(1.0, "declared", {"y_omega": 0.05}, ["y_a_x"]))
     assert "margin 1 - c = 0.257" in v["reason"] and "[precision] noise" not in v["reason"]
+
+
+def test_a_misspelt_precision_signal_gets_a_did_you_mean():
+    """[precision] noise names inputs (a measured output is y_NAME) and tolerance outputs; a slip
+    was refused with the list alone, unlike every other key of the observer file."""
+    import types
+    import pytest
+    from codegen.errors import ConfigurationError
+    from codegen.project import observer_file as observers
+    config = observers.get("lpv_linf_driver_torque", overrides={"precision.noise.r": 1e-3,
+                                                                 "precision.tolerance.beat": 1e-3})
+    with pytest.raises(ConfigurationError, match=r"\[precision.noise\] r: not an input .*\(did you mean 'y_r'\?\)$"):
+        precision.input_noise(config, types.SimpleNamespace(input_names=("T_a", "y_r", "y_delta", "v_x")))
+    with pytest.raises(ConfigurationError, match=r"\[precision.tolerance\] beat: not an output .*\(did you mean "
+                                                 r"'beta'\?\)$"):
+        precision._check_tolerance_keys(config, ["beta", "r", "delta", "T_d"])

@@ -276,3 +276,14 @@ def test_errors_stay_sample_errors(tmp_path):
     p = _write(tmp_path / "ms.csv", {**_synthetic(n=100), "t": 1000.0 * _synthetic(n=100)["t"]})
     with pytest.raises(SampleError):
         S.load(p)
+
+
+def test_a_parquet_log_is_named_as_such(tmp_path):
+    """A Parquet log was refused as "not UTF-8 text (... can't decode byte 0x90 in position 7)"."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    p = tmp_path / "log.parquet"
+    pq.write_table(pa.table(_synthetic(n=50)), p)
+    with pytest.raises(S.DatasetError, match=r"log.parquet: it is a Parquet file; allowed: a CSV log \(plain or "
+                                             r"gzip\); export it as CSV, e.g. pyarrow.csv.write_csv"):
+        S.load(p)

@@ -283,3 +283,29 @@ def test_a_reference_column_is_checked_for_its_unit_too():
     warnings = _feed_truth(_truth_checks("mrad"), cols, 1e-3)["warnings"]
     assert len(warnings) == 1 and re.search(r"column 'beta_true' \(reference of beta, declared mrad\).* under 1/100 of "
                                             r"the model's box .* for beta; in rad \(x 1000\).*\[data.truth\]", warnings[0])
+
+
+def test_a_state_whose_derivative_is_a_measured_rate_derives(tmp_path):
+    """A roll model: d roll/dt = rollr with roll unmeasured and rollr measured. The steady state of
+    rollr replaces roll and rollr by 0, and the equation of roll is then the bare number 0 (before:
+    ``AttributeError: 'int' object has no attribute 'has'``, a traceback from ``uiogen validate --data``)."""
+    import sympy as sp
+    from codegen.model import ModelDefinition, SchedulingSignal
+    vlat, yawr, roll, rollr, steer, bank = sp.symbols("vlat yawr roll rollr steer bank")
+    spd = sp.Symbol("spd", positive=True)
+    M, I_z, I_x, C_f, C_r, K, C = sp.symbols("M I_z I_x C_f C_r K C", positive=True)
+    F_f, F_r = C_f * (steer - (vlat + 1.2 * yawr) / spd), C_r * (1.5 * yawr - vlat) / spd
+    model = ModelDefinition(
+        name="roll_bank", states=(vlat, yawr, roll, rollr), known_inputs=(steer,), unknown_inputs=(bank,),
+        dynamics=sp.Matrix([(F_f + F_r) / M - spd * yawr + 9.81 * bank, (1.2 * F_f - 1.5 * F_r) / I_z, rollr,
+                            (200 * (F_f + F_r) / M - K * roll - C * rollr) / I_x]),
+        outputs=(("yawr", yawr), ("rollr", rollr), ("ay", (F_f + F_r) / M)),
+        scheduling=(SchedulingSignal(spd, "m/s"),), parameters=(M, I_z, I_x, C_f, C_r, K, C),
+        units={"vlat": "m/s", "yawr": "rad/s", "roll": "rad", "rollr": "rad/s", "steer": "rad", "bank": "rad",
+               "ay": "m/s^2", "spd": "m/s"})
+    car = tmp_path / "car.toml"
+    car.write_text("[parameters]\nM = 1600.0\nI_z = 2600.0\nI_x = 550.0\nC_f = 110000.0\nC_r = 120000.0\n"
+                   "K = 80000.0\nC = 5000.0\n\n[scheduling.spd]\nmin = 8.0\nmax = 40.0\nrate_min = -4.0\n"
+                   "rate_max = 4.0\n")
+    relations = L.derive(model, load_parameters(car), ["steer", "y_yawr", "y_rollr", "y_ay", "spd"])
+    assert "identity" in {r.kind for r in relations}              # y_ay = d vlat/dt + spd y_yawr

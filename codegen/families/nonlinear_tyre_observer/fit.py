@@ -35,7 +35,7 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
-from ...errors import ConfigurationError, SampleError
+from ...errors import ConfigurationError, DatasetError, SampleError
 from ...model import load_parameters
 from ...validation import stanford
 from .representation import numeric
@@ -225,7 +225,16 @@ def fit(config, path="stanford", samples: str = "", folds: int = 0, peers: bool 
     if not isinstance(folds, int) or folds < 0 or folds == 1:
         raise ConfigurationError(f"--folds {folds!r}: 0 (no cross-validation) or an integer >= 2",
                                  source="--folds", key="--folds", value=folds)
-    run = stanford.load(path, sample_time=config.sample_time)
+    try:
+        run = stanford.load(path, sample_time=config.sample_time)
+    except DatasetError as exc:
+        if config.column_map is None:
+            raise
+        # the user mapped their log for validate: say that the fit does not read that map, rather than
+        # leave them with the shared format's missing columns (and a did-you-mean to a column in g)
+        raise DatasetError(f"{exc}. uiogen fit reads the shared log's format only (columns "
+                           f"{', '.join(stanford.COLUMNS)}, SI units); the [data] table of {config.source} maps a "
+                           f"log for uiogen validate --data, not for the fit") from None
     a, b = parse_samples(samples, run.n)
     params = load_parameters(config.parameter_path)
     if folds:

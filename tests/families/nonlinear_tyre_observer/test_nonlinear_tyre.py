@@ -447,3 +447,27 @@ def test_peer_comparison_record_reproduces():
         for key in ("difference", "low", "high", "share_below_zero"):
             assert row[key] == pytest.approx(old[key], rel=1e-6, abs=1e-9), (row["peer"], row["block_s"], key)
         assert row["low"] <= row["difference"] <= row["high"]
+
+
+def test_fit_on_a_mapped_log_says_it_reads_the_shared_format_only(tmp_path):
+    """An observer file with a [data] table and a log in the user's own columns: the fit answered
+    with the shared format's eleven missing columns and "'ax': did you mean 'ax_g'?" (a column in g),
+    never saying that the map it had been given is for validate only."""
+    from codegen.errors import DatasetError
+    from codegen.families.nonlinear_tyre_observer import fit
+    from model_defs import PARAMS_DIR
+    text = (PARAMS_DIR.parent / "observers" / "stanford_sideslip_nonlinear_tyre.toml").read_text()
+    text = text.replace('parameters = "stanford_race_car_nonlinear_tyre.toml"',
+                        f'parameters = "{PARAMS_DIR / "stanford_race_car_nonlinear_tyre.toml"}"')
+    text += ('\n[data]\ntime = { column = "zeit_ms", unit = "ms" }\n\n[data.inputs]\n'
+             'delta = { column = "steer_deg", unit = "deg" }\na_x = { column = "ax_g", unit = "g" }\n'
+             'y_a_y = { column = "ay_g", unit = "g" }\ny_r = { column = "yaw_dps", unit = "deg/s" }\n'
+             'v_x = { column = "vx_kmh", unit = "km/h" }\n')
+    (tmp_path / "mine.toml").write_text(text)
+    log = tmp_path / "mine.csv"
+    log.write_text("zeit_ms,steer_deg,ax_g,ay_g,yaw_dps,vx_kmh\n0,0,0,0,0,72\n10,0,0,0,0,72\n")
+    cfg = observers.get(str(tmp_path / "mine.toml"))
+    with pytest.raises(DatasetError, match=r"missing column.*uiogen fit reads the shared log's format only \(columns "
+                                           r"t, vx, vy, .*, SI units\); the \[data\] table of .*mine.toml maps a log "
+                                           r"for uiogen validate --data, not for the fit"):
+        fit.fit(cfg, str(log), "0:2", peers=False)
