@@ -6,7 +6,7 @@ consistent: each term of ``x_i' = f_i`` has the unit of ``x_i`` per second, each
 of the output, the argument of ``sin``, ``tanh``, ``exp`` ... is dimensionless, the terms of a sum
 agree. Those rules are linear in the (log-)dimensions of the parameters, so :func:`infer` solves
 them exactly (rational arithmetic) for every parameter's dimension in the base quantities
-length, mass and time. Angles are dimensionless, as in SI. A signal whose unit the model does
+length, mass, time and electric current (an assist motor's A, V, Ohm, H). Angles are dimensionless, as in SI. A signal whose unit the model does
 not declare is an unknown of the same system, so it constrains nothing by itself; a literal 0
 fits any unit (``Min(a_x, 0)``).
 
@@ -47,29 +47,39 @@ import sympy as sp
 
 from ..errors import ModelDefinitionError, UnitError
 
-BASE = ("L", "M", "T")          # length [m], mass [kg], time [s]
+BASE = ("L", "M", "T", "I")     # length [m], mass [kg], time [s], electric current [A]
+_ZERO = (0,) * len(BASE)
 
-# unit symbol -> ((L, M, T) exponents, factor to SI); angles and "-" are dimensionless
+
+def _dim(L=0, M=0, T=0, I=0) -> tuple:
+    return (L, M, T, I)
+
+
+# unit symbol -> ((L, M, T, I) exponents, factor to SI); angles and "-" are dimensionless. The
+# electrical units are there for actuator models (an assist motor's current, voltage, resistance,
+# inductance, its torque constant in N m/A).
 _UNITS = {
-    "m": ((1, 0, 0), 1.0), "mm": ((1, 0, 0), 1e-3), "cm": ((1, 0, 0), 1e-2), "km": ((1, 0, 0), 1e3),
-    "kg": ((0, 1, 0), 1.0), "t": ((0, 1, 0), 1e3),
-    "s": ((0, 0, 1), 1.0), "ms": ((0, 0, 1), 1e-3), "min": ((0, 0, 1), 60.0), "h": ((0, 0, 1), 3600.0),
-    "N": ((1, 1, -2), 1.0), "kN": ((1, 1, -2), 1e3), "Pa": ((-1, 1, -2), 1.0), "W": ((2, 1, -3), 1.0),
-    "J": ((2, 1, -2), 1.0), "Hz": ((0, 0, -1), 1.0), "rpm": ((0, 0, -1), 2 * 3.141592653589793 / 60),
-    "rad": ((0, 0, 0), 1.0), "mrad": ((0, 0, 0), 1e-3), "deg": ((0, 0, 0), 3.141592653589793 / 180),
-    "rev": ((0, 0, 0), 2 * 3.141592653589793), "%": ((0, 0, 0), 1e-2),
+    "m": (_dim(L=1), 1.0), "mm": (_dim(L=1), 1e-3), "cm": (_dim(L=1), 1e-2), "km": (_dim(L=1), 1e3),
+    "kg": (_dim(M=1), 1.0), "t": (_dim(M=1), 1e3),
+    "s": (_dim(T=1), 1.0), "ms": (_dim(T=1), 1e-3), "min": (_dim(T=1), 60.0), "h": (_dim(T=1), 3600.0),
+    "N": (_dim(1, 1, -2), 1.0), "kN": (_dim(1, 1, -2), 1e3), "Pa": (_dim(-1, 1, -2), 1.0), "W": (_dim(2, 1, -3), 1.0),
+    "J": (_dim(2, 1, -2), 1.0), "Hz": (_dim(T=-1), 1.0), "rpm": (_dim(T=-1), 2 * 3.141592653589793 / 60),
+    "A": (_dim(I=1), 1.0), "mA": (_dim(I=1), 1e-3), "V": (_dim(2, 1, -3, -1), 1.0), "mV": (_dim(2, 1, -3, -1), 1e-3),
+    "Ohm": (_dim(2, 1, -3, -2), 1.0), "H": (_dim(2, 1, -2, -2), 1.0), "mH": (_dim(2, 1, -2, -2), 1e-3),
+    "rad": (_ZERO, 1.0), "mrad": (_ZERO, 1e-3), "deg": (_ZERO, 3.141592653589793 / 180),
+    "rev": (_ZERO, 2 * 3.141592653589793), "%": (_ZERO, 1e-2),
 }
-_SPELLING = {"²": "^2", "³": "^3", "·": " ", "*": " ", "Nm": "N m", "°": "deg"}
+_SPELLING = {"²": "^2", "³": "^3", "·": " ", "*": " ", "Nm": "N m", "°": "deg", "Ω": "Ohm"}
 
-#: plausible ranges of road-vehicle parameters, by dimension (L, M, T), in SI units
+#: plausible ranges of road-vehicle parameters, by dimension (L, M, T, I), in SI units
 PLAUSIBLE = {
-    (0, 1, 0): ("mass", "kg", 0.5, 1.0e5),
-    (2, 1, 0): ("moment of inertia", "kg m^2", 1.0e-5, 1.0e6),
-    (1, 0, 0): ("length", "m", 1.0e-4, 100.0),
-    (1, 1, -2): ("force (or force per radian)", "N", 1.0, 1.0e7),
-    (2, 1, -2): ("torque (or torque per radian)", "N m", 1.0e-4, 1.0e7),
-    (2, 1, -1): ("rotational damping", "N m s", 1.0e-5, 1.0e5),
-    (1, 0, -2): ("acceleration", "m/s^2", 0.1, 100.0),
+    _dim(M=1): ("mass", "kg", 0.5, 1.0e5),
+    _dim(2, 1, 0): ("moment of inertia", "kg m^2", 1.0e-5, 1.0e6),
+    _dim(L=1): ("length", "m", 1.0e-4, 100.0),
+    _dim(1, 1, -2): ("force (or force per radian)", "N", 1.0, 1.0e7),
+    _dim(2, 1, -2): ("torque (or torque per radian)", "N m", 1.0e-4, 1.0e7),
+    _dim(2, 1, -1): ("rotational damping", "N m s", 1.0e-5, 1.0e5),
+    _dim(1, 0, -2): ("acceleration", "m/s^2", 0.1, 100.0),
 }
 #: a ratio this large between two parameters of the same kind is refused (a kN beside an N)
 SAME_KIND_RATIO = 100.0
@@ -83,30 +93,30 @@ class DimensionError(ModelDefinitionError):
 
 
 def unit(text: str) -> tuple:
-    """((L, M, T) exponents, factor to SI) of a unit such as ``"N m s/rad"``, ``"kg m^2"``,
+    """((L, M, T, I) exponents, factor to SI) of a unit such as ``"N m s/rad"``, ``"kg m^2"``,
     ``"m/s^2"``, ``"1/m"``, ``"kN/rad"``."""
     u = str(text).strip()
     for a, b in _SPELLING.items():
         u = u.replace(a, b)
     if u in ("", "-", "1"):
-        return (0, 0, 0), 1.0
+        return _ZERO, 1.0
     num, _, den = u.partition("/")
-    dims, factor = [0, 0, 0], 1.0
+    dims, factor = [0] * len(BASE), 1.0
     for part, sign in ((num, 1), (den, -1)):
         for token in part.replace("(", " ").replace(")", " ").split():
             m = re.fullmatch(r"([A-Za-z%]+|1)(?:\^?(-?\d+))?", token)
             if not m or (m.group(1) not in _UNITS and m.group(1) != "1"):
                 raise DimensionError(f"unit {text!r}: cannot read {token!r} (known: {', '.join(_UNITS)})")
             power = int(m.group(2)) if m.group(2) else 1
-            d, f = _UNITS.get(m.group(1), ((0, 0, 0), 1.0))
-            for k in range(3):
+            d, f = _UNITS.get(m.group(1), (_ZERO, 1.0))
+            for k in range(len(BASE)):
                 dims[k] += sign * power * d[k]
             factor *= f ** (sign * power)
     return tuple(dims), factor
 
 
 def parse_unit(text: str) -> tuple:
-    """(L, M, T) exponents of a unit (:func:`unit`)."""
+    """(L, M, T, I) exponents of a unit (:func:`unit`)."""
     return unit(text)[0]
 
 
@@ -114,7 +124,7 @@ def format_dims(d) -> str:
     if d is None:
         return "undetermined"
     parts = [f"{u}^{int(e) if Fraction(e).denominator == 1 else e}" if e != 1 else u
-             for u, e in zip(("m", "kg", "s"), d) if e != 0]
+             for u, e in zip(("m", "kg", "s", "A"), d) if e != 0]
     return " ".join(parts) or "dimensionless"
 
 
@@ -122,7 +132,7 @@ def format_dims(d) -> str:
 class _Form:
     """A dimension as const + sum coef[p] * dim(p): one vector per base, the same coefficients."""
 
-    const: tuple = (0, 0, 0)
+    const: tuple = _ZERO
     coef: dict = field(default_factory=dict)
 
     def __add__(self, other: "_Form") -> "_Form":
@@ -147,7 +157,7 @@ class Analysis:
     """What :func:`infer` found: each parameter's dimension (None: not fixed by the model), which
     parameters share a dimension even where it is not fixed, and the model's inconsistencies."""
 
-    dims: dict                 # {parameter name: (L, M, T) as Fractions, or None}
+    dims: dict                 # {parameter name: (L, M, T, I) as Fractions, or None}
     same: list                 # [(p, q)] parameters whose dimensions are equal in every solution
     inconsistencies: list      # [text]
 
@@ -177,14 +187,14 @@ def _form(expr, known: dict, params: _Unknowns, constraints: list, where: str) -
     equal, function arguments dimensionless) go to ``constraints``."""
     if expr.is_Number or expr in (sp.pi, sp.E) or expr.is_number:
         if params.free_numbers and not (expr.is_zero or expr in (sp.S.One, sp.S.NegativeOne)):
-            return _Form((0, 0, 0), {params.fresh(f"number {expr}"): 1})
+            return _Form(_ZERO, {params.fresh(f"number {expr}"): 1})
         return _Form()
     if expr.is_Symbol:
         name = str(expr)
         if name in known:
             return _Form(known[name])
         params.add(name)             # a parameter, or a signal without a declared unit: unknown
-        return _Form((0, 0, 0), {name: 1})
+        return _Form(_ZERO, {name: 1})
     if expr.is_Add:
         forms = [_form(a, known, params, constraints, where) for a in expr.args]
         for f in forms[1:]:
@@ -259,7 +269,7 @@ def _equations(model) -> list:
     for name, expr in rows:
         if name in units:
             d = parse_unit(units[name])
-            out.append((f"d{name}/dt", (d[0], d[1], d[2] - 1), sp.sympify(expr)))
+            out.append((f"d{name}/dt", d[:2] + (d[2] - 1,) + d[3:], sp.sympify(expr)))          # per second
     for name, expr in model.outputs:
         if name in units:
             out.append((f"output {name}", parse_unit(units[name]), sp.sympify(expr)))
@@ -267,7 +277,7 @@ def _equations(model) -> list:
 
 
 def _signal_units(model, scale: bool = False) -> dict:
-    """{signal name: (L, M, T) exponents} of every signal with a declared unit (the model's
+    """{signal name: (L, M, T, I) exponents} of every signal with a declared unit (the model's
     ``units`` less its parameters, and the scheduling signals' own units); ``scale=True``: the
     :func:`unit` pairs, exponents and factor to SI."""
     params = {str(p) for p in model.parameters}
@@ -289,6 +299,7 @@ def check_units(model) -> None:
         parameter unit the equations contradict), and each output declared at another scale than
         the signal it is.
     """
+    _check_unit_strings(model)
     problems, analysis = [], analysis_of(model, free_numbers=True)
     if analysis.inconsistencies:
         problems = _term_mismatches(model) or _declaration_mismatches(model) or [
@@ -299,6 +310,19 @@ def check_units(model) -> None:
                         f"(each term of d x/dt must be in the unit of x per second, an output in its declared unit, "
                         f"the argument of sin, exp, ... dimensionless; angles are dimensionless; a model in "
                         f"normalized time declares no unit for its states)")
+
+
+def _check_unit_strings(model) -> None:
+    """Every unit the model declares reads (else a :class:`DimensionError` naming the key)."""
+    declared = [(f"units[{k!r}]", t) for k, t in (getattr(model, "units", None) or {}).items()]
+    declared += [(f"scheduling signal {g.symbol}", g.unit) for g in getattr(model, "scheduling", ()) if g.unit]
+    for key, text in declared:
+        try:
+            unit(text)
+        except DimensionError as exc:
+            raise DimensionError(f"model {model.name!r}: {key} = {text!r}: {exc.args[0]}; write the unit with "
+                                 f"these symbols, products by spaces, one '/' and powers by '^' (\"N m/A\", "
+                                 f"\"m/s^2\"), or leave the signal without a unit") from None
 
 
 def _term_mismatches(model) -> list:
@@ -357,12 +381,12 @@ def infer(model, declared_parameters: bool = True, free_numbers: bool = False) -
         _dimensionless(f - _Form(dims), what, constraints)
     for name, text in units.items():           # declared parameter units fix the free scales
         if name in params and declared_parameters:
-            _dimensionless(_Form((0, 0, 0), {name: 1}) - _Form(parse_unit(text)), f"declared unit of {name}",
+            _dimensionless(_Form(_ZERO, {name: 1}) - _Form(parse_unit(text)), f"declared unit of {name}",
                            constraints)
     names = params + sorted(unknowns - set(params))
     index = {p: k for k, p in enumerate(names)}
     system, inconsistencies = _Echelon(len(names)), []
-    for f, where in constraints:            # sum coef d_p = -const, one system for the three bases
+    for f, where in constraints:            # sum coef d_p = -const, one system for every base
         row = [Fraction(0)] * len(names)
         for p, c in f.coef.items():
             row[index[p]] += Fraction(c)
@@ -419,7 +443,7 @@ class _Echelon:
 
     def value(self, vec):
         """vec . d when every solution gives the same value (vec in the row space), else None."""
-        acc = [Fraction(0)] * 3
+        acc = [Fraction(0)] * len(BASE)
         vec = list(vec)
         for col, (prow, prhs) in self.rows.items():
             c = vec[col]

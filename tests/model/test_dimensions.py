@@ -18,9 +18,13 @@ from codegen.project import observer_file as observers
 
 
 @pytest.mark.parametrize("text, dims, factor", [
-    ("N m s/rad", (2, 1, -1), 1.0), ("kg m^2", (2, 1, 0), 1.0), ("m/s^2", (1, 0, -2), 1.0),
-    ("1/m", (-1, 0, 0), 1.0), ("kN/rad", (1, 1, -2), 1e3), ("-", (0, 0, 0), 1.0), ("km/h", (1, 0, -1), 1 / 3.6),
-    ("kg m²", (2, 1, 0), 1.0), ("Nm", (2, 1, -2), 1.0), ("mm", (1, 0, 0), 1e-3),
+    ("N m s/rad", (2, 1, -1, 0), 1.0), ("kg m^2", (2, 1, 0, 0), 1.0), ("m/s^2", (1, 0, -2, 0), 1.0),
+    ("1/m", (-1, 0, 0, 0), 1.0), ("kN/rad", (1, 1, -2, 0), 1e3), ("-", (0, 0, 0, 0), 1.0),
+    ("km/h", (1, 0, -1, 0), 1 / 3.6), ("kg m²", (2, 1, 0, 0), 1.0), ("Nm", (2, 1, -2, 0), 1.0),
+    ("mm", (1, 0, 0, 0), 1e-3),
+    # an assist motor's units: current, voltage (W/A), resistance, inductance, torque constant
+    ("mA", (0, 0, 0, 1), 1e-3), ("V", (2, 1, -3, -1), 1.0), ("Ohm", (2, 1, -3, -2), 1.0), ("Ω", (2, 1, -3, -2), 1.0),
+    ("mH", (2, 1, -2, -2), 1e-3), ("N m/A", (2, 1, -2, -1), 1.0), ("V s/rad", (2, 1, -2, -1), 1.0),
 ])
 def test_units_are_read(text, dims, factor):
     d, f = dimensions.unit(text)
@@ -47,9 +51,9 @@ def _single_track(units: dict) -> ModelDefinition:
 
 def test_dimensions_follow_from_the_equations():
     a = dimensions.infer(_single_track({"M": "kg"}))
-    F = (Fraction(1), Fraction(1), Fraction(-2))
+    F = (Fraction(1), Fraction(1), Fraction(-2), Fraction(0))
     assert a.dims["C_f"] == F and a.dims["C_r"] == F             # N (per radian)
-    assert a.dims["l_f"] == (1, 0, 0) and a.dims["I_z"] == (2, 1, 0)
+    assert a.dims["l_f"] == (1, 0, 0, 0) and a.dims["I_z"] == (2, 1, 0, 0)
     assert not a.inconsistencies
     # without any parameter unit the absolute dimension of a mass is free, the kinds are not
     free = dimensions.infer(_single_track({}))
@@ -209,6 +213,38 @@ def test_numbers_may_carry_units_and_zero_fits_any():
                    + (a_x - v) / 10]),
         (("x", x),), (), (m,), units={"x": "m", "v": "m/s", "a_x": "m/s^2", "F": "N", "m": "kg"})
     dimensions.check_units(model)
+
+
+def _assist_motor(torque_term=None, units=None) -> ModelDefinition:
+    """A steering column with a DC assist motor: current i [A] from the voltage u [V] through
+    L di/dt = u - R i - k_e w, the column's rate w driven by k_t i and the driver's torque T_d."""
+    th, w, i, u, T_d = sp.symbols("th w i u T_d")
+    J, c, k_t, k_e, R, L = sp.symbols("J c k_t k_e R L", positive=True)
+    torque = k_t * i if torque_term is None else torque_term(i, k_t)
+    return ModelDefinition(
+        "assist_motor", (th, w, i), (u,), (T_d,),
+        sp.Matrix([w, (torque + T_d - c * w) / J, (u - R * i - k_e * w) / L]),
+        (("th", th), ("i", i)), (), (J, c, k_t, k_e, R, L),
+        units={"th": "rad", "w": "rad/s", "i": "A", "u": "V", "T_d": "N m", "J": "kg m^2", "c": "N m s/rad",
+               "k_t": "N m/A", "k_e": "V s/rad", "R": "Ohm", "L": "H", **(units or {})})
+
+
+def test_an_electric_actuator_declares_its_units():
+    dimensions.check_units(_assist_motor())
+    a = dimensions.infer(_assist_motor())
+    assert a.dims["k_t"] == a.dims["k_e"] == (2, 1, -2, -1)          # N m/A and V s/rad are one unit
+    # the torque constant left out: a current written into a torque
+    with pytest.raises(dimensions.UnitError, match=r"the units do not agree in dw/dt"):
+        dimensions.check_units(_assist_motor(torque_term=lambda i, k_t: i))
+    with pytest.raises(dimensions.UnitError, match=r"the declared unit of R is V, the equations make it "
+                                                   r"m\^2 kg s\^-3 A\^-2"):
+        dimensions.check_units(_assist_motor(units={"R": "V"}))
+
+
+def test_a_unit_that_does_not_read_names_its_key():
+    with pytest.raises(dimensions.DimensionError, match=r"model 'assist_motor': units\['i'\] = 'Amp': unit 'Amp': "
+                                                        r"cannot read 'Amp' \(known: .*\bA\b.*\); write the unit"):
+        dimensions.check_units(_assist_motor(units={"i": "Amp"}))
 
 
 def test_every_builtin_model_passes_the_units_check():
