@@ -23,6 +23,7 @@ UNITS = {
     "N m": ("torque", 1.0), "kN m": ("torque", 1e3),
     "s": ("time", 1.0), "ms": ("time", 1e-3),
     "m": ("length", 1.0), "mm": ("length", 1e-3), "km": ("length", 1e3),
+    "A": ("current", 1.0), "mA": ("current", 1e-3), "V": ("voltage", 1.0), "mV": ("voltage", 1e-3),
     "1": ("dimensionless", 1.0),
 }
 _SPELLINGS = {"m/s²": "m/s^2", "rad/s²": "rad/s^2", "deg/s²": "deg/s^2", "Nm": "N m", "N*m": "N m", "N·m": "N m",

@@ -674,3 +674,13 @@ def test_data_table_values_that_cannot_be_meant(edit, pattern):
     with pytest.raises(ConfigurationError, match=pattern):
         columns.parse(table, "obs.toml")
     assert columns.parse(copy.deepcopy(_DATA), "obs.toml").inputs["delta"].scale == 1.0
+
+
+def test_an_actuator_current_column_converts():
+    """A motor current logged in mA for a model input declared in A (the units an electric assist model declares)."""
+    from codegen.project import columns
+    table = {"time": "t", "inputs": {"i_m": {"column": "motor_mA", "unit": "mA"}}}
+    col = columns.parse(table, "obs.toml").inputs["i_m"]
+    assert columns.factor(col, "A", "obs.toml", "data.inputs", "i_m") == pytest.approx(1e-3)
+    with pytest.raises(ConfigurationError, match=r"\[data.inputs.i_m\] unit = \"mA\": a unit of voltage"):
+        columns.factor(col, "V", "obs.toml", "data.inputs", "i_m")
