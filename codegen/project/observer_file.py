@@ -328,10 +328,11 @@ def _parse(path: Path, overrides: dict | None = None, project: str | Path | None
     doc = ""
     with path.open() as fh:
         for line in fh:
-            if line.startswith("#"):
-                doc += line.lstrip("# ").rstrip() + " "
-            else:
+            if not line.startswith("#"):
                 break
+            text = line.lstrip("# ").rstrip()
+            if not HINT_LINE.match(text):          # the description, not the starter's commands
+                doc += text + " "
     config = ObserverConfig(path.stem, data["family"], data["model"], data["parameters"], data.get("polytope", ""),
                             data.get("rate_bounds", "exact"), float(data["sample_time"]),
                             dict(data.get("design", {})), dict(data.get("ui_filter", {})), doc.strip(), str(path),
@@ -342,6 +343,12 @@ def _parse(path: Path, overrides: dict | None = None, project: str | Path | None
                             dict(data.get("substitute", {})))
     family.check_config(config, data)
     return config
+
+
+#: a line of an observer file's header comment that is a command or a hint for its user (what
+#: ``uiogen new`` writes: ``next: uiogen design ...``, notes, the trial design's outcome), not part
+#: of the description the generated C, its header and the FMU carry
+HINT_LINE = re.compile(r"^(next:|then:|note:|uiogen |trial design by uiogen|WARNING:)")
 
 
 def names() -> list:

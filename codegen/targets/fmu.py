@@ -35,10 +35,6 @@ FORMATS = {"fmu": "2.0", "fmu3": "3.0"}
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 
 
-# a line of the observer file's header that is a command or a hint, not a description
-_NOT_DESCRIPTION = re.compile(r"^(next:|then:|note:|uiogen |trial design by uiogen|WARNING:)")
-
-
 def description(b) -> str:
     """The FMU's ``description``: the first paragraph of the observer file's header comment without
     its commands and notes (a ``next: uiogen design ...`` line, ``note:`` lines, the starter's ``then:`` and
@@ -55,7 +51,7 @@ def description(b) -> str:
                     if lines:
                         break           # the first paragraph only
                     continue
-                if not _NOT_DESCRIPTION.match(text):
+                if not observers.HINT_LINE.match(text):
                     lines.append(text)
     except OSError:
         lines = [b.config.doc] if b.config.doc else []

@@ -240,3 +240,17 @@ def test_one_state_in_two_threads_is_refused_and_separate_states_run_together(ts
     [t.start() for t in threads]
     [t.join() for t in threads]
     assert all(np.array_equal(r, ref) for r in results)
+
+
+def test_the_description_leaves_out_the_starters_commands_and_notes(tmp_path):
+    """`uiogen new --from-model` heads its file with commands, the trial's outcome and notes: hints
+    for the user, not the description the generated C's header and the FMU carry."""
+    path = tmp_path / "mine.toml"
+    path.write_text("# mine: algebraic_uio for my rig.\n"
+                    "# next: uiogen design THIS_FILE --update && uiogen generate THIS_FILE\n"
+                    "# trial design by uiogen analyze (gain 1): certified\n"
+                    "# note: the unknown input enters with relative degree 1\n"
+                    "#   uiogen build mine.toml\n" + OBSERVER_FILE)
+    doc = observers.get(str(path)).doc
+    assert doc.startswith("mine: algebraic_uio for my rig. Example 1 of Ichalal"), doc
+    assert not any(w in doc for w in ("next:", "trial design", "note:", "uiogen ")), doc
