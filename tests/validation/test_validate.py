@@ -152,3 +152,40 @@ def test_a_misspelt_data_input_is_named_with_a_did_you_mean(tmp_path, monkeypatc
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "Traceback" not in err, err
     assert re.search(message, err), err
+
+
+def _roll_project(tmp_path, edit=lambda text: text):
+    from codegen.project import observer_file as observers
+    case = ROOT / "tests" / "analysis" / "models" / "roll_bank"
+    (tmp_path / "roll.py").write_text(edit((case / "roll.py").read_text()))
+    (tmp_path / "roll_params.toml").write_text((case / "roll_params.toml").read_text())
+    (tmp_path / "obs.toml").write_text('family = "linf_uio"\nmodel = "roll.py"\nparameters = "roll_params.toml"\n'
+                                       'sample_time = 0.01\npolytope = "sector"\n')
+    return observers.get(str(tmp_path / "obs.toml"))
+
+
+def test_an_unstable_plant_is_refused_not_tabulated(tmp_path):
+    """A model that is an unstable plant (here the roll stiffness with the wrong sign: phi grows as
+    e^{12 t} to 1e100 and beyond while staying finite) gave a table with a truth RMS of 1e100, no
+    warning and a 200-digit NMSE; now the run is refused naming the state, the range it left and when."""
+    from codegen.validation import excitation
+    config = _roll_project(tmp_path, lambda text: text.replace("- Kphi * phi", "+ Kphi * phi"))
+    with pytest.raises(ModelDefinitionError, match=r"the plant diverged in the excitation run: state phi left "
+                       r"10 x the plausible range of an angle \(\+-12\.57 rad\) at t = [0-9.]+ s and reached "
+                       r"\|phi\| = [0-9.]+e\+[0-9]+ rad.*would measure the divergence.*roll_params\.toml"):
+        excitation.simulate(config, 30.0)
+    # the stable model runs as before
+    (tmp_path / "stable").mkdir()
+    assert np.abs(excitation.simulate(_roll_project(tmp_path / "stable"), 5.0)["phi"]).max() < 1.0
+
+
+def test_the_figures_table_stays_readable_for_huge_figures():
+    """NMSE was printed with .2f: a 200-digit number; every figure is now 4 significant digits."""
+    from codegen.validation.common import format_stats
+    from codegen.validation.metrics import signal_report
+    est = np.array([0.0, 0.0, 0.0, 1e100])           # an estimate far off: NMSE -2e201 %
+    text = format_stats({"phi": signal_report(np.array([1.0, 2.0, 3.0, 4.0]), est, unit="m"), "ok": signal_report(
+        np.array([1.0, 2.0, 3.0]), np.array([1.1, 2.0, 2.9]), unit="m")})
+    assert max(len(line) for line in text.splitlines()) < 110, text
+    assert "-2e+201" in text and all(len(cell) <= 10 for cell in text.split()), text
+    assert " 99" in text.splitlines()[2] or "98.5" in text, text
