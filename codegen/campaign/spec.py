@@ -252,6 +252,7 @@ def parse(data: dict, source: str) -> CampaignSpec:
                                else f"not set: the {EXCITATION} scenario has no driver", suggest(k, gains))
         driver.append((k, parse_dist(v, source=source, section="driver", key=k)))
     measured = _measured_signals(config)
+    run_s = _run_duration(config, top["scenarios"], top.get("duration"))
     sensors = []
     for sig, table in top.get("sensors", {}).items():
         if sig not in measured:
@@ -266,7 +267,10 @@ def parse(data: dict, source: str) -> CampaignSpec:
             d = parse_dist(table[f], source=source, section=sec, key=f)
             if f in ("noise", "delay"):
                 nominal = sensor_noise(families.get(config.family)).get(sig, 0.0) if f == "noise" else 0.0
-                check_support(d, nominal, [(">=", 0.0, "")], source=source, section=sec, key=f,
+                # a delay as long as the run leaves the observer nothing but the first sample (1e9 s was
+                # accepted): it must be shorter than the shortest run
+                bound = [("<", run_s, f"shorter than the run: {run_s:g} s")] if f == "delay" and run_s else []
+                check_support(d, nominal, [(">=", 0.0, ""), *bound], source=source, section=sec, key=f,
                               what=f"the {'standard deviation' if f == 'noise' else 'delay'} of sensor {sig}")
             fields.append((f, d))
         sensors.append((sig, tuple(fields)))
@@ -281,6 +285,24 @@ def parse(data: dict, source: str) -> CampaignSpec:
                         chunk=top.get("chunk"), run_timeout=top.get("run_timeout", 60.0),
                         parameters=tuple(params), driver=tuple(driver),
                         sensors=tuple(sensors), raw=data)
+
+
+def _run_duration(config, names, duration) -> float | None:
+    """[s] The shortest run of the campaign: ``duration`` where it truncates the scenarios, else the
+    scenarios' own (the excitation's :data:`codegen.validation.excitation.DURATION`); None where
+    unknown."""
+    from ..validation import excitation, scenarios as scn_lib
+    from .plants import EXCITATION
+    own = []
+    for name in dict.fromkeys(names):
+        if name == EXCITATION:
+            own.append(excitation.DURATION)
+            continue
+        try:
+            own.append(scn_lib.make(name, sample_rate=1.0 / config.sample_time).duration)
+        except Exception:          # noqa: BLE001 -- a scenario that cannot be built here says so when it runs
+            return duration
+    return min([*own, *([duration] if duration else [])]) if own else duration
 
 
 def _plant_parameters(plant) -> tuple:

@@ -34,15 +34,16 @@ def _cell(v, width: int) -> str:
 def format_stats(rows: dict, label: str = "signal") -> str:
     """:func:`signal_stats` rows as text, one definition for every table: the unit each row's figures
     are in (``deg*`` where converted from the declared rad), RMS, the truth's RMS and the error in %
-    of it, max and mean absolute error, NMSE %."""
-    lines = [f"{label:16s} {'unit':>7s} {'RMS':>10s} {'truth RMS':>10s} {'RMS %':>8s} {'max':>10s} {'MAE':>10s} "
-             f"{'NMSE %':>8s}"]
+    of it, max and mean absolute error, NMSE %; every figure to 4 significant digits, so a huge one
+    (an estimate far off its reference) stays one readable cell."""
+    lines = [f"{label:16s} {'unit':>7s} {'RMS':>10s} {'truth RMS':>10s} {'RMS %':>10s} {'max':>10s} {'MAE':>10s} "
+             f"{'NMSE %':>10s}"]
     for sig, r in rows.items():
         unit = (r.get("unit") or "–") + ("*" if r.get("converted_from") else "")
-        pct = "–" if r.get("rms_percent") is None else f"{r['rms_percent']:.3g}"
-        nmse = "–" if r.get("nmse_percent") is None else f"{r['nmse_percent']:.2f}"
-        lines.append(f"{sig:16s} {unit:>7s} {_cell(r.get('rms'), 10)} {_cell(r.get('truth_rms'), 10)} {pct:>8s} "
-                     f"{_cell(r.get('max'), 10)} {_cell(r.get('mae'), 10)} {nmse:>8s}")
+        pct = "–" if r.get("rms_percent") is None else f"{r['rms_percent']:.4g}"
+        nmse = "–" if r.get("nmse_percent") is None else f"{r['nmse_percent']:.4g}"
+        lines.append(f"{sig:16s} {unit:>7s} {_cell(r.get('rms'), 10)} {_cell(r.get('truth_rms'), 10)} {pct:>10s} "
+                     f"{_cell(r.get('max'), 10)} {_cell(r.get('mae'), 10)} {nmse:>10s}")
     after = {r.get("after_s") for r in rows.values()}
     notes = []
     if any(r.get("converted_from") for r in rows.values()):

@@ -109,6 +109,9 @@ def _bad_value(p: Path, column: str, row: int, v: str, sep: str) -> DatasetError
             f"separators); allowed: '.' as the decimal mark (e.g. 1.5). Re-export the log with "
             f"'.' decimals, e.g. pandas.read_csv(path, sep={sep!r}, decimal=',')"
             f".to_csv(out, index=False)")
+    if not v.strip():               # an empty cell: a missing sample, not a value to quote ('')
+        return DatasetError(f"{where}: an empty cell (a missing sample); allowed: a decimal number such as 1.5 "
+                            f"or -2.5e-3 in every row of a mapped column (fill or drop the row)")
     return DatasetError(f"{where}: non-numeric value {v!r}; allowed: a decimal number "
                         f"such as 1.5 or -2.5e-3")
 

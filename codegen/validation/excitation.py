@@ -158,9 +158,55 @@ def simulate(config, duration: float = DURATION, seed: int = 0) -> dict:
         raise ModelDefinitionError(f"model {model.name!r}: the excitation run left the finite numbers at t = "
                                    f"{run.t[k]:.3g} s (state {bad[0]}); narrow the [inputs.*] ranges of "
                                    f"{params.source}")
+    _refuse_divergence(model, params, run.t, truth, plant.states)
     for name, _ in model.outputs:
         truth.setdefault(name, truth[f"y_{name}"])
     return truth
+
+
+DIVERGED_FACTOR = 10.0
+"""A state beyond DIVERGED_FACTOR x the plausible range of its dimension
+(:data:`codegen.validation.log_checks.PLAUSIBLE`) has left any plausible range."""
+DIVERGED_BOX_FACTOR = 1e3
+"""A state beyond DIVERGED_BOX_FACTOR x the largest |bound| of its ``[state_bounds]`` box has left
+it for good (an open-loop position state may drift out of its box some 100-fold; a diverging one
+grows without bound)."""
+DIVERGED_ABSOLUTE = 1e9
+"""|value| in the model's unit no state of a vehicle model reaches (whatever its unit or box)."""
+
+
+def _refuse_divergence(model, params, t, truth, states) -> None:
+    """Raise when the plant's trajectory diverged while staying finite (an unstable plant under the
+    excitation: every figure, the truth's RMS included, would then be the divergence's, not the
+    observer's). Each state is held against the first of: DIVERGED_FACTOR x the plausible range of
+    its unit's dimension, DIVERGED_BOX_FACTOR x its ``[state_bounds]`` box, DIVERGED_ABSOLUTE."""
+    from .log_checks import PLAUSIBLE, _dimension, _si
+    first = None
+    for k in states:
+        x = np.abs(np.asarray(truth[k], float))
+        unit = (model.units or {}).get(k)
+        dim = _dimension(unit)
+        limits = [(DIVERGED_ABSOLUTE, f"+-{DIVERGED_ABSOLUTE:g} {unit or '(model units)'}")]
+        if dim in PLAUSIBLE:
+            limits.append((DIVERGED_FACTOR * PLAUSIBLE[dim], f"{DIVERGED_FACTOR:g} x the plausible range of "
+                           f"{'an' if dim[0] in 'aeiou' else 'a'} {dim} (+-{PLAUSIBLE[dim]:.4g} {_si(dim)})"))
+        if k in params.state_bounds:
+            lo, hi = params.state_bounds[k]
+            limits.append((DIVERGED_BOX_FACTOR * max(abs(lo), abs(hi)), f"{DIVERGED_BOX_FACTOR:g} x its "
+                           f"[state_bounds] box [{lo:g}, {hi:g}]"))
+        limit, what = min(limits, key=lambda lw: lw[0])
+        beyond = np.flatnonzero(x > limit)
+        if beyond.size and (first is None or beyond[0] < first[1]):
+            first = (k, int(beyond[0]), limit, what, unit, float(x.max()), int(np.argmax(x)))
+    if first is None:
+        return
+    k, i, _, what, unit, peak, j = first
+    raise ModelDefinitionError(
+        f"model {model.name!r}: the plant diverged in the excitation run: state {k} left {what} at t = {t[i]:.4g} s "
+        f"and reached |{k}| = {peak:.4g} {unit or '(model units)'} at t = {t[j]:.4g} s, so every figure of the run "
+        f"(the truth's RMS, the errors, NMSE) would measure the divergence, not the observer; the model is unstable "
+        f"under this excitation: check the signs of its equations, or narrow the [inputs.*] ranges (or the swept "
+        f"[scheduling.*] range) of {params.source}")
 
 
 def run(config, duration: float | None = None, seed: int = 0, progress=None, observer=None) -> dict:

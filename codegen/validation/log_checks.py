@@ -56,6 +56,12 @@ rely on the model's boxes and the physics."""
 #: a column spanning less than 1/SMALL_FACTOR of its box, which another unit brings to the box's
 #: scale, is named in a warning (a kN column declared in N)
 SMALL_FACTOR = 100.0
+REFERENCE_FACTOR = 10.0
+"""An estimate whose RMS differs from its ``[data.truth]`` reference's by more than this factor
+(either way) is named in a warning: its figures (RMS %, NMSE) measure a scale, not an error."""
+REFERENCE_UNIT_BAND = (1 / 1.25, 1.25)
+"""A ratio of estimate to reference within this band of another unit's factor (and that factor
+beyond 2 either way: deg/rad 57.3, km/h to m/s 3.6, g 9.81, kN 1000) names that unit."""
 BOX_FACTOR = 2.0
 """A column beyond BOX_FACTOR x the largest |bound| of the model's box for it is a unit mistake
 when another unit of its dimension brings it inside the box."""
@@ -653,7 +659,30 @@ class LogChecks:
                 r.exponents = exponents(r, points)
         results = [(r, r.verdict()) for r in self.relations]
         warnings += self._physics(results)
-        return {"checks": [r.summary() for r in self.relations], "warnings": warnings}
+        return {"checks": [r.summary() for r in self.relations], "warnings": warnings,
+                "unchecked_columns": self._unchecked(results)}
+
+    def _unchecked(self, results) -> list:
+        """The mapped input columns (``[data.inputs]``) no judged physics relation reads with its
+        scale: only the range checks saw them, which miss a unit off by a factor under
+        :data:`SMALL_FACTOR` inside the box (rad/s declared deg/s); one row each, for the user to
+        double-check (``[data.truth]`` columns are compared with their estimates instead)."""
+        judged = set()
+        for r, verdict in results:
+            if verdict != "not judged":
+                judged |= {s for s in r.inputs if r.exponents.get(s, 1) != 0}
+        rows = []
+        for n in self.names:
+            col = self.columns[n]
+            if n in judged or col.declared_by != "map":
+                continue
+            involved = any(n in r.inputs for r in self.relations)
+            rows.append({"signal": n, "column": col.column, "unit": col.unit or col.model_unit, "table": col.table,
+                         "why": "the log does not excite the model's relations that read it" if involved
+                         else "no physics relation of the model reads it",
+                         "range_checked": self.box_of(n) is not None
+                         or PLAUSIBLE.get(_dimension(col.model_unit)) is not None})
+        return rows
 
     def _alternatives(self, n: str):
         """(factor, unit) for each other unit of the column's dimension: the values in the model's
@@ -711,6 +740,29 @@ class LogChecks:
                                         + self._fix(col, f"unit = \"{u}\"", f"convert the column from {u}")
                                         + " if that is its unit")
         return warnings
+
+    def reference_scale(self, name: str, ratio: float | None, after_s: float | None = None) -> str | None:
+        """A warning when estimate ``name`` and its ``[data.truth]`` reference differ in scale by a
+        unit factor or more than :data:`REFERENCE_FACTOR` (``ratio`` = RMS of the estimate / RMS of
+        the reference, :meth:`codegen.validation.streaming.ErrorStats.scale_ratio`); None otherwise."""
+        key = f"truth:{name}"
+        if ratio is None or key not in self.columns or not ratio > 0:
+            return None
+        col = self.columns[key]
+        lo, hi = REFERENCE_UNIT_BAND
+        fits = [(f, u) for f, u in self._alternatives(key)
+                if not 0.5 <= f <= 2.0 and lo <= ratio / f <= hi]
+        if not fits and 1 / REFERENCE_FACTOR <= ratio <= REFERENCE_FACTOR:
+            return None
+        where = f" after the first {after_s:g} s" if after_s else ""
+        text = (f"{self.source}: [{col.table}] {name}: {col.describe(key)}: the estimate's RMS is {ratio:.4g} x the "
+                f"reference's{where}, so the RMS % and NMSE of {name} measure that factor, not the observer's error")
+        if fits:
+            f, u = min(fits, key=lambda fu: abs(math.log(ratio / fu[0])))
+            return text + (f"; the column looks like {u} (x {f:.4g}), not {col.unit or col.model_unit}"
+                           + self._fix(col, f"unit = \"{u}\"", f"convert the column from {u}") + " if that is its unit")
+        return text + (f"; no unit of its dimension is that factor: check the column, its unit and scale "
+                       f"(allowed: a factor within {REFERENCE_FACTOR:g} x either way, or a unit named)")
 
     @staticmethod
     def _inside(r: _Range, f: float, bounds) -> bool:

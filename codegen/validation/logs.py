@@ -136,10 +136,28 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
         kept.add(sig)
     time.finish()
     report = checks.finish()
+    for n, stats in compared.items():           # a reference in another unit than declared (rad as deg)
+        said = checks.reference_scale(n, stats.scale_ratio(), SETTLE_TIME)
+        column = f"column {cmap.truth[n].column!r} (reference of {n},"
+        if said is not None and not any(w.startswith(column) for w in report["warnings"]):   # said once
+            report["warnings"].append(said)
     return {"kind": "column_map", "observer": {n: s.result() for n, s in compared.items()},
             "estimates": {n: s.result() for n, s in summary.items()}, "baselines": {},
             "status_flags": flags, "samples": reader.rows, "data": str(path), "signals": kept.signals(),
-            "signals_stride": kept.stride, "log_checks": report["checks"], "warnings": report["warnings"]}
+            "signals_stride": kept.stride, "log_checks": report["checks"], "warnings": report["warnings"],
+            "unchecked_columns": report["unchecked_columns"]}
+
+
+def unchecked_line(rows) -> str | None:
+    """The line naming the mapped columns no physics check covered (None: every one was)."""
+    if not rows:
+        return None
+    cols = "; ".join(f"{r['column']!r} ([{r['table']}] {r['signal']}, unit {r['unit'] or 'none'}: {r['why']}"
+                     + ("" if r["range_checked"] else "; no range either") + ")" for r in rows)
+    one = len(rows) == 1
+    return (f"unchecked: {cols}. No physics check covered {'it' if one else 'them'} (a range check, where there is "
+            f"one, misses a unit off by a factor under {log_checks.SMALL_FACTOR:g} inside the model's box): "
+            f"double-check {'its' if one else 'their'} unit")
 
 
 def format_table(result: dict) -> str:
@@ -153,4 +171,7 @@ def format_table(result: dict) -> str:
             unit = (s.get("unit") or "–") + ("*" if s.get("converted_from") else "")
             lines.append(f"{name:12s} {unit:>7s} {s['mean']:10.4g} {s['std']:10.4g} {s['min']:10.4g} {s['max']:10.4g}")
     lines += [f"warning: {w}" for w in result.get("warnings", ())]
+    said = unchecked_line(result.get("unchecked_columns"))
+    if said:
+        lines.append(said)
     return "\n".join(lines)

@@ -56,6 +56,7 @@ class ErrorStats:
     def __init__(self, unit: str | None, settle: float | None = None):
         self.unit, self.settle = unit, settle
         self.abs_sum, self.max_abs, self.sq_sum, self.truth_sq_sum = 0.0, 0.0, 0.0, 0.0
+        self.est_sq_sum = 0.0
         self.err, self.ref = _Moments(), _Moments()
         self.nonfinite, self.first_nonfinite, self.seen = 0, None, 0
 
@@ -80,8 +81,17 @@ class ErrorStats:
             self.max_abs = max(self.max_abs, float(a.max()))
             self.sq_sum += float(np.sum(e * e))
             self.truth_sq_sum += float(np.sum(y * y))
+            self.est_sq_sum += float(np.sum(yh * yh))
         self.err.add(e)
         self.ref.add(y)
+
+    def scale_ratio(self) -> float | None:
+        """RMS of the estimate / RMS of the reference over the compared samples (None: a reference
+        of RMS 0 or no sample): about 1 for any observer worth its table, a unit factor (57.3 for
+        deg/rad) when the reference column is in another unit than the one declared."""
+        if not self.err.n or self.truth_sq_sum <= 0 or not math.isfinite(self.est_sq_sum):
+            return None
+        return math.sqrt(self.est_sq_sum / self.truth_sq_sum)
 
     def result(self) -> dict:
         """The :func:`~codegen.validation.metrics.signal_report` row (and ``after_s``), as

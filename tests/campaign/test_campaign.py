@@ -110,6 +110,11 @@ def test_draws_depend_on_seed_and_index_only():
      "a_x"),
     ('observer = "lpv_linf_driver_torque"\nscenarios = ["track_varying_speed"]\nruns = 2\n[sensors.r]\ndelay = -0.01\n',
      "delay"),
+    # a delay not shorter than the run (1e9 s was accepted: the observer saw the first sample only)
+    ('observer = "lpv_linf_driver_torque"\nscenarios = ["track_varying_speed"]\nruns = 2\n[sensors.r]\ndelay = 1e9\n',
+     "delay"),
+    ('observer = "lpv_linf_driver_torque"\nscenarios = ["track_varying_speed"]\nruns = 2\nduration = 5.0\n'
+     '[sensors.r]\ndelay = { dist = "uniform", low = 0.0, high = 5.0 }\n', "high"),
     ('observer = "lpv_linf_driver_torque"\nscenarios = ["track_speed"]\nruns = 2\n', "scenarios[0]"),
     # a family without a plant of the library's scenarios: its campaigns run the excitation scenario
     ('observer = "ts_fuzzy_uio"\nscenarios = ["track_varying_speed"]\nruns = 2\n', "scenarios"),

@@ -265,6 +265,21 @@ def test_non_numeric_names_column_and_row(tmp_path):
         S.load(p)
 
 
+@pytest.mark.parametrize("cell", ["", "  "])
+def test_an_empty_cell_is_named_as_such(tmp_path, cell):
+    """An empty cell was reported as "non-numeric value ''"; it is named as an empty cell, with its row
+    and column."""
+    p = _write(tmp_path / "n.csv", _synthetic(n=50))
+    lines = p.read_text().splitlines()
+    f = lines[5].split(",")
+    f[S.COLUMNS.index("yaw_rate")] = cell
+    lines[5] = ",".join(f)
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(S.DatasetError, match=r"n.csv: column 'yaw_rate', data row 5: an empty cell \(a missing "
+                                             r"sample\); allowed: a decimal number"):
+        S.load(p)
+
+
 def test_utf16_is_refused(tmp_path):
     p = tmp_path / "u16.csv"
     p.write_bytes(",".join(S.COLUMNS).encode("utf-16"))

@@ -152,3 +152,136 @@ def test_a_misspelt_data_input_is_named_with_a_did_you_mean(tmp_path, monkeypatc
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "Traceback" not in err, err
     assert re.search(message, err), err
+
+
+def _roll_project(tmp_path, edit=lambda text: text):
+    from codegen.project import observer_file as observers
+    case = ROOT / "tests" / "analysis" / "models" / "roll_bank"
+    (tmp_path / "roll.py").write_text(edit((case / "roll.py").read_text()))
+    (tmp_path / "roll_params.toml").write_text((case / "roll_params.toml").read_text())
+    (tmp_path / "obs.toml").write_text('family = "linf_uio"\nmodel = "roll.py"\nparameters = "roll_params.toml"\n'
+                                       'sample_time = 0.01\npolytope = "sector"\n')
+    return observers.get(str(tmp_path / "obs.toml"))
+
+
+def test_an_unstable_plant_is_refused_not_tabulated(tmp_path):
+    """A model that is an unstable plant (here the roll stiffness with the wrong sign: phi grows as
+    e^{12 t} to 1e100 and beyond while staying finite) gave a table with a truth RMS of 1e100, no
+    warning and a 200-digit NMSE; now the run is refused naming the state, the range it left and when."""
+    from codegen.validation import excitation
+    config = _roll_project(tmp_path, lambda text: text.replace("- Kphi * phi", "+ Kphi * phi"))
+    with pytest.raises(ModelDefinitionError, match=r"the plant diverged in the excitation run: state phi left "
+                       r"10 x the plausible range of an angle \(\+-12\.57 rad\) at t = [0-9.]+ s and reached "
+                       r"\|phi\| = [0-9.]+e\+[0-9]+ rad.*would measure the divergence.*roll_params\.toml"):
+        excitation.simulate(config, 30.0)
+    # the stable model runs as before
+    (tmp_path / "stable").mkdir()
+    assert np.abs(excitation.simulate(_roll_project(tmp_path / "stable"), 5.0)["phi"]).max() < 1.0
+
+
+def test_the_figures_table_stays_readable_for_huge_figures():
+    """NMSE was printed with .2f: a 200-digit number; every figure is now 4 significant digits."""
+    from codegen.validation.common import format_stats
+    from codegen.validation.metrics import signal_report
+    est = np.array([0.0, 0.0, 0.0, 1e100])           # an estimate far off: NMSE -2e201 %
+    text = format_stats({"phi": signal_report(np.array([1.0, 2.0, 3.0, 4.0]), est, unit="m"), "ok": signal_report(
+        np.array([1.0, 2.0, 3.0]), np.array([1.1, 2.0, 2.9]), unit="m")})
+    assert max(len(line) for line in text.splitlines()) < 110, text
+    assert "-2e+201" in text and all(len(cell) <= 10 for cell in text.split()), text
+    assert " 99" in text.splitlines()[2] or "98.5" in text, text
+
+
+class _EchoObserver:
+    """A stand-in compiled step whose estimate of phir is its input dw (a perfect estimate when the
+    log's reference column is dw in the declared unit)."""
+    input_names = ("dw", "y_r", "y_ay", "y_p")
+    output_names = ("phir",)
+    sample_time = 0.01
+
+    def initial_state(self):
+        return None
+
+    def run(self, inputs, state=None):
+        n = len(inputs)
+        return np.asarray(inputs)[:, :1].copy(), np.zeros(n, dtype=int), state
+
+
+@pytest.mark.parametrize("unit, message", [
+    ("rad", None),
+    # logged in rad, declared deg: RMS % 5620 and NMSE -319613 with no warning (the small-range warning
+    # needs a factor of 100)
+    ("deg", r"log.csv: \[data.truth\] phir: column 'ref' \(reference of phir, declared deg\): the estimate's RMS is "
+            r"57.3 x the reference's after the first 2 s, so the RMS % and NMSE of phir measure that factor, not the "
+            r"observer's error; the column looks like rad \(x 57.3\), not deg: declare unit = \"rad\" for 'ref' in "
+            r"\[data.truth\] if that is its unit"),
+    # logged in rad, declared mrad: the small-range warning names it (once)
+    ("mrad", r"declared mrad\) spans .* under 1/100 of the model's box .* in rad \(x 1000\)"),
+])
+def test_a_reference_column_in_another_unit_is_named(tmp_path, monkeypatch, capsys, unit, message):
+    import re
+    from codegen import cli
+    from codegen.extension import build as extension
+    case = ROOT / "tests" / "analysis" / "models" / "roll_bank"
+    for f in ("roll.py", "roll_params.toml"):
+        (tmp_path / f).write_text((case / f).read_text())
+    (tmp_path / "obs.toml").write_text(
+        'family = "linf_uio"\nmodel = "roll.py"\nparameters = "roll_params.toml"\nsample_time = 0.01\n'
+        'polytope = "sector"\n\n[data]\ntime = "t"\n\n[data.inputs]\n'
+        + "".join(f'{k} = {{ column = "{k}", unit = "{u}" }}\n'
+                  for k, u in (("dw", "rad"), ("y_r", "rad/s"), ("y_ay", "m/s^2"), ("y_p", "rad/s")))
+        + f'\n[data.truth]\nphir = {{ column = "ref", unit = "{unit}" }}\n')
+    monkeypatch.setattr(extension, "load", lambda config: _EchoObserver())
+    monkeypatch.setattr(extension, "require_current", lambda config: None)
+    t = np.arange(0, 20, 0.01)
+    dw = 0.02 * np.sin(0.7 * t) + 0.01 * np.sin(2.3 * t)
+    with open(tmp_path / "log.csv", "w") as fh:
+        fh.write("t,dw,y_r,y_ay,y_p,ref\n")
+        for row in zip(t, dw, dw * 0, dw * 0, dw * 0, dw):
+            fh.write(",".join(repr(float(v)) for v in row) + "\n")
+    assert cli.main(["validate", str(tmp_path / "obs.toml"), "--data", str(tmp_path / "log.csv"), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    if message is None:
+        assert res["warnings"] == [] and res["observer"]["phir"]["rms"] < 1e-12
+        return
+    assert len(res["warnings"]) == 1 and re.search(message, res["warnings"][0]), res["warnings"]
+    assert cli.main(["validate", str(tmp_path / "obs.toml"), "--data", str(tmp_path / "log.csv")]) == 0
+    out = capsys.readouterr().out
+    assert re.search("warning: .*" + message, out), out
+
+
+def test_columns_no_physics_check_reads_are_listed(tmp_path, monkeypatch, capsys):
+    """The roll rate y_p of the roll model is read by no relation of the model (the one judged relation,
+    a_y from the yaw dynamics, reads dw, y_r, y_ay, vx): a y_p column in rad/s declared deg/s passed
+    without a word. validate now lists it (text and JSON), and only it."""
+    from codegen import cli
+    from codegen.extension import build as extension
+    from codegen.validation import excitation
+    case = ROOT / "tests" / "analysis" / "models" / "roll_bank"
+    for f in ("roll.py", "roll_params.toml"):
+        (tmp_path / f).write_text((case / f).read_text())
+    units = {"dw": "rad", "y_r": "rad/s", "y_ay": "m/s^2", "y_p": "deg/s", "vx": "m/s"}
+    (tmp_path / "obs.toml").write_text(
+        'family = "linf_uio"\nmodel = "roll.py"\nparameters = "roll_params.toml"\nsample_time = 0.01\n'
+        'polytope = "sector"\n\n[data]\ntime = "t"\n\n[data.inputs]\n'
+        + "".join(f'{k} = {{ column = "{k}_col", unit = "{u}" }}\n' for k, u in units.items()))
+    from codegen.project import observer_file as observers
+    run = excitation.simulate(observers.get(str(tmp_path / "obs.toml")), 20.0)
+    obs = _EchoObserver()
+    obs.input_names = tuple(units)
+    monkeypatch.setattr(extension, "load", lambda config: obs)
+    monkeypatch.setattr(extension, "require_current", lambda config: None)
+    with open(tmp_path / "log.csv", "w") as fh:
+        fh.write("t," + ",".join(f"{k}_col" for k in units) + "\n")
+        for row in zip(run["t"], *(run[k] for k in units)):          # y_p logged in rad/s
+            fh.write(",".join(repr(float(v)) for v in row) + "\n")
+    args = ["validate", str(tmp_path / "obs.toml"), "--data", str(tmp_path / "log.csv")]
+    assert cli.main([*args, "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["warnings"] == []
+    assert res["unchecked_columns"] == [{"signal": "y_p", "column": "y_p_col", "unit": "deg/s", "table": "data.inputs",
+                                         "why": "no physics relation of the model reads it", "range_checked": False}]
+    assert cli.main(args) == 0
+    out = capsys.readouterr().out
+    assert ("unchecked: 'y_p_col' ([data.inputs] y_p, unit deg/s: no physics relation of the model reads it; no range "
+            "either). No physics check covered it (a range check, where there is one, misses a unit off by a factor "
+            "under 100 inside the model's box): double-check its unit") in out, out
