@@ -95,6 +95,38 @@ def test_an_undetectable_state_is_named_with_the_sensor_that_sees_it(tmp_path):
     assert st.estimable["states_unobservable_without_unknown_inputs"] == ["x1"]
 
 
+
+def test_an_unobservable_mode_bounds_the_decay_rate_the_analysis_proposes():
+    """roll_actuator_lag: q (a valve lag, tau_q = 0.5 s) is seen by no sensor, its mode at -2 1/s. No output
+    injection moves it, so no observer's error decays faster than exp(-2 t). The analysis reported it,
+    then proposed linf_uio with alpha = 2 (its trial: a bare InfeasibleLMIError); it now proposes half
+    of it and says why, and so for switched_pi's decay_rate."""
+    s, st = _subject_and_structure(MODELS / "roll_actuator_lag" / "observer.toml")
+    limit = st.decay_limit()
+    assert limit["states"] == ["q"] and limit["rate"] == pytest.approx(2.0, rel=1e-9)
+    apps = {a.family: a for a in ranking.assess(s, st)}
+    linf = apps["linf_uio"]
+    assert linf.applies and linf.observer["design"]["alpha"] == 1.0 and linf.decay_key == "design.alpha"
+    assert "unobservable mode along q" in linf.why["design.alpha"]
+    assert ranking.decay_proposal(1.0, limit) == (1.0, "")          # below the limit already: kept
+    rate, why = ranking.decay_proposal(5.0, {"rate": 0.5, "states": ["a", "b"], "at": "v = 1"})
+    assert rate == 0.25 and "along a, b" in why
+    # an observable model has no such limit
+    roll = MODELS / "roll_bank"
+    assert structure.analyze(subject.load(str(roll / "roll.py"), str(roll / "roll_params.toml"))).decay_limit() is None
+
+
+def test_a_decay_rate_the_unobservable_mode_rules_out_fails_with_the_reason():
+    """The observer file asks alpha = 2 of linf_uio: its trial fails, and the reason says that q's mode
+    at -2 1/s rules it out and what to take instead, before the solver's words."""
+    a = analysis.analyze(str(MODELS / "roll_actuator_lag" / "observer.toml"))
+    tried = a.ranking.own_trial
+    assert tried.status == "failed" and tried.error.__name__ == "InfeasibleLMIError"
+    assert tried.reason.startswith("[design] alpha = 2 1/s asks the error to decay at least that fast, but q is "
+                                   "unobservable with a mode at Re = -2 1/s")
+    assert "take [design] alpha below it (e.g. 1) or measure q" in tried.reason
+    assert "The solver: InfeasibleLMIError" in tried.reason
+
 def test_relative_degrees_of_the_steering_model_are_those_of_its_equations():
     """Nguyen et al. 2019 (5): T_d enters delta_dot' (degree 1 on delta_dot); delta' = delta_dot (2 on
     delta); r' depends on delta, so r''' on T_d (3). Exact (symbolic) and the same at every sample."""
