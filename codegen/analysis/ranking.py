@@ -514,25 +514,41 @@ def _with_sensor(subject: Subject, structure, app: Applicability, folder: Path, 
     return None
 
 
-def starter_text(subject: Subject, app: Applicability, folder: Path, structure=None, trial: Trial | None = None) -> str:
+def starter_text(subject: Subject, app: Applicability, folder: Path, structure=None, trial: Trial | None = None,
+                 chosen_by: str | None = None) -> str:
     """The observer file ``uiogen new --from-model`` writes for ``app``: its settings with the
     reasons as comments, the model and parameter file by paths relative to ``folder``; ``trial``,
     the analysis's trial design of these settings, is said in the header (certified, or the failure
-    that ``uiogen design`` will repeat)."""
+    that ``uiogen design`` will repeat). ``chosen_by``: how the user chose a family that is not
+    the best-ranked (``--family``); a family that proposes no settings gets the family's defaults
+    (family and sample time only)."""
     import os
+    proposal = app.observer
+    why = {"family": f"{GUARANTEES[app.guarantee][1]}", "model": "your equations", "parameters": "your car",
+           **app.why}
+    if proposal is None:
+        proposal = {"sample_time": subject.sample_time}
+        why = {**why, "sample_time": f"s, from {subject.sample_time_source}"}
     table = {"family": app.family, "model": os.path.relpath(subject.model_path, folder),
              "parameters": os.path.relpath(subject.parameter_path, folder),
-             **{k: v for k, v in app.observer.items() if k != "family"}}
-    why = {"family": f"{GUARANTEES[app.guarantee][1]}",
-           "model": "your equations", "parameters": "your car", **app.why}
-    head = [f"# {subject.name}: {app.family}, chosen by uiogen analyze {subject.target}",
-            f"# (the best-ranked family that applies to these sensors: {', '.join(subject.outputs)};",
-            f"# unknown inputs {', '.join(subject.unknown_inputs) or 'none'}).",
-            "# next: uiogen design THIS_FILE --update && uiogen generate THIS_FILE && uiogen build THIS_FILE"]
+             **{k: v for k, v in proposal.items() if k != "family"}}
+    if chosen_by is None:
+        head = [f"# {subject.name}: {app.family}, chosen by uiogen analyze {subject.target}",
+                f"# (the best-ranked family that applies to these sensors: {', '.join(subject.outputs)};"]
+    else:
+        head = [f"# {subject.name}: {app.family}, {chosen_by} (uiogen analyze {subject.target};",
+                f"# it applies to these sensors: {', '.join(subject.outputs)};"]
+    head += [f"# unknown inputs {', '.join(subject.unknown_inputs) or 'none'}).",
+             "# next: uiogen design THIS_FILE --update && uiogen generate THIS_FILE && uiogen build THIS_FILE"]
+    if app.observer is None:
+        head.append(f"# the analysis proposes no settings for {app.family} on this model: its [design] defaults "
+                    f"apply; the keys it takes are those of uiogen new DIR --family {app.family}")
     if trial is not None and trial.status == "certified":
         head.append(f"# trial design by uiogen analyze ({trial.settings}): certified")
     elif trial is not None and trial.status == "failed":
         head.append(f"# WARNING: uiogen analyze's trial design of these settings failed: {trial.reason}")
+    elif trial is not None and app.observer is not None and chosen_by is not None:
+        head.append(f"# not designed by uiogen analyze ({trial.reason}): the analysis's proposal, unmeasured")
     for note in app.notes:
         head.append(f"# note: {note}")
     return "\n".join(head + [""] + toml_lines(table, why)) + "\n"

@@ -384,6 +384,46 @@ def test_new_from_model_writes_the_best_family_and_it_designs(tmp_path, capsys):
     assert cli.main(["new", str(tmp_path / "p3")]) == 2
 
 
+
+@pytest.mark.slow       # two analyses with trial designs and one design: full lane only
+def test_new_from_model_with_a_family_writes_that_family_with_what_the_analysis_measured(tmp_path, capsys):
+    """uiogen new --from-model M --family F (refused before: "give either"): the observer file of F for the
+    model, with the settings the analysis measured for F (linf_uio ranks second for lateral_no_ay, its
+    proposed 5 ms UI filter fails and 0.1 s certifies: the file has 0.1 s and designs as written); a
+    family that does not apply is a typed error with the analysis's reason, and nothing is written."""
+    import tomllib
+    case = _copy("lateral_no_ay", tmp_path)
+    model, params = str(case / "lateral.py"), str(case / "car.toml")
+    assert cli.main(["new", str(tmp_path / "proj"), "--from-model", model, "--parameters", params,
+                     "--family", "linf_uio"]) == 0
+    out = capsys.readouterr().out
+    written = tmp_path / "proj" / "lateral_no_ay_linf_uio.toml"
+    assert f"wrote {written} (linf_uio, ranked 2 by the analysis, chosen with --family)" in out
+    text = written.read_text()
+    assert text.startswith("# lateral_no_ay: linf_uio, ranked 2 by the analysis, chosen with --family")
+    table = tomllib.loads(text)
+    assert table["family"] == "linf_uio" and table["ui_filter"]["time_constant"] == 0.1
+    assert "measured by uiogen analyze: the proposed 0.005 failed (UILoopError)" in text
+    b, _ = pipeline.solve(observers.get(str(written)))
+    assert b.discrete_certificate.ui_loop.contraction < 1
+    # a family that does not apply: the analysis's condition and fix, exit 2, no file
+    assert cli.main(["new", str(tmp_path / "p2"), "--from-model", model, "--parameters", params,
+                     "--family", "ts_fuzzy_uio"]) == 2
+    err = capsys.readouterr().err
+    assert "ConfigurationError" in err and "ts_fuzzy_uio does not apply to this model with these sensors: v_x is a " \
+        "scheduling signal" in err and "fix: make v_x a state" in err
+    assert not (tmp_path / "p2").exists()
+    assert cli.main(["new", str(tmp_path / "p3"), "--from-model", model, "--parameters", params,
+                     "--family", "no_such_family"]) == 2
+    assert "UnknownFamilyError" in capsys.readouterr().err
+    # a family that proposes no settings: the family's defaults, said in the header
+    s = subject.load(model, params)
+    app = ranking.Applicability("nonlinear_tyre_observer", True, "states_only", observer=None)
+    text = ranking.starter_text(s, app, tmp_path, chosen_by="ranked 3 by the analysis, chosen with --family")
+    assert "its [design] defaults apply" in text
+    assert tomllib.loads(text) == {"family": "nonlinear_tyre_observer", "model": "lateral_no_ay/lateral.py",
+                                   "parameters": "lateral_no_ay/car.toml", "sample_time": s.sample_time}
+
 def test_a_failed_proposal_with_a_measured_fix_is_designed_again_and_written(tmp_path, monkeypatch):
     """A trial of the analysis's proposal that fails with a measured fix (a UILoopError's remedy,
     the UI filter constant that certifies) is designed again with it; certified, the fix is the
