@@ -360,12 +360,14 @@ def cmd_new(args) -> int:
     into DIR and wired to each other by paths, ready to design, generate, build and validate as
     written (:mod:`codegen.project.starter`). With ``--from-model FILE`` instead: the observer file
     of the family ``uiogen analyze`` ranks first for that model, with the settings the analysis
-    chose and comments that say why."""
+    chose and comments that say why; with ``--from-model FILE --family F``, the observer file of
+    family F for that model (the settings the analysis measured for F, else its proposal, else
+    the family's defaults), refused with the analysis's reason when F does not apply."""
     from .project import starter
-    if (args.family is None) == (args.from_model is None):
-        raise ConfigurationError("uiogen new DIR: give either --family F (a starter copied from the family's example) "
-                                 "or --from-model FILE [--parameters FILE] (the observer the analysis chooses)",
-                                 key="--family")
+    if args.family is None and args.from_model is None:
+        raise ConfigurationError("uiogen new DIR: give --family F (a starter copied from the family's example), "
+                                 "--from-model FILE [--parameters FILE] (the observer the analysis chooses), or both "
+                                 "(the observer file of family F for your model)", key="--family")
     if args.from_model is not None:
         return _new_from_model(args)
     if args.parameters is not None:
@@ -381,30 +383,45 @@ def _new_from_model(args) -> int:
     from .project import starter
     from .analysis.ranking import starter_text
     folder = Path(args.dir)
+    wanted = families.get(args.family).name if args.family is not None else None    # an unknown name: refused first
+    if args.name is not None:
+        starter.check_name(args.name)
     result = analysis.analyze(args.from_model, args.parameters, design=True,
                               progress=lambda msg: print(f"  ... {msg}", file=sys.stderr, flush=True))
-    best = result.ranking.best
-    if best is None:
-        print(result.text())
-        raise ConfigurationError(f"uiogen new --from-model {args.from_model}: no observer family applies to these "
-                                 f"sensors (the report above gives each family's condition and fix)",
-                                 key="--from-model")
-    if best.observer is None:
-        raise ConfigurationError(f"uiogen new --from-model {args.from_model}: {best.family} ranks first but proposes "
-                                 f"no settings for this model; start from uiogen new DIR --family {best.family}",
-                                 key="--from-model")
-    name = args.name or f"{result.subject.name}_{best.family}"
+    if wanted is None:
+        best = result.ranking.best
+        if best is None:
+            print(result.text())
+            raise ConfigurationError(f"uiogen new --from-model {args.from_model}: no observer family applies to these "
+                                     f"sensors (the report above gives each family's condition and fix)",
+                                     key="--from-model")
+        if best.observer is None:
+            raise ConfigurationError(f"uiogen new --from-model {args.from_model}: {best.family} ranks first but "
+                                     f"proposes no settings for this model; start from uiogen new DIR --family "
+                                     f"{best.family}, or write the family's defaults with --from-model "
+                                     f"{args.from_model} --family {best.family}", key="--from-model")
+        chosen, tried, rank_note = best, result.ranking.entries[0][1], "ranked first"
+    else:
+        position = result.ranking.position(wanted)
+        chosen, tried = result.ranking.entries[position]
+        if not chosen.applies:
+            print(result.text())
+            raise ConfigurationError(f"uiogen new --from-model {args.from_model} --family {wanted}: {wanted} does not "
+                                     f"apply to this model with these sensors: {chosen.condition}"
+                                     + (f" (fix: {chosen.fix})" if chosen.fix else ""), key="--family", value=wanted)
+        rank_note = (f"ranked {'first' if position == 0 else position + 1} by the analysis, chosen with --family")
+    name = args.name or f"{result.subject.name}_{chosen.family}"
     starter.check_name(name)
     target = folder / f"{name}.toml"
     if target.exists():
         raise ConfigurationError(f"uiogen new {folder}: would overwrite {target}; choose an empty folder or --name",
                                  key="dir")
-    tried = result.ranking.entries[0][1]
     outputs.make_folder(folder)
-    text = starter_text(result.subject, best, folder.resolve(), trial=tried).replace("THIS_FILE", str(target))
+    text = starter_text(result.subject, chosen, folder.resolve(), trial=tried,
+                        chosen_by=None if wanted is None else rank_note).replace("THIS_FILE", str(target))
     outputs.write_atomic(target, text)
     print(result.text())
-    print(f"wrote {target} ({best.family}, ranked first)")
+    print(f"wrote {target} ({chosen.family}, {rank_note})")
     if tried.status == "failed":        # the file is written as proposed, but say plainly it does not design
         print(f"warning: the analysis's trial design of these settings failed ({tried.reason}); "
               f"uiogen design {target} fails the same way until you change what it names", file=sys.stderr)
@@ -583,10 +600,15 @@ def main(argv=None) -> int:
                                                    "real-data observer first, and print a summary pointing at it")
     p.set_defaults(func=cmd_demo)
     p = sub.add_parser("new", help="a starter project (model, parameters, observer file) in DIR, or the observer "
-                                   "file of the family the analysis ranks first for your model (--from-model)")
+                                   "file of the family the analysis ranks first for your model (--from-model), or "
+                                   "of the family you name (--from-model with --family)")
     p.add_argument("dir")
-    p.add_argument("--family", help="an observer family (uiogen list shows them in use)")
-    p.add_argument("--from-model", help="your model file (.py): the observer file of the best-ranked family")
+    p.add_argument("--family", help="an observer family (uiogen list shows them in use): alone, a starter copied "
+                                    "from its example; with --from-model, the observer file of this family for "
+                                    "your model (the settings the analysis measured for it; refused, with the "
+                                    "analysis's reason, where it does not apply)")
+    p.add_argument("--from-model", help="your model file (.py): the observer file of the best-ranked family "
+                                        "(or of --family)")
     p.add_argument("--parameters", help="the model's parameter file (with --from-model)")
     p.add_argument("--name", help="the observer's name, the file's stem (default: my_FAMILY, or MODEL_FAMILY with "
                                   "--from-model; never a built-in's)")

@@ -75,6 +75,10 @@ class Applicability:
         "seconds" (the analysis designs it) or "minutes" (it does not).
     figures : callable or None
         ``build -> {name: (value, unit, meaning)}``: the certified figures of a trial design.
+    decay_key : str
+        The dotted key of the family's certified decay rate of the error (1/s), which an
+        unobservable mode bounds (:meth:`codegen.analysis.structure.Structure.decay_limit`): a
+        trial that fails with it at or above that mode's rate says so.
     """
 
     family: str
@@ -89,6 +93,7 @@ class Applicability:
     differentiators: dict = field(default_factory=dict)
     design_cost: str = "seconds"
     figures: Callable | None = None
+    decay_key: str = ""
 
     def to_json(self) -> dict:
         return {"family": self.family, "applies": self.applies, "guarantee": self.guarantee,
@@ -378,9 +383,62 @@ def rank(subject: Subject, structure, design: bool = True, progress=None) -> Ran
                 trials[own] = completed["trial"]        # the family can: the file lacked settings
             else:
                 what_if = _with_sensor(subject, structure, own_app, Path(tmp), progress)
+    limit = structure.decay_limit() if hasattr(structure, "decay_limit") else None
+    for app in apps:
+        trials[app.family] = _decay_explained(subject, app, trials[app.family], limit)
     order = sorted(range(len(apps)), key=lambda k: sort_key(apps[k], trials[apps[k].family], k))
     return Ranking([(apps[k], trials[apps[k].family]) for k in order], own, time.perf_counter() - t0, what_if,
                    completed)
+
+
+def _dotted(table: dict, key: str):
+    """The value at the dotted ``key`` of ``table`` ("design.alpha"), or None."""
+    for part in key.split("."):
+        if not isinstance(table, dict) or part not in table:
+            return None
+        table = table[part]
+    return table
+
+
+def _decay_explained(subject: Subject, app: Applicability, tried: Trial, limit: dict | None) -> Trial:
+    """``tried``, its failure reason completed when the LMIs failed with the family's decay rate
+    (``app.decay_key``) at or above the rate of an unobservable mode (``limit``): no output injection
+    moves that mode, so no observer's error decays faster than it, and the LMIs asking for it are
+    infeasible however the rest is set."""
+    from ..errors import SolverError
+    if (limit is None or not app.decay_key or tried.status != "failed" or tried.error is None
+            or not issubclass(tried.error, SolverError)):
+        return tried
+    own = subject.config is not None and subject.config.family == app.family and tried.settings.startswith(
+        "the observer file's settings")
+    if own:
+        with open(subject.config.source, "rb") as fh:
+            value = _dotted(tomllib.load(fh), app.decay_key)
+    else:
+        value = _dotted(app.observer or {}, app.decay_key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or value < limit["rate"]:
+        return tried
+    section, _, name = app.decay_key.rpartition(".")
+    shown = f"[{section}] {name}" if section else name
+    states = ", ".join(limit["states"])
+    half = float(f"{0.5 * limit['rate']:.3g}")
+    why = (f"{shown} = {value:g} 1/s asks the error to decay at least that fast, but {states} "
+           f"{'is' if len(limit['states']) == 1 else 'are'} unobservable with a mode at Re = {-limit['rate']:.4g} 1/s "
+           f"(at {limit['at']}): no observer moves it, so no error decays faster than {limit['rate']:.4g} 1/s; "
+           f"take {shown} below it (e.g. {half:g}) or measure {states}")
+    return dataclasses.replace(tried, reason=f"{why}. The solver: {tried.reason}")
+
+
+def decay_proposal(default: float, limit: dict | None) -> tuple:
+    """(rate, reason) a family proposes for its certified decay rate of the error: ``default``, or
+    half the rate of the slowest unobservable mode (:meth:`Structure.decay_limit`) when that is lower,
+    since no observer's error decays faster than that mode."""
+    if limit is None or default <= 0.5 * limit["rate"]:
+        return default, ""
+    rate = float(f"{0.5 * limit['rate']:.3g}")
+    states = ", ".join(limit["states"])
+    return rate, (f"half the decay of the unobservable mode along {states} (Re = {-limit['rate']:.4g} 1/s at "
+                  f"{limit['at']}): no observer's error decays faster than that mode")
 
 
 def _set_dotted(table: dict, key: str, value) -> dict:
@@ -456,25 +514,41 @@ def _with_sensor(subject: Subject, structure, app: Applicability, folder: Path, 
     return None
 
 
-def starter_text(subject: Subject, app: Applicability, folder: Path, structure=None, trial: Trial | None = None) -> str:
+def starter_text(subject: Subject, app: Applicability, folder: Path, structure=None, trial: Trial | None = None,
+                 chosen_by: str | None = None) -> str:
     """The observer file ``uiogen new --from-model`` writes for ``app``: its settings with the
     reasons as comments, the model and parameter file by paths relative to ``folder``; ``trial``,
     the analysis's trial design of these settings, is said in the header (certified, or the failure
-    that ``uiogen design`` will repeat)."""
+    that ``uiogen design`` will repeat). ``chosen_by``: how the user chose a family that is not
+    the best-ranked (``--family``); a family that proposes no settings gets the family's defaults
+    (family and sample time only)."""
     import os
+    proposal = app.observer
+    why = {"family": f"{GUARANTEES[app.guarantee][1]}", "model": "your equations", "parameters": "your car",
+           **app.why}
+    if proposal is None:
+        proposal = {"sample_time": subject.sample_time}
+        why = {**why, "sample_time": f"s, from {subject.sample_time_source}"}
     table = {"family": app.family, "model": os.path.relpath(subject.model_path, folder),
              "parameters": os.path.relpath(subject.parameter_path, folder),
-             **{k: v for k, v in app.observer.items() if k != "family"}}
-    why = {"family": f"{GUARANTEES[app.guarantee][1]}",
-           "model": "your equations", "parameters": "your car", **app.why}
-    head = [f"# {subject.name}: {app.family}, chosen by uiogen analyze {subject.target}",
-            f"# (the best-ranked family that applies to these sensors: {', '.join(subject.outputs)};",
-            f"# unknown inputs {', '.join(subject.unknown_inputs) or 'none'}).",
-            "# next: uiogen design THIS_FILE --update && uiogen generate THIS_FILE && uiogen build THIS_FILE"]
+             **{k: v for k, v in proposal.items() if k != "family"}}
+    if chosen_by is None:
+        head = [f"# {subject.name}: {app.family}, chosen by uiogen analyze {subject.target}",
+                f"# (the best-ranked family that applies to these sensors: {', '.join(subject.outputs)};"]
+    else:
+        head = [f"# {subject.name}: {app.family}, {chosen_by} (uiogen analyze {subject.target};",
+                f"# it applies to these sensors: {', '.join(subject.outputs)};"]
+    head += [f"# unknown inputs {', '.join(subject.unknown_inputs) or 'none'}).",
+             "# next: uiogen design THIS_FILE --update && uiogen generate THIS_FILE && uiogen build THIS_FILE"]
+    if app.observer is None:
+        head.append(f"# the analysis proposes no settings for {app.family} on this model: its [design] defaults "
+                    f"apply; the keys it takes are those of uiogen new DIR --family {app.family}")
     if trial is not None and trial.status == "certified":
         head.append(f"# trial design by uiogen analyze ({trial.settings}): certified")
     elif trial is not None and trial.status == "failed":
         head.append(f"# WARNING: uiogen analyze's trial design of these settings failed: {trial.reason}")
+    elif trial is not None and app.observer is not None and chosen_by is not None:
+        head.append(f"# not designed by uiogen analyze ({trial.reason}): the analysis's proposal, unmeasured")
     for note in app.notes:
         head.append(f"# note: {note}")
     return "\n".join(head + [""] + toml_lines(table, why)) + "\n"

@@ -434,6 +434,18 @@ class Structure:
         f = self.fact(key)
         return f.fix if f is not None and f.fix else default
 
+    def decay_limit(self) -> dict | None:
+        """The fastest decay any observer's error can have: an unobservable mode is untouched by every
+        output injection, so the error along it decays at its own rate and no faster. {"rate": -(the
+        largest real part of the unobservable modes over the samples) [1/s], "states": the states
+        along them, "at": where}; None when every state is observable, or when a mode does not decay
+        (then no observer converges, and the observability fact fails)."""
+        f = self.fact("observability")
+        if f is None or "slowest_real_part" not in f.detail or not f.detail["slowest_real_part"] < 0:
+            return None
+        return {"rate": -float(f.detail["slowest_real_part"]), "states": list(f.detail["unobservable_states"]),
+                "at": f.detail.get("slowest_at", "")}
+
     def slowest_zero(self) -> tuple:
         """(largest real part of the invariant zeros over the samples, the zero, where) or None."""
         best = None
@@ -627,11 +639,11 @@ def analyze(subject: Subject, n_between: int = 200) -> Structure:
                                                                              "along it)"))
         facts.append(Fact("observability", detectable, statement, basis, "" if detectable else fix,
                           {"unobservable_states": along, "points": len(unobs_pts), "slowest_real_part": worst,
-                           "detectable": detectable}))
+                           "slowest_at": S.at(worst_k), "detectable": detectable}))
         if detectable:
             facts[-1] = Fact("observability", True, statement, basis, "",
                              {"unobservable_states": along, "points": len(unobs_pts), "slowest_real_part": worst,
-                              "detectable": True, "to_observe_all": fix})
+                              "slowest_at": S.at(worst_k), "detectable": True, "to_observe_all": fix})
 
     # 3. relative degrees and HOSMD orders
     sym_rd = _symbolic_relative_degrees(lin)

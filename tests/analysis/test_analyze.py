@@ -95,6 +95,38 @@ def test_an_undetectable_state_is_named_with_the_sensor_that_sees_it(tmp_path):
     assert st.estimable["states_unobservable_without_unknown_inputs"] == ["x1"]
 
 
+
+def test_an_unobservable_mode_bounds_the_decay_rate_the_analysis_proposes():
+    """roll_actuator_lag: q (a valve lag, tau_q = 0.5 s) is seen by no sensor, its mode at -2 1/s. No output
+    injection moves it, so no observer's error decays faster than exp(-2 t). The analysis reported it,
+    then proposed linf_uio with alpha = 2 (its trial: a bare InfeasibleLMIError); it now proposes half
+    of it and says why, and so for switched_pi's decay_rate."""
+    s, st = _subject_and_structure(MODELS / "roll_actuator_lag" / "observer.toml")
+    limit = st.decay_limit()
+    assert limit["states"] == ["q"] and limit["rate"] == pytest.approx(2.0, rel=1e-9)
+    apps = {a.family: a for a in ranking.assess(s, st)}
+    linf = apps["linf_uio"]
+    assert linf.applies and linf.observer["design"]["alpha"] == 1.0 and linf.decay_key == "design.alpha"
+    assert "unobservable mode along q" in linf.why["design.alpha"]
+    assert ranking.decay_proposal(1.0, limit) == (1.0, "")          # below the limit already: kept
+    rate, why = ranking.decay_proposal(5.0, {"rate": 0.5, "states": ["a", "b"], "at": "v = 1"})
+    assert rate == 0.25 and "along a, b" in why
+    # an observable model has no such limit
+    roll = MODELS / "roll_bank"
+    assert structure.analyze(subject.load(str(roll / "roll.py"), str(roll / "roll_params.toml"))).decay_limit() is None
+
+
+def test_a_decay_rate_the_unobservable_mode_rules_out_fails_with_the_reason():
+    """The observer file asks alpha = 2 of linf_uio: its trial fails, and the reason says that q's mode
+    at -2 1/s rules it out and what to take instead, before the solver's words."""
+    a = analysis.analyze(str(MODELS / "roll_actuator_lag" / "observer.toml"))
+    tried = a.ranking.own_trial
+    assert tried.status == "failed" and tried.error.__name__ == "InfeasibleLMIError"
+    assert tried.reason.startswith("[design] alpha = 2 1/s asks the error to decay at least that fast, but q is "
+                                   "unobservable with a mode at Re = -2 1/s")
+    assert "take [design] alpha below it (e.g. 1) or measure q" in tried.reason
+    assert "The solver: InfeasibleLMIError" in tried.reason
+
 def test_relative_degrees_of_the_steering_model_are_those_of_its_equations():
     """Nguyen et al. 2019 (5): T_d enters delta_dot' (degree 1 on delta_dot); delta' = delta_dot (2 on
     delta); r' depends on delta, so r''' on T_d (3). Exact (symbolic) and the same at every sample."""
@@ -351,6 +383,46 @@ def test_new_from_model_writes_the_best_family_and_it_designs(tmp_path, capsys):
     assert "is a built-in observer" in capsys.readouterr().err
     assert cli.main(["new", str(tmp_path / "p3")]) == 2
 
+
+
+@pytest.mark.slow       # two analyses with trial designs and one design: full lane only
+def test_new_from_model_with_a_family_writes_that_family_with_what_the_analysis_measured(tmp_path, capsys):
+    """uiogen new --from-model M --family F (refused before: "give either"): the observer file of F for the
+    model, with the settings the analysis measured for F (linf_uio ranks second for lateral_no_ay, its
+    proposed 5 ms UI filter fails and 0.1 s certifies: the file has 0.1 s and designs as written); a
+    family that does not apply is a typed error with the analysis's reason, and nothing is written."""
+    import tomllib
+    case = _copy("lateral_no_ay", tmp_path)
+    model, params = str(case / "lateral.py"), str(case / "car.toml")
+    assert cli.main(["new", str(tmp_path / "proj"), "--from-model", model, "--parameters", params,
+                     "--family", "linf_uio"]) == 0
+    out = capsys.readouterr().out
+    written = tmp_path / "proj" / "lateral_no_ay_linf_uio.toml"
+    assert f"wrote {written} (linf_uio, ranked 2 by the analysis, chosen with --family)" in out
+    text = written.read_text()
+    assert text.startswith("# lateral_no_ay: linf_uio, ranked 2 by the analysis, chosen with --family")
+    table = tomllib.loads(text)
+    assert table["family"] == "linf_uio" and table["ui_filter"]["time_constant"] == 0.1
+    assert "measured by uiogen analyze: the proposed 0.005 failed (UILoopError)" in text
+    b, _ = pipeline.solve(observers.get(str(written)))
+    assert b.discrete_certificate.ui_loop.contraction < 1
+    # a family that does not apply: the analysis's condition and fix, exit 2, no file
+    assert cli.main(["new", str(tmp_path / "p2"), "--from-model", model, "--parameters", params,
+                     "--family", "ts_fuzzy_uio"]) == 2
+    err = capsys.readouterr().err
+    assert "ConfigurationError" in err and "ts_fuzzy_uio does not apply to this model with these sensors: v_x is a " \
+        "scheduling signal" in err and "fix: make v_x a state" in err
+    assert not (tmp_path / "p2").exists()
+    assert cli.main(["new", str(tmp_path / "p3"), "--from-model", model, "--parameters", params,
+                     "--family", "no_such_family"]) == 2
+    assert "UnknownFamilyError" in capsys.readouterr().err
+    # a family that proposes no settings: the family's defaults, said in the header
+    s = subject.load(model, params)
+    app = ranking.Applicability("nonlinear_tyre_observer", True, "states_only", observer=None)
+    text = ranking.starter_text(s, app, tmp_path, chosen_by="ranked 3 by the analysis, chosen with --family")
+    assert "its [design] defaults apply" in text
+    assert tomllib.loads(text) == {"family": "nonlinear_tyre_observer", "model": "lateral_no_ay/lateral.py",
+                                   "parameters": "lateral_no_ay/car.toml", "sample_time": s.sample_time}
 
 def test_a_failed_proposal_with_a_measured_fix_is_designed_again_and_written(tmp_path, monkeypatch):
     """A trial of the analysis's proposal that fails with a measured fix (a UILoopError's remedy,

@@ -63,8 +63,10 @@ def assess(family, subject, structure):
                      f"design may still estimate {'it' if len(names) == 1 else 'them'} poorly; to see "
                      f"{'it' if len(names) == 1 else 'them'}: {late.fix}")
     pdlf = rate == "exact"
+    from ...analysis.ranking import decay_proposal
+    alpha, alpha_why = decay_proposal(2.0, structure.decay_limit())
     observer = {"family": family.name, "polytope": "sector", "rate_bounds": rate, "sample_time": subject.sample_time,
-                "design": {"alpha": 2.0, "lyapunov": "pdlf" if pdlf else "quadratic",
+                "design": {"alpha": alpha, "lyapunov": "pdlf" if pdlf else "quadratic",
                            "gain_bound_times_sample_time": 1.0},
                 "ui_filter": {"time_constant": 0.005}}
     why = {"polytope": "exact: the sector polytope equals A(rho) on the whole box (the paper's Taylor reduction "
@@ -72,7 +74,8 @@ def assess(family, subject, structure):
            "rate_bounds": ("sound membership-rate bounds over the box, from [scheduling] rate_min/rate_max" if pdlf
                            else "several scheduling signals: no membership-rate bounds, so a common Lyapunov matrix"),
            "sample_time": f"s, from {subject.sample_time_source}",
-           "design.alpha": "certified decay rate of the error (1/s); `uiogen sweep` measures gamma against it",
+           "design.alpha": ("certified decay rate of the error (1/s)" + (f", {alpha_why}" if alpha_why else "")
+                            + "; `uiogen sweep` measures gamma against it"),
            "design.lyapunov": ("parameter-dependent Lyapunov function (uses the rate bounds)" if pdlf
                                else "common quadratic Lyapunov matrix (no rate bounds)"),
            "design.gain_bound_times_sample_time": "||M(theta)|| <= 1/T_s: an implementable gain at this sample time",
@@ -89,4 +92,4 @@ def assess(family, subject, structure):
                                                  "the same with the unknown-input filter loop closed")}
     cost = "seconds" if poly.n_vertices <= 16 else "minutes"
     return Applicability(family.name, True, "attenuated_box", checked=tuple(checked), notes=tuple(notes),
-                         observer=observer, why=why, design_cost=cost, figures=figures)
+                         observer=observer, why=why, design_cost=cost, figures=figures, decay_key="design.alpha")

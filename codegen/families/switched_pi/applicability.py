@@ -80,12 +80,14 @@ def assess(family, subject, structure):
     notes = (f"the certificate covers the {n_modes} frozen models at the operating points, not the model between "
              f"them (the error from a mode's model grows with the distance to its point)",)
     pole = min(100.0, 0.5 / subject.sample_time)
+    from ...analysis.ranking import decay_proposal
+    decay, decay_why = decay_proposal(min(1.0, 0.5 * pole), structure.decay_limit())
     observer = {"family": family.name, "sample_time": subject.sample_time,
-                "design": {"pole_radius": pole, "decay_rate": min(1.0, 0.5 * pole)}, "switching": rule}
+                "design": {"pole_radius": pole, "decay_rate": decay}, "switching": rule}
     why = {"sample_time": f"s, exact ZOH per mode; from {subject.sample_time_source}",
            "design.pole_radius": "rad/s: every mode's error poles in |s| < r, r T_s <= 0.5",
-           "design.decay_rate": "1/s: every error mode, the unknown-input estimate's included, decays at least as "
-                                "exp(-a t)",
+           "design.decay_rate": ("1/s: every error mode, the unknown-input estimate's included, decays at least as "
+                                 "exp(-a t)" + (f"; {decay_why}" if decay_why else "")),
            "switching": "the speed rule (25): three equal bands over the scheduling box",
            "switching.performance": "xi = the states: gamma bounds the L2 gain from the unknown inputs to them"}
 
@@ -95,4 +97,4 @@ def assess(family, subject, structure):
                 "contraction_per_step": (b.discrete_certificate["contraction_per_step"], "-",
                                          "sqrt(V) per step in every mode, under any switching")}
     return Applicability(family.name, True, "attenuated_points", checked=tuple(checked), notes=notes,
-                         observer=observer, why=why, figures=figures)
+                         observer=observer, why=why, figures=figures, decay_key="design.decay_rate")

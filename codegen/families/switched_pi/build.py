@@ -53,7 +53,7 @@ class SwitchedPIBuild(ObserverBuild):
 
     def lmi_problem(self):
         """A fresh LMI problem of this design (benchmark: our path vs CVXPY on the same blocks)."""
-        return switched_pi.build_problem(self.model, self.design.T, self.design.settings)
+        return switched_pi.build_problem(self.model, self.design.T, self.design.settings, self.design.scale)
 
     @property
     def state_names(self) -> list:

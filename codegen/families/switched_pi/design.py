@@ -27,6 +27,13 @@ Choices the paper leaves open (all documented in the README):
   exp(-a t) under any switching.
 * Strictness. Every block is imposed <= -margin I so the numpy re-check of the rounded matrices
   has slack; P >= margin I.
+* Unknown-input units. Theorem 2 is invariant under omega -> k omega (gamma -> gamma / k), the
+  solver and the margins are not: a force in N (entries of F ~ 1e-3) puts gamma^2 near 1e-11,
+  under the margins, and Clarabel stops (NumericalError, InsufficientProgress) where the same
+  model in kN certifies. The LMIs are solved for omega_s = omega / k, k a power of two per unknown
+  input that puts the solver's gamma near 1 (:func:`solver_scale`, committed in the design lock);
+  P, Gamma_ai, gamma and the gains are reported in the model's units, exactly (a power of two
+  rounds nothing), and the re-check checks the solved blocks (:func:`certify`).
 * Discrete step. Each mode's observer, a linear system in q = [z; w_hat] driven by [u; y], is
   discretized exactly under a zero-order hold at T_s (matrix exponential). Its homogeneous part
   exp((A_ai - K_ai C_ai) T_s) is the sampled error dynamics, so the common P that proves the
@@ -41,7 +48,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ...errors import CertificateError, ConfigurationError, DiscretizationError, RankConditionError
+from ...errors import CertificateError, ConfigurationError, DiscretizationError, RankConditionError, SolverError
 from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks
 from ...project.settings import setting
 from ...design.precision import margin_field, precision_field
@@ -144,6 +151,74 @@ def check_assumptions(sm: SwitchedModel, T: np.ndarray, tol: float = 1e-9) -> di
     return {"modes": report}
 
 
+def unit_power(c: float) -> float:
+    """The power of two p that brings c > 0 into (1/2, 1] (c p; 1 for c already there)."""
+    if not (c > 0 and np.isfinite(c)):
+        return 1.0
+    mant, e = np.frexp(c)                     # c = mant 2^e, mant in [1/2, 1)
+    return float(np.ldexp(1.0, -(int(e) - 1 if mant == 0.5 else int(e))))
+
+
+def ui_scale(sm: SwitchedModel) -> np.ndarray:
+    """Column equilibration of F, the start of :func:`solver_scale`: per unknown input the power
+    of two that brings the largest |entry| of its column of F (over the modes) into (1/2, 1]."""
+    return np.array([unit_power(c) for c in np.abs(sm.F).max(axis=(0, 1))])
+
+
+def solver_scale(sm: SwitchedModel, T: np.ndarray, settings: "SwitchedPIDesignSettings", solver) -> np.ndarray:
+    """k_j per unknown input: the LMIs are solved for omega_s = omega / k (F_s = F diag(k)), so that
+    the solver's gamma_s = gamma min k lies near 1.
+
+    Theorem 2 is invariant under omega -> k omega with gamma -> gamma / k; the solver and the
+    strictness margins are not: the (20) block holds -gamma^2 I beside the -I of the performance
+    output, both imposed <= -margin I, so a gamma^2 near or under the margin (1e-6) is set by the
+    margin, and far under it the solve fails. Measured on a car with a trailer force: in N (F ~
+    1e-3, gamma ~ 2e-6 rad/N) Clarabel stops with NumericalError; in kN it certifies 0.00238 rad/kN,
+    10 % above the 0.00216 it certifies with gamma_s near 1. Equilibrating F alone does not suffice:
+    the same model scaled to F ~ 1 has gamma_s = 0.0015, under the margin's floor (0.0060 rad/kN).
+    So: k_0 equilibrates F (:func:`ui_scale`: the first solve is posed in unit-size data), then up
+    to two analysis solves multiply k by :func:`unit_power` of the gamma_s they find (the first may
+    be inflated by the margin's floor, the second is measured clear of it), which puts gamma_s in (1/2, 1].
+    Powers of two: the model-unit matrices are the solved ones times powers of two, exactly.
+    Committed with the design (design lock, the problem's ``ui_scale``, left out when every k is 1)
+    and read back on replay (``solver.committed_data``): a committed solution without it (a lock or
+    gains file from before the scale) was solved at k = 1."""
+    name = problem_name(sm)
+    data = solver.committed_data(name)
+    if data is not None and "ui_scale" not in data:
+        return np.ones(sm.nw)
+    if data is not None:
+        k = np.asarray(data["ui_scale"], dtype=float).ravel()
+        if k.size != sm.nw or not np.all(np.isfinite(k)) or np.any(k <= 0) or np.any(np.frexp(k)[0] != 0.5):
+            from ...errors import DesignLockError
+            raise DesignLockError(f"{name}: committed ui_scale {data['ui_scale']!r} is not {sm.nw} power(s) of two; "
+                                  f"re-solve with `uiogen design NAME --update`")
+        return k
+    k = ui_scale(sm)
+    for _ in range(2):
+        try:
+            prob = build_problem(sm, T, settings, k, design=False)
+            gamma_s = float(np.sqrt(prob.solve(tol=settings.tol, unique=True)["gamma2"]))  # AlmostSolved: a fine start
+        except SolverError:
+            return k            # the design's own solve reports what fails
+        p = unit_power(gamma_s)
+        if p == 1.0:
+            break
+        k = k * p
+    return k
+
+
+def scaled_model(sm: SwitchedModel, k) -> SwitchedModel:
+    """``sm`` in the solver's unknown-input units omega_s = omega / k: F_s = F diag(k) (exact)."""
+    from dataclasses import replace
+    return replace(sm, F=sm.F * np.asarray(k, float)[None, None, :])
+
+
+def _state_scale(sm: SwitchedModel, k) -> np.ndarray:
+    """Diagonal of S, [x; omega] = S [x; omega_s]: the augmented state in model units from the solver's."""
+    return np.concatenate([np.ones(sm.n), np.asarray(k, float)])
+
+
 def _blocks(sm: SwitchedModel, T, P, G, gamma2, r, a, xp):
     """The LMI blocks, each required <= 0: (20), the pole disk and the decay region per mode."""
     # numpy numbers for the re-check; Affine decision matrices (codegen.design.lmi) for the problem
@@ -177,6 +252,11 @@ class SwitchedPIDesign:
     Pi: tuple
     Kp: tuple
     solution: LMISolution | None
+    ui_scale: tuple = ()       # k_j of :func:`solver_scale` the LMIs were solved with (empty: 1)
+
+    @property
+    def scale(self) -> np.ndarray:
+        return np.asarray(self.ui_scale or (1.0,) * self.KI[0].shape[0], dtype=float)
 
     def closed_loop(self, sm: SwitchedModel, i: int) -> np.ndarray:
         """A_ai - K_ai C_ai of (19)."""
@@ -190,11 +270,22 @@ class SwitchedPIDesign:
             out.update({f"Gamma_a{i + 1}": self.Gamma[i].tolist(), f"K{i + 1}": self.K[i].tolist(),
                         f"KI{i + 1}": self.KI[i].tolist(), f"Pi{i + 1}": self.Pi[i].tolist(),
                         f"Kp{i + 1}": self.Kp[i].tolist()})
+        out["ui_scale"] = self.scale.tolist()
         return out
 
 
-def build_problem(sm: SwitchedModel, T: np.ndarray, settings: SwitchedPIDesignSettings) -> LMIProblem:
-    prob = LMIProblem(f"{sm.definition.name}: Menhour et al. 2014 Theorem 2 (common P, {sm.n_modes} modes)")
+def problem_name(sm: SwitchedModel) -> str:
+    return f"{sm.definition.name}: Menhour et al. 2014 Theorem 2 (common P, {sm.n_modes} modes)"
+
+
+def build_problem(sm: SwitchedModel, T: np.ndarray, settings: SwitchedPIDesignSettings, k=None,
+                  design: bool = True) -> LMIProblem:
+    """The LMIs (20) with the pole disk and decay region, in the unknown-input units omega / k
+    (:func:`solver_scale`; None: 1); ``k`` is the problem's committed data (none when every k is 1)."""
+    k = np.ones(sm.nw) if k is None else np.asarray(k, dtype=float)
+    committed = design and np.any(k != 1.0)
+    prob = LMIProblem(problem_name(sm), design=design, data={"ui_scale": [float(v) for v in k]} if committed else {})
+    sm = scaled_model(sm, k)
     n_a, m = sm.n + sm.nw, sm.m
     P = prob.symmetric("P", n_a)
     G = [prob.matrix(f"Gamma_a{i + 1}", n_a, m) for i in range(sm.n_modes)]
@@ -212,12 +303,18 @@ def design(sm: SwitchedModel, settings: SwitchedPIDesignSettings, solver) -> Swi
     gamma^2 rounded to 12 digits before anything else."""
     T, N = decoupling_matrices(sm.C[0])
     check_assumptions(sm, T)
-    prob = build_problem(sm, T, settings)
+    k = solver_scale(sm, T, settings, solver)
+    prob = build_problem(sm, T, settings, k)
     sol = solver.solve(prob, tol=settings.tol)
-    P = decimal_round(0.5 * (sol["P"] + sol["P"].T))
     n_a, m = sm.n + sm.nw, sm.m
-    G = tuple(decimal_round(np.asarray(sol[f"Gamma_a{i + 1}"]).reshape(n_a, m)) for i in range(sm.n_modes))
-    gamma = float(np.sqrt(decimal_round(sol["gamma2"])))
+    # solved for [x; omega_s] = S^-1 [x; omega]: back to the model's units, P = S^-1 P_s S^-1,
+    # Gamma_a = S^-1 Gamma_as (powers of two: exact), gamma = gamma_s / min k (exact for one unknown
+    # input; a bound for several, ||omega_s|| <= ||omega|| / min k)
+    s = _state_scale(sm, k)
+    P = decimal_round(0.5 * (sol["P"] + sol["P"].T)) / np.outer(s, s)
+    G = tuple(decimal_round(np.asarray(sol[f"Gamma_a{i + 1}"]).reshape(n_a, m)) / s[:, None]
+              for i in range(sm.n_modes))
+    gamma = float(np.sqrt(decimal_round(sol["gamma2"]))) / float(k.min())
     K, KI, Pi, Kp = [], [], [], []
     for i in range(sm.n_modes):
         # the emitted gains: exact arithmetic (codegen.design.canonical), the same on every machine
@@ -226,13 +323,26 @@ def design(sm: SwitchedModel, settings: SwitchedPIDesignSettings, solver) -> Swi
         KI.append(Ka[sm.n:])
         Pi.append(canonical.matmul(T, sm.A[i]) - canonical.matmul(K[i], sm.C[i]))
         Kp.append(K[i] + canonical.matmul(Pi[i], N))
-    return SwitchedPIDesign(settings, T, N, P, G, gamma, tuple(K), tuple(KI), tuple(Pi), tuple(Kp), sol)
+    return SwitchedPIDesign(settings, T, N, P, G, gamma, tuple(K), tuple(KI), tuple(Pi), tuple(Kp), sol,
+                            tuple(float(v) for v in k))
 
 
 def certify(sm: SwitchedModel, d: SwitchedPIDesign) -> dict:
-    """Numpy re-check of (20) and the pole disk on the emitted P, Gamma_ai, gamma (no solver)."""
-    blocks = {"P > 0": d.P}
-    for label, blk in _blocks(sm, d.T, d.P, d.Gamma, d.gamma ** 2, d.settings.pole_radius, d.settings.decay_rate, np):
+    """Numpy re-check of (20), the pole disk and the decay region on the emitted P, Gamma_ai, gamma
+    (no solver), in the units the LMIs were solved in (:func:`solver_scale`): P_s = S P S,
+    Gamma_as = S Gamma_a, gamma_s = gamma min k, each a product by powers of two (exact). In the
+    model's units the blocks are W B_s W with W = diag(S^-1, k^-1, I) (exact congruence, the
+    same signs) and the gamma^2 k^-2 block bounded by gamma^2, so a pass certifies gamma in the
+    model's units (checked there, the unknown-input rows of a force in N are 2^18 times smaller than
+    the state rows, and the margins drown in the eigenvalue solver's round-off)."""
+    k = d.scale
+    s = _state_scale(sm, k)
+    Ps = d.P * np.outer(s, s)
+    Gs = tuple(g * s[:, None] for g in d.Gamma)
+    gamma_s = d.gamma * float(k.min())
+    blocks = {"P > 0": Ps}
+    for label, blk in _blocks(scaled_model(sm, k), d.T, Ps, Gs, gamma_s ** 2, d.settings.pole_radius,
+                              d.settings.decay_rate, np):
         blocks[label] = -blk
     checks = check_blocks(blocks)
     worst = min(checks, key=lambda c: c.min_eig)
@@ -352,15 +462,18 @@ def certify_discrete(sm: SwitchedModel, d: SwitchedPIDesign, dm: DiscreteModes) 
     The observer's own state matrix A_o equals the error matrix A_ai - K_ai C_ai (same blocks), so
     Phi_i is also the sampled error transition. Raises :class:`DiscretizationError` otherwise."""
     radii, ratios = [], []
-    Lc = np.linalg.cholesky(d.P)
+    # in the solver's unknown-input units (exact powers of two; the same ratios and radii)
+    s = _state_scale(sm, d.scale)
+    P = d.P * np.outer(s, s)
+    Lc = np.linalg.cholesky(P)
     Li = np.linalg.inv(Lc)
     for i in range(sm.n_modes):
         Acl = d.closed_loop(sm, i)
         if np.abs(observer_matrices(sm, d, i)[0] - Acl).max() > 1e-9 * max(1.0, np.abs(Acl).max()):
             raise DiscretizationError(f"mode {i + 1}: observer matrix differs from the error matrix")
-        Phi = dm.Phi[i]
+        Phi = dm.Phi[i] / s[:, None] * s[None, :]
         radii.append(float(np.abs(np.linalg.eigvals(Phi)).max()))
-        S = Li @ Phi.T @ d.P @ Phi @ Li.T
+        S = Li @ Phi.T @ P @ Phi @ Li.T
         ratios.append(float(np.linalg.eigvalsh(0.5 * (S + S.T)).max()))
     if max(radii) >= 1.0:
         raise DiscretizationError(f"the T_s = {dm.Ts:g} s step has spectral radius {max(radii):.6f} >= 1 "
