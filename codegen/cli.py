@@ -246,6 +246,9 @@ def _load_gains(path: Path) -> dict:
         raise ConfigurationError(f"gains file not found: {path}", source=str(path)) from None
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ConfigurationError(f"gains file {path} is not JSON: {exc}", source=str(path)) from None
+    except OSError as exc:      # a folder, no permission, an unreadable device: the cause, not a traceback
+        raise ConfigurationError(f"gains file {path} cannot be read ({exc.strerror or exc}); allowed: a readable "
+                                 f"JSON file", source=str(path)) from None
     if not isinstance(data, dict):
         raise ConfigurationError(f"gains file {path}: expected a JSON object of named matrices", source=str(path))
     return data

@@ -13,9 +13,15 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
+import math
+import re
+
 from ..errors import (CertificateError, ConfigurationError, DesignLockError, DiscretizationError,
-                      InfeasibleLMIError)
+                      InfeasibleLMIError, brief)
 from .certificate import Certificate
+
+# the keys of one record of lmi_solutions (codegen.design.lmi.SolveRecord)
+RECORD_KEYS = ("problem", "variables", "objective", "iterations", "data")
 
 
 @dataclass(frozen=True)
@@ -64,10 +70,174 @@ def check(family, config, gains: dict, source: str) -> GainsCheck:
         ``gains`` is in no form the family checks, or a record does not fit the design (names
         the problem and the variable).
     """
+    import numpy as np
+
     from ..families.capabilities import GainForms
     if isinstance(family, GainForms) and "lmi_solutions" not in gains:
-        return family.check_gain_form(config, gains, source)
+        if not is_lock_file(gains):
+            _printed_form_entries(gains, source)
+        try:
+            # finite entries can still be unusable: P_i + X singular, or products that overflow (1e308)
+            with np.errstate(over="ignore", invalid="ignore"):
+                return family.check_gain_form(config, gains, source)
+        except np.linalg.LinAlgError as exc:
+            return GainsCheck(config.name, "printed", str(source), False,
+                              f"the gains cannot be evaluated in double precision (LinAlgError: {exc}): a matrix the "
+                              f"conditions invert is singular, or the entries are so large that products overflow")
     return check_lock_form(family, config, gains, source)
+
+
+# the names of the printed forms' gains (linf_uio: P1..PN, L1..LN, X, alpha; nonlinear_tyre_observer: L), and the
+# design-lock form's key: a key that is a near miss of one of them, while that one is absent, is a misspelling
+_PRINTED = re.compile(r"^(?:[PL]\d+|X|L|alpha)$")
+
+
+def _printed_form_entries(gains: dict, source) -> None:
+    """Refuse what a family's printed form would otherwise take silently (this module, not the family
+    packages, holds it: those are design inputs, and editing them re-solves every committed design):
+
+    - a misspelt gain name (``x`` for ``X``, ``alfa`` for ``alpha``, ``l`` for ``L``): the gain would be
+      unused (X taken as 0, the observer's alpha) and the verdict wrong;
+    - a boolean or a string among a gain's entries (``true`` or ``"1.5"``, which ``np.array(.., float)``
+      turns into a number).
+
+    Keys resembling no gain stay allowed: a design artifact or a published design carries annotations
+    (``source``, ``gamma_stated``, ``certificate``, ...) beside its gains.
+    """
+    from ..project.settings import suggest
+    present = [k for k in gains if _PRINTED.match(k)]
+    vertices = max([int(k[1:]) for k in present if k[1:].isdigit()] + [0])
+    names = ["X", "L", "alpha", "lmi_solutions", *(f"{c}{i}" for c in "PL" for i in range(1, vertices + 2))]
+    for key in gains:
+        if key in names:
+            continue
+        close = suggest(key, names)
+        if close is not None and close not in gains:
+            raise ConfigurationError(f"gains file {source}: key {key!r} is not read (did you mean {close!r}?); "
+                                     f"allowed: the family's printed form of its gains or the design lock's "
+                                     f"lmi_solutions", source=str(source), key=key)
+    for key in present:
+        if key == "alpha":
+            number(gains[key], key, source, "a positive number (the decay rate in 1/s)")
+        else:
+            number_matrix(gains[key], key, source, "finite numbers, a matrix as nested lists")
+
+
+def number_matrix(value, key: str, source, allowed: str):
+    """``value`` (parsed JSON) as a float matrix, refusing what ``np.array(value, float)`` would quietly
+    accept: a boolean (``true`` read as 1.0) or a string of digits (``"1.5"``) among the entries.
+
+    Parameters
+    ----------
+    value : object
+        A number, a list of numbers or a list of lists of numbers.
+    key : str
+        The gains file's key it was read from, named in the error.
+    source : str or Path
+        The gains file.
+    allowed : str
+        What the file may hold, for the error.
+
+    Returns
+    -------
+    numpy.ndarray
+        The entries, 2-D for a matrix (its shape is the caller's to check).
+
+    Raises
+    ------
+    ConfigurationError
+        An entry is not a finite JSON number, or the rows are ragged.
+    """
+    import numpy as np
+
+    def leaves(v):
+        if isinstance(v, list):
+            for x in v:
+                yield from leaves(x)
+        else:
+            yield v
+    # a bool is an int to Python and a digit string parses as float: both would be a wrong number, silently
+    bad = next((x for x in leaves(value) if isinstance(x, bool) or not isinstance(x, (int, float))), None)
+    if bad is not None or (not isinstance(value, list) and value is None):
+        raise ConfigurationError(f"gains file {source}: {key} = {brief(repr(value))}: entry {bad!r} is not a number; "
+                                 f"allowed: {allowed}", source=str(source), key=key, value=value, allowed=allowed)
+    try:
+        m = np.array(value, dtype=float)
+    except ValueError:          # ragged rows
+        raise ConfigurationError(f"gains file {source}: {key} = {brief(repr(value))} has rows of different lengths; "
+                                 f"allowed: {allowed}", source=str(source), key=key, value=value,
+                                 allowed=allowed) from None
+    if not np.all(np.isfinite(m)):
+        raise ConfigurationError(f"gains file {source}: {key} has non-finite entries (NaN or Infinity); allowed: "
+                                 f"{allowed}", source=str(source), key=key, value=value, allowed=allowed)
+    return m
+
+
+def number(value, key: str, source, allowed: str) -> float:
+    """``value`` as a finite float; a boolean or a string is refused (see :func:`number_matrix`)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigurationError(f"gains file {source}: {key} = {brief(repr(value))}; allowed: {allowed}",
+                                 source=str(source), key=key, value=value, allowed=allowed)
+    return float(value)
+
+
+def refuse_misspelt(gains: dict, read: list, source, allowed: str) -> None:
+    """Refuse a key that is not read but is a near miss of one that is (``x`` for ``X``, ``alfa`` for
+    ``alpha``, ``l1`` for ``L1``): it would be silently unused and the verdict computed without it.
+
+    Keys that resemble no read key stay allowed: a design artifact or a published design carries
+    annotations (``source``, ``gamma_stated``, ``certificate``, ...) beside its gains.
+    """
+    from ..project.settings import suggest
+    for key in gains:
+        if key in read:
+            continue
+        close = suggest(key, read)
+        if close is not None:
+            raise ConfigurationError(f"gains file {source}: key {key!r} is not read (did you mean {close!r}?); "
+                                     f"allowed: {allowed}", source=str(source), key=key, allowed=allowed)
+
+
+def _lock_records(raw: list, source) -> list:
+    """The records of ``lmi_solutions`` as :class:`~codegen.design.lmi.SolveRecord`, each refused with
+    its index and key when it is not one (a gains file is the user's, not a damaged lock: the error is a
+    ConfigurationError naming what is allowed, not advice to re-solve)."""
+    from ..design.lmi import SolveRecord
+    allowed = ('lmi_solutions: a list of {"problem": str, "variables": {name: number or matrix}, "objective": '
+               'number, "iterations": integer} as the design lock writes them')
+    records = []
+    for i, rec in enumerate(raw):
+        where = f"lmi_solutions[{i}]"
+        if not isinstance(rec, dict):
+            raise ConfigurationError(f"gains file {source}: {where} = {brief(repr(rec))} is not an object; allowed: "
+                                     f"{allowed}", source=str(source), key=where, value=rec, allowed=allowed)
+        from ..project.settings import suggest
+        for key in rec:
+            if key not in RECORD_KEYS:
+                hint = suggest(key, RECORD_KEYS)
+                raise ConfigurationError(
+                    f"gains file {source}: {where} has key {key!r}" + (f" (did you mean {hint!r}?)" if hint else "")
+                    + f"; allowed: {', '.join(RECORD_KEYS)}", source=str(source), key=f"{where}.{key}",
+                    allowed=", ".join(RECORD_KEYS))
+        missing = [k for k in RECORD_KEYS[:4] if k not in rec]
+        if missing:
+            raise ConfigurationError(f"gains file {source}: {where} lacks {', '.join(missing)}; allowed: {allowed}",
+                                     source=str(source), key=f"{where}.{missing[0]}", allowed=allowed)
+        if not isinstance(rec["variables"], dict):
+            raise ConfigurationError(f"gains file {source}: {where}.variables = {brief(repr(rec['variables']))} is "
+                                     f"not an object; allowed: {allowed}", source=str(source),
+                                     key=f"{where}.variables", allowed=allowed)
+        for name, value in rec["variables"].items():
+            number_matrix(value, f"{where}.variables.{name}", source, "finite numbers, a matrix as nested lists")
+        number(rec["objective"], f"{where}.objective", source, "a finite number")
+        if isinstance(rec["iterations"], bool) or not isinstance(rec["iterations"], int):
+            raise ConfigurationError(f"gains file {source}: {where}.iterations = {brief(repr(rec['iterations']))}; "
+                                     f"allowed: an integer", source=str(source), key=f"{where}.iterations")
+        try:
+            records.append(SolveRecord.from_json(rec, str(source)))
+        except DesignLockError as exc:
+            raise ConfigurationError(f"gains file {source}: {where}: {exc}", source=str(source), key=where) from None
+    return records
 
 
 def is_lock_file(gains: dict) -> bool:
@@ -77,24 +247,46 @@ def is_lock_file(gains: dict) -> bool:
 
 def check_lock_form(family, config, gains: dict, source: str) -> GainsCheck:
     """The generic check: ``gains["lmi_solutions"]`` replayed through the family's pipeline."""
-    from ..design.lmi import SolveRecord
+    import numpy as np
+
     from ..design.solver import LockReplay
     raw = gains.get("lmi_solutions")
     if raw is None and isinstance(gains.get("lock"), dict):      # a design lock file, as committed
         raw = gains["lock"].get("lmi_solutions")
     if not isinstance(raw, list):
+        from ..project.settings import suggest
+        near = next((k for k in gains if k != "lmi_solutions" and suggest(k, ["lmi_solutions"])), None)
+        what = ("no lmi_solutions" if raw is None and near is None
+                else f"key {near!r} is not read (did you mean 'lmi_solutions'?)" if raw is None
+                else f"lmi_solutions = {brief(repr(raw))} is not a list")
         raise ConfigurationError(
-            f"gains file {source}: no lmi_solutions; allowed: family {family.name!r} checks gains given as the design "
+            f"gains file {source}: {what}; allowed: family {family.name!r} checks gains given as the design "
             f"lock gives them: "
             f'{{"lmi_solutions": [{{"problem", "variables", "objective", "iterations"}}, ...]}} '
             f"(see generated_c/{config.name}/{config.name}_design.json)", key="lmi_solutions", source=str(source))
-    records = [SolveRecord.from_json(r, str(source)) for r in raw]
+    if not is_lock_file(gains):
+        # a hand-written file holds lmi_solutions alone: any other key would be silently unused
+        from ..project.settings import suggest
+        stray = sorted(k for k in gains if k != "lmi_solutions")
+        if stray:
+            hint = suggest(stray[0], ["lmi_solutions"])
+            raise ConfigurationError(
+                f"gains file {source}: key {stray[0]!r} is not read" + (f" (did you mean {hint!r}?)" if hint else "")
+                + f'; allowed: only "lmi_solutions" (or a design lock file as committed)', source=str(source),
+                key=stray[0], allowed="lmi_solutions")
+    records = _lock_records(raw, source)
     try:
         replay = LockReplay(records, source=str(source))
         build = family.build(config, replay)
         replay.check_complete()
     except (CertificateError, DiscretizationError, InfeasibleLMIError) as exc:
         return GainsCheck(config.name, "lmi_solutions", str(source), False, f"{type(exc).__name__}: {exc}")
+    except (ZeroDivisionError, np.linalg.LinAlgError) as exc:
+        # the re-check accepts a block at eigenvalue exactly 0 (X = 0 passes the algebraic UIO's "X >= I",
+        # re-checked with slack 1), and forming the gains then inverts a singular matrix: not certified
+        return GainsCheck(config.name, "lmi_solutions", str(source), False,
+                          f"{type(exc).__name__}: a matrix the gains are formed with is singular ({exc}): the "
+                          f"solution is on the boundary of its LMIs, not inside")
     except DesignLockError as exc:
         raise ConfigurationError(str(exc), source=str(source)) from None
     cases = {}

@@ -258,7 +258,7 @@ def test_check_gains_works_for_every_family_in_the_lock_form(tmp_path, capsys):
         bad.write_text(json.dumps({"lmi_solutions": data["lock"]["lmi_solutions"]}))
         assert cli.main(["check-gains", "ts_fuzzy_uio", "--gains", str(bad)]) == 2
         err = capsys.readouterr().err
-        assert f"{bad}: LMI solution record" in err and "'L1' is not" in err and "Traceback" not in err
+        assert f"gains file {bad}: lmi_solutions[0].variables.L1" in err and "Traceback" not in err
 
 
 # --- the lock verified and never lost (issue 25) -----------------------------------------------------------
