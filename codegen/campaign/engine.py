@@ -223,19 +223,6 @@ def exclusive(out_dir: Path, source: str = "SPEC"):
             fcntl.flock(fh, fcntl.LOCK_UN)
 
 
-def make_out_dir(out_dir: Path) -> Path:
-    """``mkdir -p`` of a campaign's folder: a file in the way (``--out`` an existing file, a file named
-    ``build`` in the project) is an :class:`OutputError` naming it."""
-    out_dir = Path(out_dir)
-    for folder in (out_dir, *out_dir.parents):
-        if folder.exists():
-            if not folder.is_dir():
-                raise OutputError(f"cannot create the campaign folder {out_dir}: {folder} is a file, not a folder; "
-                                  f"move it away or choose another --out")
-            break
-    return outputs.make_folder(out_dir)
-
-
 def _failed_rows(spec, runs, status: str, error: str) -> list:
     """Rows of runs that produced no result (their worker died, or the run raised): the run, its
     scenario, the status and what happened; counted, never scored."""
@@ -340,7 +327,7 @@ def run(spec, out_dir, scheduler: str | None = None, workers: int | None = None,
     raises :class:`CampaignError` naming the runs it kept and the command that continues it.
     """
     log = log or (lambda text: print(text, file=sys.stderr))
-    out_dir = make_out_dir(out_dir)
+    out_dir = outputs.make_folder(out_dir)     # a file in the way is named
     with exclusive(out_dir, spec.source):
         return _run(spec, out_dir, scheduler, workers, progress, client, resume, log)
 

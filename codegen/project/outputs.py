@@ -60,8 +60,15 @@ def writing(path, what: str = "write"):
 
 
 def make_folder(path) -> Path:
-    """``mkdir -p`` of an output folder (an OSError is an OutputError)."""
+    """``mkdir -p`` of an output folder (an OSError is an OutputError); a file in the way (an
+    ``--out`` under an existing file) is named, not reported as mkdir's bare 'File exists'."""
     path = Path(path)
+    for folder in (path, *path.parents):
+        if folder.exists():
+            if not folder.is_dir():
+                raise OutputError(f"cannot create the folder {path}: {folder} is a file, not a folder; move it "
+                                  f"away or write elsewhere")
+            break
     with writing(path, "create the folder"):
         path.mkdir(parents=True, exist_ok=True)
     return path

@@ -209,7 +209,7 @@ def export_fmu(observer, out, log=print, fmi_version: str = "2.0") -> Path:
                               flags=STRICT_CFLAGS, shared=True, object_dir=tmp / "obj")
         files = {"modelDescription.xml": md.encode(), f"binaries/linux64/{name}.so": so.read_bytes(),
                  **{f"sources/{f}": text.encode() for f, text in sources.items()}}
-    out.parent.mkdir(parents=True, exist_ok=True)
+    outputs.make_folder(out.parent)
     _zip(out, files)
     log(f"{name}: wrote {out} (FMI 2.0 co-simulation, {len(variables(b))} variables, step {config.sample_time:g} s, "
         f"binaries/linux64/{name}.so and sources/)")
@@ -362,7 +362,7 @@ def export_fmu3(observer, out, log=print) -> Path:
                               flags=STRICT_CFLAGS, shared=True, object_dir=tmp / "obj")
         files = {"modelDescription.xml": md.encode(), f"binaries/{FMI3_PLATFORM}/{name}.so": so.read_bytes(),
                  **{f"sources/{f}": text.encode() for f, text in sources.items()}}
-    out.parent.mkdir(parents=True, exist_ok=True)
+    outputs.make_folder(out.parent)
     _zip(out, files)
     log(f"{name}: wrote {out} (FMI 3.0 co-simulation, {len(variables(b)) + 1} variables, step "
         f"{config.sample_time:g} s, binaries/{FMI3_PLATFORM}/{name}.so and sources/)")

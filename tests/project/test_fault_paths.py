@@ -206,13 +206,15 @@ def test_one_campaign_at_a_time_per_folder(tmp_path):
         pass
 
 
-def test_a_file_in_the_way_of_the_campaign_folder(tmp_path):
+def test_a_file_in_the_way_of_an_output_folder(tmp_path):
+    """A campaign's --out or an FMU's folder under a file: named (was mkdir's bare 'File exists')."""
+    from codegen.project import outputs
     (tmp_path / "build").write_text("")
     with pytest.raises(OutputError, match=f"{tmp_path / 'build'} is a file, not a folder"):
-        engine.make_out_dir(tmp_path / "build" / "campaigns" / "c")
+        outputs.make_folder(tmp_path / "build" / "campaigns" / "c")
     with pytest.raises(OutputError, match="is a file, not a folder"):
-        engine.make_out_dir(tmp_path / "build")
-    assert engine.make_out_dir(tmp_path / "a" / "b").is_dir()
+        outputs.make_folder(tmp_path / "build")
+    assert outputs.make_folder(tmp_path / "a" / "b").is_dir()
 
 
 @pytest.mark.slow       # Dask: a client that waits for a scheduler

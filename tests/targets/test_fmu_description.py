@@ -78,3 +78,14 @@ def test_a_starter_header_gives_its_first_sentence_and_no_header_the_family(tmp_
                                   "from the built-in observer lpv_linf_driver_torque.")
     b = _build(tmp_path, HEADER.split("\n\n", 1)[1])
     assert fmu.description(b).startswith("observer obs: ") and "2019" in fmu.description(b)
+
+
+def test_an_fmu_under_a_file_is_an_output_error_naming_it(tmp_path, capsys):
+    """`uiogen export NAME --out afile/x.fmu` with afile a file: one typed line (was a FileExistsError
+    traceback from mkdir, after the FMU's sources were compiled)."""
+    from codegen import cli
+    (tmp_path / "afile").write_text("")
+    out = tmp_path / "afile" / "x.fmu"
+    assert cli.main(["export", "algebraic_uio_example1", "--format", "fmu", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("uiogen: error: OutputError: ") and f"{tmp_path / 'afile'} is a file, not a folder" in err
