@@ -30,8 +30,9 @@ Choices the paper leaves open (all documented in the README):
 * Unknown-input units. Theorem 2 is invariant under omega -> k omega (gamma -> gamma / k), the
   solver and the margins are not: a force in N (entries of F ~ 1e-3) puts gamma^2 near 1e-11,
   under the margins, and Clarabel stops (NumericalError, InsufficientProgress) where the same
-  model in kN certifies. The LMIs are solved for omega_s = omega / k, k a power of two per unknown
-  input that puts the solver's gamma near 1 (:func:`solver_scale`, committed in the design lock);
+  model in kN certifies. A problem the solver cannot answer in the model's units is solved for
+  omega_s = omega / k, k a power of two per unknown input that puts the solver's gamma near 1
+  (:func:`solver_scale`, committed in the design lock; k = 1 for a problem that solves unscaled);
   P, Gamma_ai, gamma and the gains are reported in the model's units, exactly (a power of two
   rounds nothing), and the re-check checks the solved blocks (:func:`certify`).
 * Discrete step. Each mode's observer, a linear system in q = [z; w_hat] driven by [u; y], is
@@ -176,7 +177,9 @@ def solver_scale(sm: SwitchedModel, T: np.ndarray, settings: "SwitchedPIDesignSe
     1e-3, gamma ~ 2e-6 rad/N) Clarabel stops with NumericalError; in kN it certifies 0.00238 rad/kN,
     10 % above the 0.00216 it certifies with gamma_s near 1. Equilibrating F alone does not suffice:
     the same model scaled to F ~ 1 has gamma_s = 0.0015, under the margin's floor (0.0060 rad/kN).
-    So: k_0 equilibrates F (:func:`ui_scale`: the first solve is posed in unit-size data), then up
+    So: when the problem solves in the model's units, k = 1 (the built-ins, and random models whose
+    tiny gamma the margin sets: scaling those broke more than it mended). Otherwise k_0 equilibrates
+    F (:func:`ui_scale`: the first solve is posed in unit-size data), then up
     to two analysis solves multiply k by :func:`unit_power` of the gamma_s they find (the first may
     be inflated by the margin's floor, the second is measured clear of it), which puts gamma_s in (1/2, 1].
     Powers of two: the model-unit matrices are the solved ones times powers of two, exactly.
@@ -194,6 +197,15 @@ def solver_scale(sm: SwitchedModel, T: np.ndarray, settings: "SwitchedPIDesignSe
             raise DesignLockError(f"{name}: committed ui_scale {data['ui_scale']!r} is not {sm.nw} power(s) of two; "
                                   f"re-solve with `uiogen design NAME --update`")
         return k
+    # the model's own units first: a problem that solves there keeps them (its gamma is a valid
+    # bound, set by the margin when tiny); rescaling one that solves gains little and, measured on
+    # random models (gamma ~ 1e-3, k up to 2^23), turned solvable problems into NumericalError or
+    # PrimalInfeasible ones. The scale is for a problem the solver cannot answer in the model's units.
+    try:
+        build_problem(sm, T, settings, np.ones(sm.nw), design=False).solve(tol=settings.tol, unique=True)
+        return np.ones(sm.nw)
+    except SolverError:
+        pass
     k = ui_scale(sm)
     for _ in range(2):
         try:
