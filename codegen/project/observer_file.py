@@ -199,9 +199,11 @@ def load_module(path: Path, name: str):
     sys.modules[name] = module
     try:
         spec.loader.exec_module(module)
+        if isinstance(getattr(module, "MODEL", None), ModelDefinition):
+            check_unit_keys(module.MODEL)
     except ModelDefinitionError as exc:
         del sys.modules[name]
-        # a check of ModelDefinition itself (a field of the wrong type): name the file it is in
+        # a check of ModelDefinition itself (a field of the wrong type, a misspelt units key): name the file
         if exc.args and isinstance(exc.args[0], str) and str(path) not in exc.args[0]:
             exc.args = (f"{path}: {exc.args[0]}", *exc.args[1:])
         raise
@@ -212,12 +214,6 @@ def load_module(path: Path, name: str):
         del sys.modules[name]
         raise ModelDefinitionError(f"{path}: importing the model called sys.exit({exc.code!r}); a model file "
                                    f"defines MODEL = ModelDefinition(...) and returns") from None
-    if isinstance(getattr(module, "MODEL", None), ModelDefinition):
-        try:
-            check_unit_keys(module.MODEL)
-        except ModelDefinitionError as exc:
-            del sys.modules[name]
-            raise ModelDefinitionError(f"{path}: {exc.args[0]}") from None
     return module
 
 
