@@ -282,8 +282,9 @@ def check_lock_form(family, config, gains: dict, source: str) -> GainsCheck:
     except (CertificateError, DiscretizationError, InfeasibleLMIError) as exc:
         return GainsCheck(config.name, "lmi_solutions", str(source), False, f"{type(exc).__name__}: {exc}")
     except (ZeroDivisionError, np.linalg.LinAlgError) as exc:
-        # the re-check accepts a block at eigenvalue exactly 0 (X = 0 passes the algebraic UIO's "X >= I",
-        # re-checked with slack 1), and forming the gains then inverts a singular matrix: not certified
+        # forming the gains inverts or divides by a matrix of the solution; one singular or overflowing in
+        # floating point (the re-check refuses a block that is singular beyond rounding, not every such
+        # product) makes the gains not certified
         return GainsCheck(config.name, "lmi_solutions", str(source), False,
                           f"{type(exc).__name__}: a matrix the gains are formed with is singular ({exc}): the "
                           f"solution is on the boundary of its LMIs, not inside")

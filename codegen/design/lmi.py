@@ -231,6 +231,13 @@ class Constraint:
     hint: str
 
 
+# An eigenvalue numpy.linalg.eigvalsh returns is within about n eps ||M||_2 of the exact eigenvalue of
+# the matrix it was given (a backward-stable symmetric solver, then Weyl's inequality); a smallest
+# eigenvalue below this many times that is not known to be positive, so the block is not certified.
+# An exactly singular block (X = 0 against "X > 0") or one positive by rounding only fails.
+EIG_ROUNDING_FACTOR = 4.0
+
+
 @dataclass(frozen=True)
 class BlockCheck:
     label: str
@@ -241,6 +248,27 @@ class BlockCheck:
     @property
     def relative_margin(self) -> float:
         return self.min_eig / max(self.scale, 1e-300)
+
+    @property
+    def rounding_floor(self) -> float:
+        """Smallest eigenvalue that is known to be positive: ``EIG_ROUNDING_FACTOR n eps ||M||_2``."""
+        return EIG_ROUNDING_FACTOR * self.size * float(np.finfo(float).eps) * self.scale
+
+    @property
+    def certified(self) -> bool:
+        """The block is positive definite beyond the eigensolver's rounding (a strict LMI holds)."""
+        return bool(self.min_eig > self.rounding_floor)
+
+    def failure(self) -> str:
+        """Why the block is not certified, for an error message."""
+        floor = f" (it must exceed the eigensolver's rounding {self.rounding_floor:.1e})" if self.min_eig >= 0 else ""
+        return f"smallest eigenvalue {self.min_eig:.3e}{floor}, block scale {self.scale:.3e}"
+
+
+def uncertified(checks) -> BlockCheck | None:
+    """The block with the least relative margin among those that fail, or None when all are certified."""
+    failed = [c for c in checks if not c.certified]
+    return min(failed, key=lambda c: c.relative_margin) if failed else None
 
 
 @dataclass(frozen=True)
@@ -867,10 +895,9 @@ class LMIProblem:
             eig = np.linalg.eigvalsh(0.5 * (mat + mat.T))
             check = BlockCheck(con.label, n, float(eig[0]), float(np.abs(eig).max()))
             checks.append(check)
-            if eig[0] < 0.0:
+            if not check.certified:
                 raise CertificateError(
-                    f"LMI {con.label!r} fails the numpy re-check: smallest eigenvalue "
-                    f"{eig[0]:.3e} < 0 (block scale {check.scale:.3e}); the solver's answer "
+                    f"LMI {con.label!r} fails the numpy re-check: {check.failure()}; the solver's answer "
                     f"cannot be trusted — tighten the solver tolerance or add a margin")
         return tuple(checks)
 

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from codegen.errors import CertificateError, InfeasibleLMIError, LMIShapeError, NonAffineLMIError
-from codegen.design.lmi import LMIProblem, bmat, svec, trace, unsvec
+from codegen.design.lmi import LMIProblem, bmat, check_blocks, svec, trace, uncertified, unsvec
 
 
 def test_svec_roundtrip_and_order():
@@ -103,3 +103,31 @@ def test_exact_reductions_keep_the_optimum_and_the_certificate():
     np.testing.assert_allclose(reduced["P"], full["P"] + full["S"], atol=1e-6)
     assert [c.label for c in reduced.checks] == [c.label for c in full.checks]   # every original block
     assert all(c.min_eig >= 0 for c in reduced.checks)
+
+
+def test_recheck_needs_a_margin_beyond_rounding():
+    # a strict LMI (P > 0) holds only when the smallest eigenvalue is positive beyond what eigvalsh
+    # cannot resolve (about n eps ||M||): an exactly singular block, or one positive by rounding only,
+    # is not certified; a small but resolved margin is
+    singular, rounding, resolved, negative = check_blocks({
+        "zero": np.zeros((3, 3)),
+        "rounding": np.diag([1e6, 1e-12]),
+        "resolved": np.diag([1e6, 1e-6]),
+        "negative": np.diag([1.0, -1e-3])})
+    assert [c.certified for c in (singular, rounding, resolved, negative)] == [False, False, True, False]
+    assert uncertified([resolved]) is None
+    assert uncertified([resolved, rounding, negative]) is negative        # the least relative margin
+    assert "must exceed the eigensolver's rounding" in rounding.failure()
+
+
+def test_replay_of_a_singular_solution_fails_the_recheck():
+    from codegen.design.lmi import SolveRecord
+    A = np.array([[-1.0, 2.0], [0.0, -3.0]])
+    prob = LMIProblem("lyapunov")
+    P = prob.symmetric("P", 2)
+    prob.require_psd("P > 0", P)
+    prob.require_nsd("A'P + PA < 0", A.T @ P + P @ A)
+    prob.minimize(trace(P))
+    rec = SolveRecord(prob.name, {"P": np.zeros((2, 2)).tolist()}, 0.0, 0, dict(prob.data))
+    with pytest.raises(CertificateError, match="'P > 0' fails the numpy re-check: smallest eigenvalue 0"):
+        prob.replay(rec)

@@ -61,12 +61,17 @@ def test_lock_form_unread_keys_are_refused(tmp_path, capsys):
 
 
 def test_lock_form_zero_solution_is_not_certified(tmp_path, capsys):
-    # X = 0 passes the re-check of "X >= I" (slack 1, eigenvalue exactly 0); L = X^-1 K divided by zero
+    # X = 0 makes a block of the algebraic UIO's LMIs exactly singular: the numpy re-check refuses it
+    # (a strict LMI), before L = X^-1 K would divide by zero
     def zero(r):
         for k, v in r["variables"].items():
             r["variables"][k] = (0 * np.array(v, float)).tolist()
-    rc, err = check(tmp_path, capsys, "algebraic_uio_example2", _records("algebraic_uio_example2", zero))
-    assert rc == 1
+    path = tmp_path / "gains.json"
+    path.write_text(json.dumps(_records("algebraic_uio_example2", zero)))
+    rc = cli.main(["check-gains", "algebraic_uio_example2", "--gains", str(path)])
+    out = capsys.readouterr()
+    assert rc == 1 and "Traceback" not in out.out + out.err
+    assert "fails the numpy re-check" in out.out and "smallest eigenvalue 0.000e+00" in out.out, out.out
 
 
 def _linf(edit):

@@ -51,7 +51,7 @@ from ...representation.differentiators import MAX_ORDER, HosmdSpec
 from ...emit.stepgen import lambdify
 from ...errors import (CertificateError, DiscretizationError, InfeasibleLMIError, ModelDefinitionError,
                       SolverError)
-from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
+from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace, uncertified
 from ...model import LPVModel
 from ...representation.polytope import (Premise, affine_decomposition, nonlinear_factors, sector_weights_product,
                                         vertex_matrices)
@@ -354,9 +354,10 @@ def certify(d: AlgebraicDesign) -> dict:
         named[label] = -(Xs @ Fs + Fs.T @ Xs + 2 * d.settings.alpha * Xs)
     checks = check_blocks(named)
     worst = min(checks, key=lambda c: c.min_eig)
-    if worst.min_eig <= 0:
-        raise CertificateError(f"LMI (39) block {worst.label!r} fails the numpy re-check on the emitted gains: "
-                               f"smallest eigenvalue {worst.min_eig:.3e}")
+    failed = uncertified(checks)
+    if failed is not None:
+        raise CertificateError(f"LMI (39) block {failed.label!r} fails the numpy re-check on the emitted gains: "
+                               f"{failed.failure()}")
     return {"blocks": len(checks), "worst_block": worst.label, "worst_min_eig": worst.min_eig,
             "worst_relative_margin": worst.relative_margin, "alpha": d.settings.alpha}
 
@@ -585,8 +586,9 @@ def aux_design(lpv: LPVModel, boxes: dict, mode: str, alpha: float, solver, tol:
         blocks[f"aux vertex {v + 1}"] = -(Xs @ As + As.T @ Xs + 2 * rate * Xs)
     checks = check_blocks(blocks)
     worst = min(checks, key=lambda c: c.min_eig)
-    if worst.min_eig <= 0:
-        raise CertificateError(f"auxiliary-system certificate fails the numpy re-check ({worst.label})")
+    failed = uncertified(checks)
+    if failed is not None:
+        raise CertificateError(f"auxiliary-system certificate fails the numpy re-check ({failed.label}: {failed.failure()})")
     a = max(sum(abs(v) for v in row) for row in GL_A)
     return {"mode": mode, "K_s": None if Ks is None else Ks.tolist(), "decay": rate, "vertices": poly.n_vertices,
             "premises": [str(p.expr) for p in poly.premises], "worst_min_eig": worst.min_eig,

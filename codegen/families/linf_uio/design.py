@@ -31,7 +31,7 @@ import numpy as np
 from ...design.canonical import decimal_round
 from ...errors import ConfigurationError, RankConditionError
 from ...errors import SolverError
-from ...design.lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks
+from ...design.lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks, uncertified
 from ...representation.polytope import Polytope
 from ...project.settings import Rule, setting
 from ...design.precision import margin_field, precision_field
@@ -342,7 +342,7 @@ def certify(poly: Polytope, P, X, L, alpha: float, performance=None) -> dict:
     Dd = ui_feedthrough(poly)
     blocks = {f"(19) P{i + 1}+X > 0": Q[i] for i in range(N)}
     checks = list(check_blocks(blocks))
-    if any(c.min_eig <= 0 for c in checks):
+    if uncertified(checks) is not None:
         return {"feasible": False, "gamma": float("inf"), "mu": float("inf"), "nu": float("inf"),
                 "blocks": [_check_json(c) for c in checks], "reason": "P_i + X not positive definite"}
     mu = max(float(np.linalg.eigvalsh(F @ np.linalg.solve(q, F.T)).max()) for q in Q)
@@ -362,8 +362,9 @@ def certify(poly: Polytope, P, X, L, alpha: float, performance=None) -> dict:
                     s2, b2 = S(j, i)
                     s, b, count = s1 + s2, b1 + b2, 2
                     label = f"(21) Y_{i + 1}{j + 1}+Y_{j + 1}{i + 1}, rate vertex {v + 1}"
-                lam_max = float(np.linalg.eigvalsh(s).max())
-                if lam_max >= 0:
+                state_block = check_blocks({label: -s})[0]
+                lam_max = -state_block.min_eig
+                if not state_block.certified:   # s must be negative definite beyond rounding
                     feasible, need = False, float("inf")
                 else:
                     # [[s, b], [b', -2 count alpha nu I]] <= 0  <=>  nu >= lmax(b' (-s)^-1 b)/(2 count alpha)

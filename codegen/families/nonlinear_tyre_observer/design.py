@@ -47,7 +47,7 @@ import numpy as np
 from ...design.canonical import decimal_round
 from ...design.precision import required_margin
 from ...errors import CertificateError, SolverError
-from ...design.lmi import LMIProblem, bmat, check_blocks, objective_bound
+from ...design.lmi import LMIProblem, bmat, check_blocks, objective_bound, uncertified
 
 DEG = 180.0 / np.pi
 CHANNELS = ("force_front", "force_rear", "ay", "r", "euler_vy", "euler_r")
@@ -300,9 +300,10 @@ def certify(plant, decay_verts, gain_verts, design: Design, level: LevelBound) -
     blocks.update({f"level bound {x.label}": gain_block(plant, x, level.Q, YQ, np.diag(level.mu)) for x in gain_verts})
     checks = check_blocks(blocks)
     worst = min(checks, key=lambda c: c.relative_margin)
-    if worst.min_eig < 0:
-        raise CertificateError(f"nonlinear-tyre observer: LMI {worst.label!r} fails the numpy re-check on the emitted "
-                               f"P and L: smallest eigenvalue {worst.min_eig:.3e}")
+    failed = uncertified(checks)
+    if failed is not None:
+        raise CertificateError(f"nonlinear-tyre observer: LMI {failed.label!r} fails the numpy re-check on the emitted "
+                               f"P and L: {failed.failure()}")
     # contraction: the largest generalized eigenvalue of (A'PA, P) over the decay vertices (physical P)
     P_phys = D.T @ design.P @ D
     Li = np.linalg.inv(np.linalg.cholesky(P_phys))

@@ -50,7 +50,7 @@ import casadi as ca
 import numpy as np
 
 from ...errors import CertificateError, ConfigurationError, DiscretizationError, RankConditionError, SolverError
-from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks
+from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, uncertified
 from ...project.settings import setting
 from ...design.precision import margin_field, precision_field
 from .representation import SwitchedModel
@@ -358,9 +358,10 @@ def certify(sm: SwitchedModel, d: SwitchedPIDesign) -> dict:
         blocks[label] = -blk
     checks = check_blocks(blocks)
     worst = min(checks, key=lambda c: c.min_eig)
-    if worst.min_eig <= 0:
-        raise CertificateError(f"Menhour et al. 2014 LMI {worst.label!r} fails the numpy re-check on the emitted matrices: "
-                               f"smallest eigenvalue {worst.min_eig:.3e}")
+    failed = uncertified(checks)
+    if failed is not None:
+        raise CertificateError(f"Menhour et al. 2014 LMI {failed.label!r} fails the numpy re-check on the emitted matrices: "
+                               f"{failed.failure()}")
     poles = [np.linalg.eigvals(d.closed_loop(sm, i)) for i in range(sm.n_modes)]
     return {"blocks": len(checks), "worst_block": worst.label, "worst_min_eig": worst.min_eig,
             "worst_relative_margin": worst.relative_margin,

@@ -30,7 +30,7 @@ import numpy as np
 
 from ...errors import CertificateError, ConfigurationError, RankConditionError, RepresentationError
 from ...emit.stepgen import solve_unpivoted
-from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
+from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace, uncertified
 from ...representation.polytope import sector_weights_product
 from ...project.settings import setting
 from ...design.precision import margin_field, precision_field
@@ -255,9 +255,10 @@ def certify(ts: TSFuzzyModel, d: TSDesign) -> dict:
     checks = check_blocks({f"P{i + 1} > 0": p for i, p in enumerate(d.P)})
     checks += check_blocks(dict(_blocks(ts, d.T, d.P, d.M, d.L, d.settings.decay, np, d.P_bar)))
     worst = min(checks, key=lambda c: c.min_eig)
-    if worst.min_eig <= 0:
-        raise CertificateError(f"Nguyen et al. 2021 LMI {worst.label!r} fails the numpy re-check on the emitted "
-                               f"matrices: smallest eigenvalue {worst.min_eig:.3e}")
+    failed = uncertified(checks)
+    if failed is not None:
+        raise CertificateError(f"Nguyen et al. 2021 LMI {failed.label!r} fails the numpy re-check on the emitted "
+                               f"matrices: {failed.failure()}")
     return {"blocks": len(checks), "worst_block": worst.label, "worst_min_eig": worst.min_eig,
             "worst_relative_margin": worst.relative_margin}
 
