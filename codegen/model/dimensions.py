@@ -15,7 +15,10 @@ term or the declaration. It reads every number but 1 and -1 as one that may carr
 ``3000 * sin(...)`` in newtons, a time constant ``(u - x) / 10``), so it refuses only what no
 reading of the numbers makes consistent: ``- r`` in an acceleration, a time constant declared
 in metres. An output declared in a unit of the same dimension as its signal but another scale
-(``deg/s`` for a yaw rate in ``rad/s``) is refused too, since the step does not convert. (The
+(``deg/s`` for a yaw rate in ``rad/s``) is refused too, since the step does not convert; so are
+the parts of one sum fixed by the declarations at two scales of one dimension (``delta`` in deg
+beside ``v_y / v_x``), a term at another scale than its equation needs and such an argument of
+``sin``, ``exp``, ... (:func:`_scale_mixtures`). (The
 plausibility checks read numbers as pure, which infers more: ``2 * C_f`` and ``2 * C_r`` are of
 one kind.)
 
@@ -304,7 +307,7 @@ def check_units(model) -> None:
     if analysis.inconsistencies:
         problems = _term_mismatches(model) or _declaration_mismatches(model) or [
             f"the units do not agree in {', '.join(analysis.inconsistencies)}"]
-    problems += _scale_mismatches(model)
+    problems += _scale_mismatches(model) + _scale_mixtures(model)
     if problems:
         raise UnitError(f"model {model.name!r}: its equations contradict its declared units: {'; '.join(problems)} "
                         f"(each term of d x/dt must be in the unit of x per second, an output in its declared unit, "
@@ -366,6 +369,108 @@ def _scale_mismatches(model) -> list:
             out.append(f"output {name} = {expr} is declared in {units[name]}, {rest} is in {declared}, and the step "
                        f"does not convert: declare {name} in {declared}, or write it as {ratio:.10g}*{rest}")
     return out
+
+
+def _scale_mixtures(model) -> list:
+    """Parts of one sum (or Min/Max, Piecewise branches, atan2's arguments) whose units are fixed by
+    the declarations alone and have one dimension but another scale, and such a part of an
+    equation in another scale than the equation needs; and a fixed argument of sin, exp, ... not
+    in radians or SI: ``delta - (v_y + l_f r)/v_x`` with ``delta`` in deg adds degrees to radians,
+    and the step does not convert. A part's scale is fixed when it is made of declared signals,
+    declared parameters and the numbers 1 and -1; a parameter without a unit, a signal without a
+    unit or any other number may carry a scale (the dimension check reads numbers the same way).
+    An output that is a number times a signal is :func:`_scale_mismatches`' (it checks the number)."""
+    import math
+    units = getattr(model, "units", None) or {}
+    scales = {name: unit(text)[1] for name, text in units.items()}
+    for g in getattr(model, "scheduling", ()):
+        if getattr(g, "unit", "") and str(g.symbol) not in scales:
+            scales[str(g.symbol)] = unit(g.unit)[1]
+    declared = {**{str(g.symbol): g.unit for g in getattr(model, "scheduling", ()) if getattr(g, "unit", "")},
+                **units}
+    out: dict = {}          # {what is wrong: [where]}: a sum the equations share is named once
+
+    def say(where, what):
+        out.setdefault(what, []).append(where)
+
+    def same(a, b):
+        return math.isclose(a, b, rel_tol=1e-9)
+
+    def desc(expr) -> str:
+        names = sorted({str(x) for x in sp.sympify(expr).free_symbols if str(x) in declared})
+        return ", ".join(f"{n} in {declared[n]}" for n in names) or "pure numbers"
+
+    def agree(parts, what):
+        where, what = what
+        fixed = [(a, f) for a, f in parts if f is not None]
+        for a, f in fixed[1:]:
+            b, g = fixed[0]
+            if not same(f, g):
+                # name the simpler part first: it is usually the one declared in another unit
+                (a, f), (b, g) = sorted(((a, f), (b, g)), key=lambda t: sp.count_ops(t[0]))
+                say(where, f"{what}, {a} ({desc(a)}) is {f / g:.10g} times the unit of {b} ({desc(b)}), and "
+                           f"the step does not convert: declare the units alike, or write the conversion")
+        return fixed[0][1] if fixed else None
+
+    def scale(expr, where):
+        """Factor to SI of ``expr`` when the declarations fix it, else None."""
+        if expr.is_number:
+            return 1.0 if expr in (sp.S.One, sp.S.NegativeOne) else None
+        if expr.is_Symbol:
+            return scales.get(str(expr))
+        if expr.is_Add:
+            return agree([(a, scale(a, where)) for a in expr.args], (where, f"in the sum {expr}"))
+        if expr.is_Mul:
+            fs = [scale(a, where) for a in expr.args]
+            return None if any(f is None for f in fs) else math.prod(fs)
+        if expr.is_Pow:
+            base, exp = expr.args
+            f = scale(base, where)
+            if exp.is_number and exp.is_real:
+                return None if f is None else f ** float(exp)
+            scale(exp, where)
+            return None
+        if isinstance(expr, (sp.Abs, sp.re, sp.im)):
+            return scale(expr.args[0], where)
+        if isinstance(expr, (sp.Min, sp.Max)):           # a literal 0 fits any scale: Min(a_x, 0)
+            return agree([(a, scale(a, where)) for a in expr.args if not a.is_zero], (where, f"in {expr}"))
+        if isinstance(expr, sp.Piecewise):
+            for _, cond in expr.args:
+                if isinstance(cond, sp.core.relational.Relational):
+                    agree([(x, scale(x, where)) for x in (cond.lhs, cond.rhs) if not x.is_zero],
+                          (where, f"in the condition {cond}"))
+            return agree([(v, scale(v, where)) for v, _ in expr.args if not v.is_zero],
+                         (where, "among the branches of a Piecewise"))
+        if isinstance(expr, sp.atan2):
+            agree([(x, scale(x, where)) for x in expr.args], (where, f"in {expr}"))
+            return 1.0
+        if isinstance(expr, (sp.sign, sp.Heaviside)):
+            scale(expr.args[0], where)
+            return 1.0
+        if isinstance(expr, sp.Function):          # sin, exp, atan, ...: read their argument in radians / SI
+            for a in expr.args:
+                f = scale(a, where)
+                if f is not None and not same(f, 1.0):
+                    say(where, f"{expr.func} reads its argument {a} ({desc(a)}) in radians / SI units, "
+                               f"{1 / f:.10g} times its unit, and the step does not convert: declare the "
+                               f"units in radians / SI, or write {f:.10g}*({a})")
+            return 1.0
+        return None
+
+    for what, _, expr in _equations(model):
+        name = what[len("output "):] if what.startswith("output ") else what[1:-3]
+        need = scales.get(name)
+        coeff, rest = expr.as_coeff_Mul()
+        if what.startswith("output ") and rest.is_Symbol and coeff.is_number:
+            continue                                # a number times a signal: _scale_mismatches
+        terms = expr.args if expr.is_Add else (expr,)
+        for term in terms:
+            f = scale(term, what)
+            if f is not None and need is not None and not same(f, need):
+                say(what, f"the term {term} ({desc(term)}) is {f / need:.10g} times the unit the equation "
+                          f"needs ({declared[name]}{'' if what.startswith('output') else ' per s'}), and the step "
+                          f"does not convert: declare the units alike, or write the conversion")
+    return [f"{', '.join(dict.fromkeys(wheres))}: {what}" for what, wheres in out.items()]
 
 
 def infer(model, declared_parameters: bool = True, free_numbers: bool = False) -> Analysis:
