@@ -166,13 +166,19 @@ def cmd_design(args) -> int:
 
 
 def _print_design(b, path, as_json: bool, compare: dict) -> int:
-    """The design's certificate and figures (text, or JSON with the comparison to the committed design)."""
+    """The design's certificate and figures (text, or JSON with the comparison to the committed
+    design), and the parameters no plausible range checked (no unit declared: a note)."""
     from .certificate import text
+    from .model import dimensions
+    model = b.config.load_model()
     if as_json:
         _print_json({"observer": b.name, "artifact": str(path), **b.figures(), "certificate": b.certificate.to_json(),
-                     "committed_design": compare})
+                     "committed_design": compare, "unranged_parameters": list(dimensions.unranged_parameters(model))})
         return 0
     print("\n".join(text.design_lines(families.get(b.config.family), b, path)))
+    note = dimensions.unranged_note(model, b.config.model_path)
+    if note:
+        print(note)
     return 0
 
 

@@ -8,9 +8,13 @@
 * the hashes of the user's files the design was made from -- the observer file, its parameter
   file and its model -- compiled into the extension (its ``SOURCES`` constant,
   :func:`source_digests`): an extension whose observer file, parameters or model changed since it
-  was built is refused, naming the file. The observer file is hashed as parsed, less its
-  ``[data]`` and ``[precision]`` tables (no design or C derives from them) and its comments, as
-  the design's own hash takes it; the parameter file and the model byte for byte.
+  was built is refused, naming the file. Each file is hashed for what it says, not how it is
+  written (:data:`HASHING`), by the same functions the design lock's hash calls
+  (``codegen.design.lock.design_inputs``), so ``load`` and ``uiogen generate`` always agree on
+  whether a file changed: the observer file as parsed, less its ``[data]`` and ``[precision]``
+  tables (no design or C derives from them); the parameter file as parsed (TOML); the model as
+  its syntax tree (:func:`python_meaning`). An edit of comments, blank lines, spacing or
+  indentation changes none of them; any edit of a value, a key or the code does.
 
 A source file that is absent is not checked: an extension deployed with its design lock but
 without the files it was made from loads (there is nothing to disagree with).
@@ -25,6 +29,10 @@ from pathlib import Path
 RECORD_SUFFIX = ".sha256"
 # The roles of the recorded sources, in the order the messages name them.
 ROLES = ("observer file", "parameters", "model")
+# How the recorded sources are hashed (the record's "hashing" entry): 2, each file for what it says
+# (module docstring). A record without the entry (an extension built before) hashed the parameter
+# file and the model byte for byte, and is checked by that rule.
+HASHING = 2
 
 
 class SourceFileUnreadable(Exception):
@@ -72,6 +80,57 @@ def observer_file_sha256(path) -> str:
     return hashlib.sha256(json.dumps(table, sort_keys=True, default=str).encode()).hexdigest()
 
 
+def parameters_sha256(path) -> str:
+    """The hash of a parameter file as parsed (TOML): its comments and layout are not hashed. A
+    file that is not UTF-8 TOML (it cannot be designed from) is hashed byte for byte."""
+    import tomllib
+    with open(path, "rb") as fh:
+        raw = fh.read()
+    try:
+        text = json.dumps(tomllib.loads(raw.decode("utf-8")), sort_keys=True, default=str)
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return hashlib.sha256(b"bytes\0" + raw).hexdigest()
+    return hashlib.sha256(b"toml\0" + text.encode()).hexdigest()
+
+
+def python_meaning(raw: bytes) -> str:
+    """A Python source's syntax tree as text: its names, numbers, strings (docstrings included)
+    and structure, without its comments, blank lines, spacing or indentation width. The same on
+    every Python version the project supports: fields that are None or empty are left out (a
+    version that adds a field, as 3.12's ``type_params``, gives it such a default), and positions
+    are not written (``ast.dump`` writes the fields of the running version, and 3.13 changed what
+    it leaves out).
+
+    Raises
+    ------
+    SyntaxError, ValueError, RecursionError
+        ``raw`` is not Python source that parses.
+    """
+    import ast
+
+    def dump(node) -> str:
+        if isinstance(node, ast.AST):
+            fields = [f"{f}={dump(v)}" for f in node._fields
+                      for v in [getattr(node, f, None)] if v is not None and v != []]
+            return f"{type(node).__name__}({', '.join(fields)})"
+        if isinstance(node, list):
+            return f"[{', '.join(dump(v) for v in node)}]"
+        return repr(node)
+    return dump(ast.parse(raw))
+
+
+def model_sha256(path) -> str:
+    """The hash of a model file's :func:`python_meaning`; a file that does not parse (it cannot be
+    imported) is hashed byte for byte."""
+    with open(path, "rb") as fh:
+        raw = fh.read()
+    try:
+        text = python_meaning(raw)
+    except (SyntaxError, ValueError, RecursionError, MemoryError):
+        return hashlib.sha256(b"bytes\0" + raw).hexdigest()
+    return hashlib.sha256(b"python\0" + text.encode()).hexdigest()
+
+
 def _relative(path, base: Path) -> str:
     try:
         return os.path.relpath(Path(path).resolve(), base.resolve())
@@ -84,8 +143,8 @@ def source_digests(observer_file, parameters, model) -> dict:
     made from, as ``uiogen build`` compiles them into the extension."""
     base = Path(observer_file).parent
     return {"observer file": [Path(observer_file).name, observer_file_sha256(observer_file)],
-            "parameters": [_relative(parameters, base), file_sha256(parameters)],
-            "model": [_relative(model, base), file_sha256(model)]}
+            "parameters": [_relative(parameters, base), parameters_sha256(parameters)],
+            "model": [_relative(model, base), model_sha256(model)], "hashing": HASHING}
 
 
 def changed_sources(recorded: dict, observer_file) -> list:
@@ -99,6 +158,11 @@ def changed_sources(recorded: dict, observer_file) -> list:
     """
     observer_file = Path(observer_file)
     base = observer_file.parent
+    hashing = recorded.get("hashing", 1)
+    if hashing not in (1, HASHING):
+        raise ValueError(f"hashing rule {hashing!r}")       # a newer uiogen's record: the caller refuses it
+    hashes = ({"parameters": parameters_sha256, "model": model_sha256} if hashing == HASHING
+              else {"parameters": file_sha256, "model": file_sha256})
     changed = []
     for role in (r for r in ROLES if r in recorded):
         rel, digest = recorded[role]
@@ -110,7 +174,7 @@ def changed_sources(recorded: dict, observer_file) -> list:
                 except SourceFileUnreadable as exc:
                     raise SourceFileUnreadable(exc.args[0], path) from None
             else:
-                now = file_sha256(path)
+                now = hashes[role](path)
         except FileNotFoundError:
             continue
         if now != digest:

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 from . import ranking as _ranking
 from . import structure as _structure
+from ..model.dimensions import unranged_parameters
 from .subject import Subject, load
 
 __all__ = ["Analysis", "analyze", "load", "Subject"]
@@ -49,7 +50,8 @@ class Analysis:
                 "parameter_file": str(s.parameter_path),
                 "observer_file": s.config.source if s.config is not None else None,
                 "states": list(s.states), "outputs": list(s.outputs), "known_inputs": list(s.known_inputs),
-                "unknown_inputs": list(s.unknown_inputs), "units": s.units, "sample_time": s.sample_time,
+                "unknown_inputs": list(s.unknown_inputs), "units": s.units,
+                "unranged_parameters": list(unranged_parameters(s.model)), "sample_time": s.sample_time,
                 "selected": s.selected, "structure": self.structure.to_json(),
                 "ranking": self.ranking.to_json() if self.ranking is not None else None,
                 "seconds": self.seconds}

@@ -3,6 +3,7 @@ structural facts with what each rests on, what is estimable, the families ranked
 designs side by side, and why the first one is first."""
 from __future__ import annotations
 
+from ..model.dimensions import unranged_note
 from ..project.settings import toml_repr
 from .ranking import GUARANTEES, Ranking, sort_key
 from .structure import BASIS
@@ -31,6 +32,9 @@ def subject_lines(subject, structure) -> list:
         lines.append("  box: " + ", ".join(f"{s} in [{lo:g}, {hi:g}] {eq.box_source.get(s, '')}"
                                            for s, (lo, hi) in eq.box.items()))
     lines.append(f"  checked at: {structure.lin.samples.describe()} ({BASIS[structure.basis]})")
+    note = unranged_note(subject.model, subject.model_path)
+    if note:
+        lines.append(f"  {note}")
     return lines
 
 

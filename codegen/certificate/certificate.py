@@ -199,8 +199,10 @@ def of_lock(data: dict, source: str = "") -> Certificate:
 
 def unit_ratio(numerator: list, denominator: list) -> str:
     """The unit of a gain from signals in ``denominator`` units to signals in ``numerator`` units:
-    'rad per N m', or '(rad, rad/s) per N m' for several."""
+    'rad per N m' when each side's signals share one unit, else each signal's unit in the signals'
+    order, repeats kept: '(rad, rad/s, rad, rad/s) per N m' for z = (beta, r, delta, delta_dot), so
+    the k-th unit is the k-th signal's (merging the repeats to '(rad, rad/s)' paired them wrongly)."""
     def group(units):
-        units = list(dict.fromkeys(u or "-" for u in units))
-        return units[0] if len(units) == 1 else f"({', '.join(units)})"
+        units = [u or "-" for u in units]
+        return units[0] if len(set(units)) == 1 else f"({', '.join(units)})"
     return f"{group(numerator)} per {group(denominator)}"

@@ -10,10 +10,11 @@ The lock records, beside the design data of the family (gains) and its certifica
 record for every family, :mod:`codegen.certificate.certificate`), the exact
 decision variables of every LMI problem the design solved (:class:`codegen.design.lmi.SolveRecord`)
 and the hash of the design's inputs (:func:`design_inputs`: the observer file, the parameter
-file, the model and every toolchain module the design imports, the numeric packages'
-versions). A lock whose hash matches is *current*: :func:`codegen.pipeline.build` replays it
-(:func:`replay`, a :class:`codegen.design.solver.LockReplay` handed to the family's build),
-re-checking every block with numpy; its solutions are matched to the design's problems by name.
+file and the model for what they say -- comments and layout are not inputs --, every toolchain
+module the design imports byte for byte, the numeric packages' versions). A lock whose hash
+matches is *current*: :func:`codegen.pipeline.build` replays it (:func:`replay`, a
+:class:`codegen.design.solver.LockReplay` handed to the family's build), re-checking every block
+with numpy; its solutions are matched to the design's problems by name.
 A stale or missing lock is re-solved by ``uiogen generate`` (and on request by ``uiogen design NAME --update``).
 
 Nothing in a lock is taken on trust: ``design_inputs`` is re-derived and compared, and every
@@ -70,25 +71,37 @@ def design_sources(config: ObserverConfig) -> list:
 
 def observer_file_digest(config: ObserverConfig) -> str:
     """Hash of the observer file as parsed, less its ``[data]`` table (the column map of logs) and
-    its ``[precision]`` table (the float32 build's tolerances), which no design or C derives from,
-    with its leading comment (the C's description): editing them or a comment inside the file
-    never re-solves a design."""
-    import hashlib
-    from python_bindings.integrity import design_table       # the one rule, shared with load's source check
-    with open(config.source, "rb") as fh:
-        table = design_table(fh.read())
-    text = json.dumps({"table": table, "doc": config.doc}, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()
+    its ``[precision]`` table (the float32 build's tolerances), which no design or C derives from:
+    editing them or any comment never re-solves a design. Its leading comment (``config.doc``) is
+    the description in the C's header, not a design input: :func:`codegen.emit.generate.emission_inputs`
+    hashes it, so an edit of it regenerates the C and keeps the design, and the extension (which
+    does not carry it) stays current. The hash is ``load``'s (:mod:`python_bindings.integrity`):
+    the two never disagree on whether the observer file changed."""
+    from python_bindings.integrity import observer_file_sha256     # the one rule, shared with load's source check
+    return observer_file_sha256(config.source)
+
+
+def file_meanings(config: ObserverConfig) -> dict:
+    """{file: what is hashed of it} for the user's inputs hashed for what they say, not how they are
+    written -- the parameter file (as parsed) and the model (its syntax tree) -- by the functions
+    ``load`` checks them with (:mod:`python_bindings.integrity`): a comment, blank line or spacing
+    edited in them re-solves nothing, and what re-solves a design also makes ``load`` refuse the
+    extension built before it. Every other source (the toolchain's modules) is hashed byte for byte."""
+    from python_bindings import integrity
+    return {Path(config.parameter_path).resolve(): integrity.parameters_sha256(config.parameter_path).encode(),
+            Path(config.model_path).resolve(): integrity.model_sha256(config.model_path).encode()}
 
 
 def design_inputs(config: ObserverConfig) -> str:
-    """Hash of the design's inputs: files (:func:`design_sources`) and numeric package versions."""
+    """Hash of the design's inputs: files (:func:`design_sources`, the user's as :func:`file_meanings`)
+    and numeric package versions."""
     v = sources.versions()
     # the parsed configuration too: a configuration changed in memory (dataclasses.replace) is
     # another design even though its file is the same
     return sources.digest(design_sources(config), {"configuration": json.dumps(config.to_json(), sort_keys=True),
                                                    "observer_file": observer_file_digest(config),
-                                                   **{k: v[k] for k in DESIGN_PACKAGES}})
+                                                   **{k: v[k] for k in DESIGN_PACKAGES}},
+                          contents=file_meanings(config))
 
 
 def read(config: ObserverConfig, base: Path | None = None) -> tuple:

@@ -3,7 +3,8 @@
 :func:`closure` follows the ``import`` statements (module level and inside functions) of the
 project's own packages with :mod:`ast`, so a design or a generated file is stamped with every
 module that can change it, and a module added to a family is covered without anyone listing it.
-:func:`digest` hashes files by their path relative to the checkout and their bytes.
+:func:`digest` hashes files by their path relative to the checkout and their bytes (a user's
+parameter file and model for what they say: ``codegen.design.lock.file_meanings``).
 """
 from __future__ import annotations
 
@@ -118,10 +119,12 @@ def versions() -> dict:
     return out
 
 
-def digest(files, extra: dict | None = None) -> str:
+def digest(files, extra: dict | None = None, contents: dict | None = None) -> str:
     """SHA-256 over (path relative to the checkout, bytes) of ``files`` in the given order, then
-    ``extra`` items (e.g. versions) in key order."""
+    ``extra`` items (e.g. versions) in key order. ``contents``: {resolved path: bytes hashed
+    instead of the file's} (a user's file hashed for what it says: ``codegen.design.lock.file_meanings``)."""
     h = hashlib.sha256()
+    contents = contents or {}
     for f in files:
         f = Path(f)
         try:
@@ -129,7 +132,8 @@ def digest(files, extra: dict | None = None) -> str:
         except ValueError:      # a user's file outside the checkout: its name is enough
             label = f.name
         h.update(label.encode() + b"\0")
-        h.update(f.read_bytes() + b"\0")
+        h.update(contents.get(f.resolve()) or f.read_bytes())
+        h.update(b"\0")
     for k, v in sorted((extra or {}).items()):
         h.update(f"{k}={v}\0".encode())
     return h.hexdigest()

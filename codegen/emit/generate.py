@@ -32,13 +32,15 @@ EMIT_PACKAGES = ("casadi", "jinja2")
 
 def emission_inputs(config: observers.ObserverConfig, lock_text: str) -> str:
     """Hash of everything the C of ``config`` derives from: the design's inputs, the design
-    lock itself, every toolchain module emission imports, the templates and the versions."""
+    lock itself, every toolchain module emission imports, the templates and the versions, and the
+    observer file's leading comment (the description in the C's header; not a design input)."""
     files = [*design_lock.design_sources(config), *sources.closure("codegen.emit.generate"),
              *sorted(TEMPLATES.glob("observer.*.j2"))]
     v = sources.versions()
     return sources.digest(files, {"lock": hashlib.sha256(lock_text.encode()).hexdigest(),
-                                  "observer_file": design_lock.observer_file_digest(config),
-                                  **{k: v[k] for k in (*design_lock.DESIGN_PACKAGES, *EMIT_PACKAGES)}})
+                                  "observer_file": design_lock.observer_file_digest(config), "doc": config.doc,
+                                  **{k: v[k] for k in (*design_lock.DESIGN_PACKAGES, *EMIT_PACKAGES)}},
+                          contents=design_lock.file_meanings(config))
 
 
 def _stamp_text(inputs: str, files: dict) -> str:

@@ -39,6 +39,12 @@ unit (``units={"M": "kg", ...}``) fixes all of them.
 
 A value that is right although it looks wrong is accepted by naming it in the parameter file's
 ``[plausibility] accept = ["C_f", ...]``.
+
+Units are optional, so a parameter whose unit the model does not declare gets no range: its value
+is checked against its sympy assumptions, the model's ``parameter_ranges`` and, with another of its
+kind, against a unit slip, never against a plausible range. That is said, not silent:
+:func:`unranged_parameters` names them, and ``uiogen design`` and ``uiogen analyze`` print
+:func:`unranged_note` (a note, not an error).
 """
 from __future__ import annotations
 
@@ -602,6 +608,29 @@ def check_plausibility(model, values: dict, source: str, accepted=()) -> None:
                                f"{format_dims(dim) if dim is not None else 'of one dimension'} by model "
                                f"{model.name!r}'s equations); they differ by {ratio:.4g}x: a unit slip (kN against "
                                f"N, mm against m)? If both are right, add [plausibility] accept = [\"{p}\", \"{q}\"]")
+
+
+def unranged_parameters(model) -> tuple:
+    """The parameters of ``model`` whose unit it does not declare, in its order: no plausible range
+    applies to their values (:func:`check_plausibility`; a dimension inferred from the equations does
+    not say what a parameter is)."""
+    units = getattr(model, "units", None) or {}
+    return tuple(str(p) for p in getattr(model, "parameters", ()) if str(p) not in units)
+
+
+def unranged_note(model, model_path=None) -> str:
+    """One line naming :func:`unranged_parameters` and how to have them checked, or "" when the
+    model declares the unit of every parameter."""
+    names = unranged_parameters(model)
+    if not names:
+        return ""
+    one = len(names) == 1
+    where = f" ({model_path})" if model_path else ""
+    return (f"note: model {model.name!r}{where} declares no unit for {', '.join(names)}: "
+            f"{'its value is' if one else 'their values are'} not checked against a plausible range (a value in kN "
+            f"where N is meant can pass); to have {'it' if one else 'them'} checked, declare "
+            f"{'its unit' if one else 'their units'} in the model's units={{...}} (as \"M\": \"kg\", "
+            f"\"C_f\": \"N/rad\", \"I_z\": \"kg m^2\"; units such as m, kg, s, N, rad)")
 
 
 _CACHE: dict = {}

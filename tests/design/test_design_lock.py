@@ -105,6 +105,50 @@ def test_a_stale_lock_is_resolved_by_generate(tmp_path):
     assert design_lock.status(observers.get("lpv_linf_driver_torque"))[0] is not None   # the checkout's untouched
 
 
+# (file, old, new, meaningful): edits of a starter project's files (uiogen new --family linf_uio)
+STARTER_EDITS = [
+    ("my_linf_uio.toml", "", "# my own observer\n", False),              # its leading comment: the C's description
+    ("my_linf_uio.toml", "[design]\n", "[design]\n# tuned later\n", False),
+    ("my_linf_uio.toml", "alpha = 5.0", "alpha   =   5.0", False),
+    ("parameters.toml", "", "# another car\n", False),
+    ("parameters.toml", "M = 2052.0       # kg", "M=2052.0 # kg, as weighed", False),
+    ("model.py", "", "# my model\n\n", False),
+    ("model.py", "    delta_dot,\n", "    delta_dot,   # the column's rate\n", False),
+    ("my_linf_uio.toml", "alpha = 5.0", "alpha = 4.0", True),
+    ("parameters.toml", "M = 2052.0", "M = 2000.0", True),
+    ("model.py", "    (l_f * F_yf - l_r * F_yr) / I_z,", "    (l_f * F_yf - l_r * F_yr) / (1.01 * I_z),", True),
+]
+
+
+def test_load_and_the_design_hash_agree_on_every_edit(tmp_path, capsys):
+    """Whatever edit makes ``uiogen generate`` re-solve a design makes ``load`` refuse the extension
+    built before it, and what ``load`` keeps (a comment, blank lines, spacing: in the observer
+    file, the parameter file or the model) re-solves nothing: the two hash each file by one rule
+    (python_bindings.integrity). The observer file's leading comment is the C header's
+    description: the C is regenerated, the design and the extension stay."""
+    from python_bindings import integrity
+    folder = tmp_path / "project"
+    assert cli.main(["new", str(folder), "--family", "linf_uio"]) == 0
+    obs = folder / "my_linf_uio.toml"
+    originals = {f: (folder / f).read_text() for f in ("my_linf_uio.toml", "parameters.toml", "model.py")}
+
+    def state():
+        config = observers.get(str(obs))
+        return (design_lock.design_inputs(config), emit.emission_inputs(config, "{}"),
+                integrity.source_digests(obs, config.parameter_path, config.model_path))
+    design, c, recorded = state()
+    for name, old, new, meaningful in STARTER_EDITS:
+        text = originals[name]
+        assert old in text, old
+        (folder / name).write_text(text.replace(old, new, 1))
+        design_now, c_now, _ = state()
+        changed = integrity.changed_sources(recorded, obs)
+        assert (design_now != design) == meaningful, (name, new)
+        assert bool(changed) == meaningful and (not changed or changed[0][1] == folder / name), (name, new, changed)
+        assert (c_now != c) == (meaningful or new.startswith("# my own")), (name, new)
+        (folder / name).write_text(text)
+
+
 def test_package_versions_are_in_both_hashes(monkeypatch):
     config = observers.get("lpv_linf_driver_torque")
     lock_text = design_lock.path(config).read_text()

@@ -29,7 +29,7 @@ def _sources(tmp_path) -> Path:
     obs = tmp_path / "obs1.toml"
     obs.write_text(OBSERVER)
     (tmp_path / "parameters.toml").write_text("M = 2052.0\n")
-    (tmp_path / "model.py").write_text("# a model\n")
+    (tmp_path / "model.py").write_text("# a model\nMODEL = 1\n")
     return obs
 
 
@@ -44,13 +44,65 @@ def test_the_observer_file_is_hashed_as_parsed_less_data_and_precision(tmp_path)
     assert integrity.observer_file_sha256(obs) != digest
 
 
+PARAMETERS = '# Vehicle of the paper\n[parameters]\nM = 2052.0   # kg\nl_f = 1.3\n\n[inputs]\nT_d = { min = -4.0, max = 4.0 }\n'
+MODEL = '"""A model."""\nimport sympy as sp\n\nx = sp.Symbol("x")\nif True:\n    MODEL = (x, f"{x}", 2.0)  # the definition\n'
+
+
+@pytest.mark.parametrize("hash_of, text, layout, meaning", [
+    (integrity.parameters_sha256, PARAMETERS,
+     [("# Vehicle of the paper\n", ""), ("   # kg", "  # kg, vehicle mass"), ("M = 2052.0", "M=2052.0"),
+      ("\n\n[inputs]", "\n\n\n[inputs]"), ("{ min = -4.0, max = 4.0 }", "{min=-4.0,max=4.0}")],
+     [("2052.0", "2000.0"), ("l_f", "l_r"), ("max = 4.0", "max = 5.0"), ("2052.0", "2052")]),
+    (integrity.model_sha256, MODEL,
+     [("  # the definition", ""), ("import sympy", "# a note\nimport sympy"), ("\n\nx", "\n\n\n\nx"),
+      ("    MODEL", "  MODEL"), ("(x, f", "( x , f"), ('"x"', "'x'")],
+     [("2.0", "3.0"), ("2.0", "2"), ('"""A model."""', '"""Another model."""'), ("{x}", "{x!r}"),
+      ("if True", "if False")]),
+])
+def test_parameters_and_model_are_hashed_for_what_they_say_not_how_they_are_written(tmp_path, hash_of, text,
+                                                                                    layout, meaning):
+    """A comment, blank line or spacing edited in the parameter file or the model changes neither
+    ``load``'s check nor the design's hash (both call these functions); a value, a key, the code
+    or a docstring does."""
+    path = tmp_path / "file"
+    path.write_text(text)
+    digest = hash_of(path)
+    for old, new in layout:
+        assert old in text
+        path.write_text(text.replace(old, new))
+        assert hash_of(path) == digest, (old, new)
+    for old, new in meaning:
+        assert old in text
+        path.write_text(text.replace(old, new))
+        assert hash_of(path) != digest, (old, new)
+    path.write_bytes(text.encode() + b"\xff")          # not UTF-8: hashed byte for byte, never an error
+    assert hash_of(path) != digest
+
+
+def test_an_extension_recorded_by_an_older_uiogen_is_checked_byte_for_byte(tmp_path):
+    """A record without ``hashing`` (an extension built before the files were hashed for what
+    they say) holds byte hashes: it is checked by that rule, so it is neither refused for an
+    unchanged file nor accepted after an edit."""
+    obs = _sources(tmp_path)
+    old = {"observer file": [obs.name, integrity.observer_file_sha256(obs)],
+           "parameters": ["parameters.toml", integrity.file_sha256(tmp_path / "parameters.toml")],
+           "model": ["model.py", integrity.file_sha256(tmp_path / "model.py")]}
+    assert integrity.changed_sources(old, obs) == []
+    (tmp_path / "model.py").write_text("# another comment\nMODEL = 1\n")
+    assert integrity.changed_sources(old, obs) == [("model", tmp_path / "model.py")]
+    assert integrity.changed_sources(integrity.source_digests(obs, tmp_path / "parameters.toml",
+                                                              tmp_path / "model.py"), obs) == []
+    with pytest.raises(ValueError, match="hashing rule 3"):      # a newer uiogen's record: refused by load
+        integrity.changed_sources({**old, "hashing": 3}, obs)
+
+
 def test_changed_sources_names_each_changed_file_and_skips_absent_ones(tmp_path):
     obs = _sources(tmp_path)
     recorded = integrity.source_digests(obs, tmp_path / "parameters.toml", tmp_path / "model.py")
     assert recorded["parameters"][0] == "parameters.toml" and recorded["model"][0] == "model.py"
     assert integrity.changed_sources(recorded, obs) == []
     (tmp_path / "parameters.toml").write_text("M = 2000.0\n")
-    (tmp_path / "model.py").write_text("# another model\n")
+    (tmp_path / "model.py").write_text("# a model\nMODEL = 2\n")
     assert integrity.changed_sources(recorded, obs) == [("parameters", tmp_path / "parameters.toml"),
                                                          ("model", tmp_path / "model.py")]
     (tmp_path / "parameters.toml").unlink()      # a deployment without its sources: nothing to compare
@@ -88,8 +140,12 @@ def test_load_refuses_an_extension_whose_parameters_model_or_observer_file_chang
         assert load(obs).name == "obs1"
         obs.write_text("# only a comment more\n" + OBSERVER)
         assert load(obs).name == "obs1"
+        (tmp_path / "parameters.toml").write_text("# a comment\nM   = 2052.0  # kg\n")
+        (tmp_path / "model.py").write_text("# a model, commented\n\nMODEL  =  1   # one\n")
+        assert load(obs).name == "obs1"           # comments and layout: the design's hash keeps them too
+        _sources(tmp_path)
         for path, edit in ((tmp_path / "parameters.toml", ("2052.0", "2000.0")),
-                           (tmp_path / "model.py", ("a model", "a changed model")),
+                           (tmp_path / "model.py", ("MODEL = 1", "MODEL = 2")),
                            (obs, ("alpha = 5.0", "alpha = 4.0"))):
             before = path.read_text()
             path.write_text(before.replace(*edit))

@@ -5,6 +5,7 @@ model that declares no parameter unit at all (the equations say the two stiffnes
 kind); a declared unit brings the plausible range of its quantity; a value that is right although
 it looks wrong is accepted by name.
 """
+import json
 import textwrap
 from fractions import Fraction
 
@@ -311,3 +312,29 @@ def test_a_table_entry_naming_no_signal_of_the_model_is_refused(tmp_path, capsys
     assert "ConfigurationError" in err and "car.toml" in err and "Traceback" not in err
     import re
     assert re.search(message, err), err
+
+
+def test_a_parameter_without_a_unit_is_named_as_not_range_checked(tmp_path, capsys):
+    """Units are optional, so a parameter whose unit the model does not declare gets no plausible
+    range (C_f written in kN/rad passes if C_r is in kN/rad too): ``uiogen analyze`` and ``uiogen
+    design`` say so, naming it and how to have it checked (a note, not an error)."""
+    path = _project(tmp_path / "none", M="1.476")                # tonnes where kg is meant: passes
+    model = observers.get(str(path)).load_model()
+    assert dimensions.unranged_parameters(model) == ("M", "l_f", "l_r", "I_e", "I_z", "C_f", "C_r")
+    assert cli.main(["analyze", str(path), "--no-design", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["unranged_parameters"] == list(dimensions.unranged_parameters(model))
+    path = _project(tmp_path / "some", extra=', "M": "kg", "l_f": "m", "l_r": "m", "I_e": "kg m", "I_z": "kg m^2"')
+    assert cli.main(["analyze", str(path), "--no-design"]) == 0
+    out = capsys.readouterr().out
+    note = [line.strip() for line in out.splitlines() if line.strip().startswith("note: model 'unit_slip_car'")]
+    assert note == [f"note: model 'unit_slip_car' ({tmp_path / 'some' / 'car.py'}) declares no unit for C_f, C_r: their "
+                    f"values are not checked against a plausible range (a value in kN where N is meant can pass); to "
+                    f"have them checked, declare their units in the model's units={{...}} (as \"M\": \"kg\", "
+                    f"\"C_f\": \"N/rad\", \"I_z\": \"kg m^2\"; units such as m, kg, s, N, rad)"], out
+    assert cli.main(["design", str(path)]) == 0                     # and below the design it certified
+    out = capsys.readouterr().out
+    assert [line for line in out.splitlines() if line.startswith("note: ")] == note, out
+    path = _project(tmp_path / "all", extra=', "M": "kg", "l_f": "m", "l_r": "m", "I_e": "kg m", "I_z": "kg m^2", '
+                                           '"C_f": "N/rad", "C_r": "N/rad"')
+    model = observers.get(str(path)).load_model()
+    assert dimensions.unranged_parameters(model) == () and dimensions.unranged_note(model) == ""

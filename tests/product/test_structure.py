@@ -150,9 +150,9 @@ def test_the_c_hash_covers_the_design_the_emitters_and_the_templates(NAME, monke
     lock = design_lock.path(config).read_text()
     hashed, real_digest = [], sources.digest
 
-    def spy(files, extra=None):
+    def spy(files, extra=None, contents=None):
         hashed.append(([Path(f) for f in files], dict(extra or {})))
-        return real_digest(files, extra)
+        return real_digest(files, extra, contents)
     monkeypatch.setattr(sources, "digest", spy)
     emit.emission_inputs(config, lock)
     (files, extra), = [h for h in hashed if "lock" in h[1]]
