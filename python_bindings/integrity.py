@@ -191,8 +191,9 @@ def record_text(extension_bytes: bytes, name: str) -> str:
     return f"{hashlib.sha256(extension_bytes).hexdigest()}  {name}\n"
 
 
-def binary_mismatch(extension: Path) -> str:
-    """Why ``extension``'s bytes are not those ``uiogen build`` recorded, or "" when they are."""
+def binary_mismatch(extension: Path, copy: Path | None = None) -> str:
+    """Why ``extension``'s bytes (or those of ``copy``, a copy of it) are not those ``uiogen build``
+    recorded, or "" when they are."""
     record = record_path(extension)
     try:
         text = record.read_text(encoding="ascii")
@@ -201,7 +202,7 @@ def binary_mismatch(extension: Path) -> str:
     except (OSError, UnicodeDecodeError) as exc:
         return f"its build record {record} is unreadable ({type(exc).__name__})"
     recorded = text.split("  ", 1)[0].strip()
-    if file_sha256(extension) != recorded:
+    if file_sha256(copy or extension) != recorded:
         return (f"its bytes are not those its build record {record.name} holds (truncated, or changed after "
                 f"`uiogen build`)")
     return ""

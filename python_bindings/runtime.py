@@ -163,9 +163,12 @@ def load(observer, project: str | Path | None = None) -> CompiledObserver:
     observer file (built by ``uiogen build``); ``project``: its project folder when it is not
     the default (:mod:`python_bindings.workspace`)."""
     workspace, name = Workspace.locate(observer, project)
-    if not workspace.design_lock(name).is_file():
-        _refuse_unknown(str(observer), workspace.design_lock(name))
     text = str(observer)
+    is_path = text.endswith(".toml") or "/" in text
+    if not workspace.design_lock(name).is_file() or not (is_path or (BUILTIN_OBSERVERS / f"{text}.toml").is_file()):
+        # a bare name is a built-in's: one of the user's own, generated here, would load without the
+        # check of its observer file, parameters and model (the CLI refuses it too)
+        _refuse_unknown(text, workspace.design_lock(name))
     source = Path(text) if text.endswith(".toml") or "/" in text else BUILTIN_OBSERVERS / f"{text}.toml"
     return open_observer(workspace, name, text + (f" --project {project}" if project is not None else ""),
                          observer_file=source)
@@ -180,9 +183,11 @@ def _refuse_unknown(text: str, lock: Path) -> None:
     elif not (BUILTIN_OBSERVERS / f"{text}.toml").is_file():
         known = sorted(p.stem for p in BUILTIN_OBSERVERS.glob("*.toml"))
         close = difflib.get_close_matches(text, known, n=1)
+        own = Path(f"{text}.toml")
         raise UnknownObserverError(f"{text!r} is not a built-in observer"
                                    + (f" (did you mean {close[0]!r}?)" if close else f" (built-in: {', '.join(known)})")
-                                   + "; for an observer of your own, pass the path of its observer file (.toml)")
+                                   + "; for an observer of your own, pass the path of its observer file"
+                                   + (f": load({str(own)!r})" if own.is_file() else " (.toml)"))
 
 
 def open_observer(workspace: Workspace, name: str, argument: str | None = None,
@@ -199,6 +204,8 @@ def open_observer(workspace: Workspace, name: str, argument: str | None = None,
     path = workspace.extension(name)
     key = f"uiogen_ext_{hashlib.sha256(str(path).encode()).hexdigest()[:16]}_{name}"
     module = sys.modules.get(key)
+    if module is not None and path.is_file() and _file_identity(path) != _LOADED_FROM.get(key):
+        module = None          # rebuilt since this process loaded it: load the new build, not the one held
     if module is None:
         if not path.is_file():
             raise UnknownObserverError(f"observer {name!r} is generated but not compiled (no {path}); "
@@ -206,10 +213,10 @@ def open_observer(workspace: Workspace, name: str, argument: str | None = None,
         damage = integrity.binary_mismatch(path)      # before dlopen: a truncated object dies of SIGBUS
         if damage:
             raise DamagedExtensionError(f"the extension {path} is not loaded: {damage}; run `uiogen build {argument}`")
-        spec = importlib.util.spec_from_file_location(f"_{name}", path)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
+        identity = _file_identity(path)
+        module = _import_extension(name, path, argument, again=key in sys.modules)
         sys.modules[key] = module
+        _LOADED_FROM[key] = identity
     design = hashlib.sha256(lock.read_bytes()).hexdigest()
     if getattr(module, "DESIGN_SHA256", None) != design:
         raise StaleExtensionError(f"the extension {path} was built from another design than {lock} (the design "
@@ -221,6 +228,39 @@ def open_observer(workspace: Workspace, name: str, argument: str | None = None,
     if observer_file is not None:
         _check_sources(module, path, Path(observer_file), argument)
     return observer_class(module)(module, path)
+
+
+# {module key: (device, inode, size, mtime) of the file the module held under it was loaded from}
+_LOADED_FROM: dict = {}
+
+
+def _file_identity(path: Path) -> tuple:
+    st = path.stat()
+    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
+
+
+def _import_extension(name: str, path: Path, argument: str, again: bool):
+    """The extension module in ``path``. ``again``: this process already holds a module loaded from
+    ``path`` (an earlier build). Python keeps an extension module per (file name, module name), so
+    the new build is imported from a copy under another file name; the copy is removed once loaded
+    (the mapping stays)."""
+    import shutil
+    import tempfile
+    if not again:
+        spec = importlib.util.spec_from_file_location(f"_{name}", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+    with tempfile.TemporaryDirectory(prefix="uiogen-reload-") as tmp:
+        copy = Path(tmp) / path.name
+        shutil.copyfile(path, copy)
+        damage = integrity.binary_mismatch(path, copy)     # the file may have been rebuilt again meanwhile
+        if damage:
+            raise DamagedExtensionError(f"the extension {path} is not loaded: {damage}; run `uiogen build {argument}`")
+        spec = importlib.util.spec_from_file_location(f"_{name}", copy)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    return module
 
 
 def _check_sources(module, path: Path, observer_file: Path, argument: str) -> None:

@@ -131,6 +131,45 @@ def test_a_wrong_path_or_name_is_said_as_such(tmp_path):
         load("my_car")
 
 
+def test_a_bare_name_is_a_built_in_even_where_an_own_observer_is_generated(project):
+    """A bare name loads a built-in observer; one of the user's own, generated in the project,
+    would load without the check of its observer file, parameters and model (a wheel's load("car")
+    in the project folder returned the extension of the old parameters): it is refused, and the
+    observer file beside it named."""
+    own = project.root / "my_car.toml"
+    own.write_text((project.root / f"{NAME}.toml").read_text())
+    shutil.copytree(project.observer_dir(NAME), project.observer_dir("my_car"))
+    (project.observer_dir("my_car") / f"{NAME}_design.json").rename(project.design_lock("my_car"))
+    with pytest.raises(UnknownObserverError, match=r"'my_car' is not a built-in observer .*pass the path of its "
+                                                   r"observer file: load\('my_car.toml'\)"):
+        import os
+        cwd = os.getcwd()
+        os.chdir(project.root)
+        try:
+            load("my_car", project=project.root)
+        finally:
+            os.chdir(cwd)
+
+
+def test_a_rebuild_is_loaded_by_the_same_process(project):
+    """Python keeps an extension module per file: after `uiogen build` in a shell, load() in the same
+    session (a notebook) loads the new build, not the one it holds, and the old object still runs."""
+    from codegen import cli
+    path = project.root / f"{NAME}.toml"
+    inputs = np.tile([0.5, 0.01, 0.02, 0.0, 20.0], (50, 1))
+    before = load(path)
+    first = before.run(inputs)[0][-1].copy()
+    path.write_text(path.read_text().replace("alpha = 5.0 ", "alpha = 3.0 "))
+    for verb in (["design", "--update"], ["generate"], ["build"]):
+        assert cli.main([verb[0], str(path), *verb[1:]]) == 0
+    after = load(path)
+    assert after.design_sha256 == hashlib.sha256(project.design_lock(NAME).read_bytes()).hexdigest()
+    assert after.design_sha256 != before.design_sha256
+    assert not np.allclose(after.run(inputs)[0][-1], first)          # the new gains
+    np.testing.assert_array_equal(before.run(inputs)[0][-1], first)  # the old object is untouched
+    assert load(path).design_sha256 == after.design_sha256          # and held from now on
+
+
 def test_the_recorder_records_what_it_runs_and_changes_nothing():
     obs = load(NAME)
     rng = np.random.default_rng(0)
