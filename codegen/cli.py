@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -114,14 +115,15 @@ _FILE_MISTAKES = (ConfigurationError, UnknownObserverError, MissingParameterErro
                   SchedulingBoundsError, DesignLockError)
 
 
-def _analysis_of_failure(config, as_json: bool) -> None:
+def _analysis_of_failure(config, as_json: bool, error: Exception) -> None:
     """The analysis facts at the top of a failed design (stdout; the error stays one line on
     stderr): the structure and every family's verdict, without trial designs."""
     from . import analysis
     try:
         result = analysis.analyze(config.source, design=False)
     except Exception as exc:        # the design's own error is the one that matters: it follows, one line
-        print(f"(no analysis of {config.source}: {type(exc).__name__}: {exc})")
+        if (type(exc), str(exc)) != (type(error), str(error)):      # the same error once, not twice
+            print(f"(no analysis of {config.source}: {type(exc).__name__}: {exc})")
         return
     if as_json:
         _print_json({"analysis": result.to_json()})
@@ -136,8 +138,8 @@ def cmd_design(args) -> int:
         b, records = pipeline.solve(config)
     except _FILE_MISTAKES:
         raise
-    except UiogenError:
-        _analysis_of_failure(config, args.json)
+    except UiogenError as exc:
+        _analysis_of_failure(config, args.json, exc)
         raise
     text = design_lock.dumps(design_lock.document(b, records))
     compare = _compare_with_committed(config, records)
@@ -654,7 +656,12 @@ def main(argv=None) -> int:
     if getattr(args, "workers", None) is not None and args.workers < 1:
         parser.error("--workers must be >= 1")
     try:
-        return args.func(args)
+        code = args.func(args)
+        sys.stdout.flush()           # a closed pipe shows here, inside the handlers, not at exit
+        return code
+    except BrokenPipeError:          # `uiogen design X | head -1`: the reader has what it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())   # nothing more to flush at exit
+        return 141                   # as a command killed by SIGPIPE
     except KeyboardInterrupt:     # Ctrl-C: every output is written whole or not at all (outputs, generate)
         print(f"uiogen: interrupted: uiogen {args.command} stopped before it finished (the previous state is kept)",
               file=sys.stderr)

@@ -290,8 +290,11 @@ def test_every_builtin_model_passes_the_units_check():
 def test_the_units_check_runs_before_any_design(tmp_path, capsys):
     path = _project(tmp_path, extra=', "I_e": "kg m^2"')      # T_eng / I_e is an acceleration: I_e in kg m
     assert cli.main(["design", str(path)]) == 2
-    err = capsys.readouterr().err.strip().splitlines()[-1]
+    out = capsys.readouterr()
+    err = out.err.strip().splitlines()[-1]
     assert err.startswith("uiogen: error: UnitError: model 'unit_slip_car'") and "the declared unit of" in err
+    # said once: the analysis printed above a failed design fails on the same error and adds nothing
+    assert (out.out + out.err).count("the declared unit of") == 1, out
 
 
 @pytest.mark.parametrize("table, text, message", [

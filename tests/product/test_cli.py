@@ -19,6 +19,16 @@ def test_list_json():
     assert "lpv_linf_driver_torque" in [r["name"] for r in json.loads(proc.stdout)]
 
 
+def test_a_reader_that_closes_the_pipe_gets_no_traceback():
+    """`uiogen list | head -1`: the reader closes the pipe before uiogen writes; uiogen stops quietly,
+    with the status of a command killed by SIGPIPE (a BrokenPipeError traceback 2 runs in 3 before)."""
+    proc = subprocess.Popen([sys.executable, "-m", "codegen.cli", "list"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, cwd=ROOT)
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 141 and err == "", err
+
+
 @pytest.mark.slow       # 15 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_design_json_and_artifact(tmp_path):
     out = tmp_path / "design.json"
