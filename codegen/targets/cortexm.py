@@ -1,9 +1,11 @@
 """Cortex-M4F cross build of the observer step (Debian's arm-none-eabi-gcc): code size
 (arm-none-eabi-size) and worst-case stack (-fstack-usage, summed along the step's call chain),
-double and float32 variants. ``python -m codegen.targets.cortexm [NAME ...]`` prints the table.
-Executed under QEMU against the host build: codegen/tools/qemu.py."""
+double and float32 variants. ``python -m codegen.targets.cortexm [NAME ...]`` prints the table
+(NAME: a built-in observer or an observer file, as the ``uiogen`` verbs take it). Executed under
+QEMU against the host build: codegen/tools/qemu.py."""
 from __future__ import annotations
 
+import argparse
 import re
 import shutil
 import subprocess
@@ -11,11 +13,13 @@ import sys
 import tempfile
 from pathlib import Path
 
-from ..errors import UnsupportedError
+from ..errors import UnknownObserverError, UnsupportedError
 from ..emit.toolchain import STRICT_CFLAGS, run
 
 CC = "arm-none-eabi-gcc"
 SIZE = "arm-none-eabi-size"
+# the Debian/Ubuntu packages of the tools (scripts/install_embedded_tools.sh installs them: make embedded-tools)
+PACKAGES = "gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm"
 CPU_FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard"]
 # The strict flags, for size: -Os; -ffunction-sections so the table counts the step only.
 FLAGS = [f for f in STRICT_CFLAGS if f != "-O2"] + ["-Os", "-ffunction-sections", "-fdata-sections",
@@ -24,6 +28,48 @@ FLAGS = [f for f in STRICT_CFLAGS if f != "-O2"] + ["-Os", "-ffunction-sections"
 
 def available() -> bool:
     return shutil.which(CC) is not None and shutil.which(SIZE) is not None
+
+
+def install_hint(tools: str) -> str:
+    """The message of an embedded tool that is not installed: which, and how to install it."""
+    return f"{tools} not installed: sudo apt-get install {PACKAGES} (in a checkout: make embedded-tools)"
+
+
+def command_line(prog: str, description: str) -> argparse.ArgumentParser:
+    """The command line of the embedded tools (this module's, :mod:`codegen.tools.m4cycles`'s,
+    :mod:`codegen.tools.qemu`'s): NAME ... and ``--project``, as the ``uiogen`` verbs take them."""
+    from ..cli import project_option
+    parser = argparse.ArgumentParser(prog=prog, description=description, parents=[project_option()])
+    parser.add_argument("names", nargs="*", metavar="NAME",
+                        help="a built-in observer (uiogen list) or the path of an observer file (.toml), as every "
+                             "uiogen verb takes it; default: every built-in observer generated in the project")
+    return parser
+
+
+def resolve(names=None, project=None) -> list:
+    """The observers' configurations: each name (a built-in name, an observer-file path or a
+    configuration) as the ``uiogen`` verbs resolve it (:func:`codegen.project.observer_file.get`),
+    default every built-in observer generated in ``project``; an unknown one is an
+    UnknownObserverError before any work, with a did-you-mean: the observer file ``NAME.toml`` in
+    the working directory, else the closest built-in name."""
+    from ..extension.build import generated_names
+    from ..project import observer_file as observers
+    from ..project.settings import suggest
+    configs = []
+    for name in names or generated_names(project):
+        try:
+            configs.append(observers.get(name, project=project))
+        except UnknownObserverError as exc:
+            if not isinstance(name, str) or observers.is_path(name):
+                raise
+            near = f"{name}.toml" if Path(f"{name}.toml").is_file() else suggest(name, observers.names())
+            if near is None:
+                raise
+            head, text = f"no observer named {name!r}", str(exc)
+            text = f"{head} (did you mean {near!r}?){text[len(head):]}" if text.startswith(head) else \
+                f"{text}; did you mean {near!r}?"
+            raise UnknownObserverError(text) from None
+    return configs
 
 
 def _stack(su_files) -> dict:
@@ -41,7 +87,7 @@ def measure(name: str, src_dir: Path, out_dir: Path, precision: str = "double") 
     the largest helper). Double arithmetic on the M4F calls libgcc's soft-float routines, whose
     code and stack are not in these figures."""
     if not available():
-        raise UnsupportedError(f"{CC} is not installed: run scripts/install_embedded_tools.sh")
+        raise UnsupportedError(install_hint(CC))
     stem = name + ("_f32" if precision == "float32" else "")
     objs, sus = [], []
     for src in (src_dir / f"{stem}_kernel.c", src_dir / f"{stem}.c"):
@@ -62,22 +108,42 @@ def measure(name: str, src_dir: Path, out_dir: Path, precision: str = "double") 
             "stack_bytes": stack, "unbounded": dynamic}
 
 
-def table(names=None) -> list:
+def table(names=None, project=None) -> list:
+    """Code, rodata and stack per observer (names or configurations, :func:`resolve`) and precision;
+    the generated C is checked against its stamp first (``uiogen build`` does the same)."""
     from . import float32 as prec
-    from ..extension.build import generated_dir, generated_names
+    from ..extension.build import check_generated, generated_dir
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for name in names or generated_names():
+        for config in resolve(names, project):
+            check_generated(config)
             for p in ("double", "float32"):
-                src = generated_dir(name) if p == "double" else prec.emit_float(name, Path(tmp) / "src")
-                out = Path(tmp) / f"{name}_{p}"
+                src = generated_dir(config) if p == "double" else prec.emit_float(config, Path(tmp) / "src")
+                out = Path(tmp) / f"{config.name}_{p}"
                 out.mkdir()
-                rows.append(measure(name, src, out, p))
+                rows.append(measure(config.name, src, out, p))
     return rows
 
 
+PROG = "python -m codegen.targets.cortexm"
+DESCRIPTION = ("Cross-compile each observer's step for the Cortex-M4F (arm-none-eabi-gcc, hard float, the strict "
+               "flags, -Os), double and float32, and print its code and rodata (arm-none-eabi-size) and the "
+               "worst-case stack of NAME_step (-fstack-usage). The observer must have been generated (uiogen "
+               f"generate NAME). Needs arm-none-eabi-gcc: sudo apt-get install {PACKAGES} (in a checkout: make "
+               "embedded-tools).")
+
+
 def main(argv=None) -> int:
-    rows = table((argv if argv is not None else sys.argv[1:]) or None)
+    from ..cli import report_errors
+    args = command_line(PROG, DESCRIPTION).parse_args(argv)
+    return report_errors(PROG, lambda: _main(args))
+
+
+def _main(args) -> int:
+    configs = resolve(args.names, args.project)
+    if not available():
+        raise UnsupportedError(install_hint(CC if shutil.which(CC) is None else SIZE))
+    rows = table(configs)
     print(f"{'observer':32s} {'precision':9s} {'code [B]':>9s} {'rodata [B]':>10s} {'stack [B]':>9s}")
     for r in rows:
         print(f"{r['observer']:32s} {r['precision']:9s} {r['code_bytes']:9d} {r['rodata_bytes']:10d} {r['stack_bytes']:9d}")

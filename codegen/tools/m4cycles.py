@@ -20,7 +20,8 @@ ends of the range. Zero wait states are assumed (code and data in SRAM, as on th
 flash wait states add to every figure. Double arithmetic has no unit on the M4F: it runs in
 libgcc's soft-float routines, whose instructions are counted the same way.
 
-``python -m codegen.tools.m4cycles [NAME ...]`` prints the table; ``uiogen bench`` includes it.
+``python -m codegen.tools.m4cycles [NAME ...]`` prints the table (NAME: a built-in observer or an
+observer file, as the ``uiogen`` verbs take it); ``uiogen bench`` includes it.
 """
 from __future__ import annotations
 
@@ -178,16 +179,20 @@ def count(elf: Path, work: Path) -> dict:
     return out
 
 
-def measure(name: str, precision: str, inputs: np.ndarray, work: Path, src_dir: Path | None = None) -> dict:
-    """Per step of ``name`` in ``precision`` on the M4F: instructions, cycles (P = 1 and 3), by kind."""
+def measure(observer, precision: str, inputs: np.ndarray, work: Path, src_dir: Path | None = None) -> dict:
+    """Per step of ``observer`` (a name, an observer-file path or a configuration) in ``precision``
+    on the M4F: instructions, cycles (P = 1 and 3), by kind."""
     from ..extension.build import generated_dir
+    from ..project import observer_file as observers
     from ..targets import float32 as prec
     if not available():
-        raise UnsupportedError(f"{qemu.missing() or OBJDUMP} not installed: run scripts/install_embedded_tools.sh")
+        raise UnsupportedError(cortexm.install_hint(qemu.missing() or OBJDUMP))
+    config = observers.get(observer)
+    name = config.name
     n1, n2 = RUNS[precision]
     if inputs.shape[0] < n2:
         raise UnsupportedError(f"{name}: {inputs.shape[0]} recorded samples, {n2} needed")
-    src = src_dir or (generated_dir(name) if precision == "double" else prec.emit_float(name, work / "src"))
+    src = src_dir or (generated_dir(config) if precision == "double" else prec.emit_float(config, work / "src"))
     runs = []
     for n in (n1, n2):
         target = work / f"{precision}_{n}"
@@ -213,25 +218,28 @@ def measure(name: str, precision: str, inputs: np.ndarray, work: Path, src_dir: 
     return row
 
 
-def flops(name: str) -> int:
-    """The step's floating-point operations (the CasADi graph's arithmetic nodes), the floor."""
+def flops(name) -> int:
+    """The step's floating-point operations (the CasADi graph's arithmetic nodes), the floor
+    (``name``: a name, an observer-file path or a configuration)."""
     from .. import pipeline
     from ..project import observer_file as observers
     from .flops import flop_count
     return int(flop_count(pipeline.build(observers.get(name)).step_function())["total"])
 
 
-def table(names=None, progress=None) -> list:
-    """Per observer and precision: cycles and instructions per step, and the step's flop count
-    (``progress``: called with each row as it is measured)."""
-    from ..extension.build import generated_names
+def table(names=None, progress=None, project=None) -> list:
+    """Per observer (names or configurations, :func:`codegen.targets.cortexm.resolve`) and precision:
+    cycles and instructions per step, and the step's flop count (``progress``: called with each row
+    as it is measured). The generated C is checked against its stamp first."""
+    from ..extension.build import check_generated
     rows = []
-    for name in names or generated_names():
-        scenario, inputs = qemu.record_inputs(name)
-        f = flops(name)
+    for config in cortexm.resolve(names, project):
+        check_generated(config)
+        scenario, inputs = qemu.record_inputs(config)
+        f = flops(config)
         with tempfile.TemporaryDirectory() as tmp:
             for p in ("float32", "double"):
-                r = measure(name, p, inputs, Path(tmp) / p)
+                r = measure(config, p, inputs, Path(tmp) / p)
                 r.update(scenario=scenario, flops=f, cycles_per_flop=r[f"cycles_p{REFILL[-1]}"] / f)
                 rows.append(r)
                 if progress is not None:
@@ -249,12 +257,31 @@ HEADER = (f"{'observer':32s} {'precision':8s} {'instr':>10s} {'cycles P=1':>10s}
           f"{'flops':>6s} {'cyc/flop':>8s}")
 
 
+PROG = "python -m codegen.tools.m4cycles"
+DESCRIPTION = ("Cycles per step of each observer on the Cortex-M4F, float32 and double: the step built for speed "
+               "(-O2 -flto) runs the observer's recorded validation inputs under QEMU (mps2-an386), every executed "
+               "instruction weighted by its Cortex-M4 timing (zero wait states; a taken branch 1 + P, P = 1 and 3); "
+               "beside the step's flop count. The observer must have been generated and built (uiogen generate NAME; "
+               "uiogen build NAME). Needs arm-none-eabi-gcc, arm-none-eabi-objdump and qemu-system-arm: sudo apt-get "
+               f"install {cortexm.PACKAGES} (in a checkout: make embedded-tools).")
+
+
 def main(argv=None) -> int:
+    from ..cli import report_errors
+    args = cortexm.command_line(PROG, DESCRIPTION).parse_args(argv)
+    return report_errors(PROG, lambda: _main(args))
+
+
+def _main(args) -> int:
+    from ..extension.build import check_generated, load
+    configs = cortexm.resolve(args.names, args.project)
     if not available():
-        print(f"M4F cycle count skipped: {qemu.missing() or OBJDUMP} not installed (scripts/install_embedded_tools.sh)")
-        return 0
-    print(HEADER)
-    table((argv if argv is not None else sys.argv[1:]) or None, progress=lambda r: print(format_row(r), flush=True))
+        raise UnsupportedError(cortexm.install_hint(qemu.missing() or OBJDUMP))
+    for config in configs:      # generated and built, before the table starts (else how to do it)
+        check_generated(config)
+        load(config)
+    print(HEADER, flush=True)
+    table(configs, progress=lambda r: print(format_row(r), flush=True))
     return 0
 
 

@@ -10,7 +10,8 @@ SYS_WRITE0 for the lines, SYS_EXIT for the end) to print, for each sample, the s
 hex bit pattern of every output. The observer's C is compiled with the same strict flags as
 :mod:`codegen.targets.cortexm` (``-ffp-contract=off``, never fast-math), linked against newlib's libm
 and libgcc (the soft-float double routines). ``python -m codegen.tools.qemu [NAME ...]`` prints the
-comparison per observer and precision.
+comparison per observer and precision (NAME: a built-in observer or an observer file, as the
+``uiogen`` verbs take it).
 """
 from __future__ import annotations
 
@@ -194,7 +195,7 @@ def build_elf(name: str, src_dir: Path, inputs: np.ndarray, out_dir: Path, preci
     (``defines``: extra ``-D`` flags of the harness, e.g. ``UIOGEN_COUNT_STEPS=N``; ``optimize``:
     the optimization flags, given to the compiler and the linker, e.g. ``("-O2", "-flto")``)."""
     if not available():
-        raise UnsupportedError(f"{missing()} not installed: run scripts/install_embedded_tools.sh")
+        raise UnsupportedError(cortexm.install_hint(missing()))
     f32 = precision == "float32"
     stem = name + ("_f32" if f32 else "")
     real, bits, dtype, width = ("float", "uint32_t", np.float32, 8) if f32 else ("double", "uint64_t", np.float64, 16)
@@ -237,36 +238,40 @@ def execute(elf: Path, n_output: int, precision: str = "double", timeout: int = 
     return out, status
 
 
-def host_run(name: str, inputs: np.ndarray, precision: str, work: Path) -> tuple:
+def host_run(observer, inputs: np.ndarray, precision: str, work: Path) -> tuple:
     """The host build of the same precision: the Python extension (double) or the float32
     variant's shared library (:mod:`codegen.targets.float32`)."""
     from ..extension.build import load
     if precision == "double":
-        out, status, _ = load(name).run(inputs)
+        out, status, _ = load(observer).run(inputs)
         return np.asarray(out, dtype=np.float64), np.asarray(status, dtype=np.int32)
     from ..targets import float32 as prec
-    out, status, _ = prec.load_float(name, work / "host_f32").run(inputs)
+    out, status, _ = prec.load_float(observer, work / "host_f32").run(inputs)
     return out, np.asarray(status, dtype=np.int32)
 
 
-def compare(name: str, precision: str = "double", inputs: np.ndarray | None = None, scenario: str | None = None,
+def compare(observer, precision: str = "double", inputs: np.ndarray | None = None, scenario: str | None = None,
             work: Path | None = None) -> dict:
-    """Cross-build ``name`` for the M4F, run it under QEMU on the recorded inputs and compare
-    with the host build of the same precision: bit-identical outputs and status, or the largest
-    difference (absolute, and in units in the last place of the host value)."""
+    """Cross-build ``observer`` (a name, an observer-file path or a configuration) for the M4F, run
+    it under QEMU on the recorded inputs and compare with the host build of the same precision:
+    bit-identical outputs and status, or the largest difference (absolute, and in units in the last
+    place of the host value)."""
     from ..targets import float32 as prec
     from ..extension.build import generated_dir, load
+    from ..project import observer_file as observers
+    config = observers.get(observer)
+    name = config.name
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(work or tmp)
         if inputs is None:
-            scenario, inputs = record_inputs(name, scenario)
-        obs = load(name)
-        src = generated_dir(name) if precision == "double" else prec.emit_float(name, work / "src")
+            scenario, inputs = record_inputs(config, scenario)
+        obs = load(config)
+        src = generated_dir(config) if precision == "double" else prec.emit_float(config, work / "src")
         target = work / f"m4f_{precision}"
         target.mkdir(parents=True, exist_ok=True)
         elf = build_elf(name, src, inputs, target, precision)
         out_t, status_t = execute(elf, obs.n_output, precision)
-        out_h, status_h = host_run(name, inputs, precision, work)
+        out_h, status_h = host_run(config, inputs, precision, work)
     f32 = precision == "float32"
     itype = np.uint32 if f32 else np.uint64
     out_h = np.ascontiguousarray(out_h, dtype=np.float32 if f32 else np.float64)
@@ -294,21 +299,37 @@ def format_row(r: dict) -> str:
     return f"{r['observer']:32s} {r['precision']:8s} {r['scenario']:>22s} {r['samples']:5d} samples: {verdict}"
 
 
+PROG = "python -m codegen.tools.qemu"
+DESCRIPTION = ("Run each observer's Cortex-M4F build under QEMU (qemu-system-arm -M mps2-an386, bare metal, "
+               f"semihosting) on the first {SAMPLES} inputs of its first validation scenario, double and float32, "
+               "and compare its outputs and status bit for bit with the host build of the same precision. The "
+               "observer must have been generated and built (uiogen generate NAME; uiogen build NAME). Exit status "
+               "0, or 1 where a build is not bit-identical and UIOGEN_QEMU_STRICT is set. Needs arm-none-eabi-gcc "
+               f"and qemu-system-arm: sudo apt-get install {cortexm.PACKAGES} (in a checkout: make embedded-tools).")
+
+
 def main(argv=None) -> int:
-    from ..extension.build import generated_names
+    from ..cli import report_errors
+    args = cortexm.command_line(PROG, DESCRIPTION).parse_args(argv)
+    return report_errors(PROG, lambda: _main(args))
+
+
+def _main(args) -> int:
+    from ..extension.build import check_generated, load
+    configs = cortexm.resolve(args.names, args.project)
     if not available():
-        print(f"QEMU run skipped: {missing()} not installed (scripts/install_embedded_tools.sh)")
-        return 0
-    names = (argv if argv is not None else sys.argv[1:]) or generated_names()
+        raise UnsupportedError(cortexm.install_hint(missing()))
     bad = 0
-    for name in names:
+    for config in configs:
+        check_generated(config)
+        load(config)            # built, and of the current design (else the message says how to build it)
         try:
-            scenario, inputs = record_inputs(name)
+            scenario, inputs = record_inputs(config)
         except UiogenError as exc:
-            print(f"{name:32s} skipped: no validation scenario to record its inputs from ({exc})", flush=True)
+            print(f"{config.name:32s} skipped: no validation scenario to record its inputs from ({exc})", flush=True)
             continue
         for p in ("double", "float32"):
-            r = compare(name, p, inputs, scenario)
+            r = compare(config, p, inputs, scenario)
             bad += not r["bit_identical"]
             print(format_row(r), flush=True)
     return 1 if bad and os.environ.get("UIOGEN_QEMU_STRICT") else 0
