@@ -16,9 +16,16 @@ time-varying, and derives, symbolically and with no hand-written matrix:
   Y = M(rho) x + Gamma(rho) d, with M the rows M^i_{r_i} and Gamma the rows M^i_{r_i - 1} D;
   rank condition (64) (full column rank of Gamma on the whole box, proven by bounding det Gamma or
   det Gamma'Gamma away from 0; a :class:`~codegen.errors.RankConditionError` names the failure);
-* eqs. (24), (60), (85)/(86): Q = D Gamma^-1 (square) or D Gamma^+ with Gamma^+ = (Gamma'Gamma)^-1
-  Gamma' (more outputs than UIs), and P = I - Q M_{r-1} (the rows M^i_{r_i - 1} stacked; for r = 1
-  this is eq. (24), P = I - Q C), so P D = D - Q Gamma = 0;
+* eqs. (24), (60), (85)/(86): Q = D Gamma^dagger and P = I - Q M_{r-1} (the rows M^i_{r_i - 1}
+  stacked; for r = 1 this is eq. (24), P = I - Q C), so P D = D - Q Gamma = 0 for *any* left inverse
+  (Gamma^dagger Gamma = I). A square Gamma has one, Gamma^-1. With more outputs than UIs there are
+  many; the paper's (86) takes Gamma^+ = (Gamma'Gamma)^-1 Gamma', a least-squares inverse in the
+  units the outputs happen to be written in. We take the one the state error reaches least
+  (:func:`left_inverse`): d_hat = Gamma^dagger (Y - Mcal x_hat) = d + Gamma^dagger Mcal e, and the
+  decoupling adds Q Mcal = D Gamma^dagger Mcal to the error matrix, so Gamma^dagger minimizes
+  Gamma^dagger R Gamma^dagger' (Loewner order), R = Mcal S^2 Mcal', S the widths of the declared
+  [state_bounds] (the Gauss-Markov estimator of d from Y - Mcal x_hat with the state error as its
+  noise). It does not depend on the units of the outputs (or of the states, through their boxes);
 * the error dynamics matrix of (59)/(65): F0(rho, rho', ...) = A - Q M (for r = 1, F0 = P A as in (23)).
 
 Parameter derivatives are symbols ``<name>_d1, <name>_d2, ...``; their bounds come from the
@@ -35,7 +42,8 @@ from functools import cached_property
 import sympy as sp
 
 from ...representation.bounds import BoundsError, range_bound
-from ...errors import ModelDefinitionError, RankConditionError, RelativeDegreeError, SchedulingBoundsError
+from ...errors import (ConfigurationError, ModelDefinitionError, RankConditionError, RelativeDegreeError,
+                      SchedulingBoundsError)
 from ...model import LPVModel
 
 
@@ -149,9 +157,10 @@ class Decoupling:
     Gamma, Mcal : sympy.Matrix
         eq. (84): Y = Mcal x + Gamma d (+ u terms); Gamma has rank n_d on the whole box (64).
     Q, P : sympy.Matrix
-        Q = D Gamma^-1 / D Gamma^+ (eqs. (24), (60), (85), (86)); P = I - Q M_{r-1}, P D = 0.
+        Q = D Gamma^dagger (eqs. (24), (60), (85), (86)); P = I - Q M_{r-1}, P D = 0.
     Gamma_inv : sympy.Matrix
-        Gamma^-1 or Gamma^+ (the UI reconstruction of (59), (85), (86)).
+        The left inverse Gamma^dagger: Gamma^-1 when square, else :func:`left_inverse` (the UI
+        reconstruction of (59), (85), (86)).
     F0 : sympy.Matrix
         A - Q Mcal, the error dynamics before the output injection (eqs. (31), (65), (69)).
     base : tuple of sympy.Symbol
@@ -226,6 +235,106 @@ def check_structure(lpv: LPVModel) -> None:
                                    f"takes y = C x + Du u")
 
 
+def state_scale(lpv: LPVModel, Mcal: sp.Matrix) -> sp.Matrix:
+    """diag(S): the width of the declared ``[state_bounds]`` box of every state ``Mcal`` reads (exact
+    rationals), 0 for the states it does not read (they do not enter R of :func:`left_inverse`).
+
+    Raises
+    ------
+    ConfigurationError
+        a state that ``Mcal`` reads has no ``[state_bounds]`` entry: without its scale the left
+        inverse would depend on the units the state is written in.
+    """
+    d = lpv.definition
+    read = [j for j in range(lpv.nx) if any(not _is_zero(e) for e in Mcal.col(j))]
+    missing = [str(d.states[j]) for j in read if str(d.states[j]) not in lpv.parameters.state_bounds]
+    if missing:
+        raise ConfigurationError(
+            f"{lpv.parameters.source}: [state_bounds] missing {', '.join(missing)}: model {d.name!r} has more outputs "
+            f"({lpv.ny}) than unknown inputs ({lpv.nd}), so Gamma has many left inverses, and the algebraic UIO takes "
+            f"the one the state error reaches least, measured in the state box (docs/families/algebraic_uio.md); "
+            f"add {', '.join(f'{m} = [min, max]' for m in missing)} to [state_bounds]",
+            source=lpv.parameters.source, section="state_bounds", key=missing[0], allowed="required")
+    widths = [0] * lpv.nx
+    for j in read:
+        lo, hi = lpv.parameters.state_bounds[str(d.states[j])]
+        widths[j] = sp.nsimplify(hi, rational=True) - sp.nsimplify(lo, rational=True)
+    return sp.Matrix(widths)
+
+
+def left_inverse(lpv: LPVModel, Gamma: sp.Matrix, Mcal: sp.Matrix, boxes: dict, rel_tol: float = 1e-3) -> tuple:
+    """(Gamma^dagger, certificate) for a Gamma with more rows (outputs) than columns (unknown inputs).
+
+    Every left inverse G (G Gamma = I) decouples: P D = D - D G Gamma = 0, and the error dynamics
+    e' = (A - D G Mcal - L C) e of (59) hold for any of them, so LMI (39) certifies whichever is
+    taken. They differ in how the state error enters: d_hat = G (Y - Mcal x_hat) = d + G Mcal e, and
+    the decoupling adds D G Mcal to the error matrix. We take a G that minimizes G R G' in the Loewner
+    order among the left inverses, R = Mcal S^2 Mcal' with S = diag of the state-box widths
+    (:func:`state_scale`): the reconstruction least sensitive to a state error the size of the box,
+    i.e. the Gauss-Markov (best linear unbiased) estimator of d from Y - Mcal x_hat = Gamma d + Mcal e.
+    It minimizes ||K G Mcal S||_F for every K at once, so also the decoupling's term
+    S^-1 D G Mcal S of the (box-scaled) error matrix. With T = R + Gamma Gamma' (Rao's unified least
+    squares),
+
+        G = (Gamma' T~^-1 Gamma)^-1 Gamma' T~^-1,      T~ = T + W N N' W,
+
+    where the columns of N span the output combinations v with v' [Mcal S, Gamma] = 0 and W = diag(T).
+    Without such combinations (N empty, T positive definite) this is (Gamma' R^-1 Gamma)^-1 Gamma' R^-1
+    when R is invertible, and stays the unique minimizer when an output derivative reads no state
+    (R singular). A combination v of N is identically 0 on the model's trajectories (measuring a
+    position and its speed: y_1'' - y_2' = 0); the minimizers differ only in what they do with it,
+    i.e. with the differentiators' errors in it, never in G Mcal, F0 or d_hat on exact signals: the
+    term W N N' W picks the one with G W N = 0 (T~ N = W N N' W N, so T~^-1 W N = N (N' W N)^-1 and
+    Gamma' N = 0), which is still a minimizer.
+
+    Output units: a change y -> M y with M diagonal maps Gamma, Mcal, T, W, N to M Gamma, M Mcal,
+    M T M, M W M, M^-1 N, hence G to G M^-1: G Mcal, Q Mcal, P and d_hat are the same whatever units
+    the outputs are written in (the paper's Gamma^+ of (86) is not: in raw units it takes d from the
+    output whose Gamma row is largest in those units). The state units enter only through the box, a
+    common factor on S changes nothing, and the weight of Gamma Gamma' does not change G (Rao), so the
+    unknown inputs' units do not either, except through W in the choice on N (differentiator errors
+    in exactly redundant combinations only).
+
+    Raises
+    ------
+    ConfigurationError
+        a state Mcal reads has no [state_bounds] box (:func:`state_scale`);
+    RankConditionError
+        det T~ vanishes (or cannot be bounded away from 0) somewhere on the box: the rank of
+        [Mcal S, Gamma] drops there, so no one left inverse is least sensitive on the whole box.
+    """
+    S = state_scale(lpv, Mcal)
+    MS = Mcal * sp.diag(*S)
+    T = _simplify_matrix(MS * MS.T + Gamma * Gamma.T)
+    redundant = [_simplify_matrix(v) for v in sp.Matrix.hstack(MS, Gamma).T.nullspace()]
+    Tt = T
+    if redundant:
+        N = sp.Matrix.hstack(*redundant)
+        W = sp.diag(*T.diagonal())
+        Tt = _simplify_matrix(T + W * N * N.T * W)
+    det = sp.cancel(sp.together(Tt.det(method="berkowitz")))
+    what = "det(Mcal S^2 Mcal' + Gamma Gamma'" + (" + W N N' W)" if redundant else ")")
+    why = ("the rank of [Mcal S, Gamma] (the outputs' derivatives y_i^(r_i) in the state box and the unknown inputs) "
+           "changes on the box, so no one left inverse of Gamma is the least sensitive to the state error there")
+    if _is_zero(det):
+        raise RankConditionError(f"{what} = 0 for every parameter value: {why}")
+    try:
+        cert = nonvanishing(det, boxes, what, rel_tol)
+    except RelativeDegreeError as exc:
+        raise RankConditionError(f"{exc}: {why}") from None
+    # Tt^-1 = adj(Tt) / det Tt; the scalar det Tt cancels in G
+    Ta = _simplify_matrix(Tt.adjugate(method="berkowitz"))
+    G = _simplify_matrix((Gamma.T * Ta * Gamma).inv() * Gamma.T * Ta)
+    names = lpv.definition.states
+    out = {"rule": "G = (Gamma' T^-1 Gamma)^-1 Gamma' T^-1, T = Mcal S^2 Mcal' + Gamma Gamma' (+ W N N' W): the left "
+                   "inverse least sensitive to the state error in the state box",
+           "state_scale": {str(names[j]): _num(S[j]) for j in range(len(S)) if S[j] != 0},
+           "quantity": what, "expr": _num(det), "bound": [cert["lower"], cert["upper"]]}
+    if redundant:
+        out["redundant_output_combinations"] = [[_num(e) for e in v] for v in redundant]
+    return G, out
+
+
 def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:
     """Relative degrees, M_{i rho}, Gamma, Q, P and F0 of an LPV model, proven uniform on the box.
 
@@ -235,7 +344,10 @@ def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:
         an output does not see the unknown inputs within n derivatives, or its relative degree is not
         uniform on the box;
     RankConditionError
-        rank condition (64) fails (Gamma not of full column rank somewhere on the box);
+        rank condition (64) fails (Gamma not of full column rank somewhere on the box), or redundant
+        outputs leave the left inverse of a non-square Gamma not unique (:func:`left_inverse`);
+    ConfigurationError
+        a non-square Gamma and a state its output derivatives read without a [state_bounds] box;
     ModelDefinitionError, SchedulingBoundsError
         C depends on the scheduling signals, no unknown inputs, a needed derivative is not bounded.
     """
@@ -290,7 +402,10 @@ def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:
     except RelativeDegreeError as exc:
         raise RankConditionError(f"rank condition (64) fails on the box: {exc}") from None
     certificates["rank_condition_64"] = {"quantity": label, "expr": _num(det), "bound": [cert["lower"], cert["upper"]]}
-    Gamma_inv = _simplify_matrix(Gamma.inv() if square else G2.inv() * Gamma.T)
+    if square:
+        Gamma_inv = _simplify_matrix(Gamma.inv())      # the only left inverse
+    else:
+        Gamma_inv, certificates["left_inverse"] = left_inverse(lpv, Gamma, Mcal, boxes, rel_tol)
     Q = _simplify_matrix(D * Gamma_inv)
     P = _simplify_matrix(sp.eye(n) - Q * Mprev)
     F0 = _simplify_matrix(A - Q * Mcal)
