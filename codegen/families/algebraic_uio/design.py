@@ -2,7 +2,10 @@
 
 Continuous observer (59)/(85)/(86), with everything derived by :mod:`codegen.families.algebraic_uio.representation`::
 
-    x_hat' = (A - L C - Q Mcal) x_hat + Q Y + L y,      d_hat = Gamma^-1 (Y - Mcal x_hat)   (or Gamma^+)
+    x_hat' = (A - L C - Q Mcal) x_hat + Q Y + L y,      d_hat = Gamma^dagger (Y - Mcal x_hat)
+
+(Gamma^dagger = Gamma^-1 when square, else the left inverse of
+:func:`codegen.families.algebraic_uio.representation.left_inverse`, Q = D Gamma^dagger.)
 
 Y stacks the output derivatives y_i^(r_i); for r = 1 it is observer (23) (A - Q Mcal = P A). Known
 inputs are removed with the auxiliary system (20)-(21): s' = A s + B u, the observer runs on
@@ -49,8 +52,8 @@ from . import representation as rdeg
 from ...representation.bounds import range_bound
 from ...representation.differentiators import MAX_ORDER, HosmdSpec
 from ...emit.stepgen import lambdify
-from ...errors import (CertificateError, DiscretizationError, InfeasibleLMIError, ModelDefinitionError,
-                      SolverError)
+from ...errors import (CertificateError, DesignLockError, DiscretizationError, InfeasibleLMIError,
+                      ModelDefinitionError, SolverError)
 from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
 from ...model import LPVModel
 from ...representation.polytope import (Premise, affine_decomposition, nonlinear_factors, sector_weights_product,
@@ -278,8 +281,28 @@ def _balance(mats, C=None) -> np.ndarray:
     return np.asarray(S[0], float)
 
 
-def build_problem(dec: rdeg.Decoupling, settings: AlgebraicSettings) -> tuple:
-    """LMI (39) in balanced coordinates: (problem, parts for :func:`design`)."""
+def problem_name(dec: rdeg.Decoupling) -> str:
+    return f"{dec.lpv.definition.name}: Ichalal and Mammar 2015 LMI (39)"
+
+
+def _committed_scaling(data: dict, n: int, name: str) -> np.ndarray | None:
+    """The solver's state scaling a committed solution was solved in (``state_scaling`` of the
+    problem's data, present only when it is not the observability scaling); None: that default."""
+    if "state_scaling" not in data:
+        return None
+    S = np.asarray(data["state_scaling"], dtype=float).ravel()
+    if S.size != n or not np.all(np.isfinite(S)) or np.any(S <= 0) or np.any(np.frexp(S)[0] != 0.5):
+        raise DesignLockError(f"{name}: committed state_scaling {data['state_scaling']!r} is not {n} power(s) of two; "
+                              f"re-solve with `uiogen design NAME --update`")
+    return S
+
+
+def build_problem(dec: rdeg.Decoupling, settings: AlgebraicSettings, scaling=None) -> tuple:
+    """LMI (39) in balanced coordinates: (problem, parts for :func:`design`).
+
+    ``scaling``: the diagonal state scaling S (powers of 2) to pose it in; None: the observability
+    scaling of :func:`_balance`. Another one (:func:`design`'s fallback) is part of the problem's
+    data, so a design lock replays the problem it was solved in."""
     lpv = dec.lpv
     n, ny = lpv.nx, lpv.ny
     C = np.array(lpv.C.evalf(), dtype=float)
@@ -302,10 +325,12 @@ def build_problem(dec: rdeg.Decoupling, settings: AlgebraicSettings) -> tuple:
             f"A - Q Mcal has {fixed['count']} mode(s) unobservable from C (invariant zeros of (A, D, C)) "
             f"with real parts in [{lo:.4g}, {hi:.4g}] on the box; choose alpha < {fixed['decay_limit']:.4g}")
     blocks = _vertex_blocks(form, F0_poly, P_poly, A_poly, C)
-    S = _balance([F for _, F, _ in blocks], C)
+    default = _balance([F for _, F, _ in blocks], C)
+    S = default if scaling is None else np.asarray(scaling, dtype=float)
     Si = 1.0 / S
     Cs = C * S[None, :]
-    prob = LMIProblem(f"{lpv.definition.name}: Ichalal and Mammar 2015 LMI (39)")
+    # the default scaling leaves the data as it was (the built-in design locks hold no such key)
+    prob = LMIProblem(problem_name(dec), data={} if np.array_equal(S, default) else {"state_scaling": S.tolist()})
     X = prob.symmetric("X", n)
     K = [prob.matrix(f"K{j + 1}", n, ny) for j in range(gain_poly.n_vertices)]
     t = prob.scalar("t")
@@ -327,12 +352,38 @@ def build_problem(dec: rdeg.Decoupling, settings: AlgebraicSettings) -> tuple:
 
 def design(dec: rdeg.Decoupling, settings: AlgebraicSettings, solver) -> AlgebraicDesign:
     """LMI (39) in balanced coordinates, answered by ``solver`` (:mod:`codegen.design.solver`); rounded
-    gains re-certified with numpy."""
+    gains re-certified with numpy.
+
+    The solver's coordinates are a conditioning device only (the certificate is checked in them,
+    an exact power-of-2 congruence of the model's). The observability scaling of :func:`_balance`
+    comes first; when the solver cannot answer the problem posed in it (a solver error, or its
+    answer failing the numpy re-check), the problem is posed once more in the matrix balancing of
+    the vertex matrices (:func:`_balance` without C). Why: the observability matrix adds C F^k of
+    every order k at one weight, so for a stiff error matrix (an electric pole at -500/s beside a
+    mechanical chain) its F^(n-1) terms set the scale alone and shrink the slow states by ~1e5
+    (the L = 0.2 mH assist motor: Clarabel reports AlmostPrimalInfeasible there, and certifies the
+    same problem in the matrix-balanced coordinates, cond X = 8). A problem that solves in the
+    observability scaling keeps it, so every design that solved before is unchanged. The fallback
+    scaling is committed with the solution (the problem's ``state_scaling``) and replayed; when it
+    fails too, the first error is raised, naming both."""
     lpv = dec.lpv
     n, ny = lpv.nx, lpv.ny
     C = np.array(lpv.C.evalf(), dtype=float)
-    prob, (form, gain_poly, factor_poly, blocks, S, Si, K, fixed) = build_problem(dec, settings)
-    sol = solver.solve(prob, tol=settings.tol)
+    committed = solver.committed_data(problem_name(dec))
+    scaling = None if committed is None else _committed_scaling(committed, n, problem_name(dec))
+    prob, (form, gain_poly, factor_poly, blocks, S, Si, K, fixed) = build_problem(dec, settings, scaling)
+    try:
+        sol = solver.solve(prob, tol=settings.tol)
+    except (SolverError, CertificateError) as first:
+        balanced = _balance([F for _, F, _ in blocks])
+        if committed is not None or np.array_equal(balanced, S):
+            raise                  # a replay answers the problem it was committed for; no other scaling to try
+        prob, (form, gain_poly, factor_poly, blocks, S, Si, K, fixed) = build_problem(dec, settings, balanced)
+        try:
+            sol = solver.solve(prob, tol=settings.tol)
+        except (SolverError, CertificateError) as second:
+            raise type(first)(f"{first} (posed again in the matrix-balanced state scaling {balanced.tolist()}: "
+                              f"{type(second).__name__}: {second})") from None
     Xs = decimal_round(0.5 * (sol["X"] + sol["X"].T))
     # emitted: solved exactly (codegen.design.canonical), the same on every machine
     Ls = [canonical.solve(Xs, np.atleast_2d(sol[f"K{j + 1}"]).reshape(n, ny)) for j in range(len(K))]
