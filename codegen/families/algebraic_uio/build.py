@@ -223,7 +223,7 @@ class AlgebraicUIOBuild(ObserverBuild):
     def lmi_problem(self):
         """A fresh LMI (39) problem of this design, in the design's state scaling (benchmark: our path vs
         CVXPY on the same blocks)."""
-        return alg.build_problem(self.dec, self.settings, self.design.scaling)[0]
+        return alg.build_problem(self.dec, self.settings, self.design.scaling, self.design.output_scaling)[0]
 
     def figures(self) -> dict:
         return design_summary(self)

@@ -87,18 +87,20 @@ def test_stiff_motor_designs_certifies_and_reconstructs_the_torque(tmp_path, L):
 def test_the_fallback_scaling_is_committed_and_replayed(tmp_path):
     """At 0.2 mH the observability scaling (unit columns of [C; C F; C F^2], whose F^2 terms the
     electric pole sets) leaves the problem AlmostPrimalInfeasible; it is solved in the matrix-balanced
-    scaling, and a design lock replays that problem (the scaling is the problem's data)."""
+    scaling with the outputs scaled to it, and a design lock replays that problem (the scalings are
+    the problem's data)."""
     cfg = _motor(tmp_path)
     fresh = FreshSolver()
     b = algebraic_uio.build(cfg, fresh)
     rec = next(r for r in fresh.records if r.problem.endswith("LMI (39)"))
-    assert rec.data == {"state_scaling": b.design.scaling.tolist()}
+    assert rec.data == {"state_scaling": b.design.scaling.tolist(), "output_scaling": b.design.output_scaling.tolist()}
     replay = LockReplay(fresh.records, source="test lock")
     again = algebraic_uio.build(cfg, replay)
     replay.check_complete()
     assert np.array_equal(again.design.scaling, b.design.scaling)
+    assert np.array_equal(again.design.output_scaling, b.design.output_scaling)
     assert all(np.array_equal(x, y) for x, y in zip(again.design.L, b.design.L))
-    bad = dataclasses.replace(rec, data={"state_scaling": [0.3, 1.0, 1.0]})
+    bad = dataclasses.replace(rec, data={**rec.data, "state_scaling": [0.3, 1.0, 1.0]})
     with pytest.raises(DesignLockError, match="committed state_scaling .* is not 3 power"):
         algebraic_uio.build(cfg, LockReplay([bad if r is rec else r for r in fresh.records]))
 
@@ -129,6 +131,24 @@ def test_the_torque_estimate_does_not_depend_on_the_current_unit(tmp_path):
         Ya = Ma @ x + Gma @ d
         Ym = Mm @ x + Gmm @ d
         assert Gm @ (Ym - Mm @ xh) == pytest.approx(Ga @ (Ya - Ma @ xh), rel=1e-12, abs=1e-9)
+
+
+def test_the_whole_step_estimates_the_same_torque_with_the_current_in_mA(tmp_path):
+    """End to end at 0.2 mH: both designs are the fallback problem (its output scaling follows C, so
+    the two problems differ only by 1000/1024 in the current's row), and the torque estimates of the
+    excitation run agree to 1e-3 N m (T_d spans +-10 N m). The default problem is not unit-free (the
+    observability scaling and min ||K|| read the outputs' units): where it solves, as at 20 mH, the
+    gains differ and so do the estimates' transients (0.06 N m there); after convergence the decoupling
+    (the left inverse) alone sets them."""
+    est = []
+    for sub, scale in (("A", None), ("mA", 1000)):
+        (tmp_path / sub).mkdir()
+        cfg = _motor(tmp_path / sub, current_scale=scale)
+        b = pipeline.build(cfg)
+        res = excitation.run(cfg, duration=6.0, observer=_CasadiStep(b))
+        assert res["status_flags"] == 0 and res["observer"]["T_d"]["rms_percent"] < 1.0
+        est.append(res["signals"]["estimate"]["T_d"][res["signals"]["t"] >= 2.0])
+    assert np.abs(est[0] - est[1]).max() < 1e-3
 
 
 # ---- the rule on a scheduled model: a left inverse, the least sensitive one, across the box ------------
