@@ -383,7 +383,7 @@ def design(dec: rdeg.Decoupling, settings: AlgebraicSettings, solver) -> Algebra
     electric pole at -500/s beside a mechanical chain) its F^(n-1) terms set the scale alone and
     shrink the slow states by ~1e5 (the L = 0.2 mH assist motor: Clarabel reports
     AlmostPrimalInfeasible there, and certifies the same problem in the matrix-balanced
-    coordinates, cond X = 8); and both the observability scaling and the outputs' own units move
+    coordinates, cond X = 22); and both the observability scaling and the outputs' own units move
     with the units the outputs are written in (the motor's current in mA: at 2 mH both fail
     without the output scaling), the fallback's scalings do not (F0 does not, by the choice of
     left inverse, and the output scaling follows C). A problem that solves in the observability
