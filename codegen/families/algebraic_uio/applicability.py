@@ -10,8 +10,7 @@ differentiator to add.
 """
 from __future__ import annotations
 
-from ...errors import (ConfigurationError, RankConditionError, RelativeDegreeError, SchedulingBoundsError,
-                      UiogenError)
+from ...errors import RankConditionError, RelativeDegreeError, SchedulingBoundsError, UiogenError
 
 
 def _lipschitz(subject, signal: str, order: int) -> tuple:
@@ -67,10 +66,6 @@ def assess(family, subject, structure):
     except RankConditionError as exc:
         return refuse(f"{exc}", structure.fix("left_invertibility", "") or structure.fix("matching", "")
                       or "measure more outputs that the unknown inputs reach independently")
-    except ConfigurationError as exc:
-        # more outputs than unknown inputs: the left inverse of Gamma is weighed by the state box
-        # (representation.left_inverse), so the states the output derivatives read need one
-        return refuse(f"{exc}", f"add the missing [state_bounds] entries to {subject.parameter_path.name}")
     except SchedulingBoundsError as exc:
         return refuse(f"the observer needs derivatives of its scheduling signals that the parameter file does not "
                       f"bound: {exc}",

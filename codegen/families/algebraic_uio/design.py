@@ -52,8 +52,8 @@ from . import representation as rdeg
 from ...representation.bounds import range_bound
 from ...representation.differentiators import MAX_ORDER, HosmdSpec
 from ...emit.stepgen import lambdify
-from ...errors import (CertificateError, DesignLockError, DiscretizationError, InfeasibleLMIError,
-                      ModelDefinitionError, SolverError)
+from ...errors import (CertificateError, DesignLockError, DiscretizationError, IllConditionedError,
+                      InaccurateSolveError, InfeasibleLMIError, ModelDefinitionError, SolverError)
 from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace
 from ...model import LPVModel
 from ...representation.polytope import (Premise, affine_decomposition, nonlinear_factors, sector_weights_product,
@@ -369,14 +369,26 @@ def build_problem(dec: rdeg.Decoupling, settings: AlgebraicSettings, scaling=Non
     return prob, (form, gain_poly, factor_poly, blocks, S, Si, W, K, fixed)
 
 
+def _inconclusive(exc: Exception) -> bool:
+    """Did the solve settle nothing? True for a solve stopped short of its tolerances
+    (InaccurateSolveError), an infeasibility found only at reduced tolerances
+    (AlmostPrimalInfeasible), an answer too ill-conditioned to use, or one that fails the numpy
+    re-check; False for an infeasibility proven at the full tolerances (PrimalInfeasible) or before
+    any solve, which :func:`design` lets stand."""
+    if isinstance(exc, InfeasibleLMIError):
+        return exc.status is not None and exc.status.startswith("Almost")
+    return isinstance(exc, (InaccurateSolveError, IllConditionedError, CertificateError))
+
+
 def design(dec: rdeg.Decoupling, settings: AlgebraicSettings, solver) -> AlgebraicDesign:
     """LMI (39) in balanced coordinates, answered by ``solver`` (:mod:`codegen.design.solver`); rounded
     gains re-certified with numpy.
 
     The solver's coordinates are a conditioning device only (the certificate is checked in them,
     an exact power-of-2 congruence of the model's). The observability scaling of :func:`_balance`
-    comes first, with the outputs in the model's units; when the solver cannot answer the problem
-    posed there (a solver error, or its answer failing the numpy re-check), it is posed once more
+    comes first, with the outputs in the model's units; when the solver settles nothing there
+    (:func:`_inconclusive`: stopped short of its tolerances, infeasible only at reduced ones, an
+    answer failing the numpy re-check; a full-tolerance infeasibility verdict stands), it is posed once more
     in the matrix balancing S of the vertex matrices (:func:`_balance` without C), with each output
     divided by the power of 2 nearest its row norm of C S (:func:`_output_scaling`). Why: the
     observability matrix adds C F^k of every order k at one weight, so for a stiff error matrix (an
@@ -401,8 +413,11 @@ def design(dec: rdeg.Decoupling, settings: AlgebraicSettings, solver) -> Algebra
     except (SolverError, CertificateError) as first:
         balanced = _balance([F for _, F, _ in blocks])
         Wb = _output_scaling(C, balanced)
-        if committed is not None or (np.array_equal(balanced, S) and np.array_equal(Wb, W)):
-            raise                  # a replay answers the problem it was committed for; no other scaling to try
+        if (committed is not None or (np.array_equal(balanced, S) and np.array_equal(Wb, W))
+                or not _inconclusive(first)):
+            # a replay answers the problem it was committed for; no other scaling to try; a verdict the
+            # solver reached at its full tolerances stands
+            raise
         prob, (form, gain_poly, factor_poly, blocks, S, Si, W, K, fixed) = build_problem(dec, settings, balanced, Wb)
         try:
             sol = solver.solve(prob, tol=settings.tol)

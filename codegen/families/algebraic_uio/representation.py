@@ -23,9 +23,11 @@ time-varying, and derives, symbolically and with no hand-written matrix:
   units the outputs happen to be written in. We take the one the state error reaches least
   (:func:`left_inverse`): d_hat = Gamma^dagger (Y - Mcal x_hat) = d + Gamma^dagger Mcal e, and the
   decoupling adds Q Mcal = D Gamma^dagger Mcal to the error matrix, so Gamma^dagger minimizes
-  Gamma^dagger R Gamma^dagger' (Loewner order), R = Mcal S^2 Mcal', S the widths of the declared
-  [state_bounds] (the Gauss-Markov estimator of d from Y - Mcal x_hat with the state error as its
-  noise). It does not depend on the units of the outputs (or of the states, through their boxes);
+  Gamma^dagger R Gamma^dagger' (Loewner order) at the centre of the box, R = Mcal S^2 Mcal', S the
+  widths of the declared [state_bounds] (a state's unit where none is declared; the Gauss-Markov
+  estimator of d from Y - Mcal x_hat with the state error as its noise). It does not depend on
+  the units of the outputs, to the 12 digits of its weight (nor on those of the states that have a
+  box);
 * the error dynamics matrix of (59)/(65): F0(rho, rho', ...) = A - Q M (for r = 1, F0 = P A as in (23)).
 
 Parameter derivatives are symbols ``<name>_d1, <name>_d2, ...``; their bounds come from the
@@ -39,11 +41,11 @@ import tomllib
 from dataclasses import dataclass
 from functools import cached_property
 
+import numpy as np
 import sympy as sp
 
 from ...representation.bounds import BoundsError, range_bound
-from ...errors import (ConfigurationError, ModelDefinitionError, RankConditionError, RelativeDegreeError,
-                      SchedulingBoundsError)
+from ...errors import ModelDefinitionError, RankConditionError, RelativeDegreeError, SchedulingBoundsError
 from ...model import LPVModel
 
 
@@ -235,104 +237,129 @@ def check_structure(lpv: LPVModel) -> None:
                                    f"takes y = C x + Du u")
 
 
-def state_scale(lpv: LPVModel, Mcal: sp.Matrix) -> sp.Matrix:
-    """diag(S): the width of the declared ``[state_bounds]`` box of every state ``Mcal`` reads (exact
-    rationals), 0 for the states it does not read (they do not enter R of :func:`left_inverse`).
-
-    Raises
-    ------
-    ConfigurationError
-        a state that ``Mcal`` reads has no ``[state_bounds]`` entry: without its scale the left
-        inverse would depend on the units the state is written in.
-    """
+def state_scale(lpv: LPVModel, Mcal: sp.Matrix) -> tuple:
+    """(S, unboxed): per state the width of its declared ``[state_bounds]`` box (exact rationals), or
+    1, its unit in the model, for a state without one, whose names ``unboxed`` lists (states ``Mcal``
+    does not read only). The box is how large a state error can be in the user's own terms; without
+    it the model's unit is all there is to measure it in. The outputs' units never enter (the choice
+    of :func:`left_inverse` is unit-free in them either way); the states' enter only where no box
+    is declared, which the design's certificate reports."""
     d = lpv.definition
     read = [j for j in range(lpv.nx) if any(not _is_zero(e) for e in Mcal.col(j))]
-    missing = [str(d.states[j]) for j in read if str(d.states[j]) not in lpv.parameters.state_bounds]
-    if missing:
-        raise ConfigurationError(
-            f"{lpv.parameters.source}: [state_bounds] missing {', '.join(missing)}: model {d.name!r} has more outputs "
-            f"({lpv.ny}) than unknown inputs ({lpv.nd}), so Gamma has many left inverses, and the algebraic UIO takes "
-            f"the one the state error reaches least, measured in the state box (docs/families/algebraic_uio.md); "
-            f"add {', '.join(f'{m} = [min, max]' for m in missing)} to [state_bounds]",
-            source=lpv.parameters.source, section="state_bounds", key=missing[0], allowed="required")
-    widths = [0] * lpv.nx
+    widths, unboxed = [sp.Integer(1)] * lpv.nx, []
     for j in read:
-        lo, hi = lpv.parameters.state_bounds[str(d.states[j])]
-        widths[j] = sp.nsimplify(hi, rational=True) - sp.nsimplify(lo, rational=True)
-    return sp.Matrix(widths)
+        box = lpv.parameters.state_bounds.get(str(d.states[j]))
+        if box is None:
+            unboxed.append(str(d.states[j]))
+        else:
+            widths[j] = sp.nsimplify(box[1], rational=True) - sp.nsimplify(box[0], rational=True)
+    return sp.Matrix(widths), tuple(unboxed)
 
 
-def left_inverse(lpv: LPVModel, Gamma: sp.Matrix, Mcal: sp.Matrix, boxes: dict, rel_tol: float = 1e-3) -> tuple:
-    """(Gamma^dagger, certificate) for a Gamma with more rows (outputs) than columns (unknown inputs).
+REDUNDANT_TOL = 1e-6
+"""A combination of the output derivatives whose share of [Mcal S, Gamma] (rows scaled to unit norm)
+is below this singular value is taken as redundant (:func:`left_inverse`): the model's floats and
+the auxiliary gain K_s leave exact redundancies (a position and its speed) at ~1e-13."""
+
+
+def left_inverse(lpv: LPVModel, Gamma: sp.Matrix, Mcal: sp.Matrix, boxes: dict) -> tuple:
+    """(Gamma^dagger, record) for a Gamma with more rows (outputs) than columns (unknown inputs).
 
     Every left inverse G (G Gamma = I) decouples: P D = D - D G Gamma = 0, and the error dynamics
     e' = (A - D G Mcal - L C) e of (59) hold for any of them, so LMI (39) certifies whichever is
     taken. They differ in how the state error enters: d_hat = G (Y - Mcal x_hat) = d + G Mcal e, and
-    the decoupling adds D G Mcal to the error matrix. We take a G that minimizes G R G' in the Loewner
-    order among the left inverses, R = Mcal S^2 Mcal' with S = diag of the state-box widths
-    (:func:`state_scale`): the reconstruction least sensitive to a state error the size of the box,
-    i.e. the Gauss-Markov (best linear unbiased) estimator of d from Y - Mcal x_hat = Gamma d + Mcal e.
-    It minimizes ||K G Mcal S||_F for every K at once, so also the decoupling's term
-    S^-1 D G Mcal S of the (box-scaled) error matrix. With T = R + Gamma Gamma' (Rao's unified least
-    squares),
+    the decoupling adds D G Mcal to the error matrix. We take the weighted left inverse
 
-        G = (Gamma' T~^-1 Gamma)^-1 Gamma' T~^-1,      T~ = T + W N N' W,
+        G = (Gamma' O Gamma)^-1 Gamma' O,      O = V^-1,   V = Mc S^2 Mc' + Gc Gc' (+ redundant part),
 
-    where the columns of N span the output combinations v with v' [Mcal S, Gamma] = 0 and W = diag(T).
-    Without such combinations (N empty, T positive definite) this is (Gamma' R^-1 Gamma)^-1 Gamma' R^-1
-    when R is invertible, and stays the unique minimizer when an output derivative reads no state
-    (R singular). A combination v of N is identically 0 on the model's trajectories (measuring a
-    position and its speed: y_1'' - y_2' = 0); the minimizers differ only in what they do with it,
-    i.e. with the differentiators' errors in it, never in G Mcal, F0 or d_hat on exact signals: the
-    term W N N' W picks the one with G W N = 0 (T~ N = W N N' W N, so T~^-1 W N = N (N' W N)^-1 and
-    Gamma' N = 0), which is still a minimizer.
+    Mc, Gc = Mcal, Gamma at the centre of the box (scheduling signals and their derivatives), S the
+    widths of the state box (:func:`state_scale`). At the centre G minimizes G Mc S^2 Mc' G' in the
+    Loewner order among the left inverses: the reconstruction least sensitive to a state error the
+    size of the box (the Gauss-Markov estimator of d from Y - Mcal x_hat = Gamma d + Mcal e); it
+    minimizes ||K G Mcal S||_F for every K at once, so also the decoupling's term S^-1 D G Mcal S of
+    the box-scaled error matrix. Gc Gc' does not change that minimizer (Rao's unified least squares)
+    and keeps V invertible when an output derivative reads no state. The weight is frozen at the
+    centre so that G depends on what Gamma depends on, as the paper's Gamma^+ does: the pointwise
+    minimizer would bring Mcal's parameter derivatives into G, hence new premises into the polytope
+    of F0. An LTI model (the assist motor) has the minimizer exactly everywhere.
 
-    Output units: a change y -> M y with M diagonal maps Gamma, Mcal, T, W, N to M Gamma, M Mcal,
-    M T M, M W M, M^-1 N, hence G to G M^-1: G Mcal, Q Mcal, P and d_hat are the same whatever units
-    the outputs are written in (the paper's Gamma^+ of (86) is not: in raw units it takes d from the
-    output whose Gamma row is largest in those units). The state units enter only through the box, a
-    common factor on S changes nothing, and the weight of Gamma Gamma' does not change G (Rao), so the
-    unknown inputs' units do not either, except through W in the choice on N (differentiator errors
-    in exactly redundant combinations only).
+    With B = [Mc S, Gc] = R_B B_n (R_B the row norms, rows of B_n of unit norm), V = R_B (B_n B_n' +
+    U U') R_B, where U spans the combinations u with u' B_n ~ 0 (singular values below
+    :data:`REDUNDANT_TOL`). Such a combination is identically 0 on the model's trajectories (a
+    position and its speed both measured: y_1'' - y_2' = 0); the minimizers differ only in what they
+    do with it, i.e. with the differentiators' errors in it, never in d_hat on exact signals; U U'
+    picks the one with G R_B U = 0 (and keeps V well-conditioned). O is computed in floating point
+    and rounded to 12 significant digits: any positive definite weight gives an exact left inverse
+    (checked in exact arithmetic, with O positive definite), and the exact weight would carry the
+    model's floats as rationals of hundreds of digits into G and F0 = A - D G Mcal.
+
+    Output units: a change y -> M y with M diagonal maps Gamma, Mcal, R_B to M Gamma, M Mcal, M R_B
+    and leaves B_n, U alone, so O goes to M^-1 O M^-1 and G to G M^-1 (to rounding): G Mcal, Q Mcal,
+    P and d_hat are the same whatever units the outputs are written in (the paper's Gamma^+ of (86)
+    is not: in raw units it takes d from the output whose Gamma row is largest in those units). The
+    states' units enter only where no box is declared, a common factor on S changes nothing, and the
+    weight of Gc Gc' does not change G at the centre (Rao), so the unknown inputs' units do not either
+    (but for the redundant part).
 
     Raises
     ------
-    ConfigurationError
-        a state Mcal reads has no [state_bounds] box (:func:`state_scale`);
+    SchedulingBoundsError
+        a scheduling symbol of Mcal or Gamma has no bound (no centre);
     RankConditionError
-        det T~ vanishes (or cannot be bounded away from 0) somewhere on the box: the rank of
-        [Mcal S, Gamma] drops there, so no one left inverse is least sensitive on the whole box.
+        the rounded weight is not positive definite (V too ill-conditioned for 12 digits).
     """
-    S = state_scale(lpv, Mcal)
-    MS = Mcal * sp.diag(*S)
-    T = _simplify_matrix(MS * MS.T + Gamma * Gamma.T)
-    redundant = [_simplify_matrix(v) for v in sp.Matrix.hstack(MS, Gamma).T.nullspace()]
-    Tt = T
-    if redundant:
-        N = sp.Matrix.hstack(*redundant)
-        W = sp.diag(*T.diagonal())
-        Tt = _simplify_matrix(T + W * N * N.T * W)
-    det = sp.cancel(sp.together(Tt.det(method="berkowitz")))
-    what = "det(Mcal S^2 Mcal' + Gamma Gamma'" + (" + W N N' W)" if redundant else ")")
-    why = ("the rank of [Mcal S, Gamma] (the outputs' derivatives y_i^(r_i) in the state box and the unknown inputs) "
-           "changes on the box, so no one left inverse of Gamma is the least sensitive to the state error there")
-    if _is_zero(det):
-        raise RankConditionError(f"{what} = 0 for every parameter value: {why}")
-    try:
-        cert = nonvanishing(det, boxes, what, rel_tol)
-    except RelativeDegreeError as exc:
-        raise RankConditionError(f"{exc}: {why}") from None
-    # Tt^-1 = adj(Tt) / det Tt; the scalar det Tt cancels in G
-    Ta = _simplify_matrix(Tt.adjugate(method="berkowitz"))
-    G = _simplify_matrix((Gamma.T * Ta * Gamma).inv() * Gamma.T * Ta)
+    S, unboxed = state_scale(lpv, Mcal)
+    box = _box_for(sp.Matrix.hstack(Mcal, Gamma), boxes, "the weight of the left inverse of Gamma (Mcal, Gamma)")
+    centre = {s: 0.5 * (lo + hi) for s, (lo, hi) in box.items()}
+    B = np.array(sp.Matrix.hstack(Mcal * sp.diag(*S), Gamma).subs(centre).evalf(30), dtype=float)
+    rows = np.linalg.norm(B, axis=1)            # > 0: Gamma's rows are nonzero on the box (relative degree)
+    Bn = B / rows[:, None]
+    P_, sv, _ = np.linalg.svd(Bn)
+    sv = np.concatenate([sv, np.zeros(Bn.shape[0] - sv.size)])
+    U = P_[:, sv < REDUNDANT_TOL * sv[0]]
+    Z = Bn @ Bn.T + U @ U.T
+    O = np.linalg.inv(Z) / rows[:, None] / rows[None, :]
+    O = 0.5 * (O + O.T)
+    Om = sp.Matrix(O.shape[0], O.shape[1], lambda i, j: sp.Rational(f"{O[i, j]:.11e}"))
+    if not all(Om[:k, :k].det() > 0 for k in range(1, Om.shape[0] + 1)):
+        raise RankConditionError(f"the weight of the left inverse of Gamma, {O.tolist()}, is not positive definite once "
+                                 f"rounded to 12 digits: the rows of [Mcal S, Gamma] at the centre of the box (singular "
+                                 f"values {sv.tolist()} once scaled to unit norm) are too close to dependent")
+    G = _simplify_matrix((Gamma.T * Om * Gamma).inv() * Gamma.T * Om)
     names = lpv.definition.states
-    out = {"rule": "G = (Gamma' T^-1 Gamma)^-1 Gamma' T^-1, T = Mcal S^2 Mcal' + Gamma Gamma' (+ W N N' W): the left "
-                   "inverse least sensitive to the state error in the state box",
-           "state_scale": {str(names[j]): _num(S[j]) for j in range(len(S)) if S[j] != 0},
-           "quantity": what, "expr": _num(det), "bound": [cert["lower"], cert["upper"]]}
-    if redundant:
-        out["redundant_output_combinations"] = [[_num(e) for e in v] for v in redundant]
+    out = {"rule": "G = (Gamma' O Gamma)^-1 Gamma' O, O = (Mcal S^2 Mcal' + Gamma Gamma' (+ redundant part))^-1 at "
+                   "the centre of the box: the left inverse least sensitive to the state error in the state box",
+           "state_scale": {str(names[j]): _num(S[j]) for j in range(len(S)) if any(e != 0 for e in Mcal.col(j))},
+           "state_scale_source": ("the [state_bounds] widths" if not unboxed else
+                                  f"the [state_bounds] widths; the model's unit for {', '.join(unboxed)} (no box)"),
+           "weight_at": {str(k): v for k, v in sorted(centre.items(), key=lambda kv: str(kv[0]))},
+           "weight": [[_num(e) for e in Om.row(i)] for i in range(Om.shape[0])],
+           "singular_values": sv.tolist()}
+    if U.shape[1]:
+        out["redundant_output_combinations"] = (U / rows[:, None]).T.tolist()
     return G, out
+
+
+def _derivative_orders(mats, base: tuple, boxes: dict) -> dict:
+    """{base symbol: highest derivative order in ``mats``}, every one of them bounded.
+
+    Raises
+    ------
+    SchedulingBoundsError
+        naming the derivatives the parameter file does not bound.
+    """
+    used = set().union(*(sp.sympify(m).free_symbols for m in mats))
+    orders = {b: 0 for b in base}
+    for sym in used:
+        k, m = derivative_order(sym, base)
+        orders[base[k]] = max(orders[base[k]], m)
+    missing = [str(derivative_symbol(b, m)) for b in base for m in range(orders[b] + 1)
+               if derivative_symbol(b, m) not in boxes]
+    if missing:
+        raise SchedulingBoundsError(
+            f"the observer needs {', '.join(missing)}, which the parameter file does not bound "
+            f"([scheduling.NAME] derivative_bounds = [[min2, max2], ...])")
+    return orders
 
 
 def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:
@@ -344,10 +371,7 @@ def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:
         an output does not see the unknown inputs within n derivatives, or its relative degree is not
         uniform on the box;
     RankConditionError
-        rank condition (64) fails (Gamma not of full column rank somewhere on the box), or redundant
-        outputs leave the left inverse of a non-square Gamma not unique (:func:`left_inverse`);
-    ConfigurationError
-        a non-square Gamma and a state its output derivatives read without a [state_bounds] box;
+        rank condition (64) fails (Gamma not of full column rank somewhere on the box);
     ModelDefinitionError, SchedulingBoundsError
         C depends on the scheduling signals, no unknown inputs, a needed derivative is not bounded.
     """
@@ -405,23 +429,14 @@ def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:
     if square:
         Gamma_inv = _simplify_matrix(Gamma.inv())      # the only left inverse
     else:
-        Gamma_inv, certificates["left_inverse"] = left_inverse(lpv, Gamma, Mcal, boxes, rel_tol)
+        _derivative_orders((Mcal, Gamma), base, boxes)  # the weight is taken at the box's centre: bounded first
+        Gamma_inv, certificates["left_inverse"] = left_inverse(lpv, Gamma, Mcal, boxes)
     Q = _simplify_matrix(D * Gamma_inv)
     P = _simplify_matrix(sp.eye(n) - Q * Mprev)
     F0 = _simplify_matrix(A - Q * Mcal)
     residual = _simplify_matrix(P * D)
     if any(not _is_zero(e) for e in residual):
         raise RankConditionError(f"decoupling (63) fails: P D = {residual.tolist()} != 0")
-    used = set().union(*(sp.sympify(m).free_symbols for m in (F0, Q, Mcal, Gamma, Gamma_inv)))
-    orders = {b: 0 for b in base}
-    for sym in used:
-        k, m = derivative_order(sym, base)
-        orders[base[k]] = max(orders[base[k]], m)
-    missing = [str(derivative_symbol(b, m)) for b in base for m in range(orders[b] + 1)
-               if derivative_symbol(b, m) not in boxes]
-    if missing:
-        raise SchedulingBoundsError(
-            f"the observer needs {', '.join(missing)}, which the parameter file does not bound "
-            f"([scheduling.NAME] derivative_bounds = [[min2, max2], ...])")
+    orders = _derivative_orders((F0, Q, Mcal, Gamma, Gamma_inv), base, boxes)
     return Decoupling(lpv, tuple(degrees), tuple(M_all), Gamma, Mcal, Q, P, Gamma_inv, F0, base, orders, boxes,
                       certificates)
