@@ -67,7 +67,15 @@ class SolverError(UiogenError, RuntimeError):
 
 
 class InfeasibleLMIError(SolverError):
-    """The LMI problem is (primal) infeasible; the message names the blocks involved."""
+    """The LMI problem is (primal) infeasible; the message names the blocks involved.
+
+    ``status``: the solver's verdict when it gave one (Clarabel's ``PrimalInfeasible`` at its full
+    tolerances, ``AlmostPrimalInfeasible`` at reduced ones), else None (an infeasibility proven
+    before any solve)."""
+
+    def __init__(self, message: str, *, status: str | None = None):
+        super().__init__(message)
+        self.status = status
 
 
 class InaccurateSolveError(SolverError):

@@ -840,7 +840,7 @@ class LMIProblem:
         status = str(result.status)
         if "Infeasible" in status:
             z = np.asarray(result.z)[shift:]
-            raise InfeasibleLMIError(self._infeasibility_message(status, z, blocks))
+            raise InfeasibleLMIError(self._infeasibility_message(status, z, blocks), status=status.split(".")[-1])
         if status.split(".")[-1] != "Solved" and not (stage and status.split(".")[-1] == "AlmostSolved"):
             raise InaccurateSolveError(
                 f"{self.name}{' (' + stage + ')' if stage else ''}: Clarabel stopped with status {status} after {result.iterations} "

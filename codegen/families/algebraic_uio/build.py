@@ -221,8 +221,9 @@ class AlgebraicUIOBuild(ObserverBuild):
         return step_numpy(self, z, u, y, rho)
 
     def lmi_problem(self):
-        """A fresh LMI (39) problem of this design (benchmark: our path vs CVXPY on the same blocks)."""
-        return alg.build_problem(self.dec, self.settings)[0]
+        """A fresh LMI (39) problem of this design, in the design's state scaling (benchmark: our path vs
+        CVXPY on the same blocks)."""
+        return alg.build_problem(self.dec, self.settings, self.design.scaling, self.design.output_scaling)[0]
 
     def figures(self) -> dict:
         return design_summary(self)

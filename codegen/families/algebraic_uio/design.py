@@ -2,7 +2,10 @@
 
 Continuous observer (59)/(85)/(86), with everything derived by :mod:`codegen.families.algebraic_uio.representation`::
 
-    x_hat' = (A - L C - Q Mcal) x_hat + Q Y + L y,      d_hat = Gamma^-1 (Y - Mcal x_hat)   (or Gamma^+)
+    x_hat' = (A - L C - Q Mcal) x_hat + Q Y + L y,      d_hat = Gamma^dagger (Y - Mcal x_hat)
+
+(Gamma^dagger = Gamma^-1 when square, else the left inverse of
+:func:`codegen.families.algebraic_uio.representation.left_inverse`, Q = D Gamma^dagger.)
 
 Y stacks the output derivatives y_i^(r_i); for r = 1 it is observer (23) (A - Q Mcal = P A). Known
 inputs are removed with the auxiliary system (20)-(21): s' = A s + B u, the observer runs on
@@ -49,8 +52,8 @@ from . import representation as rdeg
 from ...representation.bounds import range_bound
 from ...representation.differentiators import MAX_ORDER, HosmdSpec
 from ...emit.stepgen import lambdify
-from ...errors import (CertificateError, DiscretizationError, InfeasibleLMIError, ModelDefinitionError,
-                      SolverError)
+from ...errors import (CertificateError, DesignLockError, DiscretizationError, InaccurateSolveError,
+                      InfeasibleLMIError, ModelDefinitionError, SolverError)
 from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace, uncertified
 from ...model import LPVModel
 from ...representation.polytope import (Premise, affine_decomposition, nonlinear_factors, sector_weights_product,
@@ -243,12 +246,16 @@ class AlgebraicDesign:
     scaling: np.ndarray             # diagonal state scaling used by the solver (powers of 2)
     solution: LMISolution | None
     fixed_modes: dict | None = None   # gain-independent modes of F0 (see fixed_modes)
+    output_scaling: np.ndarray | None = None   # outputs' scaling of the fallback problem (None: the model's units)
 
     def gains_json(self) -> dict:
-        return {"form": self.form, "alpha": self.settings.alpha, "X": self.X.tolist(),
-                "L": [l.tolist() for l in self.L], "state_scaling": self.scaling.tolist(),
-                "gain_premises": [{"expr": str(p.expr), "range": [p.lower, p.upper]}
-                                  for p in self.gain_polytope.premises]}
+        out = {"form": self.form, "alpha": self.settings.alpha, "X": self.X.tolist(),
+               "L": [l.tolist() for l in self.L], "state_scaling": self.scaling.tolist(),
+               "gain_premises": [{"expr": str(p.expr), "range": [p.lower, p.upper]}
+                                 for p in self.gain_polytope.premises]}
+        if self.output_scaling is not None:
+            out["output_scaling"] = self.output_scaling.tolist()
+        return out
 
 
 def _vertex_blocks(form, F0_poly, P_poly, A_poly, C):
@@ -278,8 +285,40 @@ def _balance(mats, C=None) -> np.ndarray:
     return np.asarray(S[0], float)
 
 
-def build_problem(dec: rdeg.Decoupling, settings: AlgebraicSettings) -> tuple:
-    """LMI (39) in balanced coordinates: (problem, parts for :func:`design`)."""
+def problem_name(dec: rdeg.Decoupling) -> str:
+    return f"{dec.lpv.definition.name}: Ichalal and Mammar 2015 LMI (39)"
+
+
+def _output_scaling(C: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """Per output the power of 2 nearest the norm of its row of C S: the outputs in units of the
+    scaled states, whatever units the model writes them in (1 for a row of zeros)."""
+    norms = np.linalg.norm(C * S[None, :], axis=1)
+    return np.where(norms > 0, 2.0 ** np.round(np.log2(np.where(norms > 0, norms, 1.0))), 1.0)
+
+
+def _committed_scaling(data: dict, n: int, ny: int, name: str) -> tuple:
+    """(S, W): the solver's state and output scalings a committed solution was solved in
+    (``state_scaling``, ``output_scaling`` of the problem's data, present only for the fallback
+    problem of :func:`design`); (None, None): the default problem."""
+    if "state_scaling" not in data and "output_scaling" not in data:
+        return None, None
+    out = []
+    for key, size in (("state_scaling", n), ("output_scaling", ny)):
+        v = np.asarray(data.get(key, []), dtype=float).ravel()
+        if v.size != size or not np.all(np.isfinite(v)) or np.any(v <= 0) or np.any(np.frexp(v)[0] != 0.5):
+            raise DesignLockError(f"{name}: committed {key} {data.get(key)!r} is not {size} power(s) of two; "
+                                  f"re-solve with `uiogen design NAME --update`")
+        out.append(v)
+    return tuple(out)
+
+
+def build_problem(dec: rdeg.Decoupling, settings: AlgebraicSettings, scaling=None, output_scaling=None) -> tuple:
+    """LMI (39) in balanced coordinates: (problem, parts for :func:`design`).
+
+    ``scaling``: the diagonal state scaling S (powers of 2) to pose it in, None: the observability
+    scaling of :func:`_balance`; ``output_scaling``: W (powers of 2), the gains are solved for the
+    outputs y / W, None: the model's units. Others than these defaults (:func:`design`'s fallback)
+    are the problem's data, so a design lock replays the problem it was solved in."""
     lpv = dec.lpv
     n, ny = lpv.nx, lpv.ny
     C = np.array(lpv.C.evalf(), dtype=float)
@@ -302,10 +341,15 @@ def build_problem(dec: rdeg.Decoupling, settings: AlgebraicSettings) -> tuple:
             f"A - Q Mcal has {fixed['count']} mode(s) unobservable from C (invariant zeros of (A, D, C)) "
             f"with real parts in [{lo:.4g}, {hi:.4g}] on the box; choose alpha < {fixed['decay_limit']:.4g}")
     blocks = _vertex_blocks(form, F0_poly, P_poly, A_poly, C)
-    S = _balance([F for _, F, _ in blocks], C)
+    default = _balance([F for _, F, _ in blocks], C)
+    S = default if scaling is None else np.asarray(scaling, dtype=float)
+    W = np.ones(ny) if output_scaling is None else np.asarray(output_scaling, dtype=float)
     Si = 1.0 / S
-    Cs = C * S[None, :]
-    prob = LMIProblem(f"{lpv.definition.name}: Ichalal and Mammar 2015 LMI (39)")
+    Cs = C * S[None, :] / W[:, None]
+    # the default problem's data stay as they were (the built-in design locks hold no such key)
+    plain = np.array_equal(S, default) and np.all(W == 1.0)
+    prob = LMIProblem(problem_name(dec), data={} if plain else {"state_scaling": S.tolist(),
+                                                                "output_scaling": W.tolist()})
     X = prob.symmetric("X", n)
     K = [prob.matrix(f"K{j + 1}", n, ny) for j in range(gain_poly.n_vertices)]
     t = prob.scalar("t")
@@ -322,25 +366,77 @@ def build_problem(dec: rdeg.Decoupling, settings: AlgebraicSettings) -> tuple:
         norm_blk = bmat([[t * np.eye(ny), K[j].T], [K[j], np.eye(n)]])
         prob.require_psd(f"||K{j + 1}||^2 <= t (objective)", norm_blk + np.eye(n + ny), margin=1.0)
     prob.minimize(t)
-    return prob, (form, gain_poly, factor_poly, blocks, S, Si, K, fixed)
+    return prob, (form, gain_poly, factor_poly, blocks, S, Si, W, K, fixed)
+
+
+def _inconclusive(exc: Exception) -> bool:
+    """Did the solver fail numerically, short of an outcome at its full tolerances? True for a solve
+    stopped short of them (InaccurateSolveError: InsufficientProgress, AlmostSolved, ...), an
+    infeasibility found only at reduced tolerances (AlmostPrimalInfeasible), or an answer the
+    independent numpy re-check refutes (CertificateError): the fallback scaling of :func:`design`
+    is for these. False for an outcome reached at the full tolerances, which stands: an
+    infeasibility verdict (PrimalInfeasible) or one proven before any solve, and a solution whose
+    entries are too large to use (IllConditionedError, whose message asks for a bound). (Measured:
+    retrying the latter too certifies the algebraic UIO's trial on the built-in roll model, which
+    `uiogen analyze switched_pi_bank_angle` would then rank above its own switched PI observer.)"""
+    if isinstance(exc, InfeasibleLMIError):
+        return exc.status is not None and exc.status.startswith("Almost")
+    return isinstance(exc, (InaccurateSolveError, CertificateError))
 
 
 def design(dec: rdeg.Decoupling, settings: AlgebraicSettings, solver) -> AlgebraicDesign:
     """LMI (39) in balanced coordinates, answered by ``solver`` (:mod:`codegen.design.solver`); rounded
-    gains re-certified with numpy."""
+    gains re-certified with numpy.
+
+    The solver's coordinates are a conditioning device only (the certificate is checked in them,
+    an exact power-of-2 congruence of the model's). The observability scaling of :func:`_balance`
+    comes first, with the outputs in the model's units; when the solver fails numerically there
+    (:func:`_inconclusive`: stopped short of its tolerances, infeasible only at reduced ones, an
+    answer the numpy re-check refutes; an outcome at its full tolerances stands), it is posed once more
+    in the matrix balancing S of the vertex matrices (:func:`_balance` without C), with each output
+    divided by the power of 2 nearest its row norm of C S (:func:`_output_scaling`). Why: the
+    observability matrix adds C F^k of every order k at one weight, so for a stiff error matrix (an
+    electric pole at -500/s beside a mechanical chain) its F^(n-1) terms set the scale alone and
+    shrink the slow states by ~1e5 (the L = 0.2 mH assist motor: Clarabel reports
+    AlmostPrimalInfeasible there, and certifies the same problem in the matrix-balanced
+    coordinates, cond X = 22); and both the observability scaling and the outputs' own units move
+    with the units the outputs are written in (the motor's current in mA: at 2 mH both fail
+    without the output scaling), the fallback's scalings do not (F0 does not, by the choice of
+    left inverse, and the output scaling follows C). A problem that solves in the observability
+    scaling keeps it, so every design that solved before is unchanged. The fallback scalings are
+    committed with the solution (the problem's ``state_scaling``, ``output_scaling``) and
+    replayed; when the fallback fails too, the first error is raised, naming both."""
     lpv = dec.lpv
     n, ny = lpv.nx, lpv.ny
     C = np.array(lpv.C.evalf(), dtype=float)
-    prob, (form, gain_poly, factor_poly, blocks, S, Si, K, fixed) = build_problem(dec, settings)
-    sol = solver.solve(prob, tol=settings.tol)
+    committed = solver.committed_data(problem_name(dec))
+    scaling, outputs = (None, None) if committed is None else _committed_scaling(committed, n, ny, problem_name(dec))
+    prob, (form, gain_poly, factor_poly, blocks, S, Si, W, K, fixed) = build_problem(dec, settings, scaling, outputs)
+    try:
+        sol = solver.solve(prob, tol=settings.tol)
+    except (SolverError, CertificateError) as first:
+        balanced = _balance([F for _, F, _ in blocks])
+        Wb = _output_scaling(C, balanced)
+        if (committed is not None or (np.array_equal(balanced, S) and np.array_equal(Wb, W))
+                or not _inconclusive(first)):
+            # a replay answers the problem it was committed for; no other scaling to try; a verdict the
+            # solver reached at its full tolerances stands
+            raise
+        prob, (form, gain_poly, factor_poly, blocks, S, Si, W, K, fixed) = build_problem(dec, settings, balanced, Wb)
+        try:
+            sol = solver.solve(prob, tol=settings.tol)
+        except (SolverError, CertificateError) as second:
+            raise type(first)(f"{first} (posed again in the matrix-balanced state scaling {balanced.tolist()}, "
+                              f"outputs scaled by {Wb.tolist()}: {type(second).__name__}: {second})") from None
     Xs = decimal_round(0.5 * (sol["X"] + sol["X"].T))
     # emitted: solved exactly (codegen.design.canonical), the same on every machine
     Ls = [canonical.solve(Xs, np.atleast_2d(sol[f"K{j + 1}"]).reshape(n, ny)) for j in range(len(K))]
-    # back to the model's coordinates: x = S x_s, L = S L_s, X = S^-1 X_s S^-1
-    L = tuple(decimal_round(S[:, None] * l) for l in Ls)
+    # back to the model's coordinates: x = S x_s, y = W y_s, L = S L_s W^-1, X = S^-1 X_s S^-1 (powers of 2: exact)
+    L = tuple(decimal_round(S[:, None] * l / W[None, :]) for l in Ls)
     Xo = Si[:, None] * Xs * Si[None, :]
     closed = tuple((label, F - L[j] @ C) for label, F, j in blocks)
-    return AlgebraicDesign(settings, form, gain_poly, factor_poly, Xo, L, closed, S, sol, fixed)
+    return AlgebraicDesign(settings, form, gain_poly, factor_poly, Xo, L, closed, S, sol, fixed,
+                           None if np.all(W == 1.0) else W)
 
 
 def certify(d: AlgebraicDesign) -> dict:

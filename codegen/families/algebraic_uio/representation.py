@@ -16,9 +16,18 @@ time-varying, and derives, symbolically and with no hand-written matrix:
   Y = M(rho) x + Gamma(rho) d, with M the rows M^i_{r_i} and Gamma the rows M^i_{r_i - 1} D;
   rank condition (64) (full column rank of Gamma on the whole box, proven by bounding det Gamma or
   det Gamma'Gamma away from 0; a :class:`~codegen.errors.RankConditionError` names the failure);
-* eqs. (24), (60), (85)/(86): Q = D Gamma^-1 (square) or D Gamma^+ with Gamma^+ = (Gamma'Gamma)^-1
-  Gamma' (more outputs than UIs), and P = I - Q M_{r-1} (the rows M^i_{r_i - 1} stacked; for r = 1
-  this is eq. (24), P = I - Q C), so P D = D - Q Gamma = 0;
+* eqs. (24), (60), (85)/(86): Q = D Gamma^dagger and P = I - Q M_{r-1} (the rows M^i_{r_i - 1}
+  stacked; for r = 1 this is eq. (24), P = I - Q C), so P D = D - Q Gamma = 0 for *any* left inverse
+  (Gamma^dagger Gamma = I). A square Gamma has one, Gamma^-1. With more outputs than UIs there are
+  many; the paper's (86) takes Gamma^+ = (Gamma'Gamma)^-1 Gamma', a least-squares inverse in the
+  units the outputs happen to be written in. We take the one the state error reaches least
+  (:func:`left_inverse`): d_hat = Gamma^dagger (Y - Mcal x_hat) = d + Gamma^dagger Mcal e, and the
+  decoupling adds Q Mcal = D Gamma^dagger Mcal to the error matrix, so Gamma^dagger minimizes
+  Gamma^dagger R Gamma^dagger' (Loewner order) at the centre of the box, R = Mcal S^2 Mcal', S the
+  widths of the declared [state_bounds] (a state's unit where none is declared; the Gauss-Markov
+  estimator of d from Y - Mcal x_hat with the state error as its noise). It does not depend on
+  the units of the outputs, to the 12 digits of its weight (nor on those of the states that have a
+  box);
 * the error dynamics matrix of (59)/(65): F0(rho, rho', ...) = A - Q M (for r = 1, F0 = P A as in (23)).
 
 Parameter derivatives are symbols ``<name>_d1, <name>_d2, ...``; their bounds come from the
@@ -32,6 +41,7 @@ import tomllib
 from dataclasses import dataclass
 from functools import cached_property
 
+import numpy as np
 import sympy as sp
 
 from ...representation.bounds import BoundsError, range_bound
@@ -149,9 +159,10 @@ class Decoupling:
     Gamma, Mcal : sympy.Matrix
         eq. (84): Y = Mcal x + Gamma d (+ u terms); Gamma has rank n_d on the whole box (64).
     Q, P : sympy.Matrix
-        Q = D Gamma^-1 / D Gamma^+ (eqs. (24), (60), (85), (86)); P = I - Q M_{r-1}, P D = 0.
+        Q = D Gamma^dagger (eqs. (24), (60), (85), (86)); P = I - Q M_{r-1}, P D = 0.
     Gamma_inv : sympy.Matrix
-        Gamma^-1 or Gamma^+ (the UI reconstruction of (59), (85), (86)).
+        The left inverse Gamma^dagger: Gamma^-1 when square, else :func:`left_inverse` (the UI
+        reconstruction of (59), (85), (86)).
     F0 : sympy.Matrix
         A - Q Mcal, the error dynamics before the output injection (eqs. (31), (65), (69)).
     base : tuple of sympy.Symbol
@@ -226,6 +237,131 @@ def check_structure(lpv: LPVModel) -> None:
                                    f"takes y = C x + Du u")
 
 
+def state_scale(lpv: LPVModel, Mcal: sp.Matrix) -> tuple:
+    """(S, unboxed): per state the width of its declared ``[state_bounds]`` box (exact rationals), or
+    1, its unit in the model, for a state without one, whose names ``unboxed`` lists (states ``Mcal``
+    does not read only). The box is how large a state error can be in the user's own terms; without
+    it the model's unit is all there is to measure it in. The outputs' units never enter (the choice
+    of :func:`left_inverse` is unit-free in them either way); the states' enter only where no box
+    is declared, which the design's certificate reports."""
+    d = lpv.definition
+    read = [j for j in range(lpv.nx) if any(not _is_zero(e) for e in Mcal.col(j))]
+    widths, unboxed = [sp.Integer(1)] * lpv.nx, []
+    for j in read:
+        box = lpv.parameters.state_bounds.get(str(d.states[j]))
+        if box is None:
+            unboxed.append(str(d.states[j]))
+        else:
+            widths[j] = sp.nsimplify(box[1], rational=True) - sp.nsimplify(box[0], rational=True)
+    return sp.Matrix(widths), tuple(unboxed)
+
+
+REDUNDANT_TOL = 1e-6
+"""A combination of the output derivatives whose share of [Mcal S, Gamma] (rows scaled to unit norm)
+is below this singular value is taken as redundant (:func:`left_inverse`): the model's floats and
+the auxiliary gain K_s leave exact redundancies (a position and its speed) at ~1e-13."""
+
+
+def left_inverse(lpv: LPVModel, Gamma: sp.Matrix, Mcal: sp.Matrix, boxes: dict) -> tuple:
+    """(Gamma^dagger, record) for a Gamma with more rows (outputs) than columns (unknown inputs).
+
+    Every left inverse G (G Gamma = I) decouples: P D = D - D G Gamma = 0, and the error dynamics
+    e' = (A - D G Mcal - L C) e of (59) hold for any of them, so LMI (39) certifies whichever is
+    taken. They differ in how the state error enters: d_hat = G (Y - Mcal x_hat) = d + G Mcal e, and
+    the decoupling adds D G Mcal to the error matrix. We take the weighted left inverse
+
+        G = (Gamma' O Gamma)^-1 Gamma' O,      O = V^-1,   V = Mc S^2 Mc' + Gc Gc' (+ redundant part),
+
+    Mc, Gc = Mcal, Gamma at the centre of the box (scheduling signals and their derivatives), S the
+    widths of the state box (:func:`state_scale`). At the centre G minimizes G Mc S^2 Mc' G' in the
+    Loewner order among the left inverses: the reconstruction least sensitive to a state error the
+    size of the box (the Gauss-Markov estimator of d from Y - Mcal x_hat = Gamma d + Mcal e); it
+    minimizes ||K G Mcal S||_F for every K at once, so also the decoupling's term S^-1 D G Mcal S of
+    the box-scaled error matrix. Gc Gc' does not change that minimizer (Rao's unified least squares)
+    and keeps V invertible when an output derivative reads no state. The weight is frozen at the
+    centre so that G depends on what Gamma depends on, as the paper's Gamma^+ does: the pointwise
+    minimizer would bring Mcal's parameter derivatives into G, hence new premises into the polytope
+    of F0. An LTI model (the assist motor) has the minimizer exactly everywhere.
+
+    With B = [Mc S, Gc] = R_B B_n (R_B the row norms, rows of B_n of unit norm), V = R_B (B_n B_n' +
+    U U') R_B, where U spans the combinations u with u' B_n ~ 0 (singular values below
+    :data:`REDUNDANT_TOL`). Such a combination is identically 0 on the model's trajectories (a
+    position and its speed both measured: y_1'' - y_2' = 0); the minimizers differ only in what they
+    do with it, i.e. with the differentiators' errors in it, never in d_hat on exact signals; U U'
+    picks the one with G R_B U = 0 (and keeps V well-conditioned). O is computed in floating point
+    and rounded to 12 significant digits: any positive definite weight gives an exact left inverse
+    (checked in exact arithmetic, with O positive definite), and the exact weight would carry the
+    model's floats as rationals of hundreds of digits into G and F0 = A - D G Mcal.
+
+    Output units: a change y -> M y with M diagonal maps Gamma, Mcal, R_B to M Gamma, M Mcal, M R_B
+    and leaves B_n, U alone, so O goes to M^-1 O M^-1 and G to G M^-1 (to rounding): G Mcal, Q Mcal,
+    P and d_hat are the same whatever units the outputs are written in (the paper's Gamma^+ of (86)
+    is not: in raw units it takes d from the output whose Gamma row is largest in those units). The
+    states' units enter only where no box is declared, a common factor on S changes nothing, and the
+    weight of Gc Gc' does not change G at the centre (Rao), so the unknown inputs' units do not either
+    (but for the redundant part).
+
+    Raises
+    ------
+    SchedulingBoundsError
+        a scheduling symbol of Mcal or Gamma has no bound (no centre);
+    RankConditionError
+        the rounded weight is not positive definite (V too ill-conditioned for 12 digits).
+    """
+    S, unboxed = state_scale(lpv, Mcal)
+    box = _box_for(sp.Matrix.hstack(Mcal, Gamma), boxes, "the weight of the left inverse of Gamma (Mcal, Gamma)")
+    centre = {s: 0.5 * (lo + hi) for s, (lo, hi) in box.items()}
+    B = np.array(sp.Matrix.hstack(Mcal * sp.diag(*S), Gamma).subs(centre).evalf(30), dtype=float)
+    rows = np.linalg.norm(B, axis=1)            # > 0: Gamma's rows are nonzero on the box (relative degree)
+    Bn = B / rows[:, None]
+    P_, sv, _ = np.linalg.svd(Bn)
+    sv = np.concatenate([sv, np.zeros(Bn.shape[0] - sv.size)])
+    U = P_[:, sv < REDUNDANT_TOL * sv[0]]
+    Z = Bn @ Bn.T + U @ U.T
+    O = np.linalg.inv(Z) / rows[:, None] / rows[None, :]
+    O = 0.5 * (O + O.T)
+    Om = sp.Matrix(O.shape[0], O.shape[1], lambda i, j: sp.Rational(f"{O[i, j]:.11e}"))
+    if not all(Om[:k, :k].det() > 0 for k in range(1, Om.shape[0] + 1)):
+        raise RankConditionError(f"the weight of the left inverse of Gamma, {O.tolist()}, is not positive definite once "
+                                 f"rounded to 12 digits: the rows of [Mcal S, Gamma] at the centre of the box (singular "
+                                 f"values {sv.tolist()} once scaled to unit norm) are too close to dependent")
+    G = _simplify_matrix((Gamma.T * Om * Gamma).inv() * Gamma.T * Om)
+    names = lpv.definition.states
+    out = {"rule": "G = (Gamma' O Gamma)^-1 Gamma' O, O = (Mcal S^2 Mcal' + Gamma Gamma' (+ redundant part))^-1 at "
+                   "the centre of the box: the left inverse least sensitive to the state error in the state box",
+           "state_scale": {str(names[j]): _num(S[j]) for j in range(len(S)) if any(e != 0 for e in Mcal.col(j))},
+           "state_scale_source": ("the [state_bounds] widths" if not unboxed else
+                                  f"the [state_bounds] widths; the model's unit for {', '.join(unboxed)} (no box)"),
+           "weight_at": {str(k): v for k, v in sorted(centre.items(), key=lambda kv: str(kv[0]))},
+           "weight": [[_num(e) for e in Om.row(i)] for i in range(Om.shape[0])],
+           "singular_values": sv.tolist()}
+    if U.shape[1]:
+        out["redundant_output_combinations"] = (U / rows[:, None]).T.tolist()
+    return G, out
+
+
+def _derivative_orders(mats, base: tuple, boxes: dict) -> dict:
+    """{base symbol: highest derivative order in ``mats``}, every one of them bounded.
+
+    Raises
+    ------
+    SchedulingBoundsError
+        naming the derivatives the parameter file does not bound.
+    """
+    used = set().union(*(sp.sympify(m).free_symbols for m in mats))
+    orders = {b: 0 for b in base}
+    for sym in used:
+        k, m = derivative_order(sym, base)
+        orders[base[k]] = max(orders[base[k]], m)
+    missing = [str(derivative_symbol(b, m)) for b in base for m in range(orders[b] + 1)
+               if derivative_symbol(b, m) not in boxes]
+    if missing:
+        raise SchedulingBoundsError(
+            f"the observer needs {', '.join(missing)}, which the parameter file does not bound "
+            f"([scheduling.NAME] derivative_bounds = [[min2, max2], ...])")
+    return orders
+
+
 def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:
     """Relative degrees, M_{i rho}, Gamma, Q, P and F0 of an LPV model, proven uniform on the box.
 
@@ -290,23 +426,17 @@ def derive(lpv: LPVModel, rel_tol: float = 1e-3) -> Decoupling:
     except RelativeDegreeError as exc:
         raise RankConditionError(f"rank condition (64) fails on the box: {exc}") from None
     certificates["rank_condition_64"] = {"quantity": label, "expr": _num(det), "bound": [cert["lower"], cert["upper"]]}
-    Gamma_inv = _simplify_matrix(Gamma.inv() if square else G2.inv() * Gamma.T)
+    if square:
+        Gamma_inv = _simplify_matrix(Gamma.inv())      # the only left inverse
+    else:
+        _derivative_orders((Mcal, Gamma), base, boxes)  # the weight is taken at the box's centre: bounded first
+        Gamma_inv, certificates["left_inverse"] = left_inverse(lpv, Gamma, Mcal, boxes)
     Q = _simplify_matrix(D * Gamma_inv)
     P = _simplify_matrix(sp.eye(n) - Q * Mprev)
     F0 = _simplify_matrix(A - Q * Mcal)
     residual = _simplify_matrix(P * D)
     if any(not _is_zero(e) for e in residual):
         raise RankConditionError(f"decoupling (63) fails: P D = {residual.tolist()} != 0")
-    used = set().union(*(sp.sympify(m).free_symbols for m in (F0, Q, Mcal, Gamma, Gamma_inv)))
-    orders = {b: 0 for b in base}
-    for sym in used:
-        k, m = derivative_order(sym, base)
-        orders[base[k]] = max(orders[base[k]], m)
-    missing = [str(derivative_symbol(b, m)) for b in base for m in range(orders[b] + 1)
-               if derivative_symbol(b, m) not in boxes]
-    if missing:
-        raise SchedulingBoundsError(
-            f"the observer needs {', '.join(missing)}, which the parameter file does not bound "
-            f"([scheduling.NAME] derivative_bounds = [[min2, max2], ...])")
+    orders = _derivative_orders((F0, Q, Mcal, Gamma, Gamma_inv), base, boxes)
     return Decoupling(lpv, tuple(degrees), tuple(M_all), Gamma, Mcal, Q, P, Gamma_inv, F0, base, orders, boxes,
                       certificates)

@@ -171,7 +171,9 @@ def _mimo_model(outputs):
 
 def _mimo_build(tmp_path, outputs):
     model = _mimo_model(outputs)
-    params = _write_params(tmp_path, "mimo")
+    # the state box weighs the left inverse of a non-square Gamma (representation.left_inverse)
+    params = _write_params(tmp_path, "mimo", extra="\n[state_bounds]\nx1 = [-1.0, 1.0]\nx2 = [-2.0, 2.0]\n"
+                                                   "x3 = [-1.0, 1.0]\n")
     lpv = instantiate(model, params)
     spec = {"order": 5, "lipschitz": 2e4}
     cfg = ObserverConfig("mimo_test", "algebraic_uio", "none", "mimo.toml", "", "exact", 0.001,
