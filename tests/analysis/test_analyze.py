@@ -580,7 +580,8 @@ def test_new_from_model_writes_the_substitution_the_analysis_found_and_it_design
     text = written.read_text()
     assert tomllib.loads(text)["substitute"] == {"phi_r": "sin_phi_r"}
     assert re.search(r"^\[substitute\]    # phi_r enters only through sin\(phi_r\)", text, re.M), text
-    assert "# unknown inputs phi_r)." in text and "# trial design by uiogen analyze (the analysis's settings): certified" in text
+    assert "# unknown inputs phi_r)." in text
+    assert "# trial design by uiogen analyze (the analysis's settings): certified" in text
     config = observers.get(str(written))
     (sub,) = config.substitutions()
     assert str(sub.symbol) == "sin_phi_r" and str(sub.inverse) == "asin(sin_phi_r)"
