@@ -43,7 +43,15 @@ class UnitError(ModelDefinitionError):
 
 
 class NotAffineError(ModelDefinitionError):
-    """The dynamics are not affine in states/inputs, so no LPV form exists."""
+    """The dynamics are not affine in states/inputs, so no LPV form exists.
+
+    ``unknown_inputs``: the names of the unknown inputs the equations are not affine in, when
+    they are the cause (the fix is then a change of variables, ``[substitute]``, not a
+    scheduling signal); empty when a state or a known input is."""
+
+    def __init__(self, message: str, *, unknown_inputs: tuple = ()):
+        super().__init__(message)
+        self.unknown_inputs = tuple(str(u) for u in unknown_inputs)
 
 
 class SchedulingBoundsError(ModelDefinitionError):

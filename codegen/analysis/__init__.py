@@ -52,7 +52,13 @@ class Analysis:
                 "states": list(s.states), "outputs": list(s.outputs), "known_inputs": list(s.known_inputs),
                 "unknown_inputs": list(s.unknown_inputs), "units": s.units,
                 "unranged_parameters": list(unranged_parameters(s.model)), "sample_time": s.sample_time,
-                "selected": s.selected, "structure": self.structure.to_json(),
+                "selected": s.selected,
+                "substitutions": [{**sub.to_json(), "origin": s.substitution_origin,
+                                   "estimated": f"{sub.symbol} = {sub.carrier}",
+                                   "recovered": f"{sub.unknown} = {sub.inverse}, an output of the observer"}
+                                  for sub in s.substitutions],
+                "substitution_refusals": dict(s.substitution_refusals),
+                "structure": self.structure.to_json(),
                 "ranking": self.ranking.to_json() if self.ranking is not None else None,
                 "seconds": self.seconds}
 

@@ -162,8 +162,66 @@ def sort_key(app: Applicability, trial: Trial, index: int) -> tuple:
             sum(app.differentiators.values()), index)
 
 
+def not_affine_fix(subject: Subject, exc, default: str) -> str:
+    """The fix of a family's :class:`~codegen.errors.NotAffineError`, consistent with what it names:
+    for an unknown input inside a nonlinearity, the change of variables (``[substitute]``) or why
+    none applies on the box (:attr:`Subject.substitution_refusals`); ``default`` (a measured
+    scheduling signal, ...) when a state or a known input is not affine."""
+    from ..model.substitution import find_carrier, new_name
+    names = getattr(exc, "unknown_inputs", ())
+    if not names:
+        return default
+    fixes = []
+    for d in names:
+        why = subject.substitution_refusals.get(d)
+        if why is not None:
+            fixes.append(f"no [substitute] applies to {d} ({why}): write the model so that {d} enters affinely, or "
+                         f"through one expression strictly monotone in {d} over its [inputs.{d}] range and the box")
+            continue
+        symbol = next((s for s in subject.model.unknown_inputs if str(s) == d), None)
+        carrier = find_carrier(subject.model, symbol)[0] if symbol is not None else None
+        name = new_name(subject.model, carrier, d) if carrier is not None else f"{d}_carrier"
+        fixes.append(f"add [substitute] {d} = \"{name}\" to the observer file (the family then estimates that "
+                     f"expression's value and the step recovers {d}; docs/tutorial.md, 'Unknown inputs inside a "
+                     f"nonlinearity')")
+    return "; ".join(fixes)
+
+
+def substitution_text(subject: Subject) -> list:
+    """One sentence per substituted unknown input: the table, what the observer then estimates and
+    how the input is recovered."""
+    out = []
+    for sub in subject.substitutions:
+        out.append(f"[substitute] {sub.unknown} = \"{sub.symbol}\" ({subject.substitution_origin}): {sub.unknown} "
+                   f"enters only through {sub.carrier}, so the family estimates {sub.symbol} = {sub.carrier} "
+                   f"(in [{sub.lower:.6g}, {sub.upper:.6g}] on the box) and the step recovers {sub.unknown} = "
+                   f"{sub.inverse}, an output of the observer under its own name")
+    return out
+
+
+def _with_substitution(subject: Subject, app: Applicability) -> Applicability:
+    """``app`` for a subject whose unknown inputs were substituted: the ``[substitute]`` table in the
+    settings it proposes (so the trial design and ``uiogen new --from-model`` design what was
+    analyzed) and, when it applies, a note that says what it estimates."""
+    table = subject.substitute_table
+    if not table:
+        return app
+    observer, why = app.observer, dict(app.why)
+    if observer is not None and "substitute" not in observer:
+        observer = {**observer, "substitute": dict(table)}
+        why["substitute"] = "; ".join(
+            f"{sub.unknown} enters only through {sub.carrier}: the observer estimates {sub.symbol} and recovers "
+            f"{sub.unknown} = {sub.inverse} (found by uiogen analyze, proven invertible on the box)"
+            for sub in subject.substitutions)
+    notes = app.notes
+    if app.applies:
+        notes = (*(f"applies with {text}" for text in substitution_text(subject)), *notes)
+    return dataclasses.replace(app, observer=observer, why=why, notes=tuple(notes))
+
+
 def assess(subject: Subject, structure) -> list:
-    """Every registered family's :class:`Applicability` for ``subject``, in registry order."""
+    """Every registered family's :class:`Applicability` for ``subject``, in registry order (with the
+    subject's ``[substitute]`` table in each family's settings, :func:`_with_substitution`)."""
     from .. import families
     from ..families.capabilities import Applicability as HasApplicability
     out = []
@@ -179,7 +237,7 @@ def assess(subject: Subject, structure) -> list:
         if app is None:
             app = Applicability(name, False, "unknown", condition="the family gives no applicability check "
                                 "(the Applicability capability): design it to find out")
-        out.append(app)
+        out.append(_with_substitution(subject, app))
     return out
 
 
@@ -255,7 +313,7 @@ def wrapper_model(subject: Subject, add_states: tuple = ()) -> str:
              "[o[0] for o in _declared])",
              f"_changes = {{'outputs': tuple(o for o in _m.outputs if o[0] in {outputs!r}) + _extra}}"]
     if subject.selected.get("unknown_inputs") is not None:
-        unknown = list(subject.unknown_inputs)
+        unknown = list(subject.selected["unknown_inputs"])    # the model's names ([substitute] applies after)
         lines += ["_inputs = (*_m.known_inputs, *_m.unknown_inputs)",
                   f"_changes['known_inputs'] = tuple(s for s in _inputs if str(s) not in {unknown!r})",
                   f"_changes['unknown_inputs'] = tuple(s for s in _inputs if str(s) in {unknown!r})"]
@@ -529,6 +587,9 @@ def starter_text(subject: Subject, app: Applicability, folder: Path, structure=N
     if proposal is None:
         proposal = {"sample_time": subject.sample_time}
         why = {**why, "sample_time": f"s, from {subject.sample_time_source}"}
+        if subject.substitute_table:
+            proposal["substitute"] = subject.substitute_table
+            why["substitute"] = "the change of variables the analysis applied (docs/analyze.md)"
     table = {"family": app.family, "model": os.path.relpath(subject.model_path, folder),
              "parameters": os.path.relpath(subject.parameter_path, folder),
              **{k: v for k, v in proposal.items() if k != "family"}}
@@ -538,7 +599,7 @@ def starter_text(subject: Subject, app: Applicability, folder: Path, structure=N
     else:
         head = [f"# {subject.name}: {app.family}, {chosen_by} (uiogen analyze {subject.target};",
                 f"# it applies to these sensors: {', '.join(subject.outputs)};"]
-    head += [f"# unknown inputs {', '.join(subject.unknown_inputs) or 'none'}).",
+    head += [f"# unknown inputs {', '.join(subject.declared_unknown_inputs) or 'none'}).",
              "# next: uiogen design THIS_FILE --update && uiogen generate THIS_FILE && uiogen build THIS_FILE"]
     if app.observer is None:
         head.append(f"# the analysis proposes no settings for {app.family} on this model: its [design] defaults "

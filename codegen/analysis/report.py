@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from ..model.dimensions import unranged_note
 from ..project.settings import toml_repr
-from .ranking import GUARANTEES, Ranking, sort_key
+from .ranking import GUARANTEES, Ranking, sort_key, substitution_text
 from .structure import BASIS
 
 _MARK = {True: "holds", False: "FAILS", None: "info "}
@@ -13,6 +13,12 @@ _MARK = {True: "holds", False: "FAILS", None: "info "}
 
 def _figures(figures: dict) -> str:
     return "; ".join(f"{k} = {v:.6g}" + (f" {u}" if u and u != "-" else "") for k, (v, u, _) in figures.items())
+
+
+def _unknown(subject) -> list:
+    """The analyzed unknown inputs, a substituted one with the input it stands for."""
+    stands = {str(sub.symbol): str(sub.unknown) for sub in subject.substitutions}
+    return [f"{u} (for {stands[u]}, [substitute])" if u in stands else u for u in subject.unknown_inputs]
 
 
 def subject_lines(subject, structure) -> list:
@@ -25,8 +31,11 @@ def subject_lines(subject, structure) -> list:
              + (f" (--outputs; declared but not measured: {', '.join(subject.unmeasured_declared_outputs())})"
                 if subject.selected.get('outputs') else ""),
              f"  known inputs: {', '.join(subject.known_inputs) or 'none'}; unknown inputs: "
-             f"{', '.join(subject.unknown_inputs) or 'none'}"
+             f"{', '.join(_unknown(subject)) or 'none'}"
              + (" (--unknown-inputs)" if subject.selected.get("unknown_inputs") else ""),
+             *(f"  {text}" for text in substitution_text(subject)),
+             *(f"  {d} enters through a nonlinearity and no [substitute] applies: {why}"
+               for d, why in subject.substitution_refusals.items()),
              f"  sample time {subject.sample_time:g} s (from {subject.sample_time_source})"]
     if eq.box:
         lines.append("  box: " + ", ".join(f"{s} in [{lo:g}, {hi:g}] {eq.box_source.get(s, '')}"
@@ -112,6 +121,9 @@ def explain(ranking: Ranking) -> str:
     best, bt = ranking.entries[0]
     text = f"best: {best.family} ({GUARANTEES[best.guarantee][1]}"
     text += f"; certified: {_figures(bt.figures)})" if bt.status == "certified" else ")"
+    table = (best.observer or {}).get("substitute")
+    if table:
+        text += " with " + ", ".join(f"[substitute] {d} = \"{w}\"" for d, w in table.items())
     own = ranking.own_family
     if own is None or own == best.family:
         done = ("" if ranking.completed is None or ranking.completed["trial"] is not bt else

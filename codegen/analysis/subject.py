@@ -6,7 +6,11 @@ An observer file brings its model, its parameter file and its sample time; a mod
 parameter file (``--parameters``). ``--outputs`` picks the measured outputs among those the model
 declares (the others are sensors the car could have: the analysis proposes them as fixes), and
 ``--unknown-inputs`` the unknown inputs among the model's known and unknown inputs (the rest are
-known). Nothing here writes a file.
+known). An unknown input that enters only through one nonlinear expression (``g sin(phi_r)``) is
+analyzed through that expression's value, as an observer file's ``[substitute]`` table has the
+family design it: the file's own table, else the one the analysis finds and proves
+(:func:`codegen.model.substitution.propose`), applied by the same
+:func:`codegen.model.substitution.apply`. Nothing here writes a file.
 """
 from __future__ import annotations
 
@@ -18,7 +22,7 @@ from pathlib import Path
 
 import sympy as sp
 
-from ..errors import ConfigurationError, ModelDefinitionError
+from ..errors import ConfigurationError, ModelDefinitionError, NotAffineError
 from ..model import ParameterSet, load_parameters, parameter_substitution
 from ..project import observer_file as observers
 from ..project.settings import suggest
@@ -81,6 +85,9 @@ class Subject:
     declared_outputs: tuple
     base_model: object
     module: object = None
+    substitutions: tuple = ()       # [substitute] applied: Substitution, one per unknown input replaced
+    substitution_origin: str = ""   # "the observer file" | "the analysis" (when substitutions)
+    substitution_refusals: dict = dataclasses.field(default_factory=dict)  # {unknown input: why no change}
 
     @property
     def model_module(self):
@@ -116,6 +123,18 @@ class Subject:
 
     def unit(self, name: str) -> str:
         return self.units.get(name, "-")
+
+    @property
+    def substitute_table(self) -> dict:
+        """The ``[substitute]`` table of what is analyzed ({unknown input: new name}), {} if none."""
+        return {str(sub.unknown): str(sub.symbol) for sub in self.substitutions}
+
+    @property
+    def declared_unknown_inputs(self) -> tuple:
+        """The unknown inputs in the model's own names (a substituted one by its own name, not its
+        carrier's)."""
+        back = {str(sub.symbol): str(sub.unknown) for sub in self.substitutions}
+        return tuple(back.get(n, n) for n in self.unknown_inputs)
 
     @property
     def restricted(self) -> bool:
@@ -269,21 +288,7 @@ def load(target: str, parameters: str | None = None, outputs=None, unknown_input
                                  key="--parameters")
     module, base = _load_model(model_path)
     params = load_parameters(param_path)
-    if config is not None and config.substitute and parameters is None:
-        # the observer file's [substitute] is part of what is designed: analyse the model the family
-        # sees (each unknown input replaced by its carrier's value, over the range the carrier takes)
-        base, subs = config.design_model(), config.substitutions()
-        inputs = dict(params.inputs)
-        for sub in subs:
-            inputs[str(sub.symbol)] = {**inputs.get(str(sub.unknown), {}), "min": sub.lower, "max": sub.upper}
-        params = dataclasses.replace(params, inputs=inputs)
-    model = base
     selected = {"outputs": None, "unknown_inputs": None}
-    declared = tuple(n for n, _ in base.outputs)
-    if outputs:
-        names = _names(outputs, declared, "an output", "--outputs")
-        model = dataclasses.replace(model, outputs=tuple(o for o in base.outputs if o[0] in names))
-        selected["outputs"] = names
     if unknown_inputs:
         if not hasattr(base, "known_inputs"):
             raise ConfigurationError(f"--unknown-inputs: model {base.name!r} declares no known inputs (it is a "
@@ -291,8 +296,64 @@ def load(target: str, parameters: str | None = None, outputs=None, unknown_input
                                      key="--unknown-inputs")
         inputs = (*base.known_inputs, *base.unknown_inputs)
         names = _names(unknown_inputs, [str(s) for s in inputs], "an input", "--unknown-inputs")
-        model = dataclasses.replace(model, known_inputs=tuple(s for s in inputs if str(s) not in names),
-                                    unknown_inputs=tuple(s for s in inputs if str(s) in names))
+        base = dataclasses.replace(base, known_inputs=tuple(s for s in inputs if str(s) not in names),
+                                   unknown_inputs=tuple(s for s in inputs if str(s) in names))
         selected["unknown_inputs"] = names
+    base, params, subs, origin, refused = _substituted(base, params, config, parameters)
+    model = base
+    declared = tuple(n for n, _ in base.outputs)
+    if outputs:
+        names = _names(outputs, declared, "an output", "--outputs")
+        model = dataclasses.replace(model, outputs=tuple(o for o in base.outputs if o[0] in names))
+        selected["outputs"] = names
     return Subject(text, model, model_path, params, param_path, config, sample_time, selected, declared, base,
-                   module)
+                   module, tuple(subs), origin, refused)
+
+
+def _substituted(model, params: ParameterSet, config, parameters) -> tuple:
+    """(model, params, [Substitution], origin, {unknown input: why not}): ``model`` with the unknown
+    inputs that enter through a nonlinearity replaced by their carriers' values, through
+    :func:`codegen.model.substitution.apply`, the code path of an observer file's ``[substitute]``:
+    the observer file's own table when it has one, else the table
+    :func:`codegen.model.substitution.propose` finds (each carrier proven invertible on the box),
+    the inputs it cannot replace with the reason. ``params`` gains the range each carrier takes on
+    the box, the box of the new unknown input. A model that is not a ModelDefinition (a family's
+    richer definition) is analyzed as it is, an observer file's table applied as the family does."""
+    from ..model import ModelDefinition
+    from ..model import substitution as substitution_rules
+    if config is not None and config.substitute and parameters is None and not isinstance(model, ModelDefinition):
+        model, subs = config.design_model(), config.substitutions()
+        return model, _with_carrier_ranges(params, subs), subs, "the observer file", {}
+    if not isinstance(model, ModelDefinition):
+        return model, params, [], "", {}
+    values = parameter_substitution(model, params)
+    if config is not None and config.substitute:
+        names = {str(u) for u in model.unknown_inputs}
+        table = {k: v for k, v in config.substitute.items() if k in names}   # --unknown-inputs may drop one
+        source, origin, refused = config.source, "the observer file", {}
+    else:
+        table, refused = substitution_rules.propose(model, params, values)
+        source, origin = f"uiogen analyze {params.source}", "the analysis"
+    if origin == "the observer file":
+        model, subs = substitution_rules.apply(model, params, values, table, source)
+    else:                       # one at a time: an input the change leaves in the equations is a refusal
+        subs = []
+        for key, name in table.items():
+            try:
+                model, done = substitution_rules.apply(model, params, values, {key: name}, source)
+            except NotAffineError as exc:
+                refused[key] = str(exc).removeprefix(f"{source}: [substitute] {key}: ")
+                continue
+            subs += done
+    if not subs:
+        return model, params, [], "", refused
+    return model, _with_carrier_ranges(params, subs), subs, origin, refused
+
+
+def _with_carrier_ranges(params: ParameterSet, subs) -> ParameterSet:
+    """``params`` with the range each substituted carrier takes on the box as the [inputs] box of its
+    new unknown input (the other keys, a bandwidth, those of the input it replaces)."""
+    inputs = dict(params.inputs)
+    for sub in subs:
+        inputs[str(sub.symbol)] = {**inputs.get(str(sub.unknown), {}), "min": sub.lower, "max": sub.upper}
+    return dataclasses.replace(params, inputs=inputs)

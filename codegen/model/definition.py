@@ -373,7 +373,8 @@ def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str, 
             raise NotAffineError(
                 f"model {model!r}: row {i} is not affine in {what} (d/d{symbols[j]} = {brief(entry)} "
                 f"still depends on {', '.join(sorted(map(str, entry.free_symbols & set(symbols))))})"
-                + (f"; {hint(symbols[j])}" if hint is not None else ""))
+                + (f"; {hint(symbols[j])}" if hint is not None else ""),
+                unknown_inputs=(symbols[j],) if what == "the unknown inputs" else ())
     return jac
 
 
@@ -597,11 +598,11 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     B = _affine_part(f, u, "the known inputs", model.name)
     Bw = _affine_part(f, w, "the derived inputs", model.name)
     from .substitution import offer
-    D = _affine_part(f, d, "the unknown inputs", model.name, hint=lambda s: offer(model, s))
+    D = _affine_part(f, d, "the unknown inputs", model.name, hint=lambda s: offer(model, s, params, subs))
     C = _affine_part(h, x, "the states", model.name)
     Du = _affine_part(h, u, "the known inputs", model.name)
     Duw = _affine_part(h, w, "the derived inputs", model.name)
-    Dd = _affine_part(h, d, "the unknown inputs", model.name, hint=lambda s: offer(model, s))
+    Dd = _affine_part(h, d, "the unknown inputs", model.name, hint=lambda s: offer(model, s, params, subs))
     col = lambda syms: sp.Matrix(len(syms), 1, list(syms))   # a (k, 1) column, also for k = 0
     rest = sp.simplify(f - A * col(x) - B * col(u) - D * col(d)
                        - (Bw * sp.Matrix(w) if w else sp.zeros(*f.shape))) if x else f

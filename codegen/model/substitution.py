@@ -211,14 +211,55 @@ def _inverses(c, d, w) -> list:
     return []
 
 
-def offer(model, d) -> str:
-    """The sentence a family's "not affine in the unknown inputs" error ends with."""
+def offer(model, d, params=None, subs: dict | None = None) -> str:
+    """The sentence a family's "not affine in the unknown inputs" error ends with. With the
+    parameter file (``params``, and the parameter values ``subs``) the change of variables is
+    also proven (:func:`analyse`): where the box rules it out, the sentence says why instead of
+    offering a table the design would refuse."""
     carrier, why = find_carrier(model, d)
     if carrier is None:
         return f"no change of variables applies: {why}"
+    if params is not None:
+        _, why = analyse(model, params, subs if subs is not None else {}, d, new_name(model, carrier, d))
+        if why is not None:
+            return f"{d} enters only through {carrier}, but no change of variables applies: {why}"
     return (f"{d} enters only through {carrier}: add [substitute] {d} = \"{d}_carrier\" to the observer file to "
             f"design for that expression's value and recover {d} by inverting it in the step (docs: tutorial, "
             f"'Unknown inputs inside a nonlinearity')")
+
+
+def new_name(model, carrier, d, taken=()) -> str:
+    """The name :func:`propose` gives the value of ``carrier``: ``sin_phi_r`` for ``sin(phi_r)`` (the
+    carrier's outermost function and the input), ``phi_r_carrier`` for any other expression; a
+    name the model already uses gets ``_w`` appended until it is new."""
+    used = {str(s) for s in _variables(model)} | {str(p) for p in model.parameters} | set(taken)
+    head = getattr(getattr(carrier, "func", None), "__name__", "")
+    name = f"{head}_{d}" if isinstance(carrier, sp.Function) and head.isidentifier() else f"{d}_carrier"
+    while name in used:
+        name += "_w"
+    return name
+
+
+def propose(model, params, subs: dict) -> tuple:
+    """({unknown input: new name}, {unknown input: why not}): the ``[substitute]`` table that makes
+    ``model`` affine in its unknown inputs, for every unknown input that enters through a
+    nonlinearity and whose carrier :func:`analyse` proves invertible on the box of ``params``
+    (``subs``: the parameter values); the others with the reason no change of variables applies.
+    An unknown input that enters affinely is in neither. ``uiogen analyze`` applies the table with
+    :func:`apply`, as an observer file's ``[substitute]`` is applied."""
+    table, refused = {}, {}
+    for d in model.unknown_inputs:
+        if not any(carriers(row, d)[0] for row in _rows(model)):
+            continue                                    # affine in d already
+        carrier, why = find_carrier(model, d)
+        if carrier is not None:
+            name = new_name(model, carrier, d, table.values())
+            _, why = analyse(model, params, subs, d, name)
+        if why is None:
+            table[str(d)] = name
+        else:
+            refused[str(d)] = why
+    return table, refused
 
 
 def apply(model, params, subs: dict, table: dict, source: str) -> tuple:

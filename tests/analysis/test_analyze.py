@@ -493,3 +493,98 @@ def test_left_invertibility_holds_at_a_stiff_point():
     assert facts.left_invertible and facts.inseparable == ()
     two = point_facts(A, np.eye(2), np.array([[1.0, 0.0]]), np.zeros((1, 2)))
     assert not two.left_invertible and set(two.inseparable) == {0, 1}
+
+
+# ---- an unknown input inside a nonlinearity ([substitute]) -------------------------------------------------
+
+def _roll_sine(tmp_path, old: str = "", new: str = "") -> tuple:
+    """The roll_bank_sine model (tests/analysis/models), ``old`` replaced by ``new`` in its equations."""
+    case = _copy("roll_bank_sine", tmp_path)
+    model = case / "roll.py"
+    if old:
+        text = model.read_text()
+        assert old in text
+        model.write_text(text.replace(old, new))
+    return str(model), str(case / "roll_car.toml")
+
+
+def _analyze_json(capsys, model: str, params: str) -> dict:
+    assert cli.main(["analyze", model, "--parameters", params, "--no-design", "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_a_bank_angle_inside_a_sine_is_analyzed_through_the_sine(tmp_path, capsys):
+    """A user's roll model (tests/analysis/models/roll_bank_sine): the unknown bank angle phi_r enters
+    as g sin(phi_r). The analysis said "no family applies" and its fixes asked for a measured
+    scheduling signal, while the NotAffineError they quoted offered [substitute]; it now applies that
+    change of variables itself (proven on the box by the observer file's own code path) and linf_uio
+    applies with it: it estimates sin_phi_r = sin(phi_r), the step recovers phi_r = asin(sin_phi_r)."""
+    data = _analyze_json(capsys, *_roll_sine(tmp_path))
+    (sub,) = data["substitutions"]
+    assert (sub["unknown_input"], sub["as"], sub["carrier"], sub["inverse"], sub["origin"]) == \
+        ("phi_r", "sin_phi_r", "sin(phi_r)", "asin(sin_phi_r)", "the analysis")
+    assert sub["range"] == pytest.approx([-np.sin(0.15), np.sin(0.15)], rel=1e-6)
+    assert sub["estimated"] == "sin_phi_r = sin(phi_r)" and sub["recovered"].startswith("phi_r = asin(sin_phi_r)")
+    assert data["substitution_refusals"] == {} and data["unknown_inputs"] == ["sin_phi_r"]
+    fams = {f["family"]: f for f in data["ranking"]["families"]}
+    assert data["ranking"]["best"] == "linf_uio"
+    assert [name for name, f in fams.items() if f["applies"]] == ["linf_uio"]
+    linf = fams["linf_uio"]
+    assert linf["observer"]["substitute"] == {"phi_r": "sin_phi_r"}
+    assert any('applies with [substitute] phi_r = "sin_phi_r"' in n and "estimates sin_phi_r = sin(phi_r)" in n
+               and "recovers phi_r = asin(sin_phi_r)" in n for n in linf["notes"])
+    for f in fams.values():         # nothing is refused for phi_r any more, and no fix asks for what it is not
+        assert "phi_r" not in f["condition"] and "scheduling signal" not in f["fix"], f
+    model, params = _roll_sine(tmp_path / "t")
+    assert cli.main(["analyze", model, "--parameters", params, "--no-design"]) == 0
+    out = capsys.readouterr().out
+    assert 'unknown inputs: sin_phi_r (for phi_r, [substitute])' in out
+    assert '[substitute] phi_r = "sin_phi_r" (the analysis): phi_r enters only through sin(phi_r)' in out
+    assert 'best: linf_uio' in out and 'with [substitute] phi_r = "sin_phi_r"' in out and "no family applies" not in out
+
+
+def test_where_no_change_of_variables_applies_the_fixes_say_why(tmp_path, capsys):
+    """The same model with cos(phi_r), not monotone on phi_r in [-0.15, 0.15]: still no family
+    applies, and the error each family quotes and its fix agree (no [substitute] offered that the
+    design refuses, no scheduling signal for an unknown input). A state inside a nonlinearity
+    (sin(phi)) keeps the scheduling-signal fix, while phi_r is still analyzed through sin(phi_r)."""
+    data = _analyze_json(capsys, *_roll_sine(tmp_path, "g * sp.sin(phi_r)", "g * sp.cos(phi_r)"))
+    assert data["substitutions"] == [] and "not monotone in phi_r" in data["substitution_refusals"]["phi_r"]
+    assert data["ranking"]["best"] is None
+    quoted = [f for f in data["ranking"]["families"] if "not affine in the unknown inputs" in f["condition"]]
+    assert {f["family"] for f in quoted} >= {"linf_uio", "algebraic_uio", "switched_pi"}
+    for f in quoted:
+        assert "add [substitute]" not in f["condition"] and "no change of variables applies" in f["condition"]
+        assert f["fix"].startswith("no [substitute] applies to phi_r (cos(phi_r) is not monotone in phi_r")
+        assert "scheduling signal" not in f["fix"]
+    data = _analyze_json(capsys, *_roll_sine(tmp_path / "state", "- phi) / tau_phi", "- sp.sin(phi)) / tau_phi"))
+    assert [s["as"] for s in data["substitutions"]] == ["sin_phi_r"]
+    linf = next(f for f in data["ranking"]["families"] if f["family"] == "linf_uio")
+    assert not linf["applies"] and "not affine in the states" in linf["condition"]
+    assert "SchedulingSignal" in linf["fix"] and "[substitute]" not in linf["fix"]
+
+
+@pytest.mark.slow       # one analysis with a linf_uio trial design and one design, about 10 s
+def test_new_from_model_writes_the_substitution_the_analysis_found_and_it_designs(tmp_path, capsys):
+    """uiogen new --from-model roll_bank_sine --family linf_uio exited 2 ("does not apply"); it writes
+    the observer file with the [substitute] table the analysis applied, and the file designs as
+    written: the observer's outputs end with the recovered phi_r (end to end through generate, build
+    and validate: docs/analyze.md)."""
+    import tomllib
+    model, params = _roll_sine(tmp_path)
+    assert cli.main(["new", str(tmp_path / "proj"), "--from-model", model, "--parameters", params,
+                     "--family", "linf_uio"]) == 0
+    out = capsys.readouterr().out
+    written = tmp_path / "proj" / "roll_bank_linf_uio.toml"
+    assert f"wrote {written} (linf_uio, ranked first by the analysis, chosen with --family)" in out
+    text = written.read_text()
+    assert tomllib.loads(text)["substitute"] == {"phi_r": "sin_phi_r"}
+    assert re.search(r"^\[substitute\]    # phi_r enters only through sin\(phi_r\)", text, re.M), text
+    assert "# unknown inputs phi_r)." in text
+    assert "# trial design by uiogen analyze (the analysis's settings): certified" in text
+    config = observers.get(str(written))
+    (sub,) = config.substitutions()
+    assert str(sub.symbol) == "sin_phi_r" and str(sub.inverse) == "asin(sin_phi_r)"
+    b, _ = pipeline.solve(config)
+    assert b.output_names[-1] == "phi_r" and "sin_phi_r" in b.output_names
+    assert b.discrete_certificate.ui_loop.contraction < 1

@@ -10,7 +10,8 @@ differentiator to add.
 """
 from __future__ import annotations
 
-from ...errors import RankConditionError, RelativeDegreeError, SchedulingBoundsError, UiogenError
+from ...errors import (NotAffineError, RankConditionError, RelativeDegreeError, SchedulingBoundsError,
+                       UiogenError)
 
 
 def _lipschitz(subject, signal: str, order: int) -> tuple:
@@ -51,12 +52,15 @@ def assess(family, subject, structure):
     try:
         lpv = subject.lpv
         rdeg.check_structure(lpv)
-    except UiogenError as exc:
+    except NotAffineError as exc:
+        from ...analysis.ranking import not_affine_fix
         return refuse(f"{type(exc).__name__}: {exc}",
                       "measure outputs the unknown inputs do not reach directly (y = C x); the L-infinity UIO takes "
                       "the feedthrough" if "reach the outputs" in str(exc) else
-                      "write each nonlinearity through a measured scheduling signal" if "affine" in str(exc) else
-                      "as the message says")
+                      not_affine_fix(subject, exc, "write each nonlinearity through a measured scheduling signal")
+                      if "affine" in str(exc) else "as the message says")
+    except UiogenError as exc:
+        return refuse(f"{type(exc).__name__}: {exc}", "as the message says")
     try:
         dec = rdeg.derive(lpv)
     except RelativeDegreeError as exc:

@@ -26,9 +26,10 @@ def assess(family, subject, structure):
     try:
         lpv = subject.lpv
     except NotAffineError as exc:
-        return refuse(f"the model is not LPV: {exc}",
-                      "write each nonlinearity through measured signals (a SchedulingSignal bounded in "
-                      "[scheduling.NAME], or a derived input); families for nonlinear models rank below")
+        from ...analysis.ranking import not_affine_fix
+        return refuse(f"the model is not LPV: {exc}", not_affine_fix(
+            subject, exc, "write each nonlinearity through measured signals (a SchedulingSignal bounded in "
+                          "[scheduling.NAME], or a derived input); families for nonlinear models rank below"))
     except UiogenError as exc:
         return refuse(f"{type(exc).__name__}: {exc}", "fix the parameter file as the message says")
     signals = [str(s) for s in lpv.scheduling_symbols]

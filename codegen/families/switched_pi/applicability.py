@@ -11,7 +11,7 @@ models, not the model between the operating points.
 """
 from __future__ import annotations
 
-from ...errors import UiogenError
+from ...errors import NotAffineError, UiogenError
 
 
 def proposed_rule(subject) -> dict | None:
@@ -52,9 +52,12 @@ def assess(family, subject, structure):
         lpv = subject.lpv
         lpv.require_no_ui_feedthrough("switched H-infinity PI observer", "Menhour et al. 2014, eq. (2): y = C x")
     except UiogenError as exc:
+        from ...analysis.ranking import not_affine_fix
         return refuse(f"{type(exc).__name__}: {exc}", "measure outputs the unknown inputs do not reach directly; "
                       "the L-infinity UIO takes the feedthrough" if "reach the outputs" in str(exc)
-                      else "write each nonlinearity through a measured scheduling signal")
+                      else not_affine_fix(subject, exc, "write each nonlinearity through a measured scheduling "
+                                                        "signal") if isinstance(exc, NotAffineError)
+                      else "as the message says")
     if not lpv.nd:
         return refuse("the model has no unknown input to estimate", "declare the unknown inputs")
     rule = proposed_rule(subject)
@@ -70,7 +73,9 @@ def assess(family, subject, structure):
         text = str(exc)
         fix = (structure.fix("strong_detectability") or structure.fix("observability")
                or "measure an output that sees the unknown input's effect at rest") if "A2" in text or \
-            "detectable" in text else "measure linearly independent outputs; merge dependent unknown inputs"
+            "detectable" in text else ("measure outputs the known inputs do not reach directly (y = C x); the "
+                                       "L-infinity UIO takes y = C x + Du u") if "known-input feedthrough" in text \
+            else "measure linearly independent outputs; merge dependent unknown inputs"
         return refuse(f"{type(exc).__name__}: {text}", fix)
     n_modes = sm.n_modes
     axis = raw["axis"][0]

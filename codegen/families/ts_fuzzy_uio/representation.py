@@ -201,7 +201,7 @@ def split_consequents(model: ModelDefinition, subs: dict) -> dict:
         raise NotAffineError(f"model {model.name!r}: the unknown inputs must enter with a constant matrix "
                              f"(D_v depends on {sorted(map(str, set().union(*(e.free_symbols for e in Dv))))}). The "
                              f"L-infinity UIO (family linf_uio) takes a scheduling-dependent D(rho)"
-                             + "".join(f"; {offer(model, u)}" for u in nonlinear))
+                             + "".join(f"; {offer(model, u)}" for u in nonlinear), unknown_inputs=nonlinear)
     drift = sp.expand(F - Dv * sp.Matrix(d))
     Av = sp.zeros(len(x), len(x))
     fv = sp.zeros(len(x), 1)
