@@ -38,7 +38,7 @@ def install_hint(tools: str) -> str:
 def command_line(prog: str, description: str) -> argparse.ArgumentParser:
     """The command line of the embedded tools (this module's, :mod:`codegen.tools.m4cycles`'s,
     :mod:`codegen.tools.qemu`'s): NAME ... and ``--project``, as the ``uiogen`` verbs take them."""
-    from ..cli import project_option
+    from ..commandline import project_option
     parser = argparse.ArgumentParser(prog=prog, description=description, parents=[project_option()])
     parser.add_argument("names", nargs="*", metavar="NAME",
                         help="a built-in observer (uiogen list) or the path of an observer file (.toml), as every "
@@ -134,7 +134,7 @@ DESCRIPTION = ("Cross-compile each observer's step for the Cortex-M4F (arm-none-
 
 
 def main(argv=None) -> int:
-    from ..cli import report_errors
+    from ..commandline import report_errors
     args = command_line(PROG, DESCRIPTION).parse_args(argv)
     return report_errors(PROG, lambda: _main(args))
 

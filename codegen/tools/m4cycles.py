@@ -267,7 +267,7 @@ DESCRIPTION = ("Cycles per step of each observer on the Cortex-M4F, float32 and 
 
 
 def main(argv=None) -> int:
-    from ..cli import report_errors
+    from ..commandline import report_errors
     args = cortexm.command_line(PROG, DESCRIPTION).parse_args(argv)
     return report_errors(PROG, lambda: _main(args))
 

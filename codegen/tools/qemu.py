@@ -309,7 +309,7 @@ DESCRIPTION = ("Run each observer's Cortex-M4F build under QEMU (qemu-system-arm
 
 
 def main(argv=None) -> int:
-    from ..cli import report_errors
+    from ..commandline import report_errors
     args = cortexm.command_line(PROG, DESCRIPTION).parse_args(argv)
     return report_errors(PROG, lambda: _main(args))
 

@@ -326,7 +326,9 @@ def test_the_analysis_of_an_observer_file_applies_its_substitution(tmp_path):
     assert [str(d) for d in result.subject.model.unknown_inputs] == ["sin_phi"]
     assert result.subject.equations.box[sp.Symbol("sin_phi")] == pytest.approx((-np.sin(0.1), np.sin(0.1)))
     verdicts = {a.family: a for a, _ in result.ranking.entries}
-    assert verdicts["linf_uio"].applies and "[substitute]" not in result.text()
+    text = result.text()
+    assert verdicts["linf_uio"].applies and "add [substitute]" not in text and "NotAffineError" not in text
+    assert '[substitute] phi = "sin_phi" (the observer file)' in text       # the table it applied, said so
 
 
 def test_a_ts_known_input_bounded_by_its_inputs_table_is_accepted_by_the_analysis(tmp_path):
