@@ -59,6 +59,18 @@ class CompiledObserver:
     def __repr__(self) -> str:
         return f"<CompiledObserver {self.name} from {self.path}>"
 
+    # The object holds no state (a run's state is the caller's array) and nothing the extension does
+    # not carry: a copy is the object itself, and a pickle (multiprocessing, concurrent.futures) opens
+    # the same extension file again in the receiving process, refused there if it was rebuilt since.
+    def __copy__(self):
+        return self
+
+    def __deepcopy__(self, memo):
+        return self
+
+    def __reduce__(self):
+        return _reopen, (str(self.path), self.name, self.design_sha256)
+
     @property
     def n_state(self) -> int:
         return self.module.N_STATE
@@ -106,6 +118,20 @@ class CompiledObserver:
         status = np.empty(n, dtype=np.int32)
         self.module.run(state, inputs, outputs, status, n)
         return outputs, status, state
+
+
+def _reopen(path: str, name: str, design_sha256: str) -> CompiledObserver:
+    """The observer a pickle names: the extension at ``path`` (``PROJECT/build/extensions/``), checked
+    as :func:`load` checks it, of the design it was pickled with."""
+    workspace = Workspace(Path(path).parents[2])
+    if workspace.extension(name) != Path(path):
+        raise UnknownObserverError(f"{path} is not where uiogen build puts observer {name!r}; load() it by its "
+                                   f"observer file in this process")
+    obs = open_observer(workspace, name)
+    if obs.design_sha256 != design_sha256:
+        raise StaleExtensionError(f"the extension {path} was rebuilt from another design since the observer was "
+                                  f"pickled; load() the observer again and send that")
+    return obs
 
 
 def observer_class(module) -> type:
@@ -179,7 +205,11 @@ def _refuse_unknown(text: str, lock: Path) -> None:
     observer that was never generated)."""
     if text.endswith(".toml") or "/" in text:
         if not Path(text).is_file():
-            raise UnknownObserverError(f"no observer file {text} (and no generated design {lock}): check the path")
+            folder = Path(text).parent
+            siblings = sorted(p.name for p in folder.glob("*.toml")) if folder.is_dir() else []
+            close = difflib.get_close_matches(Path(text).name, siblings, n=1)
+            raise UnknownObserverError(f"no observer file {text} (and no generated design {lock}): check the path"
+                                       + (f" (did you mean {str(folder / close[0])!r}?)" if close else ""))
     elif not (BUILTIN_OBSERVERS / f"{text}.toml").is_file():
         known = sorted(p.stem for p in BUILTIN_OBSERVERS.glob("*.toml"))
         close = difflib.get_close_matches(text, known, n=1)

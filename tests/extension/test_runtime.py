@@ -124,6 +124,9 @@ def test_a_wrong_path_or_name_is_said_as_such(tmp_path):
     observer was never generated (which sends the user to run generate on a file that is not there)."""
     with pytest.raises(UnknownObserverError, match=r"no observer file .*nope\.toml .*check the path"):
         load(tmp_path / "nope.toml")
+    (tmp_path / "disturbance.toml").write_text("")
+    with pytest.raises(UnknownObserverError, match=r"check the path \(did you mean '.*/disturbance.toml'\?\)"):
+        load(tmp_path / "disturbanc.toml")
     with pytest.raises(UnknownObserverError, match=r"'lpv_linf_driver_torqe' is not a built-in observer \(did you "
                                                    r"mean 'lpv_linf_driver_torque'\?\); .*path of its observer file"):
         load("lpv_linf_driver_torqe")
@@ -168,6 +171,31 @@ def test_a_rebuild_is_loaded_by_the_same_process(project):
     assert not np.allclose(after.run(inputs)[0][-1], first)          # the new gains
     np.testing.assert_array_equal(before.run(inputs)[0][-1], first)  # the old object is untouched
     assert load(path).design_sha256 == after.design_sha256          # and held from now on
+
+
+def test_an_observer_pickles_to_a_worker_and_copies_to_itself(project):
+    """A worker process (multiprocessing, concurrent.futures) gets the observer by pickle: it opens the
+    same extension file there, checked as load() checks it; a copy is the object itself (it holds no
+    state). Before: PicklingError, and deepcopy's "cannot pickle 'module' object"."""
+    import copy
+    import pickle
+    obs = load(project.root / f"{NAME}.toml")
+    assert copy.copy(obs) is obs and copy.deepcopy(obs) is obs
+    code = ("import pickle, sys, numpy as np\nobs = pickle.loads(sys.stdin.buffer.read())\n"
+            "print(obs.design_sha256, obs.run(np.full((3, obs.n_input), 0.1))[0][-1].tolist())")
+    proc = subprocess.run([sys.executable, "-c", code], input=pickle.dumps(obs), capture_output=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr.decode()
+    sha, last = proc.stdout.decode().split(" ", 1)
+    assert sha == obs.design_sha256
+    assert json.loads(last) == obs.run(np.full((3, obs.n_input), 0.1))[0][-1].tolist()
+    # rebuilt from another design in between: refused in the worker, not run with other gains
+    data = pickle.dumps(obs)
+    lock = project.design_lock(NAME)
+    doc = json.loads(lock.read_text())
+    doc["design_note"] = "changed"
+    lock.write_text(json.dumps(doc))
+    with pytest.raises(StaleExtensionError):
+        pickle.loads(data)
 
 
 def test_the_recorder_records_what_it_runs_and_changes_nothing():
