@@ -57,7 +57,10 @@ def get(name: str) -> Family:
     try:
         return _REGISTRY[name]
     except KeyError:
-        raise UnknownFamilyError(f"unknown observer family {name!r}; known: {', '.join(names())}",
+        from ..project.settings import suggest
+        close = suggest(str(name), names())
+        raise UnknownFamilyError(f"unknown observer family {name!r}" + (f" (did you mean {close!r}?)" if close else "")
+                                 + f"; known: {', '.join(names())}",
                                  key="family", value=name, allowed=", ".join(names())) from None
 
 

@@ -416,6 +416,8 @@ def test_new_from_model_with_a_family_writes_that_family_with_what_the_analysis_
     assert cli.main(["new", str(tmp_path / "p3"), "--from-model", model, "--parameters", params,
                      "--family", "no_such_family"]) == 2
     assert "UnknownFamilyError" in capsys.readouterr().err
+    assert cli.main(["new", str(tmp_path / "p4"), "--family", "ts_fuzy_uio"]) == 2
+    assert "unknown observer family 'ts_fuzy_uio' (did you mean 'ts_fuzzy_uio'?)" in capsys.readouterr().err
     # a family that proposes no settings: the family's defaults, said in the header
     s = subject.load(model, params)
     app = ranking.Applicability("nonlinear_tyre_observer", True, "states_only", observer=None)
