@@ -603,7 +603,7 @@ def check_plausibility(model, values: dict, source: str, accepted=()) -> None:
         ratio = max(a, b) / min(a, b)
         if ratio >= SAME_KIND_RATIO:
             dim = analysis.dims.get(p)
-            raise config_error(source, "parameters", f"{p}, {q}", f"{values[p]:g}, {values[q]:g}",
+            raise config_error(source, "parameters", f"{p}, {q}", [values[p], values[q]],
                                f"values of the same kind within a factor {SAME_KIND_RATIO:g} (both "
                                f"{format_dims(dim) if dim is not None else 'of one dimension'} by model "
                                f"{model.name!r}'s equations); they differ by {ratio:.4g}x: a unit slip (kN against "

@@ -113,7 +113,7 @@ def test_a_kn_beside_an_n_is_refused_with_the_ratio(tmp_path, capsys):
     assert cli.main(["design", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "Traceback" not in err
-    assert "car.toml" in err and "C_f, C_r" in err and "1035x" in err and "unit slip" in err
+    assert "car.toml: [parameters] C_f, C_r = [57.0, 59000.0]:" in err and "1035x" in err and "unit slip" in err
     assert "[plausibility] accept" in err
 
 
