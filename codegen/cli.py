@@ -345,15 +345,21 @@ def cmd_validate(args) -> int:
         from .validation import report
         with outputs.writing(args.report):
             page = report.write_validation(args.name, result, args.report, data=False)
+    # a run whose step failed numerically or diverged is a failed validation: exit 1, the reason on stderr
+    why = validate.failure(result)
     if args.json:
         print(validate.to_json(result))
-        return 0
-    print(validate.header(args.name, result))
-    print(validate.format_table(result))
-    if args.plot:
-        print(f"plot: {args.plot}")
-    if args.report:
-        print(f"report: {page.resolve()}")
+    else:
+        print(validate.header(args.name, result))
+        print(validate.format_table(result))
+        if args.plot:
+            print(f"plot: {args.plot}")
+        if args.report:
+            print(f"report: {page.resolve()}")
+    if why:
+        print(f"uiogen: validation failed: {why}; the estimates above are not the observer's (an initial estimate "
+              f"outside the certified set, a set the run leaves, or a step that is not certified there)", file=sys.stderr)
+        return 1
     return 0
 
 

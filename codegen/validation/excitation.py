@@ -231,7 +231,11 @@ def run(config, duration: float | None = None, seed: int = 0, progress=None, obs
         if s in truth:
             keep = slice(0, len(est) - lag)
             table[s] = signal_stats(truth[s][keep], est[keep], truth["t"][keep], unit=units.get(s))
+    # which bits: a SCHEDULING_CLAMPED sample is outside the certified set, a NUMERICAL_FAILURE one
+    # reset the state (the estimate is not of the step's dynamics there)
+    counts = {k: int(np.count_nonzero(status & bit)) for k, bit in obs.status_bits.items() if bit}
     return {"observer": table, "baselines": {}, "status_flags": int(np.count_nonzero(status)),
+            "status_counts": {k: v for k, v in counts.items() if v},
             "samples": int(len(status)), "max_abs_ay": max_abs_ay(truth),
             "plant": "model", "plant_model": f"{model.name} (its own equations, excitation)",
             "scenario": "excitation", "table_format": "generic", "units": units,

@@ -102,11 +102,27 @@ def plot(result: dict, path: str) -> None:
     plt.close(fig)
 
 
+def failure(result: dict) -> str:
+    """Why a run says nothing of the observer's accuracy, or "": the step failed numerically (and
+    reset its state) on some samples, or an estimate's error is not finite (it diverged)."""
+    import math
+    why = []
+    failed = result.get("status_counts", {}).get("NUMERICAL_FAILURE", 0)
+    if failed:
+        why.append(f"the step reported NUMERICAL_FAILURE on {failed} of {result['samples']} samples and reset its "
+                   f"state there")
+    diverged = [s for s, row in result.get("observer", {}).items()
+                if isinstance(row, dict) and isinstance(row.get("rms"), float) and not math.isfinite(row["rms"])]
+    if diverged:
+        why.append(f"the error of {', '.join(diverged)} is not finite (the estimate diverged)")
+    return "; ".join(why)
+
+
 def to_json(result: dict) -> str:
     """``uiogen validate --json``: every row in the one definition (``definitions`` says what each
     key means and in which unit), and the family's paper format beside it (``paper_format``)."""
-    keys = ("observer", "baselines", "plant", "plant_model", "scenario", "status_flags", "samples", "max_abs_ay",
-            "paper_format")
+    keys = ("observer", "baselines", "plant", "plant_model", "scenario", "status_flags", "status_counts", "samples",
+            "max_abs_ay", "paper_format")
     return json.dumps({**{k: result[k] for k in keys if k in result}, "definitions": metrics.DEFINITIONS},
                       indent=1, sort_keys=True)
 

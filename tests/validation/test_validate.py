@@ -286,3 +286,24 @@ def test_columns_no_physics_check_reads_are_listed(tmp_path, monkeypatch, capsys
     assert ("unchecked: 'y_p_col' ([data.inputs] y_p, unit deg/s: no physics relation of the model reads it; no range "
             "either). No physics check covered it (a range check, where there is one, misses a unit off by a factor "
             "under 100 inside the model's box): double-check its unit") in out, out
+
+
+@pytest.mark.slow          # the compiled observer
+def test_a_run_whose_step_failed_numerically_is_a_failed_validation(monkeypatch, capsys):
+    """The excitation run counts each status bit; a step that reported NUMERICAL_FAILURE (it reset its
+    state) or an estimate that diverged makes `uiogen validate` exit 1 with the reason on stderr (a
+    user's TS observer started outside its box diverged to 1e269 and validate exited 0)."""
+    from codegen import cli
+    good = validate.run_scenario("lpv_linf_driver_torque", "excitation", duration=6.0)
+    assert "NUMERICAL_FAILURE" not in good["status_counts"] and validate.failure(good) == ""
+    bad = {**good, "status_counts": {**good["status_counts"], "NUMERICAL_FAILURE": 3},
+           "observer": {**good["observer"], "T_d": {**good["observer"]["T_d"], "rms": float("inf")}}}
+    assert validate.failure(bad) == (f"the step reported NUMERICAL_FAILURE on 3 of {good['samples']} samples and "
+                                     f"reset its state there; the error of T_d is not finite (the estimate diverged)")
+    monkeypatch.setattr(validate, "run_scenario", lambda *a, **k: bad)
+    assert cli.main(["validate", "lpv_linf_driver_torque", "--scenario", "excitation", "--json"]) == 1
+    out = capsys.readouterr()
+    assert json.loads(out.out)["status_counts"]["NUMERICAL_FAILURE"] == 3
+    assert out.err.startswith("uiogen: validation failed: the step reported NUMERICAL_FAILURE on 3 of")
+    monkeypatch.setattr(validate, "run_scenario", lambda *a, **k: good)
+    assert cli.main(["validate", "lpv_linf_driver_torque", "--scenario", "excitation"]) == 0
