@@ -590,3 +590,16 @@ def test_new_from_model_writes_the_substitution_the_analysis_found_and_it_design
     b, _ = pipeline.solve(config)
     assert b.output_names[-1] == "phi_r" and "sin_phi_r" in b.output_names
     assert b.discrete_certificate.ui_loop.contraction < 1
+
+
+@pytest.mark.slow          # a trial design of the interconnected family
+def test_the_interconnected_family_applies_to_a_users_own_model_file(tmp_path, capsys):
+    """The interconnected starter (its model beside the observer file, not in model_defs/) designs, and
+    the analysis says so (it said "the family reads its model from model_defs/NAME.py only" and "no family
+    applies" for a file `uiogen design` certifies)."""
+    assert cli.main(["new", str(tmp_path / "st"), "--family", "interconnected_uio"]) == 0
+    capsys.readouterr()
+    result = analysis.analyze(str(tmp_path / "st" / "my_interconnected_uio.toml"))
+    verdict = {a.family: a for a, _ in result.ranking.entries}["interconnected_uio"]
+    assert verdict.applies, verdict.condition
+    assert result.ranking.best.family == "interconnected_uio"

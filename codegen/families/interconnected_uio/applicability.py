@@ -25,9 +25,6 @@ def assess(family, subject, structure):
         return refuse(f"model {subject.name!r} is one system: this family needs its states split into interconnected "
                       f"subsystems (longitudinal, lateral) with the coupling between them",
                       "write the model as an InterconnectedModelDefinition (model_defs/interconnected_vehicle.py)")
-    if not subject.is_builtin_model:
-        return refuse(f"the family reads its model from model_defs/NAME.py only (icm.load), not {subject.model_path}",
-                      "put the model file in model_defs/ and name it by its module name")
     try:
         ts = icm.build(model, subject.parameters)
     except UiogenError as exc:
