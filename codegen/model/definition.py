@@ -207,7 +207,8 @@ class LPVModel:
         return self.Dd is not None and any(e != 0 for e in self.Dd)
 
     def require_no_ui_feedthrough(self, family: str, reason: str) -> None:
-        """Refuse unknown inputs in the outputs for a family whose theory needs y = C x (+ Du u).
+        """Refuse unknown inputs in the outputs for a family whose theory needs y = C x (the families
+        that call this take no known-input feedthrough either, so the advice asks for neither).
 
         Raises
         ------
@@ -221,8 +222,8 @@ class LPVModel:
                 for j in range(self.Dd.shape[1]) if self.Dd[i, j] != 0]
         raise NotAffineError(
             f"model {self.definition.name!r}: unknown inputs reach the outputs ({', '.join(hits)}); the {family} "
-            f"needs y = C x + Du u ({reason}). The L-infinity UIO (family linf_uio) takes this feedthrough; "
-            f"or measure an output the unknown input does not reach")
+            f"needs y = C x, no input in an output ({reason}). The L-infinity UIO (family linf_uio) takes this "
+            f"feedthrough; or measure outputs that no input, known or unknown, reaches")
 
     @property
     def nx(self) -> int:
