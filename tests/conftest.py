@@ -39,6 +39,16 @@ def require_strace() -> str:
     return path
 
 
+def require_embedded_tool(ok: bool, what: str) -> None:
+    """A cross tool (arm-none-eabi-gcc, qemu-system-arm, cmake): skipped where it is missing, a failure in
+    CI (CI=true), where .ci/run installs them (make embedded-tools)."""
+    if not ok:
+        message = f"{what} not installed (make embedded-tools / scripts/install_embedded_tools.sh)"
+        if os.environ.get("CI") == "true":
+            pytest.fail(message)
+        pytest.skip(message)
+
+
 @pytest.fixture(scope="session")
 def config():
     return observers.get(NAME)

@@ -6,7 +6,6 @@ the extension's (double) and to the float32 library's on a validation log. Witho
 arm-none-eabi-gcc the tests skip naming them; under CI (CI=true) they fail instead."""
 from __future__ import annotations
 
-import os
 import shutil
 import subprocess
 
@@ -18,18 +17,11 @@ from codegen.targets import cortexm
 from codegen.targets import float32 as precision
 from codegen.extension.build import build_extension, generated_dir, load
 from codegen.validation import run as validate
+from conftest import require_embedded_tool as require
 
 NAME = "lpv_linf_driver_torque"
 M4F = ["-DCMAKE_SYSTEM_NAME=Generic", "-DCMAKE_C_COMPILER=arm-none-eabi-gcc",
        f"-DCMAKE_C_FLAGS={' '.join(cortexm.CPU_FLAGS)}", "-DCMAKE_EXE_LINKER_FLAGS=--specs=nosys.specs"]
-
-
-def require(ok: bool, what: str) -> None:
-    if not ok:
-        message = f"{what} not installed (make embedded-tools / scripts/install_embedded_tools.sh)"
-        if os.environ.get("CI") == "true":
-            pytest.fail(message)
-        pytest.skip(message)
 
 
 def cmake(*args, cwd=None) -> subprocess.CompletedProcess:

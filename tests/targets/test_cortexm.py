@@ -5,26 +5,17 @@ bit-identical to the host build of the same precision. Without the tools the tes
 message naming them; under CI (CI=true), where `make test` installs them, they fail instead."""
 from __future__ import annotations
 
-import os
-
 import numpy as np
 import pytest
 
 from codegen.targets import cortexm
 from codegen.tools import qemu
 from codegen.extension.build import build_extension
+from conftest import require_embedded_tool as require
 
 pytestmark = pytest.mark.slow          # arm-none-eabi-gcc and QEMU
 
 NAME = "lpv_linf_driver_torque"
-
-
-def require(ok: bool, what: str) -> None:
-    if not ok:
-        message = f"{what} not installed (make embedded-tools / scripts/install_embedded_tools.sh)"
-        if os.environ.get("CI") == "true":
-            pytest.fail(message)
-        pytest.skip(message)
 
 
 def test_core_observer_fits_8k_code_and_1k_stack():

@@ -6,7 +6,6 @@ on stderr with exit status 2. They read ``--help`` as an observer name, looked f
 cross compiler and QEMU are slow and skip without them (under CI they fail, as in test_cortexm.py)."""
 from __future__ import annotations
 
-import os
 import re
 
 import pytest
@@ -15,16 +14,9 @@ from codegen import families
 from codegen.project import starter
 from codegen.targets import cortexm
 from codegen.tools import m4cycles, qemu
+from conftest import require_embedded_tool as require
 
 TOOLS = {"cortexm": cortexm, "m4cycles": m4cycles, "qemu": qemu}
-
-
-def require(ok: bool, what: str) -> None:
-    if not ok:
-        message = f"{what} not installed (make embedded-tools / scripts/install_embedded_tools.sh)"
-        if os.environ.get("CI") == "true":
-            pytest.fail(message)
-        pytest.skip(message)
 
 
 def one_error_line(capsys) -> str:
