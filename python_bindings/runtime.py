@@ -195,7 +195,7 @@ def load(observer, project: str | Path | None = None) -> CompiledObserver:
         # a bare name is a built-in's: one of the user's own, generated here, would load without the
         # check of its observer file, parameters and model (the CLI refuses it too)
         _refuse_unknown(text, workspace.design_lock(name))
-    source = Path(text) if text.endswith(".toml") or "/" in text else BUILTIN_OBSERVERS / f"{text}.toml"
+    source = Path(text) if is_path else BUILTIN_OBSERVERS / f"{text}.toml"
     return open_observer(workspace, name, text + (f" --project {project}" if project is not None else ""),
                          observer_file=source)
 
@@ -276,21 +276,21 @@ def _import_extension(name: str, path: Path, argument: str, again: bool):
     (the mapping stays)."""
     import shutil
     import tempfile
-    if not again:
-        spec = importlib.util.spec_from_file_location(f"_{name}", path)
+
+    def imported(file: Path):
+        spec = importlib.util.spec_from_file_location(f"_{name}", file)
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
         return module
+    if not again:
+        return imported(path)
     with tempfile.TemporaryDirectory(prefix="uiogen-reload-") as tmp:
         copy = Path(tmp) / path.name
         shutil.copyfile(path, copy)
         damage = integrity.binary_mismatch(path, copy)     # the file may have been rebuilt again meanwhile
         if damage:
             raise DamagedExtensionError(f"the extension {path} is not loaded: {damage}; run `uiogen build {argument}`")
-        spec = importlib.util.spec_from_file_location(f"_{name}", copy)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-    return module
+        return imported(copy)
 
 
 def _check_sources(module, path: Path, observer_file: Path, argument: str) -> None:

@@ -388,10 +388,9 @@ def _scale_mixtures(model) -> list:
     An output that is a number times a signal is :func:`_scale_mismatches`' (it checks the number)."""
     import math
     units = getattr(model, "units", None) or {}
-    scales = {name: unit(text)[1] for name, text in units.items()}
-    for g in getattr(model, "scheduling", ()):
-        if getattr(g, "unit", "") and str(g.symbol) not in scales:
-            scales[str(g.symbol)] = unit(g.unit)[1]
+    params = {str(p) for p in model.parameters}
+    scales = {name: factor for name, (_, factor) in _signal_units(model, scale=True).items()}
+    scales.update({name: unit(text)[1] for name, text in units.items() if name in params})   # declared parameters too
     declared = {**{str(g.symbol): g.unit for g in getattr(model, "scheduling", ()) if getattr(g, "unit", "")},
                 **units}
     out: dict = {}          # {what is wrong: [where]}: a sum the equations share is named once
