@@ -190,6 +190,34 @@ class _Unknowns(set):
         return name
 
 
+# Min and Max re-evaluate when sympy's expand rebuilds them, and their constructor searches for
+# dominated arguments with the general simplifier (seconds per equation of a Fiala tyre, on every
+# verb): the dimension analysis reads their arguments only, so they are expanded as inert functions
+# printed under the same names.
+_INERT = {sp.Min: sp.Function("Min"), sp.Max: sp.Function("Max")}
+_MINMAX = (sp.Min, sp.Max, *_INERT.values())
+
+
+def _expanded(expr):
+    """``expr`` expanded into a sum of products, Min and Max kept inert (a Piecewise is left whole)."""
+    if expr.has(sp.Piecewise):
+        return expr
+    return sp.expand(_inert(expr))
+
+
+def _inert(expr):
+    """``expr`` with every Min and Max inert, rebuilt from the leaves (sympy's replace would rebuild an
+    outer Max from its new arguments and evaluate it)."""
+    if expr.is_Atom or not expr.has(sp.Min, sp.Max):
+        return expr
+    args = [_inert(a) for a in expr.args]
+    return _INERT[expr.func](*args) if isinstance(expr, (sp.Min, sp.Max)) else expr.func(*args)
+
+
+def _is_minmax(expr) -> bool:
+    return isinstance(expr, _MINMAX[:2]) or expr.func in _MINMAX[2:]
+
+
 def _form(expr, known: dict, params: _Unknowns, constraints: list, where: str) -> _Form:
     """The dimension of ``expr`` as a form in the unknown dimensions (``params``: parameters,
     signals without a unit, numbers if ``params.free_numbers``); rules that must hold (sum terms
@@ -225,10 +253,10 @@ def _form(expr, known: dict, params: _Unknowns, constraints: list, where: str) -
         return _Form()
     if isinstance(expr, (sp.Abs, sp.re, sp.im)):
         return _form(expr.args[0], known, params, constraints, where)
-    if isinstance(expr, (sp.Min, sp.Max)):           # a literal 0 fits any unit: Min(a_x, 0)
+    if _is_minmax(expr):                             # a literal 0 fits any unit: Min(a_x, 0)
         forms = [_form(a, known, params, constraints, where) for a in expr.args if not a.is_zero]
         for f in forms[1:]:
-            _dimensionless(f - forms[0], f"{where}: arguments of {expr.func.__name__}", constraints)
+            _dimensionless(f - forms[0], f"{where}: arguments of {expr.func}", constraints)
         return forms[0] if forms else _Form()
     if isinstance(expr, sp.Piecewise):
         forms = []
@@ -339,7 +367,7 @@ def _term_mismatches(model) -> list:
     unit is not the one the equation needs (``- r`` in an acceleration)."""
     known, params, out = _signal_units(model), [str(p) for p in model.parameters], []
     for what, dims, expr in _equations(model):
-        e = sp.expand(expr) if not expr.has(sp.Piecewise) else expr
+        e = _expanded(expr)
         for term in (e.args if e.is_Add else (e,)):
             f = _form(term, known, _Unknowns(params, free_numbers=True), [], what)
             if not f.coef and tuple(f.const) != tuple(dims):
@@ -437,7 +465,7 @@ def _scale_mixtures(model) -> list:
             return None
         if isinstance(expr, (sp.Abs, sp.re, sp.im)):
             return scale(expr.args[0], where)
-        if isinstance(expr, (sp.Min, sp.Max)):           # a literal 0 fits any scale: Min(a_x, 0)
+        if _is_minmax(expr):                             # a literal 0 fits any scale: Min(a_x, 0)
             return agree([(a, scale(a, where)) for a in expr.args if not a.is_zero], (where, f"in {expr}"))
         if isinstance(expr, sp.Piecewise):
             for _, cond in expr.args:
@@ -487,7 +515,7 @@ def infer(model, declared_parameters: bool = True, free_numbers: bool = False) -
     known = _signal_units(model)
     constraints, unknowns = [], _Unknowns(params, free_numbers)
     for what, dims, expr in _equations(model):
-        f = _form(sp.expand(expr) if not expr.has(sp.Piecewise) else expr, known, unknowns, constraints, what)
+        f = _form(_expanded(expr), known, unknowns, constraints, what)
         _dimensionless(f - _Form(dims), what, constraints)
     for name, text in units.items():           # declared parameter units fix the free scales
         if name in params and declared_parameters:
@@ -521,46 +549,55 @@ def _unit_row(n, k):
 
 
 class _Echelon:
-    """Rows of a linear system in reduced echelon form, exact (Fractions), grown one row at a time."""
+    """Rows of a linear system in reduced echelon form, exact (Fractions), grown one row at a time.
+
+    Rows are sparse ({column: coefficient}): a model with a free unknown per number has hundreds of
+    columns, each constraint a few."""
 
     def __init__(self, n: int):
         self.n = n
-        self.rows = {}          # pivot column -> (row with 1 at the pivot, rhs vector)
+        self.rows = {}          # pivot column -> (row {column: coefficient} with 1 at the pivot, rhs vector)
+
+    @staticmethod
+    def _axpy(row, rhs, c, prow, prhs):
+        """(row - c prow, rhs - c prhs), zeros dropped."""
+        row = dict(row)
+        for k, v in prow.items():
+            w = row.get(k, 0) - c * v
+            if w:
+                row[k] = w
+            else:
+                row.pop(k, None)
+        return row, [a - c * b for a, b in zip(rhs, prhs)]
 
     def _reduce(self, row, rhs):
-        row, rhs = list(row), list(rhs)
-        for col, (prow, prhs) in self.rows.items():
-            c = row[col]
+        row, rhs = {k: Fraction(v) for k, v in enumerate(row) if v} if isinstance(row, list) else dict(row), list(rhs)
+        # the pivot rows are zero on every other pivot column: one pass over the pivots the row holds
+        for col in [k for k in row if k in self.rows]:
+            c = row.get(col)
             if c:
-                row = [a - c * b for a, b in zip(row, prow)]
-                rhs = [a - c * b for a, b in zip(rhs, prhs)]
+                row, rhs = self._axpy(row, rhs, c, *self.rows[col])
         return row, rhs
 
     def add(self, row, rhs) -> bool:
         """Add ``row . d = rhs``; False (and nothing added) when it contradicts the rows so far."""
         row, rhs = self._reduce(row, rhs)
-        pivot = next((k for k, v in enumerate(row) if v), None)
-        if pivot is None:
+        if not row:
             return not any(rhs)
+        pivot = min(row)
         c = row[pivot]
-        row, rhs = [v / c for v in row], [v / c for v in rhs]
+        row, rhs = {k: v / c for k, v in row.items()}, [v / c for v in rhs]
         for col, (prow, prhs) in list(self.rows.items()):     # keep the form reduced
-            f = prow[pivot]
+            f = prow.get(pivot)
             if f:
-                self.rows[col] = ([a - f * b for a, b in zip(prow, row)], [a - f * b for a, b in zip(prhs, rhs)])
+                self.rows[col] = self._axpy(prow, prhs, f, row, rhs)
         self.rows[pivot] = (row, rhs)
         return True
 
     def value(self, vec):
         """vec . d when every solution gives the same value (vec in the row space), else None."""
-        acc = [Fraction(0)] * len(BASE)
-        vec = list(vec)
-        for col, (prow, prhs) in self.rows.items():
-            c = vec[col]
-            if c:
-                vec = [a - c * b for a, b in zip(vec, prow)]
-                acc = [a + c * b for a, b in zip(acc, prhs)]
-        return tuple(acc) if not any(vec) else None
+        vec, acc = self._reduce(vec, [Fraction(0)] * len(BASE))
+        return tuple(-a for a in acc) if not vec else None
 
 
 def check_plausibility(model, values: dict, source: str, accepted=()) -> None:
