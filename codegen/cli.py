@@ -6,9 +6,9 @@
     uiogen generate [NAME ...] [--force] [--out DIR] [--project DIR]
     uiogen build [NAME ...] [--float32] [--project DIR]
     uiogen check-gains NAME --gains FILE [--json]
-    uiogen fit NAME --data PATH|stanford --samples A:B [--folds K] [--write] [--json]
+    uiogen fit NAME --data PATH|stanford|niki --samples A:B [--folds K] [--write] [--json]
     uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png] [--report DIR] [--project DIR]
-    uiogen validate NAME --data PATH|stanford [--json] [--plot FILE.png] [--report DIR] [--project DIR]
+    uiogen validate NAME --data PATH|stanford|niki [--json] [--plot FILE.png] [--report DIR] [--project DIR]
     uiogen demo [--json] [--report DIR]
     uiogen bench [--json]
     uiogen campaign SPEC.toml [--runs N] [--only K] [--resume] [--json] [--scheduler ADDRESS] [--workers N] [--out DIR]
@@ -567,9 +567,11 @@ def main(argv=None) -> int:
     p = sub.add_parser("fit", help="identify an observer's numbers (tyre, noise levels) on a sample range of a log")
     p.add_argument("name")
     p.add_argument("--data", required=True, help="a logged run in the shared format (CSV, plain or .gz) with a "
-                                                 "sideslip reference; 'stanford' = the shared log")
+                                                 "sideslip reference; 'stanford', 'niki' = the shared logs (Ferrari, GTI)")
     p.add_argument("--samples", required=True, metavar="A:B", help="the samples A..B-1 the fit may read (e.g. 0:13750)")
-    p.add_argument("--folds", type=int, default=0, help="cross-validate inside the range with K contiguous folds")
+    p.add_argument("--folds", type=int, default=0, help="cross-validate inside the range with K contiguous folds: each "
+                                                        "tyre set (fitted; the parameter file's [prior] stiffnesses) "
+                                                        "judged on held-out folds, the better written")
     p.add_argument("--write", action="store_true", help="write the fitted values into the parameter and observer files")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_fit)
@@ -578,7 +580,7 @@ def main(argv=None) -> int:
     p.add_argument("name")
     p.add_argument("--scenario", help="excitation (any model: its own equations, swept and excited) or one of codegen.validation.scenarios.names()")
     p.add_argument("--data", help="a logged run (CSV, plain or .gz): the columns mapped by the observer file's [data] "
-                                  "table, or else the shared format; 'stanford' = the shared log")
+                                  "table, or else the shared format; 'stanford', 'niki' = the shared logs (Ferrari, GTI)")
     p.add_argument("--plant", choices=("nominal", "model", "commonroad"), default="nominal",
                    help="nominal: our symbolic truth plant (Pacejka); model: the observer's exact model")
     p.add_argument("--duration", type=float, default=None, help="truncate the scenario [s]")

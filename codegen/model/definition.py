@@ -181,6 +181,7 @@ class ParameterSet:
     state_bounds: Mapping[str, tuple] = field(default_factory=dict)   # [state_bounds] NAME = [min, max]
     inputs: Mapping[str, dict] = field(default_factory=dict)   # [inputs.NAME] min, max, bandwidth (excitation)
     accepted: tuple = ()      # [plausibility] accept: values right although they look implausible
+    prior: Mapping[str, dict] = field(default_factory=dict)   # [prior] NAME = {value, rel_sigma, source}: published
 
 
 @dataclass(frozen=True)
@@ -246,7 +247,11 @@ class LPVModel:
 # codegen.families.algebraic_uio.representation.derivative_boxes; exogenous and premise_bounds by
 # codegen.families.interconnected_uio.representation).
 PARAMETER_TABLES = ("parameters", "scheduling", "meta", "plant", "state_bounds", "exogenous", "premise_bounds",
-                    "inputs", "plausibility")
+                    "inputs", "plausibility", "prior")
+PRIOR_KEYS = {"value": Rule(float, required=True, doc="the published or datasheet value, in the parameter's unit"),
+              "rel_sigma": Rule(float, gt=0, required=True, doc="its stated uncertainty, one standard deviation "
+                                                                 "relative to the value"),
+              "source": Rule(str, doc="where the value is published")}
 INPUT_KEYS = {"min": Rule(float, required=True), "max": Rule(float, required=True),
               "bandwidth": Rule(float, gt=0, doc="Hz, highest frequency of the excitation signal")}
 SCHEDULING_KEYS = {"min": Rule(float), "max": Rule(float), "rate_min": Rule(float), "rate_max": Rule(float),
@@ -360,7 +365,16 @@ def load_parameters(path: str | Path) -> ParameterSet:
     if stray:
         raise config_error(str(path), "plausibility", "accept", stray,
                            f"names of [parameters] ({', '.join(values)})", suggest(stray[0], list(values)))
-    return ParameterSet(str(path), values, boxes, meta, plant, state_bounds, inputs, accepted)
+    prior = {}
+    for key, table in _table(data, "prior", path).items():
+        if key not in values:
+            raise config_error(str(path), "prior", key, table, f"the name of a [parameters] value ({', '.join(values)})",
+                               suggest(key, list(values)))
+        if not isinstance(table, dict):
+            raise config_error(str(path), "prior", key, table, "an inline table { value = ..., rel_sigma = ..., "
+                               "source = \"...\" } (the published value and its relative uncertainty)")
+        prior[key] = parse_table(table, PRIOR_KEYS, source=str(path), section=f"prior.{key}")
+    return ParameterSet(str(path), values, boxes, meta, plant, state_bounds, inputs, accepted, prior)
 
 
 def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str, hint=None) -> sp.Matrix:

@@ -60,6 +60,12 @@ STANFORD_PATH = (Path(__file__).resolve().parents[3] / "shared" / "data" / "stan
                  / "run_20140222_part1.csv.gz")
 """Location of the converted first half of run 20140222_01_01_03_250lm."""
 
+NIKI_PATH = STANFORD_PATH.parents[1] / "second_car" / "niki_high_speed.csv.gz"
+"""Location of the shared run of the second car, Stanford's VW GTI "Niki" (200 Hz, OxTS truth)."""
+
+SHORTHANDS = {"stanford": STANFORD_PATH, "niki": NIKI_PATH}
+"""Names of the shared logs beside a source checkout, for ``--data``."""
+
 EVALUATION_T_START = 137.5
 """[s from the log's start] The shared half's evaluation part starts here (sample 13750 of 27500): the
 identification part (samples 0-13749) is the only one any number of an estimator of this log may be
@@ -170,11 +176,13 @@ class StanfordRun:
 
 
 def _resolve(path) -> Path:
-    if isinstance(path, str) and path.strip().lower() == "stanford":
-        if not STANFORD_PATH.is_file():     # an installed uiogen: the shorthand names a checkout's neighbour
-            raise DatasetError(f"'stanford' is the shared log beside a source checkout ({STANFORD_PATH}), which is "
+    name = path.strip().lower() if isinstance(path, str) else None
+    if name in SHORTHANDS:
+        shared = SHORTHANDS[name]
+        if not shared.is_file():     # an installed uiogen: the shorthand names a checkout's neighbour
+            raise DatasetError(f"{name!r} is the shared log beside a source checkout ({shared}), which is "
                                f"not there: pass the log's own path (a CSV, plain or .gz)")
-        return STANFORD_PATH
+        return shared
     return Path(path)
 
 

@@ -65,6 +65,10 @@ class NonlinearTyreSettings:
     decay: float | None = setting(None, gt=0, lt=1, doc="lambda: V(e+) <= lambda^2 V(e) required; absent: "
                                                         "decay_fraction of the largest certifiable rate")
     decay_fraction: float = setting(0.2, gt=0, le=1, doc="fraction of the largest certifiable decay rate required")
+    objective: str = setting("gamma", choices=("gamma", "noise_bound"),
+                             doc="what the gains minimize: gamma, one l2 gain for every channel at its level; "
+                                 "noise_bound, the RMS bound of the sideslip error with every channel at its level "
+                                 "(one multiplier per channel, as a Kalman gain weighs each noise by its variance)")
     stiffness_range: tuple = setting((1.0, 1.0), items=Rule(float, gt=0),
                                      doc="[lo, hi]: factors on each axle's cornering stiffness the certificate covers")
     friction_range: tuple = setting((1.0, 1.0), items=Rule(float, gt=0),

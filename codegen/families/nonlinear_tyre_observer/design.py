@@ -178,17 +178,40 @@ def lmi_problem(plant, decay_verts, gain_verts, settings, rate, best_rate, L_sca
     prob = LMIProblem(problem_name(L_scaled is not None), data={"best_decay_rate": best_rate, "decay_rate": rate})
     P = prob.symmetric("P", 2)
     Y = prob.matrix("Y", 2, 2) if L_scaled is None else P @ L_scaled
-    eta = prob.scalar("eta")
     prob.require_psd("P >= I", P, margin=1.0)
     hint = "lower sliding_fraction or decay_fraction: the tyre slope is too small at a vertex"
     for x in decay_verts:
         prob.require_psd(f"decay {x.label}", decay_block(plant, x, P, Y, rate, LMIProblem), margin=settings.margin,
                          hint=hint)
+    if getattr(settings, "objective", "gamma") == "noise_bound" and L_scaled is None:
+        # one multiplier per channel, their sum minimized: the RMS bound at the levels (level_bound_problem)
+        # with the gains free. eta = max(mu) then certifies the uniform gain with the same P (the block
+        # grows with its multiplier block).
+        W, total = _multipliers(prob)
+        for x in gain_verts:
+            prob.require_psd(f"l2 gain {x.label}", gain_block(plant, x, P, Y, W, LMIProblem), margin=settings.margin,
+                             hint="lower gain_sliding_fraction")
+        prob.minimize(total)
+        return prob
+    eta = prob.scalar("eta")
     for x in gain_verts:
         prob.require_psd(f"l2 gain {x.label}", gain_block(plant, x, P, Y, eta, LMIProblem), margin=settings.margin,
                          hint="lower gain_sliding_fraction")
     prob.minimize(eta)
     return prob
+
+
+def _multipliers(prob):
+    """(diag(mu_i), sum mu_i) over the CHANNELS, the mu_i scalars of ``prob``."""
+    nw = len(CHANNELS)
+    M, total = None, None
+    for i, c in enumerate(CHANNELS):
+        m = prob.scalar(f"mu_{c}")
+        E = np.zeros((nw, nw))
+        E[i, i] = 1.0
+        M = m * E if M is None else M + m * E
+        total = m if total is None else total + m
+    return M, total
 
 
 @dataclass(frozen=True)
@@ -244,8 +267,9 @@ def synthesize(plant, decay_verts, gain_verts, settings, solver) -> Design:
         L = settings.gain
     else:
         L = decimal_round(np.linalg.inv(D) @ np.linalg.solve(P, sol["Y"]) @ D)
-    # the certified gain: the solver's eta rounded up to three significant digits (re-checked in certify)
-    eta = objective_bound(float(sol["eta"]))
+    # the certified gain: the solver's eta rounded up to three significant digits (re-checked in certify);
+    # a noise-bound design certifies eta = its largest multiplier
+    eta = objective_bound(float(sol["eta"]) if "eta" in sol.values else max(float(sol[f"mu_{c}"]) for c in CHANNELS))
     return Design(L, P, eta, best, rate, given, sol)
 
 
@@ -253,14 +277,7 @@ def level_bound_problem(plant, gain_verts, settings, L_scaled) -> LMIProblem:
     """min sum(mu) over Q and the per-channel multipliers at ``gain_verts``, the (scaled) gains fixed."""
     prob = LMIProblem(LEVEL_PROBLEM)
     Q = prob.symmetric("Q", 2)
-    nw = len(CHANNELS)
-    mus = [prob.scalar(f"mu_{c}") for c in CHANNELS]
-    M, total = None, None
-    for i, m in enumerate(mus):
-        E = np.zeros((nw, nw))
-        E[i, i] = 1.0
-        M = m * E if M is None else M + m * E
-        total = m if total is None else total + m
+    M, total = _multipliers(prob)
     prob.require_psd("Q > 0", Q, margin=settings.margin)
     for x in gain_verts:
         prob.require_psd(f"level bound {x.label}", gain_block(plant, x, Q, Q @ L_scaled, M, LMIProblem),
@@ -292,7 +309,8 @@ def certify(plant, decay_verts, gain_verts, design: Design, level: LevelBound) -
     the contraction per step at the decay vertices, the certified gain and the bound at the levels."""
     D = plant.D
     Y = design.P @ (D @ design.L @ np.linalg.inv(D))
-    blocks = {"P >= I": design.P - np.eye(2)}
+    # the certificate needs P > 0; P >= I only normalizes the solve, and an optimum may rest on it
+    blocks = {"P > 0": design.P}
     blocks.update({f"decay {x.label}": decay_block(plant, x, design.P, Y, design.rate) for x in decay_verts})
     blocks.update({f"l2 gain {x.label}": gain_block(plant, x, design.P, Y, design.eta) for x in gain_verts})
     blocks["Q > 0"] = level.Q

@@ -40,7 +40,8 @@ from ...model import load_parameters
 from ...validation import stanford
 from .representation import numeric
 
-WINDOW = 21                 # samples of the moving averages (0.21 s at 100 Hz)
+AVERAGE_S = 0.21            # s, the span of the moving averages: the accelerometers' vibration is not force
+WINDOW = 21                 # samples of the moving averages at 100 Hz (:func:`window` at another sample time)
 YAW_LEVER = 1.0             # m: the yaw-acceleration residual [rad/s^2] weighs as this lever times it [m/s^2]
 """Weight of the yaw acceleration beside a_y in the tyre fit, chosen by 5-fold cross-validation inside the
 identification part (samples 0-13749; pooled held-out sideslip RMS of the designed observer): 0.1 m 0.2667,
@@ -70,9 +71,15 @@ def _round(x: float) -> float:
     return float(f"{x:.{DIGITS}g}")
 
 
-def _average(x: np.ndarray) -> np.ndarray:
-    """Centered moving average over WINDOW samples, the ends (WINDOW // 2 each) left out."""
-    return np.convolve(x, np.full(WINDOW, 1.0 / WINDOW), mode="valid")
+def window(Ts: float) -> int:
+    """Samples of the moving averages at the sample time ``Ts``: AVERAGE_S, odd (a centred average)."""
+    n = max(1, int(round(AVERAGE_S / Ts)))
+    return n if n % 2 else n + 1
+
+
+def _average(x: np.ndarray, n: int = WINDOW) -> np.ndarray:
+    """Centered moving average over ``n`` samples, the ends (n // 2 each) left out."""
+    return np.convolve(x, np.full(n, 1.0 / n), mode="valid")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,6 +92,9 @@ class _Problem:
     fitted: tuple           # (C_f, C_r, mu) symbols; mu stands for every axle's friction
     start: np.ndarray
     G2: np.ndarray
+    window: int             # samples of the moving averages (AVERAGE_S at the observer's sample time)
+    prior: tuple            # published (C_f, C_r) of the parameter file's [prior], or None
+    mu_reached: float       # the friction the log's combined acceleration reaches (ENVELOPE_QUANTILE)
 
 
 def log_columns(module, source: str) -> dict:
@@ -133,30 +143,60 @@ def _problem(config, params, run, a: int, b: int) -> _Problem:
     others = {u: 0 for u in model.known_inputs if columns[str(u)] != "delta"}     # the static capacity: a_x = 0
     static = [float(numeric(ax.peak, {**subs, **{f: 1 for f in fric}, **others})) for ax in axles]
     start = np.array([15.0 * fz for fz in static] + [1.0])       # 15 F_z per rad, mu = 1: a physical prior
-    return _Problem(signals, meas, forces, (*stiff, mu), start, G2)
+    n = window(config.sample_time)
+    prior = None
+    if all(str(c) in params.prior for c in stiff):
+        prior = tuple(float(params.prior[str(c)]["value"]) for c in stiff)
+    return _Problem(signals, meas, forces, (*stiff, mu), start, G2, n, prior, mu_reached(run, a, b, n, subs))
 
 
-def _tyre_fit(prob: _Problem, mask: np.ndarray) -> np.ndarray:
+ENVELOPE_QUANTILE = 0.995
+"""The friction the log reaches: this quantile of |(a_x, a_y)| / g over the range (AVERAGE_S averages): a
+lower bound of the day's friction that one spike of the averages does not set."""
+
+
+def mu_reached(run, a: int, b: int, n: int, subs: dict) -> float:
+    g = next((float(v) for k, v in subs.items() if str(k) == "g"), 9.81)
+    acc = np.hypot(_average(np.asarray(run.ax, float)[a:b], n), _average(np.asarray(run.ay, float)[a:b], n))
+    return float(np.quantile(acc, ENVELOPE_QUANTILE) / g)
+
+
+CANDIDATES = ("fitted", "published")
+"""The tyre sets a fit judges: ``fitted``, the three numbers from the log (from the physical start);
+``published``, the parameter file's ``[prior]`` stiffnesses with the friction alone from the log (never
+below the friction the log reaches). With ``--folds`` the one with the lower pooled held-out sideslip RMS
+is written; without, ``fitted``."""
+
+
+def _tyre_fit(prob: _Problem, mask: np.ndarray, candidate: str = "fitted") -> np.ndarray:
+    """(C_f, C_r, mu) of ``candidate`` by least squares on the masked averages."""
     from scipy.optimize import least_squares
-    m_avg = np.column_stack([_average(prob.measured[:, k]) for k in range(2)])
-    scale = prob.start
+    n = prob.window
+    m_avg = np.column_stack([_average(prob.measured[:, k], n) for k in range(2)])
     W = np.diag([1.0, YAW_LEVER]) @ prob.G2          # axle forces -> (a_y, YAW_LEVER r')
 
-    def residual(q):
-        f = prob.forces(q * scale)
-        res = m_avg - np.column_stack([_average(f[:, k]) for k in range(2)])
+    def residual_at(x):
+        f = prob.forces(x)
+        res = m_avg - np.column_stack([_average(f[:, k], n) for k in range(2)])
         return (res[mask] @ W.T).ravel()
-    sol = least_squares(residual, np.ones(3), x_scale=np.ones(3), method="trf")
+    if candidate == "published":
+        c = np.array(prob.prior)
+        sol = least_squares(lambda q: residual_at(np.array([c[0], c[1], q[0]])), np.array([max(1.0, prob.mu_reached)]),
+                            bounds=([prob.mu_reached], [np.inf]), method="trf")
+        return np.array([c[0], c[1], sol.x[0]])
+    scale = prob.start
+    sol = least_squares(lambda q: residual_at(q * scale), np.ones(3), x_scale=np.ones(3), method="trf")
     return sol.x * scale
 
 
 def _levels(prob: _Problem, x: np.ndarray, run, a: int, b: int, Ts: float, mask: np.ndarray) -> dict:
     f = prob.forces(x)
-    res = np.column_stack([_average(prob.measured[:, k] - f[:, k]) for k in range(2)])[mask]
+    n = prob.window
+    res = np.column_stack([_average(prob.measured[:, k] - f[:, k], n) for k in range(2)])[mask]
     from scipy.signal import savgol_filter
-    half = WINDOW // 2
-    ddv = savgol_filter(np.asarray(run.vy, float)[a:b], WINDOW, 3, deriv=2, delta=Ts)[half:-half][mask]
-    ddr = savgol_filter(np.asarray(run.yaw_rate, float)[a:b], WINDOW, 3, deriv=2, delta=Ts)[half:-half][mask]
+    half = n // 2
+    ddv = savgol_filter(np.asarray(run.vy, float)[a:b], n, 3, deriv=2, delta=Ts)[half:b - a - half][mask]
+    ddr = savgol_filter(np.asarray(run.yaw_rate, float)[a:b], n, 3, deriv=2, delta=Ts)[half:b - a - half][mask]
     inner = np.zeros(b - a, bool)
     inner[half:b - a - half] = mask
     return {"sigma_force_front": float(np.sqrt(np.mean(res[:, 0] ** 2))),
@@ -202,26 +242,50 @@ def observer_beta(config, params, design: dict, run, a: int, b: int) -> np.ndarr
     return np.arctan2(zs[2], np.asarray(run.vx, float)[a:b])
 
 
-def _peers(config, params, run, a: int, b: int) -> tuple:
-    """The EKF grid on the range: (best {sigma_fy, sigma_ay}, [(sigma_fy, sigma_ay, rms), ...])."""
+def _sub_run(run, a: int, b: int):
+    return stanford.StanfordRun(**{f.name: (getattr(run, f.name)[a:b] if f.name != "source" else run.source)
+                                   for f in dataclasses.fields(run)})
+
+
+def _ekf_betas(config, params, run, a: int, b: int, noises) -> list:
+    """The same-tyre EKF's sideslip [rad] over samples a..b-1, one array per {sigma_fy, sigma_ay} of ``noises``."""
     import tempfile
-    sub = stanford.StanfordRun(**{f.name: (getattr(run, f.name)[a:b] if f.name != "source" else run.source)
-                                  for f in dataclasses.fields(run)})
-    rows = []
+    sub = _sub_run(run, a, b)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "parameters.toml"
         path.write_text(_parameter_text(config.parameter_path, params.values, {}))
-        for fy in PEER_GRID["sigma_fy"]:
-            for ay in PEER_GRID["sigma_ay"]:
-                ekf = stanford.nonlinear_tyre_peers(sub, path, {"sigma_fy": fy, "sigma_ay": ay},
-                                                    which=("ekf_nonlinear_tyre",))["ekf_nonlinear_tyre"]
-                rows.append((fy, ay, ekf.beta_stats.rms))
+        return [stanford.nonlinear_tyre_peers(sub, path, noise, which=("ekf_nonlinear_tyre",))["ekf_nonlinear_tyre"].beta
+                for noise in noises]
+
+
+def _peers(config, params, run, a: int, b: int) -> tuple:
+    """The EKF grid on the range: (best {sigma_fy, sigma_ay}, [(sigma_fy, sigma_ay, rms), ...])."""
+    grid = [{"sigma_fy": fy, "sigma_ay": ay} for fy in PEER_GRID["sigma_fy"] for ay in PEER_GRID["sigma_ay"]]
+    truth = np.asarray(run.beta_true, float)[a:b]
+    rows = [(g["sigma_fy"], g["sigma_ay"], _rms_deg(beta - truth))
+            for g, beta in zip(grid, _ekf_betas(config, params, run, a, b, grid))]
     fy, ay, _ = min(rows, key=lambda t: t[2])
     return {"sigma_fy": fy, "sigma_ay": ay}, rows
 
 
+def _rms_deg(err: np.ndarray) -> float:
+    return float(np.degrees(np.sqrt(np.mean(np.square(err)))))
+
+
+def _judged(config, params, prob, run, a: int, b: int, x: np.ndarray, mask: np.ndarray) -> dict:
+    """The rounded tyre of ``x``, the noise levels on ``mask`` and the designed observer's sideslip error
+    [deg] over the range."""
+    tyre = tyre_values(config, x)
+    levels = {k: _round(v) for k, v in _levels(prob, _rounded(config, tyre), run, a, b, config.sample_time,
+                                                mask).items()}
+    beta = observer_beta(config, _with_values(params, tyre), levels, run, a, b)
+    return {"parameters": tyre, "design": levels, "error": np.degrees(beta - run.beta_true[a:b])}
+
+
 def fit(config, path="stanford", samples: str = "", folds: int = 0, peers: bool = True) -> dict:
-    """Identify the tyre, the noise levels and the peers' noise levels on samples A..B-1 of a log."""
+    """Identify the tyre, the noise levels and the peers' noise levels on samples A..B-1 of a log; with
+    ``folds`` >= 2, judge every tyre set of :data:`CANDIDATES` the parameter file allows on held-out
+    contiguous folds and keep the better (module docstring)."""
     if not isinstance(folds, int) or folds < 0 or folds == 1:
         raise ConfigurationError(f"--folds {folds!r}: 0 (no cross-validation) or an integer >= 2",
                                  source="--folds", key="--folds", value=folds)
@@ -237,84 +301,151 @@ def fit(config, path="stanford", samples: str = "", folds: int = 0, peers: bool 
                            f"log for uiogen validate --data, not for the fit") from None
     a, b = parse_samples(samples, run.n)
     params = load_parameters(config.parameter_path)
-    if folds:
-        _check_folds(folds, a, b)
     prob = _problem(config, params, run, a, b)
-    half = WINDOW // 2
+    if folds:
+        _check_folds(folds, a, b, prob.window)
+    candidates = [c for c in CANDIDATES if c == "fitted" or prob.prior is not None]
+    cv = _cross_validate(config, params, prob, run, a, b, folds, candidates) if folds else None
+    choice = min(candidates, key=lambda c: cv["pooled"][c]) if cv else "fitted"
+    half = prob.window // 2
     full = np.ones(b - a - 2 * half, bool)
-    x = _tyre_fit(prob, full)
+    x = _tyre_fit(prob, full, choice)
     tyre = tyre_values(config, x)
     fitted_params = _with_values(params, tyre)
     levels = {k: _round(v) for k, v in _levels(prob, _rounded(config, tyre), run, a, b, config.sample_time,
                                                full).items()}
     out = {"observer": config.name, "data": str(path), "samples": [a, b],
            "t_range": [float(run.t[a] - run.t[0]), float(run.t[b - 1] - run.t[0])],
-           "parameters": tyre, "design": levels, "start": prob.start.tolist()}
+           "parameters": tyre, "design": levels, "start": prob.start.tolist(), "choice": choice,
+           "window_samples": prob.window, "mu_reached": _round(prob.mu_reached)}
+    if prob.prior is not None:
+        out["prior"] = {k: dict(v) for k, v in params.prior.items()}
     if peers:
         best, rows = _peers(config, fitted_params, run, a, b)
         out["peers"] = {k: (v if v is not None else "highpass") for k, v in best.items()}
         out["peer_grid"] = [[fy, ay if ay is not None else "highpass", rms] for fy, ay, rms in rows]
+        if cv:
+            _peer_folds(config, params, run, a, b, cv, choice, best)
     beta = observer_beta(config, fitted_params, levels, run, a, b)
-    out["observer_beta_rms_deg"] = float(np.degrees(np.sqrt(np.mean((beta - run.beta_true[a:b]) ** 2))))
-    if folds:
-        cv = _cross_validate(config, params, prob, run, a, b, folds)
-        out["cross_validation"] = cv
-        out["cross_validated_rms_deg"] = float(np.sqrt(np.mean([r["held_out_rms_deg"] ** 2 for r in cv])))
-        names = list(tyre)
-        out["table"] = {"header": ["held-out fold (samples)", *names, "β RMSE on the fold [deg]", "on the rest [deg]"],
-                        "rows": [[f"{r['fold'][0]}–{r['fold'][1] - 1}", *[r["parameters"][k] for k in names],
-                                  r["held_out_rms_deg"], r["training_rms_deg"]] for r in cv]
-                        + [["pooled over the folds", *[None for _ in names], out["cross_validated_rms_deg"], None],
-                           [f"{a}–{b - 1} (the fit)", *[tyre[k] for k in names], None, out["observer_beta_rms_deg"]]]}
+    out["observer_beta_rms_deg"] = _rms_deg(beta - run.beta_true[a:b])
+    if cv:
+        rows = cv["folds"]
+        out["cross_validation"] = [{"fold": r["fold"], **r[choice]} for r in rows]
+        out["cross_validated_rms_deg"] = cv["pooled"][choice]
+        out["candidates"] = {c: {"pooled_rms_deg": cv["pooled"][c], "max_abs_deg": cv["max"][c]} for c in candidates}
+        if "ekf" in cv["pooled"]:
+            out["peer_cross_validated_rms_deg"] = cv["pooled"]["ekf"]
+            out["peer_max_abs_deg"] = cv["max"]["ekf"]
+        out["uncertainty"] = _jackknife(out["cross_validation"], tyre)
+        out["table"] = _table(out, rows, candidates, choice)
     return out
+
+
+def _jackknife(rows: list, tyre: dict) -> dict:
+    """{parameter: block-jackknife standard error} from the K fits that each left one contiguous fold out:
+    sqrt((K-1)/K sum (theta_k - mean)^2), the spread a fit on this much log has."""
+    k = len(rows)
+    return {name: _round(float(np.sqrt((k - 1) / k * np.sum((np.array([r["parameters"][name] for r in rows])
+                                                            - np.mean([r["parameters"][name] for r in rows])) ** 2))))
+            for name in tyre}
+
+
+def _table(out: dict, rows: list, candidates: list, choice: str) -> dict:
+    """Per held-out fold: each candidate's tyre and held-out sideslip RMS, the same-tyre EKF's beside the
+    chosen one; pooled; the written numbers with their jackknife standard errors."""
+    names = list(out["parameters"])
+    header = ["held-out fold (samples)"]
+    for c in candidates:
+        header += [f"{c}: {n}" for n in names] + [f"{c}: β RMSE on the fold [deg]"]
+    with_peer = "peer_cross_validated_rms_deg" in out
+    if with_peer:
+        header.append(f"EKF ({choice} tyre): β RMSE on the fold [deg]")
+    body = []
+    for r in rows:
+        line = [f"{r['fold'][0]}–{r['fold'][1] - 1}"]
+        for c in candidates:
+            line += [r[c]["parameters"][n] for n in names] + [r[c]["held_out_rms_deg"]]
+        if with_peer:
+            line.append(r["ekf_held_out_rms_deg"])
+        body.append(line)
+    pooled = ["pooled over the folds"]
+    for c in candidates:
+        pooled += [None for _ in names] + [out["candidates"][c]["pooled_rms_deg"]]
+    if with_peer:
+        pooled.append(out["peer_cross_validated_rms_deg"])
+    a, b = out["samples"]
+    written = [f"{a}–{b - 1}: {choice} (written)"]
+    for c in candidates:
+        written += ([f"{out['parameters'][n]:g} ± {out['uncertainty'][n]:.2g}" for n in names] + [None]
+                    if c == choice else [None for _ in names] + [None])
+    if with_peer:
+        written.append(None)
+    return {"header": header, "rows": body + [pooled, written]}
 
 
 def _fold_edges(a: int, b: int, folds: int) -> list:
     return [a + ((b - a) * k) // folds for k in range(folds + 1)]
 
 
-def _fold_sizes(a: int, b: int, folds: int) -> tuple:
+def _fold_sizes(a: int, b: int, folds: int, n: int = WINDOW) -> tuple:
     """(smallest held-out fold, smallest training set) in samples; a training set is the range less its
-    fold and the WINDOW guard on each side of it (no average on one side may see the other)."""
+    fold and the ``n``-sample guard on each side of it (no average on one side may see the other)."""
     edges = _fold_edges(a, b, folds)
     held = [hi - lo for lo, hi in zip(edges, edges[1:])]
-    train = [(b - a) - h - WINDOW * ((lo > a) + (hi < b)) for h, lo, hi in zip(held, edges, edges[1:])]
+    train = [(b - a) - h - n * ((lo > a) + (hi < b)) for h, lo, hi in zip(held, edges, edges[1:])]
     return min(held), min(train)
 
 
-def _check_folds(folds: int, a: int, b: int) -> None:
+def _check_folds(folds: int, a: int, b: int, n: int = WINDOW) -> None:
     """Every held-out fold and every training set at least MIN_SAMPLES, as for a fit (ConfigurationError)."""
-    held, train = _fold_sizes(a, b, folds)
+    held, train = _fold_sizes(a, b, folds, n)
     if held >= MIN_SAMPLES and train >= MIN_SAMPLES:
         return
-    most = max((k for k in range(2, (b - a) // MIN_SAMPLES + 1) if min(_fold_sizes(a, b, k)) >= MIN_SAMPLES),
+    most = max((k for k in range(2, (b - a) // MIN_SAMPLES + 1) if min(_fold_sizes(a, b, k, n)) >= MIN_SAMPLES),
                default=None)
     allowed = (f"2..{most} for samples {a}:{b}" if most else
-               f"none for samples {a}:{b}: cross-validation needs at least {2 * MIN_SAMPLES + WINDOW} samples")
+               f"none for samples {a}:{b}: cross-validation needs at least {2 * MIN_SAMPLES + n} samples")
     raise ConfigurationError(f"--folds {folds}: the smallest held-out fold has {held} samples and the smallest "
                              f"training set {train}; each needs at least {MIN_SAMPLES} ({MIN_SAMPLES / 100:g} s at "
                              f"100 Hz); allowed: {allowed}", source="--folds", key="--folds", value=folds)
 
 
-def _cross_validate(config, params, prob, run, a, b, folds) -> list:
-    half = WINDOW // 2
+def _cross_validate(config, params, prob, run, a, b, folds, candidates) -> dict:
+    """Each candidate fitted on the range less one contiguous fold (and a guard of one average on each
+    side), designed, run over the range and judged on the fold."""
+    n = prob.window
+    half = n // 2
     edges = _fold_edges(a, b, folds)
     idx = np.arange(a + half, b - half)              # samples the averages cover
-    rows = []
+    rows, errors = [], {c: [] for c in candidates}
     for k in range(folds):
         lo, hi = edges[k], edges[k + 1]
-        train = (idx < lo - WINDOW) | (idx >= hi + WINDOW)
-        x = _tyre_fit(prob, train)
-        tyre = tyre_values(config, x)
-        p = _with_values(params, tyre)
-        levels = {kk: _round(v) for kk, v in _levels(prob, _rounded(config, tyre), run, a, b, config.sample_time,
-                                                     train).items()}
-        beta = observer_beta(config, p, levels, run, a, b)
-        err = np.degrees(beta - run.beta_true[a:b])
-        rows.append({"fold": [lo, hi], "parameters": tyre, "design": levels,
-                     "held_out_rms_deg": float(np.sqrt(np.mean(err[lo - a:hi - a] ** 2))),
-                     "training_rms_deg": float(np.sqrt(np.mean(np.concatenate([err[:lo - a], err[hi - a:]]) ** 2)))})
-    return rows
+        train = (idx < lo - n) | (idx >= hi + n)
+        row = {"fold": [lo, hi]}
+        for c in candidates:
+            judged = _judged(config, params, prob, run, a, b, _tyre_fit(prob, train, c), train)
+            err = judged.pop("error")
+            errors[c].append(err[lo - a:hi - a])
+            row[c] = {**judged, "held_out_rms_deg": _rms_deg(np.radians(err[lo - a:hi - a])),
+                      "training_rms_deg": _rms_deg(np.radians(np.concatenate([err[:lo - a], err[hi - a:]])))}
+        rows.append(row)
+    pooled = {c: _rms_deg(np.radians(np.concatenate(errors[c]))) for c in candidates}
+    biggest = {c: float(np.max(np.abs(np.concatenate(errors[c])))) for c in candidates}
+    return {"folds": rows, "pooled": pooled, "max": biggest}
+
+
+def _peer_folds(config, params, run, a: int, b: int, cv: dict, choice: str, noise: dict) -> None:
+    """The same-tyre EKF on each fold with the tyre ``choice`` fitted without it (its two noise levels
+    those the grid chose on the whole range: an advantage to the peer), added to ``cv``."""
+    truth, errors = np.asarray(run.beta_true, float)[a:b], []
+    for row in cv["folds"]:
+        lo, hi = row["fold"]
+        beta = _ekf_betas(config, _with_values(params, row[choice]["parameters"]), run, a, b, [noise])[0]
+        err = np.degrees(beta - truth)[lo - a:hi - a]
+        row["ekf_held_out_rms_deg"] = _rms_deg(np.radians(err))
+        errors.append(err)
+    cv["pooled"]["ekf"] = _rms_deg(np.radians(np.concatenate(errors)))
+    cv["max"]["ekf"] = float(np.max(np.abs(np.concatenate(errors))))
 
 
 # --- the files --------------------------------------------------------------------------------------
@@ -368,13 +499,30 @@ def lines(result: dict) -> list:
     a, b = result["samples"]
     t0, t1 = result["t_range"]
     p = result["parameters"]
+    unc = result.get("uncertainty", {})
     out = [f"uiogen fit {result['observer']} on {result['data']}, samples {a}:{b} (t - t_0 in [{t0:g}, {t1:g}] s, "
            f"{b - a} samples)",
            f"  tyre (least squares of a_y and {YAW_LEVER:g} m x the yaw acceleration against the model's at the log's "
-           "own velocities, 0.21 s averages; start: 15 F_z per rad, mu = 1):",
-           "    " + ", ".join(f"{k} = {v:g}" for k, v in p.items()),
-           "  noise levels of the l2-gain design ([design]):",
-           "    " + ", ".join(f"{k} = {v:g}" for k, v in result["design"].items())]
+           f"own velocities, {AVERAGE_S:g} s averages"
+           + (f" of {result['window_samples']} samples" if "window_samples" in result else "") + "):"]
+    if "prior" in result:
+        out.append("    published ([prior]): " + ", ".join(
+            f"{k} = {v['value']:g} ± {100 * v['rel_sigma']:g} %" + (f" ({v['source']})" if v.get("source") else "")
+            for k, v in result["prior"].items()))
+    if "mu_reached" in result:
+        out.append(f"    the log's combined acceleration reaches mu >= {result['mu_reached']:g} "
+                   f"({100 * ENVELOPE_QUANTILE:g}th percentile of |(a_x, a_y)| / g)")
+    for c, v in result.get("candidates", {}).items():
+        out.append(f"    {c}: pooled held-out beta RMS {v['pooled_rms_deg']:.4f} deg (largest {v['max_abs_deg']:.2f})"
+                   + ("  <- chosen" if c == result["choice"] else ""))
+    if "peer_cross_validated_rms_deg" in result:
+        out.append(f"    same-tyre EKF on the same folds: {result['peer_cross_validated_rms_deg']:.4f} deg (largest "
+                   f"{result['peer_max_abs_deg']:.2f})")
+    out += ["  " + result.get("choice", "fitted") + ": " + ", ".join(
+                f"{k} = {v:g}" + (f" ± {unc[k]:.2g}" if k in unc else "") for k, v in p.items())
+            + (" (± block-jackknife standard error over the folds)" if unc else ""),
+            "  noise levels of the l2-gain design ([design]):",
+            "    " + ", ".join(f"{k} = {v:g}" for k, v in result["design"].items())]
     if "peers" in result:
         out += ["  Kalman peers (EKF grid, beta RMS on the range): "
                 + ", ".join(f"{k} = {v}" for k, v in result["peers"].items())]
