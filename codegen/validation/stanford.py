@@ -63,8 +63,8 @@ STANFORD_PATH = (Path(__file__).resolve().parents[3] / "shared" / "data" / "stan
 NIKI_PATH = STANFORD_PATH.parents[1] / "second_car" / "niki_high_speed.csv.gz"
 """Location of the shared run of the second car, Stanford's VW GTI "Niki" (200 Hz, OxTS truth)."""
 
-SHORTHANDS = {"stanford": STANFORD_PATH, "niki": NIKI_PATH}
-"""Names of the shared logs beside a source checkout, for ``--data``."""
+SHORTHANDS = ("stanford", "niki")
+"""Names of the shared logs beside a source checkout, for ``--data`` (:data:`STANFORD_PATH`, :data:`NIKI_PATH`)."""
 
 EVALUATION_T_START = 137.5
 """[s from the log's start] The shared half's evaluation part starts here (sample 13750 of 27500): the
@@ -178,7 +178,7 @@ class StanfordRun:
 def _resolve(path) -> Path:
     name = path.strip().lower() if isinstance(path, str) else None
     if name in SHORTHANDS:
-        shared = SHORTHANDS[name]
+        shared = STANFORD_PATH if name == "stanford" else NIKI_PATH
         if not shared.is_file():     # an installed uiogen: the shorthand names a checkout's neighbour
             raise DatasetError(f"{name!r} is the shared log beside a source checkout ({shared}), which is "
                                f"not there: pass the log's own path (a CSV, plain or .gz)")
