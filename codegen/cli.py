@@ -6,7 +6,7 @@
     uiogen generate [NAME ...] [--force] [--out DIR] [--project DIR]
     uiogen build [NAME ...] [--float32] [--project DIR]
     uiogen check-gains NAME --gains FILE [--json]
-    uiogen fit NAME --data PATH|stanford|niki --samples A:B [--folds K] [--write] [--json]
+    uiogen fit NAME --data PATH|stanford|niki --samples A:B [--folds K] [--judge RUN ...] [--plot FILE.png] [--write] [--json]
     uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png] [--report DIR] [--project DIR]
     uiogen validate NAME --data PATH|stanford|niki [--json] [--plot FILE.png] [--report DIR] [--project DIR]
     uiogen demo [--json] [--report DIR]
@@ -292,7 +292,17 @@ def cmd_fit(args) -> int:
     from .families.capabilities import Identification, require
     cfg = observers.get(args.name)
     family = require(families.get(cfg.family), Identification)
-    result = family.fit(cfg, args.data, args.samples, folds=args.folds)
+    if args.plot and not args.judge:
+        raise ConfigurationError("--plot draws the fit run beside the runs --judge names; name at least one --judge RUN",
+                                 source="--plot", key="--plot", value=args.plot)
+    if args.plot and not Path(args.plot).suffix:        # matplotlib adds .png: say the file it writes
+        args.plot = f"{args.plot}.png"
+    result = family.fit(cfg, args.data, args.samples, folds=args.folds, judge=tuple(args.judge or ()))
+    if args.plot:
+        with outputs.writing(args.plot):
+            family.fit_plot(result, args.plot)
+    for row in result.get("runs", ()):
+        row.pop("series")                                  # arrays: the plot's, not the printed result's
     texts = family.fit_files(cfg, result)
     changed = {path: path.read_text() != body for path, body in texts.items()}
     if args.write and any(changed.values()):     # all the old files or all the new ones, never a mixture
@@ -572,6 +582,12 @@ def main(argv=None) -> int:
     p.add_argument("--folds", type=int, default=0, help="cross-validate inside the range with K contiguous folds: each "
                                                         "tyre set (fitted; the parameter file's [prior] stiffnesses) "
                                                         "judged on held-out folds, the better written")
+    p.add_argument("--judge", action="append", metavar="RUN", help="another run of the same car (a log in the shared "
+                                                                     "format, or a shorthand): the observer designed "
+                                                                     "with the fitted numbers and its same-tyre EKF and "
+                                                                     "UKF run on it and are printed beside the fit run; "
+                                                                     "repeat for more runs")
+    p.add_argument("--plot", metavar="FILE.png", help="with --judge: the sideslip of every run, truth and estimates")
     p.add_argument("--write", action="store_true", help="write the fitted values into the parameter and observer files")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_fit)

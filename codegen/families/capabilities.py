@@ -139,8 +139,12 @@ class LogPeers(Protocol):
 class Identification(Protocol):
     """``uiogen fit``: the observer's numbers identified on part of a log."""
 
-    def fit(self, config, path, samples: str, folds: int = 0) -> dict:
-        """Identify the observer's numbers on samples A..B-1 (``samples`` = "A:B") of a log."""
+    def fit(self, config, path, samples: str, folds: int = 0, judge=()) -> dict:
+        """Identify the observer's numbers on samples A..B-1 (``samples`` = "A:B") of a log; ``judge``:
+        other runs of the same car to run the identified observer and its peers on (``result["runs"]``)."""
+
+    def fit_plot(self, result: dict, path) -> None:
+        """The fit run and the judged runs of ``result`` as a figure (PNG) at ``path``."""
 
     def fit_files(self, config, result: dict) -> dict:
         """{path: text} of the files that hold the fitted numbers."""

@@ -48,9 +48,13 @@ class NonlinearTyreObserver(Family):
             return {}
         return {k: v.beta for k, v in stanford.nonlinear_tyre_peers(run, config.parameter_path).items()}
 
-    def fit(self, config, path, samples: str, folds: int = 0) -> dict:
+    def fit(self, config, path, samples: str, folds: int = 0, judge=()) -> dict:
         from .fit import fit
-        return fit(config, path, samples, folds)
+        return fit(config, path, samples, folds, judge=judge)
+
+    def fit_plot(self, result: dict, path) -> None:
+        from .fit import plot_runs
+        plot_runs(result, path)
 
     def fit_files(self, config, result: dict) -> dict:
         from .fit import files

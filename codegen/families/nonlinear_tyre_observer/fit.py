@@ -282,10 +282,12 @@ def _judged(config, params, prob, run, a: int, b: int, x: np.ndarray, mask: np.n
     return {"parameters": tyre, "design": levels, "error": np.degrees(beta - run.beta_true[a:b])}
 
 
-def fit(config, path="stanford", samples: str = "", folds: int = 0, peers: bool = True) -> dict:
+def fit(config, path="stanford", samples: str = "", folds: int = 0, peers: bool = True, judge=()) -> dict:
     """Identify the tyre, the noise levels and the peers' noise levels on samples A..B-1 of a log; with
     ``folds`` >= 2, judge every tyre set of :data:`CANDIDATES` the parameter file allows on held-out
-    contiguous folds and keep the better (module docstring)."""
+    contiguous folds and keep the better (module docstring); ``judge``: other runs of the same car (paths
+    or shorthands), on which the observer designed with the fitted numbers and its same-tyre peers run
+    (:func:`judged_runs`)."""
     if not isinstance(folds, int) or folds < 0 or folds == 1:
         raise ConfigurationError(f"--folds {folds!r}: 0 (no cross-validation) or an integer >= 2",
                                  source="--folds", key="--folds", value=folds)
@@ -326,8 +328,14 @@ def fit(config, path="stanford", samples: str = "", folds: int = 0, peers: bool 
         out["peer_grid"] = [[fy, ay if ay is not None else "highpass", rms] for fy, ay, rms in rows]
         if cv:
             _peer_folds(config, params, run, a, b, cv, choice, best)
+    judged = [stanford.load(p, sample_time=config.sample_time) for p in judge]     # every log read before the work
     beta = observer_beta(config, fitted_params, levels, run, a, b)
     out["observer_beta_rms_deg"] = _rms_deg(beta - run.beta_true[a:b])
+    if judge:
+        noise = _peer_levels(config, out)
+        out["runs"] = [_run_row(config, fitted_params, levels, noise, _sub_run(run, a, b), f"{path} (the fit, {a}:{b})",
+                                beta)]
+        out["runs"] += [_run_row(config, fitted_params, levels, noise, other, str(p)) for p, other in zip(judge, judged)]
     if cv:
         rows = cv["folds"]
         out["cross_validation"] = [{"fold": r["fold"], **r[choice]} for r in rows]
@@ -339,6 +347,56 @@ def fit(config, path="stanford", samples: str = "", folds: int = 0, peers: bool 
         out["uncertainty"] = _jackknife(out["cross_validation"], tyre)
         out["table"] = _table(out, rows, candidates, choice)
     return out
+
+
+PEERS = ("ekf_nonlinear_tyre", "ukf_nonlinear_tyre")
+
+
+def _peer_levels(config, result: dict) -> dict:
+    """The peers' two noise levels: the fit's grid choice, else the parameter file's ``[meta]``."""
+    if "peers" in result:
+        return {k: (None if v == "highpass" else float(v)) for k, v in result["peers"].items()}
+    return stanford.peer_noise(config.parameter_path)
+
+
+def _run_row(config, params, levels: dict, noise: dict, run, label: str, beta=None) -> dict:
+    """One run judged: the observer designed with ``params`` and ``levels`` and the same-tyre EKF and UKF
+    (``noise``), each from its initial state; sideslip RMS and largest error [deg], the series for a plot."""
+    import tempfile
+    if beta is None:
+        beta = observer_beta(config, params, levels, run, 0, run.n)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "parameters.toml"
+        path.write_text(_parameter_text(config.parameter_path, params.values, {}))
+        peers = stanford.nonlinear_tyre_peers(run, path, noise, which=PEERS)
+    truth = np.asarray(run.beta_true, float)
+    series = {"observer": np.asarray(beta, float), **{k: np.asarray(v.beta, float) for k, v in peers.items()}}
+    return {"data": label, "samples": int(run.n),
+            "estimators": {k: {"rms_deg": _rms_deg(v - truth), "max_abs_deg": float(np.degrees(np.max(np.abs(v - truth))))}
+                           for k, v in series.items()},
+            "series": {"t": np.asarray(run.t, float) - float(run.t[0]), "truth": truth, **series}}
+
+
+def plot_runs(result: dict, path) -> None:
+    """The sideslip of the fit run and every judged run, truth and estimates, one panel a run (PNG)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    runs = result["runs"]
+    fig, axes = plt.subplots(len(runs), 1, figsize=(10, 3 * len(runs)), squeeze=False)
+    for ax, row in zip(axes[:, 0], runs):
+        s = row["series"]
+        ax.plot(s["t"], np.degrees(s["truth"]), "k", lw=1.2, label="reference")
+        for name in ("observer", *PEERS):
+            e = row["estimators"][name]
+            ax.plot(s["t"], np.degrees(s[name]), lw=0.8, label=f"{name} (RMS {e['rms_deg']:.3f}°, max {e['max_abs_deg']:.2f}°)")
+        ax.set_title(row["data"], fontsize=9)
+        ax.set_ylabel("β [deg]")
+        ax.legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("t - t_0 [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def _jackknife(rows: list, tyre: dict) -> dict:
@@ -535,4 +593,12 @@ def lines(result: dict) -> list:
                    f"{row['training_rms_deg']:.4f})")
     if "cross_validation" in result:
         out.append(f"  cross-validated beta RMS (folds pooled): {result['cross_validated_rms_deg']:.4f} deg")
+    if result.get("runs"):
+        out.append("  the fitted numbers on the fit run and on the other runs (beta RMS / largest error, deg; "
+                   "each estimator from its initial state):")
+        names = list(result["runs"][0]["estimators"])
+        out.append("    " + f"{'run':44s}" + "".join(f"{n:>22s}" for n in names))
+        for row in result["runs"]:
+            out.append("    " + f"{row['data'][-44:]:44s}" + "".join(
+                f"{row['estimators'][n]['rms_deg']:>13.4f} / {row['estimators'][n]['max_abs_deg']:<6.2f}" for n in names))
     return out
