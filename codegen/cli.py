@@ -579,9 +579,10 @@ def main(argv=None) -> int:
     p.add_argument("--data", required=True, help="a logged run in the shared format (CSV, plain or .gz) with a "
                                                  "sideslip reference; 'stanford', 'niki' = the shared logs (Ferrari, GTI)")
     p.add_argument("--samples", required=True, metavar="A:B", help="the samples A..B-1 the fit may read (e.g. 0:13750)")
-    p.add_argument("--folds", type=int, default=0, help="cross-validate inside the range with K contiguous folds: each "
-                                                        "tyre set (fitted; the parameter file's [prior] stiffnesses) "
-                                                        "judged on held-out folds, the better written")
+    p.add_argument("--folds", type=int, default=None, help="cross-validate inside the range with K contiguous folds: "
+                                                           "each tyre set (fitted; the parameter file's [prior] "
+                                                           "stiffnesses) judged on held-out folds, the better written "
+                                                           "(default: 5 with a [prior], else 0, no cross-validation)")
     p.add_argument("--judge", action="append", metavar="RUN", help="another run of the same car (a log in the shared "
                                                                      "format, or a shorthand): the observer designed "
                                                                      "with the fitted numbers and its same-tyre EKF and "

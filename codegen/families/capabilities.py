@@ -139,7 +139,7 @@ class LogPeers(Protocol):
 class Identification(Protocol):
     """``uiogen fit``: the observer's numbers identified on part of a log."""
 
-    def fit(self, config, path, samples: str, folds: int = 0, judge=()) -> dict:
+    def fit(self, config, path, samples: str, folds: int | None = None, judge=()) -> dict:
         """Identify the observer's numbers on samples A..B-1 (``samples`` = "A:B") of a log; ``judge``:
         other runs of the same car to run the identified observer and its peers on (``result["runs"]``)."""
 

@@ -48,7 +48,7 @@ class NonlinearTyreObserver(Family):
             return {}
         return {k: v.beta for k, v in stanford.nonlinear_tyre_peers(run, config.parameter_path).items()}
 
-    def fit(self, config, path, samples: str, folds: int = 0, judge=()) -> dict:
+    def fit(self, config, path, samples: str, folds: int | None = None, judge=()) -> dict:
         from .fit import fit
         return fit(config, path, samples, folds, judge=judge)
 

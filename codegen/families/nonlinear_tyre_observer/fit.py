@@ -282,13 +282,18 @@ def _judged(config, params, prob, run, a: int, b: int, x: np.ndarray, mask: np.n
     return {"parameters": tyre, "design": levels, "error": np.degrees(beta - run.beta_true[a:b])}
 
 
-def fit(config, path="stanford", samples: str = "", folds: int = 0, peers: bool = True, judge=()) -> dict:
+DEFAULT_FOLDS = 5
+"""Folds when the parameter file has a ``[prior]`` and ``folds`` is not given: the choice between the tyre
+sets is made on held-out data, never by default for the fitted one."""
+
+
+def fit(config, path="stanford", samples: str = "", folds: int | None = None, peers: bool = True, judge=()) -> dict:
     """Identify the tyre, the noise levels and the peers' noise levels on samples A..B-1 of a log; with
     ``folds`` >= 2, judge every tyre set of :data:`CANDIDATES` the parameter file allows on held-out
     contiguous folds and keep the better (module docstring); ``judge``: other runs of the same car (paths
     or shorthands), on which the observer designed with the fitted numbers and its same-tyre peers run
     (:func:`judged_runs`)."""
-    if not isinstance(folds, int) or folds < 0 or folds == 1:
+    if folds is not None and (not isinstance(folds, int) or isinstance(folds, bool) or folds < 0 or folds == 1):
         raise ConfigurationError(f"--folds {folds!r}: 0 (no cross-validation) or an integer >= 2",
                                  source="--folds", key="--folds", value=folds)
     try:
@@ -304,6 +309,8 @@ def fit(config, path="stanford", samples: str = "", folds: int = 0, peers: bool 
     a, b = parse_samples(samples, run.n)
     params = load_parameters(config.parameter_path)
     prob = _problem(config, params, run, a, b)
+    if folds is None:
+        folds = DEFAULT_FOLDS if prob.prior is not None else 0
     if folds:
         _check_folds(folds, a, b, prob.window)
     candidates = [c for c in CANDIDATES if c == "fitted" or prob.prior is not None]
