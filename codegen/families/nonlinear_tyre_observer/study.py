@@ -60,6 +60,11 @@ def _setup(name: str, path) -> _Setup:
     return _Setup(config, L, gains, params, run, run.t - run.t[0], split)
 
 
+def _has_evaluation_part(su: _Setup) -> bool:
+    """Whether the log reaches past the parameter file's identification end (a part no choice was made on)."""
+    return bool(np.any(su.t >= su.split))
+
+
 def parameter_range(name: str = "stanford_sideslip_nonlinear_tyre", path="stanford") -> dict:
     from .fit import observer_beta
     su = _setup(name, path)
@@ -80,24 +85,32 @@ def parameter_range(name: str = "stanford_sideslip_nonlinear_tyre", path="stanfo
                       "friction_range": [f_rng[0] / fs, f_rng[1] / fs]}
             beta = observer_beta(config, p, design, run, 0, run.n)
             err = np.degrees(beta - run.beta_true)
-            rows.append({"stiffness_factor": cs, "friction_factor": fs,
-                         "evaluation": float(np.sqrt(np.mean(err[t >= split] ** 2))),
-                         "identification": float(np.sqrt(np.mean(err[t < split] ** 2))),
-                         "whole": float(np.sqrt(np.mean(err ** 2)))})
-    table = {"header": ["stiffness factor", "friction factor", "β RMSE evaluation part [deg]", "identification part",
-                        "whole half"],
-             "rows": [[r["stiffness_factor"], r["friction_factor"], r["evaluation"], r["identification"], r["whole"]]
-                      for r in rows]}
+            row = {"stiffness_factor": cs, "friction_factor": fs, "whole": float(np.sqrt(np.mean(err ** 2)))}
+            if _has_evaluation_part(su):
+                row.update({"evaluation": float(np.sqrt(np.mean(err[t >= split] ** 2))),
+                            "identification": float(np.sqrt(np.mean(err[t < split] ** 2)))})
+            rows.append(row)
+    if _has_evaluation_part(su):
+        table = {"header": ["stiffness factor", "friction factor", "β RMSE evaluation part [deg]",
+                            "identification part", "whole half"],
+                 "rows": [[r["stiffness_factor"], r["friction_factor"], r["evaluation"], r["identification"],
+                           r["whole"]] for r in rows]}
+    else:           # every sample identified the numbers: one column
+        table = {"header": ["stiffness factor", "friction factor", "β RMSE whole log [deg]"],
+                 "rows": [[r["stiffness_factor"], r["friction_factor"], r["whole"]] for r in rows]}
     return {"observer": name, "data": str(path), "L": L, "stiffness_range": s_rng, "friction_range": f_rng,
             "t_split": split, "points": rows, "table": table}
 
 
 def peer_comparison(name: str = "stanford_sideslip_nonlinear_tyre", path="stanford") -> dict:
-    """The committed observer against the same-tyre EKF and UKF on the evaluation part: each RMS and
-    the bootstrap interval of observer minus peer for each block length of :data:`BLOCKS_S`."""
+    """The committed observer against the same-tyre EKF and UKF on the evaluation part (the whole log when
+    every sample identified the numbers): each RMS and the bootstrap interval of observer minus peer for
+    each block length of :data:`BLOCKS_S`."""
     from .fit import observer_beta
     su = _setup(name, path)
-    run, part = su.run, su.t >= su.split
+    run = su.run
+    part = su.t >= su.split if _has_evaluation_part(su) else np.ones(run.n, bool)
+    where = "evaluation part" if _has_evaluation_part(su) else "whole log"
     beta = observer_beta(su.config, su.params, su.gains, run, 0, run.n)
     errors = {"observer": np.degrees(beta - run.beta_true)[part]}
     for peer, res in stanford.nonlinear_tyre_peers(run, su.config.parameter_path).items():
@@ -108,7 +121,7 @@ def peer_comparison(name: str = "stanford_sideslip_nonlinear_tyre", path="stanfo
         for block_s in BLOCKS_S:
             r = metrics.rms_difference_interval(errors["observer"], errors[peer], block=int(round(block_s / run.dt)))
             rows.append({"peer": peer, "block_s": block_s, **r})
-    table = {"header": ["peer", "block [s]", "observer − peer, β RMSE evaluation part [deg]", "95 % interval low",
+    table = {"header": ["peer", "block [s]", f"observer − peer, β RMSE {where} [deg]", "95 % interval low",
                         "high", "share of draws where the observer is lower"],
              "rows": [[r["peer"], r["block_s"], r["difference"], r["low"], r["high"], r["share_below_zero"]]
                       for r in rows]}
