@@ -395,11 +395,15 @@ def scenario_inputs(config, obs, scenarios=None) -> dict:
     real_data = (demo.REAL_DATA_OBSERVER, *demo.REAL_DATA_OTHERS)
     if scenarios is None and config.name in real_data and validate.SHARED_LOG not in todo:
         todo.append(validate.SHARED_LOG)
+    from ..model import load_parameters
+    own = load_parameters(config.parameter_path).meta.get("shared_log")       # the car's own shared log
+    if scenarios is None and own is not None and f"{own} log" in validate.SHARED_LOGS and f"{own} log" not in todo:
+        todo.append(f"{own} log")
     while todo:
         scenario = todo.pop(0)
         try:
-            out[scenario] = (validate.shared_log_inputs(obs.input_names) if scenario == validate.SHARED_LOG
-                             else validate.scenario_inputs(config, scenario))
+            out[scenario] = (validate.shared_log_inputs(obs.input_names, validate.SHARED_LOGS[scenario])
+                             if scenario in validate.SHARED_LOGS else validate.scenario_inputs(config, scenario))
         except ModelDefinitionError:
             fallbacks = [validate.SHARED_LOG] if validate.reads_the_log(obs.input_names) else ["excitation"]
             if scenarios is not None or scenario in fallbacks:

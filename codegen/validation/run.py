@@ -134,6 +134,9 @@ DATA_COLUMNS = {"delta": "delta", "y_r": "yaw_rate", "y_a_y": "ay", "v_x": "vx",
 # the input sequence of an observer of the shared log, for tools that need one (codegen.tools.qemu,
 # codegen.targets.float32): its validation is the logged run, not a simulated scenario
 SHARED_LOG = "stanford log"
+SHARED_LOGS = {SHARED_LOG: "stanford", "niki log": "niki"}
+"""The shared logs as validation runs: {scenario name: the ``--data`` shorthand}. A parameter file's
+``[meta] shared_log`` names its car's (``niki``): the float build is held to it too."""
 
 
 def reads_the_log(input_names) -> bool:
@@ -141,13 +144,14 @@ def reads_the_log(input_names) -> bool:
     return all(c in DATA_COLUMNS for c in input_names)
 
 
-def shared_log_inputs(input_names) -> np.ndarray | None:
-    """The shared Stanford log as the observer's input matrix, or None when the observer takes
-    other signals than the log's (DatasetError, typed, where ../shared is absent)."""
+def shared_log_inputs(input_names, log: str = "stanford") -> np.ndarray | None:
+    """A shared log (``log``: a shorthand of :data:`SHARED_LOGS`) as the observer's input matrix, or
+    None when the observer takes other signals than the log's (DatasetError, typed, where ../shared is
+    absent)."""
     if not reads_the_log(input_names):
         return None
     from . import stanford
-    run = stanford.load("stanford")
+    run = stanford.load(log)
     return np.ascontiguousarray(np.column_stack([getattr(run, DATA_COLUMNS[c]) for c in input_names]),
                                 dtype=np.float64)
 

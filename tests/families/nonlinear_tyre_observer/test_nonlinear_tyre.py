@@ -16,6 +16,7 @@ import sympy as sp
 
 from codegen import cli, families
 from codegen.project import observer_file as observers
+from codegen.model import load_parameters
 from codegen.errors import CertificateError, ConfigurationError
 from codegen.families.nonlinear_tyre_observer import design as dsn
 from codegen.validation import stanford
@@ -99,7 +100,8 @@ def test_slope_bounds_are_sound_and_the_attained_values_attained(built):
         # attained: the grid values are values of the product, inside the bounds and reaching them within
         # the factor bounds' looseness (the product of two separately sound factors)
         assert b.theta[0] <= b.attained[0] and b.attained[1] <= b.theta[1]
-        assert b.attained[0] <= 0.97 * b.theta[0] and b.attained[1] >= 1.2 * b.theta[1]
+        # (at 0.95 t_sl the slope is small and the factor bounds 36 % apart there: attained -144 N, sound -106 N)
+        assert b.attained[0] <= 0.95 * b.theta[0] and b.attained[1] >= 1.4 * b.theta[1]
     # (1 - rho)^2 of the lowest stiffness survives at rho t_sl (0.25 % at 0.95): (1 - rho)^2 * 0.9 C, projected
     params = load_parameters(observers.get(NAME).parameter_path).values
     rho = built.settings.sliding_fraction
@@ -231,8 +233,8 @@ def test_full_sliding_cannot_be_certified():
     bad = dataclasses.replace(cfg, design={**cfg.design, "sliding_fraction": 0.999999})
     with pytest.raises(CertificateError, match="not observable"):
         FAMILY.build(bad, FreshSolver())
-    with pytest.raises(ConfigurationError, match="gain_sliding_fraction"):
-        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, "gain_sliding_fraction": 0.95}), FreshSolver())
+    with pytest.raises(ConfigurationError, match="gain_sliding_fraction"):        # beyond the certified set
+        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, "gain_sliding_fraction": 0.97}), FreshSolver())
 
 
 @pytest.mark.slow          # the compiled observer
@@ -278,7 +280,7 @@ def test_real_log_figures_on_the_identification_data():
     assert peaks[170.0] == pytest.approx(0.56, abs=0.05)
     assert peaks[207.0] == pytest.approx(1.10, abs=0.05)
     text = validate.format_data_table(res)
-    assert text.splitlines()[1].split()[:2] == ["estimator", "beta"]
+    assert text.splitlines()[0].split()[:3] == ["estimator", "beta", "RMSE"]
 
 
 @pytest.mark.slow       # two tyre sets on five folds of 27,500 samples, ten designs, the EKF: about 40 s
