@@ -325,15 +325,19 @@ def derive(model, params, input_names) -> list:
               + [g.symbol for g in model.scheduling if g.derived is None and str(g.symbol) not in names]
               + [g.symbol for g in model.scheduling if g.derived is not None and g.symbol not in derived])
     unmeasured = [x for x in model.states if x not in measured_state]
-    f = [sp.sympify(e).xreplace(measured_state) for e in model.dynamics]
+    with sp.evaluate(False):                      # a Min/Max rebuilt evaluated runs sympy's simplifier
+        f = [sp.sympify(e).xreplace(measured_state) for e in model.dynamics]
     allowed = measured | set(derived) | set(model.parameters)
 
     def hides(e) -> bool:
         return any(e.has(v) for v in hidden)
 
     def numeric(e):
-        """The expression in measured and derived signals, parameters substituted."""
-        return sp.sympify(e).xreplace(values)
+        """The expression in measured and derived signals, parameters substituted, unevaluated: it is
+        only evaluated numerically (lambdify), and sympy's re-evaluation of a Min/Max with numbers put
+        in runs its general simplifier (seconds per tyre law, on every validate)."""
+        with sp.evaluate(False):
+            return sp.sympify(e).xreplace(values)
 
     functions = []
     for sym, expr in derived.items():
