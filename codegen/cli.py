@@ -301,17 +301,23 @@ def cmd_fit(args) -> int:
     if args.plot:
         with outputs.writing(args.plot):
             family.fit_plot(result, args.plot)
-    for row in result.get("runs", ()):
-        row.pop("series")                                  # arrays: the plot's, not the printed result's
     texts = family.fit_files(cfg, result)
     changed = {path: path.read_text() != body for path, body in texts.items()}
     if args.write and any(changed.values()):     # all the old files or all the new ones, never a mixture
         outputs.write_together({path: body for path, body in texts.items() if changed[path]}, cfg.source)
     files = {_shown(p): ("written" if args.write and c else "differs" if c else "equal") for p, c in changed.items()}
+    lines = text.fit_lines(family, result, files)
+    if args.report:
+        from .validation import report
+        with outputs.writing(args.report):
+            report.write_fit(args.name, result, lines, args.report,
+                             plot=family.fit_plot if result.get("runs") else None)
+    for row in result.get("runs", ()):
+        row.pop("series")                                  # arrays: the plot's, not the printed result's
     if args.json:
         _print_json({**result, "files": files})
     else:
-        print("\n".join(text.fit_lines(family, result, files)))
+        print("\n".join(lines))
     return 0
 
 
@@ -589,6 +595,8 @@ def main(argv=None) -> int:
                                                                      "UKF run on it and are printed beside the fit run; "
                                                                      "repeat for more runs")
     p.add_argument("--plot", metavar="FILE.png", help="with --judge: the sideslip of every run, truth and estimates")
+    p.add_argument("--report", metavar="DIR", help="an HTML page DIR/index.html: the runs (with --judge) and their "
+                                                   "figure, the held-out folds, the output")
     p.add_argument("--write", action="store_true", help="write the fitted values into the parameter and observer files")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_fit)

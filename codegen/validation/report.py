@@ -181,6 +181,42 @@ def write_validation(name: str, result: dict, out_dir, data: bool) -> Path:
     return page
 
 
+def _table(header: list, rows: list) -> str:
+    def cell(v):
+        return "–" if v is None else f"{v:.4g}" if isinstance(v, float) else str(v)
+    return ("<table><tr>" + "".join(f"<th>{html.escape(str(h))}</th>" for h in header) + "</tr>"
+            + "".join("<tr>" + "".join(f"<td>{html.escape(cell(v))}</td>" for v in r) + "</tr>" for r in rows)
+            + "</table>")
+
+
+def write_fit(name: str, result: dict, text: list, out_dir, plot=None) -> Path:
+    """``uiogen fit ... --report DIR``: the identification's page: the fit run and every judged run
+    (sideslip RMS and largest error per estimator, the figure ``plot(result, path)`` draws), the
+    held-out folds' table, and the text output; returns the page's path."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    body = [f"<h1>uiogen fit {html.escape(name)}</h1>"]
+    runs = result.get("runs") or []
+    if runs:
+        names = list(runs[0]["estimators"])
+        body += ["<h2>The fitted numbers on the fit run and on the other runs</h2>",
+                 '<p class="note">β RMS and largest error [deg], each estimator from its initial state; the '
+                 'judged runs are never read by the fit.</p>',
+                 _table(["run", *(f"{n} RMS" for n in names), *(f"{n} max" for n in names)],
+                        [[r["data"], *(r["estimators"][n]["rms_deg"] for n in names),
+                          *(r["estimators"][n]["max_abs_deg"] for n in names)] for r in runs])]
+        if plot is not None:
+            fig = out_dir / "runs.png"
+            plot(result, fig)
+            body.append(_img(fig, "sideslip of every run, truth and estimates"))
+    if "table" in result:
+        body += ["<h2>Held-out folds</h2>", _table(result["table"]["header"], result["table"]["rows"])]
+    body += ["<h2>Output</h2>", _pre("\n".join(text))]
+    page = out_dir / PAGE
+    page.write_text(_page(f"uiogen fit {name}", body))
+    return page
+
+
 def rank_real_data(runs: dict) -> list:
     """Every estimator run on a log, best first: (label, observer name or None for a peer, sideslip
     RMS [deg] it is ranked by, what that RMS is of). ``runs``: {observer: its run on the log}, the

@@ -108,10 +108,10 @@ def test_the_noise_bound_objective_certifies_a_lower_bound_at_the_levels():
 
 @pytest.mark.slow       # a fit on 13,750 samples, the observer and both peers on two runs: about 15 s
 def test_identify_on_one_run_and_judge_on_another(tmp_path, capsys):
-    """`uiogen fit ... --judge OTHER --plot FILE`: the observer designed with the fitted numbers and its
-    same-tyre EKF and UKF run on the fit range and on another run (here the rest of the shared half,
+    """`uiogen fit ... --judge OTHER --plot FILE --report DIR`: the observer designed with the fitted numbers
+    and its same-tyre EKF and UKF run on the fit range and on another run (here the rest of the shared half,
     written as a file of its own: each estimator starts from its initial state there), printed beside each
-    other, in --json, and drawn."""
+    other, in --json, drawn, and on an HTML page."""
     import gzip
     import json
     require_shared(stanford.STANFORD_PATH, "shared Stanford log")
@@ -130,9 +130,14 @@ def test_identify_on_one_run_and_judge_on_another(tmp_path, capsys):
     assert set(judged["estimators"]) == {"observer", "ekf_nonlinear_tyre", "ukf_nonlinear_tyre"}
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # the text table names both runs; --plot without a run to judge is one typed line
-    assert cli.main(["fit", name, "--data", "stanford", "--samples", "0:13750", "--folds", "0", "--judge", str(other)]) == 0
+    page = tmp_path / "report" / "index.html"
+    assert cli.main(["fit", name, "--data", "stanford", "--samples", "0:13750", "--folds", "0", "--judge", str(other),
+                     "--report", str(page.parent)]) == 0
     out = capsys.readouterr().out
     assert "stanford (the fit, 0:13750)" in out and "other_run.csv" in out
+    html = page.read_text()               # the page: the runs' table, their figure beside it, the output
+    assert html.count("<tr>") == 3 and str(other) in html and 'src="runs.png"' in html
+    assert (page.parent / "runs.png").read_bytes()[:4] == b"\x89PNG" and "uiogen fit" in html
     assert cli.main(["fit", name, "--data", "stanford", "--samples", "0:13750", "--plot", str(png)]) == 2
     err = capsys.readouterr().err
     assert "--plot" in err and "--judge" in err and len(err.strip().splitlines()) == 1
