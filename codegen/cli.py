@@ -6,7 +6,7 @@
     uiogen generate [NAME ...] [--force] [--out DIR] [--project DIR]
     uiogen build [NAME ...] [--float32] [--project DIR]
     uiogen check-gains NAME --gains FILE [--json]
-    uiogen fit NAME --data PATH|stanford|niki --samples A:B [--folds K] [--judge RUN ...] [--plot FILE.png] [--write] [--json]
+    uiogen fit NAME --data PATH|stanford|niki --samples A:B [--folds K] [--judge RUN ...] [--choose KEY=[V, ...]] [--plot FILE.png] [--write] [--json]
     uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png] [--report DIR] [--project DIR]
     uiogen validate NAME --data PATH|stanford|niki [--json] [--plot FILE.png] [--report DIR] [--project DIR]
     uiogen demo [--json] [--report DIR]
@@ -297,7 +297,10 @@ def cmd_fit(args) -> int:
                                  source="--plot", key="--plot", value=args.plot)
     if args.plot and not Path(args.plot).suffix:        # matplotlib adds .png: say the file it writes
         args.plot = f"{args.plot}.png"
-    result = family.fit(cfg, args.data, args.samples, folds=args.folds, judge=tuple(args.judge or ()))
+    from .design.sweep import parse_set
+    choose = [parse_set(text, "--choose") for text in args.choose or ()]
+    result = family.fit(cfg, args.data, args.samples, folds=args.folds, judge=tuple(args.judge or ()),
+                        choose=choose)
     if args.plot:
         with outputs.writing(args.plot):
             family.fit_plot(result, args.plot)
@@ -594,6 +597,9 @@ def main(argv=None) -> int:
                                                                      "with the fitted numbers and its same-tyre EKF and "
                                                                      "UKF run on it and are printed beside the fit run; "
                                                                      "repeat for more runs")
+    p.add_argument("--choose", action="append", metavar="KEY=[V, ...]",
+                   help="a [design] setting and the values to judge on the held-out folds with the tyre sets, e.g. "
+                        "design.decay_fraction=[0.1, 0.2]; repeat for a grid; the best is written")
     p.add_argument("--plot", metavar="FILE.png", help="with --judge: the sideslip of every run, truth and estimates")
     p.add_argument("--report", metavar="DIR", help="an HTML page DIR/index.html: the runs (with --judge) and their "
                                                    "figure, the held-out folds, the output")

@@ -48,9 +48,9 @@ class NonlinearTyreObserver(Family):
             return {}
         return {k: v.beta for k, v in stanford.nonlinear_tyre_peers(run, config.parameter_path).items()}
 
-    def fit(self, config, path, samples: str, folds: int | None = None, judge=()) -> dict:
+    def fit(self, config, path, samples: str, folds: int | None = None, judge=(), choose=()) -> dict:
         from .fit import fit
-        return fit(config, path, samples, folds, judge=judge)
+        return fit(config, path, samples, folds, judge=judge, choose=choose)
 
     def fit_plot(self, result: dict, path) -> None:
         from .fit import plot_runs

@@ -35,7 +35,7 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
-from ...errors import ConfigurationError, DatasetError, SampleError
+from ...errors import CertificateError, ConfigurationError, DatasetError, SampleError
 from ...model import load_parameters
 from ...validation import stanford
 from .representation import numeric
@@ -287,12 +287,14 @@ DEFAULT_FOLDS = 5
 sets is made on held-out data, never by default for the fitted one."""
 
 
-def fit(config, path="stanford", samples: str = "", folds: int | None = None, peers: bool = True, judge=()) -> dict:
+def fit(config, path="stanford", samples: str = "", folds: int | None = None, peers: bool = True, judge=(),
+        choose=()) -> dict:
     """Identify the tyre, the noise levels and the peers' noise levels on samples A..B-1 of a log; with
     ``folds`` >= 2, judge every tyre set of :data:`CANDIDATES` the parameter file allows on held-out
     contiguous folds and keep the better (module docstring); ``judge``: other runs of the same car (paths
     or shorthands), on which the observer designed with the fitted numbers and its same-tyre peers run
-    (:func:`judged_runs`)."""
+    (:func:`_run_row`); ``choose``: ``[(KEY, [values...]), ...]`` of ``design.*`` settings, every
+    combination cross-validated with the tyre sets and the best written (:func:`_chosen_design`)."""
     if folds is not None and (not isinstance(folds, int) or isinstance(folds, bool) or folds < 0 or folds == 1):
         raise ConfigurationError(f"--folds {folds!r}: 0 (no cross-validation) or an integer >= 2",
                                  source="--folds", key="--folds", value=folds)
@@ -314,7 +316,15 @@ def fit(config, path="stanford", samples: str = "", folds: int | None = None, pe
     if folds:
         _check_folds(folds, a, b, prob.window)
     candidates = [c for c in CANDIDATES if c == "fitted" or prob.prior is not None]
-    cv = _cross_validate(config, params, prob, run, a, b, folds, candidates) if folds else None
+    settings_table, chosen = None, {}
+    if choose:
+        if not folds:
+            raise ConfigurationError("--choose picks settings by their pooled held-out sideslip RMS: it needs "
+                                     "--folds K (K >= 2)", source="--choose", key="--choose", value=choose)
+        config, chosen, settings_table, cv = _chosen_design(config, params, prob, run, a, b, folds, candidates,
+                                                            choose)
+    else:
+        cv = _cross_validate(config, params, prob, run, a, b, folds, candidates) if folds else None
     choice = min(candidates, key=lambda c: cv["pooled"][c]) if cv else "fitted"
     half = prob.window // 2
     full = np.ones(b - a - 2 * half, bool)
@@ -325,10 +335,12 @@ def fit(config, path="stanford", samples: str = "", folds: int | None = None, pe
                                                full).items()}
     out = {"observer": config.name, "data": str(path), "samples": [a, b],
            "t_range": [float(run.t[a] - run.t[0]), float(run.t[b - 1] - run.t[0])],
-           "parameters": tyre, "design": levels, "start": prob.start.tolist(), "choice": choice,
+           "parameters": tyre, "design": {**levels, **chosen}, "start": prob.start.tolist(), "choice": choice,
            "window_samples": prob.window, "mu_reached": _round(prob.mu_reached)}
     if prob.prior is not None:
         out["prior"] = {k: dict(v) for k, v in params.prior.items()}
+    if settings_table is not None:
+        out["settings"] = settings_table
     if peers:
         best, rows = _peers(config, fitted_params, run, a, b)
         out["peers"] = {k: (v if v is not None else "highpass") for k, v in best.items()}
@@ -499,6 +511,41 @@ def _cross_validate(config, params, prob, run, a, b, folds, candidates) -> dict:
     return {"folds": rows, "pooled": pooled, "max": biggest}
 
 
+def _chosen_design(config, params, prob, run, a, b, folds, candidates, choose) -> tuple:
+    """Every combination of the ``design.*`` values of ``choose`` cross-validated with every tyre set;
+    (the config with the best combination, {key: value} of it, the table of every combination, its
+    cross-validation). A combination the design refuses (no certificate) is a row of the table."""
+    import itertools
+    from ...design.sweep import REFUSALS
+    keys = [k for k, _ in choose]
+    bad = [k for k in keys if not k.startswith("design.") or k.count(".") != 1]
+    if bad:
+        raise ConfigurationError(f"--choose {bad[0]}: the fit chooses [design] settings only (design.KEY, e.g. "
+                                 f"design.decay_fraction=[0.1, 0.2]); the tyre sets are its own choice",
+                                 source="--choose", key=bad[0])
+    if len(set(keys)) != len(keys):
+        raise ConfigurationError(f"--choose: a key given twice in {keys}", source="--choose", key=keys)
+    rows, best = [], None
+    for values in itertools.product(*[v for _, v in choose]):
+        setting = {k.split(".", 1)[1]: v for k, v in zip(keys, values)}
+        cfg = dataclasses.replace(config, design={**config.design, **setting})
+        try:
+            cv = _cross_validate(cfg, params, prob, run, a, b, folds, candidates)
+        except REFUSALS as exc:
+            rows.append([*values, *([None] * len(candidates)), f"{type(exc).__name__}: {str(exc).splitlines()[0]}"])
+            continue
+        rows.append([*values, *(cv["pooled"][c] for c in candidates), "certified"])
+        score = min(cv["pooled"][c] for c in candidates)
+        if best is None or score < best[0]:
+            best = (score, cfg, setting, cv)
+    if best is None:
+        raise CertificateError(f"--choose: the design refuses every combination ({rows[0][-1]}); see uiogen sweep for "
+                               f"the settings that certify")
+    table = {"header": [*keys, *(f"{c}: pooled held-out β RMSE [deg]" for c in candidates), "outcome"], "rows": rows,
+             "keys": keys, "candidates": list(candidates)}
+    return best[1], best[2], table, best[3]
+
+
 def _peer_folds(config, params, run, a: int, b: int, cv: dict, choice: str, noise: dict) -> None:
     """The same-tyre EKF on each fold with the tyre ``choice`` fitted without it (its two noise levels
     those the grid chose on the whole range: an advantage to the peer), added to ``cv``."""
@@ -577,6 +624,15 @@ def lines(result: dict) -> list:
     if "mu_reached" in result:
         out.append(f"    the log's combined acceleration reaches mu >= {result['mu_reached']:g} "
                    f"({100 * ENVELOPE_QUANTILE:g}th percentile of |(a_x, a_y)| / g)")
+    if "settings" in result:
+        t = result["settings"]
+        k, names = len(t["keys"]), t["candidates"]
+        out.append("    [design] settings judged on the same folds (pooled held-out beta RMS, deg):")
+        for row in t["rows"]:
+            what = ", ".join(f"{key}={v}" for key, v in zip(t["keys"], row[:k]))
+            said = (", ".join(f"{c} {v:.4f}" for c, v in zip(names, row[k:-1])) if row[-1] == "certified"
+                    else row[-1])
+            out.append(f"      {what}: {said}")
     for c, v in result.get("candidates", {}).items():
         out.append(f"    {c}: pooled held-out beta RMS {v['pooled_rms_deg']:.4f} deg (largest {v['max_abs_deg']:.2f})"
                    + ("  <- chosen" if c == result["choice"] else ""))
@@ -586,8 +642,10 @@ def lines(result: dict) -> list:
     out += ["  " + result.get("choice", "fitted") + ": " + ", ".join(
                 f"{k} = {v:g}" + (f" ± {unc[k]:.2g}" if k in unc else "") for k, v in p.items())
             + (" (± block-jackknife standard error over the folds)" if unc else ""),
-            "  noise levels of the l2-gain design ([design]):",
-            "    " + ", ".join(f"{k} = {v:g}" for k, v in result["design"].items())]
+            "  noise levels of the l2-gain design" + (" and the settings chosen" if "settings" in result else "")
+            + " ([design]):",
+            "    " + ", ".join(f"{k} = {v:g}" if isinstance(v, (int, float)) else f"{k} = {v!r}"
+                           for k, v in result["design"].items())]
     if "peers" in result:
         out += ["  Kalman peers (EKF grid, beta RMS on the range): "
                 + ", ".join(f"{k} = {v}" for k, v in result["peers"].items())]

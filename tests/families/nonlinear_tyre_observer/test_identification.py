@@ -143,3 +143,32 @@ def test_identify_on_one_run_and_judge_on_another(tmp_path, capsys):
     assert "--plot" in err and "--judge" in err and len(err.strip().splitlines()) == 1
     assert cli.main(["fit", name, "--data", "stanford", "--samples", "0:13750", "--judge", "/nonexistent.csv"]) == 2
     assert "DatasetError" in capsys.readouterr().err
+
+
+@pytest.mark.slow       # two settings x two tyre sets x two folds on 3000 samples: eight designs, about 25 s
+def test_fit_chooses_design_settings_on_the_held_out_folds_and_writes_the_best(tmp_path, capsys):
+    """`uiogen fit ... --folds 2 --choose design.decay_fraction=[0.1, 0.2] --write` in a starter: every
+    combination is cross-validated with both tyre sets, the one with the lowest pooled held-out RMS is
+    written into the observer file's [design] beside the noise levels; a setting outside [design], or
+    a choice without folds, is one typed line."""
+    import json
+    require_shared(stanford.STANFORD_PATH, "shared Stanford log")
+    folder = tmp_path / "car"
+    assert cli.main(["new", str(folder), "--family", "nonlinear_tyre_observer", "--name", "mine"]) == 0
+    obs = folder / "mine.toml"
+    capsys.readouterr()
+    args = ["fit", str(obs), "--data", "stanford", "--samples", "9000:12000", "--folds", "2"]
+    assert cli.main([*args, "--choose", "design.decay_fraction=[0.1, 0.2]", "--write", "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    table = r["settings"]
+    assert table["keys"] == ["design.decay_fraction"] and [row[0] for row in table["rows"]] == [0.1, 0.2]
+    best = min(table["rows"], key=lambda row: min(row[1:3]))
+    assert r["design"]["decay_fraction"] == best[0]
+    assert r["cross_validated_rms_deg"] == pytest.approx(min(best[1:3]), rel=1e-12)
+    written = re.search(r"^decay_fraction = ([0-9.]+)", obs.read_text(), re.M)
+    assert float(written.group(1)) == best[0]
+    for extra, match in ((["--choose", "parameters.C_f=[1e5]"], "chooses \\[design\\] settings only"),
+                         (["--choose", "design.decay_fraction=[0.1]", "--folds", "0"], "needs --folds")):
+        assert cli.main([*args[:-2], *extra] if "--folds" in extra else [*args, *extra]) == 2
+        err = capsys.readouterr().err
+        assert re.search(match, err) and len(err.strip().splitlines()) == 1 and "Traceback" not in err
