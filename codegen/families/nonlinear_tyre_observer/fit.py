@@ -6,12 +6,15 @@ The log must carry a sideslip reference (the shared Stanford format: ``vx``, ``v
 1. **The tyre** (parameter file): each axle's cornering stiffness and *one* friction coefficient
    for both axles, three numbers, by least squares of the log's a_y and yaw acceleration (the
    latter times :data:`YAW_LEVER`) against the model's, from its axle forces at the log's own
-   velocities (v_y = ``vy``, r = ``yaw_rate``). Both sides are averaged over 0.21 s (21 samples
-   at 100 Hz): the accelerometers' vibration is not force. The
+   velocities (v_y = ``vy``, r = ``yaw_rate``). Both sides are averaged over :data:`AVERAGE_S`
+   (21 samples at 100 Hz, 43 at 200 Hz): the accelerometers' vibration is not force. The
    fit starts from a physical prior the log does not set (stiffness 15 F_z per rad, mu = 1), never
    from the committed values. m, l_f, l_r, I_z, g and the drive layout stay as the file has them.
+   A parameter file with a ``[prior]`` of both axle stiffnesses (published values and their stated
+   uncertainty) adds a second tyre set, :data:`CANDIDATES`: the published stiffnesses with the
+   friction alone from the log, never below what the log's combined acceleration reaches.
 2. **The noise levels** of the l2-gain design (observer file ``[design] sigma_*``), each by its
-   definition on the range: the axle force residual (RMS of the 0.21 s averages, per axle), the
+   definition on the range: the axle force residual (RMS of the averages, per axle), the
    sensors' vibration (standard deviation of a_y and r after the source repository's high-pass
    filter, :func:`codegen.validation.stanford.highpass_std`), the Euler residual T_s/2 |x''| (RMS,
    from the reference's second derivative).
@@ -20,10 +23,14 @@ The log must carry a sideslip reference (the shared Stanford format: ``vx``, ``v
    1.0} m/s^2, by the EKF's sideslip RMS on the range.
 
 Values are rounded to four significant digits. ``folds`` > 1 cross-validates inside the range:
-the range is cut into that many contiguous folds; for each, 1. and 2. are fitted on the others
-(a 0.21 s guard band left out on both sides), the observer designed with them, run over the whole
-range, and its sideslip RMS taken on the fold it never saw. Everything is deterministic (closed
-forms, scipy's least squares from a fixed start, a fixed grid).
+the range is cut into that many contiguous folds; for each, every tyre set and 2. are fitted on the
+others (a guard band of one average left out on both sides), the observer designed with them, run over
+the whole range, and its sideslip RMS taken on the fold it never saw. The set with the lower pooled
+held-out RMS is written, each number with its block-jackknife standard error over the folds, the
+same-tyre EKF's held-out RMS beside it; ``choose`` adds ``[design]`` settings to the same choice. With
+a ``[prior]`` and no ``folds``, :data:`DEFAULT_FOLDS`. ``judge`` runs the result on other runs of the
+same car (never read for a choice). Everything is deterministic (closed forms, scipy's least squares
+from a fixed start, fixed grids).
 """
 from __future__ import annotations
 
