@@ -111,6 +111,33 @@ def _check_structure(model, source):
                                    f"(ts_fuzzy_uio) tyre laws of measured states")
 
 
+AXLE_FIELDS = ("name", "law", "projection", "slip", "inverse", "sliding", "peak_symbol", "peak", "stiffness",
+               "friction")
+"""What the family reads of each element of a model's ``AXLES`` (``model_defs/single_track_nonlinear_tyre.py``,
+class ``Axle``, says what each is)."""
+
+
+def axles_of(module, source) -> tuple:
+    """The model module's ``AXLES``, each with every field of :data:`AXLE_FIELDS` (else a
+    ModelDefinitionError naming the model file, the axle and the missing fields: an axle written against
+    an older contract was an AttributeError traceback inside the representation)."""
+    model_file = getattr(module, "__file__", None) or source
+    axles = getattr(module, "AXLES", None)
+    name = getattr(getattr(module, "MODEL", None), "name", "?")
+    if not axles:
+        raise ModelDefinitionError(f"{model_file}: model module of {name!r} has no AXLES (how each axle force "
+                                   f"depends on the lateral speed; see model_defs/single_track_nonlinear_tyre.py)")
+    for k, a in enumerate(axles):
+        missing = [f for f in AXLE_FIELDS if not hasattr(a, f)]
+        if missing:
+            label = f"AXLES[{k}]" + (f" ({a.name!r})" if hasattr(a, "name") else "")
+            raise ModelDefinitionError(
+                f"{model_file}: {label} of model {name!r} has no {', '.join(missing)}: each axle gives "
+                f"{', '.join(AXLE_FIELDS)} (peak_symbol: the capacity symbol its law and sliding slip are written in; "
+                f"see class Axle in model_defs/single_track_nonlinear_tyre.py)")
+    return tuple(axles)
+
+
 @dataclass(frozen=True)
 class Signals:
     """The model's own names of what the family reads, by role, and their units (the model's ``units``;
@@ -165,7 +192,7 @@ def signals(module, source: str) -> Signals:
         raise ModelDefinitionError(f"{where}: output {names[r_out]!r} measures the state {r_state}, the yaw rate; the "
                                    f"nonlinear-tyre observer takes the states in the order (lateral speed, yaw rate): "
                                    f"declare states = ({states[1]}, {states[0]}) in MODEL")
-    axles = getattr(module, "AXLES", None) or ()
+    axles = axles_of(module, source)
     inputs = [str(u) for u in model.known_inputs]
     read = [k for k, u in enumerate(model.known_inputs)
             if any(u in sp.sympify(a.slip).free_symbols for a in axles)]
@@ -273,10 +300,7 @@ def represent(module, params, settings, source: str) -> TyreRepresentation:
     model = module.MODEL
     model_file = getattr(module, "__file__", None) or source       # where a structure error is the model's
     _check_structure(model, model_file)
-    axles = getattr(module, "AXLES", None)
-    if not axles:
-        raise ModelDefinitionError(f"{model_file}: model module of {model.name!r} has no AXLES (how each axle force "
-                                   f"depends on the lateral speed; see model_defs/single_track_nonlinear_tyre.py)")
+    axles = axles_of(module, model_file)
     lacking = [k for k in ("FORCES", "DYNAMICS_IN_FORCES", "A_Y_IN_FORCES", "Phi_f", "Phi_r", "t_sym")
                if not hasattr(module, k)]
     if lacking:

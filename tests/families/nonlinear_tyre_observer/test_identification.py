@@ -172,3 +172,30 @@ def test_fit_chooses_design_settings_on_the_held_out_folds_and_writes_the_best(t
         assert cli.main([*args[:-2], *extra] if "--folds" in extra else [*args, *extra]) == 2
         err = capsys.readouterr().err
         assert re.search(match, err) and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_an_axle_missing_a_field_is_one_typed_line_naming_the_model_the_axle_and_the_field(tmp_path, capsys):
+    """A user's model written against an older contract (its Axle without peak_symbol) was an
+    AttributeError traceback inside the representation; now design and fit say which axle of which
+    model file lacks which field."""
+    folder = tmp_path / "car"
+    assert cli.main(["new", str(folder), "--family", "nonlinear_tyre_observer", "--name", "mine"]) == 0
+    model = folder / "model.py"
+    text = model.read_text()
+    for old, new in (("    peak_symbol: sp.Symbol\n", ""),
+                     ("tyres.fiala_sliding_slip(C_f, F_PEAK[0]), F_PEAK[0], F_maxf",
+                      "tyres.fiala_sliding_slip(C_f, F_PEAK[0]), F_maxf"),
+                     ("tyres.fiala_sliding_slip(C_r, F_PEAK[1]), F_PEAK[1], F_maxr",
+                      "tyres.fiala_sliding_slip(C_r, F_PEAK[1]), F_maxr")):
+        assert old in text
+        text = text.replace(old, new)
+    model.write_text(text)
+    capsys.readouterr()
+    for verb in (["design", str(folder / "mine.toml")],
+                 ["fit", str(folder / "mine.toml"), "--data", "stanford", "--samples", "0:1000", "--folds", "0"]):
+        if verb[0] == "fit":
+            require_shared(stanford.STANFORD_PATH, "shared Stanford log")
+        assert cli.main(verb) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and "Traceback" not in err and "AttributeError" not in err
+        assert str(model) in err and "AXLES[0] ('front')" in err and "has no peak_symbol" in err
