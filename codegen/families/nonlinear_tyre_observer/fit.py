@@ -254,15 +254,20 @@ def _sub_run(run, a: int, b: int):
                                    for f in dataclasses.fields(run)})
 
 
-def _ekf_betas(config, params, run, a: int, b: int, noises) -> list:
-    """The same-tyre EKF's sideslip [rad] over samples a..b-1, one array per {sigma_fy, sigma_ay} of ``noises``."""
+def _same_tyre_peers(config, params, run, noises, which=("ekf_nonlinear_tyre",)) -> list:
+    """The same-tyre Kalman peers ``which`` on ``run`` with the numbers of ``params`` (through a parameter
+    file of their own, as :func:`codegen.validation.stanford.nonlinear_tyre_peers` reads one), one
+    {peer: BaselineResult} per {sigma_fy, sigma_ay} of ``noises``."""
     import tempfile
-    sub = _sub_run(run, a, b)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "parameters.toml"
         path.write_text(_parameter_text(config.parameter_path, params.values, {}))
-        return [stanford.nonlinear_tyre_peers(sub, path, noise, which=("ekf_nonlinear_tyre",))["ekf_nonlinear_tyre"].beta
-                for noise in noises]
+        return [stanford.nonlinear_tyre_peers(run, path, noise, which=which) for noise in noises]
+
+
+def _ekf_betas(config, params, run, a: int, b: int, noises) -> list:
+    """The same-tyre EKF's sideslip [rad] over samples a..b-1, one array per {sigma_fy, sigma_ay} of ``noises``."""
+    return [p["ekf_nonlinear_tyre"].beta for p in _same_tyre_peers(config, params, _sub_run(run, a, b), noises)]
 
 
 def _peers(config, params, run, a: int, b: int) -> tuple:
@@ -276,17 +281,23 @@ def _peers(config, params, run, a: int, b: int) -> tuple:
 
 
 def _rms_deg(err: np.ndarray) -> float:
+    """RMS [deg] of a sideslip error [rad]."""
     return float(np.degrees(np.sqrt(np.mean(np.square(err)))))
+
+
+def _max_deg(err: np.ndarray) -> float:
+    """Largest |error| [deg] of a sideslip error [rad]."""
+    return float(np.degrees(np.max(np.abs(err))))
 
 
 def _judged(config, params, prob, run, a: int, b: int, x: np.ndarray, mask: np.ndarray) -> dict:
     """The rounded tyre of ``x``, the noise levels on ``mask`` and the designed observer's sideslip error
-    [deg] over the range."""
+    [rad] over the range."""
     tyre = tyre_values(config, x)
     levels = {k: _round(v) for k, v in _levels(prob, _rounded(config, tyre), run, a, b, config.sample_time,
                                                 mask).items()}
     beta = observer_beta(config, _with_values(params, tyre), levels, run, a, b)
-    return {"parameters": tyre, "design": levels, "error": np.degrees(beta - run.beta_true[a:b])}
+    return {"parameters": tyre, "design": levels, "error": beta - run.beta_true[a:b]}
 
 
 DEFAULT_FOLDS = 5
@@ -388,17 +399,13 @@ def _peer_levels(config, result: dict) -> dict:
 def _run_row(config, params, levels: dict, noise: dict, run, label: str, beta=None) -> dict:
     """One run judged: the observer designed with ``params`` and ``levels`` and the same-tyre EKF and UKF
     (``noise``), each from its initial state; sideslip RMS and largest error [deg], the series for a plot."""
-    import tempfile
     if beta is None:
         beta = observer_beta(config, params, levels, run, 0, run.n)
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "parameters.toml"
-        path.write_text(_parameter_text(config.parameter_path, params.values, {}))
-        peers = stanford.nonlinear_tyre_peers(run, path, noise, which=PEERS)
+    (peers,) = _same_tyre_peers(config, params, run, [noise], PEERS)
     truth = np.asarray(run.beta_true, float)
     series = {"observer": np.asarray(beta, float), **{k: np.asarray(v.beta, float) for k, v in peers.items()}}
     return {"data": label, "samples": int(run.n),
-            "estimators": {k: {"rms_deg": _rms_deg(v - truth), "max_abs_deg": float(np.degrees(np.max(np.abs(v - truth))))}
+            "estimators": {k: {"rms_deg": _rms_deg(v - truth), "max_abs_deg": _max_deg(v - truth)}
                            for k, v in series.items()},
             "series": {"t": np.asarray(run.t, float) - float(run.t[0]), "truth": truth, **series}}
 
@@ -510,11 +517,11 @@ def _cross_validate(config, params, prob, run, a, b, folds, candidates) -> dict:
             judged = _judged(config, params, prob, run, a, b, _tyre_fit(prob, train, c), train)
             err = judged.pop("error")
             errors[c].append(err[lo - a:hi - a])
-            row[c] = {**judged, "held_out_rms_deg": _rms_deg(np.radians(err[lo - a:hi - a])),
-                      "training_rms_deg": _rms_deg(np.radians(np.concatenate([err[:lo - a], err[hi - a:]])))}
+            row[c] = {**judged, "held_out_rms_deg": _rms_deg(err[lo - a:hi - a]),
+                      "training_rms_deg": _rms_deg(np.concatenate([err[:lo - a], err[hi - a:]]))}
         rows.append(row)
-    pooled = {c: _rms_deg(np.radians(np.concatenate(errors[c]))) for c in candidates}
-    biggest = {c: float(np.max(np.abs(np.concatenate(errors[c])))) for c in candidates}
+    pooled = {c: _rms_deg(np.concatenate(errors[c])) for c in candidates}
+    biggest = {c: _max_deg(np.concatenate(errors[c])) for c in candidates}
     return {"folds": rows, "pooled": pooled, "max": biggest}
 
 
@@ -560,11 +567,11 @@ def _peer_folds(config, params, run, a: int, b: int, cv: dict, choice: str, nois
     for row in cv["folds"]:
         lo, hi = row["fold"]
         beta = _ekf_betas(config, _with_values(params, row[choice]["parameters"]), run, a, b, [noise])[0]
-        err = np.degrees(beta - truth)[lo - a:hi - a]
-        row["ekf_held_out_rms_deg"] = _rms_deg(np.radians(err))
+        err = (beta - truth)[lo - a:hi - a]
+        row["ekf_held_out_rms_deg"] = _rms_deg(err)
         errors.append(err)
-    cv["pooled"]["ekf"] = _rms_deg(np.radians(np.concatenate(errors)))
-    cv["max"]["ekf"] = float(np.max(np.abs(np.concatenate(errors))))
+    cv["pooled"]["ekf"] = _rms_deg(np.concatenate(errors))
+    cv["max"]["ekf"] = _max_deg(np.concatenate(errors))
 
 
 # --- the files --------------------------------------------------------------------------------------
