@@ -6,7 +6,7 @@
   :func:`record_path`): a truncated or overwritten extension is refused before it is loaded (a
   truncated shared object that is loaded dies of SIGBUS, with no message);
 * the hashes of the user's files the design was made from -- the observer file, its parameter
-  file and its model -- compiled into the extension (its ``SOURCES`` constant,
+  file, its model and the modules beside the model that it imports -- compiled into the extension (its ``SOURCES`` constant,
   :func:`source_digests`): an extension whose observer file, parameters or model changed since it
   was built is refused, naming the file. Each file is hashed for what it says, not how it is
   written (:data:`HASHING`), by the same functions the design lock's hash calls
@@ -29,6 +29,8 @@ from pathlib import Path
 RECORD_SUFFIX = ".sha256"
 # The roles of the recorded sources, in the order the messages name them.
 ROLES = ("observer file", "parameters", "model")
+# The modules beside a user's model that it imports, each hashed byte for byte (as the design lock does).
+HELPERS = "model helpers"
 # How the recorded sources are hashed (the record's "hashing" entry): 2, each file for what it says
 # (module docstring). A record without the entry (an extension built before) hashed the parameter
 # file and the model byte for byte, and is checked by that rule.
@@ -138,13 +140,17 @@ def _relative(path, base: Path) -> str:
         return str(Path(path).resolve())
 
 
-def source_digests(observer_file, parameters, model) -> dict:
+def source_digests(observer_file, parameters, model, helpers=()) -> dict:
     """{role: [path relative to the observer file's folder, SHA-256]} of the files a design is
-    made from, as ``uiogen build`` compiles them into the extension."""
+    made from, as ``uiogen build`` compiles them into the extension; ``helpers``: the modules beside
+    a user's model that it imports (``model helpers``: [[path, SHA-256 of the bytes], ...])."""
     base = Path(observer_file).parent
-    return {"observer file": [Path(observer_file).name, observer_file_sha256(observer_file)],
-            "parameters": [_relative(parameters, base), parameters_sha256(parameters)],
-            "model": [_relative(model, base), model_sha256(model)], "hashing": HASHING}
+    out = {"observer file": [Path(observer_file).name, observer_file_sha256(observer_file)],
+           "parameters": [_relative(parameters, base), parameters_sha256(parameters)],
+           "model": [_relative(model, base), model_sha256(model)], "hashing": HASHING}
+    if helpers:
+        out[HELPERS] = [[_relative(h, base), file_sha256(h)] for h in helpers]
+    return out
 
 
 def changed_sources(recorded: dict, observer_file) -> list:
@@ -179,6 +185,12 @@ def changed_sources(recorded: dict, observer_file) -> list:
             continue
         if now != digest:
             changed.append((role, path))
+    for rel, digest in recorded.get(HELPERS, ()):
+        try:
+            if file_sha256(base / rel) != digest:
+                changed.append(("model helper", base / rel))
+        except FileNotFoundError:
+            continue
     return changed
 
 

@@ -66,20 +66,74 @@ def _imports(path: Path, module_level: bool = False) -> tuple:
     return tuple(m for m in found if m and m.split(".")[0] in PACKAGES)
 
 
+def _beside(folder: Path, module: str) -> list:
+    """Files of ``module`` (and of the packages above it) found in ``folder``: a user's model imports
+    the modules beside it by their bare names (``from tyre_data import C_SCALE``)."""
+    parts, out = module.split("."), []
+    for k in range(1, len(parts) + 1):
+        base = folder.joinpath(*parts[:k])
+        for f in (base / "__init__.py", base.with_suffix(".py")):
+            if f.is_file():
+                out.append(f.resolve())
+                break
+    return out
+
+
+@functools.lru_cache(maxsize=None)
+def _user_imports(path: Path) -> tuple:
+    """Module names imported anywhere in a user's file (absolute, or relative to its folder)."""
+    try:
+        tree = ast.parse(path.read_text(), str(path))
+    except (SyntaxError, UnicodeDecodeError, ValueError):
+        return ()               # refused with its own message where the file is imported
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level <= 1:
+            mod = node.module or ""
+            found += [f"{mod}.{a.name}" if mod else a.name for a in node.names] + ([mod] if mod else [])
+    return tuple(found)
+
+
+def user_closure(path) -> list:
+    """A user's file and every module beside it that it imports, transitively (a helper module
+    with the tyre data is as much a design input as the model)."""
+    start = Path(path).resolve()
+    seen, todo = {start}, [start]
+    while todo:
+        f = todo.pop()
+        for mod in _user_imports(f):
+            for g in _beside(f.parent, mod):
+                if g not in seen:
+                    seen.add(g)
+                    todo.append(g)
+    return sorted(seen, key=_order)
+
+
+def helper_modules(model) -> list:
+    """The modules beside a user's model that it imports (none for a model of the checkout: the
+    toolchain's stamp covers those byte for byte)."""
+    model = Path(model).resolve()
+    return [f for f in user_closure(model) if f != model] if _outside(model) else []
+
+
 def closure(*modules: str, files=()) -> list:
     """Sorted files of ``modules`` and of every project module they import, transitively.
 
     A module counts with every import it makes (those inside functions run when its code
     runs); the packages above a module count with the imports their ``__init__`` makes when
     imported (a family's package wires its validation lazily: designs do not depend on it).
-    ``files``: more source files, e.g. a user's model outside the project, followed the same way.
+    ``files``: more source files, e.g. a user's model outside the project, followed the same way,
+    with the modules beside it that it imports (:func:`user_closure`).
     """
     seen, todo = set(), [(m, False) for m in modules]
     for f in files:
         f = Path(f).resolve()
-        if f not in seen:
-            seen.add(f)
-            todo += [(m, False) for m in _imports(f)]
+        for g in (user_closure(f) if _outside(f) else [f]):
+            if g not in seen:
+                seen.add(g)
+                todo += [(m, False) for m in _imports(g)]
     done = set()
     while todo:
         mod, parent_only = todo.pop()
@@ -95,6 +149,15 @@ def closure(*modules: str, files=()) -> list:
             module_level = parent_only or k < len(parts)
             todo += [(m, False) for m in _imports(f, module_level) if (m, False) not in done]
     return sorted(seen, key=_order)
+
+
+def _outside(f: Path) -> bool:
+    """Whether ``f`` lies outside the checkout (a user's file)."""
+    try:
+        f.relative_to(ROOT)
+        return False
+    except ValueError:
+        return True
 
 
 def _order(f: Path) -> tuple:

@@ -253,7 +253,9 @@ def source_record(config: observers.ObserverConfig) -> dict:
     if not config.source:
         return {}
     try:
-        return integrity.source_digests(config.source, config.parameter_path, config.model_path)
+        from ..design.sources import helper_modules
+        return integrity.source_digests(config.source, config.parameter_path, config.model_path,
+                                        helper_modules(config.model_path))
     except integrity.SourceFileUnreadable as exc:
         from ..errors import ConfigurationError
         raise ConfigurationError(f"{config.source}: {exc.args[0]}", source=str(config.source)) from None

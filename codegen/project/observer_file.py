@@ -25,7 +25,7 @@ from pathlib import Path
 from ..errors import ConfigurationError, ModelDefinitionError, UnknownObserverError
 from ..model import ModelDefinition
 from ..model.definition import check_unit_keys
-from . import columns, precision
+from . import columns, model_reads, precision
 from .settings import Rule, config_error, parse_table, suggest, toml_error
 from python_bindings.workspace import PACKAGE_ROOT, Workspace
 
@@ -38,7 +38,8 @@ OBSERVERS_DIR = MODELS_DIR / "observers"
 COMMON_KEYS = {
     "family": Rule(str, required=True, doc="an observer family (codegen.families)"),
     "model": Rule(str, required=True, doc="model_defs/MODEL.py, or a .py path relative to this file"),
-    "parameters": Rule(str, required=True, doc="a file in model_defs/params, or a path relative to this file"),
+    "parameters": Rule(str, required=True,
+                       doc="a path relative to this file (a built-in observer: a file in model_defs/params)"),
     "sample_time": Rule(float, gt=0, required=True, doc="s"),
     "design": Rule(dict),
     "data": Rule(dict, doc="the column map of a logged run (uiogen validate --data; codegen.project.columns)"),
@@ -176,8 +177,11 @@ def _model_file(model: str, folder: Path) -> Path:
 
 
 def _parameter_file(parameters: str, folder: Path) -> Path:
-    local = (folder / parameters).resolve()
-    return local if folder != OBSERVERS_DIR and ("/" in parameters or local.is_file()) else PARAMS_DIR / parameters
+    """A built-in observer's parameter file is the library's (``model_defs/params/NAME``); a user's
+    observer file names its own, relative to its folder, and never a built-in of the same name: a
+    project's file deleted or misspelt would otherwise design another car without a word, and a
+    library file would change the user's design when uiogen is upgraded."""
+    return PARAMS_DIR / parameters if folder == OBSERVERS_DIR else (folder / parameters).resolve()
 
 
 def builtin_model(name: str):
@@ -198,7 +202,9 @@ def load_module(path: Path, name: str):
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     try:
-        spec.loader.exec_module(module)
+        with model_reads.watching(path) as reads:
+            spec.loader.exec_module(module)
+        model_reads.check(path, reads)
         if isinstance(getattr(module, "MODEL", None), ModelDefinition):
             check_unit_keys(module.MODEL)
     except ModelDefinitionError as exc:
@@ -317,10 +323,18 @@ def _parse(path: Path, overrides: dict | None = None, project: str | Path | None
                            f"relative to {folder})", suggest(data["model"], models))
     param_file = _parameter_file(data["parameters"], folder)
     if not param_file.is_file():
-        files = sorted(p.name for p in PARAMS_DIR.glob("*.toml"))
+        if builtin:
+            files = sorted(p.name for p in PARAMS_DIR.glob("*.toml"))
+            raise config_error(source, None, "parameters", data["parameters"],
+                               f"no file {param_file}; built-in parameter files: {', '.join(files)}",
+                               suggest(data["parameters"], files))
+        library = PARAMS_DIR / Path(str(data["parameters"])).name
+        files = sorted(p.name for p in folder.glob("*.toml") if p.resolve() != path.resolve())
+        hint = (f"; the built-in parameter file of that name is {library}: to start from it, copy it beside the "
+                f"observer file (cp {library} {folder}/)" if library.is_file() else "")
         raise config_error(source, None, "parameters", data["parameters"],
-                           f"no file {param_file}; built-in parameter files: {', '.join(files)} (or a path "
-                           f"relative to {folder})", suggest(data["parameters"], files))
+                           f"no file {param_file} (a path relative to {folder}: an observer file of your own names "
+                           f"its own parameter file, never a built-in one){hint}", suggest(data["parameters"], files))
     doc = ""
     with path.open() as fh:
         for line in fh:

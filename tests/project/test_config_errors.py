@@ -42,8 +42,12 @@ def _edit(text: str, pattern: str, repl: str) -> str:
 
 
 def observer_file(tmp_path, name, pattern=None, repl=None, *, stem=None) -> Path:
-    """A copy of committed observer ``name`` in tmp_path with one regex substitution."""
+    """A copy of committed observer ``name`` in tmp_path with one regex substitution, its built-in
+    parameter file copied beside it (an observer file of one's own names its own parameter file)."""
     text = (OBS_DIR / f"{name}.toml").read_text()
+    params = re.search(r'(?m)^parameters = "([^"]+)"', text).group(1)
+    if not (tmp_path / params).exists():
+        (tmp_path / params).write_text((PARAMS_DIR / params).read_text())
     if pattern is not None:
         text = _edit(text, pattern, repl)
     path = tmp_path / f"{stem or name}.toml"

@@ -129,12 +129,12 @@ def test_ctrl_c_during_a_design_is_one_line(project):
                      + model.read_text())
     proc = subprocess.Popen([sys.executable, "-m", "codegen.cli", "design", str(project / "obs1.toml"), "--update"],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 60
+    # waits for events (the marker, the exit), never for a time a loaded machine could overrun
     while not marker.exists():
-        assert proc.poll() is None and time.time() < deadline, proc.communicate()
+        assert proc.poll() is None, proc.communicate()
         time.sleep(0.1)
     proc.send_signal(signal.SIGINT)
-    out, err = proc.communicate(timeout=60)
+    out, err = proc.communicate()
     assert proc.returncode == 130 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert "interrupted: uiogen design" in err and "previous state is kept" in err
     assert not (project / "generated_c").exists()

@@ -14,6 +14,7 @@ probe 6), each a typed error or a refusal now:
   results off by 1e295); a state that a run() of another thread is using: refused.
 """
 import os
+import re
 import resource
 import subprocess
 import sys
@@ -28,7 +29,10 @@ from codegen.project import observer_file as observers
 from python_bindings import load
 
 ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
-OBSERVER_FILE = (ROOT / "model_defs" / "observers" / "algebraic_uio_example1.toml").read_text()
+# an observer file of one's own names its parameter file by a path (here the built-in file's, absolute)
+OBSERVER_FILE = re.sub(r'(?m)^parameters = "([^"]+)"',
+                       lambda m: f'parameters = "{ROOT / "model_defs" / "params" / m.group(1)}"',
+                       (ROOT / "model_defs" / "observers" / "algebraic_uio_example1.toml").read_text())
 DESIGNED = "ts_fuzzy_uio"          # designs in seconds; its lock (10.5 kB) does not fit 8 kB
 
 

@@ -74,6 +74,8 @@ def _observer(folder: Path, **changes) -> Path:
     """stanford_sideslip's observer file with a [data] table mapping the Stanford columns;
     ``changes``: INPUT = "inline table" replacing its entry."""
     text = (ROOT / "model_defs" / "observers" / f"{NAME}.toml").read_text()
+    params = re.search(r'(?m)^parameters = "([^"]+)"', text).group(1)       # an observer file of one's own
+    (folder / params).write_text((ROOT / "model_defs" / "params" / params).read_text())   # names its own file
     entries = {k: f'{{ column = "{c}", unit = "{u}" }}' for k, (c, u) in MAP.items()}
     entries.update(changes)
     text += "\n[data]\ntime = \"t\"\n\n[data.inputs]\n" + "".join(f"{k} = {v}\n" for k, v in entries.items())
