@@ -434,11 +434,14 @@ def _scale_mixtures(model) -> list:
         return ", ".join(f"{n} in {declared[n]}" for n in names) or "pure numbers"
 
     def agree(parts, what):
-        where, what = what
+        # ``what`` = (where, (text, expr)): the message is only written when the parts disagree
+        # (printing every sum of a tyre model on every check took most of its time)
+        where, (text, shown) = what
         fixed = [(a, f) for a, f in parts if f is not None]
         for a, f in fixed[1:]:
             b, g = fixed[0]
             if not same(f, g):
+                what = f"{text}{shown}"
                 # name the simpler part first: it is usually the one declared in another unit
                 (a, f), (b, g) = sorted(((a, f), (b, g)), key=lambda t: sp.count_ops(t[0]))
                 say(where, f"{what}, {a} ({desc(a)}) is {f / g:.10g} times the unit of {b} ({desc(b)}), and "
@@ -452,7 +455,7 @@ def _scale_mixtures(model) -> list:
         if expr.is_Symbol:
             return scales.get(str(expr))
         if expr.is_Add:
-            return agree([(a, scale(a, where)) for a in expr.args], (where, f"in the sum {expr}"))
+            return agree([(a, scale(a, where)) for a in expr.args], (where, ("in the sum ", expr)))
         if expr.is_Mul:
             fs = [scale(a, where) for a in expr.args]
             return None if any(f is None for f in fs) else math.prod(fs)
@@ -466,16 +469,16 @@ def _scale_mixtures(model) -> list:
         if isinstance(expr, (sp.Abs, sp.re, sp.im)):
             return scale(expr.args[0], where)
         if _is_minmax(expr):                             # a literal 0 fits any scale: Min(a_x, 0)
-            return agree([(a, scale(a, where)) for a in expr.args if not a.is_zero], (where, f"in {expr}"))
+            return agree([(a, scale(a, where)) for a in expr.args if not a.is_zero], (where, ("in ", expr)))
         if isinstance(expr, sp.Piecewise):
             for _, cond in expr.args:
                 if isinstance(cond, sp.core.relational.Relational):
                     agree([(x, scale(x, where)) for x in (cond.lhs, cond.rhs) if not x.is_zero],
-                          (where, f"in the condition {cond}"))
+                          (where, ("in the condition ", cond)))
             return agree([(v, scale(v, where)) for v, _ in expr.args if not v.is_zero],
-                         (where, "among the branches of a Piecewise"))
+                         (where, ("among the branches of a Piecewise", "")))
         if isinstance(expr, sp.atan2):
-            agree([(x, scale(x, where)) for x in expr.args], (where, f"in {expr}"))
+            agree([(x, scale(x, where)) for x in expr.args], (where, ("in ", expr)))
             return 1.0
         if isinstance(expr, (sp.sign, sp.Heaviside)):
             scale(expr.args[0], where)

@@ -289,6 +289,44 @@ def _side_function(expr):
     return (lambda a: fn(*(a[k] for k in keys))), keys
 
 
+def _opaque(exprs, hidden) -> tuple:
+    """``exprs`` with each largest part that holds a hidden signal and is not built by +, * and
+    powers (a tyre law's Min/Max or Piecewise, an atan of the slip) replaced by a symbol of its
+    own, the same symbol in every expression; and those symbols."""
+    hidden, found = set(hidden), {}
+
+    def walk(e):
+        if not (e.free_symbols & hidden) or e.is_Symbol:
+            return
+        if e.is_Add or e.is_Mul or (e.is_Pow and e.exp.is_number):
+            for a in e.args:
+                walk(a)
+        elif e not in found:
+            found[e] = sp.Dummy(f"opaque{len(found)}")
+    for e in exprs:
+        walk(e)
+    return [e.xreplace(found) for e in exprs], list(found.values())
+
+
+def _identity(h, f, hidden, is_measured):
+    """(i, c, g) with ``h = c f[i] + g``, c and g free of the ``hidden`` signals, or None."""
+    def hides(e) -> bool:
+        return any(e.has(v) for v in hidden)
+
+    for i, fi in enumerate(f):
+        v0 = next((v for v in hidden if fi.has(v) and sp.diff(fi, v) != 0), None)
+        if v0 is None:
+            continue
+        c = sp.simplify(sp.diff(h, v0) / sp.diff(fi, v0))
+        if c == 0 or hides(c) or not is_measured(c):
+            continue
+        g = sp.simplify(sp.expand(h - c * fi))
+        if any(sp.simplify(sp.diff(g, v)) != 0 for v in hidden if g.has(v)) or hides(g):
+            continue
+        return i, c, g
+    return None
+
+
 def derive(model, params, input_names) -> list:
     """The relations between measured signals that the model's equations give (see the module
     docstring): output identities, kinematic identities and low-slip steady states, as
@@ -353,7 +391,8 @@ def derive(model, params, input_names) -> list:
     # output identities: y = c dx/dt + g(measured)
     for out, expr in model.outputs:
         y = sp.Symbol(f"y_{out}")
-        h = sp.sympify(expr).xreplace(measured_state)
+        with sp.evaluate(False):                  # as the dynamics above: no Min/Max re-evaluated
+            h = sp.sympify(expr).xreplace(measured_state)
         if y not in measured or h in measured_state.values():
             continue
         if not hides(h):
@@ -361,16 +400,13 @@ def derive(model, params, input_names) -> list:
                 relations.append(_relation(points, functions, f"{y} = {_sstr(h)} (output {out} of the model)",
                                            str(y), y, numeric(h), "identity", IDENTITY_BAND, model))
             continue
-        for i, fi in enumerate(f):
-            v0 = next((v for v in hidden if fi.has(v) and sp.diff(fi, v) != 0), None)
-            if v0 is None:
-                continue
-            c = sp.simplify(sp.diff(h, v0) / sp.diff(fi, v0))
-            if c == 0 or hides(c) or not is_measured(c):
-                continue
-            g = sp.simplify(sp.expand(h - c * fi))
-            if any(sp.simplify(sp.diff(g, v)) != 0 for v in hidden if g.has(v)) or hides(g):
-                continue
+        # first with the tyre laws as opaque symbols (exact where the output and the dynamics share
+        # them, as a_y and dv_y/dt share the axle forces: no derivative of a saturation), then as written
+        (h_o, *f_o), opaque = _opaque([h, *f], hidden)
+        found = _identity(h_o, f_o, [*hidden, *opaque], is_measured) if opaque else None
+        found = found or _identity(h, f, hidden, is_measured)
+        if found is not None:
+            i, c, g = found
             x = model.states[i]
             if x in measured_state:               # exact: y - c d(y_x)/dt = g
                 dx = _derivative_symbol(str(measured_state[x]))
@@ -382,7 +418,6 @@ def derive(model, params, input_names) -> list:
                         f"{x} unmeasured, its derivative averages out)")
             relations.append(_relation(points, functions, text, str(y), numeric(lhs), numeric(g), "identity",
                                        IDENTITY_BAND, model))
-            break
 
     # kinematic identities: d(y_x)/dt = f_x(measured)
     chained = set()
@@ -402,10 +437,14 @@ def derive(model, params, input_names) -> list:
         unknowns = unmeasured + [x]
         # sp.S.Zero, not 0: xreplace returns the replacement itself when the whole equation is one
         # of the replaced symbols (d roll/dt = roll_rate), and a Python int has no .has
-        eqs = [sp.sympify(model.dynamics[model.states.index(s)]).xreplace({d: sp.S.Zero for d in model.unknown_inputs})
-               .xreplace({s: y for s, y in measured_state.items() if s != x}) for s in unknowns]
-        if any(hides(e.xreplace({s: sp.S.Zero for s in unknowns})) or not (e.free_symbols - set(unknowns)) <= allowed
-               for e in eqs):
+        # unevaluated (numeric() keeps them so): an evaluated Min/Max with zeros put in runs sympy's
+        # simplifier; a hidden signal left in only by that is looked at evaluated
+        zero_ui, other = {d: sp.S.Zero for d in model.unknown_inputs}, {s: y for s, y in measured_state.items() if s != x}
+        with sp.evaluate(False):
+            eqs = [sp.sympify(model.dynamics[model.states.index(s)]).xreplace(zero_ui).xreplace(other) for s in unknowns]
+            at_zero = [e.xreplace({s: sp.S.Zero for s in unknowns}) for e in eqs]
+        if any((hides(z) and hides(sp.sympify(e).xreplace({s: sp.S.Zero for s in unknowns}).doit()))
+               or not (e.free_symbols - set(unknowns)) <= allowed for e, z in zip(eqs, at_zero)):
             continue
         pred = _SteadyState([numeric(e) for e in eqs], unknowns, len(unknowns) - 1,
                             {g.symbol for g in model.scheduling} | set(derived))

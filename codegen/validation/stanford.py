@@ -39,6 +39,7 @@ is tuned on ``beta_true``.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -492,6 +493,7 @@ STANFORD_CAR = VehicleParams(m=982.0, lf=1.33, lr=1.07, iz=982.0 / 12.0 * (1.7 *
 """Parameters used with this data by its authors (data README, ``BetaStanfordLinear.m``)."""
 
 
+@functools.lru_cache(maxsize=8)
 def _equiripple_highpass(fst: float = 0.15, fp: float = 0.25, ast_db: float = 60.0,
                          ap_db: float = 1.0) -> np.ndarray:
     """Minimum-order equiripple FIR high-pass (MATLAB ``fdesign.highpass('Fst,Fp,Ast,Ap')``).
@@ -518,8 +520,9 @@ def _equiripple_highpass(fst: float = 0.15, fp: float = 0.25, ast_db: float = 60
         stop = np.abs(H[f <= fst]).max()
         passb = np.abs(np.abs(H[f >= fp]) - 1).max()
         if stop <= ds * 1.0001 and passb <= dp * 1.0001:
-            return h
+            break
         order += 2
+    h.setflags(write=False)             # shared by every caller (lru_cache)
     return h
 
 
@@ -529,6 +532,7 @@ def highpass_std(x) -> float:
     Used as the sensor-noise level estimate (sample std, ddof = 1, as MATLAB ``std``).
     """
     from scipy import signal
+    # the taps are one design (Parks-McClellan, iterated): made once per process, read-only
     return float(np.std(signal.lfilter(_equiripple_highpass(), [1.0], np.asarray(x, float)), ddof=1))
 
 
