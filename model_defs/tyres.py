@@ -26,7 +26,7 @@ def fiala_slip_force(t, cornering_stiffness, mu_fz, clamp=True):
     """
     t_slide = 3 * mu_fz / cornering_stiffness
     if clamp:
-        t = sp.Min(sp.Max(t, -t_slide), t_slide)
+        t = _symbolic(sp.Min, _symbolic(sp.Max, t, -t_slide), t_slide)
     c = cornering_stiffness
     return c * t - c ** 2 / (3 * mu_fz) * sp.Abs(t) * t + c ** 3 / (27 * mu_fz ** 2) * t ** 3
 
@@ -45,4 +45,11 @@ def friction_circle_capacity(mu_fz, f_x, floor):
     can exceed mu F_z on one axle (hard braking moves load forward), and a capacity of 0 would
     make the sliding slip 0. Pure cornering (f_x = 0) gives mu F_z exactly.
     """
-    return sp.sqrt(sp.Max(mu_fz ** 2 - f_x ** 2, (floor * mu_fz) ** 2))
+    return sp.sqrt(_symbolic(sp.Max, mu_fz ** 2 - f_x ** 2, (floor * mu_fz) ** 2))
+
+
+def _symbolic(minmax, *args):
+    """``minmax(*args)`` unevaluated when an argument holds a symbol: sympy's Min/Max constructor then
+    runs its general simplifier (0.3 s per import of a model with two axles) and leaves arguments
+    like these as they are; with numbers only, the number."""
+    return minmax(*args, evaluate=not any(sp.sympify(a).free_symbols for a in args))

@@ -1,8 +1,13 @@
 import json
 import os
+import tempfile
 from pathlib import Path
 
 import pytest
+
+# The derived-results cache (codegen.model.cache) of this test session only, for its subprocesses too:
+# a run starts cold, and nothing a developer's own runs kept is read.
+os.environ["UIOGEN_CACHE_DIR"] = tempfile.mkdtemp(prefix="uiogen-test-cache-")
 
 from codegen.project import observer_file as observers
 from codegen import pipeline

@@ -49,6 +49,7 @@ kind, against a unit slip, never against a plausible range. That is said, not si
 from __future__ import annotations
 
 import re
+import sys
 from dataclasses import dataclass, field
 from fractions import Fraction
 
@@ -335,7 +336,16 @@ def check_units(model) -> None:
         naming the model, each term in another unit than its equation needs (or each declared
         parameter unit the equations contradict), and each output declared at another scale than
         the signal it is.
+
+    A model that passed is remembered by its content (:mod:`codegen.model.cache`, keyed also by this
+    module's and the definition's source and sympy's version): the analysis is sympy work that gives
+    the same answer every time, and every verb checks the model again.
     """
+    from . import cache, definition
+    digest = cache.key(UNITS_CHECKED, {"model": cache.model_digest(model), "sympy": sp.__version__,
+                                       "code": cache.code_digest(sys.modules[__name__], definition)})
+    if cache.read(UNITS_CHECKED, digest) is not None:
+        return
     _check_unit_strings(model)
     problems, analysis = [], analysis_of(model, free_numbers=True)
     if analysis.inconsistencies:
@@ -347,6 +357,10 @@ def check_units(model) -> None:
                         f"(each term of d x/dt must be in the unit of x per second, an output in its declared unit, "
                         f"the argument of sin, exp, ... dimensionless; angles are dimensionless; a model in "
                         f"normalized time declares no unit for its states)")
+    cache.write(UNITS_CHECKED, digest, {"units": "consistent"})
+
+
+UNITS_CHECKED = "units_checked"
 
 
 def _check_unit_strings(model) -> None:
@@ -677,10 +691,30 @@ _CACHE: dict = {}
 
 def analysis_of(model, free_numbers: bool = False) -> Analysis:
     """:func:`infer`, once per model object and reading of the numbers (the analysis is exact and
-    costs a few sympy solves)."""
+    costs a few sympy solves), and across runs once per model content (:mod:`codegen.model.cache`)."""
     key = (id(model), free_numbers)
     hit = _CACHE.get(key)
     if hit is None or hit[0] is not model:
-        hit = (model, infer(model, free_numbers=free_numbers))
+        hit = (model, _stored_analysis(model, free_numbers))
         _CACHE[key] = hit
     return hit[1]
+
+
+ANALYSIS = "unit_analysis"
+
+
+def _stored_analysis(model, free_numbers: bool) -> Analysis:
+    from . import cache, definition
+    digest = cache.key(ANALYSIS, {"model": cache.model_digest(model), "free_numbers": free_numbers,
+                                  "sympy": sp.__version__, "code": cache.code_digest(sys.modules[__name__], definition)})
+    stored = cache.read(ANALYSIS, digest)
+    if stored is not None:
+        try:
+            return Analysis({p: None if d is None else tuple(Fraction(x) for x in d) for p, d in stored["dims"].items()},
+                            [tuple(pq) for pq in stored["same"]], list(stored["inconsistencies"]))
+        except (KeyError, TypeError, ValueError, ZeroDivisionError, AttributeError):
+            pass                         # a record of another shape: computed again below
+    out = infer(model, free_numbers=free_numbers)
+    cache.write(ANALYSIS, digest, {"dims": {p: None if d is None else [str(x) for x in d] for p, d in out.dims.items()},
+                                   "same": [list(pq) for pq in out.same], "inconsistencies": list(out.inconsistencies)})
+    return out
