@@ -260,6 +260,8 @@ def open_observer(workspace: Workspace, name: str, argument: str | None = None,
     return observer_class(module)(module, path)
 
 
+_ABSENT = object()
+
 # {module key: (device, inode, size, mtime) of the file the module held under it was loaded from}
 _LOADED_FROM: dict = {}
 
@@ -279,8 +281,19 @@ def _import_extension(name: str, path: Path, argument: str, again: bool):
 
     def imported(file: Path):
         spec = importlib.util.spec_from_file_location(f"_{name}", file)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
+        # CPython files a single-phase extension module under its own name (_NAME) in sys.modules as
+        # it loads: an observer named socket, io or ssl would replace the standard library's _socket,
+        # _io, _ssl there. The module is held under a key private to uiogen (open_observer), so
+        # whatever sys.modules held under _NAME before is put back.
+        before = sys.modules.get(spec.name, _ABSENT)
+        try:
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+        finally:
+            if before is _ABSENT:
+                sys.modules.pop(spec.name, None)
+            else:
+                sys.modules[spec.name] = before
         return module
     if not again:
         return imported(path)

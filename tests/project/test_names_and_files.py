@@ -258,3 +258,22 @@ def test_the_description_leaves_out_the_starters_commands_and_notes(tmp_path):
     doc = observers.get(str(path)).doc
     assert doc.startswith("mine: algebraic_uio for my rig. Example 1 of Ichalal"), doc
     assert not any(w in doc for w in ("next:", "trial design", "note:", "uiogen ")), doc
+
+
+@pytest.mark.slow       # builds an extension
+def test_an_observer_named_like_a_standard_module_leaves_it_alone(tmp_path):
+    """An observer called socket compiles to _socket: loading it must not replace the standard
+    library's _socket in sys.modules (import socket, ssl failed after load)."""
+    project = tmp_path / "p"
+    for args in (("new", str(project), "--family", "linf_uio", "--name", "socket"),
+                 ("generate", str(project / "socket.toml")), ("build", str(project / "socket.toml"))):
+        proc = _cli(*args)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+    probe = ("import sys\nimport python_bindings as pb\nobs = pb.load(sys.argv[1])\n"
+             "import socket, ssl\nassert socket.socket and ssl.SSLContext\n"
+             "assert 'lib-dynload' in getattr(sys.modules['_socket'], '__file__', 'lib-dynload') "
+             "and hasattr(sys.modules['_socket'], 'socket'), sys.modules['_socket']\n"
+             "x = obs.initial_state()\nprint('ok', obs.name)\n")
+    out = subprocess.run([sys.executable, "-c", probe, str(project / "socket.toml")], capture_output=True, text=True,
+                         cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert out.returncode == 0 and out.stdout.strip() == "ok socket", out.stderr[-2000:]
