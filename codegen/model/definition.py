@@ -20,6 +20,7 @@ import sympy as sp
 from ..errors import (MissingParameterError, ModelDefinitionError, NotAffineError, SchedulingBoundsError,
                       UnknownParameterError, brief)
 from ..project.settings import Rule, check_keys, config_error, parse_table, parse_value, suggest
+from .names import RULE as NAME_RULE, c_name_problem, suggest as suggest_name
 
 
 @dataclass(frozen=True)
@@ -131,6 +132,16 @@ class ModelDefinition:
                 raise ModelDefinitionError(
                     f"model {self.name!r}: derived input {w.symbol} uses {', '.join(sorted(stray))}; "
                     f"it may only use parameters, measured outputs y_<name> and input scheduling signals")
+        signals = [*(("state", s) for s in self.states), *(("known input", s) for s in self.known_inputs),
+                   *(("unknown input", s) for s in self.unknown_inputs),
+                   *(("scheduling signal", g.symbol) for g in self.scheduling),
+                   *(("derived input", w.symbol) for w in self.derived_inputs), *(("output", n) for n, _ in self.outputs)]
+        for role, sym in signals:
+            why = c_name_problem(str(sym))
+            if why is not None:       # a field of the step's C structs and of the Python API (codegen.model.names)
+                raise ModelDefinitionError(
+                    f"model {self.name!r}: the {role} {str(sym)!r} {why}; a signal's name is a C and Python "
+                    f"identifier of the generated step: {NAME_RULE} (e.g. {suggest_name(str(sym))!r})")
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
             raise ModelDefinitionError(f"model {self.name!r}: symbol(s) declared twice: {', '.join(dup)}")
@@ -534,6 +545,62 @@ def check_parameter_values(model, values: Mapping[str, float], source: str, sect
                                + (f" (model {model.name!r} declares {p}: {reasons})" if reasons else ""))
 
 
+def _model_equations(model) -> list:
+    """[(where, expression)] of every equation a design evaluates."""
+    dynamics = list(getattr(model, "dynamics", ()))
+    pairs = dynamics if dynamics and isinstance(dynamics[0], tuple) else zip(getattr(model, "states", ()), dynamics)
+    out = [(f"d{x}/dt", e) for x, e in pairs]         # (state, expression) pairs: an interconnected model
+    out += [(f"output {n}", e) for n, e in getattr(model, "outputs", ())]
+    out += [(f"derived input {w.symbol}", w.expr) for w in getattr(model, "derived_inputs", ())]
+    out += [(f"scheduling signal {g.symbol}", g.derived) for g in getattr(model, "scheduling", ())
+            if g.derived is not None]
+    return out
+
+
+def check_singular_values(model, values: Mapping[str, float], source: str) -> None:
+    """Refuse parameter values that make a part of the model's equations made of parameters alone
+    infinite, undefined or complex (``1/M`` with M = 0, ``sqrt(l_f - l_r)`` with l_f < l_r): the
+    design would otherwise fail deep inside with a numeric error, or go on with a model that is not
+    the one written. Each largest such part is evaluated once with the file's values.
+
+    Raises
+    ------
+    ConfigurationError
+        naming the file, the parameters and their values, the equation and the part.
+    """
+    params = set(model.parameters)
+    subs = {p: sp.Float(values[str(p)]) for p in params if str(p) in values}
+    seen = set()
+
+    def visit(where, e):
+        if e in seen or not isinstance(e, sp.Basic) or e.is_Atom:
+            return
+        seen.add(e)
+        free = e.free_symbols
+        if free and free <= params:
+            v = e.xreplace(subs)
+            bad = v.has(sp.zoo, sp.oo, -sp.oo, sp.nan) or (v.is_number and v.is_extended_real is False)
+            if not bad and v.is_number:
+                try:
+                    bad = not math.isfinite(float(v))
+                except (TypeError, ValueError):
+                    bad = True
+            if bad:
+                names = sorted(str(q) for q in free)
+                what = ("infinite (a division by zero)" if v.has(sp.zoo, sp.oo, -sp.oo) else
+                        "undefined" if v.has(sp.nan) else f"complex ({brief(sp.N(v, 6))}: a root or log of a negative "
+                                                         f"number)")
+                raise config_error(source, "parameters", ", ".join(names),
+                                   values[names[0]] if len(names) == 1 else [values[q] for q in names],
+                                   f"model {model.name!r}: with this value its {where} holds {brief(e)}, which is "
+                                   f"{what}; the values must keep every part of the equations finite and real")
+            return
+        for a in e.args:
+            visit(where, a)
+    for where, expr in _model_equations(model):
+        visit(where, sp.sympify(expr))
+
+
 def check_signal_tables(model: ModelDefinition, params: ParameterSet) -> None:
     """Refuse an entry of the parameter file's ``[scheduling.NAME]``, ``[state_bounds]`` or
     ``[inputs.NAME]`` tables that names no signal of the model (a misspelt signal would otherwise
@@ -583,6 +650,7 @@ def parameter_substitution(model: ModelDefinition, params: ParameterSet) -> dict
             f"parameter file {params.source} sets {', '.join(unknown)}, which model "
             f"{model.name!r} does not use (declared: {', '.join(needed)})")
     check_parameter_values(model, params.values, params.source)
+    check_singular_values(model, params.values, params.source)
     from .dimensions import check_plausibility, check_units
     check_units(model)
     check_plausibility(model, params.values, params.source, params.accepted)

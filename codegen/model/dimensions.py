@@ -91,6 +91,8 @@ PLAUSIBLE = {
     _dim(2, 1, -1): ("rotational damping", "N m s", 1.0e-5, 1.0e5),
     _dim(1, 0, -2): ("acceleration", "m/s^2", 0.1, 100.0),
 }
+#: kinds whose value is a body's own property and positive (a length or a force can be signed)
+POSITIVE_KINDS = ("mass", "moment of inertia")
 #: a ratio this large between two parameters of the same kind is refused (a kN beside an N)
 SAME_KIND_RATIO = 100.0
 
@@ -338,12 +340,12 @@ def check_units(model) -> None:
         the signal it is.
 
     A model that passed is remembered by its content (:mod:`codegen.model.cache`, keyed also by this
-    module's and the definition's source and sympy's version): the analysis is sympy work that gives
+    module's source and sympy's version): the analysis is sympy work that gives
     the same answer every time, and every verb checks the model again.
     """
-    from . import cache, definition
+    from . import cache
     digest = cache.key(UNITS_CHECKED, {"model": cache.model_digest(model), "sympy": sp.__version__,
-                                       "code": cache.code_digest(sys.modules[__name__], definition)})
+                                       "code": cache.code_digest(sys.modules[__name__])})
     if cache.read(UNITS_CHECKED, digest) is not None:
         return
     _check_unit_strings(model)
@@ -638,6 +640,10 @@ def check_plausibility(model, values: dict, source: str, accepted=()) -> None:
         key, factor = unit(text)
         if key in PLAUSIBLE:
             kind, si, lo, hi = PLAUSIBLE[key]
+            if kind in POSITIVE_KINDS and values[p] <= 0:
+                raise config_error(source, "parameters", p, values[p],
+                                   f"a {kind} is > 0 (model {model.name!r} declares {p} in {text}); if the value is "
+                                   f"right, add [plausibility] accept = [\"{p}\"]")
             v = abs(values[p]) * factor
             if v != 0 and not lo <= v <= hi:
                 raise config_error(source, "parameters", p, values[p],
@@ -704,9 +710,9 @@ ANALYSIS = "unit_analysis"
 
 
 def _stored_analysis(model, free_numbers: bool) -> Analysis:
-    from . import cache, definition
+    from . import cache
     digest = cache.key(ANALYSIS, {"model": cache.model_digest(model), "free_numbers": free_numbers,
-                                  "sympy": sp.__version__, "code": cache.code_digest(sys.modules[__name__], definition)})
+                                  "sympy": sp.__version__, "code": cache.code_digest(sys.modules[__name__])})
     stored = cache.read(ANALYSIS, digest)
     if stored is not None:
         try:

@@ -25,6 +25,7 @@ from pathlib import Path
 from ..errors import ConfigurationError, ModelDefinitionError, UnknownObserverError
 from ..model import ModelDefinition
 from ..model.definition import check_unit_keys
+from ..model.names import RULE as NAME_RULE, c_name_problem, suggest as suggest_name
 from . import columns, model_reads, precision
 from .settings import Rule, config_error, parse_table, suggest, toml_error
 from python_bindings.workspace import PACKAGE_ROOT, Workspace
@@ -249,11 +250,6 @@ MAX_NAME_LENGTH = 64
 """Longest observer name: the name prefixes every identifier of its C API and names its
 extension module (``_NAME``); C99 guarantees 63 significant characters of an identifier, and
 names of up to 64 characters build and load (a 200-character one did not)."""
-_C_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-_C_KEYWORDS = frozenset(
-    "auto break case char const continue default do double else enum extern float for goto if inline int long "
-    "register restrict return short signed sizeof static struct switch typedef union unsigned void volatile "
-    "while _Bool _Complex _Imaginary".split())
 
 
 def check_name(name: str, source: str) -> str:
@@ -266,27 +262,21 @@ def check_name(name: str, source: str) -> str:
         not a C identifier (``my obs``, ``1abc``, ``my-obs``), a C keyword, or longer than
         :data:`MAX_NAME_LENGTH`.
     """
-    why = None
-    if not _C_IDENTIFIER.fullmatch(name):
-        why = "is not a C identifier"
-    elif name in _C_KEYWORDS:
-        why = "is a C keyword"
-    elif len(name) > MAX_NAME_LENGTH:
+    why = c_name_problem(name)
+    if why is None and len(name) > MAX_NAME_LENGTH:
         why = f"has {len(name)} characters"
     if why is None:
         return name
     raise ConfigurationError(
-        f"{source}: the observer's name {name!r} (the file's name) {why}; allowed: ASCII letters, digits and '_', "
-        f"not starting with a digit, not a C keyword, at most {MAX_NAME_LENGTH} characters (it prefixes the "
-        f"observer's C functions and names its extension): rename the file, e.g. "
-        f"{_suggest_name(name)}.toml", source=source, key="name", value=name,
-        allowed=f"a C identifier of at most {MAX_NAME_LENGTH} characters")
+        f"{source}: the observer's name {name!r} (the file's name) {why}; allowed: {NAME_RULE}, at most "
+        f"{MAX_NAME_LENGTH} characters (it prefixes the observer's C functions and CasADi functions and names its "
+        f"extension): rename the file, e.g. {_suggest_name(name)}.toml", source=source, key="name", value=name,
+        allowed=f"a C identifier of at most {MAX_NAME_LENGTH} characters ({NAME_RULE})")
 
 
 def _suggest_name(name: str) -> str:
-    s = re.sub(r"[^A-Za-z0-9_]", "_", name)
-    s = s if s and not s[0].isdigit() else f"obs_{s}"
-    return (s + "_obs" if s in _C_KEYWORDS else s)[:MAX_NAME_LENGTH]
+    s = suggest_name(name)
+    return (s if s != "signal" else "my_observer")[:MAX_NAME_LENGTH].rstrip("_")
 
 
 def _parse(path: Path, overrides: dict | None = None, project: str | Path | None = None) -> ObserverConfig:

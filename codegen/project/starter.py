@@ -18,9 +18,8 @@ import shlex
 from pathlib import Path
 
 from ..errors import ConfigurationError
+from ..model.names import RULE as NAME_RULE, c_name_problem
 from . import observer_file as observers, outputs
-
-NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 
 
 def default_name(family) -> str:
@@ -29,10 +28,13 @@ def default_name(family) -> str:
 
 def check_name(name: str) -> None:
     """An observer name for a new project: a C identifier, not a built-in observer's name."""
-    if not NAME.match(name):
-        raise ConfigurationError(f"uiogen new --name {name!r}: an observer name is a C identifier (letters, digits, "
-                                 f"underscores, not starting with a digit): it names the C API NAME_step and the "
-                                 f"extension _NAME", key="--name", value=name, allowed="a C identifier")
+    why = c_name_problem(name)
+    if why is None and len(name) > observers.MAX_NAME_LENGTH:
+        why = f"has {len(name)} characters (at most {observers.MAX_NAME_LENGTH})"
+    if why is not None:
+        raise ConfigurationError(f"uiogen new --name {name!r}: {why}; an observer name is a C identifier ({NAME_RULE}): "
+                                 f"it names the C API NAME_step, its CasADi functions and the extension _NAME",
+                                 key="--name", value=name, allowed=f"a C identifier ({NAME_RULE})")
     if name in observers.names():
         raise ConfigurationError(f"uiogen new --name {name}: {name!r} is a built-in observer (uiogen list); a project "
                                  f"observer of that name would be shadowed by it wherever a name is given "

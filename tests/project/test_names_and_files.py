@@ -50,13 +50,18 @@ def _one_line(proc) -> str:
 
 # --- observer names ------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("name, why", [("my obs", "is not a C identifier"), ("1abc", "is not a C identifier"),
-                                       ("my-obs", "is not a C identifier"), ("double", "is a C keyword"),
-                                       ("a" * 65, "has 65 characters"), ("a" * 200, "has 200 characters")])
+NOT_SHAPED = "is not made of ASCII letters, digits and single underscores"
+
+
+@pytest.mark.parametrize("name, why", [("my obs", NOT_SHAPED), ("1abc", NOT_SHAPED), ("my-obs", NOT_SHAPED),
+                                       ("double", "is a C keyword"), ("obs_", NOT_SHAPED), ("my__obs", NOT_SHAPED),
+                                       ("_x", NOT_SHAPED), ("_Atomic", NOT_SHAPED), ("class", "is a C++ keyword"),
+                                       ("errno", "is a macro"), ("a" * 65, "has 65 characters"),
+                                       ("a" * 200, "has 200 characters")])
 def test_an_observer_name_that_is_not_a_c_identifier_is_refused_before_any_design(tmp_path, name, why):
     path = tmp_path / f"{name}.toml"
     path.write_text(OBSERVER_FILE)
-    with pytest.raises(ConfigurationError, match=why) as e:
+    with pytest.raises(ConfigurationError, match=re.escape(why)) as e:
         observers.get(str(path))
     assert "rename the file" in str(e.value) and "64 characters" in str(e.value)
     err = _one_line(_cli("design", str(path)))
@@ -64,15 +69,16 @@ def test_an_observer_name_that_is_not_a_c_identifier_is_refused_before_any_desig
 
 
 def test_names_up_to_the_limit_are_accepted(tmp_path):
-    for name in ("a" * 64, "_x1", "obs_2"):
+    for name in ("a" * 64, "x1", "obs_2", "socket"):
         path = tmp_path / f"{name}.toml"
         path.write_text(OBSERVER_FILE)
         assert observers.get(str(path)).name == name
 
 
 def test_uiogen_new_refuses_a_bad_name_and_writes_nothing(tmp_path):
-    err = _one_line(_cli("new", str(tmp_path / "p"), "--family", "linf_uio", "--name", "my obs"))
-    assert "an observer name is a C identifier" in err and not (tmp_path / "p").exists()
+    for name in ("my obs", "obs_", "my__obs", "_x", "_Atomic", "NAN"):
+        err = _one_line(_cli("new", str(tmp_path / "p"), "--family", "linf_uio", "--name", name))
+        assert "an observer name is a C identifier" in err and not (tmp_path / "p").exists()
 
 
 # --- a model file that exits ----------------------------------------------------------------------
@@ -277,3 +283,24 @@ def test_an_observer_named_like_a_standard_module_leaves_it_alone(tmp_path):
     out = subprocess.run([sys.executable, "-c", probe, str(project / "socket.toml")], capture_output=True, text=True,
                          cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(ROOT)))
     assert out.returncode == 0 and out.stdout.strip() == "ok socket", out.stderr[-2000:]
+
+
+# --- signal names: one rule at the model's import (codegen.model.names) --------------------------------------
+
+@pytest.mark.parametrize("bad", ["NAN", "int", "errno", "INFINITY", "M_PI", "EOF", "v y", "\N{ROCKET}", "class", "x_",
+                                 "EPERM", "Py_None", "casadi_real"])
+def test_a_signal_name_that_cannot_be_a_c_field_is_one_line_at_the_first_verb(tmp_path, bad):
+    """A state renamed (the symbol's name only): refused at design, before any C is written."""
+    proc = _cli("new", str(tmp_path / "p"), "--family", "linf_uio", "--name", "obs1")
+    assert proc.returncode == 0, proc.stderr
+    model = tmp_path / "p" / "model.py"
+    text = model.read_text()
+    assert 'sp.symbols("beta r delta delta_dot")' in text
+    model.write_text(text.replace('sp.symbols("beta r delta delta_dot")',
+                                  f'(sp.Symbol({bad!r}), *sp.symbols("r delta delta_dot"))'))
+    err = _one_line(_cli("design", str(tmp_path / "p" / "obs1.toml")))
+    assert "ModelDefinitionError" in err and f"the state {bad!r}" in err and str(model) in err, err
+    proc = _cli("generate", str(tmp_path / "p" / "obs1.toml"))     # the failure, named, in the summary line
+    err = _one_line(proc)
+    assert "ModelDefinitionError" in err and f"the state {bad!r}" in proc.stdout + proc.stderr
+    assert not list((tmp_path / "p").rglob("*.c")) and not list((tmp_path / "p").rglob("*_design.json"))
