@@ -82,6 +82,9 @@ def build(config: ObserverConfig, solver=None):
     b = wrap(_checked(_family_build(config, solver)))
     if isinstance(solver, LockReplay):
         solver.check_complete()
+        if solver.recorded is not None:        # what the lock reports is what its solutions give
+            design_lock.check_reproduced(solver.recorded, b, solver.source,
+                                         config.name if config.builtin else config.source)
     return b
 
 

@@ -199,8 +199,49 @@ def solutions(data: dict, source: str = "") -> list:
 
 
 def replay(data: dict, source: str = ""):
-    """A :class:`~codegen.design.solver.LockReplay` of the lock ``data`` (read from ``source``)."""
-    return LockReplay(solutions(data, source), source)
+    """A :class:`~codegen.design.solver.LockReplay` of the lock ``data`` (read from ``source``); the
+    design it rebuilds must reproduce the lock's entries (:func:`check_reproduced`)."""
+    return LockReplay(solutions(data, source), source, recorded=data)
+
+
+def _differs(a, b) -> bool:
+    """Whether two JSON values differ beyond the last bits of a number (a re-check's eigenvalues on
+    another CPU may differ there; a forged number does not)."""
+    import math
+    if isinstance(a, bool) or isinstance(b, bool) or not (isinstance(a, (int, float)) and isinstance(b, (int, float))):
+        if isinstance(a, dict) and isinstance(b, dict):
+            return a.keys() != b.keys() or any(_differs(a[k], b[k]) for k in a)
+        if isinstance(a, list) and isinstance(b, list):
+            return len(a) != len(b) or any(_differs(x, y) for x, y in zip(a, b))
+        return a != b
+    if math.isnan(a) or math.isnan(b):
+        return not (math.isnan(a) and math.isnan(b))
+    return not math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-300)
+
+
+def check_reproduced(data: dict, build, source: str, how: str = "NAME") -> None:
+    """Refuse a lock whose entries are not what its own solutions give: every number the tool reports
+    from a lock (gamma, gains, bounds, the certificate) is the one the replay re-derives and re-checks,
+    so a lock forged with its checksums recomputed (gamma times 1000) cannot be believed by one verb
+    and contradicted by the C of another.
+
+    Raises
+    ------
+    DesignLockError
+        naming the entries that differ, with the lock's value and the re-derived one of the first.
+    """
+    fresh = json.loads(json.dumps({**build.artifact(), "certificate": build.certificate.to_json()}, sort_keys=True))
+    recorded = {k: v for k, v in data.items() if k != "lock"}
+    wrong = sorted(k for k in set(fresh) | set(recorded) if k not in fresh or k not in recorded
+                   or _differs(fresh[k], recorded[k]))
+    if wrong:
+        first = wrong[0]
+        show = (f" ({first}: the lock says {json.dumps(recorded.get(first))[:120]}, its solutions give "
+                f"{json.dumps(fresh.get(first))[:120]})")
+        raise DesignLockError(f"{source}: the design lock's {', '.join(wrong)} {'is' if len(wrong) == 1 else 'are'} "
+                              f"not what its own LMI solutions give when replayed and re-checked{show}: a lock edited "
+                              f"with its checksums recomputed, or written by another uiogen; restore it from version "
+                              f"control, or re-solve it with `uiogen design {how} --update`")
 
 
 def document(build, records: list) -> dict:

@@ -106,8 +106,9 @@ class LockReplay:
 
     tol = None
 
-    def __init__(self, records, source: str = ""):
+    def __init__(self, records, source: str = "", recorded: dict | None = None):
         self.source = source
+        self.recorded = recorded        # the lock these records come from (its entries are checked by the pipeline)
         self._records: dict = {}
         for rec in records:
             if rec.problem in self._records:

@@ -356,6 +356,31 @@ def test_an_edited_lock_is_refused_naming_the_entry(tmp_path, capsys, entry):
     assert "Traceback" not in err and "DesignLockError" in err
 
 
+FORGED = {k: EDITS[k] for k in ("gamma", "gains_at_vertices", "signals")}
+
+
+@pytest.mark.parametrize("entry", FORGED)
+def test_a_forged_lock_with_its_checksums_recomputed_is_refused(tmp_path, capsys, entry):
+    """gamma x 1000 (or a gain, or two names swapped) with lock.sections and lock.sha256 recomputed:
+    the checksums verify, but the entry is not what the lock's own solutions give when replayed."""
+    lock = _copy_generated(tmp_path)
+    data = json.loads(lock.read_text())
+    FORGED[entry](data)
+    if entry == "gamma":
+        data["gamma"] = data["gamma"] * 2000          # the edit above halves it: x 1000 in all
+    forged = design_lock.seal(data)
+    lock.write_text(design_lock.dumps(forged))
+    design_lock.verify(forged, str(lock))              # the checksums alone do not see it
+    with pytest.raises(DesignLockError, match=f"design lock's .*{entry}.* not what its own LMI solutions give"):
+        pipeline.build(observers.get(LINF, project=tmp_path))
+    capsys.readouterr()
+    assert cli.main(["generate", LINF, "--project", str(tmp_path)]) == 2
+    out, err = capsys.readouterr()
+    assert "Traceback" not in out + err and "not what its own LMI solutions give" in out + err, (out, err)
+    assert cli.main(["design", LINF, "--update", "--project", str(tmp_path)]) == 0      # the way out it names
+    assert pipeline.build(observers.get(LINF, project=tmp_path)) is not None
+
+
 def test_every_committed_lock_verifies_against_its_checksums():
     for name in NAMES:
         config = observers.get(name)
