@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of stanford_sideslip_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define STANFORD_SIDESLIP_DESIGN_HASH "f334f7833a14dffae4a8a07b5046b91db0154be90583cc411528eecf7aefdeea"
+#define STANFORD_SIDESLIP_DESIGN_HASH "a2fcbcd3a61fc5900fa763b01f5e5258465461f53fa5a518636b9681b9e74886"
 
 /* Status bits returned by stanford_sideslip_step; a sample's status is their OR (stanford_sideslip_status). */
 typedef enum {

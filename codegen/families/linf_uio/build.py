@@ -85,18 +85,25 @@ class LinfBuild(ObserverBuild):
         perf = list(settings.performance) or [str(x) for x in d.states]
         uis = [str(u) for u in d.unknown_inputs]
         rates = ", ".join(f"[{lo:.4g}, {hi:.4g}]" for lo, hi in poly.rate_bounds)
+        # a common quadratic Lyapunov function holds at every vertex whatever the memberships do: no rate bound
+        # enters its certificate (with rate_bounds = "none" the polytope records [0, 0], which is not a claim)
+        quadratic = settings.lyapunov == "quadratic"
+        trajectories = ("for every scheduling trajectory in the box, at any rate (one quadratic Lyapunov function at "
+                        "every vertex)" if quadratic else
+                        "for every scheduling trajectory in the box whose membership rates stay within the rate bounds")
+        rate_note = ("membership rates: any (quadratic Lyapunov function)" if quadratic else
+                     f"membership rates within the {poly.rate_bound_mode} bounds {rates} 1/s")
         return Certificate(
             family="linf_uio",
             claim=(f"Theorem 1 of Nguyen et al. 2019 ({settings.lyapunov} Lyapunov function): the estimation error "
                    f"decays at rate alpha = {settings.alpha:g} 1/s and its performance output z = "
                    f"({', '.join(perf)}) has the peak-to-peak gain gamma from the unknown-input estimate's error, "
-                   f"for every scheduling trajectory in the box whose membership rates stay within the rate bounds"),
+                   f"{trajectories}"),
             plant_class=(f"the LPV model {d.name} with the parameters of {self.config.parameters}, on its "
                          f"{poly.kind} polytope of {poly.n_vertices} vertices ({polytope.FORMS[poly.kind]})"),
             noise="noise-free measurements; the unknown inputs any bounded signals",
             region={str(sym): (lo, hi) for sym, lo, hi in zip(poly.signals, poly.lowers, poly.uppers)},
-            region_note=(f"membership rates within the {poly.rate_bound_mode} bounds {rates} 1/s; SCHEDULING_CLAMPED "
-                         f"flags a scheduling input outside its box"),
+            region_note=f"{rate_note}; SCHEDULING_CLAMPED flags a scheduling input outside its box",
             recheck=Recheck.of(self.design.solution.checks),
             step=Step(self.config.sample_time, "backward Euler, the UI filter loop closed",
                       max(dc.contraction, dc.ui_loop.contraction)),

@@ -195,3 +195,13 @@ def test_printed_gains_are_checked_for_what_they_hold(published, tmp_path):
                            .replace(")", r"\)")) as exc:
             family.check_gain_form(cfg, gains, "g.json")
         assert exc.value.key == key and exc.value.source == "g.json"
+
+
+def test_a_quadratic_design_claims_every_rate_not_frozen_scheduling(built):
+    """rate_bounds = "none" records [0, 0] in the polytope; a common quadratic Lyapunov function needs no
+    rate bound, and its certificate says so (it stated membership rates bounded by [0, 0])."""
+    cert = built("stanford_sideslip").certificate
+    assert "at any rate" in cert.claim and "rate bounds" not in cert.claim
+    assert "[0, 0]" not in cert.region_note and "any (quadratic Lyapunov function)" in cert.region_note
+    pdlf = built("lpv_linf_driver_torque").certificate
+    assert "membership rates stay within the rate bounds" in pdlf.claim
