@@ -180,6 +180,12 @@ class ModelDefinition:
         return tuple(sp.Symbol(f"y_{n}") for n in self.output_names)
 
 
+def _nonzero(e) -> bool:
+    """Whether a coefficient is not zero: as written, and again simplified (a coefficient that only
+    simplifies to 0 -- a trigonometric identity, terms that cancel once expanded -- is no feedthrough)."""
+    return e != 0 and sp.simplify(e) != 0
+
+
 @dataclass(frozen=True)
 class ParameterSet:
     """Values read from a parameter file."""
@@ -216,7 +222,7 @@ class LPVModel:
 
     @property
     def has_ui_feedthrough(self) -> bool:
-        return self.Dd is not None and any(e != 0 for e in self.Dd)
+        return self.Dd is not None and any(_nonzero(e) for e in self.Dd)
 
     def require_no_ui_feedthrough(self, family: str, reason: str) -> None:
         """Refuse unknown inputs in the outputs for a family whose theory needs y = C x (the families
@@ -231,7 +237,7 @@ class LPVModel:
             return
         names = [n for n, _ in self.definition.outputs]
         hits = [f"{names[i]} <- {self.definition.unknown_inputs[j]}" for i in range(self.Dd.shape[0])
-                for j in range(self.Dd.shape[1]) if self.Dd[i, j] != 0]
+                for j in range(self.Dd.shape[1]) if _nonzero(self.Dd[i, j])]
         raise NotAffineError(
             f"model {self.definition.name!r}: unknown inputs reach the outputs ({', '.join(hits)}); the {family} "
             f"needs y = C x, no input in an output ({reason}). The L-infinity UIO (family linf_uio) takes this "
@@ -700,6 +706,9 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     for mat, label in ((B, "B"), (D, "D"), (C, "C"), (Du, "Du"), (Bw, "Bw"), (Duw, "Duw"), (Dd, "Dd")):
         if any(e.free_symbols & set(x + u + d + w) for e in mat):
             raise NotAffineError(f"model {model.name!r}: {label} depends on states or inputs")
+    # an unknown input's coefficient in an output that is 0 once simplified is no feedthrough (decided
+    # exactly here, with the parameters symbolic: a float residue of 1e-17 after substitution is not 0)
+    Dd = Dd.applyfunc(lambda e: e if _nonzero(e) else sp.S.Zero)
     A, B, D, C, Du, Bw, Duw, Dd = (m.subs(subs) for m in (A, B, D, C, Du, Bw, Duw, Dd))
     sched = tuple(sig.symbol for sig in model.scheduling)
     allowed = set(sched)

@@ -6,6 +6,7 @@ the size guard that refuses a too large TS design before building it; sound boun
 saturating tyre; ``uiogen new``.
 """
 import dataclasses
+import sys
 import textwrap
 
 import numpy as np
@@ -323,3 +324,30 @@ def test_user_mistakes_on_the_way_are_one_line_and_exit_2(tmp_path, capsys, what
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "Traceback" not in err, err
     assert re.search(message, err), err
+
+
+def test_a_feedthrough_whose_coefficient_simplifies_to_zero_is_none(tmp_path):
+    """F reaches a_y only through (sin^2 + cos^2 - 1)(l_f / M) F: zero once simplified, so the algebraic
+    UIO (which needs y = C x) takes the model; written with a real coefficient it is refused as before."""
+    from codegen.errors import NotAffineError
+    from codegen.model import instantiate, load_parameters
+    zero = (SIDESLIP_MODEL.replace('("a_y", (F_yf + F_yr + F) / M)',
+                                   '("a_y", (F_yf + F_yr) / M + (sp.sin(k) ** 2 + sp.cos(k) ** 2 - 1) / M * F)')
+            .replace("parameters=(M, I_z, l_f, l_r, C_f, C_r)", "parameters=(M, I_z, l_f, l_r, C_f, C_r, k)")
+            .replace('v_x = sp.Symbol("v_x", positive=True)', 'v_x = sp.Symbol("v_x", positive=True)\nk = sp.Symbol("k")'))
+    assert zero.count("sp.sin(k)") == 1 and "C_r, k)" in zero
+    (tmp_path / "car.py").write_text(zero)
+    (tmp_path / "car.toml").write_text(SIDESLIP_PARAMS.replace("C_r = 120000.0", "C_r = 120000.0\nk = 0.5"))
+    obs = tmp_path / "obs.toml"
+    obs.write_text('family = "algebraic_uio"\nmodel = "car.py"\nparameters = "car.toml"\nsample_time = 0.01\n')
+    config = observers.get(str(obs))
+    lpv = instantiate(config.load_model(), load_parameters(config.parameter_path))
+    assert not lpv.has_ui_feedthrough and all(e == 0 for e in lpv.Dd)
+    lpv.require_no_ui_feedthrough("algebraic UIO", "test")          # no refusal
+    (tmp_path / "car.py").write_text(SIDESLIP_MODEL)
+    (tmp_path / "car.toml").write_text(SIDESLIP_PARAMS)
+    for m in [m for m in sys.modules if m.startswith("uiogen_user_model")]:
+        del sys.modules[m]
+    config = observers.get(str(obs))
+    with pytest.raises(NotAffineError, match=r"a_y <- F"):
+        instantiate(config.load_model(), load_parameters(config.parameter_path)).require_no_ui_feedthrough("x", "y")
