@@ -6,7 +6,8 @@
 #   make embedded-tools  cppcheck, arm-none-eabi-gcc, qemu-system-arm (apt-get where available)
 #   make check   reliability suite (hostile input, sanitizers, static facts, determinism) and the long runs
 #   make docs    re-run demo and bench into docs/data/, rewrite the docs' tables, build the site
-#   make generate | build | bench | clean   (bench: also campaign runs/s, 1 and 2 workers, 10,000 runs)
+#   make generate | build | bench | clean   (bench: also campaign runs/s, 1 and 2 workers, 10,000 runs, and
+#                                            every verb's latency against its floor)
 #   make lock    refresh constraints.txt (exact versions of everything the targets install)
 PYTHON ?= python3
 VENV   := .venv
@@ -69,6 +70,7 @@ bench: build
 	$(PIP) install --quiet $(PIN) --no-build-isolation -e '.[bench]'
 	$(BIN)/uiogen bench
 	$(BIN)/python -m codegen.campaign.bench --target
+	$(BIN)/python -m codegen.tools.latency
 
 # The docs: re-run the demo and the benchmark, rewrite the docs' tables from them, build the site.
 docs: build
@@ -77,6 +79,7 @@ docs: build
 	$(BIN)/uiogen demo --json > docs/data/demo.json.tmp && mv docs/data/demo.json.tmp docs/data/demo.json
 	$(BIN)/uiogen bench --json > docs/data/bench.json.tmp && mv docs/data/bench.json.tmp docs/data/bench.json
 	$(BIN)/python -m codegen.tools.spread --out docs/data/spread.json
+	$(BIN)/python -m codegen.tools.latency --out docs/data/latency.json
 	mkdir -p docs/data/sweeps
 	$(BIN)/uiogen sweep switched_pi_bank_angle --set 'design.pole_radius=[29, 30, 30.5, 35, 50, 100, 300, 1000, 10000]' \
 	  --set 'design.decay_rate=[0, 1]' --show gamma,max_pole_modulus,max_pole_real_part,discrete_contraction_per_step \
