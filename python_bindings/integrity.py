@@ -58,7 +58,7 @@ def design_table(raw: bytes) -> dict:
     """
     import tomllib
     try:
-        table = tomllib.loads(raw.decode("utf-8"))
+        table = tomllib.loads(raw.decode("utf-8-sig"))
     except UnicodeDecodeError as exc:
         raise SourceFileUnreadable(f"it is not UTF-8 text (byte {exc.start}: {raw[exc.start:exc.start + 1]!r})") \
             from None
@@ -89,7 +89,7 @@ def parameters_sha256(path) -> str:
     with open(path, "rb") as fh:
         raw = fh.read()
     try:
-        text = json.dumps(tomllib.loads(raw.decode("utf-8")), sort_keys=True, default=str)
+        text = json.dumps(tomllib.loads(raw.decode("utf-8-sig")), sort_keys=True, default=str)
     except (UnicodeDecodeError, tomllib.TOMLDecodeError):
         return hashlib.sha256(b"bytes\0" + raw).hexdigest()
     return hashlib.sha256(b"toml\0" + text.encode()).hexdigest()

@@ -145,6 +145,13 @@ class ModelDefinition:
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
             raise ModelDefinitionError(f"model {self.name!r}: symbol(s) declared twice: {', '.join(dup)}")
+        # the step reads each output's measurement as the input y_NAME: no other signal may have that name
+        taken = sorted({f"y_{n}" for n, _ in self.outputs} & set(names))
+        if taken:
+            raise ModelDefinitionError(
+                f"model {self.name!r}: {', '.join(taken)} is the name of the measurement of output "
+                f"{', '.join(t[2:] for t in taken)} (the step's input y_<output>), and also of a declared "
+                f"symbol; rename the symbol")
         if not isinstance(self.dynamics, sp.MatrixBase) or self.dynamics.shape != (len(self.states), 1):
             shape = getattr(self.dynamics, "shape", None)
             raise ModelDefinitionError(
@@ -315,9 +322,11 @@ def load_parameters(path: str | Path) -> ParameterSet:
         No file, not TOML, no ``[parameters]``, missing or inverted bounds.
     """
     path = Path(path)
+    if path.is_dir():
+        raise ModelDefinitionError(f"parameter file {path} is a folder, not a file: name the .toml file in it")
     try:
-        with path.open("rb") as fh:
-            data = tomllib.load(fh)
+        # utf-8-sig: a byte-order mark (Windows editors write one) is read past, as the hashes do
+        data = tomllib.loads(path.read_bytes().decode("utf-8-sig"))
     except FileNotFoundError:
         raise ModelDefinitionError(f"parameter file not found: {path}") from None
     except tomllib.TOMLDecodeError as exc:

@@ -284,9 +284,11 @@ def _parse(path: Path, overrides: dict | None = None, project: str | Path | None
     path = Path(path)
     from . import outputs           # a `uiogen fit --write` killed half-way: its files all new, first
     outputs.finish_pending(path, log=lambda text: print(f"uiogen: {text}", file=sys.stderr))
+    if path.is_dir():
+        raise UnknownObserverError(f"{path} is a folder, not an observer file: name the .toml file in it")
     try:
-        with path.open("rb") as fh:
-            data = tomllib.load(fh)
+        # utf-8-sig: a byte-order mark (Windows editors write one) is read past, as load's hash does
+        data = tomllib.loads(path.read_bytes().decode("utf-8-sig"))
     except FileNotFoundError:
         raise UnknownObserverError(f"no observer file {path}") from None
     except tomllib.TOMLDecodeError as exc:
@@ -312,6 +314,9 @@ def _parse(path: Path, overrides: dict | None = None, project: str | Path | None
                            f"no model file {model_file}; built-in models: {', '.join(models)} (or a .py path "
                            f"relative to {folder})", suggest(data["model"], models))
     param_file = _parameter_file(data["parameters"], folder)
+    if param_file.is_dir():
+        raise config_error(source, None, "parameters", data["parameters"],
+                           f"{param_file} is a folder; name a parameter .toml file (a path relative to {folder})")
     if not param_file.is_file():
         if builtin:
             files = sorted(p.name for p in PARAMS_DIR.glob("*.toml"))
@@ -326,7 +331,7 @@ def _parse(path: Path, overrides: dict | None = None, project: str | Path | None
                            f"no file {param_file} (a path relative to {folder}: an observer file of your own names "
                            f"its own parameter file, never a built-in one){hint}", suggest(data["parameters"], files))
     doc = ""
-    with path.open() as fh:
+    with path.open(encoding="utf-8-sig") as fh:
         for line in fh:
             if not line.startswith("#"):
                 break

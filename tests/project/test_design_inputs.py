@@ -133,3 +133,39 @@ def test_a_missing_parameter_file_is_not_replaced_by_a_builtin(project):
     msg = str(exc.value)
     assert str((project / "commonroad_bmw320i.toml").resolve()) in msg and f"cp {builtin}" in msg
     assert exc.value.key == "parameters"
+
+
+def test_a_byte_order_mark_is_read_past_alike_by_design_and_load(project):
+    """Windows editors write a UTF-8 BOM: the observer and parameter files read as without it, and the
+    hashes that decide staleness (design lock, extension record) are those of the file without it."""
+    config = _fresh(project / "obs1.toml")
+    before = (lock.design_inputs(config), integrity.observer_file_sha256(project / "obs1.toml"),
+              integrity.parameters_sha256(project / "parameters.toml"))
+    for f in ("obs1.toml", "parameters.toml"):
+        (project / f).write_bytes(b"\xef\xbb\xbf" + (project / f).read_bytes())
+    config = _fresh(project / "obs1.toml")
+    assert config.doc and not config.doc.startswith("\ufeff")
+    after = (lock.design_inputs(config), integrity.observer_file_sha256(project / "obs1.toml"),
+             integrity.parameters_sha256(project / "parameters.toml"))
+    assert after == before
+
+
+def test_a_folder_where_a_file_is_named_is_said_so(project):
+    obs = project / "obs1.toml"
+    (project / "params_dir").mkdir()
+    obs.write_text(obs.read_text().replace('parameters = "parameters.toml"', 'parameters = "params_dir"'))
+    with pytest.raises(ConfigurationError, match="params_dir is a folder; name a parameter .toml file"):
+        observers.get(str(obs))
+    (project / "as_dir.toml").mkdir()
+    with pytest.raises(Exception, match="is a folder, not an observer file"):
+        observers.get(str(project / "as_dir.toml"))
+
+
+def test_a_symbol_named_like_an_outputs_measurement_is_refused(project):
+    """A known input y_r beside the output r: both would be the step's input y_r."""
+    model = project / "model.py"
+    text = model.read_text()
+    model.write_text(text.replace('T_a, T_d = sp.symbols("T_a T_d")', 'T_a, T_d = sp.symbols("y_r T_d")'))
+    config = _fresh(project / "obs1.toml")
+    with pytest.raises(ModelDefinitionError, match=r"y_r is the name of the measurement of output r"):
+        config.load_definition()
