@@ -513,6 +513,15 @@ def cmd_campaign(args) -> int:
         print(report.format_summary(summary))
         print(f"wrote {summary['files']['runs']}, {summary['files']['summary']}, "
               f"{', '.join(summary['files']['plots'])}")
+    # runs without a result (their worker died, or they raised) make the campaign incomplete: a script
+    # that checks the exit code must see it, and --resume runs the lost ones again
+    failed = {k: v for k, v in summary.get("runs_failed", {}).items() if k in engine.NO_RESULT}
+    if failed:
+        print(f"uiogen: campaign {args.spec}: {sum(failed.values())} of {summary['runs']} runs produced no result "
+              f"({', '.join(f'{k}: {v}' for k, v in sorted(failed.items()))}); the reports hold the others"
+              + (f"; `uiogen campaign {args.spec} --resume --out {out}` runs the lost ones again"
+                 if "worker_lost" in failed else ""), file=sys.stderr)
+        return 1
     return 0
 
 

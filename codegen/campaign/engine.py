@@ -61,6 +61,10 @@ def _chunks(spec, runs, n_workers: int) -> list:
 
 
 JOURNAL = "runs.jsonl"
+# statuses of runs that produced no result; --resume runs the worker_lost ones again (a lost worker is the
+# machine's failure, not the run's: the run itself re-runs bit for bit from its index)
+NO_RESULT = ("worker_lost", "error")
+RETRIED = ("worker_lost",)
 LOCK = ".campaign.lock"
 JOURNAL_FORMAT = 1
 GATHER_TIMEOUT = 5.0       # s to fetch a finished task's rows before looking at the cluster again
@@ -135,7 +139,8 @@ class Journal:
             if isinstance(e, dict) and "complete" in e:
                 complete = True
             elif isinstance(e, dict) and isinstance(e.get("run"), int):
-                rows.setdefault(e["run"], e)
+                if e["run"] not in rows or rows[e["run"]].get("status") in RETRIED:
+                    rows[e["run"]] = e          # a lost run run again by --resume: its later row
             else:
                 raise CampaignError(f"{self.path}: line {i} is neither a run's row nor the end mark: the results "
                                     f"file is damaged; delete it to start over")
@@ -181,11 +186,14 @@ class Journal:
             return
         self._append("".join(json.dumps(r) + "\n" for r in rows))
         for r in rows:
-            self.rows.setdefault(int(r["run"]), r)
+            k = int(r["run"])
+            if k not in self.rows or self.rows[k].get("status") in RETRIED:
+                self.rows[k] = r
 
     def complete(self, runs: int) -> None:
         """Mark the campaign finished (a later campaign into the same folder may start over); once:
-        resuming a finished campaign only re-writes its reports."""
+        resuming a finished campaign only re-writes its reports (and runs its lost runs again, whose
+        later rows count)."""
         if not self.finished:
             self._append(json.dumps({"complete": runs}) + "\n")
             self.finished = True
@@ -322,7 +330,8 @@ def run(spec, out_dir, scheduler: str | None = None, workers: int | None = None,
     finishes; with ``resume`` the runs already there are not run again (the journal must be of
     the same campaign file and design). A worker that dies is replaced (Dask re-runs its tasks);
     a task that kills its worker repeatedly is re-run one run at a time and the run that does is
-    reported (status ``worker_lost``); a run that raises is reported (status ``error``). When
+    reported (status ``worker_lost``: ``resume`` runs it again); a run that raises is reported (status
+    ``error``). When
     every worker is gone, or no run finishes within ``run_timeout``, the campaign stops and
     raises :class:`CampaignError` naming the runs it kept and the command that continues it.
     """
@@ -336,7 +345,7 @@ def _run(spec, out_dir: Path, scheduler, workers, progress, client, resume: bool
     design = runner.prepare(spec)           # the design is current; the plant compiled once, here
     journal = Journal(out_dir / JOURNAL, identity(spec, design), resume, source=spec.source)
     try:
-        todo = [k for k in range(spec.runs) if k not in journal.rows]
+        todo = [k for k in range(spec.runs) if k not in journal.rows or journal.rows[k].get("status") in RETRIED]
         wall, n_workers, left = 0.0, 0, []
         if not todo:
             journal.start()

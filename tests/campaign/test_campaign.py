@@ -391,3 +391,32 @@ def test_the_journal_cuts_a_torn_last_line_and_refuses_damage(tmp_path):
     path.write_text(good.replace('"run": 0', '"run: 0', 1))
     with pytest.raises(CampaignError, match="line 2"):
         engine.Journal(path, header, resume=True)
+
+
+def test_resume_runs_lost_runs_again_and_a_campaign_with_runs_without_result_exits_nonzero(tmp_path):
+    """A finished campaign whose journal holds a worker_lost run and an error run: --resume runs the lost
+    one again (its row then equals its run by index), keeps the error, writes the reports and exits 1
+    naming both; with every run kept it would exit 0."""
+    spec_path = _spec_file(tmp_path, runs=4, chunk=1, duration=6.0)
+    out = tmp_path / "out"
+    res = cli("campaign", str(spec_path), "--workers", "1", "--out", str(out), "--json")
+    assert res.returncode == 0, res.stderr
+    journal = out / engine.JOURNAL
+    lines = [json.loads(line) for line in journal.read_text().splitlines()]
+    original = {e["run"]: dict(e) for e in lines if "run" in e}
+    for e in lines:
+        if e.get("run") == 1:
+            e.clear()
+            e.update({"run": 1, "scenario": original[1]["scenario"], "status": "worker_lost", "error": "killed"})
+        elif e.get("run") == 2:
+            e.clear()
+            e.update({"run": 2, "scenario": original[2]["scenario"], "status": "error", "error": "raised"})
+    journal.write_text("".join(json.dumps(e) + "\n" for e in lines))
+    res = cli("campaign", str(spec_path), "--workers", "1", "--out", str(out), "--resume", "--json")
+    assert res.returncode == 1, res.stderr
+    assert "1 of 4 runs produced no result (error: 1)" in res.stderr and "Traceback" not in res.stderr
+    summary = json.loads(res.stdout)
+    assert summary["resumed_runs"] == 3 and summary["runs_failed"].get("error") == 1
+    assert "worker_lost" not in summary["runs_failed"]
+    rows = engine.read_rows(out / "runs.csv")
+    assert _same(rows[1], original[1]) and rows[2]["status"] == "error"
