@@ -150,7 +150,13 @@ def observer_class(module) -> type:
 
 def real(a, name: str, what: str) -> np.ndarray:
     """``a`` as an array of real numbers, or a SampleError: numpy would drop a complex part
-    (ComplexWarning) and parse strings ('1.5') where the caller meant numbers."""
+    (ComplexWarning) and parse strings ('1.5') where the caller meant numbers, and a masked array's
+    mask."""
+    if isinstance(a, np.ma.MaskedArray) and np.ma.is_masked(a):
+        # np.asarray drops the mask: the masked samples' stored values would be run as measurements
+        raise SampleError(f"{name}: {what} is a masked array with {int(np.ma.count_masked(a))} masked entries; the "
+                          f"step runs every sample it is given: pass the samples to use (a[~a.mask]), or fill "
+                          f"the masked ones on purpose (a.filled(value))")
     arr = np.asarray(a)
     if arr.dtype.kind not in "fiu":
         why = "a complex part would be dropped" if arr.dtype.kind == "c" else "not numbers"

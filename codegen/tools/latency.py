@@ -33,14 +33,33 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 RECORD = "latency"
 
-# one built-in per family: (observer, the shared log its validate --data and fit read or None, the scenario
-# its validate --scenario runs or None: the observers of the shared log have no scenario of their own)
-BUILTINS = {"linf_uio": ("stanford_sideslip", "stanford", None),
-            "ts_fuzzy_uio": ("ts_fuzzy_uio_stanford", "stanford", None),
-            "nonlinear_tyre_observer": ("niki_sideslip_nonlinear_tyre", "niki", "excitation"),
-            "algebraic_uio": ("algebraic_uio_example1", None, "paper"),
-            "interconnected_uio": ("interconnected_uio", None, "satory"),
-            "switched_pi": ("switched_pi_bank_angle", None, "banked_road_braking")}
+def _choice(family) -> tuple:
+    """(observer, its shared log or None, scenario observer, scenario) for one family, asked of the
+    registries: the family's first built-in that reads a shared log (``validate --data``, and ``fit``
+    where the family identifies), and its first built-in with a scenario of its own (the family's first
+    demo scenario, else the excitation run)."""
+    from ..families.capabilities import Scenarios
+    from ..model import load_parameters
+    from ..project import observer_file as observers
+    from ..validation import demo
+    from ..validation.run import reads_the_log
+    own = [observers.get(n) for n in observers.names() if observers.get(n).family == family.name]
+    if not own:
+        return None
+    data_obs, data = None, None
+    for config in own:
+        inputs = json.loads(config.workspace.design_lock(config.name).read_text())["signals"]["input"]
+        if reads_the_log(inputs):
+            data_obs = config.name
+            data = load_parameters(config.parameter_path).meta.get("shared_log", "stanford")
+            break
+    if isinstance(family, Scenarios) and family.demo_scenarios:
+        scenario = family.demo_scenarios[0]
+        others = [c.name for c in own if c.name != data_obs and c.name not in demo.REAL_DATA_ONLY]
+        scen_obs = others[0] if others else (data_obs if data_obs not in demo.REAL_DATA_ONLY else None)
+    else:                       # no scenarios of the family's own: the excitation run of its own equations
+        scenario, scen_obs = "excitation", data_obs or own[0].name
+    return (data_obs or own[0].name), data, scen_obs, scenario
 
 
 def _cli(args: list, env: dict, cwd: Path) -> tuple:
@@ -101,9 +120,10 @@ def _log_floors(name: str, data: str) -> dict:
     return {"read_log_s": t1 - t0, "observer_run_s": t3 - t2, "peers_s": t4 - t3, "samples": int(run.n)}
 
 
-def _builtin_rows(family: str, env: dict, work: Path) -> list:
+def _builtin_rows(family, env: dict, work: Path) -> list:
+    from ..families.capabilities import Identification
     from ..project import observer_file as observers
-    name, data, scenario = BUILTINS[family]
+    name, data, scen_obs, scenario = _choice(family)
     config = observers.get(name)
     rows = []
     solve = _solve_seconds(config)
@@ -117,10 +137,10 @@ def _builtin_rows(family: str, env: dict, work: Path) -> list:
         rows.append({"observer": name, "verb": "generate (empty project)" if i == 1 else "generate (unchanged)",
                      "run": i, "seconds": s, "rc": rc, "floor": "LMI solves" if i == 1 else "",
                      "floor_s": solve if i == 1 else None})
-    if scenario is not None:
-        s, rc = _cli(["validate", name, "--scenario", scenario, "--json"], env, ROOT)
-        rows.append({"observer": name, "verb": f"validate --scenario {scenario}", "run": 1, "seconds": s, "rc": rc,
-                     "floor": "", "floor_s": None})
+    if scen_obs is not None:
+        s, rc = _cli(["validate", scen_obs, "--scenario", scenario, "--json"], env, ROOT)
+        rows.append({"observer": scen_obs, "verb": f"validate --scenario {scenario}", "run": 1, "seconds": s,
+                     "rc": rc, "floor": "", "floor_s": None})
     if data is not None:
         floors = _log_floors(name, data)
         for i in (1, 2):
@@ -129,7 +149,7 @@ def _builtin_rows(family: str, env: dict, work: Path) -> list:
                          "floor": f"read {floors['samples']} samples + observer + Kalman peers",
                          "floor_s": floors["read_log_s"] + floors["observer_run_s"] + floors["peers_s"],
                          **{k: v for k, v in floors.items()}})
-        if family == "nonlinear_tyre_observer":
+        if isinstance(family, Identification):
             samples = f"0:{floors['samples']}"
             s, rc = _cli(["fit", name, "--data", data, "--samples", samples, "--folds", "0"], env, ROOT)
             rows.append({"observer": name, "verb": f"fit --samples {samples} --folds 0", "run": 1, "seconds": s,
@@ -138,12 +158,13 @@ def _builtin_rows(family: str, env: dict, work: Path) -> list:
     return rows
 
 
-def _starter_rows(family: str, env: dict, work: Path) -> list:
-    folder = work / f"starter_{family}"
-    obs = folder / f"my_{family}.toml"
+def _starter_rows(family, env: dict, work: Path) -> list:
+    from ..project.starter import default_name
+    folder = work / f"starter_{family.name}"
+    obs = folder / f"{default_name(family)}.toml"
     rows = []
-    s, rc = _cli(["new", folder, "--family", family], env, work)
-    rows.append({"observer": f"starter {family}", "verb": "new", "run": 1, "seconds": s, "rc": rc, "floor": "",
+    s, rc = _cli(["new", folder, "--family", family.name], env, work)
+    rows.append({"observer": f"starter {family.name}", "verb": "new", "run": 1, "seconds": s, "rc": rc, "floor": "",
                  "floor_s": None})
     from ..project import observer_file as observers
     solve = _solve_seconds(observers.get(str(obs))) if rc == 0 else None
@@ -152,7 +173,7 @@ def _starter_rows(family: str, env: dict, work: Path) -> list:
                        ("validate --scenario excitation", ["validate", obs, "--scenario", "excitation", "--json"]),
                        ("design", ["design", obs])):
         s, rc = _cli(args, env, work)
-        rows.append({"observer": f"starter {family}", "verb": verb, "run": 1, "seconds": s, "rc": rc,
+        rows.append({"observer": f"starter {family.name}", "verb": verb, "run": 1, "seconds": s, "rc": rc,
                      "floor": "LMI solves" if verb.startswith("design") else "",
                      "floor_s": solve if verb.startswith("design") else None})
     return rows
@@ -161,14 +182,15 @@ def _starter_rows(family: str, env: dict, work: Path) -> list:
 def measure(families=None) -> dict:
     """Every row (module docstring); the derived-results cache starts empty in a folder of its own."""
     from .. import families as registry
-    names = [f for f in (families or registry.names()) if f in BUILTINS]
+    chosen = [registry.get(f) for f in (families or registry.names())]
+    chosen = [f for f in chosen if _choice(f) is not None]
     with tempfile.TemporaryDirectory(prefix="uiogen-latency-") as tmp:
         work = Path(tmp)
         env = dict(os.environ, UIOGEN_CACHE_DIR=str(work / "cache"), PYTHONPATH=str(ROOT))
         os.environ["UIOGEN_CACHE_DIR"] = env["UIOGEN_CACHE_DIR"]      # this process's floors: the same cache
         startup = _startup(env)
         rows = []
-        for family in names:
+        for family in chosen:
             rows += _builtin_rows(family, env, work)
             rows += _starter_rows(family, env, work)
     table_rows = []

@@ -196,6 +196,18 @@ def test_run_refuses_arrays_that_are_not_real_numbers(ts, bad):
 
 
 @pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
+def test_run_refuses_a_masked_array_with_masked_samples(ts):
+    rows = np.ma.masked_array(np.tile([20.0, 0.01], (10, 1)), mask=False)
+    out, _, _ = ts.run(rows)                                         # nothing masked: run as given
+    rows[3, 1] = np.ma.masked
+    with pytest.raises(SampleError, match="masked array with 1 masked entries"):
+        ts.run(rows)
+    with pytest.raises(SampleError, match="state is a masked array"):
+        state = np.ma.masked_array(np.zeros(ts.n_state), mask=[True] + [False] * (ts.n_state - 1))
+        ts.run(rows.filled(0.0), state=state)
+
+
+@pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 def test_an_output_overlapping_the_inputs_is_refused(ts):
     buf = np.zeros(ts.n_input + ts.n_output)
     buf[:ts.n_input] = [20.0, 0.01]
