@@ -29,11 +29,9 @@ variable, the inverse map v_y(t) (which turns the Jacobian of the force into a f
 delta) alone, so it can be bounded over a set of slip values), its lateral capacity and its
 full-sliding slip, written in a symbol of that capacity.
 """
-from dataclasses import dataclass
-
 import sympy as sp
 
-from codegen.model import ModelDefinition, SchedulingSignal
+from codegen.model import Axle, ModelDefinition, SchedulingSignal
 from model_defs import tyres
 
 v_y, r = sp.symbols("v_y r")
@@ -72,32 +70,7 @@ _forces = {FORCES[0]: Phi_f, FORCES[1]: Phi_r}
 a_y = A_Y_IN_FORCES.subs(_forces)
 
 
-@dataclass(frozen=True)
-class Axle:
-    """How one body-frame axle force Phi = law(t) projection depends on the unmeasured state.
-
-    ``law``: the tyre law in ``t_sym`` *without* its sliding clamp (equal to the model's on
-    |t| <= t_sl), written in the capacity symbol ``peak_symbol``; ``peak``: that capacity in the
-    parameters and the measured inputs (a_x); ``projection``: the factor from the wheel to the
-    body frame; ``slip``: t in the states; ``inverse``: v_y as a function of ``t_sym`` and the
-    measured signals (so the slip's derivative along v_y becomes a function of t, delta);
-    ``sliding``: the full-sliding slip t_sl, in ``peak_symbol``; ``stiffness``, ``friction``: the
-    parameters a declared range of which the certificate covers (``[design] stiffness_range``,
-    ``friction_range``).
-    """
-
-    name: str
-    law: sp.Expr
-    projection: sp.Expr
-    slip: sp.Expr
-    inverse: sp.Expr
-    sliding: sp.Expr
-    peak_symbol: sp.Symbol
-    peak: sp.Expr
-    stiffness: sp.Symbol
-    friction: sp.Symbol
-
-
+# each axle as the nonlinear-tyre observer reads it (codegen.model.Axle says what each field is)
 AXLES = (
     Axle("front", tyres.fiala_slip_force(t_sym, C_f, F_PEAK[0], clamp=False), sp.cos(delta), t_f,
          v_x * (sp.sin(delta) - t_sym * sp.cos(delta)) / (sp.cos(delta) + t_sym * sp.sin(delta)) - l_f * r,

@@ -47,11 +47,14 @@ def _choice(family) -> tuple:
     if not own:
         return None
     data_obs, data = None, None
+    # the observers made for a shared log: the demo's real-data ones and those whose parameter file names
+    # their car's log (another reads the log's columns, but its boxes need not hold the log)
     for config in own:
+        meta = load_parameters(config.parameter_path).meta
+        made_for = config.name in (demo.REAL_DATA_OBSERVER, *demo.REAL_DATA_OTHERS) or "shared_log" in meta
         inputs = json.loads(config.workspace.design_lock(config.name).read_text())["signals"]["input"]
-        if reads_the_log(inputs):
-            data_obs = config.name
-            data = load_parameters(config.parameter_path).meta.get("shared_log", "stanford")
+        if made_for and reads_the_log(inputs):
+            data_obs, data = config.name, meta.get("shared_log", "stanford")
             break
     if isinstance(family, Scenarios) and family.demo_scenarios:
         scenario = family.demo_scenarios[0]

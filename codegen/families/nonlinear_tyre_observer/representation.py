@@ -113,8 +113,8 @@ def _check_structure(model, source):
 
 AXLE_FIELDS = ("name", "law", "projection", "slip", "inverse", "sliding", "peak_symbol", "peak", "stiffness",
                "friction")
-"""What the family reads of each element of a model's ``AXLES`` (``model_defs/single_track_nonlinear_tyre.py``,
-class ``Axle``, says what each is)."""
+"""What the family reads of each element of a model's ``AXLES`` (:class:`codegen.model.Axle` says what each is
+and checks it; an element of another class with these fields is read too)."""
 
 
 def axles_of(module, source) -> tuple:
@@ -134,7 +134,7 @@ def axles_of(module, source) -> tuple:
             raise ModelDefinitionError(
                 f"{model_file}: {label} of model {name!r} has no {', '.join(missing)}: each axle gives "
                 f"{', '.join(AXLE_FIELDS)} (peak_symbol: the capacity symbol its law and sliding slip are written in; "
-                f"see class Axle in model_defs/single_track_nonlinear_tyre.py)")
+                f"build each with codegen.model.Axle, which checks its fields)")
     return tuple(axles)
 
 

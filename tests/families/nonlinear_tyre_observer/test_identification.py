@@ -182,7 +182,11 @@ def test_an_axle_missing_a_field_is_one_typed_line_naming_the_model_the_axle_and
     assert cli.main(["new", str(folder), "--family", "nonlinear_tyre_observer", "--name", "mine"]) == 0
     model = folder / "model.py"
     text = model.read_text()
-    for old, new in (("    peak_symbol: sp.Symbol\n", ""),
+    older = ("from dataclasses import dataclass\n\n\n@dataclass(frozen=True)\nclass Axle:      # last month's contract\n"
+             + "".join(f"    {f}: object\n" for f in ("name", "law", "projection", "slip", "inverse", "sliding", "peak",
+                                                      "stiffness", "friction")) + "\n\n")
+    for old, new in (("from codegen.model import Axle, ModelDefinition, SchedulingSignal\n",
+                      older + "from codegen.model import ModelDefinition, SchedulingSignal\n"),
                      ("tyres.fiala_sliding_slip(C_f, F_PEAK[0]), F_PEAK[0], F_maxf",
                       "tyres.fiala_sliding_slip(C_f, F_PEAK[0]), F_maxf"),
                      ("tyres.fiala_sliding_slip(C_r, F_PEAK[1]), F_PEAK[1], F_maxr",
@@ -199,3 +203,26 @@ def test_an_axle_missing_a_field_is_one_typed_line_naming_the_model_the_axle_and
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and "Traceback" not in err and "AttributeError" not in err
         assert str(model) in err and "AXLES[0] ('front')" in err and "has no peak_symbol" in err
+
+
+def test_the_axle_contract_is_a_typed_class_that_checks_its_fields(tmp_path):
+    """codegen.model.Axle: the built-in model builds its axles with it; a field of the wrong kind (a number
+    where the stiffness parameter is meant) is one ModelDefinitionError at the model's import, naming the
+    model file, the axle and the field."""
+    import subprocess
+    import sys
+    from codegen.model import Axle
+    from conftest import ROOT
+    assert all(isinstance(a, Axle) for a in observers.get("niki_sideslip_nonlinear_tyre").load_model_module().AXLES)
+    proc = subprocess.run([sys.executable, "-m", "codegen.cli", "new", str(tmp_path / "p"), "--family",
+                           "nonlinear_tyre_observer", "--name", "mine"], capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    model = tmp_path / "p" / "model.py"
+    text = model.read_text()
+    assert "from codegen.model import Axle" in text and "F_maxf, C_f, mu_f)" in text
+    model.write_text(text.replace("F_maxf, C_f, mu_f)", "F_maxf, 110000.0, mu_f)"))
+    proc = subprocess.run([sys.executable, "-m", "codegen.cli", "design", str(tmp_path / "p" / "mine.toml")],
+                          capture_output=True, text=True, cwd=ROOT)
+    err = proc.stderr.strip()
+    assert proc.returncode == 2 and len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert "ModelDefinitionError" in err and str(model) in err and "Axle 'front': stiffness = 110000.0" in err
