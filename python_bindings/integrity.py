@@ -6,7 +6,8 @@
   :func:`record_path`): a truncated or overwritten extension is refused before it is loaded (a
   truncated shared object that is loaded dies of SIGBUS, with no message);
 * the hashes of the user's files the design was made from -- the observer file, its parameter
-  file, its model and the modules beside the model that it imports -- compiled into the extension (its ``SOURCES`` constant,
+  file, its model and the modules beside the model that it imports --
+  compiled into the extension (its ``SOURCES`` constant,
   :func:`source_digests`): an extension whose observer file, parameters or model changed since it
   was built is refused, naming the file. Each file is hashed for what it says, not how it is
   written (:data:`HASHING`), by the same functions the design lock's hash calls

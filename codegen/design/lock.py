@@ -98,10 +98,13 @@ def design_inputs(config: ObserverConfig) -> str:
     v = sources.versions()
     # the parsed configuration too: a configuration changed in memory (dataclasses.replace) is
     # another design even though its file is the same
+    # the parameter file counts for what it says, wherever it lies: a project's copy of a built-in file is
+    # the same design input as the file it copies (its path is the configuration's, hashed above)
     return sources.digest(design_sources(config), {"configuration": json.dumps(config.to_json(), sort_keys=True),
                                                    "observer_file": observer_file_digest(config),
                                                    **{k: v[k] for k in DESIGN_PACKAGES}},
-                          contents=file_meanings(config))
+                          contents=file_meanings(config),
+                          labels={Path(config.parameter_path).resolve(): "parameter file"})
 
 
 def read(config: ObserverConfig, base: Path | None = None) -> tuple:

@@ -182,16 +182,18 @@ def versions() -> dict:
     return out
 
 
-def digest(files, extra: dict | None = None, contents: dict | None = None) -> str:
+def digest(files, extra: dict | None = None, contents: dict | None = None, labels: dict | None = None) -> str:
     """SHA-256 over (path relative to the checkout, bytes) of ``files`` in the given order, then
     ``extra`` items (e.g. versions) in key order. ``contents``: {resolved path: bytes hashed
-    instead of the file's} (a user's file hashed for what it says: ``codegen.design.lock.file_meanings``)."""
+    instead of the file's} (a user's file hashed for what it says: ``codegen.design.lock.file_meanings``);
+    ``labels``: {resolved path: the name it is hashed under instead of its path} (a file that counts for
+    its content wherever it lies)."""
     h = hashlib.sha256()
-    contents = contents or {}
+    contents, labels = contents or {}, labels or {}
     for f in files:
         f = Path(f)
         try:
-            label = str(f.resolve().relative_to(ROOT))
+            label = labels.get(f.resolve()) or str(f.resolve().relative_to(ROOT))
         except ValueError:      # a user's file outside the checkout: its name is enough
             label = f.name
         h.update(label.encode() + b"\0")

@@ -67,7 +67,8 @@ class Axle:
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
-            raise ModelDefinitionError(f"Axle(name={self.name!r}): the name is a non-empty string (\"front\", \"rear\")")
+            raise ModelDefinitionError(f"Axle(name={self.name!r}): the name is a non-empty string "
+                                       f"(\"front\", \"rear\")")
         for f in fields(self):
             if f.name == "name":
                 continue

@@ -135,7 +135,8 @@ class ModelDefinition:
         signals = [*(("state", s) for s in self.states), *(("known input", s) for s in self.known_inputs),
                    *(("unknown input", s) for s in self.unknown_inputs),
                    *(("scheduling signal", g.symbol) for g in self.scheduling),
-                   *(("derived input", w.symbol) for w in self.derived_inputs), *(("output", n) for n, _ in self.outputs)]
+                   *(("derived input", w.symbol) for w in self.derived_inputs),
+                   *(("output", n) for n, _ in self.outputs)]
         for role, sym in signals:
             why = c_name_problem(str(sym))
             if why is not None:       # a field of the step's C structs and of the Python API (codegen.model.names)

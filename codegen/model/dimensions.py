@@ -716,8 +716,8 @@ def _stored_analysis(model, free_numbers: bool) -> Analysis:
     stored = cache.read(ANALYSIS, digest)
     if stored is not None:
         try:
-            return Analysis({p: None if d is None else tuple(Fraction(x) for x in d) for p, d in stored["dims"].items()},
-                            [tuple(pq) for pq in stored["same"]], list(stored["inconsistencies"]))
+            dims = {p: None if d is None else tuple(Fraction(x) for x in d) for p, d in stored["dims"].items()}
+            return Analysis(dims, [tuple(pq) for pq in stored["same"]], list(stored["inconsistencies"]))
         except (KeyError, TypeError, ValueError, ZeroDivisionError, AttributeError):
             pass                         # a record of another shape: computed again below
     out = infer(model, free_numbers=free_numbers)

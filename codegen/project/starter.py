@@ -32,8 +32,9 @@ def check_name(name: str) -> None:
     if why is None and len(name) > observers.MAX_NAME_LENGTH:
         why = f"has {len(name)} characters (at most {observers.MAX_NAME_LENGTH})"
     if why is not None:
-        raise ConfigurationError(f"uiogen new --name {name!r}: {why}; an observer name is a C identifier ({NAME_RULE}): "
-                                 f"it names the C API NAME_step, its CasADi functions and the extension _NAME",
+        raise ConfigurationError(f"uiogen new --name {name!r}: {why}; an observer name is a C identifier "
+                                 f"({NAME_RULE}): it names the C API NAME_step, its CasADi functions and the "
+                                 f"extension _NAME",
                                  key="--name", value=name, allowed=f"a C identifier ({NAME_RULE})")
     if name in observers.names():
         raise ConfigurationError(f"uiogen new --name {name}: {name!r} is a built-in observer (uiogen list); a project "

@@ -439,9 +439,11 @@ def derive(model, params, input_names) -> list:
         # of the replaced symbols (d roll/dt = roll_rate), and a Python int has no .has
         # unevaluated (numeric() keeps them so): an evaluated Min/Max with zeros put in runs sympy's
         # simplifier; a hidden signal left in only by that is looked at evaluated
-        zero_ui, other = {d: sp.S.Zero for d in model.unknown_inputs}, {s: y for s, y in measured_state.items() if s != x}
+        zero_ui = {d: sp.S.Zero for d in model.unknown_inputs}
+        other = {s: y for s, y in measured_state.items() if s != x}
         with sp.evaluate(False):
-            eqs = [sp.sympify(model.dynamics[model.states.index(s)]).xreplace(zero_ui).xreplace(other) for s in unknowns]
+            eqs = [sp.sympify(model.dynamics[model.states.index(s)]).xreplace(zero_ui).xreplace(other)
+                   for s in unknowns]
             at_zero = [e.xreplace({s: sp.S.Zero for s in unknowns}) for e in eqs]
         if any((hides(z) and hides(sp.sympify(e).xreplace({s: sp.S.Zero for s in unknowns}).doit()))
                or not (e.free_symbols - set(unknowns)) <= allowed for e, z in zip(eqs, at_zero)):

@@ -61,7 +61,9 @@ def project(tmp_path):
     shutil.copy(checkout.extension(NAME), ws.extension(NAME))
     shutil.copy(record_path(checkout.extension(NAME)), record_path(ws.extension(NAME)))   # its bytes' hash
     shutil.copy(ROOT / "model_defs" / "observers" / f"{NAME}.toml", tmp_path / f"{NAME}.toml")
-    return ws
+    params = re.search(r'(?m)^parameters = "([^"]+)"', (tmp_path / f"{NAME}.toml").read_text()).group(1)
+    shutil.copy(ROOT / "model_defs" / "params" / params, tmp_path / params)     # an observer file of one's own
+    return ws                                                                      # names its own parameter file
 
 
 def test_an_observer_file_loads_by_its_folder_and_stem_without_the_toolchain(project):

@@ -59,7 +59,8 @@ def test_a_division_by_zero_names_the_parameter(project, values, names):
 
 def test_a_root_of_a_negative_number_names_the_parameters(project):
     model = project / "model.py"
-    model.write_text(model.read_text().replace("F_yf = 2 * C_f * alpha_f", "F_yf = 2 * C_f * sp.sqrt(l_f - l_r) * alpha_f"))
+    model.write_text(model.read_text().replace("F_yf = 2 * C_f * alpha_f",
+                                               "F_yf = 2 * C_f * sp.sqrt(l_f - l_r) * alpha_f"))
     _set(project, l_f=1.0, l_r=1.5)
     with pytest.raises(ConfigurationError, match=r"l_f, l_r = \[1\.0, 1\.5\].*sqrt.*complex") as exc:
         _substitute(project)

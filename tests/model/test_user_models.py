@@ -334,7 +334,8 @@ def test_a_feedthrough_whose_coefficient_simplifies_to_zero_is_none(tmp_path):
     zero = (SIDESLIP_MODEL.replace('("a_y", (F_yf + F_yr + F) / M)',
                                    '("a_y", (F_yf + F_yr) / M + (sp.sin(k) ** 2 + sp.cos(k) ** 2 - 1) / M * F)')
             .replace("parameters=(M, I_z, l_f, l_r, C_f, C_r)", "parameters=(M, I_z, l_f, l_r, C_f, C_r, k)")
-            .replace('v_x = sp.Symbol("v_x", positive=True)', 'v_x = sp.Symbol("v_x", positive=True)\nk = sp.Symbol("k")'))
+            .replace('v_x = sp.Symbol("v_x", positive=True)',
+                     'v_x = sp.Symbol("v_x", positive=True)\nk = sp.Symbol("k")'))
     assert zero.count("sp.sin(k)") == 1 and "C_r, k)" in zero
     (tmp_path / "car.py").write_text(zero)
     (tmp_path / "car.toml").write_text(SIDESLIP_PARAMS.replace("C_r = 120000.0", "C_r = 120000.0\nk = 0.5"))

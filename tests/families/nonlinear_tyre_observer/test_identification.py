@@ -182,7 +182,8 @@ def test_an_axle_missing_a_field_is_one_typed_line_naming_the_model_the_axle_and
     assert cli.main(["new", str(folder), "--family", "nonlinear_tyre_observer", "--name", "mine"]) == 0
     model = folder / "model.py"
     text = model.read_text()
-    older = ("from dataclasses import dataclass\n\n\n@dataclass(frozen=True)\nclass Axle:      # last month's contract\n"
+    older = ("from dataclasses import dataclass\n\n\n"
+             "@dataclass(frozen=True)\nclass Axle:      # last month's contract\n"
              + "".join(f"    {f}: object\n" for f in ("name", "law", "projection", "slip", "inverse", "sliding", "peak",
                                                       "stiffness", "friction")) + "\n\n")
     for old, new in (("from codegen.model import Axle, ModelDefinition, SchedulingSignal\n",
