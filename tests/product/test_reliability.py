@@ -221,7 +221,9 @@ def test_generate_killed_at_every_file_operation_loses_nothing(tmp_path):
     committed, here = ROOT / "generated_c" / name, project / "generated_c" / name
     shutil.copytree(committed, here)
     cmd = [sys.executable, "-m", "codegen.cli", "generate", name, "--force", "--project", str(project)]
-    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1")     # no bytecode written: generate's files only
+    # no bytecode and no derived-results cache written (a cache folder under a file cannot be created):
+    # generate's files only, the same operations on every run
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1", UIOGEN_CACHE_DIR=os.path.join(os.devnull, "uiogen-cache"))
     log = tmp_path / "trace.log"
     calls = ",".join(FILE_CALLS)
     subprocess.run([strace, "-f", "-y", "-qq", "-o", str(log), "-e", f"trace={calls}", *cmd], cwd=ROOT, env=env,

@@ -247,9 +247,8 @@ def test_campaign_folder_faults_on_the_command_line(built, tmp_path):
     out = tmp_path / "o"
     proc = subprocess.Popen([sys.executable, "-m", "codegen.cli", "campaign", str(spec), "--workers", "1",
                              "--out", str(out)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 300
     while not (out / engine.JOURNAL).exists() or len((out / engine.JOURNAL).read_text().splitlines()) < 3:
-        assert proc.poll() is None and time.time() < deadline, proc.communicate()
+        assert proc.poll() is None, proc.communicate()          # an event, not a time
         time.sleep(0.2)
     err = _one_line(_cli("campaign", str(spec), "--workers", "1", "--out", str(out), "--resume"))
     assert f"another campaign is running into {out} (pid {proc.pid})" in err
