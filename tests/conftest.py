@@ -31,6 +31,16 @@ def require_shared(path: Path, what: str = "shared file") -> Path:
     return path
 
 
+def new_starter(folder: Path, family: str = "linf_uio", name: str = "obs1") -> Path:
+    """``uiogen new FOLDER --family FAMILY --name NAME`` in a fresh process (as a user types it); the folder."""
+    import subprocess
+    import sys
+    proc = subprocess.run([sys.executable, "-m", "codegen.cli", "new", str(folder), "--family", family, "--name", name],
+                          capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    return Path(folder)
+
+
 def require_strace() -> str:
     """The path of strace (the kill-at-each-syscall tests): skipped where it is missing, a failure
     in CI (CI=true), where .ci/run installs it."""

@@ -14,6 +14,7 @@ The folder: ``$UIOGEN_CACHE_DIR``, else ``$XDG_CACHE_HOME/uiogen``, else ``~/.ca
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -44,8 +45,15 @@ def code_digest(*modules) -> str:
     h = hashlib.sha256()
     for m in modules:
         path = Path(m.__file__)
-        h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+        h.update(path.name.encode() + b"\0" + _file_digest(path, path.stat().st_mtime_ns).encode() + b"\0")
     return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=64)
+def _file_digest(path: Path, mtime_ns: int) -> str:
+    """A source file's SHA-256, read once per modification time (the stanford module is keyed on every
+    column's noise level)."""
+    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def _canonical(x):
@@ -69,9 +77,17 @@ def _canonical(x):
 
 def model_digest(model) -> str:
     """SHA-256 of a model definition's content (its equations, signals, units, parameters and their
-    assumptions): what a result derived from the model alone is keyed by."""
-    text = json.dumps(_canonical(model), sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()
+    assumptions): what a result derived from the model alone is keyed by. Once per model object (its
+    ``srepr`` is the cost: the unit check and the unit analysis key on the same model)."""
+    held = _digests.get(id(model))
+    if held is None or held[0] is not model:
+        text = json.dumps(_canonical(model), sort_keys=True, separators=(",", ":"))
+        held = (model, hashlib.sha256(text.encode()).hexdigest())
+        _digests[id(model)] = held
+    return held[1]
+
+
+_digests: dict = {}          # {id(model): (model, digest)}: the object is kept, so its id is not reused
 
 
 def _payload_sha(payload) -> str:

@@ -89,16 +89,17 @@ def _solve_seconds(config) -> float:
     from ..design.solver import FreshSolver
 
     class Timed(FreshSolver):
-        seconds = 0.0
+        def __init__(self):
+            super().__init__()
+            self.seconds = 0.0
 
         def solve(self, problem, **options):
             sol = super().solve(problem, **options)
-            Timed.seconds += float(getattr(sol, "solve_time_s", 0.0) or 0.0)
+            self.seconds += float(getattr(sol, "solve_time_s", 0.0) or 0.0)
             return sol
-    Timed.seconds = 0.0
     solver = Timed()
     pipeline.build(config, solver)
-    return Timed.seconds
+    return solver.seconds
 
 
 def _log_floors(name: str, data: str) -> dict:

@@ -68,10 +68,9 @@ sample_time = 0.01
 TYRE_MODEL = '''
 """Sedan, single track, pure cornering, a quadratic brush law per axle:
 F(t) = C t - C^2/(4 F_max) |t| t for |t| <= t_sl = 2 F_max / C, F_max sign(t) beyond."""
-from dataclasses import dataclass
 
 import sympy as sp
-from codegen.model import ModelDefinition, SchedulingSignal
+from codegen.model import Axle, ModelDefinition, SchedulingSignal
 
 v_y, r, delta, w_f, w_r = sp.symbols("v_y r delta w_f w_r")
 v_x = sp.Symbol("v_x", positive=True)
@@ -96,20 +95,6 @@ FORCES = sp.symbols("Phi_f Phi_r")
 A_Y_IN_FORCES = (FORCES[0] + FORCES[1]) / m
 DYNAMICS_IN_FORCES = sp.Matrix([A_Y_IN_FORCES - r * v_x, (a * FORCES[0] - b * FORCES[1]) / I_z])
 _forces = {FORCES[0]: Phi_f, FORCES[1]: Phi_r}
-
-
-@dataclass(frozen=True)
-class Axle:
-    name: str
-    law: sp.Expr
-    projection: sp.Expr
-    slip: sp.Expr
-    inverse: sp.Expr
-    sliding: sp.Expr
-    peak_symbol: sp.Symbol
-    peak: sp.Expr
-    stiffness: sp.Symbol
-    friction: sp.Symbol
 
 
 AXLES = (

@@ -10,6 +10,7 @@ from codegen.errors import ConfigurationError
 from codegen.model import load_parameters
 from codegen.model.definition import parameter_substitution
 from codegen.project import observer_file as observers
+from conftest import new_starter
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -17,10 +18,7 @@ ROOT = Path(__file__).resolve().parents[2]
 @pytest.fixture
 def project(tmp_path) -> Path:
     """A starter (linf_uio) whose parameters carry no sympy sign assumption (a user's model)."""
-    proc = subprocess.run([sys.executable, "-m", "codegen.cli", "new", str(tmp_path / "p"), "--family", "linf_uio",
-                           "--name", "obs1"], capture_output=True, text=True, cwd=ROOT)
-    assert proc.returncode == 0, proc.stderr
-    model = tmp_path / "p" / "model.py"
+    model = new_starter(tmp_path / "p") / "model.py"
     text = model.read_text()
     assert '"l_f l_r eta_t R_s B_s K_p M I_z I_s C_f C_r", positive=True)' in text
     model.write_text(text.replace('"l_f l_r eta_t R_s B_s K_p M I_z I_s C_f C_r", positive=True)',

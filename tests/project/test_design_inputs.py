@@ -17,6 +17,7 @@ from codegen.errors import ConfigurationError, ModelDefinitionError
 from codegen.extension.build import source_record
 from codegen.project import observer_file as observers
 from python_bindings import integrity
+from conftest import new_starter
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -24,10 +25,7 @@ ROOT = Path(__file__).resolve().parents[2]
 @pytest.fixture
 def project(tmp_path) -> Path:
     """A starter project (``uiogen new``): obs1.toml, model.py, parameters.toml."""
-    proc = subprocess.run([sys.executable, "-m", "codegen.cli", "new", str(tmp_path / "p"), "--family", "linf_uio",
-                           "--name", "obs1"], capture_output=True, text=True, cwd=ROOT)
-    assert proc.returncode == 0, proc.stderr
-    return tmp_path / "p"
+    return new_starter(tmp_path / "p")
 
 
 def _fresh(path) -> observers.ObserverConfig:

@@ -22,9 +22,8 @@ FAMILY = families.get("nonlinear_tyre_observer")
 
 MODEL = '''
 """Single track, a tanh tyre per axle whose capacity the measured longitudinal acceleration lowers."""
-from dataclasses import dataclass
 import sympy as sp
-from codegen.model import ModelDefinition, SchedulingSignal
+from codegen.model import Axle, ModelDefinition, SchedulingSignal
 
 vlat, yawr = sp.symbols("vlat yawr")
 steer, ax_meas = sp.symbols("steer ax_meas")
@@ -52,20 +51,6 @@ FORCES = sp.symbols("Phi_f Phi_r")
 A_Y_IN_FORCES = (FORCES[0] + FORCES[1]) / m
 DYNAMICS_IN_FORCES = sp.Matrix([A_Y_IN_FORCES - yawr * spd, (a * FORCES[0] - b * FORCES[1]) / Jz])
 _forces = {FORCES[0]: Phi_f, FORCES[1]: Phi_r}
-
-
-@dataclass(frozen=True)
-class Axle:
-    name: str
-    law: sp.Expr
-    projection: sp.Expr
-    slip: sp.Expr
-    inverse: sp.Expr
-    sliding: sp.Expr
-    peak_symbol: sp.Symbol
-    peak: sp.Expr
-    stiffness: sp.Symbol
-    friction: sp.Symbol
 
 
 AXLES = (
