@@ -21,10 +21,13 @@ with s = 1/v_x, theta_k = v_x dPhi_k/dv_y at an intermediate point and w the dis
 (``sliding_fraction`` rho < 1 of each axle's sliding slip, which the measured a_x lowers through
 the friction circle), delta and a_x within ``[state_bounds]``, v_x within ``[scheduling.v_x]``,
 and the declared ranges of each axle's stiffness and friction. There the Fiala slope is at least
-(1 - rho)^2 C_k; at full sliding it is 0 and v_y is unobservable from (a_y, r), so no certificate
-over a set holding full sliding exists.
+(1 - rho)^2 C_k; at full sliding it is 0 and v_y is unobservable from (a_y, r), so no decay over a
+set holding full sliding can be certified. ``through_sliding`` certifies the step at every slip instead
+(:func:`.design.through_sliding`): the slope box [theta_full, 0] holds beyond sliding, and with a third
+Lyapunov matrix V decays at a rate proportional to the axle slopes and grows at most at
+``sliding_growth`` where both axles slide; the step then corrects by the tyre model at every slip.
 
-Samples whose estimated slip, delta, a_x or v_x lie outside S are flagged (excess > 0,
+Samples whose estimated slip (not with ``through_sliding``), delta, a_x or v_x lie outside S are flagged (excess > 0,
 SCHEDULING_CLAMPED): the certificate does not cover them, the tyre model carries (almost) no
 information on v_y there, and the step integrates the exact kinematics v_y' = a_y - r v_x with
 the measured a_y instead (a tyre model whose friction is a little low would otherwise drive the
@@ -61,6 +64,12 @@ class NonlinearTyreSettings:
     gain_r_r: float | None = setting(None, doc="given L[r, r] [-]")
     sliding_fraction: float = setting(0.9, gt=0, lt=1, doc="rho: the certified set |t| <= rho t_sl per axle "
                                                             "(decay, status bit, kinematic fallback)")
+    through_sliding: bool = setting(False, doc="certify the step at every slip (a decay rate proportional to the "
+                                               "axle slopes, V growing at most at sliding_growth where both axles "
+                                               "slide): the step then corrects by the tyre model at every slip, "
+                                               "with no kinematic fallback beyond sliding_fraction")
+    sliding_growth: float = setting(1e-3, gt=0, doc="epsilon [1/s]: the growth of V the through-sliding certificate "
+                                                    "allows where both axles slide (v_y is unobservable there)")
     gain_sliding_fraction: float = setting(0.3, gt=0, lt=1, doc="the set of the l2 gain bound, <= sliding_fraction")
     decay: float | None = setting(None, gt=0, lt=1, doc="lambda: V(e+) <= lambda^2 V(e) required; absent: "
                                                         "decay_fraction of the largest certifiable rate")
@@ -138,8 +147,9 @@ def step_parts(rep, L, Ts, z, u, y, rho, fns, xp=np):
     for k, (_, (lo, hi)) in enumerate(rep.input_boxes):
         excess = excess + fmax(0.0, fmax(lo - u[k], u[k] - hi))
     args = (vy, r_m, *[u[k] for k in range(len(rep.input_boxes))], vc)
-    for t_k, lim_k in zip(t_fn, lim_fn):
-        excess = excess + fmax(0.0, fabs(t_k(*args)) - lim_k(*args))
+    if rep.through_set is None:          # through sliding, every slip is certified: only the boxes flag
+        for t_k, lim_k in zip(t_fn, lim_fn):
+            excess = excess + fmax(0.0, fabs(t_k(*args)) - lim_k(*args))
     f = [fn(*args) for fn in f_fn]
     ea = a_m - ay_fn(*args)
     er = r_m - rh
@@ -169,6 +179,8 @@ def _build_class():
         gain_verts: tuple
         recheck: dict
         timings: dict
+        through: object = None          # dsn.Through (through_sliding), else None
+        through_verts: tuple = ()
 
         @property
         def L(self) -> np.ndarray:
@@ -259,14 +271,16 @@ def _build_class():
             s = self.rep.signals
             measured = [s.speed, *s.known_inputs]
             which = ", ".join(measured[:-1]) + " or " + measured[-1]
+            slip = ("" if self.through is not None else
+                    ", or an estimated\n * axle slip beyond sliding_fraction of its sliding slip")
             return StepNotes(
                 notes=("Each call takes the measurements of sample k and returns the estimate of sample k made",
                        "from the samples before it; the state's head is the prediction for sample k+1.",
                        f"A flagged sample integrates the kinematics {s.lateral_speed}' = {s.a_y} - {s.yaw_rate} "
                        f"{s.speed} (no tyre correction)."),
-                clamp=(f"{which} outside the certified set ({s.speed} clamped for the model), or an estimated\n"
-                       " * axle slip beyond sliding_fraction of its sliding slip: the certificate does not cover this "
-                       "sample,\n * and the step integrates the kinematics instead of correcting by the tyre model."),
+                clamp=(f"{which} outside the certified set ({s.speed} clamped for the model){slip}: the certificate "
+                       "does not cover this sample,\n * and the step integrates the kinematics instead of correcting "
+                       "by the tyre model."),
                 warmup="never set.")
 
         @property
@@ -287,7 +301,7 @@ def _build_class():
                        f"{c['best_decay_rate']:.4g} 1/s), and on the gain set (|t_k| <= {s.gain_sliding_fraction:g} "
                        f"t_sl,k) the sideslip error has the l2 gain gamma from the disturbances normalized by their "
                        f"levels, and (per-channel multipliers, a second Lyapunov matrix) an RMS bound with every "
-                       f"channel at its level"),
+                       f"channel at its level" + self._through_claim()),
                 plant_class=(f"the single-track model {self.config.model} with the tyre law of its AXLES per axle "
                              f"(the capacity from the measured signals), Euler-discretized at Ts = "
                              f"{self.config.sample_time:g} s, parameters of "
@@ -300,9 +314,17 @@ def _build_class():
                 region_note=(f"|t_k| <= {s.sliding_fraction:g} t_sl,k on each axle (the sliding slip at the measured "
                              f"signals) for the true AND the estimated state; SCHEDULING_CLAMPED flags the estimated "
                              f"slip or a measured signal ({measured} where the law reads it) outside the set: the "
-                             f"true slip is not seen ({self.rep.signals.lateral_speed} is not measured)"),
+                             f"true slip is not seen ({self.rep.signals.lateral_speed} is not measured)"
+                             if self.through is None else
+                             f"every slip for the true and the estimated state (each axle force constant beyond its "
+                             f"sliding slip, checked on the model at |t| = 1 to 3 t_sl; the front slip angle within "
+                             f"+-(90 deg - max |{names.steering}|)); the decay and the l2 gain at |t_k| <= "
+                             f"{s.sliding_fraction:g} and {s.gain_sliding_fraction:g} t_sl,k; SCHEDULING_CLAMPED "
+                             f"flags a measured signal ({measured}) outside its box only"),
                 recheck=Recheck(c["blocks"], c["worst_block"], c["worst_min_eig"], c["worst_relative_margin"]),
-                step=Step(self.config.sample_time, "Euler step of the observer (kinematic fallback outside the set)",
+                step=Step(self.config.sample_time, "Euler step of the observer (" + (
+                    "kinematic fallback outside the set" if self.through is None else
+                    "tyre correction at every slip; kinematic fallback outside the boxes") + ")",
                           c["contraction_per_step"]),
                 bounds=(Bound("gamma", c["gamma_deg"], "deg", "l2", "beta, the sideslip estimation error",
                               "the disturbances w, each channel divided by its level sigma"),
@@ -311,6 +333,14 @@ def _build_class():
                               "multipliers: " + ", ".join(f"{k} {v:.3g}" for k, v in c["bound_deg_by_channel"].items())
                               + " deg)")),
                 extras=solver_certificate(self.solution, recheck=self.recheck))
+
+        def _through_claim(self) -> str:
+            if self.through is None:
+                return ""
+            c = self.recheck
+            return (f"; at every slip, with a third Lyapunov matrix: V(e+) <= (1 - Ts (a phi - eps (1 - phi))) V(e), "
+                    f"a = {c['through_rate']:.4g} 1/s with both axles at full slope, eps = {c['sliding_growth']:.3g} "
+                    f"1/s (growth) with both sliding, phi the mean over the axles of theta_k / theta_k,full")
 
         def _representation(self):
             rep = self.rep
@@ -325,6 +355,7 @@ def _build_class():
                     "input_boxes": {n: list(b) for n, b in rep.input_boxes},
                     "certified_set": {"sliding_fraction": self.settings.sliding_fraction, "axles": axles(rep.decay_set)},
                     "gain_set": {"sliding_fraction": self.settings.gain_sliding_fraction, "axles": axles(rep.gain_set)},
+                    **({} if rep.through_set is None else {"through_set": {"axles": axles(rep.through_set)}}),
                     "stiffness_range": list(self.settings.stiffness_range),
                     "friction_range": list(self.settings.friction_range)}
 
@@ -333,7 +364,8 @@ def _build_class():
                     "representation": self._representation(),
                     "L": self.L.tolist(), "P": self.P.tolist(), "gains": "given" if self.synthesis.given else "designed",
                     "noise_levels": dict(zip(dsn.CHANNELS, self.settings.sigma.tolist())),
-                    "sliding_fraction": self.settings.sliding_fraction}
+                    "sliding_fraction": self.settings.sliding_fraction,
+                    **({} if self.through is None else {"P_through": self.through.P.tolist()})}
 
         def figures(self):
             c = self.recheck
@@ -352,7 +384,11 @@ def _build_class():
                     "stiffness_range": list(s.stiffness_range), "friction_range": list(s.friction_range),
                     "noise_levels": dict(zip(dsn.CHANNELS, s.sigma.tolist())),
                     "input_boxes": {n: list(b) for n, b in self.rep.input_boxes}, "v_x_box": list(self.rep.v_x_box),
-                    "sample_time": self.config.sample_time}
+                    "sample_time": self.config.sample_time, "through_sliding": s.through_sliding,
+                    **({} if self.through is None else {
+                        "theta_through": [list(b.theta) for b in self.rep.through_set],
+                        "through_rate": c["through_rate"], "sliding_growth": c["sliding_growth"],
+                        "through_time_constant_s": c["through_time_constant_s"]})}
 
     return Build
 
@@ -380,9 +416,13 @@ def build(config, solver, params=None):
     gain_verts = tuple(dsn.vertices(rep, rep.gain_set, with_speed=True))
     design = dsn.synthesize(plant, decay_verts, gain_verts, settings, solver)
     level = dsn.level_bound(plant, gain_verts, settings, design, solver)
+    through, through_verts = None, ()
+    if rep.through_set is not None:
+        through_verts = tuple(dsn.through_vertices(rep))
+        through = dsn.through_sliding(plant, through_verts, settings, design, solver)
     t2 = time.perf_counter()
-    cert = dsn.certify(plant, decay_verts, gain_verts, design, level)
+    cert = dsn.certify(plant, decay_verts, gain_verts, design, level, through, through_verts)
     t3 = time.perf_counter()
     return Build(config, rep, settings, plant, design, level, decay_verts, gain_verts, cert,
                  {"representation_s": t1 - t0, "design_s": t2 - t1, "solve_s": design.solution.solve_time_s,
-                  "certificates_s": t3 - t2})
+                  "certificates_s": t3 - t2}, through, through_verts)

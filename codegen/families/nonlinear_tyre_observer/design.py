@@ -273,6 +273,86 @@ def synthesize(plant, decay_verts, gain_verts, settings, solver) -> Design:
     return Design(L, P, eta, best, rate, given, sol)
 
 
+THROUGH_PROBLEM = "nonlinear-tyre observer: decay through sliding (rate proportional to the axle slopes, gains fixed)"
+
+
+def through_vertices(rep) -> list:
+    """(Vertex, phi) at the vertices of (s, theta_f, theta_r) over the through-sliding bounds (every slip:
+    0 is inside each axle's box). phi = the mean over the axles of theta_k / theta_k,full, theta_k,full the
+    box end farthest from 0 (the full slope): 1 with both axles at full slope, 0 with both sliding. The rate
+    claimed at a vertex is a phi - epsilon (1 - phi), affine in theta; the blocks are then multi-affine in
+    (s, theta) and their vertices cover the box."""
+    full = [b.theta[0] if abs(b.theta[0]) >= abs(b.theta[1]) else b.theta[1] for b in rep.through_set]
+    out = []
+    for x in vertices(rep, rep.through_set, with_speed=False):
+        out.append((x, float(np.mean([th / f for th, f in zip(x.theta, full)]))))
+    return out
+
+
+def through_rate(phi: float, rate: float, growth: float) -> float:
+    """The decay rate [1/s] claimed where the axle slopes make phi: ``rate`` at full slope, ``-growth`` at
+    full sliding of both axles (V may grow there: v_y is not observable from (a_y, r))."""
+    return rate * phi - growth * (1.0 - phi)
+
+
+def _through_problem(plant, verts, rate, growth, L_scaled, settings, design: bool) -> LMIProblem:
+    prob = LMIProblem(THROUGH_PROBLEM if design else THROUGH_PROBLEM + " (analysis)", design=design,
+                      data={"through_rate": rate, "growth": growth} if design else {})
+    P = prob.symmetric("P_through", 2)
+    prob.require_psd("P_through >= I", P, margin=1.0)
+    for x, phi in verts:
+        prob.require_psd(f"through {x.label}", decay_block(plant, x, P, P @ L_scaled, through_rate(phi, rate, growth),
+                                                           LMIProblem),
+                         margin=settings.margin, hint="set through_sliding = false, or raise sliding_growth")
+    return prob
+
+
+@dataclass(frozen=True)
+class Through:
+    """The decay of the emitted gains at every slip: one Lyapunov matrix, the rate at full slope, the growth at
+    full sliding (``through_sliding``)."""
+
+    P: np.ndarray            # scaled coordinates (rounded)
+    rate: float              # a [1/s] at full slope on both axles
+    growth: float            # epsilon [1/s] allowed where both axles slide
+    solution: object
+
+
+def through_sliding(plant, verts, settings, design: Design, solver, iterations: int = 24) -> Through:
+    """The largest rate a at full slope for which one P gives V(e+) <= (1 - T_s (a phi - epsilon (1 - phi))) V(e)
+    at every vertex of the through-sliding bounds, the emitted gains fixed (bisection on [0, 1/T_s], rounded
+    down to three digits); the problem at that rate answered by ``solver`` (recorded in the design lock). A
+    CertificateError when not even a = 0 (V growing at most at epsilon everywhere) is certified."""
+    L_scaled = plant.D @ design.L @ np.linalg.inv(plant.D)
+    growth = settings.sliding_growth
+    committed = solver.committed_data(THROUGH_PROBLEM)
+    if committed is not None:
+        rate, growth = float(committed["through_rate"]), float(committed["growth"])
+    else:
+        def feasible(a):
+            try:
+                _through_problem(plant, verts, a, growth, L_scaled, settings, design=False).solve(
+                    tol=settings.tol, unique=False)
+            except (SolverError, CertificateError):
+                return False
+            return True
+        if not feasible(0.0):
+            raise CertificateError(
+                f"nonlinear-tyre observer: through_sliding: no Lyapunov matrix keeps V from growing faster than "
+                f"sliding_growth = {growth:g} 1/s at every slip with the {'given' if design.given else 'designed'} "
+                f"gains (at full sliding of both axles v_y is unobservable, and the gains' r correction must not "
+                f"drive it); raise sliding_growth, or set through_sliding = false (the kinematic fallback beyond "
+                f"sliding_fraction, not certified there)")
+        lo, hi = 0.0, 1.0 / plant.Ts
+        for _ in range(iterations):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if feasible(mid) else (lo, mid)
+        rate = _round_down(lo)
+    sol = solver.solve(_through_problem(plant, verts, rate, growth, L_scaled, settings, design=True),
+                       tol=settings.tol)
+    return Through(decimal_round(0.5 * (sol["P_through"] + sol["P_through"].T)), rate, growth, sol)
+
+
 def level_bound_problem(plant, gain_verts, settings, L_scaled) -> LMIProblem:
     """min sum(mu) over Q and the per-channel multipliers at ``gain_verts``, the (scaled) gains fixed."""
     prob = LMIProblem(LEVEL_PROBLEM)
@@ -304,9 +384,11 @@ def level_bound(plant, gain_verts, settings, design: Design, solver) -> LevelBou
     return LevelBound(Q, mu, sol)
 
 
-def certify(plant, decay_verts, gain_verts, design: Design, level: LevelBound) -> dict:
-    """Independent numpy re-check of every block on the emitted (rounded) P, L, Q and multipliers;
-    the contraction per step at the decay vertices, the certified gain and the bound at the levels."""
+def certify(plant, decay_verts, gain_verts, design: Design, level: LevelBound, through: Through | None = None,
+            through_verts=()) -> dict:
+    """Independent numpy re-check of every block on the emitted (rounded) P, L, Q and multipliers (and the
+    through-sliding P); the contraction per step at the decay vertices, the certified gain and the bound at
+    the levels."""
     D = plant.D
     Y = design.P @ (D @ design.L @ np.linalg.inv(D))
     # the certificate needs P > 0; P >= I only normalizes the solve, and an optimum may rest on it
@@ -316,6 +398,12 @@ def certify(plant, decay_verts, gain_verts, design: Design, level: LevelBound) -
     blocks["Q > 0"] = level.Q
     YQ = level.Q @ (D @ design.L @ np.linalg.inv(D))
     blocks.update({f"level bound {x.label}": gain_block(plant, x, level.Q, YQ, np.diag(level.mu)) for x in gain_verts})
+    if through is not None:
+        blocks["P_through > 0"] = through.P
+        Yt = through.P @ (D @ design.L @ np.linalg.inv(D))
+        blocks.update({f"through {x.label}": decay_block(plant, x, through.P, Yt,
+                                                         through_rate(phi, through.rate, through.growth))
+                       for x, phi in through_verts})
     checks = check_blocks(blocks)
     worst = min(checks, key=lambda c: c.relative_margin)
     failed = uncertified(checks)
@@ -335,7 +423,9 @@ def certify(plant, decay_verts, gain_verts, design: Design, level: LevelBound) -
     if ratio >= 1.0:
         raise CertificateError(f"nonlinear-tyre observer: V(e+)/V(e) reaches {ratio:.9f} >= 1 at {slowest}")
     gamma = float(np.sqrt(design.eta * plant.Ts))
-    return {"blocks": len(checks), "worst_block": worst.label, "worst_min_eig": worst.min_eig,
+    extra = {} if through is None else {"through_rate": through.rate, "sliding_growth": through.growth,
+                                        "through_time_constant_s": 2.0 / through.rate if through.rate > 0 else None}
+    return {**extra, "blocks": len(checks), "worst_block": worst.label, "worst_min_eig": worst.min_eig,
             "worst_relative_margin": worst.relative_margin, "max_ratio": ratio,
             "contraction_per_step": float(np.sqrt(ratio)), "slowest_vertex": slowest,
             "time_constant_s": float(-plant.Ts / np.log(np.sqrt(ratio))),

@@ -576,6 +576,13 @@ def _peer_folds(config, params, run, a: int, b: int, cv: dict, choice: str, nois
 
 # --- the files --------------------------------------------------------------------------------------
 
+def _toml(v) -> str:
+    """A setting's value as TOML writes it: a bool as true/false (not the 1.0 a float of it would be)."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    return f'"{v}"' if isinstance(v, str) else repr(float(v))
+
+
 def _set_values(text: str, table: str, values: dict) -> str:
     """``text`` (TOML) with the values of ``KEY = VALUE`` lines of ``[table]`` replaced, comments kept;
     a key the table lacks is appended at its end."""
@@ -593,7 +600,7 @@ def _set_values(text: str, table: str, values: dict) -> str:
             last_of_table = i
             if m.group(2) in values:
                 v = values[m.group(2)]
-                new = f'"{v}"' if isinstance(v, str) else repr(float(v))
+                new = _toml(v)
                 pad = max(1, len(m.group(4)) + len(m.group(5)) - len(new)) if m.group(6) else 0
                 lines[i] = f"{m.group(1)}{m.group(2)}{m.group(3)}{new}{' ' * pad}{m.group(6) or ''}".rstrip()
                 seen.add(m.group(2))
@@ -601,7 +608,7 @@ def _set_values(text: str, table: str, values: dict) -> str:
     if rest:
         if last_of_table is None:
             raise ConfigurationError(f"no [{table}] table to write {', '.join(rest)} into")
-        add = [f'{k} = "{values[k]}"' if isinstance(values[k], str) else f"{k} = {float(values[k])!r}" for k in rest]
+        add = [f"{k} = {_toml(values[k])}" for k in rest]
         lines[last_of_table + 1:last_of_table + 1] = add
     return "\n".join(lines)
 
@@ -643,7 +650,7 @@ def lines(result: dict) -> list:
         k, names = len(t["keys"]), t["candidates"]
         out.append("    [design] settings judged on the same folds (pooled held-out beta RMS, deg):")
         for row in t["rows"]:
-            what = ", ".join(f"{key}={v}" for key, v in zip(t["keys"], row[:k]))
+            what = ", ".join(f"{key}={_toml(v) if isinstance(v, bool) else v}" for key, v in zip(t["keys"], row[:k]))
             said = (", ".join(f"{c} {v:.4f}" for c, v in zip(names, row[k:-1])) if row[-1] == "certified"
                     else row[-1])
             out.append(f"      {what}: {said}")
@@ -658,7 +665,8 @@ def lines(result: dict) -> list:
             + (" (± block-jackknife standard error over the folds)" if unc else ""),
             "  noise levels of the l2-gain design" + (" and the settings chosen" if "settings" in result else "")
             + " ([design]):",
-            "    " + ", ".join(f"{k} = {v:g}" if isinstance(v, (int, float)) else f"{k} = {v!r}"
+            "    " + ", ".join(f"{k} = {_toml(v)}" if isinstance(v, bool) else f"{k} = {v:g}"
+                           if isinstance(v, (int, float)) else f"{k} = {v!r}"
                            for k, v in result["design"].items())]
     if "peers" in result:
         out += ["  Kalman peers (EKF grid, beta RMS on the range): "

@@ -76,6 +76,7 @@ class TyreRepresentation:
     symbols: tuple            # (v_y, r, known inputs..., v_x)
     lever: tuple              # (l_f, -l_r): slip t_k depends on v_y + lever_k r (yaw-rate noise enters there)
     signals: "Signals"        # the model's names of the roles, and their units
+    through_set: tuple | None = None   # AxleBounds per axle at every slip (``through_sliding``), else None
 
     @property
     def theta(self) -> tuple:
@@ -219,8 +220,10 @@ def signals(module, source: str) -> Signals:
 
 
 def _axle_bounds(k, a, subs, measured_boxes, rho, delta, d_box, t_sym, vx, vy, stiffness_range, friction_range,
-                 source, rel_tol) -> AxleBounds:
-    """Sound bounds of v_x dPhi_k/dv_y on |t| <= rho t_sl (see the module docstring)."""
+                 source, rel_tol, through: bool = False) -> AxleBounds:
+    """Sound bounds of v_x dPhi_k/dv_y on |t| <= rho t_sl (see the module docstring). ``through``: rho = 1 and
+    the bounds are widened to hold 0, the slope beyond sliding (checked by :func:`_check_constant_beyond`), so
+    they hold at every slip; the slope bound reaching 0 is then expected, not refused."""
     F = a.peak_symbol
     ranged = {}                  # the axle's stiffness and friction: symbols with their declared range
     for sym, (lo, hi) in ((a.stiffness, stiffness_range), (a.friction, friction_range)):
@@ -272,12 +275,12 @@ def _axle_bounds(k, a, subs, measured_boxes, rho, delta, d_box, t_sym, vx, vy, s
         raise ModelDefinitionError(f"{source}: axle {a.name}: v_x dt/dv_y in slip coordinates still depends on "
                                    f"{sorted(map(str, stray))} (AXLES[{k}].inverse is not v_y(t))")
     rg = range_bound(geo, {t_sym: (-t_lim, t_lim), delta: d_box}, rel_tol=rel_tol, relative_cuts=True)
-    if not (rl.lower > 0 and rg.upper < 0):
+    if not through and not (rl.lower > 0 and rg.upper < 0):
         raise CertificateError(f"{source}: axle {a.name}: on |t| <= {rho:g} t_sl the tyre slope's sound lower bound is "
                                f"{rl.lower:.4g} N (the kinematic factor's upper bound {rg.upper:.4g}), not > 0 (< 0): "
                                f"near full sliding v_y is not observable from (a_y, r); lower the sliding fraction")
     product = Interval(rl.lower, rl.upper) * Interval(rg.lower, rg.upper)   # rounded outward
-    theta = (product.lo, product.hi)
+    theta = (product.lo, product.hi) if not through else (min(product.lo, 0.0), max(product.hi, 0.0))
     # attained: the product evaluated jointly on a grid of the set (tau, the ranged parameters, the
     # capacity's range, delta); every value lies inside the sound bounds
     slope_fn = sp.lambdify([tau, F, *ranged], slope, "math")
@@ -349,6 +352,14 @@ def represent(module, params, settings, source: str) -> TyreRepresentation:
         sets.append(tuple(_axle_bounds(k, a, subs, measured_boxes, rho, delta, d_box, t, vx, vy,
                                        settings.stiffness_range, settings.friction_range, source,
                                        settings.bounds_rel_tol) for k, a in enumerate(axles)))
+    through = None
+    if getattr(settings, "through_sliding", False):
+        # 1e-3 of the slope's range below its true 0 at sliding is a positive theta of ~100 N: a slope that
+        # drives the error at a few 0.01 1/s, above any sensible sliding_growth; 1e-6 leaves ~0.1 N
+        through = tuple(_axle_bounds(k, a, subs, measured_boxes, 1.0, delta, d_box, t, vx, vy,
+                                     settings.stiffness_range, settings.friction_range, source,
+                                     min(settings.bounds_rel_tol, THROUGH_REL_TOL), through=True)
+                        for k, a in enumerate(axles))
     f = tuple(numeric(e, {**subs, **zero_w}) for e in model.dynamics)
     a_y = numeric(dict(model.outputs)[names.a_y], {**subs, **zero_w})
     slips = tuple(sp.sympify(a.slip).subs(subs) for a in axles)
@@ -379,5 +390,38 @@ def represent(module, params, settings, source: str) -> TyreRepresentation:
                                                f"the output that is not the yaw rate) is not A_Y_IN_FORCES with the "
                                                f"axle forces substituted")
                 raise ModelDefinitionError(f"{source}: MODEL is not DYNAMICS_IN_FORCES with the axle forces substituted")
+    if through is not None:
+        _check_constant_beyond(axles, model_forces, symbols, subs, boxes, v_box, t, model_file, rng)
     return TyreRepresentation(f, a_y, G[:2], G[2], sets[0], sets[1], slips, sliding, settings.sliding_fraction,
-                              v_box, tuple(boxes), symbols, tuple(lever), names)
+                              v_box, tuple(boxes), symbols, tuple(lever), names, through)
+
+
+THROUGH_REL_TOL = 1e-6
+"""Tightness of the through-sliding slope bounds (relative to the slope's range)."""
+
+BEYOND = (1.0, 1.05, 1.5, 3.0)
+"""Normalized slips |tau| = |t| / t_sl at which :func:`_check_constant_beyond` compares each axle force."""
+
+
+def _check_constant_beyond(axles, model_forces, symbols, subs, boxes, v_box, t, model_file, rng, points: int = 20):
+    """The through-sliding bounds take each axle's slope as 0 beyond its sliding slip (the Fiala law's
+    clamp). ``Axle.law`` is the law *without* its clamp, so this is a property of the model's own force
+    (``Phi_f``, ``Phi_r``): compared at |tau| in :data:`BEYOND`, both signs, at random measured signals of
+    their boxes (a ModelDefinitionError naming the axle where it changes: a law that keeps rising, or
+    falls, beyond its peak is not covered)."""
+    mods = [{"Min": min, "Max": max, "Abs": abs}, "math"]
+    others = symbols[1:]                        # r, the known inputs, v_x
+    for k, a in enumerate(axles):
+        inverse = sp.lambdify([*others, t], sp.sympify(a.inverse).subs(subs), mods)
+        t_sl = sp.lambdify(others, numeric(numeric(a.sliding, {a.peak_symbol: a.peak}), subs), mods)
+        for _ in range(points):
+            pt = [rng.uniform(-0.5, 0.5), *[rng.uniform(*b) for _, b in boxes], rng.uniform(*v_box)]
+            for sign in (1.0, -1.0):
+                forces = [float(model_forces[k](inverse(*pt, sign * tau * t_sl(*pt)), *pt)) for tau in BEYOND]
+                if not all(abs(f - forces[0]) <= 1e-9 * max(1.0, abs(forces[0])) for f in forces):
+                    raise ModelDefinitionError(
+                        f"{model_file}: axle {a.name}: its force in MODEL is not constant beyond the sliding slip "
+                        f"({', '.join(f'{f:.6g} N' for f in forces)} at |t| = {', '.join(map(str, BEYOND))} t_sl): "
+                        f"[design] through_sliding certifies every slip only for a law whose slope is 0 beyond "
+                        f"sliding (the Fiala law clamped at t_sl, model_defs/tyres.py); clamp the model's force, or "
+                        f"set through_sliding = false")
