@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of niki_sideslip_nonlinear_tyre_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define NIKI_SIDESLIP_NONLINEAR_TYRE_DESIGN_HASH "4fff315f1419b6d85e11caadd92b53b33c07e2748166c745e312ae3cb16a64d5"
+#define NIKI_SIDESLIP_NONLINEAR_TYRE_DESIGN_HASH "3917cd26c890052ce5ed8f135017d7cfbec5d40472fbacd6f8a7d64acf05830d"
 
 /* Status bits returned by niki_sideslip_nonlinear_tyre_step; a sample's status is their OR (niki_sideslip_nonlinear_tyre_status). */
 typedef enum {

@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of stanford_sideslip_nonlinear_tyre_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define STANFORD_SIDESLIP_NONLINEAR_TYRE_DESIGN_HASH "c985b20bd329f2021f35747d090044ad3868eec0e40acd3866d45801d09c9443"
+#define STANFORD_SIDESLIP_NONLINEAR_TYRE_DESIGN_HASH "dbfd80a1fc2c5a406354391bee082227fa6e3678060b99bfba34c88bbfc61060"
 
 /* Status bits returned by stanford_sideslip_nonlinear_tyre_step; a sample's status is their OR (stanford_sideslip_nonlinear_tyre_status). */
 typedef enum {
