@@ -221,9 +221,18 @@ def gain_factorization(data: ObserverData):
     return lam, V, canonical.matmul(V.T, L0), canonical.matmul(V.T, L1)
 
 
+GRID_POINTS = 10_000
+"""The most points of a dense evidence grid over three or more scheduling signals: n_multi per axis is
+n_multi^m points (41^4 = 2.8 million for four signals, an hour of evaluation), so the axes get
+floor(GRID_POINTS^(1/m)) points each (three signals 21, four 10, five 6). The grids are evidence beside
+the certificates, never the proof; the figures record how many points they had."""
+
+
 def signal_grid(poly: Polytope, n_single: int = 401, n_multi: int = 41) -> np.ndarray:
-    """Dense grid over the box of all scheduling signals, shape (points, n_signals)."""
-    n = n_single if len(poly.signals) == 1 else n_multi
+    """Dense grid over the box of all scheduling signals, shape (points, n_signals): ``n_single`` points
+    for one signal, ``n_multi`` per axis for two, at most :data:`GRID_POINTS` in all beyond."""
+    m = len(poly.signals)
+    n = n_single if m == 1 else n_multi if m == 2 else max(2, min(n_multi, int(GRID_POINTS ** (1.0 / m) + 1e-9)))
     axes = [np.linspace(lo, hi, n) for lo, hi in zip(poly.lowers, poly.uppers)]
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(axes))
 
