@@ -34,7 +34,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of ts_fuzzy_uio_stanford_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define TS_FUZZY_UIO_STANFORD_DESIGN_HASH "db65cd2bc26ea72d12a466410a7d47f5e5bbb5daa2a073610d73efdd418fe7eb"
+#define TS_FUZZY_UIO_STANFORD_DESIGN_HASH "9950d7a85c363dce5deb02395e2ee0c1ebc6bf1f4ee15059ac526c28f3738ee9"
 
 /* Status bits returned by ts_fuzzy_uio_stanford_step; a sample's status is their OR (ts_fuzzy_uio_stanford_status). */
 typedef enum {
