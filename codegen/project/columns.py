@@ -29,9 +29,12 @@ UNITS = {
 _SPELLINGS = {"m/s²": "m/s^2", "rad/s²": "rad/s^2", "deg/s²": "deg/s^2", "Nm": "N m", "N*m": "N m", "N·m": "N m",
               "kNm": "kN m", "-": "1", "kph": "km/h", "°": "deg", "°/s": "deg/s"}
 
-COLUMN_KEYS = {"column": Rule(str, required=True, doc="the CSV header of the column"),
+COLUMN_KEYS = {"column": Rule(str, required=True, doc="the log's column (CSV header, Parquet column) or MDF channel"),
                "unit": Rule(str, doc="the column's unit, converted to the model's"),
-               "scale": Rule(float, doc="a factor applied after the unit (a steering ratio, a sign)")}
+               "scale": Rule(float, doc="a factor applied after the unit (a steering ratio, a sign)"),
+               "resample": Rule(str, doc='a channel at another rate than the observer\'s: "hold" (default: the last '
+                                         'sample) or "linear" (causal, delayed by its sampling step)')}
+RESAMPLE = ("hold", "linear")
 DATA_KEYS = {"time": Rule(None, required=True, doc='"COLUMN" (seconds) or { column = ..., unit = ... }'),
              "inputs": Rule(dict, required=True, doc="{ OBSERVER_INPUT = { column = ..., unit = ... } }"),
              "truth": Rule(dict, doc="{ OBSERVER_OUTPUT = { column = ..., unit = ... } }")}
@@ -49,6 +52,7 @@ class Column:
     column: str
     unit: str | None = None
     scale: float = 1.0
+    resample: str | None = None     # hold or linear for a log at another rate (None: the default, hold)
 
 
 @dataclass(frozen=True)
@@ -84,7 +88,13 @@ def _column(value, source: str, section: str, key: str, units=tuple(UNITS)) -> C
         raise config_error(source, f"{section}.{key}", "scale", value["scale"],
                            "a finite number other than 0 (a factor applied after the unit: a steering ratio, -1 for "
                            "the opposite sign)")
-    return Column(parsed["column"], unit, scale)
+    resample = parsed.get("resample")
+    if resample is not None and resample not in RESAMPLE:
+        raise config_error(source, f"{section}.{key}", "resample", resample,
+                           "hold (the last sample at or before each step) or linear (interpolated, delayed by one "
+                           "sampling step of the channel: never a value from the future)",
+                           suggest(resample, list(RESAMPLE)))
+    return Column(parsed["column"], unit, scale, resample)
 
 
 def parse(table, source: str) -> ColumnMap:
@@ -99,6 +109,9 @@ def parse(table, source: str) -> ColumnMap:
     parse_table(table, DATA_KEYS, source=source, section="data")
     time = _column(table["time"], source, "data", "time", units=tuple(u for u, (dim, _) in UNITS.items()
                                                                     if dim == "time"))
+    if time.resample is not None:      # the time column is the time base, not a signal put on it
+        raise config_error(source, "data.time", "resample", time.resample,
+                           "no resample key on the time column (it sets the time base; resample goes on a signal)")
     inputs = {k: _column(v, source, "data.inputs", k) for k, v in table["inputs"].items()}
     truth = {k: _column(v, source, "data.truth", k) for k, v in table.get("truth", {}).items()}
     return ColumnMap(source, time, inputs, truth)

@@ -186,16 +186,20 @@ class LogReader:
         """
         self.rows = 0
         self._nonfinite = {c: [0, None] for c in self.units}
-        try:
-            yield from self._arrow()
-        except _SlowPath:
-            yield from self._slow(self.rows)
+        yield from self._read()
         for c, (count, first) in self._nonfinite.items():
             if count:
                 raise DatasetError(f"{self.path}: column {c!r} has {count} non-finite value(s), first at data "
                                    f"row {first + 1}; allowed: finite numbers in {self.units[c]}")
         if self.rows < 2:
             raise DatasetError(f"{self.path}: needs at least 2 data rows, found {self.rows}")
+
+    def _read(self):
+        """The chunks of the file (a reader of another format overrides it)."""
+        try:
+            yield from self._arrow()
+        except _SlowPath:
+            yield from self._slow(self.rows)
 
     def _deliver(self, cols: dict):
         n = len(next(iter(cols.values())))

@@ -34,9 +34,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigurationError, DatasetError
-from ..project.columns import UNITS, factor, model_unit
+from ..project.columns import UNITS, Column, factor, model_unit
 from ..project.settings import config_error, suggest
-from . import csvlog, log_checks, streaming
+from . import csvlog, log_checks, logfiles, streaming
 from .common import SETTLE_TIME, format_stats
 
 
@@ -47,10 +47,12 @@ def _spec(col) -> dict:
         spec["unit"] = col.unit
     if col.scale != 1.0:
         spec["scale"] = col.scale
+    if col.resample is not None:
+        spec["resample"] = col.resample
     return spec
 
 
-def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
+def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | None = None) -> dict:
     """The compiled step over a logged run mapped by the observer file's ``[data]`` table.
 
     The log is read in chunks (``block_bytes`` of text each): the step runs chunk by chunk with
@@ -92,23 +94,43 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
                                  f"input ({', '.join(obs.input_names)}); missing: {', '.join(missing)}",
                                  source=cmap.source, section="data.inputs", key=missing[0],
                                  allowed="a column for every observer input")
-    scale = {k: factor(c, model_unit(model, k), cmap.source, "data.inputs", k) for k, c in cmap.inputs.items()}
-    scale.update({f"truth:{k}": factor(c, model_unit(model, k), cmap.source, "data.truth", k)
-                  for k, c in cmap.truth.items()})
     names = {**cmap.inputs, **{f"truth:{k}": c for k, c in cmap.truth.items()}}
     p = Path(path)
     units = {cmap.time.column: cmap.time.unit or "s"}
     for c in names.values():
         units.setdefault(c.column, c.unit or "model units")
-    reader = csvlog.LogReader(p, units, block_bytes)
+    methods = {c.column: c.resample for c in names.values() if c.resample}
+    reader = logfiles.open_log(p, units, cmap.time.column, obs.sample_time, methods, block_bytes, batch_rows)
+    mdf = isinstance(reader, logfiles.MdfLog)
+    word = "channel" if mdf else "column"
+    # the units the file states (an MDF channel's, a Parquet field's) against the map's and the model's
+    mapped, declared_by = {}, {}
+    for n, c in names.items():
+        signal = n.removeprefix("truth:")
+        unit, source = logfiles.resolve_unit(p, f"{word} {c.column!r} ({n.replace('truth:', 'reference of ')})",
+                                             reader.file_units.get(c.column), c.unit, model_unit(model, signal))
+        mapped[n] = Column(c.column, unit, c.scale, c.resample)
+        declared_by[n] = "file" if source == "file" and c.unit is None else "map"
+    in_cols = {n: mapped[n] for n in cmap.inputs}
+    truth = {n: mapped[f"truth:{n}"] for n in cmap.truth}
+    scale = {k: factor(c, model_unit(model, k), cmap.source, "data.inputs", k) for k, c in in_cols.items()}
+    scale.update({f"truth:{k}": factor(c, model_unit(model, k), cmap.source, "data.truth", k)
+                  for k, c in truth.items()})
     time = csvlog.TimeCheck(p, obs.sample_time, column=cmap.time.column)
-    t_factor = (UNITS[cmap.time.unit][1] if cmap.time.unit else 1.0) * cmap.time.scale
+    if mdf:                 # every channel's master, in s: the map's time entry is not read
+        t_factor = 1.0
+    else:
+        t_unit, _ = logfiles.resolve_unit(p, f"column {cmap.time.column!r} (time)",
+                                          reader.file_units.get(cmap.time.column), cmap.time.unit, "s")
+        t_factor = (UNITS[t_unit][1] if t_unit else 1.0) * cmap.time.scale
     checks = log_checks.LogChecks(
         p, model, load_parameters(config.parameter_path), obs.input_names,
-        {n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale) for n, c in cmap.inputs.items()},
+        {n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale, declared_by=declared_by[n])
+         for n, c in in_cols.items()},
         obs.sample_time,
-        truth={n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale, table="data.truth")
-               for n, c in cmap.truth.items()})
+        truth={n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale, table="data.truth",
+                                    declared_by=declared_by[f"truth:{n}"])
+               for n, c in truth.items()})
     declared = {n: model_unit(model, n) for n in obs.output_names}
     compared = {n: streaming.ErrorStats(declared[n], settle=SETTLE_TIME) for n in cmap.truth}
     summary = {n: streaming.Summary(declared[n]) for n in obs.output_names if n not in cmap.truth}
@@ -136,6 +158,7 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
         kept.add(sig)
     time.finish()
     report = checks.finish()
+    report["warnings"][:0] = getattr(reader, "warnings", [])      # the resampling's, first
     for n, stats in compared.items():           # a reference in another unit than declared (rad as deg)
         said = checks.reference_scale(n, stats.scale_ratio(), SETTLE_TIME)
         column = f"column {cmap.truth[n].column!r} (reference of {n},"
@@ -145,7 +168,8 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
             "estimates": {n: s.result() for n, s in summary.items()}, "baselines": {},
             "status_flags": flags, "samples": reader.rows, "data": str(path), "signals": kept.signals(),
             "signals_stride": kept.stride, "log_checks": report["checks"], "warnings": report["warnings"],
-            "unchecked_columns": report["unchecked_columns"]}
+            "unchecked_columns": report["unchecked_columns"], "format": logfiles.kind(p),
+            "resampling": getattr(reader, "resampling", {})}
 
 
 def unchecked_line(rows) -> str | None:
