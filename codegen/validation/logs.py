@@ -52,13 +52,15 @@ def _spec(col) -> dict:
     return spec
 
 
-def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | None = None) -> dict:
+def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | None = None, out=None) -> dict:
     """The compiled step over a logged run mapped by the observer file's ``[data]`` table.
 
     The log is read in chunks (``block_bytes`` of text each): the step runs chunk by chunk with
     its state carried over, the statistics are merged, and every check of
     :mod:`codegen.validation.log_checks` (units, the model's physics) must pass before anything
-    is returned.
+    is returned. ``out``: a file (``.mf4`` or ``.parquet``) the observer's outputs and status are
+    written to, on the log's time base (:mod:`codegen.validation.logout`), put in place once every
+    check has passed.
 
     Raises
     ------
@@ -136,28 +138,41 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | N
     summary = {n: streaming.Summary(declared[n]) for n in obs.output_names if n not in cmap.truth}
     kept = streaming.Decimated()
     state, flags, t0 = obs.initial_state(), 0, None
-    for _, cols in reader.chunks():
-        t = cols[cmap.time.column] * t_factor
-        time.feed(t)
-        inputs = np.column_stack([cols[cmap.inputs[n].column] * scale[n] for n in obs.input_names])
-        checks.feed(t, {n: inputs[:, j] for j, n in enumerate(obs.input_names)})
-        checks.feed_truth({n: cols[c.column] * scale[f"truth:{n}"] for n, c in cmap.truth.items()})
-        out, status, state = obs.run(inputs, state)
-        flags += int(np.count_nonzero(status))
-        t0 = t[0] if t0 is None else t0
-        t = t - t0
-        sig = {"t": t}
-        for j, name in enumerate(obs.output_names):
-            sig[name] = out[:, j]
-            if name in cmap.truth:
-                ref = cols[cmap.truth[name].column] * scale[f"truth:{name}"]
-                sig[f"{name}_truth"] = ref
-                compared[name].add(ref, out[:, j], t)
-            else:
-                summary[name].add(out[:, j])
-        kept.add(sig)
-    time.finish()
-    report = checks.finish()
+    written = None
+    if out is not None:
+        from . import logout
+        written = logout.OutputLog(out, declared, f"uiogen validate {config.name} --data {p}")
+    try:
+        for _, cols in reader.chunks():
+            t = cols[cmap.time.column] * t_factor
+            time.feed(t)
+            inputs = np.column_stack([cols[cmap.inputs[n].column] * scale[n] for n in obs.input_names])
+            checks.feed(t, {n: inputs[:, j] for j, n in enumerate(obs.input_names)})
+            checks.feed_truth({n: cols[c.column] * scale[f"truth:{n}"] for n, c in cmap.truth.items()})
+            est, status, state = obs.run(inputs, state)
+            flags += int(np.count_nonzero(status))
+            if written is not None:
+                written.add(t, est, status)            # the log's own times, not the run's from 0
+            t0 = t[0] if t0 is None else t0
+            t = t - t0
+            sig = {"t": t}
+            for j, name in enumerate(obs.output_names):
+                sig[name] = est[:, j]
+                if name in cmap.truth:
+                    ref = cols[cmap.truth[name].column] * scale[f"truth:{name}"]
+                    sig[f"{name}_truth"] = ref
+                    compared[name].add(ref, est[:, j], t)
+                else:
+                    summary[name].add(est[:, j])
+            kept.add(sig)
+        time.finish()
+        report = checks.finish()
+        if written is not None:         # in place only when every check has passed
+            written.finish()
+    except BaseException:
+        if written is not None:
+            written.abort()
+        raise
     report["warnings"][:0] = getattr(reader, "warnings", [])      # the resampling's, first
     for n, stats in compared.items():           # a reference in another unit than declared (rad as deg)
         said = checks.reference_scale(n, stats.scale_ratio(), SETTLE_TIME)
@@ -169,7 +184,7 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | N
             "status_flags": flags, "samples": reader.rows, "data": str(path), "signals": kept.signals(),
             "signals_stride": kept.stride, "log_checks": report["checks"], "warnings": report["warnings"],
             "unchecked_columns": report["unchecked_columns"], "format": logfiles.kind(p),
-            "resampling": getattr(reader, "resampling", {})}
+            "resampling": getattr(reader, "resampling", {}), "out": str(out) if out is not None else None}
 
 
 def unchecked_line(rows) -> str | None:

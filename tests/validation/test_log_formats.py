@@ -26,6 +26,7 @@ from codegen.project import observer_file as observers
 from codegen.validation import logfiles
 from codegen.validation import run as validate
 from codegen.validation import stanford as S
+from codegen.validation.common import SETTLE_TIME
 
 from conftest import require_shared
 
@@ -165,6 +166,16 @@ def test_linear_reports_its_latency(data, tmp_path):
     assert 0 < abs(rms - ref) < 0.01 * ref, (rms, ref)
 
 
+def test_a_rate_change_is_a_warning(data, tmp_path):
+    cols = data["cols"]
+    t = cols["t"]
+    tc = np.r_[t[:2000], np.arange(t[2000], t[-1], 0.0125)]         # 100 Hz, then 80 Hz: no gap, another rate
+    log = _stanford_mdf(tmp_path / "rate.mf4", cols, delta=(tc, np.interp(tc, t, cols["delta"]), "rad"))
+    res = _run(_observer(tmp_path, units=False), log)
+    said = [w for w in res["warnings"] if w.startswith("channel 'delta' changes its rate")]
+    assert len(said) == 1 and "(80 Hz) from t = " in said[0] and "(100 Hz) over the log" in said[0], res["warnings"]
+
+
 # --- resampling, by itself ------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("method", ["hold", "linear"])
@@ -237,3 +248,56 @@ def test_an_unknown_file_unit_is_refused_unless_the_map_states_it(data, tmp_path
 def test_a_resample_method_not_known(tmp_path):
     with pytest.raises(ConfigurationError, match=r"\[data.inputs.v_x\] resample = \"cubic\": hold .* or linear"):
         observers.get(str(_observer(tmp_path, v_x='{ column = "vx", resample = "cubic" }')), project=ROOT)
+
+
+# --- --out: the outputs and status, read back by the library of their format ------------------------------
+
+@pytest.mark.parametrize("suffix", [".mf4", ".parquet"])
+def test_out_is_read_back(data, tmp_path, suffix):
+    log = _stanford_mdf(tmp_path / "log.mf4", data["cols"])
+    out = tmp_path / "res" / f"estimates{suffix}"
+    proc = subprocess.run([sys.executable, "-m", "codegen.cli", "validate", str(_observer(tmp_path, units=False)),
+                           "--data", str(log), "--out", str(out), "--project", str(ROOT), "--json"],
+                          capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads(proc.stdout)
+    assert res["out"] == str(out) and sorted(p.name for p in out.parent.iterdir()) == [out.name]   # no temporary
+    ref = data["csv"]
+    t = data["cols"]["t"]
+    if suffix == ".mf4":
+        mdf = asammdf.MDF(out)
+        beta, status = mdf.get("beta"), mdf.get("status")
+        mdf.close()
+        times, values, unit, flags = beta.timestamps, beta.samples, beta.unit, status.samples
+    else:
+        table = pq.read_table(out)
+        times, values = table.column("time").to_numpy(), table.column("beta").to_numpy()
+        unit = table.schema.field("beta").metadata[b"unit"].decode()
+        flags = table.column("status").to_numpy()
+        assert table.schema.field("time").metadata[b"unit"] == b"s"
+    assert np.array_equal(times, t)                                  # the log's own times, not from 0
+    assert unit == "rad"                                             # the model's unit of beta
+    assert int(np.count_nonzero(flags)) == ref["status_flags"] and flags.size == ROWS
+    # the written sideslip is the run's: its error against the reference after the settle time is the CSV's RMS
+    err = np.degrees(values - data["cols"]["beta_true"])[t - t[0] >= SETTLE_TIME]
+    assert abs(np.sqrt(np.mean(err ** 2)) - ref["observer"]["beta"]["rms"]) <= 1e-12
+
+
+def test_out_is_not_written_when_the_run_is_refused(data, tmp_path):
+    cols = data["cols"]
+    keep = np.r_[0:1000, 1010:ROWS]
+    log = _stanford_mdf(tmp_path / "gap.mf4", cols, ay=(cols["t"][keep], cols["ay"][keep], "m/s^2"))
+    (tmp_path / "out").mkdir()
+    old = tmp_path / "out" / "estimates.parquet"
+    old.write_bytes(b"the previous results")
+    with pytest.raises(DatasetError, match="gap"):
+        _run(_observer(tmp_path, units=False), log, out=old)
+    assert old.read_bytes() == b"the previous results" and [p.name for p in old.parent.iterdir()] == [old.name]
+
+
+def test_out_with_a_suffix_it_cannot_write(data, tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "codegen.cli", "validate", str(data["observer"]), "--data",
+                           str(data["folder"] / "log.csv"), "--out", str(tmp_path / "est.csv"), "--project", str(ROOT)],
+                          capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 2 and proc.stderr.startswith("uiogen: error: ConfigurationError: --out "), proc.stderr
+    assert "allowed: .mf4, .mdf, .parquet, .pq" in proc.stderr and not (tmp_path / "est.csv").exists()
