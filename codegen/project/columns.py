@@ -35,6 +35,7 @@ COLUMN_KEYS = {"column": Rule(str, required=True, doc="the log's column (CSV hea
                "resample": Rule(str, doc='a channel at another rate than the observer\'s: "hold" (default: the last '
                                          'sample) or "linear" (causal, delayed by its sampling step)')}
 RESAMPLE = ("hold", "linear")
+TIME_KEYS = {k: v for k, v in COLUMN_KEYS.items() if k != "resample"}   # the time base is not resampled
 DATA_KEYS = {"time": Rule(None, required=True, doc='"COLUMN" (seconds) or { column = ..., unit = ... }'),
              "inputs": Rule(dict, required=True, doc="{ OBSERVER_INPUT = { column = ..., unit = ... } }"),
              "truth": Rule(dict, doc="{ OBSERVER_OUTPUT = { column = ..., unit = ... } }")}
@@ -65,13 +66,13 @@ class ColumnMap:
     truth: dict = field(default_factory=dict)
 
 
-def _column(value, source: str, section: str, key: str, units=tuple(UNITS)) -> Column:
-    """One column spec; ``units``: the units allowed for it (the time column: s, ms)."""
+def _column(value, source: str, section: str, key: str, units=tuple(UNITS), keys=COLUMN_KEYS) -> Column:
+    """One column spec; ``units``: the units allowed for it (the time column: s, ms); ``keys``: its keys."""
     if isinstance(value, str):
         value = {"column": value}
     if not isinstance(value, dict):
         raise config_error(source, section, key, value, '"COLUMN" or an inline table { column = "...", unit = "..." }')
-    parsed = parse_table(value, COLUMN_KEYS, source=source, section=f"{section}.{key}")
+    parsed = parse_table(value, keys, source=source, section=f"{section}.{key}")
     if not parsed["column"].strip():
         # an empty header would otherwise surface later as a "missing column ['']" of the log
         raise config_error(source, f"{section}.{key}", "column", parsed["column"], "the (non-empty) header of a column "
@@ -108,10 +109,7 @@ def parse(table, source: str) -> ColumnMap:
     """
     parse_table(table, DATA_KEYS, source=source, section="data")
     time = _column(table["time"], source, "data", "time", units=tuple(u for u, (dim, _) in UNITS.items()
-                                                                    if dim == "time"))
-    if time.resample is not None:      # the time column is the time base, not a signal put on it
-        raise config_error(source, "data.time", "resample", time.resample,
-                           "no resample key on the time column (it sets the time base; resample goes on a signal)")
+                                                                    if dim == "time"), keys=TIME_KEYS)
     inputs = {k: _column(v, source, "data.inputs", k) for k, v in table["inputs"].items()}
     truth = {k: _column(v, source, "data.truth", k) for k, v in table.get("truth", {}).items()}
     return ColumnMap(source, time, inputs, truth)
