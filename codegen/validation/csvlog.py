@@ -147,8 +147,10 @@ class LogReader:
         if kind:
             # named here: decoding it as text would only say "not UTF-8" at some byte
             how = (", e.g. pyarrow.csv.write_csv(pyarrow.parquet.read_table(path), out)" if kind == "Parquet" else "")
+            mapped = ("; or map its columns in the observer file's [data] table, which reads Parquet and MDF4 "
+                      "(docs/validation.md, 'Log formats')" if kind in ("Parquet", "MDF (ASAM measurement data)") else "")
             raise DatasetError(f"cannot read {p}: it is a {kind} file; allowed: a CSV log (plain or gzip); export "
-                               f"it as CSV{how}")
+                               f"it as CSV{how}{mapped}")
         if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
             raise DatasetError(f"cannot read {p}: the file is UTF-16 encoded (byte-order mark {head[:2]!r}); "
                                f"allowed: UTF-8 or ASCII text; save it as UTF-8")

@@ -34,7 +34,9 @@ mapped channels, not with the file -- and put on one time base, the observer's s
 from __future__ import annotations
 
 import difflib
+import gc
 import logging
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -250,6 +252,23 @@ def _mdf():
     return MDF
 
 
+def _open(MDF, p: Path):
+    """``MDF(p)``, or a DatasetError: asammdf raises many types on a damaged file, and the half-built
+    object's ``__del__`` then fails too, which Python would print as 'Exception ignored' below the
+    one-line error; it is collected here with that report swallowed."""
+    hook, failure = sys.unraisablehook, None
+    sys.unraisablehook = lambda unraisable: None
+    try:
+        try:
+            return MDF(str(p))
+        except Exception as exc:     # noqa: BLE001 -- any failure of the parser says the same to the user
+            failure = f"{type(exc).__name__}: {exc}"
+        gc.collect()                 # the exception (and the half-built object it holds) is gone: collect it now
+    finally:
+        sys.unraisablehook = hook
+    raise DatasetError(f"cannot read {p}: not a readable MDF file ({failure})")
+
+
 class Channel:
     """One mapped channel, read whole: its times [s], values, unit, and the facts of its sampling."""
 
@@ -360,10 +379,7 @@ class MdfLog:
         p = Path(path)
         self.path, self.units, self.time_key, self.chunk_rows = p, dict(channels), time_key, int(chunk_rows)
         regular_file(p)
-        try:
-            mdf = MDF(str(p))
-        except Exception as exc:     # noqa: BLE001 -- asammdf raises many types on a damaged file; all say the same
-            raise DatasetError(f"cannot read {p}: not a readable MDF file ({type(exc).__name__}: {exc})") from None
+        mdf = _open(MDF, p)
         try:
             self.channels = [self._channel(mdf, p, name, methods.get(name, DEFAULT_METHOD)) for name in self.units]
         finally:

@@ -209,6 +209,11 @@ def format_table(result: dict) -> str:
         for name, s in result["estimates"].items():
             unit = (s.get("unit") or "–") + ("*" if s.get("converted_from") else "")
             lines.append(f"{name:12s} {unit:>7s} {s['mean']:10.4g} {s['std']:10.4g} {s['min']:10.4g} {s['max']:10.4g}")
+    moved = {c: r for c, r in (result.get("resampling") or {}).items() if r["method"] != "as recorded"}
+    if moved:               # what the figures rest on: channels the log did not hold at the observer's times
+        lines.append("resampled onto the observer's sample time: " + "; ".join(
+            f"{c!r} {r['rate_hz']:.4g} Hz, {r['method']}" + (f" (latency {r['latency_s']:.3g} s)" if r["latency_s"]
+                                                             else "") for c, r in moved.items()))
     lines += [f"warning: {w}" for w in result.get("warnings", ())]
     said = unchecked_line(result.get("unchecked_columns"))
     if said:

@@ -23,7 +23,7 @@ import pytest
 
 from codegen.errors import ConfigurationError, DatasetError
 from codegen.project import observer_file as observers
-from codegen.validation import logfiles
+from codegen.validation import logfiles, logs
 from codegen.validation import run as validate
 from codegen.validation import stanford as S
 from codegen.validation.common import SETTLE_TIME
@@ -153,6 +153,7 @@ def test_mdf_channels_at_200_100_and_50_hz(data, tmp_path):
     assert res["resampling"]["ay"]["method"] == "hold" and res["resampling"]["ay"]["rate_hz"] == pytest.approx(200)
     assert res["resampling"]["vx"]["rate_hz"] == pytest.approx(50)
     assert any("'vx' is sampled at 50 Hz, slower than the observer's 100 Hz" in w for w in res["warnings"])
+    assert "resampled onto the observer's sample time: 'ay' 200 Hz, hold; 'vx' 50 Hz, hold" in logs.format_table(res)
 
 
 def test_linear_reports_its_latency(data, tmp_path):
@@ -243,6 +244,19 @@ def test_an_unknown_file_unit_is_refused_unless_the_map_states_it(data, tmp_path
         _run(_observer(tmp_path, units=False), log)
     res = _run(_observer(tmp_path, units=False, v_x='{ column = "vx", unit = "m/s" }'), log)
     assert abs(res["observer"]["beta"]["rms"] - data["csv"]["observer"]["beta"]["rms"]) <= 1e-12
+
+
+@pytest.mark.parametrize("suffix", [".parquet", ".mf4"])
+def test_a_damaged_file_is_one_line(data, tmp_path, suffix):
+    whole = tmp_path / f"whole{suffix}"
+    if suffix == ".parquet":
+        pq.write_table(data["table"], whole)
+    else:
+        _stanford_mdf(whole, data["cols"])
+    log = tmp_path / f"cut{suffix}"
+    log.write_bytes(whole.read_bytes()[:5000])                      # a copy cut short: the magic, then nothing
+    err = _cli_error(_observer(tmp_path, units=False), log)
+    assert f"cannot read {log}: not a readable {'Parquet' if suffix == '.parquet' else 'MDF'} file (" in err, err
 
 
 def test_a_resample_method_not_known(tmp_path):
