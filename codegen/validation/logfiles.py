@@ -1,4 +1,5 @@
-"""Logs in Parquet and MDF4 for ``uiogen validate --data``, beside the CSV of :mod:`codegen.validation.csvlog`.
+"""Logs in Parquet, MDF4 and ROS 2 bags for ``uiogen validate --data``, beside the CSV of
+:mod:`codegen.validation.csvlog`.
 
 The format is told by the file's first bytes, never by its name (a log renamed ``.csv`` is still
 read as what it is): ``PAR1`` is Parquet, ``MDF     `` (``MDF`` and five spaces) is an ASAM MDF
@@ -30,6 +31,11 @@ mapped channels, not with the file -- and put on one time base, the observer's s
 - a step longer than :data:`~codegen.validation.csvlog.GAP_FACTOR` x a channel's median period is
   a gap (a DatasetError: no method should bridge missing samples silently); a channel whose
   period changes along the log, or that is slower than the observer, is a warning of the result.
+
+A ROS 2 bag (:class:`BagLog`, rosbags; a folder with ``metadata.yaml``, sqlite3 or mcap storage) is
+put on the grid the same way: each mapped ``TOPIC.FIELD`` (``/imu.angular_velocity.z``) is a
+channel at its topic's rate, timed by its message's ``header.stamp`` (the bag's recording time for
+a message without a header).
 """
 from __future__ import annotations
 
@@ -48,6 +54,7 @@ from .csvlog import GAP_FACTOR, PERIOD_RTOL, SHORT_FACTOR, LogReader, regular_fi
 
 PARQUET_MAGIC = b"PAR1"
 MDF_MAGIC = b"MDF     "
+BAG_FILES = (b"\x89MCAP0\r\n", b"SQLite format 3\x00")
 BATCH_ROWS = 65_536
 """Rows per Parquet batch (and per chunk of a resampled MDF log): about 0.5 MiB per float64 column."""
 METHODS = RESAMPLE
@@ -62,7 +69,8 @@ are not multiples of 0.01 to the last bit)."""
 
 
 def kind(path) -> str:
-    """``"parquet"``, ``"mdf"`` or ``"csv"``: the format of a log, from its first bytes.
+    """``"parquet"``, ``"mdf"``, ``"rosbag2"`` (a folder with ``metadata.yaml``) or ``"csv"``: the format
+    of a log, from its first bytes.
 
     Raises
     ------
@@ -70,16 +78,21 @@ def kind(path) -> str:
         missing, not a regular file, or unreadable.
     """
     p = Path(path)
+    if p.is_dir() and (p / "metadata.yaml").is_file():
+        return "rosbag2"
     regular_file(p)
     try:
         with open(p, "rb") as fh:
-            head = fh.read(8)
+            head = fh.read(16)
     except OSError as exc:
         raise DatasetError(f"cannot read {p}: {exc.strerror or exc}") from None
     if head.startswith(PARQUET_MAGIC):
         return "parquet"
     if head.startswith(MDF_MAGIC):
         return "mdf"
+    if head.startswith(BAG_FILES) and (p.parent / "metadata.yaml").is_file():
+        # the storage file of a bag: the bag is its folder (its metadata names the storage and the topics)
+        raise DatasetError(f"{p} is the storage file of a ROS 2 bag; allowed: the bag's folder, {p.parent}")
     return "csv"
 
 
@@ -347,7 +360,58 @@ def resample(c: Channel, grid: np.ndarray, ts: float) -> tuple:
     return c.x[np.maximum(idx, 0)], 0.0
 
 
-class MdfLog:
+class OnGrid:
+    """Channels at their own rates on one grid at the observer's sample time, delivered in chunks
+    (the MDF and ROS 2 readers read their channels into ``self.channels`` and call :meth:`_put_on_grid`)."""
+
+    def _put_on_grid(self, ts: float) -> None:
+        """``grid``, ``values`` (per channel, at the grid times), ``resampling`` and ``warnings`` of
+        ``self.channels`` at the sample time ``ts`` [s]."""
+        p = self.path
+        start, end = max(c.start for c in self.channels), min(c.end for c in self.channels)
+        if end - start < ts:
+            spans = "; ".join(f"{c.name!r} {c.start:.6g}..{c.end:.6g} s" for c in self.channels)
+            raise DatasetError(f"{p}: the mapped channels share no span of at least one sample time {ts:g} s "
+                               f"({spans}); allowed: channels recorded over the same interval")
+        self.grid = time_base(self.channels, ts)
+        self.values, self.resampling, self.warnings = {}, {}, []
+        for c in self.channels:
+            x = on_grid(c, self.grid, ts)
+            latency, recorded = 0.0, x is not None
+            if x is None:
+                x, latency = resample(c, self.grid, ts)
+            self.values[c.name] = x
+            self.resampling[c.name] = {"rate_hz": 1.0 / c.period, "method": "as recorded" if recorded else c.method,
+                                       "latency_s": latency}
+            if c.period > ts * (1.0 + PERIOD_RTOL):
+                self.warnings.append(
+                    f"channel {c.name!r} is sampled at {1 / c.period:.4g} Hz, slower than the observer's "
+                    f"{1 / ts:.4g} Hz: {c.method} gives it between samples"
+                    + (f" (latency {latency:.6g} s)" if c.method == "linear" else " (each value held until the next)"))
+            if c.rate_change is not None:
+                t0, t1, per = c.rate_change
+                self.warnings.append(f"channel {c.name!r} changes its rate: median period {per:.6g} s "
+                                     f"({1 / per:.4g} Hz) from t = {t0:.6g} to {t1:.6g} s, {c.period:.6g} s "
+                                     f"({1 / c.period:.4g} Hz) over the log")
+            if c.short:
+                self.warnings.append(f"channel {c.name!r} has {c.short} step(s) shorter than {SHORT_FACTOR:g} x its "
+                                     f"median period {c.period:.6g} s (irregular sampling)")
+        self.rows = 0
+
+    def chunks(self):
+        """Yield ``(first, {key: float64 array})`` of the grid, the time under ``time_key`` [s]."""
+        self.rows = 0
+        n = self.grid.size
+        if n < 2:
+            raise DatasetError(f"{self.path}: the mapped channels share {n} sample time(s); needs at least 2")
+        for first in range(0, n, self.chunk_rows):
+            part = slice(first, first + self.chunk_rows)
+            cols = {self.time_key: self.grid[part], **{k: v[part] for k, v in self.values.items()}}
+            self.rows = min(n, first + self.chunk_rows)
+            yield first, cols
+
+
+class MdfLog(OnGrid):
     """An MDF log: the mapped channels, each read alone with its own master, on the observer's grid.
 
     Parameters
@@ -385,36 +449,7 @@ class MdfLog:
         finally:
             mdf.close()
         self.file_units = {c.name: c.unit for c in self.channels}
-        ts = float(sample_time)
-        start, end = max(c.start for c in self.channels), min(c.end for c in self.channels)
-        if end - start < ts:
-            spans = "; ".join(f"{c.name!r} {c.start:.6g}..{c.end:.6g} s" for c in self.channels)
-            raise DatasetError(f"{p}: the mapped channels share no span of at least one sample time {ts:g} s "
-                               f"({spans}); allowed: channels recorded over the same interval")
-        self.grid = time_base(self.channels, ts)
-        self.values, self.resampling, self.warnings = {}, {}, []
-        for c in self.channels:
-            x = on_grid(c, self.grid, ts)
-            latency, recorded = 0.0, x is not None
-            if x is None:
-                x, latency = resample(c, self.grid, ts)
-            self.values[c.name] = x
-            self.resampling[c.name] = {"rate_hz": 1.0 / c.period, "method": "as recorded" if recorded else c.method,
-                                       "latency_s": latency}
-            if c.period > ts * (1.0 + PERIOD_RTOL):
-                self.warnings.append(
-                    f"channel {c.name!r} is sampled at {1 / c.period:.4g} Hz, slower than the observer's "
-                    f"{1 / ts:.4g} Hz: {c.method} gives it between samples"
-                    + (f" (latency {latency:.6g} s)" if c.method == "linear" else " (each value held until the next)"))
-            if c.rate_change is not None:
-                t0, t1, per = c.rate_change
-                self.warnings.append(f"channel {c.name!r} changes its rate: median period {per:.6g} s "
-                                     f"({1 / per:.4g} Hz) from t = {t0:.6g} to {t1:.6g} s, {c.period:.6g} s "
-                                     f"({1 / c.period:.4g} Hz) over the log")
-            if c.short:
-                self.warnings.append(f"channel {c.name!r} has {c.short} step(s) shorter than {SHORT_FACTOR:g} x its "
-                                     f"median period {c.period:.6g} s (irregular sampling)")
-        self.rows = 0
+        self._put_on_grid(float(sample_time))
 
     @staticmethod
     def _channel(mdf, p: Path, name: str, method: str) -> Channel:
@@ -442,17 +477,123 @@ class MdfLog:
         t = np.asarray(sig.timestamps, dtype=float) * UNITS[t_unit][1]
         return Channel(p, name, t, x.astype(float), sig.unit or None, method)
 
-    def chunks(self):
-        """Yield ``(first, {key: float64 array})`` of the grid, the time under ``time_key`` [s]."""
-        self.rows = 0
-        n = self.grid.size
-        if n < 2:
-            raise DatasetError(f"{self.path}: the mapped channels share {n} sample time(s); needs at least 2")
-        for first in range(0, n, self.chunk_rows):
-            part = slice(first, first + self.chunk_rows)
-            cols = {self.time_key: self.grid[part], **{k: v[part] for k, v in self.values.items()}}
-            self.rows = min(n, first + self.chunk_rows)
-            yield first, cols
+
+ROS2_STORE = "LATEST"
+"""The rosbags typestore of the message types a bag names without their definitions (the newest ROS 2
+distribution's standard messages; a bag that stores its definitions is read with its own)."""
+
+
+def _rosbags():
+    try:
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        raise UnsupportedError("ROS 2 bags need rosbags, which is not installed: " + install_hint("validation")) \
+            from None
+    return AnyReader, get_typestore(getattr(Stores, ROS2_STORE))
+
+
+def _split(name: str):
+    """``/imu/data.angular_velocity.z`` -> (``/imu/data``, [``angular_velocity``, ``z``]): a ROS 2 topic
+    name holds no '.', so the first '.' ends it."""
+    topic, _, path = name.partition(".")
+    return topic, [f for f in path.split(".") if f]
+
+
+def _fields(msg) -> list:
+    """The fields of a deserialized message (not the type's own ``__msgtype__``)."""
+    names = getattr(msg, "__dataclass_fields__", None) or getattr(msg, "__slots__", ())
+    return [f for f in names if not f.startswith("__")]
+
+
+def _field(p: Path, name: str, msg, path: list):
+    value = msg
+    for k, f in enumerate(path):
+        if f.isdigit() and isinstance(value, (list, tuple, np.ndarray)):
+            if int(f) >= len(value):
+                raise DatasetError(f"{p}: channel {name!r}: index {f} of a field of {len(value)} value(s)")
+            value = value[int(f)]
+            continue
+        if not hasattr(value, f) or f not in _fields(value):
+            have = _fields(value)
+            near = closest(f, have)
+            raise DatasetError(f"{p}: channel {name!r}: the message has no field {'.'.join(path[:k + 1])!r}"
+                               + (f" (closest: {', '.join(repr(x) for x in near)})" if near else "")
+                               + f"; allowed: one of {have} at that level (TOPIC.FIELD.SUBFIELD, e.g. "
+                               f"/imu.angular_velocity.z)")
+        value = getattr(value, f)
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise DatasetError(f"{p}: channel {name!r} is {type(value).__name__}, not a number; allowed: a numeric "
+                           f"field (fields: {_fields(value) or 'none'})")
+    return float(value)
+
+
+def _stamp(msg):
+    """The message's header stamp [s], or None where it has none."""
+    stamp = getattr(getattr(msg, "header", None), "stamp", None)
+    return None if stamp is None else stamp.sec + 1e-9 * stamp.nanosec
+
+
+class BagLog(OnGrid):
+    """A ROS 2 bag (a folder with ``metadata.yaml``, sqlite3 or mcap storage; rosbags): every mapped
+    ``TOPIC.FIELD`` a channel, at its topic's rate, on the observer's grid.
+
+    A channel's time is its message's ``header.stamp`` where the message has a header, else the time
+    the bag recorded it. One pass over the messages of the mapped topics only; only the mapped fields
+    are kept. ROS messages carry no units (REP 103: SI), so the map's units apply.
+
+    Parameters
+    ----------
+    path, channels, time_key, methods, sample_time, chunk_rows
+        As :class:`MdfLog`; ``channels``: ``TOPIC.FIELD`` names.
+
+    Raises
+    ------
+    DatasetError
+        not a readable bag, a topic or field missing (the closest listed), a field that is not a number,
+        non-finite, with a gap.
+    UnsupportedError
+        rosbags is not installed.
+    """
+
+    def __init__(self, path, channels, time_key: str, methods, sample_time: float, chunk_rows: int = BATCH_ROWS):
+        AnyReader, store = _rosbags()
+        p = Path(path)
+        self.path, self.units, self.time_key, self.chunk_rows = p, dict(channels), time_key, int(chunk_rows)
+        wanted = {}
+        for name in self.units:
+            topic, fields = _split(name)
+            if not fields:
+                raise DatasetError(f"{p}: channel {name!r} names no field; allowed: TOPIC.FIELD (e.g. "
+                                   f"/imu.angular_velocity.z, /speed.data)")
+            wanted.setdefault(topic, []).append((name, fields))
+        try:
+            with AnyReader([p], default_typestore=store) as reader:
+                topics = {c.topic for c in reader.connections}
+                missing = [t for t in wanted if t not in topics]
+                if missing:
+                    raise _missing(p, "topic", missing, sorted(topics))
+                times = {t: [] for t in wanted}
+                values = {n: [] for n in self.units}
+                conns = [c for c in reader.connections if c.topic in wanted]
+                for conn, recorded, raw in reader.messages(connections=conns):
+                    msg = reader.deserialize(raw, conn.msgtype)
+                    stamp = _stamp(msg)
+                    times[conn.topic].append(recorded * 1e-9 if stamp is None else stamp)
+                    for name, fields in wanted[conn.topic]:
+                        values[name].append(_field(p, name, msg, fields))
+        except DatasetError:
+            raise
+        except Exception as exc:     # noqa: BLE001 -- rosbags raises its own types and sqlite's, apsw's, mcap's
+            raise DatasetError(f"cannot read {p}: not a readable ROS 2 bag ({type(exc).__name__}: {exc})") from None
+        self.channels = []
+        for topic, names in wanted.items():
+            t = np.asarray(times[topic], dtype=float)
+            for name, _ in names:
+                self.channels.append(Channel(p, name, t, np.asarray(values[name], dtype=float), None,
+                                             methods.get(name, DEFAULT_METHOD)))
+        self.file_units = {}
+        self._put_on_grid(float(sample_time))
 
 
 def open_log(path, columns, time_key: str, sample_time: float, methods=None, block_bytes=None, batch_rows=None):
@@ -462,9 +603,10 @@ def open_log(path, columns, time_key: str, sample_time: float, methods=None, blo
     what = kind(path)
     if what == "parquet":
         return ParquetLog(path, columns, batch_rows or BATCH_ROWS)
-    if what == "mdf":
+    if what in ("mdf", "rosbag2"):
         channels = {c: u for c, u in columns.items() if c != time_key}
-        return MdfLog(path, channels, time_key, methods or {}, sample_time, batch_rows or BATCH_ROWS)
+        return (MdfLog if what == "mdf" else BagLog)(path, channels, time_key, methods or {}, sample_time,
+                                                     batch_rows or BATCH_ROWS)
     reader = LogReader(path, columns, *(() if block_bytes is None else (block_bytes,)))
     reader.file_units = {}
     return reader

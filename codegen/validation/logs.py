@@ -1,4 +1,4 @@
-"""Logged runs in the user's own CSV, mapped by the observer file's ``[data]`` table.
+"""Logged runs in the user's own CSV, Parquet, MDF4 or ROS 2 bag, mapped by the observer file's ``[data]`` table.
 
 ``uiogen validate my_observer.toml --data my_log.csv`` runs the compiled step over a log whose
 columns the observer file maps onto the observer's inputs, each with its unit (converted to the
@@ -26,6 +26,12 @@ reported. Estimates with a reference get the error statistics of every validatio
 :func:`codegen.validation.metrics.signal_report`); the others a summary in the same unit
 (``estimates.SIGNAL.mean``, ``unit`` ...); ``warnings``
 lists the checks that were ambiguous, ``log_checks`` every check and its verdict.
+
+A Parquet, MDF4 or ROS 2 log (:mod:`codegen.validation.logfiles`, told by its content) is read
+through the same map: the units its file states are checked against the map's and the model's,
+and channels at their own rates are put on the observer's sample time (``resampling`` says how,
+per channel). ``out``: the outputs and status written as MDF4 or Parquet
+(:mod:`codegen.validation.logout`).
 """
 from __future__ import annotations
 
@@ -103,7 +109,7 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | N
         units.setdefault(c.column, c.unit or "model units")
     methods = {c.column: c.resample for c in names.values() if c.resample}
     reader = logfiles.open_log(p, units, cmap.time.column, obs.sample_time, methods, block_bytes, batch_rows)
-    mdf = isinstance(reader, logfiles.MdfLog)
+    mdf = isinstance(reader, logfiles.OnGrid)       # MDF4, ROS 2: channels with their own times
     word = "channel" if mdf else "column"
     # the units the file states (an MDF channel's, a Parquet field's) against the map's and the model's
     mapped, declared_by = {}, {}
@@ -119,7 +125,7 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | N
     scale.update({f"truth:{k}": factor(c, model_unit(model, k), cmap.source, "data.truth", k)
                   for k, c in truth.items()})
     time = csvlog.TimeCheck(p, obs.sample_time, column=cmap.time.column)
-    if mdf:                 # every channel's master, in s: the map's time entry is not read
+    if mdf:                 # every channel's own times, in s: the map's time entry is not read
         t_factor = 1.0
     else:
         t_unit, _ = logfiles.resolve_unit(p, f"column {cmap.time.column!r} (time)",

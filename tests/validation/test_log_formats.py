@@ -315,3 +315,67 @@ def test_out_with_a_suffix_it_cannot_write(data, tmp_path):
                           capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 2 and proc.stderr.startswith("uiogen: error: ConfigurationError: --out "), proc.stderr
     assert "allowed: .mf4, .mdf, .parquet, .pq" in proc.stderr and not (tmp_path / "est.csv").exists()
+
+
+# --- ROS 2 bags (rosbags: sqlite3 and mcap storage) ----------------------------------------------------------
+
+TOPICS = {"delta": ("/steer.data", "rad"), "y_r": ("/imu.angular_velocity.z", "rad/s"),
+          "y_a_y": ("/imu.linear_acceleration.y", "m/s^2"), "v_x": ("/speed.data", "m/s"),
+          "beta": ("/ref.data", "rad")}
+
+
+def _bag(path: Path, storage: str, cols: dict, speed_every: int = 1) -> Path:
+    """The Stanford slice as a ROS 2 bag: an Imu topic with header stamps (yaw rate, a_y), Float64 topics
+    without (steering, speed, the reference: timed by the recording); the speed every ``speed_every``-th row."""
+    rosbags = pytest.importorskip("rosbags")                         # noqa: F841 -- the validation extra
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+    store = get_typestore(Stores.LATEST)
+    T = store.types
+    imu, f64 = "sensor_msgs/msg/Imu", "std_msgs/msg/Float64"
+    with Writer(path, version=8, storage_plugin=getattr(StoragePlugin, storage)) as w:
+        conn = {topic: w.add_connection(topic, kind, typestore=store)
+                for topic, kind in (("/imu", imu), ("/steer", f64), ("/speed", f64), ("/ref", f64))}
+        zeros = np.zeros(9)
+        for k, t in enumerate(cols["t"]):
+            ns = int(round(t * 1e9))
+            stamp = T["builtin_interfaces/msg/Time"](ns // 10 ** 9, ns % 10 ** 9)
+            vec = T["geometry_msgs/msg/Vector3"]
+            msg = T[imu](T["std_msgs/msg/Header"](stamp, "base_link"), T["geometry_msgs/msg/Quaternion"](0, 0, 0, 1),
+                         zeros, vec(0.0, 0.0, cols["yaw_rate"][k]), zeros, vec(0.0, cols["ay"][k], 0.0), zeros)
+            w.write(conn["/imu"], ns, store.serialize_cdr(msg, imu))
+            for topic, c in (("/steer", "delta"), ("/ref", "beta_true")) + ((("/speed", "vx"),)
+                                                                         if k % speed_every == 0 else ()):
+                w.write(conn[topic], ns, store.serialize_cdr(T[f64](float(cols[c][k])), f64))
+    return path
+
+
+def _bag_observer(folder: Path, **changes) -> Path:
+    entries = {k: f'{{ column = "{c}", unit = "{u}" }}' for k, (c, u) in TOPICS.items()}
+    entries.update(changes)
+    return _observer(folder, **entries)
+
+
+@pytest.mark.parametrize("storage", ["SQLITE3", "MCAP"])
+def test_a_ros2_bag_on_the_grid_gives_the_csv_figures(data, tmp_path, storage):
+    log = _bag(tmp_path / "bag", storage, data["cols"])
+    res = _run(_bag_observer(tmp_path), log)
+    assert res["format"] == "rosbag2" and res["samples"] == ROWS
+    assert abs(res["observer"]["beta"]["rms"] - data["csv"]["observer"]["beta"]["rms"]) <= 1e-12
+    assert np.array_equal(res["signals"]["beta"], data["csv"]["signals"]["beta"])
+
+
+def test_a_ros2_bag_at_two_rates(data, tmp_path):
+    log = _bag(tmp_path / "bag", "MCAP", data["cols"], speed_every=2)
+    res = _run(_bag_observer(tmp_path), log)
+    rms, ref = res["observer"]["beta"]["rms"], data["csv"]["observer"]["beta"]["rms"]
+    assert 0 < abs(rms - ref) < 0.01 * ref, (rms, ref)                # as the MDF4 log's 50 Hz speed
+    assert res["resampling"]["/speed.data"]["rate_hz"] == pytest.approx(50)
+
+
+def test_a_ros2_field_or_topic_missing(data, tmp_path):
+    log = _bag(tmp_path / "bag", "SQLITE3", data["cols"])
+    err = _cli_error(_bag_observer(tmp_path, y_r='{ column = "/imu.angular_velocity.zz", unit = "rad/s" }'), log)
+    assert "channel '/imu.angular_velocity.zz': the message has no field 'angular_velocity.zz' (closest: 'z'" in err
+    err = _cli_error(_bag_observer(tmp_path, v_x='{ column = "/sped.data", unit = "m/s" }'), log)
+    assert "missing topic(s) ['/sped'] ('/sped': closest in the file '/speed'" in err, err
