@@ -511,7 +511,8 @@ def _field(p: Path, name: str, msg, path: list):
     for k, f in enumerate(path):
         if f.isdigit() and isinstance(value, (list, tuple, np.ndarray)):
             if int(f) >= len(value):
-                raise DatasetError(f"{p}: channel {name!r}: index {f} of a field of {len(value)} value(s)")
+                raise DatasetError(f"{p}: channel {name!r}: index {f} of {'.'.join(path[:k])!r}, which holds "
+                                   f"{len(value)} value(s); allowed: an index from 0 to {len(value) - 1}")
             value = value[int(f)]
             continue
         if not hasattr(value, f) or f not in _fields(value):
