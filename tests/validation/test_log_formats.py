@@ -177,35 +177,6 @@ def test_a_rate_change_is_a_warning(data, tmp_path):
     assert len(said) == 1 and "(80 Hz) from t = " in said[0] and "(100 Hz) over the log" in said[0], res["warnings"]
 
 
-# --- resampling, by itself ------------------------------------------------------------------------------
-
-@pytest.mark.parametrize("method", ["hold", "linear"])
-def test_resampling_never_reads_a_sample_from_the_future(method):
-    rng = np.random.default_rng(1)
-    t = np.cumsum(rng.uniform(0.015, 0.025, 400))                  # a jittery 50 Hz channel
-    x = rng.standard_normal(t.size)
-    grid = np.arange(t[0] + 0.03, t[-1], 0.01)
-    ch = logfiles.Channel(Path("x.mf4"), "x", t, x, None, method)
-    before, latency = logfiles.resample(ch, grid, 0.01)
-    cut = t.size // 2
-    x2 = x.copy()
-    x2[cut:] += 100.0                                               # the future, changed
-    after, _ = logfiles.resample(logfiles.Channel(Path("x.mf4"), "x", t, x2, None, method), grid, 0.01)
-    past = grid < t[cut] - 1e-9
-    assert np.array_equal(before[past], after[past])
-    assert not np.array_equal(before[~past], after[~past])
-    assert latency == (ch.max_step if method == "linear" else 0.0)
-
-
-def test_linear_is_the_channel_delayed_by_its_step():
-    t = 0.02 * np.arange(100)
-    ch = logfiles.Channel(Path("x.mf4"), "x", t, 3.0 * t, None, "linear")
-    grid = np.arange(0.02, 1.9, 0.01)
-    values, latency = logfiles.resample(ch, grid, 0.01)
-    assert latency == pytest.approx(0.02)
-    assert np.allclose(values, 3.0 * (grid - 0.02))
-
-
 # --- typed errors: one line naming the file and the channel ---------------------------------------------
 
 def test_a_channel_unit_of_the_wrong_kind(data, tmp_path):
@@ -257,6 +228,13 @@ def test_a_damaged_file_is_one_line(data, tmp_path, suffix):
     log.write_bytes(whole.read_bytes()[:5000])                      # a copy cut short: the magic, then nothing
     err = _cli_error(_observer(tmp_path, units=False), log)
     assert f"cannot read {log}: not a readable {'Parquet' if suffix == '.parquet' else 'MDF'} file (" in err, err
+
+
+def test_out_needs_a_column_map(data, tmp_path):
+    with pytest.raises(ConfigurationError, match=r"--out .*est.mf4: writing the outputs needs an observer file with a "
+                                                 r"\[data\] table"):
+        validate.run_data(NAME, str(data["folder"] / "log.csv"), out=tmp_path / "est.mf4")
+    assert not list(tmp_path.iterdir())
 
 
 def test_a_resample_method_not_known(tmp_path):
