@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DatasetError, UnsupportedError, install_hint
-from ..project.columns import RESAMPLE, UNITS, normalize_unit
+from ..project.columns import UNITS, normalize_unit
 from ..project.settings import suggest
 from .csvlog import GAP_FACTOR, PERIOD_RTOL, SHORT_FACTOR, LogReader, regular_file
 
@@ -57,7 +57,6 @@ MDF_MAGIC = b"MDF     "
 BAG_FILES = (b"\x89MCAP0\r\n", b"SQLite format 3\x00")
 BATCH_ROWS = 65_536
 """Rows per Parquet batch (and per chunk of a resampled MDF log): about 0.5 MiB per float64 column."""
-METHODS = RESAMPLE
 DEFAULT_METHOD = "hold"
 """``hold`` by default: it never invents a value between samples and adds no delay at the grid times
 where a sample lies; ``linear`` trades a delay of one sampling step for a smoother signal."""

@@ -23,7 +23,7 @@ import pytest
 
 from codegen.errors import ConfigurationError, DatasetError
 from codegen.project import observer_file as observers
-from codegen.validation import logfiles, logs
+from codegen.validation import logs
 from codegen.validation import run as validate
 from codegen.validation import stanford as S
 from codegen.validation.common import SETTLE_TIME
