@@ -8,7 +8,8 @@
     uiogen check-gains NAME --gains FILE [--json]
     uiogen fit NAME --data PATH|stanford|niki --samples A:B [--folds K] [--judge RUN ...] [--choose KEY=[V, ...]] [--plot FILE.png] [--write] [--json]
     uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png] [--report DIR] [--project DIR]
-    uiogen validate NAME --data PATH|stanford|niki [--json] [--plot FILE.png] [--report DIR] [--project DIR]
+    uiogen validate NAME --data PATH|stanford|niki [--out FILE.mf4|.parquet] [--json] [--plot FILE.png] [--report DIR]
+                    [--project DIR]
     uiogen demo [--json] [--report DIR]
     uiogen bench [--json]
     uiogen campaign SPEC.toml [--runs N] [--only K] [--resume] [--json] [--scheduler ADDRESS] [--workers N] [--out DIR]
@@ -329,8 +330,13 @@ def cmd_validate(args) -> int:
     config = observers.get(args.name, project=args.project)
     if args.plot and not Path(args.plot).suffix:        # matplotlib adds .png: say the file it writes
         args.plot = f"{args.plot}.png"
+    if args.out and not args.data:
+        raise ConfigurationError("--out FILE writes the outputs of a logged run: it goes with --data PATH")
     if args.data:
-        result = validate.run_data(config, args.data)
+        if args.out:
+            from .validation import logout
+            logout.check_path(args.out)             # a suffix it cannot write is refused before the run
+        result = validate.run_data(config, args.data, out=args.out)
         if args.plot:
             with outputs.writing(args.plot):
                 validate.plot_data(result, args.plot)
@@ -341,7 +347,7 @@ def cmd_validate(args) -> int:
         if args.json:
             from .validation.metrics import DEFINITIONS
             keys = ("observer", "baselines", "estimates", "status_flags", "samples", "splits", "peaks", "warnings",
-                    "log_checks", "baselines_skipped", "unchecked_columns")
+                    "log_checks", "baselines_skipped", "unchecked_columns", "format", "resampling", "out")
             print(json.dumps({**{k: result[k] for k in keys if k in result}, "definitions": DEFINITIONS},
                              indent=1, sort_keys=True))
             return 0
@@ -352,6 +358,8 @@ def cmd_validate(args) -> int:
             print(f"plot: {args.plot}")
         if args.report:
             print(f"report: {page.resolve()}")
+        if args.out:
+            print(f"outputs: {Path(args.out).resolve()}")
         return 0
     if not args.scenario:
         raise ConfigurationError("validate needs --scenario S (simulated plant) or --data PATH (logged run)")
@@ -619,8 +627,12 @@ def main(argv=None) -> int:
                        help="errors on an independent plant, beside the KF/EKF baselines")
     p.add_argument("name")
     p.add_argument("--scenario", help="excitation (any model: its own equations, swept and excited) or one of codegen.validation.scenarios.names()")
-    p.add_argument("--data", help="a logged run (CSV, plain or .gz): the columns mapped by the observer file's [data] "
-                                  "table, or else the shared format; 'stanford', 'niki' = the shared logs (Ferrari, GTI)")
+    p.add_argument("--data", help="a logged run (CSV, plain or .gz; Parquet; MDF4; a ROS 2 bag folder; told by the "
+                                  "content): the columns or channels mapped by the observer file's [data] table, or "
+                                  "else the shared CSV format; 'stanford', 'niki' = the shared logs (Ferrari, GTI)")
+    p.add_argument("--out", metavar="FILE", help="with --data and a [data] table: write the observer's outputs and "
+                                                 "status, with their units, on the log's time base to FILE.mf4 (MDF4) "
+                                                 "or FILE.parquet (whole or not at all)")
     p.add_argument("--plant", choices=("nominal", "model", "commonroad"), default="nominal",
                    help="nominal: our symbolic truth plant (Pacejka); model: the observer's exact model")
     p.add_argument("--duration", type=float, default=None, help="truncate the scenario [s]")

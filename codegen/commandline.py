@@ -13,7 +13,8 @@ from .errors import UiogenError, install_hint
 from .project import outputs
 
 OPTIONAL_MODULES = {"vehiclemodels": "validation", "matplotlib": "validation", "dask": "validation",
-                    "distributed": "validation", "fmpy": "fmu", "cvxpy": "bench", "scs": "bench", "AlgDiff": "bench"}
+                    "distributed": "validation", "asammdf": "validation", "rosbags": "validation",
+                    "fmpy": "fmu", "cvxpy": "bench", "scs": "bench", "AlgDiff": "bench"}
 """The modules of pyproject's extras: a verb that needs one a wheel did not install says which extra installs it."""
 
 

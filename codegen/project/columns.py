@@ -29,9 +29,13 @@ UNITS = {
 _SPELLINGS = {"m/s²": "m/s^2", "rad/s²": "rad/s^2", "deg/s²": "deg/s^2", "Nm": "N m", "N*m": "N m", "N·m": "N m",
               "kNm": "kN m", "-": "1", "kph": "km/h", "°": "deg", "°/s": "deg/s"}
 
-COLUMN_KEYS = {"column": Rule(str, required=True, doc="the CSV header of the column"),
+COLUMN_KEYS = {"column": Rule(str, required=True, doc="the log's column (CSV header, Parquet column) or MDF channel"),
                "unit": Rule(str, doc="the column's unit, converted to the model's"),
-               "scale": Rule(float, doc="a factor applied after the unit (a steering ratio, a sign)")}
+               "scale": Rule(float, doc="a factor applied after the unit (a steering ratio, a sign)"),
+               "resample": Rule(str, doc='a channel at another rate than the observer\'s: "hold" (default: the last '
+                                         'sample) or "linear" (causal, delayed by its sampling step)')}
+RESAMPLE = ("hold", "linear")
+TIME_KEYS = {k: v for k, v in COLUMN_KEYS.items() if k != "resample"}   # the time base is not resampled
 DATA_KEYS = {"time": Rule(None, required=True, doc='"COLUMN" (seconds) or { column = ..., unit = ... }'),
              "inputs": Rule(dict, required=True, doc="{ OBSERVER_INPUT = { column = ..., unit = ... } }"),
              "truth": Rule(dict, doc="{ OBSERVER_OUTPUT = { column = ..., unit = ... } }")}
@@ -49,6 +53,7 @@ class Column:
     column: str
     unit: str | None = None
     scale: float = 1.0
+    resample: str | None = None     # hold or linear for a log at another rate (None: the default, hold)
 
 
 @dataclass(frozen=True)
@@ -61,13 +66,13 @@ class ColumnMap:
     truth: dict = field(default_factory=dict)
 
 
-def _column(value, source: str, section: str, key: str, units=tuple(UNITS)) -> Column:
-    """One column spec; ``units``: the units allowed for it (the time column: s, ms)."""
+def _column(value, source: str, section: str, key: str, units=tuple(UNITS), keys=COLUMN_KEYS) -> Column:
+    """One column spec; ``units``: the units allowed for it (the time column: s, ms); ``keys``: its keys."""
     if isinstance(value, str):
         value = {"column": value}
     if not isinstance(value, dict):
         raise config_error(source, section, key, value, '"COLUMN" or an inline table { column = "...", unit = "..." }')
-    parsed = parse_table(value, COLUMN_KEYS, source=source, section=f"{section}.{key}")
+    parsed = parse_table(value, keys, source=source, section=f"{section}.{key}")
     if not parsed["column"].strip():
         # an empty header would otherwise surface later as a "missing column ['']" of the log
         raise config_error(source, f"{section}.{key}", "column", parsed["column"], "the (non-empty) header of a column "
@@ -84,7 +89,13 @@ def _column(value, source: str, section: str, key: str, units=tuple(UNITS)) -> C
         raise config_error(source, f"{section}.{key}", "scale", value["scale"],
                            "a finite number other than 0 (a factor applied after the unit: a steering ratio, -1 for "
                            "the opposite sign)")
-    return Column(parsed["column"], unit, scale)
+    resample = parsed.get("resample")
+    if resample is not None and resample not in RESAMPLE:
+        raise config_error(source, f"{section}.{key}", "resample", resample,
+                           "hold (the last sample at or before each step) or linear (interpolated, delayed by one "
+                           "sampling step of the channel: never a value from the future)",
+                           suggest(resample, list(RESAMPLE)))
+    return Column(parsed["column"], unit, scale, resample)
 
 
 def parse(table, source: str) -> ColumnMap:
@@ -98,7 +109,7 @@ def parse(table, source: str) -> ColumnMap:
     """
     parse_table(table, DATA_KEYS, source=source, section="data")
     time = _column(table["time"], source, "data", "time", units=tuple(u for u, (dim, _) in UNITS.items()
-                                                                    if dim == "time"))
+                                                                    if dim == "time"), keys=TIME_KEYS)
     inputs = {k: _column(v, source, "data.inputs", k) for k, v in table["inputs"].items()}
     truth = {k: _column(v, source, "data.truth", k) for k, v in table.get("truth", {}).items()}
     return ColumnMap(source, time, inputs, truth)

@@ -147,8 +147,10 @@ class LogReader:
         if kind:
             # named here: decoding it as text would only say "not UTF-8" at some byte
             how = (", e.g. pyarrow.csv.write_csv(pyarrow.parquet.read_table(path), out)" if kind == "Parquet" else "")
+            mapped = ("; or map its columns in the observer file's [data] table, which reads Parquet and MDF4 "
+                      "(docs/validation.md, 'Log formats')" if kind in ("Parquet", "MDF (ASAM measurement data)") else "")
             raise DatasetError(f"cannot read {p}: it is a {kind} file; allowed: a CSV log (plain or gzip); export "
-                               f"it as CSV{how}")
+                               f"it as CSV{how}{mapped}")
         if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
             raise DatasetError(f"cannot read {p}: the file is UTF-16 encoded (byte-order mark {head[:2]!r}); "
                                f"allowed: UTF-8 or ASCII text; save it as UTF-8")
@@ -186,16 +188,20 @@ class LogReader:
         """
         self.rows = 0
         self._nonfinite = {c: [0, None] for c in self.units}
-        try:
-            yield from self._arrow()
-        except _SlowPath:
-            yield from self._slow(self.rows)
+        yield from self._read()
         for c, (count, first) in self._nonfinite.items():
             if count:
                 raise DatasetError(f"{self.path}: column {c!r} has {count} non-finite value(s), first at data "
                                    f"row {first + 1}; allowed: finite numbers in {self.units[c]}")
         if self.rows < 2:
             raise DatasetError(f"{self.path}: needs at least 2 data rows, found {self.rows}")
+
+    def _read(self):
+        """The chunks of the file (a reader of another format overrides it)."""
+        try:
+            yield from self._arrow()
+        except _SlowPath:
+            yield from self._slow(self.rows)
 
     def _deliver(self, cols: dict):
         n = len(next(iter(cols.values())))

@@ -251,12 +251,14 @@ class Column:
     unit: str | None               # the unit declared for the column (None: the model's)
     model_unit: str | None
     scale: float = 1.0
-    declared_by: str = "map"       # "map": [data.inputs] (unit/scale can be fixed there); "format": the shared format
+    # "map": [data.inputs] (unit/scale can be fixed there); "format": the shared format; "file": the log's
+    # own unit (an MDF channel's, a Parquet field's metadata), checked against the map's and the model's
+    declared_by: str = "map"
     table: str = "data.inputs"     # the observer file's table that maps it ([data.truth] for a reference)
 
     def describe(self, signal: str) -> str:
         unit = self.unit or self.model_unit or "no unit"
-        how = "declared" if self.declared_by == "map" else "the shared format's unit"
+        how = {"map": "declared", "file": "the file's unit"}.get(self.declared_by, "the shared format's unit")
         scale = f", scale {self.scale:g}" if self.scale != 1.0 else ""
         what = f"reference of {signal.removeprefix('truth:')}" if signal.startswith("truth:") else signal
         return f"column {self.column!r} ({what}, {how} {unit}{scale})"
@@ -719,7 +721,7 @@ class LogChecks:
         rows = []
         for n in self.names:
             col = self.columns[n]
-            if n in judged or col.declared_by != "map":
+            if n in judged or col.declared_by == "format":
                 continue
             involved = any(n in r.inputs for r in self.relations)
             rows.append({"signal": n, "column": col.column, "unit": col.unit or col.model_unit, "table": col.table,

@@ -1,4 +1,4 @@
-"""Logged runs in the user's own CSV, mapped by the observer file's ``[data]`` table.
+"""Logged runs in the user's own CSV, Parquet, MDF4 or ROS 2 bag, mapped by the observer file's ``[data]`` table.
 
 ``uiogen validate my_observer.toml --data my_log.csv`` runs the compiled step over a log whose
 columns the observer file maps onto the observer's inputs, each with its unit (converted to the
@@ -26,6 +26,12 @@ reported. Estimates with a reference get the error statistics of every validatio
 :func:`codegen.validation.metrics.signal_report`); the others a summary in the same unit
 (``estimates.SIGNAL.mean``, ``unit`` ...); ``warnings``
 lists the checks that were ambiguous, ``log_checks`` every check and its verdict.
+
+A Parquet, MDF4 or ROS 2 log (:mod:`codegen.validation.logfiles`, told by its content) is read
+through the same map: the units its file states are checked against the map's and the model's,
+and channels at their own rates are put on the observer's sample time (``resampling`` says how,
+per channel). ``out``: the outputs and status written as MDF4 or Parquet
+(:mod:`codegen.validation.logout`).
 """
 from __future__ import annotations
 
@@ -34,9 +40,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigurationError, DatasetError
-from ..project.columns import UNITS, factor, model_unit
+from ..project.columns import UNITS, Column, factor, model_unit
 from ..project.settings import config_error, suggest
-from . import csvlog, log_checks, streaming
+from . import csvlog, log_checks, logfiles, streaming
 from .common import SETTLE_TIME, format_stats
 
 
@@ -47,16 +53,20 @@ def _spec(col) -> dict:
         spec["unit"] = col.unit
     if col.scale != 1.0:
         spec["scale"] = col.scale
+    if col.resample is not None:
+        spec["resample"] = col.resample
     return spec
 
 
-def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
+def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | None = None, out=None) -> dict:
     """The compiled step over a logged run mapped by the observer file's ``[data]`` table.
 
     The log is read in chunks (``block_bytes`` of text each): the step runs chunk by chunk with
     its state carried over, the statistics are merged, and every check of
     :mod:`codegen.validation.log_checks` (units, the model's physics) must pass before anything
-    is returned.
+    is returned. ``out``: a file (``.mf4`` or ``.parquet``) the observer's outputs and status are
+    written to, on the log's time base (:mod:`codegen.validation.logout`), put in place once every
+    check has passed.
 
     Raises
     ------
@@ -92,50 +102,84 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
                                  f"input ({', '.join(obs.input_names)}); missing: {', '.join(missing)}",
                                  source=cmap.source, section="data.inputs", key=missing[0],
                                  allowed="a column for every observer input")
-    scale = {k: factor(c, model_unit(model, k), cmap.source, "data.inputs", k) for k, c in cmap.inputs.items()}
-    scale.update({f"truth:{k}": factor(c, model_unit(model, k), cmap.source, "data.truth", k)
-                  for k, c in cmap.truth.items()})
     names = {**cmap.inputs, **{f"truth:{k}": c for k, c in cmap.truth.items()}}
     p = Path(path)
     units = {cmap.time.column: cmap.time.unit or "s"}
     for c in names.values():
         units.setdefault(c.column, c.unit or "model units")
-    reader = csvlog.LogReader(p, units, block_bytes)
+    methods = {c.column: c.resample for c in names.values() if c.resample}
+    reader = logfiles.open_log(p, units, cmap.time.column, obs.sample_time, methods, block_bytes, batch_rows)
+    mdf = isinstance(reader, logfiles.OnGrid)       # MDF4, ROS 2: channels with their own times
+    word = "channel" if mdf else "column"
+    # the units the file states (an MDF channel's, a Parquet field's) against the map's and the model's
+    mapped, declared_by = {}, {}
+    for n, c in names.items():
+        signal = n.removeprefix("truth:")
+        unit, source = logfiles.resolve_unit(p, f"{word} {c.column!r} ({n.replace('truth:', 'reference of ')})",
+                                             reader.file_units.get(c.column), c.unit, model_unit(model, signal))
+        mapped[n] = Column(c.column, unit, c.scale, c.resample)
+        declared_by[n] = "file" if source == "file" and c.unit is None else "map"
+    in_cols = {n: mapped[n] for n in cmap.inputs}
+    truth = {n: mapped[f"truth:{n}"] for n in cmap.truth}
+    scale = {k: factor(c, model_unit(model, k), cmap.source, "data.inputs", k) for k, c in in_cols.items()}
+    scale.update({f"truth:{k}": factor(c, model_unit(model, k), cmap.source, "data.truth", k)
+                  for k, c in truth.items()})
     time = csvlog.TimeCheck(p, obs.sample_time, column=cmap.time.column)
-    t_factor = (UNITS[cmap.time.unit][1] if cmap.time.unit else 1.0) * cmap.time.scale
+    if mdf:                 # every channel's own times, in s: the map's time entry is not read
+        t_factor = 1.0
+    else:
+        t_unit, _ = logfiles.resolve_unit(p, f"column {cmap.time.column!r} (time)",
+                                          reader.file_units.get(cmap.time.column), cmap.time.unit, "s")
+        t_factor = (UNITS[t_unit][1] if t_unit else 1.0) * cmap.time.scale
     checks = log_checks.LogChecks(
         p, model, load_parameters(config.parameter_path), obs.input_names,
-        {n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale) for n, c in cmap.inputs.items()},
+        {n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale, declared_by=declared_by[n])
+         for n, c in in_cols.items()},
         obs.sample_time,
-        truth={n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale, table="data.truth")
-               for n, c in cmap.truth.items()})
+        truth={n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale, table="data.truth",
+                                    declared_by=declared_by[f"truth:{n}"])
+               for n, c in truth.items()})
     declared = {n: model_unit(model, n) for n in obs.output_names}
     compared = {n: streaming.ErrorStats(declared[n], settle=SETTLE_TIME) for n in cmap.truth}
     summary = {n: streaming.Summary(declared[n]) for n in obs.output_names if n not in cmap.truth}
     kept = streaming.Decimated()
     state, flags, t0 = obs.initial_state(), 0, None
-    for _, cols in reader.chunks():
-        t = cols[cmap.time.column] * t_factor
-        time.feed(t)
-        inputs = np.column_stack([cols[cmap.inputs[n].column] * scale[n] for n in obs.input_names])
-        checks.feed(t, {n: inputs[:, j] for j, n in enumerate(obs.input_names)})
-        checks.feed_truth({n: cols[c.column] * scale[f"truth:{n}"] for n, c in cmap.truth.items()})
-        out, status, state = obs.run(inputs, state)
-        flags += int(np.count_nonzero(status))
-        t0 = t[0] if t0 is None else t0
-        t = t - t0
-        sig = {"t": t}
-        for j, name in enumerate(obs.output_names):
-            sig[name] = out[:, j]
-            if name in cmap.truth:
-                ref = cols[cmap.truth[name].column] * scale[f"truth:{name}"]
-                sig[f"{name}_truth"] = ref
-                compared[name].add(ref, out[:, j], t)
-            else:
-                summary[name].add(out[:, j])
-        kept.add(sig)
-    time.finish()
-    report = checks.finish()
+    written = None
+    if out is not None:
+        from . import logout
+        written = logout.OutputLog(out, declared, f"uiogen validate {config.name} --data {p}")
+    try:
+        for _, cols in reader.chunks():
+            t = cols[cmap.time.column] * t_factor
+            time.feed(t)
+            inputs = np.column_stack([cols[cmap.inputs[n].column] * scale[n] for n in obs.input_names])
+            checks.feed(t, {n: inputs[:, j] for j, n in enumerate(obs.input_names)})
+            checks.feed_truth({n: cols[c.column] * scale[f"truth:{n}"] for n, c in cmap.truth.items()})
+            est, status, state = obs.run(inputs, state)
+            flags += int(np.count_nonzero(status))
+            if written is not None:
+                written.add(t, est, status)            # the log's own times, not the run's from 0
+            t0 = t[0] if t0 is None else t0
+            t = t - t0
+            sig = {"t": t}
+            for j, name in enumerate(obs.output_names):
+                sig[name] = est[:, j]
+                if name in cmap.truth:
+                    ref = cols[cmap.truth[name].column] * scale[f"truth:{name}"]
+                    sig[f"{name}_truth"] = ref
+                    compared[name].add(ref, est[:, j], t)
+                else:
+                    summary[name].add(est[:, j])
+            kept.add(sig)
+        time.finish()
+        report = checks.finish()
+        if written is not None:         # in place only when every check has passed
+            written.finish()
+    except BaseException:
+        if written is not None:
+            written.abort()
+        raise
+    report["warnings"][:0] = getattr(reader, "warnings", [])      # the resampling's, first
     for n, stats in compared.items():           # a reference in another unit than declared (rad as deg)
         said = checks.reference_scale(n, stats.scale_ratio(), SETTLE_TIME)
         column = f"column {cmap.truth[n].column!r} (reference of {n},"
@@ -145,7 +189,8 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES) -> dict:
             "estimates": {n: s.result() for n, s in summary.items()}, "baselines": {},
             "status_flags": flags, "samples": reader.rows, "data": str(path), "signals": kept.signals(),
             "signals_stride": kept.stride, "log_checks": report["checks"], "warnings": report["warnings"],
-            "unchecked_columns": report["unchecked_columns"]}
+            "unchecked_columns": report["unchecked_columns"], "format": logfiles.kind(p),
+            "resampling": getattr(reader, "resampling", {}), "out": str(out) if out is not None else None}
 
 
 def unchecked_line(rows) -> str | None:
@@ -170,6 +215,11 @@ def format_table(result: dict) -> str:
         for name, s in result["estimates"].items():
             unit = (s.get("unit") or "–") + ("*" if s.get("converted_from") else "")
             lines.append(f"{name:12s} {unit:>7s} {s['mean']:10.4g} {s['std']:10.4g} {s['min']:10.4g} {s['max']:10.4g}")
+    moved = {c: r for c, r in (result.get("resampling") or {}).items() if r["method"] != "as recorded"}
+    if moved:               # what the figures rest on: channels the log did not hold at the observer's times
+        lines.append("resampled onto the observer's sample time: " + "; ".join(
+            f"{c!r} {r['rate_hz']:.4g} Hz, {r['method']}" + (f" (latency {r['latency_s']:.3g} s)" if r["latency_s"]
+                                                             else "") for c, r in moved.items()))
     lines += [f"warning: {w}" for w in result.get("warnings", ())]
     said = unchecked_line(result.get("unchecked_columns"))
     if said:

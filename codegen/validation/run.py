@@ -164,12 +164,14 @@ whole run in memory and step at about 0.1 ms per sample, so on a longer log the 
 reported alone and the result says why (``baselines_skipped``)."""
 
 
-def run_data(name, path: str = "stanford", block_bytes: int | None = None) -> dict:
+def run_data(name, path: str = "stanford", block_bytes: int | None = None, batch_rows: int | None = None,
+             out=None) -> dict:
     """Run the compiled step over a logged run, beside the baselines.
 
     An observer file with a ``[data]`` table maps the log's own columns (:mod:`codegen.validation.logs`);
     otherwise the log is in the shared (Stanford) CSV format. Either way the log is read in
-    chunks (``block_bytes`` of text each; any size in bounded memory) and checked against its
+    chunks (``block_bytes`` of text each, or ``batch_rows`` rows of a Parquet or resampled MDF log:
+    :mod:`codegen.validation.logfiles`; any size in bounded memory) and checked against its
     units and the physics of the observer's model (:mod:`codegen.validation.log_checks`) before
     anything is returned.
 
@@ -189,7 +191,11 @@ def run_data(name, path: str = "stanford", block_bytes: int | None = None) -> di
     block_bytes = csvlog.BLOCK_BYTES if block_bytes is None else block_bytes
     if config.column_map is not None:
         from . import logs
-        return logs.run(config, path, block_bytes)
+        return logs.run(config, path, block_bytes, batch_rows, out)
+    if out is not None:
+        raise ConfigurationError(f"--out {out}: writing the outputs needs an observer file with a [data] table (the "
+                                 f"column map of your own log: docs/validation.md, 'Your own logs'); "
+                                 f"{config.name} reads the shared format")
     obs = load(config)
     missing = [c for c in obs.input_names if c not in DATA_COLUMNS]
     if missing:

@@ -1,0 +1,612 @@
+"""Logs in Parquet, MDF4 and ROS 2 bags for ``uiogen validate --data``, beside the CSV of
+:mod:`codegen.validation.csvlog`.
+
+The format is told by the file's first bytes, never by its name (a log renamed ``.csv`` is still
+read as what it is): ``PAR1`` is Parquet, ``MDF     `` (``MDF`` and five spaces) is an ASAM MDF
+file, anything else is read as CSV (plain or gzip). Every reader delivers what
+:class:`codegen.validation.csvlog.LogReader` delivers -- ``chunks()`` yielding ``(first, {column:
+float64 array})`` and ``rows`` -- so the run, the time check, the unit and physics checks of
+:mod:`codegen.validation.logs` are the same code for every format; and ``file_units``, the unit
+each column or channel states in the file (:func:`resolve_unit` checks it against the map and
+the model).
+
+Parquet (:class:`ParquetLog`) is one table with one time column, like a CSV: read by row groups
+in batches of :data:`BATCH_ROWS` rows (``pyarrow.parquet.ParquetFile.iter_batches``), only the
+mapped columns; a column's unit is its field metadata ``unit``.
+
+MDF (:class:`MdfLog`, asammdf) keeps every channel group at its own rate, each channel with its
+group's master (time) channel. Only the mapped channels are read (``MDF.get`` of each; the file's
+other channels are never loaded), each held whole with its timestamps -- memory grows with the
+mapped channels, not with the file -- and put on one time base, the observer's sample time
+(:func:`time_base`, :func:`resample`):
+
+- the grid: the span where every mapped channel has data; the recorded times of the first mapped
+  channel that is sampled at the observer's period without gaps, else ``start + k Ts``;
+- a channel whose samples fall on the grid times is taken as recorded (no resampling, either
+  method: the figures of the same log as a CSV, to the last bit);
+- any other by its map entry's ``resample``: ``hold`` (default) the last sample at or before the
+  grid time; ``linear`` the channel delayed by its largest sampling step D, interpolated: the
+  value at grid time t is the straight line between the two samples around t - D, which are both
+  at or before t (causal: never a sample from the future), with latency D reported;
+- a step longer than :data:`~codegen.validation.csvlog.GAP_FACTOR` x a channel's median period is
+  a gap (a DatasetError: no method should bridge missing samples silently); a channel whose
+  period changes along the log, or that is slower than the observer, is a warning of the result.
+
+A ROS 2 bag (:class:`BagLog`, rosbags; a folder with ``metadata.yaml``, sqlite3 or mcap storage) is
+put on the grid the same way: each mapped ``TOPIC.FIELD`` (``/imu.angular_velocity.z``) is a
+channel at its topic's rate, timed by its message's ``header.stamp`` (the bag's recording time for
+a message without a header).
+"""
+from __future__ import annotations
+
+import difflib
+import gc
+import logging
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DatasetError, UnsupportedError, install_hint
+from ..project.columns import UNITS, normalize_unit
+from ..project.settings import suggest
+from .csvlog import GAP_FACTOR, PERIOD_RTOL, SHORT_FACTOR, LogReader, regular_file
+
+PARQUET_MAGIC = b"PAR1"
+MDF_MAGIC = b"MDF     "
+BAG_FILES = (b"\x89MCAP0\r\n", b"SQLite format 3\x00")
+BATCH_ROWS = 65_536
+"""Rows per Parquet batch (and per chunk of a resampled MDF log): about 0.5 MiB per float64 column."""
+DEFAULT_METHOD = "hold"
+"""``hold`` by default: it never invents a value between samples and adds no delay at the grid times
+where a sample lies; ``linear`` trades a delay of one sampling step for a smoother signal."""
+RATE_BLOCK = 1000
+"""A channel's period is compared block by block (medians of RATE_BLOCK steps) to find a rate change."""
+GRID_RTOL = 1e-6
+"""A sample within GRID_RTOL x the sample time of a grid time lies on it (times written as decimals, 10.01 s,
+are not multiples of 0.01 to the last bit)."""
+
+
+def kind(path) -> str:
+    """``"parquet"``, ``"mdf"``, ``"rosbag2"`` (a folder with ``metadata.yaml``) or ``"csv"``: the format
+    of a log, from its first bytes.
+
+    Raises
+    ------
+    DatasetError
+        missing, not a regular file, or unreadable.
+    """
+    p = Path(path)
+    if p.is_dir() and (p / "metadata.yaml").is_file():
+        return "rosbag2"
+    regular_file(p)
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(16)
+    except OSError as exc:
+        raise DatasetError(f"cannot read {p}: {exc.strerror or exc}") from None
+    if head.startswith(PARQUET_MAGIC):
+        return "parquet"
+    if head.startswith(MDF_MAGIC):
+        return "mdf"
+    if head.startswith(BAG_FILES) and (p.parent / "metadata.yaml").is_file():
+        # the storage file of a bag: the bag is its folder (its metadata names the storage and the topics)
+        raise DatasetError(f"{p} is the storage file of a ROS 2 bag; allowed: the bag's folder, {p.parent}")
+    return "csv"
+
+
+def closest(name: str, names, n: int = 3) -> list:
+    """Up to ``n`` names of the file closest to a missing one (a case-insensitive match first)."""
+    names = [str(x) for x in names]
+    first = suggest(name, names)
+    close = difflib.get_close_matches(name, names, n=n, cutoff=0.5)
+    return list(dict.fromkeys(([first] if first else []) + close))[:n]
+
+
+def _missing(p: Path, what: str, missing: list, names: list) -> DatasetError:
+    near = {m: closest(m, names) for m in missing}
+    hints = "; ".join(f"{m!r}: closest in the file {', '.join(repr(x) for x in near[m])}" if near[m]
+                      else f"{m!r}: nothing close in the file" for m in missing)
+    shown = names if len(names) <= 20 else names[:20] + [f"... ({len(names)} in all)"]
+    return DatasetError(f"{p}: missing {what}(s) {missing} ({hints}); the file has {shown}; allowed: the names "
+                        f"of the file's {what}s in the observer file's [data] table")
+
+
+# --- units ----------------------------------------------------------------------------------------
+
+def _dim_units(dim: str) -> str:
+    return ", ".join(u for u, (d, _) in UNITS.items() if d == dim)
+
+
+def resolve_unit(p: Path, what: str, file_unit, map_unit, model_unit):
+    """The unit a column is converted from: the file's (a channel's unit, a Parquet field's metadata)
+    checked against the map's and the model's; None where neither the file nor the map gives one.
+
+    ``what``: ``channel 'ay' (y_a_y)`` for the messages. The map's unit is already checked (one of
+    :data:`~codegen.project.columns.UNITS`). Strict: a file unit uiogen cannot read is refused unless the
+    map states the unit (then the map's is used: the user has said what the numbers are); a file unit
+    and a map unit that differ are refused (one of them is wrong, and uiogen cannot tell which).
+
+    Returns
+    -------
+    (unit, source)
+        ``source``: ``"file"``, ``"map"`` or None (no unit anywhere: the numbers are in the model's units).
+
+    Raises
+    ------
+    DatasetError
+        naming the file, the column and both units.
+    """
+    stated = str(file_unit).strip() if file_unit is not None else ""
+    if not stated:
+        return map_unit, ("map" if map_unit is not None else None)
+    unit = normalize_unit(stated)
+    if unit not in UNITS:
+        if map_unit is not None:
+            return map_unit, "map"
+        raise DatasetError(f"{p}: {what} has unit {stated!r} in the file, which uiogen does not know; allowed: "
+                           f"{', '.join(UNITS)} (or state the column's unit in the observer file's [data] entry, "
+                           f"unit = \"...\", which is then used)")
+    if map_unit is not None and UNITS[map_unit] != UNITS[unit]:
+        raise DatasetError(f"{p}: {what} has unit {stated!r} in the file but {map_unit!r} in the observer file's "
+                           f"[data] map; allowed: the same unit in both (drop unit from the map entry to use the "
+                           f"file's, or correct the one that is wrong)")
+    target = normalize_unit(model_unit) if model_unit else None
+    if target not in UNITS:
+        if target == unit:
+            return unit, "file"
+        raise DatasetError(f"{p}: {what} has unit {stated!r} in the file, but the model declares "
+                           + (f"the unit {model_unit!r}, which uiogen cannot convert to" if model_unit else "no unit")
+                           + "; allowed: the model's unit in the file, or a model that declares one of "
+                           f"{', '.join(UNITS)}")
+    dim, dim_model = UNITS[unit][0], UNITS[target][0]
+    if dim != dim_model:
+        raise DatasetError(f"{p}: {what} has unit {stated!r} in the file, a unit of {dim}, but the model's unit is "
+                           f"{model_unit!r}, a unit of {dim_model}; allowed: a unit of {dim_model} "
+                           f"({_dim_units(dim_model)})")
+    return unit, "file"
+
+
+# --- Parquet --------------------------------------------------------------------------------------
+
+class ParquetLog(LogReader):
+    """A Parquet log opened for reading some of its columns in batches.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    columns : mapping of str to str
+        The columns to read, each with the unit its message names.
+    batch_rows : int, optional
+        Rows per batch (tests force it small to prove the checks do not depend on it).
+
+    Raises
+    ------
+    DatasetError
+        not a readable Parquet file, duplicated or missing columns, a column that is not numeric,
+        a unit metadata that is not UTF-8.
+    """
+
+    def __init__(self, path, columns, batch_rows: int = BATCH_ROWS):
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+        p = Path(path)
+        self.path, self.units, self.batch_rows = p, dict(columns), int(batch_rows)
+        regular_file(p)
+        try:
+            self._file = pq.ParquetFile(str(p))
+            schema = self._file.schema_arrow
+        except (pa.ArrowException, OSError) as exc:
+            raise DatasetError(f"cannot read {p}: not a readable Parquet file ({exc})") from None
+        self.header = list(schema.names)
+        dup = sorted({h for h in self.header if self.header.count(h) > 1})
+        if dup:
+            raise DatasetError(f"{p}: duplicated column(s) {dup}")
+        missing = [c for c in self.units if c not in self.header]
+        if missing:
+            raise _missing(p, "column", missing, self.header)
+        self.file_units = {}
+        for c in self.units:
+            f = schema.field(c)
+            if not (pa.types.is_integer(f.type) or pa.types.is_floating(f.type)):
+                raise DatasetError(f"{p}: column {c!r} is of type {f.type}; allowed: integer or floating-point "
+                                   f"numbers")
+            raw = (f.metadata or {}).get(b"unit")
+            try:
+                self.file_units[c] = raw.decode("utf-8") if raw is not None else None
+            except UnicodeDecodeError:
+                raise DatasetError(f"{p}: column {c!r}: the field metadata 'unit' is not UTF-8 text ({raw!r})") \
+                    from None
+        self.rows = 0
+
+    def _read(self):
+        import pyarrow as pa
+        names = list(self.units)
+        batches = self._file.iter_batches(batch_size=self.batch_rows, columns=names)
+        while True:
+            try:
+                batch = next(batches)
+            except StopIteration:
+                return
+            except (pa.ArrowException, OSError) as exc:
+                raise DatasetError(f"cannot read {self.path}: {exc}") from None
+            if not batch.num_rows:
+                continue
+            cols = {}
+            for c in names:
+                a = batch.column(batch.schema.get_field_index(c))
+                if a.null_count:
+                    row = self.rows + int(np.flatnonzero(a.is_null().to_numpy(zero_copy_only=False))[0]) + 1
+                    raise DatasetError(f"{self.path}: column {c!r}, row {row}: a null (a missing sample); allowed: "
+                                       f"a number in every row of a mapped column (fill or drop the row)")
+                cols[c] = a.cast(pa.float64()).to_numpy(zero_copy_only=False)
+            yield self._deliver(cols)
+
+
+# --- MDF: channels at their own rates onto the observer's grid ------------------------------------
+
+def _quiet_asammdf():
+    """asammdf logs through the logging module: with no handler configured Python prints its warnings
+    to stderr, which would break the one-line error of the command line; uiogen says what matters."""
+    log = logging.getLogger("asammdf")
+    if not any(isinstance(h, logging.NullHandler) for h in log.handlers):
+        log.addHandler(logging.NullHandler())
+    log.propagate = False
+
+
+def _mdf():
+    try:
+        from asammdf import MDF
+    except ImportError:
+        raise UnsupportedError("MDF logs need asammdf, which is not installed: " + install_hint("validation")) \
+            from None
+    _quiet_asammdf()
+    return MDF
+
+
+def _open(MDF, p: Path):
+    """``MDF(p)``, or a DatasetError: asammdf raises many types on a damaged file, and the half-built
+    object's ``__del__`` then fails too, which Python would print as 'Exception ignored' below the
+    one-line error; it is collected here with that report swallowed."""
+    hook, failure = sys.unraisablehook, None
+    sys.unraisablehook = lambda unraisable: None
+    try:
+        try:
+            return MDF(str(p))
+        except Exception as exc:     # noqa: BLE001 -- any failure of the parser says the same to the user
+            failure = f"{type(exc).__name__}: {exc}"
+        gc.collect()                 # the exception (and the half-built object it holds) is gone: collect it now
+    finally:
+        sys.unraisablehook = hook
+    raise DatasetError(f"cannot read {p}: not a readable MDF file ({failure})")
+
+
+class Channel:
+    """One mapped channel, read whole: its times [s], values, unit, and the facts of its sampling."""
+
+    def __init__(self, p: Path, name: str, t: np.ndarray, x: np.ndarray, unit, method: str):
+        self.name, self.t, self.x, self.unit, self.method = name, t, x, unit, method
+        if t.size < 2:
+            raise DatasetError(f"{p}: channel {name!r} has {t.size} sample(s); needs at least 2")
+        bad = ~np.isfinite(x)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise DatasetError(f"{p}: channel {name!r} has {int(bad.sum())} non-finite value(s), first at "
+                               f"t = {t[i]:.6g} s; allowed: finite numbers")
+        d = np.diff(t)
+        back = np.flatnonzero(~(d > 0))
+        if back.size:
+            i = int(back[0])
+            raise DatasetError(f"{p}: channel {name!r}: time is not strictly increasing: t = {t[i + 1]!r} s after "
+                               f"t = {t[i]!r} s (sample {i + 2}); allowed: strictly increasing times")
+        self.period = float(np.median(d))
+        self.max_step = float(d.max())
+        long = np.flatnonzero(d > GAP_FACTOR * self.period)
+        if long.size:
+            i = int(long[0])
+            raise DatasetError(
+                f"{p}: channel {name!r}: gap of {d[i]:.6g} s after t = {t[i]:.6g} s ({d[i] / self.period:.3g} x its "
+                f"median period {self.period:.6g} s, {1 / self.period:.4g} Hz); {long.size} gap(s) in the channel; "
+                f"allowed: steps of at most {GAP_FACTOR:g} x the median period (no method bridges missing samples: "
+                f"split the log at the gap)")
+        self.short = int(np.count_nonzero(d < SHORT_FACTOR * self.period))
+        self.rate_change = None         # (t_from, t_to, block median) of the first block off the median
+        for k in range(0, d.size, RATE_BLOCK):
+            block = d[k:k + RATE_BLOCK]
+            if block.size >= RATE_BLOCK // 2 and abs(np.median(block) / self.period - 1.0) > PERIOD_RTOL:
+                self.rate_change = (float(t[k]), float(t[k + block.size]), float(np.median(block)))
+                break
+        # linear needs the two samples around t - D: its first value is one step after the first sample
+        self.start = float(t[0]) + (self.max_step if method == "linear" else 0.0)
+        self.end = float(t[-1])
+
+    def regular_at(self, ts: float) -> bool:
+        """Sampled at the period ``ts`` without short steps (gaps are refused when read)."""
+        return abs(self.period / ts - 1.0) <= PERIOD_RTOL and not self.short and self.rate_change is None
+
+
+def time_base(channels: list, ts: float) -> np.ndarray:
+    """The grid: the span where every channel has data, at the sample time ``ts`` [s]; the recorded times
+    of the first channel sampled at ``ts`` (the CSV's times when the log is on the grid), else start + k ts."""
+    start, end = max(c.start for c in channels), min(c.end for c in channels)
+    tol = GRID_RTOL * ts
+    for c in channels:
+        if c.regular_at(ts):
+            # a sample within tol of the span's ends belongs to it (the times are the other channels' too)
+            return c.t[(c.t >= start - tol) & (c.t <= end + tol)]
+    return start + ts * np.arange(int(np.floor((end - start) / ts + GRID_RTOL)) + 1)
+
+
+def on_grid(c: Channel, grid: np.ndarray, ts: float) -> np.ndarray | None:
+    """The channel's values as recorded when its samples over the grid's span are the grid times, else None."""
+    tol = GRID_RTOL * ts
+    i0, i1 = np.searchsorted(c.t, grid[0] - tol, side="left"), np.searchsorted(c.t, grid[-1] + tol, side="right")
+    if i1 - i0 == grid.size and np.all(np.abs(c.t[i0:i1] - grid) <= tol):
+        return c.x[i0:i1]
+    return None
+
+
+def resample(c: Channel, grid: np.ndarray, ts: float) -> tuple:
+    """The channel's values at the grid times and the latency [s] its method adds.
+
+    ``hold``: the last sample at or before each grid time (within :data:`GRID_RTOL` x ``ts``), latency 0
+    (a value is up to one period old). ``linear``: the straight line between the samples around t - D,
+    D the channel's largest step: both are at or before t; latency D.
+    """
+    if c.method == "linear":
+        return np.interp(grid - c.max_step, c.t, c.x), c.max_step
+    idx = np.searchsorted(c.t, grid + GRID_RTOL * ts, side="right") - 1
+    return c.x[np.maximum(idx, 0)], 0.0
+
+
+class OnGrid:
+    """Channels at their own rates on one grid at the observer's sample time, delivered in chunks
+    (the MDF and ROS 2 readers read their channels into ``self.channels`` and call :meth:`_put_on_grid`)."""
+
+    def _put_on_grid(self, ts: float) -> None:
+        """``grid``, ``values`` (per channel, at the grid times), ``resampling`` and ``warnings`` of
+        ``self.channels`` at the sample time ``ts`` [s]."""
+        p = self.path
+        start, end = max(c.start for c in self.channels), min(c.end for c in self.channels)
+        if end - start < ts:
+            spans = "; ".join(f"{c.name!r} {c.start:.6g}..{c.end:.6g} s" for c in self.channels)
+            raise DatasetError(f"{p}: the mapped channels share no span of at least one sample time {ts:g} s "
+                               f"({spans}); allowed: channels recorded over the same interval")
+        self.grid = time_base(self.channels, ts)
+        self.values, self.resampling, self.warnings = {}, {}, []
+        for c in self.channels:
+            x = on_grid(c, self.grid, ts)
+            latency, recorded = 0.0, x is not None
+            if x is None:
+                x, latency = resample(c, self.grid, ts)
+            self.values[c.name] = x
+            self.resampling[c.name] = {"rate_hz": 1.0 / c.period, "method": "as recorded" if recorded else c.method,
+                                       "latency_s": latency}
+            if c.period > ts * (1.0 + PERIOD_RTOL):
+                self.warnings.append(
+                    f"channel {c.name!r} is sampled at {1 / c.period:.4g} Hz, slower than the observer's "
+                    f"{1 / ts:.4g} Hz: {c.method} gives it between samples"
+                    + (f" (latency {latency:.6g} s)" if c.method == "linear" else " (each value held until the next)"))
+            if c.rate_change is not None:
+                t0, t1, per = c.rate_change
+                self.warnings.append(f"channel {c.name!r} changes its rate: median period {per:.6g} s "
+                                     f"({1 / per:.4g} Hz) from t = {t0:.6g} to {t1:.6g} s, {c.period:.6g} s "
+                                     f"({1 / c.period:.4g} Hz) over the log")
+            if c.short:
+                self.warnings.append(f"channel {c.name!r} has {c.short} step(s) shorter than {SHORT_FACTOR:g} x its "
+                                     f"median period {c.period:.6g} s (irregular sampling)")
+        self.rows = 0
+
+    def chunks(self):
+        """Yield ``(first, {key: float64 array})`` of the grid, the time under ``time_key`` [s]."""
+        self.rows = 0
+        n = self.grid.size
+        if n < 2:
+            raise DatasetError(f"{self.path}: the mapped channels share {n} sample time(s); needs at least 2")
+        for first in range(0, n, self.chunk_rows):
+            part = slice(first, first + self.chunk_rows)
+            cols = {self.time_key: self.grid[part], **{k: v[part] for k, v in self.values.items()}}
+            self.rows = min(n, first + self.chunk_rows)
+            yield first, cols
+
+
+class MdfLog(OnGrid):
+    """An MDF log: the mapped channels, each read alone with its own master, on the observer's grid.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    channels : mapping of str to str
+        The channels to read (the map's ``column`` names), each with the unit its message names.
+    time_key : str
+        The key the grid times [s] are delivered under (the map's ``time`` column, which an MDF file
+        does not need: every channel has its group's master).
+    methods : mapping of str to str
+        ``hold`` or ``linear`` per channel (:data:`DEFAULT_METHOD` where absent).
+    sample_time : float
+        The observer's sample time [s].
+    chunk_rows : int, optional
+        Grid samples per chunk.
+
+    Raises
+    ------
+    DatasetError
+        not a readable MDF file, a channel missing (the closest names listed), ambiguous (in several
+        groups), not numeric, non-finite, with a gap, or no span where every channel has data.
+    UnsupportedError
+        asammdf is not installed.
+    """
+
+    def __init__(self, path, channels, time_key: str, methods, sample_time: float, chunk_rows: int = BATCH_ROWS):
+        MDF = _mdf()
+        p = Path(path)
+        self.path, self.units, self.time_key, self.chunk_rows = p, dict(channels), time_key, int(chunk_rows)
+        regular_file(p)
+        mdf = _open(MDF, p)
+        try:
+            self.channels = [self._channel(mdf, p, name, methods.get(name, DEFAULT_METHOD)) for name in self.units]
+        finally:
+            mdf.close()
+        self.file_units = {c.name: c.unit for c in self.channels}
+        self._put_on_grid(float(sample_time))
+
+    @staticmethod
+    def _channel(mdf, p: Path, name: str, method: str) -> Channel:
+        found = mdf.channels_db.get(name)
+        if not found:
+            raise _missing(p, "channel", [name], list(mdf.channels_db))
+        if len(found) > 1:
+            raise DatasetError(f"{p}: channel {name!r} is in {len(found)} channel groups ({[g for g, _ in found]}); "
+                               f"allowed: a channel name that is unique in the file")
+        group, index = found[0]
+        try:
+            sig = mdf.get(name, group=group, index=index)
+        except Exception as exc:     # noqa: BLE001 -- asammdf's own reading errors, of many types
+            raise DatasetError(f"cannot read {p}: channel {name!r}: {type(exc).__name__}: {exc}") from None
+        x = np.asarray(sig.samples)
+        if x.dtype.kind not in "iuf" or x.ndim != 1:
+            raise DatasetError(f"{p}: channel {name!r} holds {x.dtype} values of shape {x.shape[1:] or 'scalar'}; "
+                               f"allowed: one number per sample")
+        master = mdf.masters_db.get(group)
+        t_unit = mdf.groups[group].channels[master].unit.strip() if master is not None else ""
+        t_unit = normalize_unit(t_unit) if t_unit else "s"
+        if UNITS.get(t_unit, ("",))[0] != "time":
+            raise DatasetError(f"{p}: channel {name!r}: its master channel has unit {t_unit!r}; allowed: a time "
+                               f"master in s or ms")
+        t = np.asarray(sig.timestamps, dtype=float) * UNITS[t_unit][1]
+        return Channel(p, name, t, x.astype(float), sig.unit or None, method)
+
+
+ROS2_STORE = "LATEST"
+"""The rosbags typestore of the message types a bag names without their definitions (the newest ROS 2
+distribution's standard messages; a bag that stores its definitions is read with its own)."""
+
+
+def _rosbags():
+    try:
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        raise UnsupportedError("ROS 2 bags need rosbags, which is not installed: " + install_hint("validation")) \
+            from None
+    return AnyReader, get_typestore(getattr(Stores, ROS2_STORE))
+
+
+def _split(name: str):
+    """``/imu/data.angular_velocity.z`` -> (``/imu/data``, [``angular_velocity``, ``z``]): a ROS 2 topic
+    name holds no '.', so the first '.' ends it."""
+    topic, _, path = name.partition(".")
+    return topic, [f for f in path.split(".") if f]
+
+
+def _fields(msg) -> list:
+    """The fields of a deserialized message (not the type's own ``__msgtype__``)."""
+    names = getattr(msg, "__dataclass_fields__", None) or getattr(msg, "__slots__", ())
+    return [f for f in names if not f.startswith("__")]
+
+
+def _field(p: Path, name: str, msg, path: list):
+    value = msg
+    for k, f in enumerate(path):
+        if f.isdigit() and isinstance(value, (list, tuple, np.ndarray)):
+            if int(f) >= len(value):
+                raise DatasetError(f"{p}: channel {name!r}: index {f} of {'.'.join(path[:k])!r}, which holds "
+                                   f"{len(value)} value(s); allowed: an index from 0 to {len(value) - 1}")
+            value = value[int(f)]
+            continue
+        if not hasattr(value, f) or f not in _fields(value):
+            have = _fields(value)
+            near = closest(f, have)
+            raise DatasetError(f"{p}: channel {name!r}: the message has no field {'.'.join(path[:k + 1])!r}"
+                               + (f" (closest: {', '.join(repr(x) for x in near)})" if near else "")
+                               + f"; allowed: one of {have} at that level (TOPIC.FIELD.SUBFIELD, e.g. "
+                               f"/imu.angular_velocity.z)")
+        value = getattr(value, f)
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise DatasetError(f"{p}: channel {name!r} is {type(value).__name__}, not a number; allowed: a numeric "
+                           f"field (fields: {_fields(value) or 'none'})")
+    return float(value)
+
+
+def _stamp(msg):
+    """The message's header stamp [s], or None where it has none."""
+    stamp = getattr(getattr(msg, "header", None), "stamp", None)
+    return None if stamp is None else stamp.sec + 1e-9 * stamp.nanosec
+
+
+class BagLog(OnGrid):
+    """A ROS 2 bag (a folder with ``metadata.yaml``, sqlite3 or mcap storage; rosbags): every mapped
+    ``TOPIC.FIELD`` a channel, at its topic's rate, on the observer's grid.
+
+    A channel's time is its message's ``header.stamp`` where the message has a header, else the time
+    the bag recorded it. One pass over the messages of the mapped topics only; only the mapped fields
+    are kept. ROS messages carry no units (REP 103: SI), so the map's units apply.
+
+    Parameters
+    ----------
+    path, channels, time_key, methods, sample_time, chunk_rows
+        As :class:`MdfLog`; ``channels``: ``TOPIC.FIELD`` names.
+
+    Raises
+    ------
+    DatasetError
+        not a readable bag, a topic or field missing (the closest listed), a field that is not a number,
+        non-finite, with a gap.
+    UnsupportedError
+        rosbags is not installed.
+    """
+
+    def __init__(self, path, channels, time_key: str, methods, sample_time: float, chunk_rows: int = BATCH_ROWS):
+        AnyReader, store = _rosbags()
+        p = Path(path)
+        self.path, self.units, self.time_key, self.chunk_rows = p, dict(channels), time_key, int(chunk_rows)
+        wanted = {}
+        for name in self.units:
+            topic, fields = _split(name)
+            if not fields:
+                raise DatasetError(f"{p}: channel {name!r} names no field; allowed: TOPIC.FIELD (e.g. "
+                                   f"/imu.angular_velocity.z, /speed.data)")
+            wanted.setdefault(topic, []).append((name, fields))
+        try:
+            with AnyReader([p], default_typestore=store) as reader:
+                topics = {c.topic for c in reader.connections}
+                missing = [t for t in wanted if t not in topics]
+                if missing:
+                    raise _missing(p, "topic", missing, sorted(topics))
+                times = {t: [] for t in wanted}
+                values = {n: [] for n in self.units}
+                conns = [c for c in reader.connections if c.topic in wanted]
+                for conn, recorded, raw in reader.messages(connections=conns):
+                    msg = reader.deserialize(raw, conn.msgtype)
+                    stamp = _stamp(msg)
+                    times[conn.topic].append(recorded * 1e-9 if stamp is None else stamp)
+                    for name, fields in wanted[conn.topic]:
+                        values[name].append(_field(p, name, msg, fields))
+        except DatasetError:
+            raise
+        except Exception as exc:     # noqa: BLE001 -- rosbags raises its own types and sqlite's, apsw's, mcap's
+            raise DatasetError(f"cannot read {p}: not a readable ROS 2 bag ({type(exc).__name__}: {exc})") from None
+        self.channels = []
+        for topic, names in wanted.items():
+            t = np.asarray(times[topic], dtype=float)
+            for name, _ in names:
+                self.channels.append(Channel(p, name, t, np.asarray(values[name], dtype=float), None,
+                                             methods.get(name, DEFAULT_METHOD)))
+        self.file_units = {}
+        self._put_on_grid(float(sample_time))
+
+
+def open_log(path, columns, time_key: str, sample_time: float, methods=None, block_bytes=None, batch_rows=None):
+    """The reader of a log by its content: :class:`ParquetLog`, :class:`MdfLog` or a CSV
+    :class:`~codegen.validation.csvlog.LogReader`; ``columns`` includes ``time_key`` (an MDF log reads
+    its channels' masters instead)."""
+    what = kind(path)
+    if what == "parquet":
+        return ParquetLog(path, columns, batch_rows or BATCH_ROWS)
+    if what in ("mdf", "rosbag2"):
+        channels = {c: u for c, u in columns.items() if c != time_key}
+        return (MdfLog if what == "mdf" else BagLog)(path, channels, time_key, methods or {}, sample_time,
+                                                     batch_rows or BATCH_ROWS)
+    reader = LogReader(path, columns, *(() if block_bytes is None else (block_bytes,)))
+    reader.file_units = {}
+    return reader
