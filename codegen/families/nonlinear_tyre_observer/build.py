@@ -68,8 +68,9 @@ class NonlinearTyreSettings:
                                                "axle slopes, V growing at most at sliding_growth where both axles "
                                                "slide): the step then corrects by the tyre model at every slip, "
                                                "with no kinematic fallback beyond sliding_fraction")
-    sliding_growth: float = setting(1e-3, gt=0, doc="epsilon [1/s]: the growth of V the through-sliding certificate "
-                                                    "allows where both axles slide (v_y is unobservable there)")
+    sliding_growth: float | None = setting(None, gt=0, doc="epsilon [1/s]: the growth of V the through-sliding "
+                                                           "certificate allows where both axles slide (v_y is "
+                                                           "unobservable there); absent: 1e-3")
     gain_sliding_fraction: float = setting(0.3, gt=0, lt=1, doc="the set of the l2 gain bound, <= sliding_fraction")
     decay: float | None = setting(None, gt=0, lt=1, doc="lambda: V(e+) <= lambda^2 V(e) required; absent: "
                                                         "decay_fraction of the largest certifiable rate")
@@ -99,6 +100,10 @@ class NonlinearTyreSettings:
         if any(g is not None for g in gains) and any(g is None for g in gains):
             raise ValueError("gain_vy_ay, gain_vy_r, gain_r_ay and gain_r_r are given all four (the gains are then "
                              "certified, not designed) or none (designed)")
+        if self.sliding_growth is not None and not self.through_sliding:
+            raise ValueError(f"sliding_growth = {self.sliding_growth:g} is read with through_sliding = true only (the "
+                             f"growth the certificate at every slip allows where both axles slide); set both, or "
+                             f"neither")
         if self.gain_sliding_fraction > self.sliding_fraction:
             raise ValueError(f"gain_sliding_fraction = {self.gain_sliding_fraction:g} must not exceed "
                              f"sliding_fraction = {self.sliding_fraction:g} (the gain set lies in the certified set)")

@@ -273,6 +273,10 @@ def synthesize(plant, decay_verts, gain_verts, settings, solver) -> Design:
     return Design(L, P, eta, best, rate, given, sol)
 
 
+SLIDING_GROWTH = 1e-3
+"""epsilon [1/s] by default: V may grow this fast where both axles slide (``[design] sliding_growth``): small
+beside any decay the gains certify, and above what the LMI margin on every block resolves."""
+
 THROUGH_PROBLEM = "nonlinear-tyre observer: decay through sliding (rate proportional to the axle slopes, gains fixed)"
 
 
@@ -324,7 +328,7 @@ def through_sliding(plant, verts, settings, design: Design, solver, iterations: 
     down to three digits); the problem at that rate answered by ``solver`` (recorded in the design lock). A
     CertificateError when not even a = 0 (V growing at most at epsilon everywhere) is certified."""
     L_scaled = plant.D @ design.L @ np.linalg.inv(plant.D)
-    growth = settings.sliding_growth
+    growth = SLIDING_GROWTH if settings.sliding_growth is None else settings.sliding_growth
     committed = solver.committed_data(THROUGH_PROBLEM)
     if committed is not None:
         rate, growth = float(committed["through_rate"]), float(committed["growth"])

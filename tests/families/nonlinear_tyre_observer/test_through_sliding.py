@@ -14,7 +14,7 @@ import sympy as sp
 
 from codegen import cli, families
 from codegen.design.solver import FreshSolver, LockReplay
-from codegen.errors import CertificateError, ModelDefinitionError
+from codegen.errors import CertificateError, ConfigurationError, ModelDefinitionError
 from codegen.families.nonlinear_tyre_observer import design as dsn
 from codegen.families.nonlinear_tyre_observer.fit import _set_values
 from codegen.model import load_parameters
@@ -137,6 +137,9 @@ def test_no_growth_at_full_sliding_is_refused_naming_the_setting():
     with pytest.raises(CertificateError, match="through_sliding: no Lyapunov matrix keeps V from growing faster than "
                                                "sliding_growth = 1e-09"):
         FAMILY.build(_through(cfg, sliding_growth=1e-9), FreshSolver())
+    # read with through_sliding only: set alone, it would be silently unused
+    with pytest.raises(ConfigurationError, match="sliding_growth = 0.01 is read with through_sliding = true only"):
+        FAMILY.build(dataclasses.replace(cfg, design={**cfg.design, "sliding_growth": 0.01}), FreshSolver())
 
 
 def test_a_force_that_changes_beyond_sliding_is_refused(tmp_path, capsys):
