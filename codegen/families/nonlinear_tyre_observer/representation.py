@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -219,8 +220,38 @@ def signals(module, source: str) -> Signals:
     return Signals(states[0], states[1], tuple(inputs), read[0], speed, tuple(names), 1 - r_out, r_out, units)
 
 
+AXLE_BOUNDS = "tyre_axle_bounds"
+"""The kind of the cached slope bounds (:mod:`codegen.model.cache`)."""
+
+
 def _axle_bounds(k, a, subs, measured_boxes, rho, delta, d_box, t_sym, vx, vy, stiffness_range, friction_range,
                  source, rel_tol, through: bool = False) -> AxleBounds:
+    """:func:`_derive_axle_bounds`, kept across runs (:mod:`codegen.model.cache`): the interval arithmetic
+    is most of a design's symbolic work and gives the same bounds for the same axle, parameters, boxes,
+    set and code every time. Keyed by all of them (sympy objects by srepr, the deriving modules byte for
+    byte, sympy's version); a refusal is never kept (it is raised again, with its message)."""
+    from ...model import cache
+    from ...representation import bounds as bounds_module
+    digest = cache.key(AXLE_BOUNDS, {
+        "axle": cache._canonical(a), "subs": cache._canonical(subs), "boxes": cache._canonical(measured_boxes),
+        "rho": rho, "delta": cache._canonical(delta), "d_box": list(d_box), "t": cache._canonical(t_sym),
+        "vx": cache._canonical(vx), "vy": cache._canonical(vy), "stiffness_range": list(stiffness_range),
+        "friction_range": list(friction_range), "rel_tol": rel_tol, "through": through, "sympy": sp.__version__,
+        "numpy": np.__version__, "code": cache.code_digest(sys.modules[__name__], bounds_module)})
+    stored = cache.read(AXLE_BOUNDS, digest)
+    if stored is not None:
+        return AxleBounds(*(tuple(stored[f]) if isinstance(stored[f], list) else stored[f]
+                            for f in ("theta", "attained", "slope", "kinematic", "slip_max")))
+    b = _derive_axle_bounds(k, a, subs, measured_boxes, rho, delta, d_box, t_sym, vx, vy, stiffness_range,
+                            friction_range, source, rel_tol, through)
+    cache.write(AXLE_BOUNDS, digest, {"theta": [float(x) for x in b.theta], "attained": [float(x) for x in b.attained],
+                                      "slope": [float(x) for x in b.slope], "kinematic": [float(x) for x in b.kinematic],
+                                      "slip_max": float(b.slip_max)})
+    return b
+
+
+def _derive_axle_bounds(k, a, subs, measured_boxes, rho, delta, d_box, t_sym, vx, vy, stiffness_range,
+                        friction_range, source, rel_tol, through: bool = False) -> AxleBounds:
     """Sound bounds of v_x dPhi_k/dv_y on |t| <= rho t_sl (see the module docstring). ``through``: rho = 1 and
     the bounds are widened to hold 0, the slope beyond sliding (checked by :func:`_check_constant_beyond`), so
     they hold at every slip; the slope bound reaching 0 is then expected, not refused."""

@@ -478,3 +478,34 @@ def test_fit_on_a_mapped_log_says_it_reads_the_shared_format_only(tmp_path):
                                            r"t, vx, vy, .*, SI units\); the \[data\] table of .*mine.toml maps a log "
                                            r"for uiogen validate --data, not for the fit"):
         fit.fit(cfg, str(log), "0:2", peers=False)
+
+
+def test_slope_bounds_are_kept_across_runs_and_never_stale(tmp_path, monkeypatch):
+    # the interval bounds are most of a design's symbolic work: kept per content (codegen.model.cache), equal to
+    # the derived ones to the last bit, derived again when an input of theirs changes or an entry is damaged
+    from codegen.families.nonlinear_tyre_observer import build as tyre_build, representation as R
+    from codegen.model import cache
+    monkeypatch.setenv("UIOGEN_CACHE_DIR", str(tmp_path / "cache"))
+    cache.forget()
+    calls, real = [], R._derive_axle_bounds
+    monkeypatch.setattr(R, "_derive_axle_bounds", lambda *a, **k: calls.append(a[4]) or real(*a, **k))
+    cfg = observers.get(NAME)
+    module, params = cfg.load_model_module(), load_parameters(cfg.parameter_path)
+
+    def rep(**design):
+        return R.represent(module, params, tyre_build.parse(dataclasses.replace(cfg, design={**cfg.design, **design})),
+                           cfg.source)
+    first = rep()
+    assert len(calls) == 4                                   # two sets x two axles
+    cache.forget()                                           # a new process: read from the folder
+    again = rep()
+    assert len(calls) == 4 and again.decay_set == first.decay_set and again.gain_set == first.gain_set
+    rep(stiffness_range=[0.85, 1.1])                         # another input: derived again, all four
+    assert len(calls) == 8
+    entries = sorted((tmp_path / "cache" / R.AXLE_BOUNDS).glob("*.json"))
+    assert len(entries) == 8
+    for entry in entries:                                    # damaged (the checksum no longer holds): not believed
+        entry.write_text(entry.read_text().replace('"theta": [', '"theta": [1.0, '))
+    cache.forget()
+    assert rep().decay_set == first.decay_set and len(calls) == 12
+    cache.forget()
