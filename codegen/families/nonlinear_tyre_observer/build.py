@@ -49,6 +49,7 @@ from ...model import load_parameters
 from ...project.settings import Rule, parse_settings, setting
 from ...design.precision import margin_field, precision_field
 from ...emit.stepgen import lambdify
+from ..base import ObserverBuild, StepNotes
 from . import design as dsn
 from .representation import TyreRepresentation, represent
 
@@ -167,238 +168,230 @@ def step_parts(rep, L, Ts, z, u, y, rho, fns, xp=np):
     return out, excess
 
 
-def _build_class():
-    from ..base import ObserverBuild, StepNotes
+@dataclass(frozen=True)
+class Build(ObserverBuild):
+    """A certified nonlinear-tyre observer (see the module docstring)."""
 
-    @dataclass(frozen=True)
-    class Build(ObserverBuild):
-        """A certified nonlinear-tyre observer (see the module docstring)."""
+    config: object
+    rep: TyreRepresentation
+    settings: NonlinearTyreSettings
+    plant: dsn.Plant
+    synthesis: dsn.Design
+    level: dsn.LevelBound
+    decay_verts: tuple
+    gain_verts: tuple
+    recheck: dict
+    timings: dict
+    through: object = None          # dsn.Through (through_sliding), else None
+    through_verts: tuple = ()
 
-        config: object
-        rep: TyreRepresentation
-        settings: NonlinearTyreSettings
-        plant: dsn.Plant
-        synthesis: dsn.Design
-        level: dsn.LevelBound
-        decay_verts: tuple
-        gain_verts: tuple
-        recheck: dict
-        timings: dict
-        through: object = None          # dsn.Through (through_sliding), else None
-        through_verts: tuple = ()
+    @property
+    def L(self) -> np.ndarray:
+        return self.synthesis.L
 
-        @property
-        def L(self) -> np.ndarray:
-            return self.synthesis.L
+    @property
+    def P(self) -> np.ndarray:
+        return self.synthesis.P
 
-        @property
-        def P(self) -> np.ndarray:
-            return self.synthesis.P
+    @property
+    def solution(self):
+        return self.synthesis.solution
 
-        @property
-        def solution(self):
-            return self.synthesis.solution
+    @property
+    def definition(self):
+        return self.config.load_model()
 
-        @property
-        def definition(self):
-            return self.config.load_model()
+    @property
+    def known_inputs(self) -> list:
+        return list(self.rep.signals.known_inputs)
 
-        @property
-        def known_inputs(self) -> list:
-            return list(self.rep.signals.known_inputs)
+    # every name is the model's (representation.Signals): states, known inputs, outputs, speed
+    state_names = property(lambda self: [f"{n}_next" for n in self.output_names] + self.output_names)
+    output_names = property(lambda self: [self.rep.signals.lateral_speed, self.rep.signals.yaw_rate])
+    input_names = property(lambda self: [*self.known_inputs, *(f"y_{n}" for n in self.rep.signals.outputs),
+                                         self.rep.signals.speed])
+    nu = property(lambda self: len(self.rep.input_boxes))
+    ny = property(lambda self: 2)
 
-        # every name is the model's (representation.Signals): states, known inputs, outputs, speed
-        state_names = property(lambda self: [f"{n}_next" for n in self.output_names] + self.output_names)
-        output_names = property(lambda self: [self.rep.signals.lateral_speed, self.rep.signals.yaw_rate])
-        input_names = property(lambda self: [*self.known_inputs, *(f"y_{n}" for n in self.rep.signals.outputs),
-                                             self.rep.signals.speed])
-        nu = property(lambda self: len(self.rep.input_boxes))
-        ny = property(lambda self: 2)
+    def step_function(self):
+        nu = self.nu
+        z, u, y, rho = ca.SX.sym("z", 4), ca.SX.sym("u", nu), ca.SX.sym("y", 2), ca.SX.sym("rho", 1)
+        (vy_n, r_n), excess = step_parts(self.rep, self.L, self.config.sample_time, z, u, y, rho,
+                                         _functions(self.rep, ca), xp=ca)
+        # the sympy expressions are put together unevaluated (representation.numeric): one cos(delta),
+        # one capacity per axle, ... instead of one per use
+        outs = ca.cse([ca.vertcat(vy_n, r_n, z[0], z[1]), excess])
+        return ca.Function(f"{self.name}_kernel", [z, u, y, rho], outs, ["z", "u", "y", "rho"], ["z_next", "excess"])
 
-        def step_function(self):
-            nu = self.nu
-            z, u, y, rho = ca.SX.sym("z", 4), ca.SX.sym("u", nu), ca.SX.sym("y", 2), ca.SX.sym("rho", 1)
-            (vy_n, r_n), excess = step_parts(self.rep, self.L, self.config.sample_time, z, u, y, rho,
-                                             _functions(self.rep, ca), xp=ca)
-            # the sympy expressions are put together unevaluated (representation.numeric): one cos(delta),
-            # one capacity per axle, ... instead of one per use
-            outs = ca.cse([ca.vertcat(vy_n, r_n, z[0], z[1]), excess])
-            return ca.Function(f"{self.name}_kernel", [z, u, y, rho], outs, ["z", "u", "y", "rho"], ["z_next", "excess"])
+    def reference_step(self, z, u, y, rho):
+        z, u, y, rho = (np.asarray(a, float) for a in (z, u, y, rho))
+        (vy_n, r_n), excess = step_parts(self.rep, self.L, self.config.sample_time, z, u, y, rho,
+                                         self.rep.numpy_functions, xp=np)
+        return np.array([vy_n, r_n, z[0], z[1]], dtype=float), float(excess)
 
-        def reference_step(self, z, u, y, rho):
-            z, u, y, rho = (np.asarray(a, float) for a in (z, u, y, rho))
-            (vy_n, r_n), excess = step_parts(self.rep, self.L, self.config.sample_time, z, u, y, rho,
-                                             self.rep.numpy_functions, xp=np)
-            return np.array([vy_n, r_n, z[0], z[1]], dtype=float), float(excess)
+    def contraction_metrics(self):
+        """The common P over the DMVT vertices of the certified set: the prediction (v_y, r)."""
+        from ...certificate.contraction import ContractionMetric
+        D = self.plant.D            # P is solved in the scaled state D x (certify: D' P D)
+        return [ContractionMetric(float(self.recheck["contraction_per_step"]), (D.T @ self.P @ D,),
+                                  tuple(self.state_names[:2]),
+                                  "common P over the DMVT vertices: A' P A <= c^2 P, on the certified slip set",
+                                  knob="[design] decay or decay_fraction (the rate the LMIs impose), a lower "
+                                       "sliding_fraction")]
 
-        def contraction_metrics(self):
-            """The common P over the DMVT vertices of the certified set: the prediction (v_y, r)."""
-            from ...certificate.contraction import ContractionMetric
-            D = self.plant.D            # P is solved in the scaled state D x (certify: D' P D)
-            return [ContractionMetric(float(self.recheck["contraction_per_step"]), (D.T @ self.P @ D,),
-                                      tuple(self.state_names[:2]),
-                                      "common P over the DMVT vertices: A' P A <= c^2 P, on the certified slip set",
-                                      knob="[design] decay or decay_fraction (the rate the LMIs impose), a lower "
-                                           "sliding_fraction")]
+    def lmi_problem(self):
+        d = self.synthesis
+        L_scaled = None if not d.given else self.plant.D @ d.L @ np.linalg.inv(self.plant.D)
+        return dsn.lmi_problem(self.plant, self.decay_verts, self.gain_verts, self.settings, d.rate, d.best_rate,
+                               L_scaled)
 
-        def lmi_problem(self):
-            d = self.synthesis
-            L_scaled = None if not d.given else self.plant.D @ d.L @ np.linalg.inv(self.plant.D)
-            return dsn.lmi_problem(self.plant, self.decay_verts, self.gain_verts, self.settings, d.rate, d.best_rate,
-                                   L_scaled)
+    def input_boxes(self):
+        return {self.rep.signals.speed: list(self.rep.v_x_box), **{n: list(b) for n, b in self.rep.input_boxes}}
 
-        def input_boxes(self):
-            return {self.rep.signals.speed: list(self.rep.v_x_box), **{n: list(b) for n, b in self.rep.input_boxes}}
+    def scheduling_boxes(self):
+        return [(self.rep.signals.speed, *self.rep.v_x_box, False)]
 
-        def scheduling_boxes(self):
-            return [(self.rep.signals.speed, *self.rep.v_x_box, False)]
+    def signal_docs(self):
+        s = self.rep.signals
+        vy, r, u = s.lateral_speed, s.yaw_rate, s.unit
+        state = [{"name": f"{vy}_next", "doc": f"predicted lateral speed for the next sample [{u(vy)}]"},
+                 {"name": f"{r}_next", "doc": f"predicted yaw rate for the next sample [{u(r)}]"},
+                 {"name": vy, "doc": f"estimate of {vy} at this sample, from the samples before it [{u(vy)}]"},
+                 {"name": r, "doc": f"estimate of {r} at this sample, from the samples before it [{u(r)}]"}]
+        docs = {s.steering: f"road-wheel steering angle [{u(s.steering)}]"}
+        if "a_x" in s.known_inputs and s.steering != "a_x":     # the built-in model's combined slip
+            docs["a_x"] = (f"measured longitudinal acceleration at the CoG [{u('a_x')}] (combined slip: the "
+                           f"axles' lateral capacity)")
+        inputs = [{"name": n, "doc": docs.get(n, f"measured {n}, read by the axles' lateral capacity [{u(n)}]")}
+                  for n in self.known_inputs]
+        measured = {s.a_y: f"measured lateral acceleration at the CoG [{u(s.a_y)}]",
+                    s.yaw_rate_output: f"measured yaw rate [{u(s.yaw_rate_output)}]"}
+        inputs += [{"name": f"y_{n}", "doc": measured[n]} for n in s.outputs]
+        inputs += [{"name": s.speed, "doc": f"measured longitudinal speed [{u(s.speed)}]"}]
+        return state, inputs, state[2:]
 
-        def signal_docs(self):
-            s = self.rep.signals
-            vy, r, u = s.lateral_speed, s.yaw_rate, s.unit
-            state = [{"name": f"{vy}_next", "doc": f"predicted lateral speed for the next sample [{u(vy)}]"},
-                     {"name": f"{r}_next", "doc": f"predicted yaw rate for the next sample [{u(r)}]"},
-                     {"name": vy, "doc": f"estimate of {vy} at this sample, from the samples before it [{u(vy)}]"},
-                     {"name": r, "doc": f"estimate of {r} at this sample, from the samples before it [{u(r)}]"}]
-            docs = {s.steering: f"road-wheel steering angle [{u(s.steering)}]"}
-            if "a_x" in s.known_inputs and s.steering != "a_x":     # the built-in model's combined slip
-                docs["a_x"] = (f"measured longitudinal acceleration at the CoG [{u('a_x')}] (combined slip: the "
-                               f"axles' lateral capacity)")
-            inputs = [{"name": n, "doc": docs.get(n, f"measured {n}, read by the axles' lateral capacity [{u(n)}]")}
-                      for n in self.known_inputs]
-            measured = {s.a_y: f"measured lateral acceleration at the CoG [{u(s.a_y)}]",
-                        s.yaw_rate_output: f"measured yaw rate [{u(s.yaw_rate_output)}]"}
-            inputs += [{"name": f"y_{n}", "doc": measured[n]} for n in s.outputs]
-            inputs += [{"name": s.speed, "doc": f"measured longitudinal speed [{u(s.speed)}]"}]
-            return state, inputs, state[2:]
+    def step_notes(self):
+        s = self.rep.signals
+        measured = [s.speed, *s.known_inputs]
+        which = ", ".join(measured[:-1]) + " or " + measured[-1]
+        slip = ("" if self.through is not None else
+                ", or an estimated\n * axle slip beyond sliding_fraction of its sliding slip")
+        return StepNotes(
+            notes=("Each call takes the measurements of sample k and returns the estimate of sample k made",
+                   "from the samples before it; the state's head is the prediction for sample k+1.",
+                   f"A flagged sample integrates the kinematics {s.lateral_speed}' = {s.a_y} - {s.yaw_rate} "
+                   f"{s.speed} (no tyre correction)."),
+            clamp=(f"{which} outside the certified set ({s.speed} clamped for the model){slip}: the certificate "
+                   "does not cover this sample,\n * and the step integrates the kinematics instead of correcting "
+                   "by the tyre model."),
+            warmup="never set.")
 
-        def step_notes(self):
-            s = self.rep.signals
-            measured = [s.speed, *s.known_inputs]
-            which = ", ".join(measured[:-1]) + " or " + measured[-1]
-            slip = ("" if self.through is not None else
-                    ", or an estimated\n * axle slip beyond sliding_fraction of its sliding slip")
-            return StepNotes(
-                notes=("Each call takes the measurements of sample k and returns the estimate of sample k made",
-                       "from the samples before it; the state's head is the prediction for sample k+1.",
-                       f"A flagged sample integrates the kinematics {s.lateral_speed}' = {s.a_y} - {s.yaw_rate} "
-                       f"{s.speed} (no tyre correction)."),
-                clamp=(f"{which} outside the certified set ({s.speed} clamped for the model){slip}: the certificate "
-                       "does not cover this sample,\n * and the step integrates the kinematics instead of correcting "
-                       "by the tyre model."),
-                warmup="never set.")
+    @property
+    def certificate(self):
+        c, s = self.recheck, self.settings
+        lv = dict(zip(dsn.CHANNELS, s.sigma.tolist()))
+        ranges = ""
+        if list(s.stiffness_range) != [1.0, 1.0] or list(s.friction_range) != [1.0, 1.0]:
+            ranges = (f"; every axle's cornering stiffness x[{s.stiffness_range[0]:g}, {s.stiffness_range[1]:g}] "
+                      f"and friction x[{s.friction_range[0]:g}, {s.friction_range[1]:g}] of the parameter file")
+        gains = "given" if self.synthesis.given else "designed (LMIs, jointly with the Lyapunov matrix)"
+        names = self.rep.signals
+        measured = ", ".join([names.steering, names.speed, *(n for n in names.known_inputs if n != names.steering)])
+        return Certificate(
+            family="nonlinear_tyre_observer",
+            claim=(f"one quadratic Lyapunov matrix at every vertex of (1/v_x, theta_f, theta_r) (DMVT, gains "
+                   f"{gains}): the estimation error decays at {c['decay_rate']:.4g} 1/s (the largest certifiable: "
+                   f"{c['best_decay_rate']:.4g} 1/s), and on the gain set (|t_k| <= {s.gain_sliding_fraction:g} "
+                   f"t_sl,k) the sideslip error has the l2 gain gamma from the disturbances normalized by their "
+                   f"levels, and (per-channel multipliers, a second Lyapunov matrix) an RMS bound with every "
+                   f"channel at its level" + self._through_claim()),
+            plant_class=(f"the single-track model {self.config.model} with the tyre law of its AXLES per axle "
+                         f"(the capacity from the measured signals), Euler-discretized at Ts = "
+                         f"{self.config.sample_time:g} s, parameters of "
+                         f"{self.config.parameters}{ranges}"),
+            noise=(f"axle force residuals (sigma {lv['force_front']:.4g}, {lv['force_rear']:.4g} N), a_y sensor "
+                   f"error ({lv['ay']:.4g} m/s^2), yaw-rate sensor error ({lv['r']:.4g} rad/s), Euler residuals "
+                   f"({lv['euler_vy']:.4g} m/s^2, {lv['euler_r']:.4g} rad/s^2): any sequences"),
+            region={self.rep.signals.speed: tuple(self.rep.v_x_box),
+                    **{n: tuple(b) for n, b in self.rep.input_boxes}},
+            region_note=(f"|t_k| <= {s.sliding_fraction:g} t_sl,k on each axle (the sliding slip at the measured "
+                         f"signals) for the true AND the estimated state; SCHEDULING_CLAMPED flags the estimated "
+                         f"slip or a measured signal ({measured} where the law reads it) outside the set: the "
+                         f"true slip is not seen ({self.rep.signals.lateral_speed} is not measured)"
+                         if self.through is None else
+                         f"every slip for the true and the estimated state (each axle force constant beyond its "
+                         f"sliding slip, checked on the model at |t| = 1 to 3 t_sl; the front slip angle within "
+                         f"+-(90 deg - max |{names.steering}|)); the decay and the l2 gain at |t_k| <= "
+                         f"{s.sliding_fraction:g} and {s.gain_sliding_fraction:g} t_sl,k; SCHEDULING_CLAMPED "
+                         f"flags a measured signal ({measured}) outside its box only"),
+            recheck=Recheck(c["blocks"], c["worst_block"], c["worst_min_eig"], c["worst_relative_margin"]),
+            step=Step(self.config.sample_time, "Euler step of the observer (" + (
+                "kinematic fallback outside the set" if self.through is None else
+                "tyre correction at every slip; kinematic fallback outside the boxes") + ")",
+                      c["contraction_per_step"]),
+            bounds=(Bound("gamma", c["gamma_deg"], "deg", "l2", "beta, the sideslip estimation error",
+                          "the disturbances w, each channel divided by its level sigma"),
+                    Bound("beta_rms", c["bound_deg_at_levels"], "deg", "rms", "beta, the sideslip estimation error",
+                          "every disturbance channel at its level sigma, on the gain set (per-channel "
+                          "multipliers: " + ", ".join(f"{k} {v:.3g}" for k, v in c["bound_deg_by_channel"].items())
+                          + " deg)")),
+            extras=solver_certificate(self.solution, recheck=self.recheck))
 
-        @property
-        def certificate(self):
-            c, s = self.recheck, self.settings
-            lv = dict(zip(dsn.CHANNELS, s.sigma.tolist()))
-            ranges = ""
-            if list(s.stiffness_range) != [1.0, 1.0] or list(s.friction_range) != [1.0, 1.0]:
-                ranges = (f"; every axle's cornering stiffness x[{s.stiffness_range[0]:g}, {s.stiffness_range[1]:g}] "
-                          f"and friction x[{s.friction_range[0]:g}, {s.friction_range[1]:g}] of the parameter file")
-            gains = "given" if self.synthesis.given else "designed (LMIs, jointly with the Lyapunov matrix)"
-            names = self.rep.signals
-            measured = ", ".join([names.steering, names.speed, *(n for n in names.known_inputs if n != names.steering)])
-            return Certificate(
-                family="nonlinear_tyre_observer",
-                claim=(f"one quadratic Lyapunov matrix at every vertex of (1/v_x, theta_f, theta_r) (DMVT, gains "
-                       f"{gains}): the estimation error decays at {c['decay_rate']:.4g} 1/s (the largest certifiable: "
-                       f"{c['best_decay_rate']:.4g} 1/s), and on the gain set (|t_k| <= {s.gain_sliding_fraction:g} "
-                       f"t_sl,k) the sideslip error has the l2 gain gamma from the disturbances normalized by their "
-                       f"levels, and (per-channel multipliers, a second Lyapunov matrix) an RMS bound with every "
-                       f"channel at its level" + self._through_claim()),
-                plant_class=(f"the single-track model {self.config.model} with the tyre law of its AXLES per axle "
-                             f"(the capacity from the measured signals), Euler-discretized at Ts = "
-                             f"{self.config.sample_time:g} s, parameters of "
-                             f"{self.config.parameters}{ranges}"),
-                noise=(f"axle force residuals (sigma {lv['force_front']:.4g}, {lv['force_rear']:.4g} N), a_y sensor "
-                       f"error ({lv['ay']:.4g} m/s^2), yaw-rate sensor error ({lv['r']:.4g} rad/s), Euler residuals "
-                       f"({lv['euler_vy']:.4g} m/s^2, {lv['euler_r']:.4g} rad/s^2): any sequences"),
-                region={self.rep.signals.speed: tuple(self.rep.v_x_box),
-                        **{n: tuple(b) for n, b in self.rep.input_boxes}},
-                region_note=(f"|t_k| <= {s.sliding_fraction:g} t_sl,k on each axle (the sliding slip at the measured "
-                             f"signals) for the true AND the estimated state; SCHEDULING_CLAMPED flags the estimated "
-                             f"slip or a measured signal ({measured} where the law reads it) outside the set: the "
-                             f"true slip is not seen ({self.rep.signals.lateral_speed} is not measured)"
-                             if self.through is None else
-                             f"every slip for the true and the estimated state (each axle force constant beyond its "
-                             f"sliding slip, checked on the model at |t| = 1 to 3 t_sl; the front slip angle within "
-                             f"+-(90 deg - max |{names.steering}|)); the decay and the l2 gain at |t_k| <= "
-                             f"{s.sliding_fraction:g} and {s.gain_sliding_fraction:g} t_sl,k; SCHEDULING_CLAMPED "
-                             f"flags a measured signal ({measured}) outside its box only"),
-                recheck=Recheck(c["blocks"], c["worst_block"], c["worst_min_eig"], c["worst_relative_margin"]),
-                step=Step(self.config.sample_time, "Euler step of the observer (" + (
-                    "kinematic fallback outside the set" if self.through is None else
-                    "tyre correction at every slip; kinematic fallback outside the boxes") + ")",
-                          c["contraction_per_step"]),
-                bounds=(Bound("gamma", c["gamma_deg"], "deg", "l2", "beta, the sideslip estimation error",
-                              "the disturbances w, each channel divided by its level sigma"),
-                        Bound("beta_rms", c["bound_deg_at_levels"], "deg", "rms", "beta, the sideslip estimation error",
-                              "every disturbance channel at its level sigma, on the gain set (per-channel "
-                              "multipliers: " + ", ".join(f"{k} {v:.3g}" for k, v in c["bound_deg_by_channel"].items())
-                              + " deg)")),
-                extras=solver_certificate(self.solution, recheck=self.recheck))
+    def _through_claim(self) -> str:
+        if self.through is None:
+            return ""
+        c = self.recheck
+        return (f"; at every slip, with a third Lyapunov matrix: V(e+) <= (1 - Ts (a phi - eps (1 - phi))) V(e), "
+                f"a = {c['through_rate']:.4g} 1/s with both axles at full slope, eps = {c['sliding_growth']:.3g} "
+                f"1/s (growth) with both sliding, phi the mean over the axles of theta_k / theta_k,full")
 
-        def _through_claim(self) -> str:
-            if self.through is None:
-                return ""
-            c = self.recheck
-            return (f"; at every slip, with a third Lyapunov matrix: V(e+) <= (1 - Ts (a phi - eps (1 - phi))) V(e), "
-                    f"a = {c['through_rate']:.4g} 1/s with both axles at full slope, eps = {c['sliding_growth']:.3g} "
-                    f"1/s (growth) with both sliding, phi the mean over the axles of theta_k / theta_k,full")
+    def _representation(self):
+        rep = self.rep
 
-        def _representation(self):
-            rep = self.rep
+        def axles(bounds):
+            return [{"theta_bounds": list(map(significant, b.theta)),
+                     "theta_attained_on_grid": list(map(significant, b.attained)),
+                     "slope_bounds": list(map(significant, b.slope)),
+                     "kinematic_factor_bounds": list(map(significant, b.kinematic)),
+                     "slip_max": significant(b.slip_max)} for b in bounds]
+        return {"G_f": rep.G_f.tolist(), "G_a": rep.G_a.tolist(), "v_x_box": list(rep.v_x_box),
+                "input_boxes": {n: list(b) for n, b in rep.input_boxes},
+                "certified_set": {"sliding_fraction": self.settings.sliding_fraction, "axles": axles(rep.decay_set)},
+                "gain_set": {"sliding_fraction": self.settings.gain_sliding_fraction, "axles": axles(rep.gain_set)},
+                **({} if rep.through_set is None else {"through_set": {"axles": axles(rep.through_set)}}),
+                "stiffness_range": list(self.settings.stiffness_range),
+                "friction_range": list(self.settings.friction_range)}
 
-            def axles(bounds):
-                return [{"theta_bounds": list(map(significant, b.theta)),
-                         "theta_attained_on_grid": list(map(significant, b.attained)),
-                         "slope_bounds": list(map(significant, b.slope)),
-                         "kinematic_factor_bounds": list(map(significant, b.kinematic)),
-                         "slip_max": significant(b.slip_max)} for b in bounds]
-            return {"G_f": rep.G_f.tolist(), "G_a": rep.G_a.tolist(), "v_x_box": list(rep.v_x_box),
-                    "input_boxes": {n: list(b) for n, b in rep.input_boxes},
-                    "certified_set": {"sliding_fraction": self.settings.sliding_fraction, "axles": axles(rep.decay_set)},
-                    "gain_set": {"sliding_fraction": self.settings.gain_sliding_fraction, "axles": axles(rep.gain_set)},
-                    **({} if rep.through_set is None else {"through_set": {"axles": axles(rep.through_set)}}),
-                    "stiffness_range": list(self.settings.stiffness_range),
-                    "friction_range": list(self.settings.friction_range)}
+    def artifact(self):
+        return {**artifact_head(self, [self.rep.signals.speed], flags_from_inputs_only=False),
+                "representation": self._representation(),
+                "L": self.L.tolist(), "P": self.P.tolist(), "gains": "given" if self.synthesis.given else "designed",
+                "noise_levels": dict(zip(dsn.CHANNELS, self.settings.sigma.tolist())),
+                "sliding_fraction": self.settings.sliding_fraction,
+                **({} if self.through is None else {"P_through": self.through.P.tolist()})}
 
-        def artifact(self):
-            return {**artifact_head(self, [self.rep.signals.speed], flags_from_inputs_only=False),
-                    "representation": self._representation(),
-                    "L": self.L.tolist(), "P": self.P.tolist(), "gains": "given" if self.synthesis.given else "designed",
-                    "noise_levels": dict(zip(dsn.CHANNELS, self.settings.sigma.tolist())),
-                    "sliding_fraction": self.settings.sliding_fraction,
-                    **({} if self.through is None else {"P_through": self.through.P.tolist()})}
-
-        def figures(self):
-            c = self.recheck
-            s = self.settings
-            return {"gains": "given" if self.synthesis.given else "designed",
-                    "theta_bounds": [list(b.theta) for b in self.rep.decay_set],
-                    "theta_gain_set": [list(b.theta) for b in self.rep.gain_set],
-                    "slip_max": [b.slip_max for b in self.rep.decay_set], "L": self.L.tolist(), "P": self.P.tolist(),
-                    "lmi_blocks": c["blocks"], "worst_block": c["worst_block"], "worst_min_eig": c["worst_min_eig"],
-                    "worst_relative_margin": c["worst_relative_margin"],
-                    "contraction_per_step": c["contraction_per_step"], "time_constant_s": c["time_constant_s"],
-                    "slowest_vertex": c["slowest_vertex"], "decay_rate": c["decay_rate"],
-                    "best_decay_rate": c["best_decay_rate"], "gamma_deg": c["gamma_deg"],
-                    "bound_deg_at_levels": c["bound_deg_at_levels"], "bound_deg_by_channel": c["bound_deg_by_channel"],
-                    "sliding_fraction": s.sliding_fraction, "gain_sliding_fraction": s.gain_sliding_fraction,
-                    "stiffness_range": list(s.stiffness_range), "friction_range": list(s.friction_range),
-                    "noise_levels": dict(zip(dsn.CHANNELS, s.sigma.tolist())),
-                    "input_boxes": {n: list(b) for n, b in self.rep.input_boxes}, "v_x_box": list(self.rep.v_x_box),
-                    "sample_time": self.config.sample_time, "through_sliding": s.through_sliding,
-                    **({} if self.through is None else {
-                        "theta_through": [list(b.theta) for b in self.rep.through_set],
-                        "through_rate": c["through_rate"], "sliding_growth": c["sliding_growth"],
-                        "through_time_constant_s": c["through_time_constant_s"]})}
-
-    return Build
-
-
-Build = _build_class()
+    def figures(self):
+        c = self.recheck
+        s = self.settings
+        return {"gains": "given" if self.synthesis.given else "designed",
+                "theta_bounds": [list(b.theta) for b in self.rep.decay_set],
+                "theta_gain_set": [list(b.theta) for b in self.rep.gain_set],
+                "slip_max": [b.slip_max for b in self.rep.decay_set], "L": self.L.tolist(), "P": self.P.tolist(),
+                "lmi_blocks": c["blocks"], "worst_block": c["worst_block"], "worst_min_eig": c["worst_min_eig"],
+                "worst_relative_margin": c["worst_relative_margin"],
+                "contraction_per_step": c["contraction_per_step"], "time_constant_s": c["time_constant_s"],
+                "slowest_vertex": c["slowest_vertex"], "decay_rate": c["decay_rate"],
+                "best_decay_rate": c["best_decay_rate"], "gamma_deg": c["gamma_deg"],
+                "bound_deg_at_levels": c["bound_deg_at_levels"], "bound_deg_by_channel": c["bound_deg_by_channel"],
+                "sliding_fraction": s.sliding_fraction, "gain_sliding_fraction": s.gain_sliding_fraction,
+                "stiffness_range": list(s.stiffness_range), "friction_range": list(s.friction_range),
+                "noise_levels": dict(zip(dsn.CHANNELS, s.sigma.tolist())),
+                "input_boxes": {n: list(b) for n, b in self.rep.input_boxes}, "v_x_box": list(self.rep.v_x_box),
+                "sample_time": self.config.sample_time, "through_sliding": s.through_sliding,
+                **({} if self.through is None else {
+                    "theta_through": [list(b.theta) for b in self.rep.through_set],
+                    "through_rate": c["through_rate"], "sliding_growth": c["sliding_growth"],
+                    "through_time_constant_s": c["through_time_constant_s"]})}
 
 
 def parse(config, tol=None) -> NonlinearTyreSettings:
