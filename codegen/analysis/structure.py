@@ -575,27 +575,50 @@ def candidate_sensors(subject: Subject, lin: Linearization, pts: list) -> list:
 
 
 def analyze(subject: Subject, n_between: int = 200) -> Structure:
-    """Every structural fact of ``subject`` (see the module docstring)."""
+    """Every structural fact of ``subject`` (see the module docstring), one named step per fact."""
     t0 = time.perf_counter()
     lin = linearize(subject, n_between)
-    S = lin.samples
-    P = len(S)
-    pts = [point_facts(lin.A[k], lin.D[k], lin.C[k], lin.Dd[k]) for k in range(P)]
-    basis = lin.basis
-    st, ui, out = subject.states, subject.unknown_inputs, subject.outputs
-    n, nd, ny = lin.n, lin.nd, lin.ny
-    where = S.describe()
-    facts, candidates = [], {}
-    found = []
+    pts = [point_facts(lin.A[k], lin.D[k], lin.C[k], lin.Dd[k]) for k in range(len(lin.samples))]
+    c = _Analysis(subject, lin, pts)
+    _ui_rank(c)
+    _observability(c)
+    rel, hosmd = _relative_degrees(c)
+    _matching(c, rel)
+    _left_invertibility(c)
+    _zeros_and_strong_detectability(c)
+    estimable = _estimable(subject, lin, pts)
+    seconds = time.perf_counter() - t0
+    return Structure(subject, lin, pts, c.facts, rel, hosmd, estimable, c.candidates, seconds, c.found)
 
-    def sensors() -> list:          # computed once, and only when a fact fails
-        if not found:
-            found.append(candidate_sensors(subject, lin, pts))
-        return found[0]
-    note = (f"; {', '.join(map(str, lin.unbounded))} {'has' if len(lin.unbounded) == 1 else 'have'} no bound in {subject.parameter_path.name}: "
-            f"taken at 0") if lin.unbounded else ""
 
-    # 1. every unknown input acts on the system
+class _Analysis:
+    """What every step of :func:`analyze` reads (the linearization, the facts at each point, the names) and
+    what they add to (``facts``, ``candidates``); the candidate sensors computed once, and only when a fact
+    fails (:meth:`sensors`)."""
+
+    def __init__(self, subject: Subject, lin: Linearization, pts: list):
+        self.subject, self.lin, self.pts = subject, lin, pts
+        self.S, self.P, self.basis = lin.samples, len(lin.samples), lin.basis
+        self.st, self.ui, self.out = subject.states, subject.unknown_inputs, subject.outputs
+        self.n, self.nd, self.ny = lin.n, lin.nd, lin.ny
+        self.facts, self.candidates, self._found = [], {}, None
+        self.note = (f"; {', '.join(map(str, lin.unbounded))} {'has' if len(lin.unbounded) == 1 else 'have'} no "
+                     f"bound in {subject.parameter_path.name}: taken at 0") if lin.unbounded else ""
+
+    def sensors(self) -> list:
+        if self._found is None:
+            self._found = candidate_sensors(self.subject, self.lin, self.pts)
+        return self._found
+
+    @property
+    def found(self) -> list:
+        return self._found or []
+
+
+def _ui_rank(c: _Analysis) -> None:
+    """Every unknown input acts on the system (rank [D; Dd]): appended to ``c.facts`` (``c.candidates`` where sensors are proposed)."""
+    lin, pts, S, basis, note, ui = c.lin, c.pts, c.S, c.basis, c.note, c.ui
+    nd, facts = c.nd, c.facts
     if nd:
         bad = [k for k, p in enumerate(pts) if p.rank_D < nd]
         if not bad:
@@ -611,7 +634,11 @@ def analyze(subject: Subject, n_between: int = 200) -> Structure:
                               basis, "remove the unknown inputs that do not act, or merge the dependent ones into one",
                               {"points_failing": len(bad)}))
 
-    # 2. observability / detectability of the states from the outputs (unknown inputs absent)
+
+def _observability(c: _Analysis) -> None:
+    """Observability, else detectability, of the states from the outputs (unknown inputs absent): appended to ``c.facts`` (``c.candidates`` where sensors are proposed)."""
+    pts, S, P, basis, note, st = c.pts, c.S, c.P, c.basis, c.note, c.st
+    out, n, facts, candidates, sensors = c.out, c.n, c.facts, c.candidates, c.sensors
     unobs_pts = [k for k, p in enumerate(pts) if p.unobservable.shape[1]]
     if not unobs_pts:
         facts.append(Fact("observability", True, f"every state ({', '.join(st)}) is observable from "
@@ -645,7 +672,11 @@ def analyze(subject: Subject, n_between: int = 200) -> Structure:
                              {"unobservable_states": along, "points": len(unobs_pts), "slowest_real_part": worst,
                               "slowest_at": S.at(worst_k), "detectable": True, "to_observe_all": fix})
 
-    # 3. relative degrees and HOSMD orders
+
+def _relative_degrees(c: _Analysis) -> tuple:
+    """Relative degrees of every output to every unknown input, and the HOSMD orders: (rel, hosmd): appended to ``c.facts`` (``c.candidates`` where sensors are proposed)."""
+    lin, pts, basis, ui, out, nd = c.lin, c.pts, c.basis, c.ui, c.out, c.nd
+    ny, facts = c.ny, c.facts
     sym_rd = _symbolic_relative_degrees(lin)
     rel, hosmd = {}, {}
     nonuniform, order_sets = [], {}
@@ -688,8 +719,14 @@ def analyze(subject: Subject, n_between: int = 200) -> Structure:
                           {"relative_degrees": rel, "hosmd_orders": hosmd, "uniform_outputs": not shaky,
                            "varying_pairs": [{"output": o, "unknown_input": u, "degrees": v}
                                              for o, u, v in nonuniform], "never_reached": never}))
+    return rel, hosmd
 
-    # 4. matching condition rank(C D) = rank(D)
+
+def _matching(c: _Analysis, rel: dict) -> None:
+    """The matching condition rank(C D) = rank(D): appended to ``c.facts`` (``c.candidates`` where sensors are proposed)."""
+    subject, lin, pts, S, P, basis = c.subject, c.lin, c.pts, c.S, c.P, c.basis
+    st, ui, out, n, nd, facts = c.st, c.ui, c.out, c.n, c.nd, c.facts
+    candidates, sensors = c.candidates, c.sensors
     if nd:
         bad = [k for k, p in enumerate(pts) if p.rank_CD != p.rank_D]
         late = [u for u in ui if all(rel.get(o, {}).get(u) is None or rel[o][u] >= 2 for o in out)]
@@ -720,7 +757,11 @@ def analyze(subject: Subject, n_between: int = 200) -> Structure:
                               f"= {pts[k].rank_D} at {S.at(k)} ({len(bad)} of {P} points): {why}", basis, fix,
                               {"points_failing": len(bad), "late_unknown_inputs": late, "drives": drives}))
 
-    # 5. left invertibility: can the unknown inputs be told apart at all?
+
+def _left_invertibility(c: _Analysis) -> None:
+    """Left invertibility: can the unknown inputs be told apart at all?: appended to ``c.facts`` (``c.candidates`` where sensors are proposed)."""
+    pts, S, P, basis, ui, out = c.pts, c.S, c.P, c.basis, c.ui, c.out
+    n, nd, ny, facts, candidates, sensors = c.n, c.nd, c.ny, c.facts, c.candidates, c.sensors
     if nd:
         bad = [k for k, p in enumerate(pts) if not p.left_invertible]
         if not bad:
@@ -741,7 +782,11 @@ def analyze(subject: Subject, n_between: int = 200) -> Structure:
                               f"({ny} output{'s' if ny != 1 else ''} for {nd} unknown input{'s' if nd != 1 else ''})",
                               basis, fix, {"inseparable": [ui[j] for j in insep], "points_failing": len(bad)}))
 
-    # 6. invariant zeros, where they sit; 7. strong detectability
+
+def _zeros_and_strong_detectability(c: _Analysis) -> None:
+    """Invariant zeros, where they sit, and strong detectability: appended to ``c.facts`` (``c.candidates`` where sensors are proposed)."""
+    pts, S, P, basis, st, ui = c.pts, c.S, c.P, c.basis, c.st, c.ui
+    nd, facts, candidates, sensors = c.nd, c.facts, c.candidates, c.sensors
     if nd:
         zs = [(k, z) for k, p in enumerate(pts) if p.zeros is not None for z in p.zeros]
         counts = sorted({p.zeros.size for p in pts if p.zeros is not None})
@@ -785,11 +830,6 @@ def analyze(subject: Subject, n_between: int = 200) -> Structure:
                 statement = "NOT strongly detectable: the system is not left invertible (above)"
             facts.append(Fact("strong_detectability", False, statement, basis, fix,
                               {"points_unstable_zero": len(bad_z), "points_not_left_invertible": len(bad_lr)}))
-
-    estimable = _estimable(subject, lin, pts)
-    seconds = time.perf_counter() - t0
-    return Structure(subject, lin, pts, facts, rel, hosmd, estimable, candidates, seconds,
-                     found[0] if found else [])
 
 
 def _c(z: complex) -> str:
