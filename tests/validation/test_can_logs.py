@@ -15,7 +15,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from codegen.errors import ConfigurationError, DatasetError
+from codegen.errors import ConfigurationError, DatasetError, UnsupportedError
 from codegen.validation import logfiles
 from codegen.validation.common import SETTLE_TIME
 
@@ -219,20 +219,21 @@ def test_a_missing_or_unparsable_dbc(quantized, tmp_path):
     observer = _can_observer(tmp_path, dbc="nowhere.dbc")
     err = _cli_error(observer, quantized["blf"])
     assert f"{tmp_path / 'nowhere.dbc'}: no such DBC file" in err, err
-    (tmp_path / "broken.dbc").write_text('VERSION ""\nBO_ 288 IMU: 8 Vector__XXX\n SG_ YawRate : 0|16@1- (0.01,0\n')
+    (tmp_path / "broken.dbc").write_text('VERSION ""\nBO_ x288 IMU: 8 Vector__XXX\n')    # a frame id that is no number
     err = _cli_error(_can_observer(tmp_path, dbc="broken.dbc"), quantized["blf"])
-    assert f"cannot read the DBC {tmp_path / 'broken.dbc'}: not a DBC file cantools can parse" in err, err
+    assert f"cannot read the DBC {tmp_path / 'broken.dbc'}: not a DBC file cantools can parse " \
+           f"(UnsupportedDatabaseFormatError: DBC: \"Invalid syntax at line 2, column 5" in err, err
 
 
-def test_a_message_or_signal_the_dbc_lacks(quantized):
-    folder = quantized["folder"]
+def test_a_message_or_signal_the_dbc_lacks(quantized, tmp_path):
+    folder, dbc = tmp_path, str(quantized["dbc"])              # the fixture's observer file stays as it is
     with pytest.raises(DatasetError, match=r"channel 'IMU.YawRat': message 'IMU' has no signal 'YawRat' \(closest: "
                                            r"'YawRate'\); allowed: one of its signals \['YawRate', 'AccY'\]"):
-        _run(_can_observer(folder, y_r='{ column = "IMU.YawRat" }'), quantized["blf"])
+        _run(_can_observer(folder, dbc, y_r='{ column = "IMU.YawRat" }'), quantized["blf"])
     with pytest.raises(DatasetError, match=r"channel 'IMUU.YawRate': the DBC has no message 'IMUU' \(closest: 'IMU'"):
-        _run(_can_observer(folder, y_r='{ column = "IMUU.YawRate" }'), quantized["blf"])
+        _run(_can_observer(folder, dbc, y_r='{ column = "IMUU.YawRate" }'), quantized["blf"])
     with pytest.raises(DatasetError, match=r"channel 'IMU' names no signal; allowed: MESSAGE.SIGNAL"):
-        _run(_can_observer(folder, y_r='{ column = "IMU" }'), quantized["blf"])
+        _run(_can_observer(folder, dbc, y_r='{ column = "IMU" }'), quantized["blf"])
 
 
 @pytest.mark.parametrize("suffix", [".blf", ".asc"])
@@ -260,3 +261,11 @@ def test_a_damaged_blf(quantized, tmp_path):
     garbled.write_bytes(whole[:144] + b"XXXX" + whole[148:])            # the first object's signature overwritten
     err = _cli_error(quantized["observer"], garbled)
     assert f"cannot read {garbled}: not a readable BLF file (" in err, err
+
+
+@pytest.mark.parametrize("missing", ["can", "cantools"])
+def test_without_the_libraries_the_install_hint(quantized, monkeypatch, missing):
+    monkeypatch.setitem(sys.modules, missing, None)                  # import fails as if not installed
+    with pytest.raises(UnsupportedError, match=r"CAN logs \(BLF, ASC\) need python-can and cantools, which are not "
+                                               r"installed: pip install 'uiogen\[validation\]'"):
+        logfiles.CanLog(quantized["blf"], {"IMU.YawRate": None}, "t", {}, 0.01, quantized["dbc"])
