@@ -16,6 +16,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from codegen.errors import ConfigurationError, DatasetError, UnsupportedError
+from codegen.project import observer_file as observers
 from codegen.validation import logfiles
 from codegen.validation.common import SETTLE_TIME
 
@@ -272,3 +273,13 @@ def test_without_the_libraries_the_install_hint(quantized, monkeypatch, missing)
     with pytest.raises(UnsupportedError, match=r"CAN logs \(BLF, ASC\) need python-can and cantools, which are not "
                                                r"installed: pip install 'uiogen\[validation\]'"):
         logfiles.CanLog(quantized["blf"], {"IMU.YawRate": None}, "t", {}, 0.01, quantized["dbc"])
+
+
+def test_an_empty_or_misspelt_dbc_key(tmp_path):
+    with pytest.raises(ConfigurationError, match=r'\[data\] dbc = " ": the path of a DBC file, relative to the '
+                                                 r'observer file'):
+        observers.get(str(_can_observer(tmp_path, dbc=" ")), project=ROOT)
+    path = _can_observer(tmp_path)
+    path.write_text(path.read_text().replace('dbc = "vehicle.dbc"', 'dbcfile = "vehicle.dbc"'))
+    with pytest.raises(ConfigurationError, match=r"dbcfile.*dbc"):
+        observers.get(str(path), project=ROOT)
