@@ -627,8 +627,9 @@ def main(argv=None) -> int:
                        help="errors on an independent plant, beside the KF/EKF baselines")
     p.add_argument("name")
     p.add_argument("--scenario", help="excitation (any model: its own equations, swept and excited) or one of codegen.validation.scenarios.names()")
-    p.add_argument("--data", help="a logged run (CSV, plain or .gz; Parquet; MDF4; a ROS 2 bag folder; told by the "
-                                  "content): the columns or channels mapped by the observer file's [data] table, or "
+    p.add_argument("--data", help="a logged run (CSV, plain or .gz; Parquet; MDF4; a ROS 2 bag folder; a CAN log, "
+                                  "BLF or ASC, decoded with the DBC of [data] dbc; told by the content): the columns "
+                                  "or channels mapped by the observer file's [data] table, or "
                                   "else the shared CSV format; 'stanford', 'niki' = the shared logs (Ferrari, GTI)")
     p.add_argument("--out", metavar="FILE", help="with --data and a [data] table: write the observer's outputs and "
                                                  "status, with their units, on the log's time base to FILE.mf4 (MDF4) "

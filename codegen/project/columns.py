@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from .settings import Rule, config_error, parse_table, suggest
 
@@ -38,7 +39,9 @@ RESAMPLE = ("hold", "linear")
 TIME_KEYS = {k: v for k, v in COLUMN_KEYS.items() if k != "resample"}   # the time base is not resampled
 DATA_KEYS = {"time": Rule(None, required=True, doc='"COLUMN" (seconds) or { column = ..., unit = ... }'),
              "inputs": Rule(dict, required=True, doc="{ OBSERVER_INPUT = { column = ..., unit = ... } }"),
-             "truth": Rule(dict, doc="{ OBSERVER_OUTPUT = { column = ..., unit = ... } }")}
+             "truth": Rule(dict, doc="{ OBSERVER_OUTPUT = { column = ..., unit = ... } }"),
+             "dbc": Rule(str, doc='the DBC a CAN log (BLF, ASC) is decoded with, relative to the observer file; '
+                                  'columns are then "MESSAGE.SIGNAL"')}
 
 
 def normalize_unit(unit: str) -> str:
@@ -64,6 +67,7 @@ class ColumnMap:
     time: Column
     inputs: dict = field(default_factory=dict)
     truth: dict = field(default_factory=dict)
+    dbc: str | None = None          # the DBC of a CAN log, as a path (relative ones resolved against the source)
 
 
 def _column(value, source: str, section: str, key: str, units=tuple(UNITS), keys=COLUMN_KEYS) -> Column:
@@ -107,12 +111,19 @@ def parse(table, source: str) -> ColumnMap:
     ConfigurationError
         naming the file, the key and what is allowed.
     """
-    parse_table(table, DATA_KEYS, source=source, section="data")
+    parsed = parse_table(table, DATA_KEYS, source=source, section="data")
     time = _column(table["time"], source, "data", "time", units=tuple(u for u, (dim, _) in UNITS.items()
                                                                     if dim == "time"), keys=TIME_KEYS)
     inputs = {k: _column(v, source, "data.inputs", k) for k, v in table["inputs"].items()}
     truth = {k: _column(v, source, "data.truth", k) for k, v in table.get("truth", {}).items()}
-    return ColumnMap(source, time, inputs, truth)
+    dbc = parsed.get("dbc")
+    if dbc is not None:
+        if not dbc.strip():
+            raise config_error(source, "data", "dbc", dbc, 'the path of a DBC file, relative to the observer file '
+                               '(dbc = "vehicle.dbc")')
+        # read when a CAN log is run (a missing DBC must not break the verbs that never read a log)
+        dbc = str(Path(source).parent / dbc) if source else dbc
+    return ColumnMap(source, time, inputs, truth, dbc)
 
 
 def model_unit(model, signal: str) -> str | None:

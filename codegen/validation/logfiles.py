@@ -3,7 +3,8 @@
 
 The format is told by the file's first bytes, never by its name (a log renamed ``.csv`` is still
 read as what it is): ``PAR1`` is Parquet, ``MDF     `` (``MDF`` and five spaces) is an ASAM MDF
-file, anything else is read as CSV (plain or gzip). Every reader delivers what
+file, ``LOGG`` a Vector BLF, text with an ASC header (a ``base hex`` or ``base dec`` line) a Vector ASC
+CAN log; anything else is read as CSV (plain or gzip). Every reader delivers what
 :class:`codegen.validation.csvlog.LogReader` delivers -- ``chunks()`` yielding ``(first, {column:
 float64 array})`` and ``rows`` -- so the run, the time check, the unit and physics checks of
 :mod:`codegen.validation.logs` are the same code for every format; and ``file_units``, the unit
@@ -36,13 +37,20 @@ A ROS 2 bag (:class:`BagLog`, rosbags; a folder with ``metadata.yaml``, sqlite3 
 put on the grid the same way: each mapped ``TOPIC.FIELD`` (``/imu.angular_velocity.z``) is a
 channel at its topic's rate, timed by its message's ``header.stamp`` (the bag's recording time for
 a message without a header).
+
+A CAN log (:class:`CanLog`: BLF or ASC, python-can, decoded with the DBC the map names, cantools) is
+put on the grid the same way: each mapped ``MESSAGE.SIGNAL`` is a channel at its message's rate, timed
+by the frames' timestamps relative to the log's first frame, in the DBC signal's unit.
 """
 from __future__ import annotations
 
 import difflib
 import gc
 import logging
+import re
+import struct
 import sys
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +61,11 @@ from ..project.settings import suggest
 from .csvlog import GAP_FACTOR, PERIOD_RTOL, SHORT_FACTOR, LogReader, regular_file
 
 PARQUET_MAGIC = b"PAR1"
+BLF_MAGIC = b"LOGG"
+ASC_HEAD_BYTES = 4096
+"""Bytes of a text log searched for the ASC header line (``base hex|dec``): a header of comments, a date line and
+the base line fits well within it."""
+ASC_BASE = re.compile(r"^\s*base\s+(hex|dec)\b", re.IGNORECASE | re.MULTILINE)
 MDF_MAGIC = b"MDF     "
 BAG_FILES = (b"\x89MCAP0\r\n", b"SQLite format 3\x00")
 BATCH_ROWS = 65_536
@@ -68,8 +81,9 @@ are not multiples of 0.01 to the last bit)."""
 
 
 def kind(path) -> str:
-    """``"parquet"``, ``"mdf"``, ``"rosbag2"`` (a folder with ``metadata.yaml``) or ``"csv"``: the format
-    of a log, from its first bytes.
+    """``"parquet"``, ``"mdf"``, ``"blf"``, ``"asc"``, ``"rosbag2"`` (a folder with ``metadata.yaml``) or
+    ``"csv"``: the format of a log, from its first bytes (an ASC log: a ``base hex|dec`` line in its first
+    :data:`ASC_HEAD_BYTES` bytes).
 
     Raises
     ------
@@ -89,10 +103,27 @@ def kind(path) -> str:
         return "parquet"
     if head.startswith(MDF_MAGIC):
         return "mdf"
+    if head.startswith(BLF_MAGIC):
+        return "blf"
+    if _asc_header(p):
+        return "asc"
     if head.startswith(BAG_FILES) and (p.parent / "metadata.yaml").is_file():
         # the storage file of a bag: the bag is its folder (its metadata names the storage and the topics)
         raise DatasetError(f"{p} is the storage file of a ROS 2 bag; allowed: the bag's folder, {p.parent}")
     return "csv"
+
+
+def _asc_header(p: Path) -> bool:
+    """A Vector ASC log: text whose header has a line ``base hex`` or ``base dec`` (every ASC writer, Vector's
+    and python-can's, writes it after the ``date`` line; a CSV's header row never starts with ``base hex``)."""
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(ASC_HEAD_BYTES)
+    except OSError as exc:
+        raise DatasetError(f"cannot read {p}: {exc.strerror or exc}") from None
+    if head.startswith(b"\x1f\x8b"):        # a gzip CSV: its text is not the ASC header
+        return False
+    return ASC_BASE.search(head.decode("latin-1")) is not None
 
 
 def closest(name: str, names, n: int = 3) -> list:
@@ -596,13 +627,205 @@ class BagLog(OnGrid):
         self._put_on_grid(float(sample_time))
 
 
-def open_log(path, columns, time_key: str, sample_time: float, methods=None, block_bytes=None, batch_rows=None):
-    """The reader of a log by its content: :class:`ParquetLog`, :class:`MdfLog` or a CSV
-    :class:`~codegen.validation.csvlog.LogReader`; ``columns`` includes ``time_key`` (an MDF log reads
-    its channels' masters instead)."""
+# --- CAN logs (BLF, ASC) decoded with a DBC ---------------------------------------------------------
+
+CAN_FORMATS = ("blf", "asc")
+TICKS = 1_000_000
+"""Frame times are rounded to 1 us (1 / TICKS s) from the log's first frame: python-can gives a BLF frame's time as the
+file's start (Unix time, ~1.7e9 s) plus its offset in one float64, which holds it to ~0.2 us; 1 us is far
+below a CAN frame's duration (at least ~50 us at 1 Mbit/s), so no two frames of a message merge."""
+
+
+def _quiet_can():
+    """python-can and cantools log through the logging module (a BLF object of an unknown type, a DBC
+    attribute ignored): without a handler Python would print them below the one-line error."""
+    for name in ("can", "cantools"):
+        log = logging.getLogger(name)
+        if not any(isinstance(h, logging.NullHandler) for h in log.handlers):
+            log.addHandler(logging.NullHandler())
+        log.propagate = False
+
+
+def _can():
+    try:
+        import can
+        import cantools
+    except ImportError:
+        raise UnsupportedError("CAN logs (BLF, ASC) need python-can and cantools, which are not installed: "
+                               + install_hint("validation")) from None
+    _quiet_can()
+    return can, cantools
+
+
+def frame_id(key) -> str:
+    """``0x120``, ``0x18FEF100 (extended)``: a frame id as the messages write it."""
+    fid, extended = key
+    return f"0x{fid:X}" + (" (extended)" if extended else "")
+
+
+def load_dbc(path):
+    """The DBC database at ``path`` (cantools).
+
+    Raises
+    ------
+    DatasetError
+        missing, not a regular file, or not a DBC cantools can parse (naming the file).
+    """
+    _, cantools = _can()
+    p = Path(path)
+    if not p.exists():
+        raise DatasetError(f"{p}: no such DBC file (the observer file's [data] dbc, relative to the observer file); "
+                           f"allowed: the path of the DBC the CAN log is decoded with")
+    regular_file(p)
+    try:
+        return cantools.database.load_file(str(p), database_format="dbc")
+    except Exception as exc:     # noqa: BLE001 -- cantools' parse errors, a decoding error, an I/O error
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        raise DatasetError(f"cannot read the DBC {p}: not a DBC file cantools can parse ({type(exc).__name__}"
+                           + (f": {first}" if first else "") + ")") from None
+
+
+class CanLog(OnGrid):
+    """A CAN log (Vector BLF or ASC, read by python-can) decoded with a DBC (cantools): every mapped
+    ``MESSAGE.SIGNAL`` a channel at its message's rate, on the observer's grid.
+
+    The file is streamed frame by frame; only the frames of the mapped messages are decoded (their ids
+    looked up in a dict: the others cost a lookup), and only the mapped signals are kept, each with the
+    times of the frames that carry it (a multiplexed signal: only the frames of its multiplexer value), so
+    memory grows with the mapped signals, not with the log. A channel's times are its frames' timestamps
+    relative to the log's first frame (any id), rounded to 1 us (:data:`TICKS`); its values are the DBC's
+    physical values (cantools applies the scale and offset), its unit the DBC signal's.
+
+    Parameters
+    ----------
+    path, channels, time_key, methods, sample_time, chunk_rows
+        As :class:`MdfLog`; ``channels``: ``MESSAGE.SIGNAL`` names of the DBC.
+    dbc : str or os.PathLike
+        The DBC file.
+
+    Raises
+    ------
+    DatasetError
+        the DBC missing or unparsable; a message or signal the DBC lacks (the closest names listed);
+        a mapped message that never appears in the log (its frame id and the ids the log has); a frame
+        that does not decode; a damaged log; a channel with a gap (:class:`Channel`).
+    UnsupportedError
+        python-can or cantools is not installed.
+    """
+
+    def __init__(self, path, channels, time_key: str, methods, sample_time: float, dbc, chunk_rows: int = BATCH_ROWS):
+        can, _ = _can()
+        p = Path(path)
+        self.path, self.units, self.time_key, self.chunk_rows = p, dict(channels), time_key, int(chunk_rows)
+        self.format = kind(p)
+        db = load_dbc(dbc)
+        wanted, self.file_units = {}, {}        # (frame id, extended) -> (message, [(channel, signal)])
+        for name in self.units:
+            msg, sig = self._signal(db, Path(dbc), name)
+            key = (msg.frame_id, bool(msg.is_extended_frame))
+            wanted.setdefault(key, (msg, []))[1].append((name, sig.name))
+            self.file_units[name] = sig.unit or None
+        times = {n: [] for n in self.units}
+        values = {n: [] for n in self.units}
+        seen, first = set(), None
+        what = "BLF" if self.format == "blf" else "ASC"
+        reader = None
+        try:
+            if self.format == "blf":
+                reader = can.BLFReader(str(p))
+                size = p.stat().st_size
+                if reader.file_size > size:     # python-can reads a file cut short as if it ended there
+                    raise DatasetError(f"cannot read {p}: not a readable BLF file (cut short: {size} bytes of the "
+                                       f"{reader.file_size} its header states)")
+            else:
+                reader = can.ASCReader(str(p))
+            for frame in reader:
+                if frame.is_error_frame or frame.is_remote_frame:
+                    continue
+                first = frame.timestamp if first is None else first
+                key = (frame.arbitration_id, bool(frame.is_extended_id))
+                seen.add(key)
+                entry = wanted.get(key)
+                if entry is None:
+                    continue
+                msg, sigs = entry
+                try:
+                    decoded = msg.decode(bytes(frame.data), decode_choices=False, scaling=True)
+                except Exception as exc:     # noqa: BLE001 -- cantools' DecodeError, bitstruct's errors
+                    raise DatasetError(f"{p}: frame {frame_id(key)} at t = {frame.timestamp - first:.6f} s does not "
+                                       f"decode as message {msg.name!r} of the DBC {dbc} ({type(exc).__name__}: "
+                                       f"{exc}); allowed: frames of the DBC's length and layout") from None
+                for name, sig in sigs:
+                    if sig in decoded:      # a multiplexed signal is only in its multiplexer value's frames
+                        times[name].append(frame.timestamp)
+                        values[name].append(float(decoded[sig]))
+        except DatasetError:
+            raise
+        except (can.CanError, can.io.blf.BLFParseError, struct.error, zlib.error, ValueError, IndexError, OSError,
+                EOFError) as exc:
+            raise DatasetError(f"cannot read {p}: not a readable {what} file ({type(exc).__name__}: {exc})") from None
+        finally:
+            if reader is not None:
+                reader.stop()
+        absent = [k for k in wanted if k not in seen]
+        if absent:
+            ids = sorted(seen)
+            shown = [frame_id(k) for k in ids[:30]] + ([f"... ({len(ids)} in all)"] if len(ids) > 30 else [])
+            names = ", ".join(f"{wanted[k][0].name!r} (frame id {frame_id(k)})" for k in absent)
+            raise DatasetError(f"{p}: message(s) {names} of the DBC {dbc} never appear in the log; the log has "
+                               + (f"frame ids {', '.join(shown)}" if ids else "no CAN frames")
+                               + "; allowed: messages the log holds (is the DBC the log's bus's?)")
+        self.channels = []
+        for name in self.units:
+            # whole microseconds divided by TICKS: the closest float64 to each time (10.01 s, not 10.010000000000002)
+            t = np.round((np.asarray(times[name], dtype=float) - first) * TICKS) / TICKS
+            self.channels.append(Channel(p, name, t, np.asarray(values[name], dtype=float), self.file_units[name],
+                                         methods.get(name, DEFAULT_METHOD)))
+        self._put_on_grid(float(sample_time))
+
+    @staticmethod
+    def _signal(db, dbc: Path, name: str):
+        """The DBC's message and signal of a ``MESSAGE.SIGNAL`` channel name."""
+        message, _, signal = name.partition(".")
+        if not signal:
+            raise DatasetError(f"{dbc}: channel {name!r} names no signal; allowed: MESSAGE.SIGNAL, a message of the "
+                               f"DBC and one of its signals (e.g. {_example(db)})")
+        try:
+            msg = db.get_message_by_name(message)
+        except KeyError:
+            names = [m.name for m in db.messages]
+            near = closest(message, names)
+            raise DatasetError(f"{dbc}: channel {name!r}: the DBC has no message {message!r}"
+                               + (f" (closest: {', '.join(repr(x) for x in near)})" if near else "")
+                               + f"; allowed: MESSAGE.SIGNAL with a message of the DBC ({len(names)}: "
+                               + ", ".join(names[:20]) + (", ..." if len(names) > 20 else "") + ")") from None
+        sigs = [s.name for s in msg.signals]
+        if signal not in sigs:
+            near = closest(signal, sigs)
+            raise DatasetError(f"{dbc}: channel {name!r}: message {message!r} has no signal {signal!r}"
+                               + (f" (closest: {', '.join(repr(x) for x in near)})" if near else "")
+                               + f"; allowed: one of its signals {sigs}")
+        return msg, msg.get_signal_by_name(signal)
+
+
+def _example(db) -> str:
+    for m in db.messages:
+        if m.signals:
+            return f"{m.name}.{m.signals[0].name}"
+    return "IMU.YawRate"
+
+
+def open_log(path, columns, time_key: str, sample_time: float, methods=None, block_bytes=None, batch_rows=None,
+             dbc=None):
+    """The reader of a log by its content: :class:`ParquetLog`, :class:`MdfLog`, :class:`BagLog`,
+    :class:`CanLog` (with ``dbc``, the DBC's path) or a CSV :class:`~codegen.validation.csvlog.LogReader`;
+    ``columns`` includes ``time_key`` (the readers of channels with their own times do not read it)."""
     what = kind(path)
     if what == "parquet":
         return ParquetLog(path, columns, batch_rows or BATCH_ROWS)
+    if what in CAN_FORMATS:
+        channels = {c: u for c, u in columns.items() if c != time_key}
+        return CanLog(path, channels, time_key, methods or {}, sample_time, dbc, batch_rows or BATCH_ROWS)
     if what in ("mdf", "rosbag2"):
         channels = {c: u for c, u in columns.items() if c != time_key}
         return (MdfLog if what == "mdf" else BagLog)(path, channels, time_key, methods or {}, sample_time,

@@ -1,4 +1,5 @@
-"""Logged runs in the user's own CSV, Parquet, MDF4 or ROS 2 bag, mapped by the observer file's ``[data]`` table.
+"""Logged runs in the user's own CSV, Parquet, MDF4, ROS 2 bag or CAN log (BLF, ASC with a DBC), mapped by the
+observer file's ``[data]`` table.
 
 ``uiogen validate my_observer.toml --data my_log.csv`` runs the compiled step over a log whose
 columns the observer file maps onto the observer's inputs, each with its unit (converted to the
@@ -27,10 +28,11 @@ reported. Estimates with a reference get the error statistics of every validatio
 (``estimates.SIGNAL.mean``, ``unit`` ...); ``warnings``
 lists the checks that were ambiguous, ``log_checks`` every check and its verdict.
 
-A Parquet, MDF4 or ROS 2 log (:mod:`codegen.validation.logfiles`, told by its content) is read
-through the same map: the units its file states are checked against the map's and the model's,
-and channels at their own rates are put on the observer's sample time (``resampling`` says how,
-per channel). ``out``: the outputs and status written as MDF4 or Parquet
+A Parquet, MDF4, ROS 2 or CAN log (:mod:`codegen.validation.logfiles`, told by its content; a
+CAN log decoded with the DBC of ``[data] dbc``, its columns ``MESSAGE.SIGNAL``) is read through the
+same map: the units its file states are checked against the map's and the model's, and channels at
+their own rates are put on the observer's sample time (``resampling`` says how, per channel).
+``out``: the outputs and status written as MDF4 or Parquet
 (:mod:`codegen.validation.logout`).
 """
 from __future__ import annotations
@@ -108,8 +110,15 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | N
     for c in names.values():
         units.setdefault(c.column, c.unit or "model units")
     methods = {c.column: c.resample for c in names.values() if c.resample}
-    reader = logfiles.open_log(p, units, cmap.time.column, obs.sample_time, methods, block_bytes, batch_rows)
-    mdf = isinstance(reader, logfiles.OnGrid)       # MDF4, ROS 2: channels with their own times
+    fmt = logfiles.kind(p)
+    if fmt in logfiles.CAN_FORMATS and cmap.dbc is None:
+        raise ConfigurationError(f"{cmap.source}: [data] dbc is missing: {p} is a CAN log ({fmt.upper()}), whose "
+                                 f"frames are decoded with a DBC; allowed: dbc = \"FILE.dbc\" in [data] (relative to "
+                                 f"the observer file), the columns then MESSAGE.SIGNAL", source=cmap.source,
+                                 section="data", key="dbc", allowed="the path of the log's DBC")
+    reader = logfiles.open_log(p, units, cmap.time.column, obs.sample_time, methods, block_bytes, batch_rows,
+                               dbc=cmap.dbc)
+    mdf = isinstance(reader, logfiles.OnGrid)       # MDF4, ROS 2, CAN: channels with their own times
     word = "channel" if mdf else "column"
     # the units the file states (an MDF channel's, a Parquet field's) against the map's and the model's
     mapped, declared_by = {}, {}
@@ -189,7 +198,7 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | N
             "estimates": {n: s.result() for n, s in summary.items()}, "baselines": {},
             "status_flags": flags, "samples": reader.rows, "data": str(path), "signals": kept.signals(),
             "signals_stride": kept.stride, "log_checks": report["checks"], "warnings": report["warnings"],
-            "unchecked_columns": report["unchecked_columns"], "format": logfiles.kind(p),
+            "unchecked_columns": report["unchecked_columns"], "format": fmt,
             "resampling": getattr(reader, "resampling", {}), "out": str(out) if out is not None else None}
 
 
