@@ -18,7 +18,8 @@ One sample is a CasADi ``Function`` ``step(x, p, theta) -> (x_next, y)``: ``x`` 
 states with the pose and the driver's integrators, ``p`` the scenario's values at the sample,
 ``theta`` every plant parameter and driver gain (so dispersions need no recompilation), ``y``
 the truth at the sample (taken before the step, as the Python plants do). ``mapaccum`` turns it
-into one function of the whole run, whose C is compiled once (``cc -O2``, no fast-math) into a
+into one function of a run of up to :data:`CHUNK` samples (a longer run is one call per chunk,
+the state carried over), whose C is compiled once (``cc -O2``, no fast-math) into a
 shared object cached on disk under a hash of its source, then loaded with ``casadi.external``:
 a 60 s run at 100 Hz is one C call of a few milliseconds.
 """
