@@ -120,6 +120,10 @@ def test_a_campaign_that_cannot_fit_is_refused_before_anything_is_written(tmp_pa
     """The case of the issue: 30,000 s excitation runs, here against an injected 4 GiB cgroup."""
     limit = memory.Limit(4 * memory.GiB, "cgroup v2 /sys/fs/cgroup/memory.max")
     monkeypatch.setattr(memory, "memory_limit", lambda: limit)
+
+    def started(spec):          # were the check gone, the campaign would stop here, not run 30,000 s runs
+        raise AssertionError("the campaign started")
+    monkeypatch.setattr(engine.runner, "prepare", started)
     spec = _spec(30000.0, source=str(tmp_path / "long.toml"))
     out = tmp_path / "out"
     with pytest.raises(ConfigurationError) as info:
