@@ -486,7 +486,7 @@ def cmd_bench(args) -> int:
 
 
 def cmd_campaign(args) -> int:
-    from .campaign import engine, report, runner, spec as campaign_spec
+    from .campaign import engine, memory, report, runner, spec as campaign_spec
     spec = campaign_spec.load(args.spec)
     if args.runs is not None:
         spec = spec.with_runs(args.runs)
@@ -496,6 +496,7 @@ def cmd_campaign(args) -> int:
                                      f"{spec.runs}{', --runs' if args.runs is not None else ''})", source=args.spec,
                                      key="--only", value=args.only, allowed=f"0 <= K < {spec.runs}")
         runner.design_hash(spec)                # the current design, its extension built from it
+        memory.check(spec, 0)                   # the run, here: refused before it starts if it cannot fit
         row = runner.run_one(spec, args.only)
         if args.json:
             print(json.dumps(row, indent=1))

@@ -336,6 +336,10 @@ def run(spec, out_dir, scheduler: str | None = None, workers: int | None = None,
     raises :class:`CampaignError` naming the runs it kept and the command that continues it.
     """
     log = log or (lambda text: print(text, file=sys.stderr))
+    from . import memory
+    # before the folder, the lock or a cluster: a campaign that cannot fit writes nothing (the workers of a
+    # scheduler given by address, or of a client passed in, are another machine's: not counted here)
+    memory.check(spec, 0 if (scheduler or client is not None) else (workers or local_workers()))
     out_dir = outputs.make_folder(out_dir)     # a file in the way is named
     with exclusive(out_dir, spec.source):
         return _run(spec, out_dir, scheduler, workers, progress, client, resume, log)

@@ -18,7 +18,8 @@ One sample is a CasADi ``Function`` ``step(x, p, theta) -> (x_next, y)``: ``x`` 
 states with the pose and the driver's integrators, ``p`` the scenario's values at the sample,
 ``theta`` every plant parameter and driver gain (so dispersions need no recompilation), ``y``
 the truth at the sample (taken before the step, as the Python plants do). ``mapaccum`` turns it
-into one function of the whole run, whose C is compiled once (``cc -O2``, no fast-math) into a
+into one function of a run of up to :data:`CHUNK` samples (a longer run is one call per chunk,
+the state carried over), whose C is compiled once (``cc -O2``, no fast-math) into a
 shared object cached on disk under a hash of its source, then loaded with ``casadi.external``:
 a 60 s run at 100 Hz is one C call of a few milliseconds.
 """
@@ -38,6 +39,7 @@ from ..errors import ModelDefinitionError, UnsupportedError
 from ..emit.stepgen import lambdify
 
 SUBSTEPS = 10
+CHUNK = 10_000          # samples of one call of a compiled plant (a run is as many calls as it needs)
 CACHE_ENV = "UIOGEN_PLANT_CACHE"
 DRIVER_KEYS = ("wheelbase", "R_s", "k_e", "k_edot", "k_r", "k_ri", "k_p", "k_i", "k_d")
 
@@ -325,14 +327,18 @@ class CompiledPlant:
         kind = kind or plant_kind(config, ())
         make_spec, make_step, self._inputs = KINDS[kind]
         self.kind, self.n = kind, int(n)
+        # compiled for a chunk of samples at most, called once per chunk with the state carried over: the
+        # C of a whole run of n samples grows with n (its sparsity arrays), and compiling it took 6.6 kB
+        # a sample in this process and as much in the compiler (a 30,000 s run: 20 GB each)
+        self.chunk = min(self.n, CHUNK)
         self.spec = make_spec(config)
         step = make_step(self.spec)
-        whole = step.mapaccum("plant_run", self.n, 1, {})
-        # one function: (x0, P, theta) -> Y, the trajectory's final state dropped
-        x0, P, th = ca.MX.sym("x0", self.spec.n_state), ca.MX.sym("P", len(self.spec.input_names), self.n), \
+        whole = step.mapaccum("plant_run", self.chunk, 1, {})
+        # one function: (x0, P, theta) -> (Y, the state after the chunk's last sample)
+        x0, P, th = ca.MX.sym("x0", self.spec.n_state), ca.MX.sym("P", len(self.spec.input_names), self.chunk), \
             ca.MX.sym("theta", len(self.spec.param_names))
-        _, Y = whole(x0, P, ca.repmat(th, 1, self.n))
-        run = ca.Function("plant_run", [x0, P, th], [Y])
+        X, Y = whole(x0, P, ca.repmat(th, 1, self.chunk))
+        run = ca.Function("plant_run", [x0, P, th], [Y, X[:, self.chunk - 1]])
         self.path = _compile(run, cache_dir(config))
         self._fn = ca.external("plant_run", str(self.path))
 
@@ -349,7 +355,18 @@ class CompiledPlant:
         gains = {**default_driver_gains(self.kind, scn), **(driver_gains or {})}
         x0, P, extra = self._inputs(self.spec, scn, gains)
         theta = np.array([values[k] for k in self.parameter_names] + list(extra), float)
-        Y = np.asarray(self._fn(x0, P, theta))
+        P = np.asarray(P, float)
+        Y, x = None, np.asarray(x0, float)
+        for a in range(0, self.n, self.chunk):
+            b = min(a + self.chunk, self.n)
+            part = P[:, a:b]
+            if b - a < self.chunk:        # the last chunk, padded with its last column: a sample's outputs
+                part = np.concatenate([part, np.repeat(part[:, -1:], self.chunk - (b - a), axis=1)], axis=1)
+            y, x = self._fn(x, part, theta)          # never read those of the samples after it
+            y = np.asarray(y)
+            if Y is None:
+                Y = np.empty((y.shape[0], self.n))
+            Y[:, a:b] = y[:, :b - a]
         out = {k: np.ascontiguousarray(Y[i]) for i, k in enumerate(self.spec.output_names)}
         out["t"] = np.asarray(scn.t, float)
         if self.kind == "model":

@@ -70,28 +70,28 @@ def _scenario(spec, name: str, seed: int | None):
 
 def _excitation(spec, config, seed: int):
     """The excitation run of ``spec``; a ``duration`` whose run does not fit in memory (a run is
-    held whole: its stage inputs, the plant's trajectory) is the campaign file's mistake, named."""
-    import os
+    held whole: its stage inputs, the plant's trajectory) is the campaign file's mistake, named.
+    :func:`codegen.campaign.memory.check` refuses the whole campaign before it starts; this is the
+    check of one run where it runs (a worker of another machine, behind ``--scheduler``)."""
     from ..project.settings import config_error
-    from ..validation import excitation, model_plant
+    from ..validation import excitation
+    from . import memory
     duration = spec.duration or excitation.DURATION
-    samples = duration / config.sample_time
-    model = config.load_model()
-    signals = len(model.known_inputs) + len(model.unknown_inputs) + sum(g.derived is None for g in model.scheduling)
-    # a lower bound of what the run holds: its stage times and each external signal at them (float64)
-    held = 8.0 * samples * (2 * model_plant.SUBSTEPS + 1) * (signals + 1)
-    memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    sizes = _cached(("sizes", spec), lambda: memory.sizes(spec))
+    held = memory.PROCESS_BYTES + memory.run_bytes(sizes)
+    limit = memory.memory_limit()
     why = None
-    if held > memory:       # refused before the allocation: one this large may succeed and then exhaust the machine
-        why = f"its stage inputs alone take {held / 2**30:.3g} GiB, the machine has {memory / 2**30:.3g} GiB"
+    if held > limit.bytes:       # refused before the allocation: one this large may succeed, then exhaust the machine
+        why = (f"it holds about {held / memory.GiB:.3g} GiB, the limit is {limit.bytes / memory.GiB:.3g} GiB "
+               f"({limit.source})")
     else:
         try:
             return excitation.scenario(config, duration, seed)
         except MemoryError as exc:
             why = str(exc) or "MemoryError"
     raise config_error(spec.source, None, "duration", duration,
-                       f"a run that fits in memory ({samples:.3g} samples at the sample time {config.sample_time:g} s: "
-                       f"{why}); a campaign holds each run whole, so take more, shorter runs")
+                       f"a run that fits in memory ({sizes.samples:.3g} samples at the sample time "
+                       f"{config.sample_time:g} s: {why}); a campaign holds each run whole, so take more, shorter runs")
 
 
 def default_noise(config) -> dict:
@@ -241,8 +241,14 @@ def design_hash(spec) -> str:
 def prepare(spec) -> str:
     """Check the observer's design and extension are current (:func:`design_hash`, returned) and
     compile (or find in the cache) the plant of every scenario length of the campaign."""
+    from ..validation import excitation
+    from .memory import excitation_samples
+    from .plants import EXCITATION
     design = design_hash(spec)
     for name in spec.scenarios:
+        if name == EXCITATION:       # its length alone: the run itself would stay in the coordinator's cache
+            _plant(spec, excitation_samples(spec.duration or excitation.DURATION, _config(spec).sample_time))
+            continue
         scn = _scenario(spec, name, None)
         _plant(spec, scn.t.size)
     return design

@@ -57,13 +57,18 @@ class ModelPlant:
         missing = [k for k in self.external if k not in functions]
         if missing:
             raise ModelDefinitionError(f"plant {self.name!r}: no signal for {', '.join(missing)}")
-        tt = self.stage_times(t)
-        n = tt.shape[0]
-        if not self.external:
-            return np.zeros((0, n))
-        # row m * n_ext + i: signal i at stage m
-        values = np.stack([np.asarray(functions[k](tt.ravel()), float).reshape(tt.shape) for k in self.external])
-        return values.transpose(2, 0, 1).reshape(self.n_stage * len(self.external), n)
+        t = np.asarray(t, float)
+        n, ne = t.size, len(self.external)
+        # row m * n_ext + i: signal i at stage m, written in place one row at a time (the same doubles as
+        # stage_times(t)): the stage-time matrix, its signals stacked and their transposed copy were three
+        # more matrices of the size of E
+        offsets = 0.5 * (self.sample_time / self.substeps) * np.arange(self.n_stage)
+        E = np.empty((self.n_stage * ne, n))
+        for m in range(self.n_stage if ne else 0):
+            tm = t + offsets[m]
+            for i, k in enumerate(self.external):
+                E[m * ne + i] = np.asarray(functions[k](tm), float)
+        return E
 
     def simulate(self, x0, E: np.ndarray, theta) -> dict:
         """Truth per sample ({name: array}) of a run from state ``x0`` with stage inputs ``E``."""
