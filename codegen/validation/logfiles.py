@@ -276,13 +276,15 @@ class ParquetLog(LogReader):
 
 # --- MDF: channels at their own rates onto the observer's grid ------------------------------------
 
-def _quiet_asammdf():
-    """asammdf logs through the logging module: with no handler configured Python prints its warnings
-    to stderr, which would break the one-line error of the command line; uiogen says what matters."""
-    log = logging.getLogger("asammdf")
-    if not any(isinstance(h, logging.NullHandler) for h in log.handlers):
-        log.addHandler(logging.NullHandler())
-    log.propagate = False
+def _quiet(*names):
+    """Silence the loggers ``names`` (asammdf; python-can and cantools): with no handler configured Python
+    prints a library's warnings (a BLF object of an unknown type, a DBC attribute ignored) to stderr, below
+    the one-line error of the command line; uiogen says what matters."""
+    for name in names:
+        log = logging.getLogger(name)
+        if not any(isinstance(h, logging.NullHandler) for h in log.handlers):
+            log.addHandler(logging.NullHandler())
+        log.propagate = False
 
 
 def _mdf():
@@ -291,7 +293,7 @@ def _mdf():
     except ImportError:
         raise UnsupportedError("MDF logs need asammdf, which is not installed: " + install_hint("validation")) \
             from None
-    _quiet_asammdf()
+    _quiet("asammdf")
     return MDF
 
 
@@ -636,16 +638,6 @@ file's start (Unix time, ~1.7e9 s) plus its offset in one float64, which holds i
 below a CAN frame's duration (at least ~50 us at 1 Mbit/s), so no two frames of a message merge."""
 
 
-def _quiet_can():
-    """python-can and cantools log through the logging module (a BLF object of an unknown type, a DBC
-    attribute ignored): without a handler Python would print them below the one-line error."""
-    for name in ("can", "cantools"):
-        log = logging.getLogger(name)
-        if not any(isinstance(h, logging.NullHandler) for h in log.handlers):
-            log.addHandler(logging.NullHandler())
-        log.propagate = False
-
-
 def _can():
     try:
         import can
@@ -653,7 +645,7 @@ def _can():
     except ImportError:
         raise UnsupportedError("CAN logs (BLF, ASC) need python-can and cantools, which are not installed: "
                                + install_hint("validation")) from None
-    _quiet_can()
+    _quiet("can", "cantools")
     return can, cantools
 
 
