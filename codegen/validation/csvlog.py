@@ -98,6 +98,9 @@ def _separator(p: Path, first_line: str, columns) -> str:
     return max(_SEPARATORS, key=lambda s: (len(_split_header(first_line, s)), s == ","))
 
 
+_EXCEL_SEP = re.compile(r'^"?sep=(.)"?\s*$')
+"""Excel's first line naming the separator (``sep=;``), before the header."""
+
 _DECIMAL_COMMA = re.compile(r"^\s*[+-]?(\d+,\d*|,\d+)([eE][+-]?\d+)?\s*$")
 
 
@@ -154,18 +157,28 @@ class LogReader:
         if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
             raise DatasetError(f"cannot read {p}: the file is UTF-16 encoded (byte-order mark {head[:2]!r}); "
                                f"allowed: UTF-8 or ASCII text; save it as UTF-8")
-        line = re.split(rb"\r\n|\r|\n", head, maxsplit=1)[0]
+        lines = re.split(rb"\r\n|\r|\n", head, maxsplit=2)
         try:
-            first = line.decode("utf-8-sig")        # utf-8-sig strips a leading BOM, if any
+            first = lines[0].decode("utf-8-sig")        # utf-8-sig strips a leading BOM, if any
         except UnicodeDecodeError as exc:
             raise DatasetError(f"cannot read {p}: not UTF-8 text ({exc}); allowed: UTF-8 or ASCII text") from None
+        # Excel's separator line ("sep=;" before the header, written so that Excel opens the file)
+        hint = _EXCEL_SEP.match(first)
+        self.skip = 1 + bool(hint)         # lines before the first data row
+        if hint:
+            first = lines[1].decode("utf-8", errors="replace") if len(lines) > 1 else ""
         if not first.strip():
             raise DatasetError(f"{p} is empty" if not head.strip() else f"{p}: the first line (the header) is empty")
-        self.sep = _separator(p, first, list(self.units))
+        if hint and hint.group(1) not in _SEPARATORS:
+            raise DatasetError(f"{p}: the first line {lines[0].decode('utf-8-sig')!r} names the separator "
+                               f"{hint.group(1)!r}; allowed: comma, semicolon or tab")
+        self.sep = hint.group(1) if hint else _separator(p, first, list(self.units))
         self.header = _split_header(first, self.sep)
-        dup = sorted({h for h in self.header if self.header.count(h) > 1})
+        # a duplicated name matters only where it is read: which of the two would be meant is unknown
+        dup = sorted({h for h in self.header if self.header.count(h) > 1 and h in self.units})
         if dup:
-            raise DatasetError(f"{p}: duplicated column(s) {dup}")
+            raise DatasetError(f"{p}: duplicated column(s) {dup}: the map reads a name two columns have; allowed: "
+                               f"one column of each mapped name (rename or drop the other)")
         missing = [c for c in self.units if c not in self.header]
         if missing:
             spare = [h for h in self.header if h not in self.units]
@@ -223,7 +236,7 @@ class LogReader:
             source = pa.CompressedInputStream(pa.OSFile(str(self.path)), "gzip") if self.gz else str(self.path)
             reader = pcsv.open_csv(
                 source,
-                read_options=pcsv.ReadOptions(block_size=self.block_bytes, skip_rows=1,
+                read_options=pcsv.ReadOptions(block_size=self.block_bytes, skip_rows=self.skip,
                                               column_names=[f"{i}:{h}" for i, h in enumerate(self.header)]),
                 parse_options=pcsv.ParseOptions(delimiter=self.sep, newlines_in_values=False),
                 convert_options=pcsv.ConvertOptions(
@@ -272,7 +285,8 @@ class LogReader:
         try:
             with self._text() as fh:
                 reader = csv.reader(fh, delimiter=sep)
-                next(reader, None)                       # the header
+                for _ in range(self.skip):               # the header (after Excel's separator line)
+                    next(reader, None)
                 for r in reader:
                     if not r or not any(f.strip() for f in r):
                         continue

@@ -243,6 +243,38 @@ def test_bom_and_separators_are_read(tmp_path, kw):
     assert _same(run, cols)
 
 
+@pytest.mark.parametrize("first", ["sep=;", '"sep=;"', "sep=\t"])
+def test_excel_separator_line_is_read(tmp_path, first):
+    """Excel writes ``sep=;`` before the header so that it opens the file: the line names the
+    separator, the header follows (pyarrow's reader and the csv module's both skip it)."""
+    cols = _synthetic(n=300)
+    sep = first.strip('"')[-1]
+    p = _write(tmp_path / "x.csv", cols, sep=sep)
+    p.write_text(first + "\r\n" + p.read_text())
+    assert _same(S.load(p), cols)
+    lines = p.read_text().splitlines()
+    lines[5] = lines[5].replace("0", "x", 1)           # a bad cell: the slow reader's row number is the data row
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(S.DatasetError, match="data row 4"):
+        S.load(p)
+    p.write_text("sep=|\n" + p.read_text().split("\n", 1)[1])
+    with pytest.raises(S.DatasetError, match=r"names the separator '\|'; allowed: comma, semicolon or tab"):
+        S.load(p)
+
+
+def test_an_unused_duplicated_column_is_ignored(tmp_path):
+    """Two columns of one name that the map does not read are no reason to refuse the log; a mapped
+    name that two columns have is (which one is meant is unknown)."""
+    cols = _synthetic(n=300)
+    p = _write(tmp_path / "d.csv", cols)
+    lines = p.read_text().splitlines()
+    p.write_text("\n".join([lines[0] + ",note,note"] + [ln + ",1,2" for ln in lines[1:]]) + "\n")
+    assert _same(S.load(p), cols)
+    p.write_text("\n".join([lines[0] + ",vx"] + [ln + ",1" for ln in lines[1:]]) + "\n")
+    with pytest.raises(S.DatasetError, match=r"duplicated column\(s\) \['vx'\].*rename or drop the other"):
+        S.load(p)
+
+
 @pytest.mark.parametrize("sep", [";", "\t"])
 def test_decimal_comma_is_refused(tmp_path, sep):
     p = _write(tmp_path / "eu.csv", _synthetic(n=300), sep=sep, decimal=",")
