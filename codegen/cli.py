@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from .design import lock as design_lock
+from .design.solver import progress_after
 from .emit import generate as emit
 from . import families, pipeline
 from .project import observer_file as observers
@@ -132,7 +133,8 @@ def _analysis_of_failure(config, as_json: bool, error: Exception) -> None:
 def cmd_design(args) -> int:
     config = observers.get(args.name, project=args.project)
     try:
-        b, records = pipeline.solve(config)
+        progress = None if args.json else (lambda line: print(f"  ... {line}", file=sys.stderr, flush=True))
+        b, records = pipeline.solve(config, progress=progress_after(progress))
     except _FILE_MISTAKES:
         raise
     except UiogenError as exc:

@@ -88,9 +88,10 @@ def build(config: ObserverConfig, solver=None):
     return b
 
 
-def solve(config: ObserverConfig, tol: float | None = None) -> tuple:
-    """A fresh design of ``config`` and the LMI solutions it solved: (build, [SolveRecord])."""
-    solver = FreshSolver(tol)
+def solve(config: ObserverConfig, tol: float | None = None, progress=None) -> tuple:
+    """A fresh design of ``config`` and the LMI solutions it solved: (build, [SolveRecord]);
+    ``progress``: see :class:`~codegen.design.solver.FreshSolver`."""
+    solver = FreshSolver(tol, progress)
     b = build(config, solver)
     return b, solver.records
 

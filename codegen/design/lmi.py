@@ -400,6 +400,11 @@ class LMIProblem:
     _compiled: object = None
     _symmetric: set = field(default_factory=set)      # names of the symmetric matrix variables
 
+    @property
+    def block_count(self) -> int:
+        """How many PSD/NSD blocks the problem requires."""
+        return len(self._constraints)
+
     # -- decision variables -------------------------------------------------
     def _fresh(self, name: str, shape: tuple, slots: np.ndarray, count: int) -> Affine:
         """Affine matrix whose entry (i, j) is variable ``first + slots[i, j]`` (-1: zero)."""

@@ -49,6 +49,25 @@ class Solver(Protocol):
         when this solver holds them; None: search for them."""
 
 
+PROGRESS_AFTER = 10.0
+"""Seconds a design runs before its progress lines are shown: a quick one prints none."""
+
+
+def progress_after(show, seconds: float = PROGRESS_AFTER):
+    """A ``progress`` callback for :class:`FreshSolver` that hands each line to ``show``, prefixed with
+    the seconds since it was made, once ``seconds`` have passed (None: ``show`` is None)."""
+    if show is None:
+        return None
+    import time
+    start = time.monotonic()
+
+    def report(line: str) -> None:
+        elapsed = time.monotonic() - start
+        if elapsed >= seconds:
+            show(f"[{elapsed:.0f} s] {line}")
+    return report
+
+
 def _refuse_twice(name: str, seen, what: str) -> None:
     if name in seen:
         raise LMIShapeError(f"the design {what} two LMI problems named {name!r}: solutions are kept by problem name, "
@@ -63,10 +82,14 @@ class FreshSolver:
     tol : float, optional
         Solver tolerance that replaces the design settings' ``tol`` (a sweep, a tighter check);
         None keeps the settings'.
+    progress : callable, optional
+        Called with one line after every problem it solves (design, and the analyses a family hands
+        it: a bisection's steps), naming the problem, its blocks, the outcome and the seconds taken.
     """
 
-    def __init__(self, tol: float | None = None):
+    def __init__(self, tol: float | None = None, progress=None):
         self.tol = tol
+        self.progress = progress
         self._records: dict = {}       # problem name -> SolveRecord, in solve order
 
     @property
@@ -76,15 +99,30 @@ class FreshSolver:
 
     def solve(self, problem: LMIProblem, **options) -> LMISolution:
         if not problem.design:
-            return problem.solve(**options)
+            return self._timed(problem, options)
         _refuse_twice(problem.name, self._records, "solves")
-        sol = problem.solve(**options)
+        sol = self._timed(problem, options)
         self._records[problem.name] = SolveRecord(problem.name, exact_json(sol.values), sol.objective, sol.iterations,
                                                   dict(problem.data))
         return sol
 
     def committed_data(self, problem: str) -> None:
         return None
+
+    def _timed(self, problem: LMIProblem, options: dict) -> LMISolution:
+        if self.progress is None:
+            return problem.solve(**options)
+        import time
+        start = time.perf_counter()
+        what = problem.name + "".join(f", {k} = {v:.4g}" for k, v in problem.data.items() if isinstance(v, float))
+        try:
+            sol = problem.solve(**options)
+        except Exception:
+            self.progress(f"{what}: {problem.block_count} blocks, infeasible or failed "
+                          f"({time.perf_counter() - start:.1f} s)")
+            raise
+        self.progress(f"{what}: {problem.block_count} blocks, solved ({time.perf_counter() - start:.1f} s)")
+        return sol
 
 
 class LockReplay:

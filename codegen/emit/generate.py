@@ -19,6 +19,7 @@ from pathlib import Path
 
 from ..certificate import text
 from ..design import lock as design_lock, sources
+from ..design.solver import progress_after
 from .. import families, pipeline
 from ..project import observer_file as observers
 from ..project import outputs
@@ -357,7 +358,7 @@ def _generate_one(config: observers.ObserverConfig, out_dir: Path, force: bool, 
     records = None
     if data is None:
         log(f"{name}: {why}: solving the design")
-        b, records = pipeline.solve(config)
+        b, records = pipeline.solve(config, progress=progress_after(lambda line: log(f"{name}: {line}")))
         lock_text = design_lock.dumps(design_lock.document(b, records))
     else:
         lock_text = design_lock.path(config).read_text()

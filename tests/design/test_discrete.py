@@ -44,6 +44,51 @@ def test_ui_loop_certificate_holds_along_random_scheduling(build):
         assert V >= (1 + 2 * c.beta * data.Ts) * V_next * (1 - 1e-9)
 
 
+def test_ui_loop_with_constant_multipliers_holds_along_random_scheduling(build, monkeypatch):
+    """Beyond UI_LOOP_CUBIC_LIMIT cubic blocks the loop is certified with multipliers constant over
+    the polytope: one block per vertex pair (N (N + 1) / 2, plus P >= I), recorded in the lock's
+    data, and its P proves the same decrease as the affine form's (a special case of it: the
+    certified rate is at most the affine one's)."""
+    data, c = build.data, build.discrete_certificate.ui_loop
+    N = data.poly.n_vertices
+    assert discrete.ui_loop_multipliers(N) == "affine" and c.multipliers == "affine"
+    monkeypatch.setattr(discrete, "UI_LOOP_CUBIC_LIMIT", 0)
+    assert discrete.ui_loop_multipliers(N) == "constant"
+    prob = discrete._ui_loop_problem(data, 0.5 * c.beta, data.Tf, design=False)
+    assert prob.block_count == N * (N + 1) // 2 + 1
+    assert prob.data["multipliers"] == "constant"
+    P = np.asarray(prob.solve(tol=1e-9)["P"])
+    # the constant form cannot certify more than the affine one does
+    assert not discrete._ui_loop_feasible(data, 1.5 * c.beta / discrete.UI_LOOP_BACKOFF, data.Tf)
+    scale = np.concatenate([np.ones(data.nx), 1.0 / discrete.ui_scaling(data.poly)])
+    rng = np.random.default_rng(5)
+    poly = data.poly
+    for _ in range(200):
+        v = rng.uniform(poly.signal_lower, poly.signal_upper)
+        Aa = discrete.augmented_matrices(data, np.array(discrete.premise_of_signal(poly, v), float))[0]
+        z = rng.standard_normal(data.nz)
+        z_next = np.linalg.solve(np.eye(data.nz) - data.Ts * Aa, z)
+        V, V_next = (z * scale) @ P @ (z * scale), (z_next * scale) @ P @ (z_next * scale)
+        assert V >= (1 + c.beta * data.Ts) * V_next * (1 - 1e-9)
+
+
+def test_ui_loop_bisection_stops_once_the_committed_rate_is_settled(build):
+    """The bisection stops when both ends round to the same committed rate: the rate is the one a
+    full 14-step bisection gives, with fewer solves, each one reported to the solver's progress."""
+    data = build.data
+    lines = []
+    cert = discrete.certify_ui_loop(data, FreshSolver(progress=lines.append))
+    ceiling, _ = discrete.slowest_grid_decay(data)
+    lo, hi = 0.0, ceiling
+    for _ in range(14):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if discrete._ui_loop_feasible(data, mid, data.Tf) else (lo, mid)
+    assert cert.beta == discrete._round_down(discrete.UI_LOOP_BACKOFF * lo) == 2.4
+    analyses = [line for line in lines if line.startswith(discrete.UI_LOOP_PROBLEM + ", beta")]
+    assert 2 <= len(analyses) < 15            # the feasibility at 0, the steps taken, the design solve
+    assert all(" blocks, " in line and line.endswith(" s)") for line in lines)
+
+
 def test_lyapunov_decrease_along_random_scheduling(build):
     """V_k >= kappa V_{k+1} for e_d = 0 along random speed sequences obeying |a_x| <= 4."""
     data, poly, c = build.data, build.poly, build.discrete_certificate

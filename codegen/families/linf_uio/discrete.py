@@ -439,6 +439,7 @@ class UILoopCertificate:
     blocks: int
     worst_relative_margin: float
     P: np.ndarray = dataclasses.field(default=None, compare=False, repr=False)   # over [x; d], in their units
+    multipliers: str = "affine"     # the Finsler multipliers over the polytope: ui_loop_multipliers
 
     @property
     def contraction(self) -> float:
@@ -447,6 +448,21 @@ class UILoopCertificate:
 
 UI_LOOP_PROBLEM = "UI-filter loop (common Lyapunov function)"
 UI_LOOP_BACKOFF = 0.9       # the committed decay rate, as a fraction of the largest one found
+
+
+UI_LOOP_CUBIC_LIMIT = 220
+"""The most cubic blocks (one per multiset of three vertices, C(N + 2, 3)) the certificate solves with
+multipliers affine in the memberships: N <= 10 vertices. Beyond, one feasibility problem grows as N^3
+(measured: 5,984 blocks at 32 vertices, 93 s each, about 15 of them in the bisection) and the
+multipliers are taken constant over the polytope: N (N + 1) / 2 quadratic blocks, a special case of
+the affine ones (so never a wrong proof, at most a smaller certified rate)."""
+
+
+def ui_loop_multipliers(n_vertices: int) -> str:
+    """"affine" or "constant": the Finsler multipliers :func:`certify_ui_loop` uses for a polytope of
+    ``n_vertices`` vertices (see :data:`UI_LOOP_CUBIC_LIMIT`)."""
+    cubic = n_vertices * (n_vertices + 1) * (n_vertices + 2) // 6
+    return "affine" if cubic <= UI_LOOP_CUBIC_LIMIT else "constant"
 
 
 def _ui_loop_problem(data: ObserverData, beta: float, Tf: float, design: bool, margin: float = 1e-6):
@@ -465,6 +481,9 @@ def _ui_loop_problem(data: ObserverData, beta: float, Tf: float, design: bool, m
     every eta of the simplex, hence the whole box. The gain's rational dependence M = Q^-1 L
     needs no bound. For a constant D, g = Dp c is substituted (no Lambda_2). Unknown inputs in
     the units of :func:`ui_scaling`.
+
+    With multipliers constant over the polytope (:func:`ui_loop_multipliers`, many vertices) Psi
+    is quadratic in eta and one block per pair {i, j} proves it.
     """
     poly = data.poly
     N, nx, nd, nz = poly.n_vertices, data.nx, data.nd, data.nz
@@ -474,10 +493,14 @@ def _ui_loop_problem(data: ObserverData, beta: float, Tf: float, design: bool, m
     varies = poly.D_varies
     ng = nd if varies else 0
     n = nz + nx + ng
-    prob = LMIProblem(UI_LOOP_PROBLEM, design=design, data={"beta": beta, "Tf": Tf})
+    multipliers = ui_loop_multipliers(N)
+    # the lock records the form only where it is not the affine one, which earlier locks hold
+    prob = LMIProblem(UI_LOOP_PROBLEM, design=design,
+                      data={"beta": beta, "Tf": Tf} | ({} if multipliers == "affine" else {"multipliers": multipliers}))
     P = prob.symmetric("P", nz)
-    L1 = [prob.matrix(f"Lambda1_{k + 1}", n, nx) for k in range(N)]
-    L2 = [prob.matrix(f"Lambda2_{k + 1}", n, nd) for k in range(N)] if varies else None
+    m = N if multipliers == "affine" else 1
+    L1 = [prob.matrix(f"Lambda1_{k + 1}", n, nx) for k in range(m)]
+    L2 = [prob.matrix(f"Lambda2_{k + 1}", n, nd) for k in range(m)] if varies else None
     E = np.hstack([np.eye(nz), np.zeros((nz, nx + ng))])
     if varies:
         drive = np.block([[np.eye(nx), np.zeros((nx, nd))], [np.zeros((nd, nx)), np.eye(nd) / Tf]])
@@ -496,6 +519,14 @@ def _ui_loop_problem(data: ObserverData, beta: float, Tf: float, design: bool, m
         return terms + terms.T + W
 
     prob.require_psd("P >= I", P - np.eye(nz), margin, "normalization of the Lyapunov matrix")
+    if multipliers == "constant":
+        for pair in itertools.combinations_with_replacement(range(N), 2):
+            orders = sorted(set(itertools.permutations(pair)))
+            total = T(*orders[0], 0)
+            for o in orders[1:]:
+                total = total + T(*o, 0)
+            prob.require_nsd("Psi_" + "_".join(str(v + 1) for v in pair), total, margin, "the UI filter loop")
+        return prob
     for triple in itertools.combinations_with_replacement(range(N), 3):
         orders = sorted(set(itertools.permutations(triple)))
         total = T(*orders[0])
@@ -505,9 +536,12 @@ def _ui_loop_problem(data: ObserverData, beta: float, Tf: float, design: bool, m
     return prob
 
 
-def _ui_loop_feasible(data: ObserverData, beta: float, Tf: float) -> bool:
+def _ui_loop_feasible(data: ObserverData, beta: float, Tf: float, solver=None) -> bool:
+    """Whether the loop's LMIs hold at ``beta``, ``Tf``; ``solver``: the design's, which sees (and
+    reports) the analysis solves too."""
+    prob = _ui_loop_problem(data, beta, Tf, design=False)
     try:
-        _ui_loop_problem(data, beta, Tf, design=False).solve(tol=1e-9)
+        prob.solve(tol=1e-9) if solver is None else solver.solve(prob, tol=1e-9)
         return True
     except (SolverError, CertificateError):
         return False
@@ -562,13 +596,22 @@ def certify_ui_loop(data: ObserverData, solver, min_margin: float = 0.0) -> UILo
         beta = float(committed["beta"])
     else:
         ceiling, at = slowest_grid_decay(data)
-        if ceiling <= 0 or not _ui_loop_feasible(data, 0.0, data.Tf):
-            message, remedy = _ui_loop_advice(data, ceiling, at)
-            raise UILoopError(message, remedy=remedy)
+        zero_checked = False
         lo, hi = 0.0, ceiling
         for _ in range(14):
+            # the committed rate is UI_LOOP_BACKOFF lo rounded down: once both ends round alike (and the
+            # float32 rate is not between them) no further step can change it, and each one is a solve
+            if lo > 0 and _round_down(UI_LOOP_BACKOFF * lo) == _round_down(UI_LOOP_BACKOFF * hi) \
+                    and not lo < need <= hi:
+                break
+            # a decay of 0 is proven by any feasible step: it is asked only while none has been
+            if lo == 0 and not zero_checked and (ceiling <= 0 or hi < ceiling):
+                zero_checked = True
+                if ceiling <= 0 or not _ui_loop_feasible(data, 0.0, data.Tf, solver):
+                    message, remedy = _ui_loop_advice(data, ceiling, at)
+                    raise UILoopError(message, remedy=remedy)
             mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if _ui_loop_feasible(data, mid, data.Tf) else (lo, mid)
+            lo, hi = (mid, hi) if _ui_loop_feasible(data, mid, data.Tf, solver) else (lo, mid)
         if lo < need:
             c = 1.0 / np.sqrt(1.0 + 2.0 * lo * data.Ts)
             raise DiscretizationError(
@@ -585,7 +628,8 @@ def certify_ui_loop(data: ObserverData, solver, min_margin: float = 0.0) -> UILo
     # the LMIs see the unknown inputs divided by ui_scaling: back to their own units
     scale = np.concatenate([np.ones(data.nx), 1.0 / ui_scaling(data.poly)])
     P = scale[:, None] * np.asarray(sol["P"], dtype=float) * scale[None, :]
-    return UILoopCertificate(beta, data.Ts, len(sol.checks), float(sol.worst.relative_margin), 0.5 * (P + P.T))
+    return UILoopCertificate(beta, data.Ts, len(sol.checks), float(sol.worst.relative_margin), 0.5 * (P + P.T),
+                             ui_loop_multipliers(data.poly.n_vertices))
 
 
 def _ui_loop_advice(data: ObserverData, ceiling: float, at) -> tuple:
@@ -642,7 +686,8 @@ class DiscreteCertificate:
                 "dense_grid_points": self.grid_points,
                 "ui_loop_certified_decay_rate": self.ui_loop.beta,
                 "ui_loop_contraction_per_step": self.ui_loop.contraction,
-                "ui_loop_lmi_blocks": self.ui_loop.blocks}
+                "ui_loop_lmi_blocks": self.ui_loop.blocks,
+                "ui_loop_multipliers": self.ui_loop.multipliers}
 
 
 def certify_step(data: ObserverData, alpha: float, solver, n_grid: int = 2001, min_margin: float = 0.0) -> DiscreteCertificate:
