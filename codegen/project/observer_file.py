@@ -41,7 +41,10 @@ COMMON_KEYS = {
     "model": Rule(str, required=True, doc="model_defs/MODEL.py, or a .py path relative to this file"),
     "parameters": Rule(str, required=True,
                        doc="a path relative to this file (a built-in observer: a file in model_defs/params)"),
-    "sample_time": Rule(float, gt=0, required=True, doc="s"),
+    # a vehicle observer's step: 1 Hz (the slowest a vehicle-dynamics log is read at) to 100 kHz; beyond,
+    # the design fails far from the cause (a gain bound of gain_bound_times_sample_time / sample_time)
+    "sample_time": Rule(float, ge=1e-5, le=1.0, required=True, doc="s",
+                        allowed="a finite number of seconds in [1e-05, 1] (a step at 1 Hz to 100 kHz)"),
     "design": Rule(dict),
     "data": Rule(dict, doc="the column map of a logged run (uiogen validate --data; codegen.project.columns)"),
     "precision": Rule(dict, doc="the float32 build's tolerances (codegen.project.precision)"),

@@ -194,10 +194,13 @@ BAD_VALUES = [
     # (observer, pattern, replacement, text the message must contain)
     (L, r'^lyapunov = "pdlf"', 'lyapunov = "pdfl"', "[design] lyapunov = \"pdfl\": must be one of \"pdlf\", "
                                                     "\"quadratic\" (did you mean 'pdlf'?)"),
-    (L, r"^sample_time = 0.01", 'sample_time = "fast"', 'sample_time = "fast": must be a finite number > 0'),
-    (L, r"^sample_time = 0.01", "sample_time = 0", "sample_time = 0: must be a finite number > 0"),
+    (L, r"^sample_time = 0.01", 'sample_time = "fast"', 'sample_time = "fast": must be a finite number of seconds in [1e-05, 1] (a step at 1 Hz to 100 kHz)'),
+    (L, r"^sample_time = 0.01", "sample_time = 0", "sample_time = 0: must be a finite number of seconds in [1e-05, 1] (a step at 1 Hz to 100 kHz)"),
+    # absurd but positive: refused naming the key, not by the design's infeasible LMIs (issue 39)
+    (L, r"^sample_time = 0.01", "sample_time = 1e6", "sample_time = 1000000.0: must be a finite number of seconds in [1e-05, 1] (a step at 1 Hz to 100 kHz)"),
+    (L, r"^sample_time = 0.01", "sample_time = 1e-9", "sample_time = 1e-09: must be a finite number of seconds in [1e-05, 1] (a step at 1 Hz to 100 kHz)"),
     (L, r"^sample_time = 0.01", "sample_time = -0.01", "sample_time = -0.01: must be"),
-    (L, r"^sample_time = 0.01", "sample_time = nan", "sample_time = nan: must be a finite number > 0"),
+    (L, r"^sample_time = 0.01", "sample_time = nan", "sample_time = nan: must be a finite number of seconds in [1e-05, 1] (a step at 1 Hz to 100 kHz)"),
     (L, r"^sample_time = 0.01", "sample_time = inf", "sample_time = inf: must be"),
     (L, r"^sample_time = 0.01", "sample_time = true", "sample_time = true: must be"),
     (L, r"^alpha = 5.0", 'alpha = "five"', '[design] alpha = "five": must be a finite number > 0'),
