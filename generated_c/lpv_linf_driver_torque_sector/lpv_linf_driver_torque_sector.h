@@ -28,7 +28,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of lpv_linf_driver_torque_sector_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define LPV_LINF_DRIVER_TORQUE_SECTOR_DESIGN_HASH "c4b8714e778e9cc3c02fd49f0aa5b7e7ec6f148440a0a64af5aad5c2a1d3521c"
+#define LPV_LINF_DRIVER_TORQUE_SECTOR_DESIGN_HASH "17596f1c63c59f34f61b566ede7f22f96ca6169b889ca7753d61c3f52b2f868f"
 
 /* Status bits returned by lpv_linf_driver_torque_sector_step; a sample's status is their OR (lpv_linf_driver_torque_sector_status). */
 typedef enum {

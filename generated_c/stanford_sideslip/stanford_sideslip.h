@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of stanford_sideslip_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define STANFORD_SIDESLIP_DESIGN_HASH "f016713e7e36788ccb772486bffd284ff533921b0dbf990fc01e6c1e6a87a4d4"
+#define STANFORD_SIDESLIP_DESIGN_HASH "1a5bab2c9f7ac3c1ca9bf3b6072caff1cb2e482a269dfc82468a0642828a70d1"
 
 /* Status bits returned by stanford_sideslip_step; a sample's status is their OR (stanford_sideslip_status). */
 typedef enum {
