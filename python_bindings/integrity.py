@@ -219,3 +219,52 @@ def binary_mismatch(extension: Path, copy: Path | None = None) -> str:
         return (f"its bytes are not those its build record {record.name} holds (truncated, or changed after "
                 f"`uiogen build`)")
     return ""
+
+
+def elf_truncation(path: Path) -> str:
+    """Why the ELF shared object ``path`` cannot be whole, or "" when its headers fit in the file.
+
+    dlopen maps the segments a program header names; one that ends past the end of the file is a
+    SIGBUS at the first touch, not an error. The build record cannot catch a file truncated and
+    re-recorded, so the structure is checked too: the program and section header tables and every
+    loadable segment must lie inside the file. A file that is not ELF (another platform) is not
+    checked here."""
+    import struct
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as fh:
+            head = fh.read(64)
+            if head[:4] != b"\x7fELF":
+                return ""
+            if len(head) < 52 or head[4] not in (1, 2) or head[5] not in (1, 2):
+                return "its ELF header is cut short or malformed"
+            end = "<" if head[5] == 1 else ">"
+            if head[4] == 2:            # 64-bit
+                if len(head) < 64:
+                    return "its ELF header is cut short"
+                phoff, shoff = struct.unpack(end + "QQ", head[32:48])
+                phentsize, phnum, shentsize, shnum = struct.unpack(end + "HHHH", head[54:62])
+                segment, fields = 56, end + "IIQQQQQQ"
+            else:
+                phoff, shoff = struct.unpack(end + "II", head[28:36])
+                phentsize, phnum, shentsize, shnum = struct.unpack(end + "HHHH", head[42:50])
+                segment, fields = 32, end + "IIIIIIII"
+            for what, offset, count, entry in (("program header table", phoff, phnum, phentsize),
+                                                ("section header table", shoff, shnum, shentsize)):
+                if count and offset + count * entry > size:
+                    return f"its {what} ends at byte {offset + count * entry}, past its end ({size} bytes): truncated"
+            if phentsize < segment:
+                return "its program headers are malformed"
+            fh.seek(phoff)
+            table = fh.read(phnum * phentsize)
+    except OSError as exc:
+        return f"it is unreadable ({type(exc).__name__})"
+    for k in range(phnum):
+        values = struct.unpack(fields, table[k * phentsize:k * phentsize + segment])
+        # 64-bit: type, flags, offset, vaddr, paddr, filesz, memsz, align; 32-bit: type, offset, vaddr,
+        # paddr, filesz, memsz, flags, align
+        kind, offset, filesz = (values[0], values[2], values[5]) if segment == 56 else (values[0], values[1], values[4])
+        if kind == 1 and offset + filesz > size:          # PT_LOAD
+            return f"its loadable segment {k} ends at byte {offset + filesz}, past its end ({size} bytes): truncated"
+    return ""
+

@@ -246,7 +246,8 @@ def open_observer(workspace: Workspace, name: str, argument: str | None = None,
         if not path.is_file():
             raise UnknownObserverError(f"observer {name!r} is generated but not compiled (no {path}); "
                                        f"run `uiogen build {argument}`")
-        damage = integrity.binary_mismatch(path)      # before dlopen: a truncated object dies of SIGBUS
+        # before dlopen: a truncated object dies of SIGBUS (its record may have been recomputed: the structure too)
+        damage = integrity.binary_mismatch(path) or integrity.elf_truncation(path)
         if damage:
             raise DamagedExtensionError(f"the extension {path} is not loaded: {damage}; run `uiogen build {argument}`")
         identity = _file_identity(path)

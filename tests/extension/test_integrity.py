@@ -204,6 +204,18 @@ def test_a_truncated_or_unrecorded_extension_is_refused_before_it_is_loaded(tmp_
     proc = run()
     assert proc.returncode == 0 and "has no build record" in proc.stdout, (proc.returncode, proc.stdout, proc.stderr)
     assert issubclass(DamagedExtensionError, StaleExtensionError) and issubclass(SourceFileError, UiogenError)
+    # truncated and its record recomputed for the cut bytes: the ELF structure says it is cut (no SIGBUS)
+    cut = ws.extension("obs1").read_bytes()
+    integrity.record_path(ws.extension("obs1")).write_text(integrity.record_text(cut, ws.extension("obs1").name))
+    assert integrity.binary_mismatch(ws.extension("obs1")) == ""
+    proc = run()
+    assert proc.returncode == 0, (proc.returncode, proc.stderr)
+    assert proc.stdout.startswith("DamagedExtensionError the extension ") and "past its end" in proc.stdout, proc.stdout
+    assert integrity.elf_truncation(Path(_ctypes.__file__)) == ""       # a whole object passes
+    for keep in (40, 63, 2000, len(data) - 1):
+        part = tmp_path / f"cut{keep}.so"
+        part.write_bytes(data[:keep])
+        assert integrity.elf_truncation(part), keep
 
 
 # --- builds (slow) --------------------------------------------------------------------------------
