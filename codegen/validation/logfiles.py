@@ -443,6 +443,42 @@ class OnGrid:
             yield first, cols
 
 
+class TableOnGrid(OnGrid):
+    """A CSV or Parquet log sampled at another rate than the observer's, on the observer's grid: its
+    mapped columns read whole through ``table`` (the streaming reader, every check of its format), each
+    a :class:`Channel` on the log's one time column (converted to s by ``time_factor``), then put on the
+    grid like an MDF log's channels (``methods``: ``hold`` or ``linear`` per column). A log at the
+    observer's rate is streamed instead (:func:`period_of`): this one holds its mapped columns."""
+
+    def __init__(self, table, time_key: str, time_factor: float, methods, sample_time: float,
+                 chunk_rows: int = BATCH_ROWS):
+        self.path, self.time_key, self.chunk_rows = table.path, time_key, int(chunk_rows)
+        self.file_units = dict(getattr(table, "file_units", {}))
+        names = [c for c in table.units if c != time_key]
+        parts = {c: [] for c in (time_key, *names)}
+        for _, cols in table.chunks():
+            for c in parts:
+                parts[c].append(cols[c])
+        t = np.concatenate(parts[time_key]) * time_factor
+        self.channels = [Channel(self.path, c, t, np.concatenate(parts[c]), self.file_units.get(c),
+                                 (methods or {}).get(c, DEFAULT_METHOD)) for c in names]
+        self._put_on_grid(sample_time)
+
+
+def period_of(table, time_key: str, time_factor: float) -> float:
+    """The median period [s] of the first :data:`~codegen.validation.csvlog.MEDIAN_STEPS` steps of a CSV or
+    Parquet log's time column (what its time check judges the log by)."""
+    from .csvlog import MEDIAN_STEPS
+    times, held = [], 0
+    for _, cols in table.chunks():
+        times.append(cols[time_key])
+        held += cols[time_key].size
+        if held > MEDIAN_STEPS:
+            break
+    t = np.concatenate(times)[:MEDIAN_STEPS + 1] * time_factor
+    return float(np.median(np.diff(t))) if t.size >= 2 else float("nan")
+
+
 class MdfLog(OnGrid):
     """An MDF log: the mapped channels, each read alone with its own master, on the observer's grid.
 

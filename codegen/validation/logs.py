@@ -140,6 +140,13 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | N
         t_unit, _ = logfiles.resolve_unit(p, f"column {cmap.time.column!r} (time)",
                                           reader.file_units.get(cmap.time.column), cmap.time.unit, "s")
         t_factor = (UNITS[t_unit][1] if t_unit else 1.0) * cmap.time.scale
+        period = logfiles.period_of(reader, cmap.time.column, t_factor)
+        # another rate than the observer's: read whole and put on its grid, as an MDF log's channels (a
+        # period past MAX_PERIOD, times in ms taken for s, or times that do not increase: the stream says so)
+        if 0 < period <= csvlog.MAX_PERIOD and abs(period / obs.sample_time - 1.0) > csvlog.PERIOD_RTOL:
+            reader = logfiles.TableOnGrid(reader, cmap.time.column, t_factor, methods, obs.sample_time,
+                                          batch_rows or logfiles.BATCH_ROWS)
+            t_factor = 1.0
     checks = log_checks.LogChecks(
         p, model, load_parameters(config.parameter_path), obs.input_names,
         {n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale, declared_by=declared_by[n])

@@ -41,16 +41,17 @@ UNITS = {"delta": "rad", "yaw_rate": "rad/s", "ay": "m/s^2", "vx": "m/s", "beta_
 MAP = {"delta": "delta", "y_r": "yaw_rate", "y_a_y": "ay", "v_x": "vx"}
 
 
-def _observer(folder: Path, units: bool = True, **changes) -> Path:
+def _observer(folder: Path, units: bool = True, time: str = '"t"', **changes) -> Path:
     """The observer file with a [data] map of the Stanford columns, with their units or without
-    (``units=False``: the file's units are used); ``changes``: SIGNAL = "inline table"."""
+    (``units=False``: the file's units are used); ``time``: the map's time entry; ``changes``:
+    SIGNAL = "inline table"."""
     text = (ROOT / "model_defs" / "observers" / f"{NAME}.toml").read_text()
     params = re.search(r'(?m)^parameters = "([^"]+)"', text).group(1)
     (folder / params).write_text((ROOT / "model_defs" / "params" / params).read_text())
     entries = {k: f'{{ column = "{c}"' + (f', unit = "{UNITS[c]}"' if units else "") + " }" for k, c in MAP.items()}
     entries["beta"] = '{ column = "beta_true"' + (', unit = "rad"' if units else "") + " }"
     entries.update(changes)
-    text += "\n[data]\ntime = \"t\"\n\n[data.inputs]\n"
+    text += f"\n[data]\ntime = {time}\n\n[data.inputs]\n"
     text += "".join(f"{k} = {v}\n" for k, v in entries.items() if k != "beta")
     text += f"\n[data.truth]\nbeta = {entries['beta']}\n"
     path = folder / f"{NAME}.toml"
@@ -154,6 +155,41 @@ def test_mdf_channels_at_200_100_and_50_hz(data, tmp_path):
     assert res["resampling"]["vx"]["rate_hz"] == pytest.approx(50)
     assert any("'vx' is sampled at 50 Hz, slower than the observer's 100 Hz" in w for w in res["warnings"])
     assert "resampled onto the observer's sample time: 'ay' 200 Hz, hold; 'vx' 50 Hz, hold" in logs.format_table(res)
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_a_csv_or_parquet_log_at_200_hz_is_put_on_the_observer_grid(data, tmp_path, suffix):
+    """A table at twice the observer's rate (the 100 Hz samples and the midpoints between them): held
+    at the grid times it is the 100 Hz log again, to the last bit. Before, the time check refused it
+    (the log's period 0.005 s is not the observer's 0.01 s)."""
+    cols = data["cols"]
+    t = cols["t"]
+    t200 = np.repeat(t, 2)[:-1] + np.tile([0.0, 0.005], t.size)[:-1]
+    table = pa.table({c: np.interp(t200, t, cols[c]) if c != "t" else t200 for c in data["table"].column_names})
+    log = tmp_path / f"log200{suffix}"
+    pcsv.write_csv(table, log) if suffix == ".csv" else pq.write_table(table, log)
+    res = _run(data["observer"], log, block_bytes=1 << 14) if suffix == ".csv" else _run(data["observer"], log)
+    assert res["samples"] == ROWS
+    assert np.array_equal(res["signals"]["beta"], data["csv"]["signals"]["beta"])
+    assert res["observer"]["beta"]["rms"] == data["csv"]["observer"]["beta"]["rms"]
+    assert {r["method"] for r in res["resampling"].values()} == {"hold"}
+    assert all(r["rate_hz"] == pytest.approx(200) for r in res["resampling"].values())
+
+
+def test_a_csv_log_at_50_hz_is_held_and_said(data, tmp_path):
+    """Every other row: each value held one step in two; the sideslip moves by less than 5 %, the
+    warning names every column slower than the observer; times in ms (the map's unit) convert first."""
+    cols = data["cols"]
+    table = data["table"].take(np.arange(0, ROWS, 2))
+    table = table.set_column(table.column_names.index("t"), "t", pa.array(cols["t"][::2] * 1e3))
+    log = tmp_path / "log50.csv"
+    pcsv.write_csv(table, log)
+    res = _run(_observer(tmp_path, time='{ column = "t", unit = "ms" }'), log)
+    rms, ref = res["observer"]["beta"]["rms"], data["csv"]["observer"]["beta"]["rms"]
+    assert 0 < abs(rms - ref) < 0.05 * ref, (rms, ref)
+    assert res["samples"] == ROWS - 1
+    for c in ("delta", "yaw_rate", "ay", "vx"):
+        assert any(f"{c!r} is sampled at 50 Hz, slower than the observer's 100 Hz" in w for w in res["warnings"])
 
 
 def test_linear_reports_its_latency(data, tmp_path):
