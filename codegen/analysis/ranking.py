@@ -11,11 +11,14 @@ The ranking puts first what guarantees most (:data:`GUARANTEES`), among what app
 
 1. the family applies (every structural condition holds and the parameter file has what it needs);
 2. its trial design is certified (before one not tried, before one that failed);
-3. the guarantee: the error does not depend on the unknown inputs (decoupled), before a certified
+3. a proposal that reads every measured scheduling signal before one that holds some at a
+   constant value (:attr:`Applicability.frozen`: its estimate is of another car whenever the
+   signal leaves that value);
+4. the guarantee: the error does not depend on the unknown inputs (decoupled), before a certified
    gain over the whole scheduling box, before a gain at fixed operating points only, before
    states without the unknown inputs;
-4. fewer differentiated outputs (the sum of the HOSMD orders: noise is amplified by each);
-5. the registry's order.
+5. fewer differentiated outputs (the sum of the HOSMD orders: noise is amplified by each);
+6. the registry's order.
 """
 from __future__ import annotations
 
@@ -94,13 +97,24 @@ class Applicability:
     design_cost: str = "seconds"
     figures: Callable | None = None
     decay_key: str = ""
+    frozen: dict = field(default_factory=dict)
+
+    def frozen_text(self) -> str:
+        """One sentence on the measured signals the proposal freezes ("" when none)."""
+        if not self.frozen:
+            return ""
+        held = ", ".join(f"{s} = {v:g}" for s, v in self.frozen.items())
+        return (f"FROZEN measured signal{'s' if len(self.frozen) > 1 else ''}: this proposal holds {held} (mid-box) "
+                f"and its observer does not read {'them' if len(self.frozen) > 1 else 'it'}: away from "
+                f"{'those values' if len(self.frozen) > 1 else 'that value'} the estimates are of another model, "
+                f"with no status raised; ranked after the proposals that read every measured signal")
 
     def to_json(self) -> dict:
         return {"family": self.family, "applies": self.applies, "guarantee": self.guarantee,
                 "guarantee_means": GUARANTEES.get(self.guarantee, (9, ""))[1], "condition": self.condition,
                 "fix": self.fix, "checked": [{"statement": s, "basis": b} for s, b in self.checked],
                 "notes": list(self.notes), "observer": self.observer, "differentiators": self.differentiators,
-                "design_cost": self.design_cost}
+                "design_cost": self.design_cost, "frozen": dict(self.frozen), "frozen_means": self.frozen_text()}
 
 
 @dataclass(frozen=True)
@@ -158,7 +172,7 @@ _TRIAL_ORDER = {"certified": 0, "not tried": 1, "failed": 2}
 
 
 def sort_key(app: Applicability, trial: Trial, index: int) -> tuple:
-    return (not app.applies, _TRIAL_ORDER[trial.status], GUARANTEES.get(app.guarantee, (9,))[0],
+    return (not app.applies, _TRIAL_ORDER[trial.status], bool(app.frozen), GUARANTEES.get(app.guarantee, (9,))[0],
             sum(app.differentiators.values()), index)
 
 
@@ -610,6 +624,8 @@ def starter_text(subject: Subject, app: Applicability, folder: Path, structure=N
         head.append(f"# WARNING: uiogen analyze's trial design of these settings failed: {trial.reason}")
     elif trial is not None and app.observer is not None and chosen_by is not None:
         head.append(f"# not designed by uiogen analyze ({trial.reason}): the analysis's proposal, unmeasured")
+    if app.frozen:
+        head.append(f"# WARNING: {app.frozen_text()}")
     for note in app.notes:
         head.append(f"# note: {note}")
     return "\n".join(head + [""] + toml_lines(table, why)) + "\n"
