@@ -305,18 +305,26 @@ def toml_lines(table: dict, why: dict | None = None, prefix: str = "") -> list:
     return lines
 
 
-def wrapper_model(subject: Subject, add_states: tuple = ()) -> str:
+def wrapper_model(subject: Subject, add_states: tuple = (), beside: Path | None = None) -> str:
     """A model file that imports the subject's model and applies --outputs/--unknown-inputs (and
     measures ``add_states``: declared outputs or states, by name), so a trial design runs on exactly
-    what was analyzed."""
+    what was analyzed. ``beside``: the folder the file is written to, which it then imports the
+    model relative to (``uiogen new --from-model --outputs``: a project that moves as a whole)."""
+    import os
     from ..project import observer_file as observers
     path = subject.model_path
+    shown = str(path)
     if path.parent == observers.MODELS_DIR:
         load = f"_base = observers.builtin_model({path.stem!r})"
+    elif beside is not None:
+        shown = os.path.relpath(path.resolve(), Path(beside).resolve())
+        rel = os.path.relpath(path.resolve(), Path(beside).resolve())
+        load = (f"_base = observers.load_module((Path(__file__).resolve().parent / {rel!r}).resolve(), "
+                f"'uiogen_sensors_base_' + {path.stem!r})")
     else:
         load = f"_base = observers.load_module(Path({str(path)!r}), 'uiogen_analysis_base_' + {path.stem!r})"
     outputs = list(subject.outputs)
-    lines = ['"""uiogen analyze: the model of ' + str(path) + ' with the sensors and unknown inputs analyzed."""',
+    lines = ['"""uiogen analyze: the model of ' + shown + ' with the sensors and unknown inputs analyzed."""',
              "import dataclasses", "from pathlib import Path", "",
              "from codegen.project import observer_file as observers", "", load,
              "globals().update({k: v for k, v in vars(_base).items() if not k.startswith('__')})",
@@ -587,7 +595,7 @@ def _with_sensor(subject: Subject, structure, app: Applicability, folder: Path, 
 
 
 def starter_text(subject: Subject, app: Applicability, folder: Path, structure=None, trial: Trial | None = None,
-                 chosen_by: str | None = None) -> str:
+                 chosen_by: str | None = None, model_file: Path | None = None) -> str:
     """The observer file ``uiogen new --from-model`` writes for ``app``: its settings with the
     reasons as comments, the model and parameter file by paths relative to ``folder``; ``trial``,
     the analysis's trial design of these settings, is said in the header (certified, or the failure
@@ -604,7 +612,11 @@ def starter_text(subject: Subject, app: Applicability, folder: Path, structure=N
         if subject.substitute_table:
             proposal["substitute"] = subject.substitute_table
             why["substitute"] = "the change of variables the analysis applied (docs/analyze.md)"
-    table = {"family": app.family, "model": os.path.relpath(subject.model_path, folder),
+    if model_file is not None:          # --outputs/--unknown-inputs: the model as analyzed, written beside
+        why["model"] = (f"your equations ({os.path.relpath(subject.model_path, folder)}) with the sensors and "
+                        f"unknown inputs analyzed: {', '.join(subject.outputs)}; "
+                        f"{', '.join(subject.declared_unknown_inputs) or 'none'}")
+    table = {"family": app.family, "model": os.path.relpath(model_file or subject.model_path, folder),
              "parameters": os.path.relpath(subject.parameter_path, folder),
              **{k: v for k, v in proposal.items() if k != "family"}}
     if chosen_by is None:
