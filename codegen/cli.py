@@ -412,8 +412,10 @@ def cmd_new(args) -> int:
                                  "(the observer file of family F for your model)", key="--family")
     if args.from_model is not None:
         return _new_from_model(args)
-    if args.parameters is not None:
-        raise ConfigurationError("uiogen new --parameters goes with --from-model", key="--parameters")
+    for given, flag in ((args.parameters, "--parameters"), (args.outputs, "--outputs"),
+                        (args.unknown_inputs, "--unknown-inputs")):
+        if given is not None:
+            raise ConfigurationError(f"uiogen new {flag} goes with --from-model", key=flag)
     target = starter.write(Path(args.dir), families.get(args.family), args.name)
     print(f"wrote {target}, {target.parent / 'model.py'}, {target.parent / 'parameters.toml'}")
     print("next: " + "; ".join(starter.next_steps(target)))
@@ -428,7 +430,8 @@ def _new_from_model(args) -> int:
     wanted = families.get(args.family).name if args.family is not None else None    # an unknown name: refused first
     if args.name is not None:
         starter.check_name(args.name)
-    result = analysis.analyze(args.from_model, args.parameters, design=True,
+    result = analysis.analyze(args.from_model, args.parameters, outputs=args.outputs,
+                              unknown_inputs=args.unknown_inputs, design=True,
                               progress=lambda msg: print(f"  ... {msg}", file=sys.stderr, flush=True))
     if wanted is None:
         best = result.ranking.best
@@ -458,9 +461,17 @@ def _new_from_model(args) -> int:
     if target.exists():
         raise ConfigurationError(f"uiogen new {folder}: would overwrite {target}; choose an empty folder or --name",
                                  key="dir")
+    wrapper = folder / f"{name}_model.py" if result.subject.restricted else None
+    if wrapper is not None and wrapper.exists():
+        raise ConfigurationError(f"uiogen new {folder}: would overwrite {wrapper}; choose an empty folder or --name",
+                                 key="dir")
     outputs.make_folder(folder)
+    if wrapper is not None:     # the sensors chosen with --outputs/--unknown-inputs, as the analysis had them
+        from .analysis.ranking import wrapper_model
+        outputs.write_atomic(wrapper, wrapper_model(result.subject, beside=folder))
     text = starter_text(result.subject, chosen, folder.resolve(), trial=tried,
-                        chosen_by=None if wanted is None else rank_note).replace("THIS_FILE", str(target))
+                        chosen_by=None if wanted is None else rank_note,
+                        model_file=None if wrapper is None else wrapper.resolve()).replace("THIS_FILE", str(target))
     outputs.write_atomic(target, text)
     print(result.text())
     print(f"wrote {target} ({chosen.family}, {rank_note})")
@@ -660,6 +671,12 @@ def main(argv=None) -> int:
     p.add_argument("--from-model", help="your model file (.py): the observer file of the best-ranked family "
                                         "(or of --family)")
     p.add_argument("--parameters", help="the model's parameter file (with --from-model)")
+    p.add_argument("--outputs", nargs="+", metavar="OUTPUT",
+                   help="with --from-model: the measured outputs, among those the model declares (default: all); "
+                        "the observer file's model is then DIR/NAME_model.py, your model with these sensors")
+    p.add_argument("--unknown-inputs", nargs="+", metavar="INPUT",
+                   help="with --from-model: the unknown inputs, among the model's known and unknown inputs "
+                        "(default: as declared)")
     p.add_argument("--name", help="the observer's name, the file's stem (default: my_FAMILY, or MODEL_FAMILY with "
                                   "--from-model; never a built-in's)")
     p.set_defaults(func=cmd_new)

@@ -11,11 +11,14 @@ The ranking puts first what guarantees most (:data:`GUARANTEES`), among what app
 
 1. the family applies (every structural condition holds and the parameter file has what it needs);
 2. its trial design is certified (before one not tried, before one that failed);
-3. the guarantee: the error does not depend on the unknown inputs (decoupled), before a certified
+3. a proposal that reads every measured scheduling signal before one that holds some at a
+   constant value (:attr:`Applicability.frozen`: its estimate is of another car whenever the
+   signal leaves that value);
+4. the guarantee: the error does not depend on the unknown inputs (decoupled), before a certified
    gain over the whole scheduling box, before a gain at fixed operating points only, before
    states without the unknown inputs;
-4. fewer differentiated outputs (the sum of the HOSMD orders: noise is amplified by each);
-5. the registry's order.
+5. fewer differentiated outputs (the sum of the HOSMD orders: noise is amplified by each);
+6. the registry's order.
 """
 from __future__ import annotations
 
@@ -94,13 +97,24 @@ class Applicability:
     design_cost: str = "seconds"
     figures: Callable | None = None
     decay_key: str = ""
+    frozen: dict = field(default_factory=dict)
+
+    def frozen_text(self) -> str:
+        """One sentence on the measured signals the proposal freezes ("" when none)."""
+        if not self.frozen:
+            return ""
+        held = ", ".join(f"{s} = {v:g}" for s, v in self.frozen.items())
+        return (f"FROZEN measured signal{'s' if len(self.frozen) > 1 else ''}: this proposal holds {held} (mid-box) "
+                f"and its observer does not read {'them' if len(self.frozen) > 1 else 'it'}: away from "
+                f"{'those values' if len(self.frozen) > 1 else 'that value'} the estimates are of another model, "
+                f"with no status raised; ranked after the proposals that read every measured signal")
 
     def to_json(self) -> dict:
         return {"family": self.family, "applies": self.applies, "guarantee": self.guarantee,
                 "guarantee_means": GUARANTEES.get(self.guarantee, (9, ""))[1], "condition": self.condition,
                 "fix": self.fix, "checked": [{"statement": s, "basis": b} for s, b in self.checked],
                 "notes": list(self.notes), "observer": self.observer, "differentiators": self.differentiators,
-                "design_cost": self.design_cost}
+                "design_cost": self.design_cost, "frozen": dict(self.frozen), "frozen_means": self.frozen_text()}
 
 
 @dataclass(frozen=True)
@@ -158,7 +172,7 @@ _TRIAL_ORDER = {"certified": 0, "not tried": 1, "failed": 2}
 
 
 def sort_key(app: Applicability, trial: Trial, index: int) -> tuple:
-    return (not app.applies, _TRIAL_ORDER[trial.status], GUARANTEES.get(app.guarantee, (9,))[0],
+    return (not app.applies, _TRIAL_ORDER[trial.status], bool(app.frozen), GUARANTEES.get(app.guarantee, (9,))[0],
             sum(app.differentiators.values()), index)
 
 
@@ -291,18 +305,26 @@ def toml_lines(table: dict, why: dict | None = None, prefix: str = "") -> list:
     return lines
 
 
-def wrapper_model(subject: Subject, add_states: tuple = ()) -> str:
+def wrapper_model(subject: Subject, add_states: tuple = (), beside: Path | None = None) -> str:
     """A model file that imports the subject's model and applies --outputs/--unknown-inputs (and
     measures ``add_states``: declared outputs or states, by name), so a trial design runs on exactly
-    what was analyzed."""
+    what was analyzed. ``beside``: the folder the file is written to, which it then imports the
+    model relative to (``uiogen new --from-model --outputs``: a project that moves as a whole)."""
+    import os
     from ..project import observer_file as observers
     path = subject.model_path
+    shown = str(path)
     if path.parent == observers.MODELS_DIR:
         load = f"_base = observers.builtin_model({path.stem!r})"
+    elif beside is not None:
+        shown = os.path.relpath(path.resolve(), Path(beside).resolve())
+        rel = os.path.relpath(path.resolve(), Path(beside).resolve())
+        load = (f"_base = observers.load_module((Path(__file__).resolve().parent / {rel!r}).resolve(), "
+                f"'uiogen_sensors_base_' + {path.stem!r})")
     else:
         load = f"_base = observers.load_module(Path({str(path)!r}), 'uiogen_analysis_base_' + {path.stem!r})"
     outputs = list(subject.outputs)
-    lines = ['"""uiogen analyze: the model of ' + str(path) + ' with the sensors and unknown inputs analyzed."""',
+    lines = ['"""uiogen analyze: the model of ' + shown + ' with the sensors and unknown inputs analyzed."""',
              "import dataclasses", "from pathlib import Path", "",
              "from codegen.project import observer_file as observers", "", load,
              "globals().update({k: v for k, v in vars(_base).items() if not k.startswith('__')})",
@@ -573,7 +595,7 @@ def _with_sensor(subject: Subject, structure, app: Applicability, folder: Path, 
 
 
 def starter_text(subject: Subject, app: Applicability, folder: Path, structure=None, trial: Trial | None = None,
-                 chosen_by: str | None = None) -> str:
+                 chosen_by: str | None = None, model_file: Path | None = None) -> str:
     """The observer file ``uiogen new --from-model`` writes for ``app``: its settings with the
     reasons as comments, the model and parameter file by paths relative to ``folder``; ``trial``,
     the analysis's trial design of these settings, is said in the header (certified, or the failure
@@ -590,7 +612,11 @@ def starter_text(subject: Subject, app: Applicability, folder: Path, structure=N
         if subject.substitute_table:
             proposal["substitute"] = subject.substitute_table
             why["substitute"] = "the change of variables the analysis applied (docs/analyze.md)"
-    table = {"family": app.family, "model": os.path.relpath(subject.model_path, folder),
+    if model_file is not None:          # --outputs/--unknown-inputs: the model as analyzed, written beside
+        why["model"] = (f"your equations ({os.path.relpath(subject.model_path, folder)}) with the sensors and "
+                        f"unknown inputs analyzed: {', '.join(subject.outputs)}; "
+                        f"{', '.join(subject.declared_unknown_inputs) or 'none'}")
+    table = {"family": app.family, "model": os.path.relpath(model_file or subject.model_path, folder),
              "parameters": os.path.relpath(subject.parameter_path, folder),
              **{k: v for k, v in proposal.items() if k != "family"}}
     if chosen_by is None:
@@ -610,6 +636,8 @@ def starter_text(subject: Subject, app: Applicability, folder: Path, structure=N
         head.append(f"# WARNING: uiogen analyze's trial design of these settings failed: {trial.reason}")
     elif trial is not None and app.observer is not None and chosen_by is not None:
         head.append(f"# not designed by uiogen analyze ({trial.reason}): the analysis's proposal, unmeasured")
+    if app.frozen:
+        head.append(f"# WARNING: {app.frozen_text()}")
     for note in app.notes:
         head.append(f"# note: {note}")
     return "\n".join(head + [""] + toml_lines(table, why)) + "\n"

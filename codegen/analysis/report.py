@@ -105,6 +105,8 @@ def family_lines(ranking: Ranking) -> list:
                          f"{trial.reason}")
         elif app.applies:
             lines.append(f"       trial design: not tried ({trial.reason})")
+        if app.frozen and app.applies:
+            lines.append(f"       {app.frozen_text()}")
         for text, basis in app.checked:
             lines.append(f"       checked: {text} [{basis}]")
         for note in app.notes:
@@ -121,6 +123,8 @@ def explain(ranking: Ranking) -> str:
     best, bt = ranking.entries[0]
     text = f"best: {best.family} ({GUARANTEES[best.guarantee][1]}"
     text += f"; certified: {_figures(bt.figures)})" if bt.status == "certified" else ")"
+    if best.frozen:
+        text += f"; {best.frozen_text()}"
     table = (best.observer or {}).get("substitute")
     if table:
         text += " with " + ", ".join(f"[substitute] {d} = \"{w}\"" for d, w in table.items())
@@ -138,11 +142,14 @@ def explain(ranking: Ranking) -> str:
         why = (f"its trial design {'failed' if trial.status == 'failed' else 'was not tried'}"
                + (f" ({trial.reason})" if trial.reason else "") + f", {best.family}'s is certified")
     elif ko[2] != kb[2]:
+        why = (f"its proposal holds measured signals constant ({', '.join(app.frozen)}), {best.family}'s reads "
+               f"every one")
+    elif ko[3] != kb[3]:
         why = (f"{best.family}'s guarantee is stronger: {GUARANTEES[best.guarantee][1]}, against "
                f"{GUARANTEES[app.guarantee][1]}")
         if trial.status == "certified":
             why += f" (measured: {own} {_figures(trial.figures)})"
-    elif ko[3] != kb[3]:
+    elif ko[4] != kb[4]:
         why = (f"{best.family} differentiates less (HOSMD orders {sum(best.differentiators.values())} against "
                f"{sum(app.differentiators.values())})")
     else:

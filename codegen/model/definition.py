@@ -173,6 +173,16 @@ class ModelDefinition:
                 raise ModelDefinitionError(
                     f"model {self.name!r}: output {out_name!r} uses undeclared symbol(s) "
                     f"{', '.join(sorted(stray))}")
+        for out_name, expr in self.outputs:
+            # a measurement of no state tells the observer nothing of them (issue 42): refused, not ignored
+            reads = sp.sympify(expr).free_symbols
+            if not reads & set(self.states):
+                what = (f"it reads only {', '.join(sorted(str(s) for s in reads))}" if reads else "it is a constant")
+                raise ModelDefinitionError(
+                    f"model {self.name!r}: output {out_name!r} = {expr} reads no state ({what}): it tells the "
+                    f"observer nothing about the states; write it in the states it measures (e.g. "
+                    f"({str(self.states[0])!r}, {self.states[0]}) for a sensor of {self.states[0]}), or drop it "
+                    f"from outputs (a signal measured directly is a known input or a scheduling signal)")
 
     @property
     def state_names(self) -> tuple:

@@ -385,6 +385,31 @@ def test_new_from_model_writes_the_best_family_and_it_designs(tmp_path, capsys):
 
 
 
+@pytest.mark.slow       # one analysis with trial designs and one design, about 30 s
+def test_new_from_model_with_outputs_writes_the_model_with_those_sensors_and_it_designs(tmp_path, capsys):
+    """Issue 42: ``uiogen new --from-model`` had no --outputs, so a model that declares more sensors
+    than the car has could not be written for the ones it has. With --outputs r the observer file's
+    model is DIR/NAME_model.py (the user's model, imported relative to it, with r measured), the
+    file is the analysis's choice for r alone, and it designs as written."""
+    model = (MODELS / "lateral_no_ay" / "lateral.py").read_text().replace(
+        'outputs=(("r", r),)', 'outputs=(("r", r), ("a_y", (F_yf + F_yr + F) / M))')
+    (tmp_path / "lateral.py").write_text(model)
+    shutil.copy(MODELS / "lateral_no_ay" / "car.toml", tmp_path / "car.toml")
+    assert cli.main(["new", str(tmp_path / "proj"), "--from-model", str(tmp_path / "lateral.py"),
+                     "--parameters", str(tmp_path / "car.toml"), "--outputs", "r"]) == 0
+    written = sorted((tmp_path / "proj").glob("*.toml"))
+    assert len(written) == 1
+    text = written[0].read_text()
+    wrapper = tmp_path / "proj" / f"{written[0].stem}_model.py"
+    assert f'model = "{wrapper.name}"' in text and "these sensors: r;" in text
+    assert "'../lateral.py'" in wrapper.read_text() and str(tmp_path) not in wrapper.read_text()
+    (tmp_path / "proj").rename(tmp_path / "moved")            # relative paths: the project moves whole
+    capsys.readouterr()
+    assert cli.main(["design", str(tmp_path / "moved" / written[0].name)]) == 0
+    assert cli.main(["new", str(tmp_path / "p2"), "--family", families.names()[0], "--outputs", "r"]) == 2
+    assert "--outputs goes with --from-model" in capsys.readouterr().err
+
+
 @pytest.mark.slow       # two analyses with trial designs and one design: full lane only
 def test_new_from_model_with_a_family_writes_that_family_with_what_the_analysis_measured(tmp_path, capsys):
     """uiogen new --from-model M --family F (refused before: "give either"): the observer file of F for the

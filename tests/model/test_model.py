@@ -129,3 +129,18 @@ def test_wrong_shape_and_undeclared_symbols():
         _toy(lambda x1, x2, u, d, v, k: sp.Matrix([x2]))
     with pytest.raises(ModelDefinitionError, match="undeclared symbol"):
         _toy(lambda x1, x2, u, d, v, k: sp.Matrix([x2, sp.Symbol("zeta") * x1]))
+
+
+def test_an_output_that_reads_no_state_is_refused_naming_it():
+    """Issue 42: an output that reads no state (a known input, an unknown input, a constant) was
+    accepted silently; it tells the observer nothing about the states. Refused, naming the output;
+    written in the state it measures, the model is accepted."""
+    x1, x2, u, d = sp.symbols("x1 x2 u d")
+
+    def model(outputs):
+        return ModelDefinition("no_state_output", (x1, x2), (u,), (d,), sp.Matrix([x2, -x1 - x2 + u + d]),
+                               outputs, (), ())
+    for expr, what in ((u, "it reads only u"), (2 * d, "it reads only d"), (sp.Integer(3), "it is a constant")):
+        with pytest.raises(ModelDefinitionError, match=rf"output 'a' = .* reads no state \({what}\)"):
+            model((("y", x1), ("a", expr)))
+    assert model((("y", x1), ("a", x2 + u))).output_names == ("y", "a")

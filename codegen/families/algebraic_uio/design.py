@@ -336,10 +336,20 @@ def build_problem(dec: rdeg.Decoupling, settings: AlgebraicSettings, scaling=Non
     fixed = fixed_modes(dec)
     if fixed["count"] and fixed["decay_limit"] <= settings.alpha:
         lo, hi = fixed["real_range"]
+        head = (f"{lpv.definition.name}: decay rate alpha = {settings.alpha:g} is out of reach for any gain: "
+                f"A - Q Mcal has {fixed['count']} mode(s) unobservable from C (invariant zeros of (A, D, C)) "
+                f"with real parts in [{lo:.4g}, {hi:.4g}] on the box")
+        if fixed["decay_limit"] > 1e-6:        # a mode that decays, however slowly: alpha below its rate
+            half = float(f"{0.5 * fixed['decay_limit']:.2g}")
+            raise InfeasibleLMIError(f"{head}; choose [design] alpha < {fixed['decay_limit']:.4g} (e.g. {half:g})")
+        # alpha > 0 is required, and no gain moves these modes: no alpha works (issue 42)
+        along = fixed_mode_states(dec)
         raise InfeasibleLMIError(
-            f"{lpv.definition.name}: decay rate alpha = {settings.alpha:g} is out of reach for any gain: "
-            f"A - Q Mcal has {fixed['count']} mode(s) unobservable from C (invariant zeros of (A, D, C)) "
-            f"with real parts in [{lo:.4g}, {hi:.4g}] on the box; choose alpha < {fixed['decay_limit']:.4g}")
+            f"{head}: {'it does' if fixed['count'] == 1 else 'they do'} not decay (real part up to {hi:.4g} 1/s), so "
+            f"no [design] alpha (> 0) works and no unknown-input observer of these outputs converges; measure "
+            f"{' or '.join(along) if along else 'a state along the mode'} too (an output that reads "
+            f"{'it' if len(along) <= 1 else 'one of them'}: the mode is then seen; `uiogen analyze` names the "
+            f"sensors that remove it)")
     blocks = _vertex_blocks(form, F0_poly, P_poly, A_poly, C)
     default = _balance([F for _, F, _ in blocks], C)
     S = default if scaling is None else np.asarray(scaling, dtype=float)
@@ -526,6 +536,31 @@ def fixed_modes(dec: rdeg.Decoupling, samples: int = 2000, seed: int = 0, rel_to
         return {"count": 0, "real_range": None, "decay_limit": None, "samples": len(points)}
     return {"count": count, "real_range": [min(reals), max(reals)], "decay_limit": -max(reals),
             "samples": len(points)}
+
+
+def fixed_mode_states(dec: rdeg.Decoupling, samples: int = 200, seed: int = 0, rel_tol: float = 1e-9) -> list:
+    """The states along the least stable fixed mode of :func:`fixed_modes` (its eigenvector's entries
+    above a tenth of the largest, in the model's units), at the corner or sample where it is least
+    stable: what an added output must read to make that mode observable."""
+    rng = np.random.default_rng(seed)
+    syms = dec.symbols
+    F0 = _lambdify(syms, dec.F0, np)
+    C = np.array(dec.lpv.C.evalf(), dtype=float)
+    n = C.shape[1]
+    corners = [[dec.boxes[s][(k >> i) & 1] for i, s in enumerate(syms)] for k in range(2 ** len(syms))]
+    best, vector = -np.inf, None
+    for vals in corners + [[rng.uniform(*dec.boxes[s]) for s in syms] for _ in range(samples)]:
+        F = np.asarray(F0(*vals), dtype=float)
+        scale = max(1.0, float(np.abs(F).max()), float(np.abs(C).max()))
+        w, V = np.linalg.eig(F)
+        for lam, v in zip(w, V.T):
+            pbh = np.vstack([F - lam * np.eye(n), C.astype(complex)])
+            if np.linalg.svd(pbh, compute_uv=False)[-1] <= rel_tol * scale and lam.real > best:
+                best, vector = float(lam.real), np.abs(v)
+    if vector is None:
+        return []
+    states = dec.lpv.definition.states
+    return [str(states[i]) for i in range(n) if vector[i] >= 0.1 * vector.max()]
 
 
 def check_fixed_gain(d: AlgebraicDesign, L: np.ndarray, C: np.ndarray, tol: float = 1e-9) -> dict:

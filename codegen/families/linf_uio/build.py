@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 import time
 from dataclasses import dataclass
 
@@ -17,7 +18,8 @@ from ...certificate.contraction import ContractionMetric
 from ...design.precision import required_margin
 from ...model import LPVModel, instantiate, load_parameters
 from ...project.observer_file import ObserverConfig
-from ...errors import ModelDefinitionError, RankConditionError, RepresentationError, UILoopError, UiogenError
+from ...errors import (CertificateError, ModelDefinitionError, RankConditionError, RepresentationError, SolverError, UILoopError,
+                      UiogenError)
 from ..base import ObserverBuild, StepNotes
 from . import design as linf_uio
 from . import discrete
@@ -231,10 +233,21 @@ def build(config: ObserverConfig, solver) -> LinfBuild:
             f"({2 ** len(polytope.scheduling_nonlinearities(lpv))} vertices), or narrow the scheduling box")
     try:
         design = linf_uio.design(poly, settings, solver, lpv.definition.states)
+        quadratic = design if settings.lyapunov == "quadratic" else \
+            linf_uio.design(poly, dataclasses.replace(settings, lyapunov="quadratic"), solver, lpv.definition.states)
     except RankConditionError as exc:
         raise RankConditionError(f"{config.source}: {exc}") from None
-    quadratic = design if settings.lyapunov == "quadratic" else \
-        linf_uio.design(poly, dataclasses.replace(settings, lyapunov="quadratic"), solver, lpv.definition.states)
+    except (SolverError, CertificateError) as exc:
+        if time.perf_counter() - t1 > RETRY_WITHIN_S:
+            raise
+        said, remedy = _solver_remedies(poly, settings, lpv.definition.states)
+        text = str(exc)
+        if remedy:          # the generic ways out give way to the one measured
+            text = re.sub(r"; loosen the tolerance \(now [^)]*\), rescale the data, or relax the design constraints",
+                          "", text)
+        exc.args = (f"{config.source}: {text}{said}",)   # the same error, its advice measured
+        exc.remedy = remedy
+        raise exc from None
     if design.gamma > quadratic.gamma:
         # the quadratic design is a point of the PDLF problem (P_i = P, X = 0, the rate terms
         # cancel): PDLF never returns worse than what it contains
@@ -255,6 +268,42 @@ def build(config: ObserverConfig, solver) -> LinfBuild:
                "solve_s": design.solution.solve_time_s, "build_s": design.solution.build_time_s,
                "certificates_s": t3 - t2}
     return LinfBuild(config, lpv, poly, err, design, quadratic, cert, data, dcert, timings)
+
+
+#: a failed solve that took less than this many seconds is retried with the settings that may work
+#: (:func:`_solver_remedies`): a few designs of about its cost, so the error names a measured fix
+RETRY_WITHIN_S = 30.0
+
+
+def _solver_remedies(poly, settings, states: tuple = ()) -> tuple:
+    """(text, remedy) after a solver failure of Theorem 1: the design again with [design] lyapunov =
+    "quadratic" (one Lyapunov matrix: fewer, better-conditioned blocks), then with alpha at a half
+    and a tenth, then both; the first that the solver answers and the numpy re-check certifies is
+    named (remedy {"design.KEY": value}, which ``uiogen analyze`` designs again with), else the
+    text says that none of them does. Measurements with their own solver: nothing is committed."""
+    tries = []
+    if settings.lyapunov != "quadratic":
+        tries.append({"lyapunov": "quadratic"})
+    for factor in (2, 10):
+        tries.append({"alpha": float(f"{settings.alpha / factor:.3g}")})
+        if settings.lyapunov != "quadratic":
+            tries.append({"lyapunov": "quadratic", "alpha": float(f"{settings.alpha / factor:.3g}")})
+    for change in tries:
+        try:
+            d = linf_uio.design(poly, dataclasses.replace(settings, **change), FreshSolver(), states)
+        except UiogenError:
+            continue
+        shown = " with ".join(f"{k} = {toml_value(v)}" for k, v in change.items())
+        return (f"; measured: with [design] {shown} the design is solved and certified (gamma = {d.gamma:.4g}; "
+                f"a lower alpha certifies a slower decay)" if "alpha" in change else
+                f"; measured: with [design] {shown} the design is solved and certified (gamma = {d.gamma:.4g})",
+                {f"design.{k}": v for k, v in change.items()})
+    tried = ", ".join(" with ".join(f"{k} = {toml_value(v)}" for k, v in c.items()) for c in tries)
+    return f"; measured: [design] {tried} do not solve either", {}
+
+
+def toml_value(v) -> str:
+    return f'"{v}"' if isinstance(v, str) else f"{v:g}"
 
 
 def _measured_remedies(poly, settings, data, sample_time: float, states: tuple = ()) -> str:

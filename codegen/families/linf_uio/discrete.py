@@ -641,17 +641,15 @@ def _ui_loop_advice(data: ObserverData, ceiling: float, at) -> tuple:
             f"over the scheduling box")
     if ceiling <= 0:
         head += f" (it is unstable at {where}: eigenvalue with real part {-ceiling:.4g} 1/s)"
-    # the other way out, not measured here (it changes the polytope and so the gains): a box that
-    # reaches beyond where the vehicle runs, narrowed at the point the loop is slowest
-    box = (f"; or narrow the parameter file's [scheduling] box where it is slowest ({where}), if the vehicle "
-           f"does not run there")
+    # no box advice: a narrowed box changes the polytope and so the gains, and the slowest point of
+    # the new design moves with its edge (issue 42): only what was measured here is said
     for factor in (2, 5, 10, 20, 50):
         Tf = data.Tf * factor
         if slowest_grid_decay(data, Tf, n_grid=101)[0] > 0 and _ui_loop_feasible(data, 0.0, Tf):
             return (f"{head}; measured: [ui_filter] time_constant = {Tf:g} s certifies it (a slower unknown-input "
-                    f"estimate){box}", {"ui_filter.time_constant": float(f"{Tf:g}")})
+                    f"estimate)", {"ui_filter.time_constant": float(f"{Tf:g}")})
     return (f"{head}; measured: no filter constant up to {50 * data.Tf:g} s certifies it (the gains close an "
-            f"unstable loop through the UI filter){box}", {})
+            f"unstable loop through the UI filter)", {})
 
 
 def loop_is_certifiable(data: ObserverData) -> bool:

@@ -376,3 +376,51 @@ def test_lateral_force_with_noise_meets_5_percent():
     assert res["paper_format"]["rows"]["F_yr"]["rms_percent_after_5s"] <= 5.0
     assert res["observer"]["F_yr"]["unit"] == "N" and res["observer"]["F_yr"]["rms_percent"] <= 5.0
     assert res["max_abs_ay"] > 5.0          # the tyres are in their nonlinear range (xi != 0)
+
+
+# ---- issue 42 item 10: advice of a decay rate that is allowed and works, or of a sensor -----------------
+
+def _yaw_moment_build(tmp_path, outputs, alpha=1.0):
+    """A relative-degree-2 yaw-moment model: heading psi' = r, yaw rate r' = -(c / v) r + M_z / I_z
+    (the yaw moment M_z unknown, the damping falling with the speed v), lateral offset e' = V psi at a
+    reference speed V. With the heading alone the offset is an unobservable integrator: a fixed mode
+    at 0 of A - Q Mcal."""
+    psi, r, e, M_z = sp.symbols("psi r e M_z")
+    v = sp.Symbol("v", positive=True)
+    states = {"psi": psi, "r": r, "e": e}
+    model = ModelDefinition("yaw_moment", (psi, r, e), (), (M_z,),
+                            sp.Matrix([r, -40.0 * r / v + M_z / 2500.0, 20.0 * psi]),
+                            tuple((o, states[o]) for o in outputs), (SchedulingSignal(v),), ())
+    params = _write_params(tmp_path, "yaw", sched="v", lo=5.0, hi=30.0,
+                           extra="derivative_bounds = [[-1.0, 1.0]]\n\n[state_bounds]\npsi = [-0.5, 0.5]\nr = [-1.0, 1.0]\ne = [-2.0, 2.0]\n")
+    spec = {"order": 5, "lipschitz": 1e3}
+    cfg = ObserverConfig("yaw_test", "algebraic_uio", "none", "yaw.toml", "", "exact", 0.001,
+                         {"lmi": "direct", "alpha": alpha, "margin": 1e-4,
+                          "differentiators": {**{f"y_{o}": spec for o in outputs}, "v": {"order": 5, "lipschitz": 50.0}}},
+                         {}, "", str(tmp_path / "yaw.toml"))
+    return algebraic_uio.build(cfg, FreshSolver(), lpv=instantiate(model, params))
+
+
+def test_no_decay_rate_works_for_a_mode_that_does_not_decay_and_the_sensor_named_does(tmp_path):
+    """The error said "choose alpha < -0" (or "< -2.447") where alpha > 0 is required: no alpha works
+    for a fixed mode that does not decay. It says so and names the state to measure; measured, the
+    design goes through."""
+    (tmp_path / "yaw.toml").write_text("")
+    with pytest.raises(InfeasibleLMIError) as err:
+        _yaw_moment_build(tmp_path, ("psi",))
+    text = str(err.value)
+    assert "no [design] alpha (> 0) works" in text and "choose" not in text, text
+    assert "measure e too" in text, text
+    b = _yaw_moment_build(tmp_path, ("psi", "e"))
+    assert b.dec.relative_degrees == (2, 3) and b.design.fixed_modes["count"] == 0
+
+
+def test_a_decay_rate_below_the_fixed_modes_that_the_error_advises_designs(builds):
+    """Example 1, alpha = 6.5 beyond its fixed mode at -6: the advised value, applied, designs."""
+    b = builds["algebraic_uio_example1"]
+    with pytest.raises(InfeasibleLMIError) as err:
+        alg.design(b.dec, dataclasses.replace(b.settings, alpha=6.5), FreshSolver())
+    import re
+    advised = float(re.search(r"choose \[design\] alpha < 6 \(e\.g\. ([0-9.]+)\)", str(err.value)).group(1))
+    assert 0 < advised < 6
+    alg.design(b.dec, dataclasses.replace(b.settings, alpha=advised), FreshSolver())

@@ -205,3 +205,25 @@ def test_a_quadratic_design_claims_every_rate_not_frozen_scheduling(built):
     assert "[0, 0]" not in cert.region_note and "any (quadratic Lyapunov function)" in cert.region_note
     pdlf = built("lpv_linf_driver_torque").certificate
     assert "membership rates stay within the rate bounds" in pdlf.claim
+
+
+@pytest.mark.slow       # three fresh designs of the driver-torque observer, 7 s
+def test_a_solver_failure_names_the_setting_that_solves_and_it_designs(config):
+    """Issue 42 item 10: an infeasible Theorem 1 (a decay rate too high) was answered with the
+    solver's generic ways out (a looser tolerance, a rescaling); the retry with the settings that
+    may work is cheap, so the error names the one measured to solve, as a remedy ``uiogen analyze``
+    designs again with, and that setting, applied, designs."""
+    import dataclasses
+    import re
+    from codegen.errors import InfeasibleLMIError
+    high = dataclasses.replace(config, design={**config.design, "alpha": 60.0})
+    with pytest.raises(InfeasibleLMIError) as err:
+        pipeline.solve(high)
+    text = str(err.value)
+    found = re.search(r"measured: with \[design\] alpha = ([0-9.]+) the design is solved and certified", text)
+    assert found, text
+    alpha = float(found.group(1))
+    assert err.value.remedy == {"design.alpha": alpha} and alpha < 60.0
+    assert "loosen the tolerance" not in text
+    b, _ = pipeline.solve(dataclasses.replace(config, design={**config.design, "alpha": alpha}))
+    assert b.design.settings.alpha == alpha and b.recheck["feasible"]
