@@ -41,7 +41,9 @@ DATA_KEYS = {"time": Rule(None, required=True, doc='"COLUMN" (seconds) or { colu
              "inputs": Rule(dict, required=True, doc="{ OBSERVER_INPUT = { column = ..., unit = ... } }"),
              "truth": Rule(dict, doc="{ OBSERVER_OUTPUT = { column = ..., unit = ... } }"),
              "dbc": Rule(str, doc='the DBC a CAN log (BLF, ASC) is decoded with, relative to the observer file; '
-                                  'columns are then "MESSAGE.SIGNAL"')}
+                                  'columns are then "MESSAGE.SIGNAL"'),
+             "can_channel": Rule(int, ge=1, doc="the bus of a CAN log recorded on several, numbered as Vector's "
+                                               "tools show it (1 for CAN 1): only its frames are decoded")}
 
 
 def normalize_unit(unit: str) -> str:
@@ -68,6 +70,7 @@ class ColumnMap:
     inputs: dict = field(default_factory=dict)
     truth: dict = field(default_factory=dict)
     dbc: str | None = None          # the DBC of a CAN log, as a path (relative ones resolved against the source)
+    can_channel: int | None = None  # the bus of a multi-bus CAN log (1 = CAN 1); None: the log must not need one
 
 
 def _column(value, source: str, section: str, key: str, units=tuple(UNITS), keys=COLUMN_KEYS) -> Column:
@@ -123,7 +126,11 @@ def parse(table, source: str) -> ColumnMap:
                                '(dbc = "vehicle.dbc")')
         # read when a CAN log is run (a missing DBC must not break the verbs that never read a log)
         dbc = str(Path(source).parent / dbc) if source else dbc
-    return ColumnMap(source, time, inputs, truth, dbc)
+    can_channel = parsed.get("can_channel")
+    if can_channel is not None and dbc is None:
+        raise config_error(source, "data", "can_channel", can_channel, "a bus number beside dbc = \"FILE.dbc\" (it "
+                           "chooses the frames of a CAN log, which only a DBC decodes)")
+    return ColumnMap(source, time, inputs, truth, dbc, can_channel)
 
 
 def model_unit(model, signal: str) -> str | None:

@@ -741,7 +741,8 @@ class CanLog(OnGrid):
         python-can or cantools is not installed.
     """
 
-    def __init__(self, path, channels, time_key: str, methods, sample_time: float, dbc, chunk_rows: int = BATCH_ROWS):
+    def __init__(self, path, channels, time_key: str, methods, sample_time: float, dbc, chunk_rows: int = BATCH_ROWS,
+                 bus: int | None = None):
         can, _ = _can()
         p = Path(path)
         self.path, self.units, self.time_key, self.chunk_rows = p, dict(channels), time_key, int(chunk_rows)
@@ -756,6 +757,8 @@ class CanLog(OnGrid):
         times = {n: [] for n in self.units}
         values = {n: [] for n in self.units}
         seen, first = set(), None
+        buses = {}              # mapped (frame id, extended) -> the buses (1 = CAN 1) its frames came on
+        on_bus = set()          # the buses of every frame
         what = "BLF" if self.format == "blf" else "ASC"
         reader = None
         try:
@@ -771,11 +774,17 @@ class CanLog(OnGrid):
                 if frame.is_error_frame or frame.is_remote_frame:
                     continue
                 first = frame.timestamp if first is None else first
+                # python-can numbers the buses from 0 (the file's CAN 1 is channel 0)
+                number = frame.channel + 1 if isinstance(frame.channel, int) else None
+                on_bus.add(number)
+                if bus is not None and number != bus:
+                    continue
                 key = (frame.arbitration_id, bool(frame.is_extended_id))
                 seen.add(key)
                 entry = wanted.get(key)
                 if entry is None:
                     continue
+                buses.setdefault(key, set()).add(number)
                 msg, sigs = entry
                 try:
                     decoded = msg.decode(bytes(frame.data), decode_choices=False, scaling=True)
@@ -795,12 +804,25 @@ class CanLog(OnGrid):
         finally:
             if reader is not None:
                 reader.stop()
+        listed = ", ".join("CAN " + str(b) if b is not None else "a bus with no number" for b in sorted(
+            on_bus, key=lambda b: (b is None, b or 0)))
+        if bus is not None and bus not in on_bus:
+            raise DatasetError(f"{p}: [data] can_channel = {bus}: the log has no frame on CAN {bus}; its frames are on "
+                               f"{listed or 'no bus'}; allowed: one of those")
+        mixed = {k: b for k, b in buses.items() if len(b) > 1}
+        if mixed:
+            k, b = next(iter(mixed.items()))
+            raise DatasetError(f"{p}: message {wanted[k][0].name!r} (frame id {frame_id(k)}) comes on "
+                               f"{len(b)} buses ({', '.join('CAN ' + str(x) for x in sorted(b, key=lambda x: x or 0))}): "
+                               f"two sources of one signal would be mixed; allowed: [data] can_channel = N (N: the "
+                               f"bus to read, as numbered in the log)")
         absent = [k for k in wanted if k not in seen]
         if absent:
             ids = sorted(seen)
             shown = [frame_id(k) for k in ids[:30]] + ([f"... ({len(ids)} in all)"] if len(ids) > 30 else [])
             names = ", ".join(f"{wanted[k][0].name!r} (frame id {frame_id(k)})" for k in absent)
-            raise DatasetError(f"{p}: message(s) {names} of the DBC {dbc} never appear in the log; the log has "
+            raise DatasetError(f"{p}: message(s) {names} of the DBC {dbc} never appear in the log"
+                               + (f" on CAN {bus}" if bus is not None else "") + "; the log has "
                                + (f"frame ids {', '.join(shown)}" if ids else "no CAN frames")
                                + "; allowed: messages the log holds (is the DBC the log's bus's?)")
         self.channels = []
@@ -844,7 +866,7 @@ def _example(db) -> str:
 
 
 def open_log(path, columns, time_key: str, sample_time: float, methods=None, block_bytes=None, batch_rows=None,
-             dbc=None):
+             dbc=None, bus=None):
     """The reader of a log by its content: :class:`ParquetLog`, :class:`MdfLog`, :class:`BagLog`,
     :class:`CanLog` (with ``dbc``, the DBC's path) or a CSV :class:`~codegen.validation.csvlog.LogReader`;
     ``columns`` includes ``time_key`` (the readers of channels with their own times do not read it)."""
@@ -853,7 +875,7 @@ def open_log(path, columns, time_key: str, sample_time: float, methods=None, blo
         return ParquetLog(path, columns, batch_rows or BATCH_ROWS)
     if what in CAN_FORMATS:
         channels = {c: u for c, u in columns.items() if c != time_key}
-        return CanLog(path, channels, time_key, methods or {}, sample_time, dbc, batch_rows or BATCH_ROWS)
+        return CanLog(path, channels, time_key, methods or {}, sample_time, dbc, batch_rows or BATCH_ROWS, bus)
     if what in ("mdf", "rosbag2"):
         channels = {c: u for c, u in columns.items() if c != time_key}
         return (MdfLog if what == "mdf" else BagLog)(path, channels, time_key, methods or {}, sample_time,

@@ -117,7 +117,7 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | N
                                  f"the observer file), the columns then MESSAGE.SIGNAL", source=cmap.source,
                                  section="data", key="dbc", allowed="the path of the log's DBC")
     reader = logfiles.open_log(p, units, cmap.time.column, obs.sample_time, methods, block_bytes, batch_rows,
-                               dbc=cmap.dbc)
+                               dbc=cmap.dbc, bus=cmap.can_channel)
     mdf = isinstance(reader, logfiles.OnGrid)       # MDF4, ROS 2, CAN: channels with their own times
     word = "channel" if mdf else "column"
     # the units the file states (an MDF channel's, a Parquet field's) against the map's and the model's

@@ -44,9 +44,14 @@ TO_DBC = {"rad": 1.0, "deg": 180 / np.pi, "deg/s": 180 / np.pi, "m/s^2": 1.0, "k
 """The Stanford columns (rad, rad/s, m/s^2, m/s) into the DBC's units."""
 
 
-def _dbc(path: Path, signals: dict, floats: bool = False) -> Path:
+EXTENDED = 0x18DA0000
+"""Added to every frame id of a DBC of 29-bit (extended) ids (J1939-like: above the 11-bit range)."""
+
+
+def _dbc(path: Path, signals: dict, floats: bool = False, extended: bool = False) -> Path:
     """A DBC of ``signals`` (QUANTIZED's layout): 16-bit integers with their scale and offset, two to a
-    message; ``floats``: one IEEE double per message instead (no quantization), in the Stanford units."""
+    message; ``floats``: one IEEE double per message instead (no quantization), in the Stanford units;
+    ``extended``: 29-bit frame ids (:data:`EXTENDED` added)."""
     messages = {}
     for key, (_, msg, fid, sig, unit, scale, offset, signed) in signals.items():
         if floats:
@@ -58,7 +63,8 @@ def _dbc(path: Path, signals: dict, floats: bool = False) -> Path:
         fid_, sigs = messages.setdefault(msg, (fid, []))
         sigs.append(Signal(sig, start=16 * len(sigs), length=16, is_signed=signed,
                            conversion=LinearConversion(scale, offset, False), unit=unit))
-    db = cantools.database.Database(messages=[Message(frame_id=fid, name=name, length=8, signals=sigs)
+    db = cantools.database.Database(messages=[Message(frame_id=fid + (EXTENDED if extended else 0), name=name, length=8,
+                                                      signals=sigs, is_extended_frame=extended)
                                               for name, (fid, sigs) in messages.items()])
     path.write_text(db.as_dbc_string())
     return path
@@ -69,9 +75,12 @@ def _raw(x: np.ndarray, scale: float, offset: float) -> np.ndarray:
     return np.round((x - offset) / scale)
 
 
-def _log(path: Path, dbc: Path, cols: dict, rows=slice(None), skip=(), floats: bool = False) -> Path:
+def _log(path: Path, dbc: Path, cols: dict, rows=slice(None), skip=(), floats: bool = False, channel: int = 0,
+         also=None) -> Path:
     """The Stanford slice as frames of the DBC, written by python-can's BLF or ASC writer (by suffix):
-    every message once per row at the row's time (from START); ``skip``: messages left out."""
+    every message once per row at the row's time (from START); ``skip``: messages left out; ``channel``:
+    python-can's bus number (0: the file's CAN 1); ``also``: (channel, message, {signal: factor}) a second
+    copy of one message on another bus, its raw values scaled (another sensor)."""
     db = cantools.database.load_file(str(dbc))
     t = cols["t"][rows] - cols["t"][0] + START
     payload = {}                                     # message -> {signal: per-row raw (or float) values}
@@ -90,7 +99,12 @@ def _log(path: Path, dbc: Path, cols: dict, rows=slice(None), skip=(), floats: b
                 m = db.get_message_by_name(name)
                 data = m.encode({s: (float(v[k]) if floats else int(v[k])) for s, v in sigs.items()}, scaling=floats)
                 writer.on_message_received(can.Message(timestamp=float(tk), arbitration_id=m.frame_id, data=data,
-                                                       is_extended_id=False))
+                                                       is_extended_id=m.is_extended_frame, channel=channel))
+                if also is not None and also[1] == name:
+                    other = m.encode({s: int(v[k] * also[2].get(s, 1.0)) for s, v in sigs.items()}, scaling=False)
+                    writer.on_message_received(can.Message(timestamp=float(tk) + 1e-4, arbitration_id=m.frame_id,
+                                                           data=other, is_extended_id=m.is_extended_frame,
+                                                           channel=also[0]))
     return path
 
 
@@ -175,6 +189,44 @@ def test_quantized_signals_give_the_figures_their_scale_explains(data, quantized
 
 
 QUANTIZED_UNIT = {f"{m}.{s}": u for (_, m, _, s, u, *_) in QUANTIZED.values()}
+
+
+def test_29_bit_frame_ids_give_the_11_bit_figures(data, quantized, tmp_path):
+    """The same frames with extended (29-bit) ids, the DBC's messages extended too: the same figures to
+    the last bit; a DBC of 11-bit ids does not decode the 29-bit frames (an id is its number and its
+    kind), and the message says so."""
+    dbc = _dbc(tmp_path / "vehicle.dbc", QUANTIZED, extended=True)
+    log = _log(tmp_path / "log.blf", dbc, data["cols"])
+    res = _run(_can_observer(tmp_path), log)
+    ref = _run(quantized["observer"], quantized["blf"])
+    assert res["observer"]["beta"]["rms"] == ref["observer"]["beta"]["rms"]
+    assert np.array_equal(res["signals"]["beta"], ref["signals"]["beta"])
+    (tmp_path / "vehicle.dbc").write_text(quantized["dbc"].read_text())         # 11-bit ids against the 29-bit log
+    err = _cli_error(_can_observer(tmp_path), log)
+    assert "never appear in the log" in err and f"0x{EXTENDED + 0x120:X} (extended)" in err, err
+
+
+def test_a_log_of_two_buses_needs_its_bus_named(data, quantized, tmp_path):
+    """IMU frames on CAN 1 and, from another unit, on CAN 2 (its yaw rate 20 % off): mixed, the signal
+    would jump between the two; refused naming both buses and the key. can_channel = 1 gives the
+    single-bus figures to the last bit; a bus the log does not have lists those it has."""
+    log = _log(tmp_path / "two.asc", quantized["dbc"], data["cols"], also=(1, "IMU", {"YawRate": 1.2}))
+    observer = _can_observer(tmp_path)
+    (tmp_path / "vehicle.dbc").write_text(quantized["dbc"].read_text())
+    err = _cli_error(observer, log)
+    assert "message 'IMU' (frame id 0x120) comes on 2 buses (CAN 1, CAN 2)" in err
+    assert "[data] can_channel = N" in err
+    text = observer.read_text().replace('dbc = "vehicle.dbc"\n', 'dbc = "vehicle.dbc"\ncan_channel = 1\n')
+    observer.write_text(text)
+    res = _run(observer, log)
+    ref = _run(quantized["observer"], quantized["asc"])
+    assert res["observer"]["beta"]["rms"] == ref["observer"]["beta"]["rms"]
+    observer.write_text(text.replace("can_channel = 1", "can_channel = 3"))
+    err = _cli_error(observer, log)
+    assert "[data] can_channel = 3: the log has no frame on CAN 3; its frames are on CAN 1, CAN 2" in err
+    observer.write_text(text.replace("can_channel = 1", "can_channel = 0"))
+    err = _cli_error(observer, log, kind="ConfigurationError")
+    assert "can_channel = 0" in err and ">= 1" in err
 
 
 def test_staggered_frames_are_held(data, tmp_path):
