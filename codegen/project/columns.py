@@ -36,12 +36,16 @@ COLUMN_KEYS = {"column": Rule(str, required=True, doc="the log's column (CSV hea
                "resample": Rule(str, doc='a channel at another rate than the observer\'s: "hold" (default: the last '
                                          'sample) or "linear" (causal, delayed by its sampling step)')}
 RESAMPLE = ("hold", "linear")
+PHYSICS_CHECKS = ("refuse", "warn")
 TIME_KEYS = {k: v for k, v in COLUMN_KEYS.items() if k != "resample"}   # the time base is not resampled
 DATA_KEYS = {"time": Rule(None, required=True, doc='"COLUMN" (seconds) or { column = ..., unit = ... }'),
              "inputs": Rule(dict, required=True, doc="{ OBSERVER_INPUT = { column = ..., unit = ... } }"),
              "truth": Rule(dict, doc="{ OBSERVER_OUTPUT = { column = ..., unit = ... } }"),
              "dbc": Rule(str, doc='the DBC a CAN log (BLF, ASC) is decoded with, relative to the observer file; '
-                                  'columns are then "MESSAGE.SIGNAL"')}
+                                  'columns are then "MESSAGE.SIGNAL"'),
+             "physics_checks": Rule(str, choices=PHYSICS_CHECKS,
+                                    doc='"refuse" (default): a log that fails a physics relation of the model is '
+                                        'refused; "warn": it is run, the failure a warning in the report')}
 
 
 def normalize_unit(unit: str) -> str:
@@ -68,6 +72,7 @@ class ColumnMap:
     inputs: dict = field(default_factory=dict)
     truth: dict = field(default_factory=dict)
     dbc: str | None = None          # the DBC of a CAN log, as a path (relative ones resolved against the source)
+    physics_checks: str = "refuse"  # "warn": a failed physics relation of the log checks is a warning
 
 
 def _column(value, source: str, section: str, key: str, units=tuple(UNITS), keys=COLUMN_KEYS) -> Column:
@@ -123,7 +128,7 @@ def parse(table, source: str) -> ColumnMap:
                                '(dbc = "vehicle.dbc")')
         # read when a CAN log is run (a missing DBC must not break the verbs that never read a log)
         dbc = str(Path(source).parent / dbc) if source else dbc
-    return ColumnMap(source, time, inputs, truth, dbc)
+    return ColumnMap(source, time, inputs, truth, dbc, parsed.get("physics_checks", "refuse"))
 
 
 def model_unit(model, signal: str) -> str | None:
