@@ -138,3 +138,33 @@ def test_validate_data_runs_a_refused_log_with_the_override(tmp_path):
     assert any("overridden by [data] physics_checks" in w for w in res["warnings"])
     text = _validate(wrong, log)
     assert text.returncode == 0 and "overridden by [data] physics_checks" in text.stdout
+
+
+def test_the_shared_real_log_with_noise_added_and_a_wrong_column(tmp_path):
+    """The shared Stanford log (real sensors) through stanford_sideslip's checks with its declared noise
+    (the family's validation noise): with sigma 0.05 m/s more on the speed it passes, every relation ok.
+    The yaw acceleration mapped to the yaw rate is still refused: its high-frequency content (0.8 rad/s
+    by its second differences) is far beyond a yaw-rate sensor's declared noise, so it is not taken
+    as noise (NOISE_TRUST), which would hide the wrong column."""
+    from codegen.project import observer_file as observers
+    from codegen.project.columns import model_unit
+    from codegen.project.precision import input_noise
+    from codegen.validation import stanford as S
+    from test_log_checks import MAP, NAME, _feed, _real
+    run = S.load(_real(tmp_path / "real.csv"))
+    cols = {c: np.array(getattr(run, c)) for c in S.COLUMNS}
+    config = observers.get(NAME)
+    model, names = config.load_model(), list(MAP)
+    declared = input_noise(config, names)
+    assert declared["y_r"] < 1e-3
+
+    def checks():
+        return L.LogChecks("log.csv", model, load_parameters(config.parameter_path), names,
+                           {n: L.Column(MAP[n][0], MAP[n][1], model_unit(model, n)) for n in names}, 0.01,
+                           noise=declared)
+    noisy = dict(cols, vx=cols["vx"] + SIGMA * np.random.default_rng(1).standard_normal(cols["vx"].size))
+    rep = _feed(checks(), noisy)
+    assert {c["verdict"] for c in rep["checks"]} == {"ok"} and rep["warnings"] == []
+    assert rep["noise"]["v_x"] == pytest.approx(0.051, abs=0.003)
+    with pytest.raises(DatasetError, match=r"column 'yaw_rate' \(y_r.*wrong column"):
+        _feed(checks(), dict(cols, yaw_rate=cols["yaw_acc"]))
