@@ -50,7 +50,7 @@ import numpy as np
 from ..certificate.contraction import ContractionMetric
 from ..emit import generate as emit
 from ..project import observer_file as observers
-from .. import families, pipeline
+from .. import pipeline
 from ..errors import CertificateError, ConfigurationError, ModelDefinitionError
 from ..emit.toolchain import STRICT_CFLAGS, compile_and_link
 
