@@ -341,39 +341,6 @@ def test_the_same_log_elsewhere_has_no_peaks_of_ours(tmp_path):
     assert there["peaks"] == [] and there["observer"] == here["observer"]
 
 
-def test_a_bound_short_of_its_tolerance_designs_on_its_stated_enclosure(tmp_path):
-    """A magic-formula tyre of the unmeasured sideslip, bounded with a budget of one box (issue 42
-    item 8): it was refused ("gap ... after 1 boxes"). A sound enclosure short of its tolerance gives
-    a larger DMVT box, not a wrong one: the design goes through on it, and the certificate and the
-    artifact state that the bound is an enclosure and its gap."""
-    model = DERIVED_SPEED.replace("F_yr = C_r * (l_r * r / v_x - beta)",
-                                  "F_yr = 3000 * sp.sin(1.3 * sp.atan(C_r * (l_r * r / v_x - beta) / 3900))")
-    obs = project(tmp_path, "ts_fuzzy_uio", model, extra="[design]\nbounds_max_boxes = 1\nbounds_rel_tol = 1e-12\n")
-    b = pipeline.build(observers.get(str(obs)))
-    (loose,) = b.ts.loose_bounds
-    assert "/dbeta: sound enclosure" in loose and "gap" in loose and "stopped after" in loose
-    assert "not tight within [design] bounds_max_boxes" in b.certificate.plant_class and loose in b.certificate.plant_class
-    row = [e for row in b.artifact()["ts_model"]["jacobian_bounds"] for e in row if e.get("enclosure")]
-    assert len(row) == 1 and row[0]["state"] == "beta" and row[0]["gap"] > 0
-    assert row[0]["lower"] <= row[0]["attained"][0] <= row[0]["attained"][1] <= row[0]["upper"]
-
-
-def test_a_bound_out_of_reach_names_the_files_boxes(tmp_path):
-    """An expression that cannot be enclosed on the box (asin of 20 beta, beta in [-0.1, 0.1]): the
-    error names the parameter file's boxes and no [design] budget (which cannot fix it); narrowing
-    the box as it says designs."""
-    from codegen.errors import BoundsError
-    model = DERIVED_SPEED.replace("F_yr = C_r * (l_r * r / v_x - beta)",
-                                  "F_yr = 3000 * sp.asin(20 * beta) + C_r * (l_r * r / v_x - beta)")
-    obs = project(tmp_path, "ts_fuzzy_uio", model)
-    with pytest.raises(BoundsError, match=r"car.toml: .*narrow those of the variables it ranges over "
-                                          r"\(observer .*obs_ts_fuzzy_uio") as err:
-        pipeline.build(observers.get(str(obs)))
-    assert "bounds_max_boxes" not in str(err.value) and "bounds_rel_tol" not in str(err.value)
-    (tmp_path / "car.toml").write_text((PARAMS + INPUTS).replace("beta = [-0.1, 0.1]", "beta = [-0.04, 0.04]"))
-    pipeline.build(observers.get(str(obs)))
-
-
 _FIELDS_MODEL = '''
 import sympy as sp
 from codegen.model import ModelDefinition, SchedulingSignal
