@@ -349,7 +349,8 @@ def cmd_validate(args) -> int:
         if args.json:
             from .validation.metrics import DEFINITIONS
             keys = ("observer", "baselines", "estimates", "status_flags", "samples", "splits", "peaks", "warnings",
-                    "log_checks", "baselines_skipped", "unchecked_columns", "format", "resampling", "out")
+                    "log_checks", "baselines_skipped", "unchecked_columns", "format", "resampling", "out",
+                    "noise", "log_checks_overridden")
             print(json.dumps({**{k: result[k] for k in keys if k in result}, "definitions": DEFINITIONS},
                              indent=1, sort_keys=True))
             return 0

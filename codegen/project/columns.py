@@ -36,6 +36,7 @@ COLUMN_KEYS = {"column": Rule(str, required=True, doc="the log's column (CSV hea
                "resample": Rule(str, doc='a channel at another rate than the observer\'s: "hold" (default: the last '
                                          'sample) or "linear" (causal, delayed by its sampling step)')}
 RESAMPLE = ("hold", "linear")
+PHYSICS_CHECKS = ("refuse", "warn")
 TIME_KEYS = {k: v for k, v in COLUMN_KEYS.items() if k != "resample"}   # the time base is not resampled
 DATA_KEYS = {"time": Rule(None, required=True, doc='"COLUMN" (seconds) or { column = ..., unit = ... }'),
              "inputs": Rule(dict, required=True, doc="{ OBSERVER_INPUT = { column = ..., unit = ... } }"),
@@ -43,7 +44,10 @@ DATA_KEYS = {"time": Rule(None, required=True, doc='"COLUMN" (seconds) or { colu
              "dbc": Rule(str, doc='the DBC a CAN log (BLF, ASC) is decoded with, relative to the observer file; '
                                   'columns are then "MESSAGE.SIGNAL"'),
              "can_channel": Rule(int, ge=1, doc="the bus of a CAN log recorded on several, numbered as Vector's "
-                                               "tools show it (1 for CAN 1): only its frames are decoded")}
+                                               "tools show it (1 for CAN 1): only its frames are decoded"),
+             "physics_checks": Rule(str, choices=PHYSICS_CHECKS,
+                                    doc='"refuse" (default): a log that fails a physics relation of the model is '
+                                        'refused; "warn": it is run, the failure a warning in the report')}
 
 
 def normalize_unit(unit: str) -> str:
@@ -70,6 +74,7 @@ class ColumnMap:
     inputs: dict = field(default_factory=dict)
     truth: dict = field(default_factory=dict)
     dbc: str | None = None          # the DBC of a CAN log, as a path (relative ones resolved against the source)
+    physics_checks: str = "refuse"  # "warn": a failed physics relation of the log checks is a warning
     can_channel: int | None = None  # the bus of a multi-bus CAN log (1 = CAN 1); None: the log must not need one
 
 
@@ -130,7 +135,7 @@ def parse(table, source: str) -> ColumnMap:
     if can_channel is not None and dbc is None:
         raise config_error(source, "data", "can_channel", can_channel, "a bus number beside dbc = \"FILE.dbc\" (it "
                            "chooses the frames of a CAN log, which only a DBC decodes)")
-    return ColumnMap(source, time, inputs, truth, dbc, can_channel)
+    return ColumnMap(source, time, inputs, truth, dbc, parsed.get("physics_checks", "refuse"), can_channel)
 
 
 def model_unit(model, signal: str) -> str | None:

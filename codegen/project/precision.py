@@ -40,7 +40,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .settings import Rule, parse_settings, setting
+from .settings import Rule, parse_settings, setting, suggest
 
 DEFAULT_FRACTION = 0.1
 
@@ -68,3 +68,38 @@ class PrecisionSettings:
 def parse(table, source: str) -> PrecisionSettings:
     """The ``[precision]`` table, every key and value checked (ConfigurationError naming the file)."""
     return parse_settings(PrecisionSettings, table or {}, source=source, section="precision")
+
+
+def input_noise(config, inputs) -> dict:
+    """{input name: standard deviation} of the sensor noise of an observer's ``inputs``: its observer
+    file's ``[precision] noise`` table, else the family's validation noise of a measured ``y_NAME``
+    or a raw input ``NAME`` (:func:`codegen.families.capabilities.sensor_noise`); an input with
+    neither is left out. The float32 build's tolerance and ``validate --data``'s log checks use it.
+
+    Raises
+    ------
+    ConfigurationError
+        a ``[precision] noise`` key that is no input of the observer.
+    """
+    from .. import families
+    from ..errors import ConfigurationError
+    from ..families.capabilities import sensor_noise
+    spec = config.precision
+    inputs = list(inputs)
+    source = config.source or f"{config.name}.toml"
+    for key in spec.noise:
+        if key not in inputs:
+            near = suggest(key, inputs) or suggest(f"y_{key}", inputs)     # the measured yawr is the input y_yawr
+            raise ConfigurationError(f"{source}: [precision.noise] {key}: not an input of {config.name}; its inputs: "
+                                     f"{', '.join(inputs)}" + (f" (did you mean {near!r}?)" if near else ""),
+                                     source=source, section="precision.noise", key=key, allowed=", ".join(inputs))
+    family = sensor_noise(families.get(config.family))
+    out = {}
+    for name in inputs:
+        if name in spec.noise:
+            out[name] = float(spec.noise[name])
+        elif name.startswith("y_") and name[2:] in family:
+            out[name] = float(family[name[2:]])
+        elif name in family:
+            out[name] = float(family[name])
+    return out

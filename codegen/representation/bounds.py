@@ -66,7 +66,11 @@ natural form where the function is flat (a tyre's slope fading into sliding); th
 is skipped for a while after it stops paying. The attained values come from the pieces' centres
 and a few local searches (compass search in double precision), and are evaluated in mpmath at 128 bits
 (rounded to the nearest double): ``lower <= attained_min <= attained_max <= upper`` holds as a
-consequence of soundness, and the gap measures how tight the bounds are.
+consequence of soundness, and the gap measures how tight the bounds are. Where the refinement stops
+short of its tolerance (its budget of boxes spent, or a piece doubles cannot split), a caller that
+only needs a sound bound (``enclose=True``: a DMVT vertex set, where a looser bound is a larger
+polytope, not a wrong one) gets the enclosure reached, the least lower bound over the pieces left,
+marked ``converged=False`` with its gap; it is refused only where that enclosure is not finite.
 """
 from __future__ import annotations
 
@@ -885,10 +889,28 @@ class RangeBound:
     boxes_examined: int
     argmin: tuple = ()
     argmax: tuple = ()
+    #: False where the refinement stopped before its tolerance (``enclose=True``): [lower, upper] is
+    #: still a sound enclosure, only looser; :attr:`gap` says by how much at most
+    converged: bool = True
+    #: why it stopped short ("" when converged): the budget, or a piece doubles cannot split
+    stopped: str = ""
 
     @property
     def constant(self) -> bool:
         return self.lower == self.upper
+
+    @property
+    def gap(self) -> float:
+        """The largest distance of a bound from the attained values: how much looser than the true
+        range the enclosure may be (0 where it is the attained range itself)."""
+        return max(self.attained_min - self.lower, self.upper - self.attained_max, 0.0)
+
+    def describe_gap(self) -> str:
+        """'enclosure, gap G (...)' for a bound that did not converge; '' otherwise."""
+        if self.converged:
+            return ""
+        return (f"sound enclosure [{self.lower:.6g}, {self.upper:.6g}], not tight: the values attained span "
+                f"[{self.attained_min:.6g}, {self.attained_max:.6g}] (gap {self.gap:.3g}; {self.stopped})")
 
 
 def _bisect(box: dict, scale: dict | None = None):
@@ -958,11 +980,18 @@ def _local_search(rough, b: dict, used: list, start: tuple, sign: float) -> tupl
 
 
 def range_bound(expr: sp.Expr, box: dict, rel_tol: float = 1e-3, max_boxes: int = 20000,
-                relative_cuts: bool = False) -> RangeBound:
+                relative_cuts: bool = False, enclose: bool = False) -> RangeBound:
     """Guaranteed [lower, upper] of ``expr`` over ``box``, within ``rel_tol`` of attained values.
 
     ``relative_cuts``: bisect the side widest relative to the root box (variables of very different
     units); default: the widest in absolute terms.
+
+    ``enclose``: where the refinement stops before its tolerance (the budget ``max_boxes`` spent, or
+    a piece doubles cannot split), return the sound enclosure it has reached instead of refusing:
+    the smallest lower bound over the box pieces still in the heap (they cover the box), never an
+    attained value. The result then has ``converged`` False, and its ``gap`` and ``stopped`` say how
+    loose it may be and why. For a use where a looser bound is only more conservative (a DMVT
+    vertex set, a premise range), that is a larger polytope, not a wrong one.
 
     The bounds hold for the exact real function (:func:`evaluate`); ``attained_min`` and
     ``attained_max`` are values it takes at points of the box, so they lie inside the bounds.
@@ -970,9 +999,9 @@ def range_bound(expr: sp.Expr, box: dict, rel_tol: float = 1e-3, max_boxes: int 
     Raises
     ------
     BoundsError
-        if the expression cannot be enclosed, or the refinement budget runs out (or a box piece
-        can no longer be split) before the bounds are within tolerance (the message gives the gap
-        reached).
+        if the expression cannot be enclosed (or only by an infinite bound), or, without
+        ``enclose``, the refinement budget runs out (or a box piece can no longer be split) before
+        the bounds are within tolerance (the message gives the gap reached).
     """
     expr = sp.sympify(expr)
     stray = expr.free_symbols - set(box)
@@ -1005,6 +1034,16 @@ def range_bound(expr: sp.Expr, box: dict, rel_tol: float = 1e-3, max_boxes: int 
             v = value(p)
             low, high = min(low, (v, p)), max(high, (v, p))
 
+    stopped = []                            # why a side stopped short of its tolerance (enclose=True)
+
+    def short(lb: float, why: str) -> float:
+        """The enclosure reached, lb: the least lower bound of sign * expr over the heap's pieces,
+        which cover the box (sound whatever the tolerance); refused only where it is not finite."""
+        if not math.isfinite(lb):
+            raise BoundsError(f"bounding {expr}: no finite enclosure over the box ({why})")
+        stopped.append(why)
+        return lb
+
     def refine(sign: float) -> float:
         # minimize sign * expr: a heap of (lower bound of sign * expr, tiebreak, box piece, tightened), the
         # lower bound first from the natural form; a piece that reaches the top is tightened once by its
@@ -1036,10 +1075,15 @@ def range_bound(expr: sp.Expr, box: dict, rel_tol: float = 1e-3, max_boxes: int 
             pops += 1
             halves = _bisect(b, widths)
             if halves is None:
+                if enclose:
+                    return short(lb, f"a box piece doubles cannot split at {dict(zip(map(str, used), mid(b)))}")
                 raise BoundsError(f"bounding {expr}: gap {best - lb:.3g} (tolerance {rel_tol * scale:.3g}) on a box "
                                   f"piece doubles cannot split, {dict(zip(map(str, used), mid(b)))}: the gap is "
                                   f"rounding of the expression there; loosen the bounds' tolerance")
             if examined >= max_boxes:
+                if enclose:
+                    return short(lb, f"branch and bound stopped after {examined} boxes, tolerance "
+                                     f"{rel_tol * scale:.3g}")
                 raise BoundsError(f"bounding {expr}: gap {best - lb:.3g} after {examined} boxes "
                                   f"(tolerance {rel_tol * scale:.3g}); loosen the bounds' tolerance or "
                                   f"split the box")
@@ -1056,4 +1100,5 @@ def range_bound(expr: sp.Expr, box: dict, rel_tol: float = 1e-3, max_boxes: int 
     lower = refine(1.0)
     upper = -refine(-1.0)
     names = [str(s) for s in used]
-    return RangeBound(lower, upper, low[0], high[0], examined, tuple(zip(names, low[1])), tuple(zip(names, high[1])))
+    return RangeBound(lower, upper, low[0], high[0], examined, tuple(zip(names, low[1])), tuple(zip(names, high[1])),
+                      converged=not stopped, stopped="; ".join(dict.fromkeys(stopped)))

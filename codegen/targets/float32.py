@@ -50,7 +50,7 @@ import numpy as np
 from ..certificate.contraction import ContractionMetric
 from ..emit import generate as emit
 from ..project import observer_file as observers
-from .. import families, pipeline
+from .. import pipeline
 from ..errors import CertificateError, ConfigurationError, ModelDefinitionError
 from ..emit.toolchain import STRICT_CFLAGS, compile_and_link
 
@@ -333,26 +333,10 @@ def _units(b) -> dict:
 
 def input_noise(config, b) -> dict:
     """{input name: standard deviation} of the sensor noise: the ``[precision] noise`` table, else
-    the family's validation noise of a measured ``y_NAME`` or a raw input ``NAME``."""
-    spec = config.precision
-    inputs = list(b.input_names)
-    source = config.source or f"{config.name}.toml"
-    for key in spec.noise:
-        if key not in inputs:
-            raise ConfigurationError(f"{source}: [precision.noise] {key}: not an input of {config.name}; its inputs: "
-                                     f"{', '.join(inputs)}{_did_you_mean(key, inputs)}", source=source,
-                                     section="precision.noise", key=key, allowed=", ".join(inputs))
-    from ..families.capabilities import sensor_noise
-    family = sensor_noise(families.get(config.family))
-    out = {}
-    for name in inputs:
-        if name in spec.noise:
-            out[name] = float(spec.noise[name])
-        elif name.startswith("y_") and name[2:] in family:
-            out[name] = float(family[name[2:]])
-        elif name in family:
-            out[name] = float(family[name])
-    return out
+    the family's validation noise of a measured ``y_NAME`` or a raw input ``NAME``
+    (:func:`codegen.project.precision.input_noise`, which ``validate --data`` judges a log with too)."""
+    from ..project.precision import input_noise as table
+    return table(config, list(b.input_names))
 
 
 def noise_response(obs, inputs: np.ndarray, noise: dict, out_d: np.ndarray) -> np.ndarray:

@@ -77,6 +77,18 @@ MIN_CORR = 0.5
 WRONG_CORR = 0.3
 STRONG = 5.0
 """Both sides varying STRONG x their MIN_STD and correlated less than WRONG_CORR: a wrong column."""
+NOISE_MARGIN = 1.0
+"""A side is judged to vary only where the std of its noise-free part is at least NOISE_MARGIN x the
+std its sensors' noise gives it (:meth:`Relation.noise`): below that, a low correlation is the noise
+(a derivative of a speed with sigma 0.05 m/s at 100 Hz has a noise of 0.7 m/s^2), not a wrong column."""
+NOISE_TRUST = 10.0
+"""A column's own noise (its high-pass) is taken up to NOISE_TRUST x the sensor noise declared for it:
+beyond, its high-frequency content is not that sensor's noise but another signal (a yaw acceleration
+mapped to the yaw rate: 0.8 rad/s on the shared log against 8.7e-4 declared), which must not hide
+a wrong column. A column without a declared noise is taken at its own."""
+GAIN_ROWS = 256
+"""Rows per chunk at which the sides' sensitivity to each signal's noise is taken (a mean of squares:
+a subsample gives it)."""
 IDENTITY_BAND = (1 / 1.4, 1.4)
 """Allowed ratio of an identity of the model (the same quantity twice)."""
 STEADY_BAND = (0.75, 1 / 0.75)
@@ -204,6 +216,10 @@ class Relation:
     exponents: dict = field(default_factory=dict)     # signal -> exponent of k in its scale (None: not homogeneous)
     derivatives: tuple = ()                            # signals whose derivative a side reads
     derived: tuple = ()                                # (name, function, keys) of derived signals it reads
+    # key (a signal, or "d/dt NAME") -> [sum dy^2, sum dx^2, sum dx dy] of the sides' sensitivities to it, and rows
+    gains: dict = field(default_factory=dict)
+    gain_rows: int = 0
+    key_noise: dict = field(default_factory=dict)      # key -> variance of its noise as the sides read it (finish)
 
     def evaluate(self, a: dict):
         """The two sides on averaged signals ``a`` whose derived signals are (re)computed here
@@ -212,22 +228,86 @@ class Relation:
 
     def feed(self, a: dict) -> None:
         y, x = self.sides(a)
-        self.moments.add(np.asarray(x, dtype=float).ravel(), np.asarray(y, dtype=float).ravel())
+        y, x = np.asarray(y, dtype=float).ravel(), np.asarray(x, dtype=float).ravel()
+        self.moments.add(x, y)
+        self._sensitivities(a, max(x.size, y.size))
+
+    def _sensitivities(self, a: dict, m: int) -> None:
+        """Accumulate, on up to GAIN_ROWS rows of the chunk, the squared sensitivities of the two sides
+        to each signal (and derivative) they read: the noise of a signal reaches a side through them."""
+        keys = [k for s in self.inputs for k in (s, f"d/dt {s}") if k in a]
+        if not keys or m == 0:
+            return
+        pick = np.unique(np.linspace(0, m - 1, min(GAIN_ROWS, m)).astype(int))
+        rows = {k: (np.asarray(v, dtype=float)[pick] if np.ndim(v) and np.size(v) == m else v) for k, v in a.items()}
+        found = {}
+        with np.errstate(all="ignore"):
+            for k in keys:
+                v = np.asarray(rows[k], dtype=float)
+                step = 1e-6 * max(float(np.sqrt(np.nanmean(v * v))) if v.size else 0.0, 1e-6)
+                hi, lo = dict(rows), dict(rows)
+                hi[k], lo[k] = v + step, v - step
+                (y1, x1), (y0, x0) = self.evaluate(hi), self.evaluate(lo)
+                shape = (pick.size,)            # a side that does not vary with the rows is broadcast to them
+                gy = np.broadcast_to(np.asarray(y1, dtype=float) - np.asarray(y0, dtype=float), shape)
+                gx = np.broadcast_to(np.asarray(x1, dtype=float) - np.asarray(x0, dtype=float), shape)
+                found[k] = (gy / (2 * step), gx / (2 * step))
+        ok = np.logical_and.reduce([np.isfinite(g) for pair in found.values() for g in pair])
+        n = int(np.count_nonzero(ok))
+        if not n:
+            return
+        for k, (gy, gx) in found.items():
+            gy, gx = gy[ok], gx[ok]
+            acc = self.gains.setdefault(k, np.zeros(3))
+            acc += (float(np.sum(gy * gy)), float(np.sum(gx * gx)), float(np.sum(gx * gy)))
+        self.gain_rows += n
+
+    def noise(self) -> tuple:
+        """(var y, var x, cov xy): the variance the sensors' noise gives each side (per sample), from
+        the sides' mean squared sensitivities and each key's noise variance (:attr:`key_noise`)."""
+        if not self.gain_rows:
+            return 0.0, 0.0, 0.0
+        out = np.zeros(3)
+        for k, acc in self.gains.items():
+            out += acc / self.gain_rows * self.key_noise.get(k, 0.0)
+        return float(out[0]), float(out[1]), float(out[2])
+
+    def _signal(self) -> tuple:
+        """(std y, std x, correlation) of the sides' noise-free parts: the moments less the noise's
+        (the correlation is the measured one where no noise is known)."""
+        m = self.moments
+        vy, vx, cxy = self.noise()
+        sy2, sx2 = m.cyy / m.n - vy, m.cxx / m.n - vx
+        sy, sx = math.sqrt(max(sy2, 0.0)), math.sqrt(max(sx2, 0.0))
+        if not (vy or vx or cxy):
+            return sy, sx, m.corr
+        if sy2 <= 0 or sx2 <= 0:
+            return sy, sx, 0.0
+        return sy, sx, max(-1.0, min(1.0, (m.cxy / m.n - cxy) / math.sqrt(sx2 * sy2)))
 
     def verdict(self) -> str:
         """'ok', 'ratio' (the bracket misses the band), 'uncorrelated' (both sides vary strongly
         and do not follow each other), 'weak' (a weak correlation under strong variation), or
-        'not judged' (the log does not excite the relation)."""
+        'not judged' (the log does not excite the relation, or its sensors' noise hides it).
+
+        Strong variation is of the noise-free part of each side: STRONG x ``min_std`` and at least
+        NOISE_MARGIN x the noise the side carries; the correlation judged is then the one of the
+        noise-free parts (the moments less the noise's, :meth:`noise`). The ratio's bracket is the
+        measured one, which holds the true ratio with noise on both sides."""
         m = self.moments
         # one side varying is enough: a unit mistake may shrink the other below min_std
         if m.n < MIN_SAMPLES or not (max(m.std_x, m.std_y) >= self.min_std and m.cxx > 0 and m.cyy > 0
                                      and m.cxy != 0):
             return "not judged"
         if abs(m.corr) < MIN_CORR:
-            strong = m.std_x >= STRONG * self.min_std and m.std_y >= STRONG * self.min_std
+            sy, sx, corr = self._signal()
+            vy, vx, _ = self.noise()
+            strong = all(sig >= STRONG * self.min_std and sig >= NOISE_MARGIN * math.sqrt(var) and sig > 0
+                         for sig, var in ((sx, vx), (sy, vy)))
             if not strong:
                 return "not judged"
-            return "uncorrelated" if abs(m.corr) < WRONG_CORR else "weak"
+            if abs(corr) < MIN_CORR:
+                return "uncorrelated" if abs(corr) < WRONG_CORR else "weak"
         _, lo, hi = m.bracket()
         return "ok" if meets(lo, hi, self.band) else "ratio"
 
@@ -238,6 +318,11 @@ class Relation:
         if m.n and m.cxx > 0 and m.cxy != 0:
             k1, lo, hi = m.bracket()
             row.update(ratio=k1, bracket=[lo, hi], correlation=m.corr)
+            vy, vx, _ = self.noise()
+            if vy or vx:
+                sy, sx, corr = self._signal()
+                row.update(noise_std=[math.sqrt(vy), math.sqrt(vx)], signal_std=[sy, sx],
+                           noise_free_correlation=corr)
         return row
 
 
@@ -627,10 +712,23 @@ class LogChecks:
     truth : mapping of str to Column, optional
         Where each estimate's reference comes from (``[data.truth]``): checked for its unit like an
         input (:meth:`feed_truth`), in no physical relation.
+    noise : mapping of str to float, optional
+        The declared standard deviation of each input's sensor noise, in the model's unit (the
+        observer file's ``[precision] noise``, else the family's validation noise). Each input's
+        noise is the larger of it and the log's own (:meth:`measured_noise`, a high-pass of the
+        column); the physics relations are judged on the sides' noise-free parts
+        (:meth:`Relation.verdict`).
+    physics_checks : str
+        "refuse" (default): a failed physics relation is a DatasetError; "warn" (the observer file's
+        ``[data] physics_checks``): the same text is a warning in the report, marked as overridden.
     """
 
-    def __init__(self, source, model, params, input_names, columns: dict, sample_time: float, truth=None):
+    def __init__(self, source, model, params, input_names, columns: dict, sample_time: float, truth=None,
+                 noise=None, physics_checks: str = "refuse"):
         self.source, self.model, self.params = source, model, params
+        self.sample_time, self.declared_noise = float(sample_time), dict(noise or {})
+        self.physics_checks = physics_checks
+        self.second = {}             # input -> [sum of squared second differences, count]: the log's own noise
         self.columns = dict(columns)
         self.names = [n for n in input_names if n in self.columns]
         self.truth = [f"truth:{n}" for n in (truth or {})]
@@ -682,6 +780,7 @@ class LogChecks:
         if w is None:
             return
         h = self.h
+        self._high_pass(w, h)
         a = {n: box(w[n], h) for n in self.names}
         for n in self.derivatives:
             a[f"d/dt {n}"] = ddt(w[n], w["t"], h)
@@ -694,20 +793,71 @@ class LogChecks:
             pick = np.linspace(0, m - 1, min(SAMPLE_ROWS, m)).astype(int)
             self.sample.append({k: np.asarray(v)[pick] for k, v in a.items()})
 
+    def _high_pass(self, w: dict, h: int) -> None:
+        """Second differences x[k+1] - 2 x[k] + x[k-1] at the window's centers (each sample of the log
+        once, whatever the chunking): of white noise of std s their mean square is 6 s^2, of a smooth
+        signal sampled fast next to nothing."""
+        for n in self.names:
+            x = np.asarray(w[n], dtype=float)
+            d2 = x[h + 1:x.size - h + 1] - 2.0 * x[h:x.size - h] + x[h - 1:x.size - h - 1]
+            d2 = d2[np.isfinite(d2)]
+            acc = self.second.setdefault(n, [0.0, 0])
+            acc[0] += float(np.sum(d2 * d2))
+            acc[1] += int(d2.size)
+
+    def measured_noise(self) -> dict:
+        """{input: std} of the log's own noise: the high-pass of :meth:`_high_pass` (an upper bound of
+        a white noise's std where the signal itself is smooth)."""
+        return {n: math.sqrt(acc[0] / (6.0 * acc[1])) for n, acc in self.second.items() if acc[1]}
+
+    def noise(self) -> dict:
+        """{input: std} the relations are judged with: the larger of the declared and the measured noise,
+        the measured one taken up to NOISE_TRUST x the declared (the measured alone where none is declared)."""
+        measured, out = self.measured_noise(), {}
+        for n in self.names:
+            declared, own = self.declared_noise.get(n, 0.0), measured.get(n, 0.0)
+            out[n] = max(declared, min(own, NOISE_TRUST * declared)) if declared > 0 else own
+        return out
+
+    def _set_noise(self) -> None:
+        """Each relation's key noise: an averaged signal's (std / sqrt(2h + 1)), a central difference's
+        (sqrt(2) std / (2 h T_s))."""
+        sigma, h = self.noise(), self.h
+        for r in self.relations:
+            r.key_noise = {}
+            for s in r.inputs:
+                v = sigma.get(s, 0.0) ** 2
+                r.key_noise[s] = v / (2 * h + 1)
+                r.key_noise[f"d/dt {s}"] = 2.0 * v / (2 * h * self.sample_time) ** 2
+
     # --- verdicts ---------------------------------------------------------------------------------
 
     def finish(self) -> dict:
         """Raise the first failed check (units first, then physics); return the report
-        ``{"checks": [...], "warnings": [...]}``."""
+        ``{"checks": [...], "warnings": [...]}``. With ``physics_checks = "warn"`` a failed physics
+        relation is a warning marked as overridden (and ``overridden`` lists it)."""
         warnings = self._units()
         if self.sample:
             points = {k: np.concatenate([s[k] for s in self.sample]) for k in self.sample[0]}
             for r in self.relations:
                 r.exponents = exponents(r, points)
+        self._set_noise()
         results = [(r, r.verdict()) for r in self.relations]
-        warnings += self._physics(results)
-        return {"checks": [r.summary() for r in self.relations], "warnings": warnings,
-                "unchecked_columns": self._unchecked(results)}
+        overridden = []
+        try:
+            warnings += self._physics(results)
+        except DatasetError as exc:
+            if self.physics_checks != "warn":
+                raise
+            overridden.append(str(exc))
+            warnings.append(f"{exc} [refusal overridden by [data] physics_checks = \"warn\": the estimates below "
+                            f"are of a log the physics checks reject]")
+        report = {"checks": [r.summary() for r in self.relations], "warnings": warnings,
+                  "unchecked_columns": self._unchecked(results),
+                  "noise": {n: v for n, v in self.noise().items() if v > 0}}
+        if overridden:
+            report["overridden"] = overridden
+        return report
 
     def _unchecked(self, results) -> list:
         """The mapped input columns (``[data.inputs]``) no judged physics relation reads with its
@@ -873,10 +1023,16 @@ class LogChecks:
             suspects = direct or [s for s in rel.inputs if s in self.columns and s not in ok_signals] \
                 or [s for s in rel.inputs if s in self.columns]
             m = rel.moments
+            vy, vx, _ = rel.noise()
+            sy, sx, corr = rel._signal()
+            noisy = (f" (without the sensors' noise, std {math.sqrt(vy):.3g} and {math.sqrt(vx):.3g}: correlation "
+                     f"{corr:.2f}, std {sy:.3g} and {sx:.3g})") if (vy or vx) else ""
             text = (f"{self.source}: {' or '.join(self.columns[s].describe(s) for s in suspects)} does not follow "
                     f"{rel.what}: correlation {m.corr:.2f} over {m.n} samples while both sides vary (std {m.std_y:.3g} "
-                    f"and {m.std_x:.3g}); allowed: |correlation| >= {MIN_CORR:g}. Likely cause: a wrong column (e.g. "
-                    f"a derivative or another signal mapped to {suspects[0]}): check the column map")
+                    f"and {m.std_x:.3g}){noisy}; allowed: |correlation| >= {MIN_CORR:g}. Likely cause: a wrong column "
+                    f"(e.g. a derivative or another signal mapped to {suspects[0]}): check the column map"
+                    + (f" (if it is right: [data] physics_checks = \"warn\" runs the log with this as a warning)"
+                       if any(self.columns[c].declared_by != "format" for c in self.names) else ""))
             if rel.kind != "steady state":
                 raise DatasetError(text)
             warnings.append(text + ", or the model's low-slip steady state")

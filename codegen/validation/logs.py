@@ -147,6 +147,7 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | N
             reader = logfiles.TableOnGrid(reader, cmap.time.column, t_factor, methods, obs.sample_time,
                                           batch_rows or logfiles.BATCH_ROWS)
             t_factor = 1.0
+    from ..project.precision import input_noise
     checks = log_checks.LogChecks(
         p, model, load_parameters(config.parameter_path), obs.input_names,
         {n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale, declared_by=declared_by[n])
@@ -154,7 +155,8 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | N
         obs.sample_time,
         truth={n: log_checks.Column(c.column, c.unit, model_unit(model, n), c.scale, table="data.truth",
                                     declared_by=declared_by[f"truth:{n}"])
-               for n, c in truth.items()})
+               for n, c in truth.items()},
+        noise=input_noise(config, obs.input_names), physics_checks=cmap.physics_checks)
     declared = {n: model_unit(model, n) for n in obs.output_names}
     compared = {n: streaming.ErrorStats(declared[n], settle=SETTLE_TIME) for n in cmap.truth}
     summary = {n: streaming.Summary(declared[n]) for n in obs.output_names if n not in cmap.truth}
@@ -206,7 +208,9 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | N
             "status_flags": flags, "samples": reader.rows, "data": str(path), "signals": kept.signals(),
             "signals_stride": kept.stride, "log_checks": report["checks"], "warnings": report["warnings"],
             "unchecked_columns": report["unchecked_columns"], "format": fmt,
-            "resampling": getattr(reader, "resampling", {}), "out": str(out) if out is not None else None}
+            "resampling": getattr(reader, "resampling", {}), "out": str(out) if out is not None else None,
+            "noise": report["noise"], **({"log_checks_overridden": report["overridden"]} if "overridden" in report
+                                         else {})}
 
 
 def unchecked_line(rows) -> str | None:

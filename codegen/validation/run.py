@@ -185,6 +185,7 @@ def run_data(name, path: str = "stanford", block_bytes: int | None = None, batch
     from ..model import load_parameters
     from ..project.columns import model_unit
     from ..project.observer_file import get
+    from ..project.precision import input_noise
     from . import csvlog, log_checks, stanford, streaming
     config = get(name)
     require_current(config)                 # never the compiled step of an older design
@@ -208,7 +209,8 @@ def run_data(name, path: str = "stanford", block_bytes: int | None = None, batch
         checks = log_checks.LogChecks(
             stanford._resolve(path), model, load_parameters(config.parameter_path), obs.input_names,
             {n: log_checks.Column(DATA_COLUMNS[n], stanford.UNITS[DATA_COLUMNS[n]], model_unit(model, n),
-                                  declared_by="format") for n in obs.input_names}, obs.sample_time)
+                                  declared_by="format") for n in obs.input_names}, obs.sample_time,
+            noise=input_noise(config, obs.input_names))
     outputs = obs.output_names
     delta_unknown = "delta" in outputs and "y_delta" not in obs.input_names and "delta" not in obs.input_names
     table = {"beta": streaming.ErrorStats("rad"), "vy": streaming.ErrorStats("m/s")}

@@ -341,18 +341,6 @@ def test_the_same_log_elsewhere_has_no_peaks_of_ours(tmp_path):
     assert there["peaks"] == [] and there["observer"] == here["observer"]
 
 
-def test_a_bound_out_of_reach_names_the_files_settings(tmp_path):
-    """A magic-formula tyre of the unmeasured sideslip, bounded with a budget of one box: the error names the
-    parameter file's boxes and the family's [design] keys that set the bound's effort."""
-    from codegen.errors import BoundsError
-    model = DERIVED_SPEED.replace("F_yr = C_r * (l_r * r / v_x - beta)",
-                                  "F_yr = 3000 * sp.sin(1.3 * sp.atan(C_r * (l_r * r / v_x - beta) / 3900))")
-    obs = project(tmp_path, "ts_fuzzy_uio", model, extra="[design]\nbounds_max_boxes = 1\nbounds_rel_tol = 1e-12\n")
-    with pytest.raises(BoundsError, match=r"car.toml: .*narrow those of the variables it ranges over, or loosen "
-                                          r"\[design\] bounds_rel_tol or \[design\] bounds_max_boxes of .*obs_ts_fuzzy_uio"):
-        pipeline.build(observers.get(str(obs)))
-
-
 _FIELDS_MODEL = '''
 import sympy as sp
 from codegen.model import ModelDefinition, SchedulingSignal

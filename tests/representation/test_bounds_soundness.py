@@ -109,6 +109,47 @@ def test_a_constant_that_is_not_a_double_is_enclosed():
             assert iv.lo < mpmath.mpf(sp.N(c, 70)) < iv.hi, c
 
 
+# --- a refinement short of its tolerance: the sound enclosure it reached ---------------------------------
+
+def test_a_bound_short_of_its_budget_is_the_sound_enclosure_reached():
+    """Issue 42 item 8: the Jacobian entry of a magic-formula rear tyre (a function of one combination
+    u = 30 (1.5 r / v - beta) over a 3-D box) does not close its gap within 200 boxes. Refused without
+    ``enclose``; with it, the outer bound over the remaining pieces (never an attained value), marked
+    not converged with its gap: it contains the true extremes (found along u, which spans [-7.5, 7.5]
+    continuously over the box) and every sampled value."""
+    beta, r, v = sp.symbols("beta r v")
+    entry = bounds.derivative(sp.sin(sp.Rational(13, 10) * sp.atan(30 * (sp.Rational(3, 2) * r / v - beta))), beta)
+    box = {beta: (-0.1, 0.1), r: (-0.5, 0.5), v: (5.0, 40.0)}
+    with pytest.raises(BoundsError, match=r"gap .* after 201 boxes"):
+        bounds.range_bound(entry, box, max_boxes=200)
+    rb = bounds.range_bound(entry, box, max_boxes=200, enclose=True)
+    assert not rb.converged and "stopped after 201 boxes" in rb.stopped
+    assert rb.gap > 0.1 and f"gap {rb.gap:.3g}" in rb.describe_gap()
+    assert_attained_inside(entry, rb, box)
+    u = sp.Symbol("u")
+    along = mp_function(entry.subs({r: 0, v: 5}).subs(beta, -u / 30), [u])        # the entry as a function of u
+    with mpmath.workprec(PREC):
+        values = [along(p) for p in np.linspace(-7.5, 7.5, 30001)]
+        true_min, true_max = min(values), max(values)
+    assert_encloses(rb.lower, rb.upper, true_min, "true minimum")
+    assert_encloses(rb.lower, rb.upper, true_max, "true maximum")
+    assert rb.upper - float(true_max) > 1.0                   # looser than the true range: an enclosure, said so
+    f = mp_function(entry, [beta, r, v])
+    rng = np.random.default_rng(42)
+    for p in zip(*(rng.uniform(*box[s], 2000) for s in (beta, r, v))):
+        assert_encloses(rb.lower, rb.upper, f(*p), f"entry at {p}")
+    # with the budget the bound converges inside the enclosure: the enclosure only ever widens the range
+    tight = bounds.range_bound(entry, box, enclose=True)
+    assert rb.lower <= tight.lower and tight.upper <= rb.upper
+    # a piece doubles cannot split: the enclosure of the constant's rounding, stated
+    x_ = sp.Symbol("x")
+    point = bounds.range_bound(x_ - (10 ** 17 + 1), {x_: (1e17, 1e17)}, enclose=True)
+    assert not point.converged and "cannot split" in point.stopped and point.lower <= -1.0 <= point.upper
+    # no finite enclosure: refused
+    with pytest.raises(BoundsError, match="no finite enclosure"):
+        bounds.range_bound(sp.exp(sp.exp(sp.exp(x_))), {x_: (0.0, 10.0)}, max_boxes=20, enclose=True)
+
+
 # --- random expressions against mpmath ----------------------------------------------------------------
 
 def _safe_unary(e):

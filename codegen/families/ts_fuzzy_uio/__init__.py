@@ -19,7 +19,7 @@ class TSFuzzyUIO(Family):
     citation = "Nguyen, Dinh, Guerra, Pan, IEEE/ASME T-Mech 26(3), 2021"
     short_citation = "Nguyen et al. 2021"
     observer_keys = {}
-    bounds_settings = ("bounds_rel_tol", "bounds_max_boxes")
+    bounds_settings = ()       # its Jacobian bounds short of their tolerance are sound enclosures, never refused
     example = "ts_fuzzy_uio"
     # capabilities (codegen.families.capabilities): Scenarios, DemoPlant, DemoFigures, BenchStudy, Applicability
     demo_scenarios = ("random_trajectory_accel", "circular_path_normal", "time_varying_grip_normal")

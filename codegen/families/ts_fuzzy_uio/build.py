@@ -108,7 +108,9 @@ class TSFuzzyBuild(ObserverBuild):
                    f"unknown inputs are reconstructed from the next output (16c)"),
             plant_class=(f"the discrete-time TS model of {d.name} (Euler at Ts = {self.config.sample_time:g} s, "
                          f"parameters of {self.config.parameters}): {ts.n_rules} rules, the unmeasured nonlinearities "
-                         f"within sound Jacobian bounds (interval arithmetic) over D_x"),
+                         f"within sound Jacobian bounds (interval arithmetic) over D_x"
+                         + (f"; not tight within [design] bounds_max_boxes (the certificate holds for the larger DMVT "
+                            f"box): {'; '.join(ts.loose_bounds)}" if ts.loose_bounds else "")),
             noise="noise-free measurements; the unknown inputs any signals (reconstructed, not bounded)",
             region={str(k): tuple(v) for k, v in ts.state_box.items()},
             region_note=("the compact set D_x of the premises and of the Jacobian bounds; SCHEDULING_CLAMPED flags a "

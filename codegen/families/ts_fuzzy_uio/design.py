@@ -58,6 +58,8 @@ class TSDesignSettings:
     bounds_rel_tol, bounds_max_boxes : float, int
         Accuracy of the sound Jacobian bounds (relative to the attained values) and the budget of
         boxes their branch-and-bound may split (:func:`codegen.representation.bounds.range_bound`).
+        A bound short of its accuracy when the budget is spent is the sound enclosure reached (a
+        larger DMVT box), stated with its gap in the artifact and the certificate, not a refusal.
     max_lmi_blocks, max_memory_gb : int, float
         Size guards, checked before any LMI is built (:func:`size_guard`): the number of blocks
         of (27) and the memory their coefficients need.
@@ -67,7 +69,8 @@ class TSDesignSettings:
     margin: float = setting(1e-4, ge=0)
     tol: float = setting(1e-8, gt=0)
     bounds_rel_tol: float = setting(1e-3, gt=0, le=1, doc="accuracy of the Jacobian bounds")
-    bounds_max_boxes: int = setting(20000, gt=0, doc="boxes the bound refinement may split")
+    bounds_max_boxes: int = setting(20000, gt=0, doc="boxes the bound refinement may split (then: the sound "
+                                                     "enclosure reached, its gap stated)")
     max_lmi_blocks: int = setting(50000, gt=0, doc="largest number of LMI blocks of (27) to build")
     max_memory_gb: float = setting(4.0, gt=0, doc="largest memory the LMI coefficients may take")
     relaxation: str = setting("auto", choices=("auto", "triples", "pairs"), doc="blocks of (27)")

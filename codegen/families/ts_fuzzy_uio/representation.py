@@ -13,7 +13,10 @@ derives, with no hand-written split:
   interval bounds, :mod:`codegen.representation.bounds`), 2^p sector vertices and product memberships;
 * Euler discretization at T_s (eq. (9)): A = I + T_s A_v, D = T_s D_v, f = T_s f_v, G = T_s G_v;
 * sound bounds of the Jacobian of phi over D_x (Assumption 1, eq. (14)); entries of zero width
-  collapse, so the DMVT vertex set V_phi has only the vertices that matter.
+  collapse, so the DMVT vertex set V_phi has only the vertices that matter. A bound whose branch
+  and bound does not reach its tolerance within ``[design] bounds_max_boxes`` is the sound
+  enclosure it has reached (a larger DMVT box, never a smaller one), stated with its gap in the
+  artifact (``ts_model.jacobian_bounds``) and the certificate's plant class.
 """
 from __future__ import annotations
 
@@ -84,6 +87,13 @@ class TSFuzzyModel:
         return np.array([[[b.lower, b.upper] for b in row] for row in self.jacobian_bounds]).reshape(
             self.nphi, self.nx, 2)
 
+    @property
+    def loose_bounds(self) -> list:
+        """'d(phi)/dx: ...' for each Jacobian bound that is a sound enclosure short of its tolerance
+        (the branch and bound stopped: the DMVT box is larger, still sound); empty when all converged."""
+        return [f"d({phi})/d{s}: {b.describe_gap()}" for phi, row in zip(self.phi, self.jacobian_bounds)
+                for s, b in zip(self.definition.states, row) if not b.converged]
+
     @cached_property
     def theta_vertices(self) -> np.ndarray:
         """V_phi: corners of the Jacobian box over its non-degenerate entries, shape (P, nphi, nx)."""
@@ -137,7 +147,8 @@ class TSFuzzyModel:
             "f": [str(e) for e in self.f], "phi": [str(e) for e in self.phi],
             "state_box": {str(k): list(v) for k, v in self.state_box.items()},
             "jacobian_bounds": [[{"state": str(s), "lower": b.lower, "upper": b.upper,
-                                  "attained": [b.attained_min, b.attained_max]}
+                                  "attained": [b.attained_min, b.attained_max],
+                                  **({} if b.converged else {"enclosure": True, "gap": b.gap, "stopped": b.stopped})}
                                  for s, b in zip(self.definition.states, row)] for row in self.jacobian_bounds],
             "dmvt_vertices": int(self.theta_vertices.shape[0]),
         }
@@ -343,7 +354,7 @@ def build(model: ModelDefinition, params: ParameterSet, sample_time: float,
             dphi = derivative(phi, s)        # real symbols; Clarke form where phi switches
             row.append(RangeBound(0.0, 0.0, 0.0, 0.0, 0) if dphi == 0 or s in measured else
                        range_bound(dphi, {v: box[v] for v in dphi.free_symbols}, rel_tol=rel_tol,
-                                   max_boxes=max_boxes))
+                                   max_boxes=max_boxes, enclose=True))
         jac.append(tuple(row))
     return TSFuzzyModel(model, params, Ts, parts["measured"], parts["unmeasured"], premises,
                         memberships(premises), A, G, D, C, Ts * parts["f"], parts["phi"], box, tuple(jac))
