@@ -7,14 +7,18 @@ physical: a declared fraction of what the sensors' noise already does to the est
 
     [precision]
     fraction = 0.1                       # tolerance = 0.1 x the estimate's RMS response to the sensor noise
-    noise = { y_r = 8.7e-4 }             # input -> standard deviation of its sensor noise [its unit]
+    noise = { y_r = 8.7e-4 }             # input -> std of its sensor noise [its unit]; better: [sensor_noise] r
+                                         # of the parameter file (one place, read by validate too)
     tolerance = { T_d = 0.05 }           # output -> absolute tolerance [its unit], instead of the rule
     uncertified_states = "measured"      # or "refuse" (the default), see below
     accumulation = "compensated"         # or "plain" (the default), see below
 
-The sensor noise of an input not in ``noise`` is the family's validation noise for that signal
-(:meth:`Family.sensor_noise`, a measured ``y_NAME`` or a raw input ``NAME``); an input with
-neither is taken noise free. An output whose estimate no declared noise moves needs a
+The sensor noise is declared once, for every verb, in the parameter file's ``[sensor_noise]``
+table (:mod:`codegen.validation.noise`: by the model's signal name, in its unit); ``noise`` here is
+the former place, still read, and must agree with it (a ConfigurationError naming both files where
+they differ). An input declared in neither takes the family's validation noise for that signal
+(:meth:`Family.sensor_noise`, a measured ``y_NAME`` or a raw input ``NAME``); an input with none
+of them is taken noise free. An output whose estimate no declared noise moves needs a
 ``tolerance``: the build says which.
 
 State with dynamics of its own that no certificate covers (the sliding-mode differentiators:

@@ -42,6 +42,7 @@ is within its tolerance on every validation scenario, and refused
 from __future__ import annotations
 
 import ctypes
+import math
 from pathlib import Path
 
 import casadi as ca
@@ -332,8 +333,10 @@ def _units(b) -> dict:
 
 
 def input_noise(config, b) -> dict:
-    """{input name: standard deviation} of the sensor noise: the ``[precision] noise`` table, else
-    the family's validation noise of a measured ``y_NAME`` or a raw input ``NAME``."""
+    """{input name: standard deviation} of the sensor noise: the ``[precision] noise`` table (which must
+    agree with the parameter file's ``[sensor_noise]``), else ``[sensor_noise]``
+    (:mod:`codegen.validation.noise`), else the family's validation noise of a measured ``y_NAME`` or a
+    raw input ``NAME``."""
     spec = config.precision
     inputs = list(b.input_names)
     source = config.source or f"{config.name}.toml"
@@ -342,12 +345,26 @@ def input_noise(config, b) -> dict:
             raise ConfigurationError(f"{source}: [precision.noise] {key}: not an input of {config.name}; its inputs: "
                                      f"{', '.join(inputs)}{_did_you_mean(key, inputs)}", source=source,
                                      section="precision.noise", key=key, allowed=", ".join(inputs))
+    from ..model import load_parameters
+    from ..validation import noise as sensor
+    params = load_parameters(config.parameter_path)
+    declared = sensor.observer_levels(inputs, config.load_model(), params)     # [sensor_noise]: the one place
+    for key, value in spec.noise.items():
+        if key in declared and not math.isclose(float(value), declared[key], rel_tol=1e-9, abs_tol=0.0):
+            raise ConfigurationError(
+                f"{source}: [precision.noise] {key} = {float(value):g} disagrees with the sensor noise {declared[key]:g} "
+                f"that [sensor_noise] of {params.source} declares for it (in the model's unit): declare a sensor's noise "
+                f"once, in [sensor_noise] (read by validate and the float32 build); remove {key} from [precision] noise",
+                source=source, section="precision.noise", key=key,
+                allowed=f"{declared[key]:g} (the [sensor_noise] level), or no entry")
     from ..families.capabilities import sensor_noise
     family = sensor_noise(families.get(config.family))
     out = {}
     for name in inputs:
         if name in spec.noise:
             out[name] = float(spec.noise[name])
+        elif name in declared:
+            out[name] = declared[name]
         elif name.startswith("y_") and name[2:] in family:
             out[name] = float(family[name[2:]])
         elif name in family:
