@@ -159,3 +159,70 @@ def test_the_table_is_no_design_input(tmp_path):
     assert integrity.parameters_sha256(plain) == before
     Path(plain).write_text(Path(plain).read_text().replace("g = 9.81", "g = 9.80"))
     assert integrity.parameters_sha256(plain) != before
+
+
+def _reads(model) -> list:
+    """The observer input columns of a model's measured signals (an output NAME is read as y_NAME)."""
+    kinds = noise.measured_signals(model)
+    return [f"y_{s}" if k == "output" else s for s, k in kinds.items()]
+
+
+def test_starters_declare_the_levels_the_float32_build_took(tmp_path):
+    """Every starter's [sensor_noise] holds the levels its float32 build took before (the example's
+    [precision] noise, else the family's): the float32 tolerance of a starter is unchanged, and its
+    excitation run carries noise by default."""
+    from types import SimpleNamespace
+    from codegen import families
+    from codegen.project import observer_file as observers, starter
+    from codegen.targets.float32 import input_noise
+    for name in families.names():
+        family = families.get(name)
+        if not family.example:
+            continue
+        example = observers.get(family.example)
+        config = observers.get(str(starter.write(tmp_path / name, family)))
+        params = load_parameters(config.parameter_path)
+        assert params.sensor_noise, name
+        build = SimpleNamespace(input_names=_reads(example.load_model()))
+        assert input_noise(config, build) == input_noise(example, build), name
+
+
+def test_a_precision_noise_that_disagrees_with_the_sensor_table_is_refused(tmp_path):
+    from types import SimpleNamespace
+    from codegen import families
+    from codegen.project import observer_file as observers, starter
+    from codegen.targets.float32 import input_noise
+    family = next(families.get(f) for f in families.names() if families.get(f).example)
+    path = starter.write(tmp_path, family)
+    config = observers.get(str(path))
+    model = config.load_model()
+    declared = noise.declared(model, load_parameters(config.parameter_path))
+    sig, std = next(iter(declared.items()))
+    col = f"y_{sig}" if noise.measured_signals(model)[sig] == "output" else sig
+    build = SimpleNamespace(input_names=_reads(model))
+    text = path.read_text()
+    assert "[precision]" not in text       # the first starter's example declares no [precision] noise
+    path.write_text(text + f"\n[precision]\nnoise = {{ {col} = {std!r} }}\n")
+    assert input_noise(observers.get(str(path)), build)[col] == std           # agreeing: read, the same level
+    path.write_text(text + f"\n[precision]\nnoise = {{ {col} = {3 * std!r} }}\n")
+    with pytest.raises(ConfigurationError, match=rf"{path.name}: \[precision.noise\] {col} = {3 * std:g} disagrees with "
+                                                 rf"the sensor noise {std:g} that \[sensor_noise\] of .*parameters.toml "
+                                                 rf"declares for it"):
+        input_noise(observers.get(str(path)), build)
+
+
+def test_the_header_says_how_the_run_was_measured(tmp_path, monkeypatch):
+    config = _project(tmp_path, TABLE)
+    assert ", sensor noise as declared, " in validate.header("obs", _run(config, monkeypatch))
+    assert ", noise free (--noise-free), " in validate.header("obs", _run(config, monkeypatch, noise=False))
+
+
+def test_noise_free_is_for_the_excitation_scenario():
+    """A family's own scenarios carry their paper's noise: --noise-free there is refused, not ignored."""
+    from codegen import families
+    from codegen.families.capabilities import Scenarios
+    family = next(families.get(f) for f in families.names()
+                  if families.get(f).example and isinstance(families.get(f), Scenarios))
+    scenario = family.demo_scenarios[0]
+    with pytest.raises(ConfigurationError, match=rf"--noise-free: scenario '{scenario}' is the {family.name} family's"):
+        validate.run_scenario(family.example, scenario, noise=False)
