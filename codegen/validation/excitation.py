@@ -259,7 +259,14 @@ def run(config, duration: float | None = None, seed: int = 0, progress=None, obs
         measured = sensor.add(measured, list(obs.input_names), record["levels"], seed)
         record["seed"] = int(seed)
     out, status, _ = obs.run(measured)
-    lags = pipeline.build(config).output_lags()
+    b = pipeline.build(config)
+    lags = b.output_lags()
+    from .. import families
+    from ..families.capabilities import NoiseBound
+    family = families.get(config.family)
+    if record["mode"] == "declared" and isinstance(family, NoiseBound):
+        # the certificate's noise-to-estimate bound, restated at the levels this run adds
+        record["certified_bound"] = family.noise_bound(b, sensor.declared(model, params))
     units = dict(model.units)
     table, estimates = {}, {}
     for i, s in enumerate(obs.output_names):
@@ -311,5 +318,12 @@ def noise_line(record: dict | None) -> str:
         shown, k, _ = reported_unit(record["units"].get(col))
         parts.append(f"{col} {k * std:.3g}" + (f" {shown}" if shown else ""))
     free = f"; noise free: {', '.join(record['noise_free'])}" if record["noise_free"] else ""
-    return (f"sensor noise (std, seeded white, seed {record.get('seed', 0)}, [sensor_noise] of {record['source']}): "
+    line = (f"sensor noise (std, seeded white, seed {record.get('seed', 0)}, [sensor_noise] of {record['source']}): "
             f"{', '.join(parts)}{free}")
+    bound = record.get("certified_bound")
+    if bound:
+        at = ", ".join(f"{k} {v:.4g}" for k, v in bound["declared"].items()) or "none of its sensor channels"
+        line += (f"\ncertified at this noise: {bound['norm']} of {bound['error']} <= {bound['bound']:.4g} {bound['unit']} "
+                 f"(declared: {at}; {bound['where']}); at the design's own levels {bound['design_bound']:.4g} "
+                 f"{bound['unit']}")
+    return line
