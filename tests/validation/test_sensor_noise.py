@@ -226,3 +226,39 @@ def test_noise_free_is_for_the_excitation_scenario():
     scenario = family.demo_scenarios[0]
     with pytest.raises(ConfigurationError, match=rf"--noise-free: scenario '{scenario}' is the {family.name} family's"):
         validate.run_scenario(family.example, scenario, noise=False)
+
+
+@pytest.mark.slow       # designs, generates, compiles and runs a starter (about a minute)
+def test_a_starter_validates_with_its_declared_noise(tmp_path, capsys):
+    """A starter (`uiogen new`) declares its sensors' noise; validate adds it by default (other figures
+    than --noise-free, the same ones run again), and with sensors 100 x noisier, edited without a new
+    design or build (the table is no design input), the unknown input's estimate is named as carrying
+    no information and --fail-uninformative exits 3."""
+    import tomllib
+    from codegen import families
+    from codegen.project import observer_file as observers, starter
+    family = next(families.get(f) for f in families.names() if families.get(f).example)
+    path = starter.write(tmp_path, family)
+    for argv in (["design", str(path), "--update"], ["generate", str(path)], ["build", str(path)]):
+        assert cli.main(argv) == 0, argv
+    config = observers.get(str(path))
+    unknown = [str(d) for d in config.load_model().unknown_inputs]
+    noisy = validate.run_scenario(config, "excitation", duration=8.0)
+    again = validate.run_scenario(config, "excitation", duration=8.0)
+    free = validate.run_scenario(config, "excitation", duration=8.0, noise=False)
+    assert noisy["noise"]["mode"] == "declared" and noisy["noise"]["levels"] and free["noise"]["mode"] == "off"
+    assert {s: r["rms"] for s, r in noisy["observer"].items()} == {s: r["rms"] for s, r in again["observer"].items()}
+    for d in unknown:
+        assert noisy["observer"][d]["rms"] > free["observer"][d]["rms"] > 0, d
+        assert noisy["observer"][d]["no_information"] is False, d
+    params = Path(config.parameter_path)
+    text = params.read_text()
+    levels = tomllib.loads(text)["sensor_noise"]
+    params.write_text(text[:text.index("[sensor_noise]")] + "[sensor_noise]\n"
+                      + "".join(f"{name} = {100 * std!r}\n" for name, std in levels.items()))
+    capsys.readouterr()
+    assert cli.main(["validate", str(path), "--scenario", "excitation", "--duration", "8", "--json",
+                     "--fail-uninformative"]) == 3
+    data = json.loads(capsys.readouterr().out)
+    assert set(unknown) <= set(data["uninformative"]), data["uninformative"]
+    assert data["noise"]["levels"] == pytest.approx({k: 100 * v for k, v in noisy["noise"]["levels"].items()})
