@@ -135,7 +135,7 @@ def remark(rows: dict, noisy: bool | None = None) -> str:
         return ""
     parts = [f"{s} (error RMS {r['rms']:.4g} >= {r['truth_std']:.4g} {r.get('unit') or ''}, its truth's RMS about "
              f"its mean; NMSE {r['nmse_percent']:.4g} %)".replace("  ", " ") for s, r in bad.items()]
-    return (f"no information in {', '.join(bad)}: {'; '.join(parts)}: the truth's mean (a constant) would estimate "
+    return (f"no information: {'; '.join(parts)}: the truth's mean (a constant) would estimate "
             f"{'it' if len(bad) == 1 else 'them'} as well"
             + {True: "; below the noise floor of the declared sensor noise", False: ", even without sensor noise",
                None: ""}[noisy])

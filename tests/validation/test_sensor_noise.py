@@ -102,7 +102,7 @@ def test_an_estimate_without_information_is_named(tmp_path, monkeypatch, capsys)
     monkeypatch.setattr(validate, "run_scenario", lambda *a, **k: res)
     assert cli.main(["validate", str(tmp_path / "obs.toml"), "--scenario", "excitation"]) == 0
     out = capsys.readouterr()
-    line = (f"no information in phir: phir (error RMS {row['rms']:.4g} >= {row['truth_std']:.4g} deg, its truth's RMS "
+    line = (f"no information: phir (error RMS {row['rms']:.4g} >= {row['truth_std']:.4g} deg, its truth's RMS "
             f"about its mean; NMSE {row['nmse_percent']:.4g} %): the truth's mean (a constant) would estimate it as "
             f"well; below the noise floor of the declared sensor noise")
     assert line in out.out.splitlines() and out.err == f"uiogen: warning: {line}\n"
