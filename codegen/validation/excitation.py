@@ -220,10 +220,11 @@ def _refuse_divergence(model, params, t, truth, states) -> None:
         f"[scheduling.*] range) of {params.source}")
 
 
-def noise_record(input_names, model, params, noise: bool = True) -> dict:
+def noise_record(input_names, model, params, noise: bool = True, source: str | None = None) -> dict:
     """What the run's measurements carry: ``levels`` {observer input: standard deviation, in the
     model's unit of the signal}, ``units``, ``noise_free`` (the inputs read without noise), ``source``
-    (the parameter file) and ``mode``: "declared" (``[sensor_noise]``), "none declared" (the file has
+    (the parameter file as the observer file names it, ``source``: the same project in another folder
+    gives the same record) and ``mode``: "declared" (``[sensor_noise]``), "none declared" (the file has
     no level for any input the observer reads), or "off" (``noise=False``, ``--noise-free``)."""
     from . import noise as sensor
     levels = sensor.observer_levels(input_names, model, params)       # checked even when turned off
@@ -233,7 +234,7 @@ def noise_record(input_names, model, params, noise: bool = True) -> dict:
         mode = "declared" if any(levels.values()) else "none declared"
     units = dict(model.units or {})
     signals = sensor.measured_signals(model)
-    return {"mode": mode, "levels": levels, "source": params.source,
+    return {"mode": mode, "levels": levels, "source": source or params.source,
             "units": {c: units.get(sensor.column_signal(c, signals) or c) for c in levels},
             "noise_free": [c for c in input_names if not levels.get(c)]}
 
@@ -253,7 +254,7 @@ def run(config, duration: float | None = None, seed: int = 0, progress=None, obs
     missing = [c for c in obs.input_names if c not in truth]
     if missing:
         raise ModelDefinitionError(f"observer {config.name!r}: its inputs {missing} are not signals of the model")
-    record = noise_record(list(obs.input_names), model, params, noise)
+    record = noise_record(list(obs.input_names), model, params, noise, source=str(config.parameters))
     measured = np.column_stack([truth[c] for c in obs.input_names])
     if record["levels"]:
         measured = sensor.add(measured, list(obs.input_names), record["levels"], seed)
