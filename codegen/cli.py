@@ -7,7 +7,7 @@
     uiogen build [NAME ...] [--float32] [--project DIR]
     uiogen check-gains NAME --gains FILE [--json]
     uiogen fit NAME --data PATH|stanford|niki --samples A:B [--folds K] [--judge RUN ...] [--choose KEY=[V, ...]] [--plot FILE.png] [--write] [--json]
-    uiogen validate NAME --scenario S [--plant nominal|commonroad] [--json] [--plot FILE.png] [--report DIR] [--project DIR]
+    uiogen validate NAME --scenario S [--plant nominal|commonroad] [--noise-free] [--fail-uninformative] [--json] [--plot FILE.png] [--report DIR] [--project DIR]
     uiogen validate NAME --data PATH|stanford|niki [--out FILE.mf4|.parquet] [--json] [--plot FILE.png] [--report DIR]
                     [--project DIR]
     uiogen demo [--json] [--report DIR]
@@ -328,7 +328,7 @@ def cmd_fit(args) -> int:
 
 
 def cmd_validate(args) -> int:
-    from .validation import run as validate
+    from .validation import noise, run as validate
     config = observers.get(args.name, project=args.project)
     if args.plot and not Path(args.plot).suffix:        # matplotlib adds .png: say the file it writes
         args.plot = f"{args.plot}.png"
@@ -346,28 +346,34 @@ def cmd_validate(args) -> int:
             from .validation import report
             with outputs.writing(args.report):
                 page = report.write_validation(args.name, result, args.report, data=True)
+        remark = noise.remark(result.get("observer", {}), noisy=None)
         if args.json:
             from .validation.metrics import DEFINITIONS
             keys = ("observer", "baselines", "estimates", "status_flags", "samples", "splits", "peaks", "warnings",
                     "log_checks", "baselines_skipped", "unchecked_columns", "format", "resampling", "out",
                     "noise", "log_checks_overridden")
-            print(json.dumps({**{k: result[k] for k in keys if k in result}, "definitions": DEFINITIONS},
+            print(json.dumps({**{k: result[k] for k in keys if k in result}, "definitions": DEFINITIONS,
+                              "uninformative": sorted(noise.uninformative(result.get("observer", {})))},
                              indent=1, sort_keys=True))
-            return 0
-        warned = f", {len(result['warnings'])} warning(s) below" if result.get("warnings") else ""
-        print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} flagged{warned}")
-        print(validate.format_data_table(result))
-        if args.plot:
-            print(f"plot: {args.plot}")
-        if args.report:
-            print(f"report: {page.resolve()}")
-        if args.out:
-            print(f"outputs: {Path(args.out).resolve()}")
-        return 0
+        else:
+            warned = f", {len(result['warnings'])} warning(s) below" if result.get("warnings") else ""
+            print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} "
+                  f"flagged{warned}")
+            print(validate.format_data_table(result))
+            if remark:
+                print(remark)
+            if args.plot:
+                print(f"plot: {args.plot}")
+            if args.report:
+                print(f"report: {page.resolve()}")
+            if args.out:
+                print(f"outputs: {Path(args.out).resolve()}")
+        return _uninformative_exit(remark, args)
     if not args.scenario:
         raise ConfigurationError("validate needs --scenario S (simulated plant) or --data PATH (logged run)")
     result = validate.run_scenario(config, args.scenario, args.plant, duration=args.duration,
-                                   progress=validate.progress_bar(f"{args.scenario} on {args.plant}"))
+                                   progress=validate.progress_bar(f"{args.scenario} on {args.plant}"),
+                                   noise=not args.noise_free)
     if args.plot:
         with outputs.writing(args.plot):
             validate.plot(result, args.plot)
@@ -377,11 +383,16 @@ def cmd_validate(args) -> int:
             page = report.write_validation(args.name, result, args.report, data=False)
     # a run whose step failed numerically or diverged is a failed validation: exit 1, the reason on stderr
     why = validate.failure(result)
+    record = result.get("noise")
+    remark = noise.remark(result.get("observer", {}),
+                          noisy=bool(record["levels"]) if isinstance(record, dict) and "mode" in record else None)
     if args.json:
         print(validate.to_json(result))
     else:
         print(validate.header(args.name, result))
         print(validate.format_table(result))
+        if remark:
+            print(remark)
         if args.plot:
             print(f"plot: {args.plot}")
         if args.report:
@@ -390,6 +401,18 @@ def cmd_validate(args) -> int:
         print(f"uiogen: validation failed: {why}; the estimates above are not the observer's (an initial estimate "
               f"outside the certified set, a set the run leaves, or a step that is not certified there)", file=sys.stderr)
         return 1
+    return _uninformative_exit(remark, args)
+
+
+def _uninformative_exit(remark: str, args) -> int:
+    """The exit code of a validation that ran: 3 with --fail-uninformative when an estimate carries no
+    information (the remark, also on stderr), else 0."""
+    if not remark:
+        return 0
+    print(f"uiogen: warning: {remark}", file=sys.stderr)
+    if args.fail_uninformative:
+        print("uiogen: validation failed (--fail-uninformative): an estimate carries no information", file=sys.stderr)
+        return 3
     return 0
 
 
@@ -652,6 +675,12 @@ def main(argv=None) -> int:
     p.add_argument("--plant", choices=("nominal", "model", "commonroad"), default="nominal",
                    help="nominal: our symbolic truth plant (Pacejka); model: the observer's exact model")
     p.add_argument("--duration", type=float, default=None, help="truncate the scenario [s]")
+    p.add_argument("--noise-free", action="store_true",
+                   help="excitation: without the sensor noise the parameter file's [sensor_noise] declares (added by "
+                        "default)")
+    p.add_argument("--fail-uninformative", action="store_true",
+                   help="exit 3 when an estimate carries no information (error RMS >= its truth's RMS about its mean); "
+                        "without it the run names such estimates and exits 0")
     p.add_argument("--json", action="store_true")
     p.add_argument("--plot", help="write estimates vs truth to this PNG")
     p.add_argument("--report", metavar="DIR", help="write an HTML page (DIR/index.html) with the figures and the tables")

@@ -84,13 +84,17 @@ def observer_file_sha256(path) -> str:
 
 
 def parameters_sha256(path) -> str:
-    """The hash of a parameter file as parsed (TOML): its comments and layout are not hashed. A
-    file that is not UTF-8 TOML (it cannot be designed from) is hashed byte for byte."""
+    """The hash of a parameter file as parsed (TOML): its comments and layout are not hashed, nor its
+    ``[sensor_noise]`` table (the sensors' noise levels ``uiogen validate`` adds: no design or C derives
+    from them, so declaring or editing them re-solves nothing). A file that is not UTF-8 TOML (it
+    cannot be designed from) is hashed byte for byte."""
     import tomllib
     with open(path, "rb") as fh:
         raw = fh.read()
     try:
-        text = json.dumps(tomllib.loads(raw.decode("utf-8-sig")), sort_keys=True, default=str)
+        data = tomllib.loads(raw.decode("utf-8-sig"))
+        data.pop("sensor_noise", None)
+        text = json.dumps(data, sort_keys=True, default=str)
     except (UnicodeDecodeError, tomllib.TOMLDecodeError):
         return hashlib.sha256(b"bytes\0" + raw).hexdigest()
     return hashlib.sha256(b"toml\0" + text.encode()).hexdigest()

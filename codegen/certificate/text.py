@@ -151,7 +151,11 @@ def validation_header(family, name: str, result: dict, settle_time: float) -> st
         parts.append(f"max |a_y| {result['max_abs_ay']:.2f} m/s^2")
     if "relative_degrees" in result:
         parts.append(f"relative degree {result['relative_degrees']}")
-    if "noise" in result:
+    record = result.get("noise")
+    if isinstance(record, dict) and "mode" in record:     # the excitation run's: its levels are the line below
+        parts.append({"declared": "sensor noise as declared", "off": "noise free (--noise-free)",
+                      "none declared": "noise free (none declared)"}[record["mode"]])
+    elif "noise" in result:
         parts.append(f"white output noise {result['noise']}" if result["noise"] else "noise free")
     parts.append(f"{result['status_flags']} flagged samples")
     note = getattr(family, "table_note", "") if result.get("table_format") != "generic" else ""

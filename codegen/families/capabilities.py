@@ -19,6 +19,7 @@ protocol                  used by
 :class:`GainForms`        ``uiogen check-gains``: the paper's printed form of the gains
 :class:`LogPeers`         ``uiogen validate --data``: estimators run beside the observer on a log
 :class:`Identification`   ``uiogen fit``: identify the observer's numbers on a log
+:class:`NoiseBound`       ``uiogen validate``: the certified noise-to-estimate bound at the declared noise
 ========================  =====================================================================
 """
 from __future__ import annotations
@@ -154,8 +155,20 @@ class Identification(Protocol):
         """The identification's result as text lines (its own table format; the files' state is the verb's)."""
 
 
+@runtime_checkable
+class NoiseBound(Protocol):
+    """A certificate that bounds the estimation error from the sensors' noise, restated at the levels
+    the parameter file's ``[sensor_noise]`` declares (``uiogen validate`` prints it beside the run)."""
+
+    def noise_bound(self, b, levels: dict) -> dict:
+        """The bound of build ``b``'s certificate at sensor noise ``levels`` ({measured signal: std, in
+        the model's unit}): {"error", "norm", "unit", "bound", "design_bound" (at the design's own
+        levels), "levels" (every channel's, as used), "declared" (the signals taken from ``levels``),
+        "where" (the conditions the bound holds under)}."""
+
+
 CAPABILITIES = (Scenarios, DemoPlant, DemoFigures, BenchFigures, BenchStudy, Campaigns, Applicability, GainForms,
-                LogPeers, Identification)
+                LogPeers, Identification, NoiseBound)
 
 # what each capability is called in an error
 _WHAT = {Scenarios: "simulated validation scenarios (uiogen validate --scenario, uiogen demo)",
@@ -164,7 +177,8 @@ _WHAT = {Scenarios: "simulated validation scenarios (uiogen validate --scenario,
          Applicability: "applicability check (uiogen analyze)",
          GainForms: "printed form of its gains (uiogen check-gains takes the design lock's lmi_solutions)",
          LogPeers: "estimators run beside the observer on a log",
-         Identification: "identification (uiogen fit): its numbers come from its paper or its parameter file"}
+         Identification: "identification (uiogen fit): its numbers come from its paper or its parameter file",
+         NoiseBound: "certified noise-to-estimate bound"}
 
 
 def of(family) -> tuple:

@@ -217,6 +217,8 @@ class ParameterSet:
     inputs: Mapping[str, dict] = field(default_factory=dict)   # [inputs.NAME] min, max, bandwidth (excitation)
     accepted: tuple = ()      # [plausibility] accept: values right although they look implausible
     prior: Mapping[str, dict] = field(default_factory=dict)   # [prior] NAME = {value, rel_sigma, source}: published
+    sensor_noise: Mapping[str, dict] = field(default_factory=dict)   # [sensor_noise] NAME = {std, unit}: the car's
+    # sensors (codegen.validation.noise checks the names and units against the model)
 
 
 @dataclass(frozen=True)
@@ -282,18 +284,23 @@ class LPVModel:
 # codegen.families.algebraic_uio.representation.derivative_boxes; exogenous and premise_bounds by
 # codegen.families.interconnected_uio.representation).
 PARAMETER_TABLES = ("parameters", "scheduling", "meta", "plant", "state_bounds", "exogenous", "premise_bounds",
-                    "inputs", "plausibility", "prior")
+                    "inputs", "plausibility", "prior", "sensor_noise")
 PRIOR_KEYS = {"value": Rule(float, required=True, doc="the published or datasheet value, in the parameter's unit"),
               "rel_sigma": Rule(float, gt=0, required=True, doc="its stated uncertainty, one standard deviation "
                                                                  "relative to the value"),
               "source": Rule(str, doc="where the value is published")}
 INPUT_KEYS = {"min": Rule(float, required=True), "max": Rule(float, required=True),
               "bandwidth": Rule(float, gt=0, doc="Hz, highest frequency of the excitation signal")}
+SENSOR_NOISE_KEYS = {"std": Rule(float, ge=0, required=True, doc="standard deviation of the sensor's white noise, "
+                                                                  "in unit"),
+                     "unit": Rule(str, doc="the unit std is in (default: the signal's unit in the model)")}
 SCHEDULING_KEYS = {"min": Rule(float), "max": Rule(float), "rate_min": Rule(float), "rate_max": Rule(float),
                    "derivative_bounds": Rule(list, doc="[[min, max], ...] of the derivatives of order 2, 3, ...")}
 PLAUSIBILITY_KEYS = {"accept": Rule(list, items=Rule(str), doc="parameters whose values are right although "
                                                                "they look implausible (codegen.model.dimensions)")}
 _NUMBER = Rule(float)
+_STD = Rule(float, ge=0, allowed="a standard deviation >= 0 in the signal's unit (a finite number), or "
+                                 "{ std = ..., unit = \"...\" }: the white noise of the measured signal's sensor")
 _PAIR = Rule(list, items=Rule(float), allowed="[min, max], two finite numbers")
 
 
@@ -322,7 +329,9 @@ def load_parameters(path: str | Path) -> ParameterSet:
     ``NAME = [min, max]`` (the compact state set of designs that bound unmeasured nonlinearities);
     ``[exogenous]`` and ``[premise_bounds]`` are read by the interconnected family; ``[inputs.NAME]``
     (``min``, ``max``, optional ``bandwidth`` in Hz) bounds a known or unknown input for the generic
-    excitation scenario (:mod:`codegen.validation.excitation`; ``min = max`` holds it at that value).
+    excitation scenario (:mod:`codegen.validation.excitation`; ``min = max`` holds it at that value);
+    ``[sensor_noise]`` (``NAME = std`` or ``NAME = { std, unit }``) is the standard deviation of each
+    measured signal's sensor noise (:mod:`codegen.validation.noise`: ``uiogen validate`` adds it).
 
     Raises
     ------
@@ -411,7 +420,18 @@ def load_parameters(path: str | Path) -> ParameterSet:
             raise config_error(str(path), "prior", key, table, "an inline table { value = ..., rel_sigma = ..., "
                                "source = \"...\" } (the published value and its relative uncertainty)")
         prior[key] = parse_table(table, PRIOR_KEYS, source=str(path), section=f"prior.{key}")
-    return ParameterSet(str(path), values, boxes, meta, plant, state_bounds, inputs, accepted, prior)
+    sensor_noise = {key: _sensor_noise(value, path, key) for key, value in _table(data, "sensor_noise", path).items()}
+    return ParameterSet(str(path), values, boxes, meta, plant, state_bounds, inputs, accepted, prior, sensor_noise)
+
+
+def _sensor_noise(value, path, key) -> dict:
+    """``[sensor_noise] NAME = std`` (in the signal's unit) or ``NAME = { std = ..., unit = "..." }``
+    as {"std", "unit" (None: the model's)}; a negative, non-numeric or non-finite std is refused."""
+    if isinstance(value, dict):
+        table = parse_table(value, SENSOR_NOISE_KEYS, source=str(path), section=f"sensor_noise.{key}")
+        return {"std": float(table["std"]), "unit": table.get("unit")}
+    std = parse_value(value, _STD, source=str(path), section="sensor_noise", key=key)
+    return {"std": float(std), "unit": None}
 
 
 def _affine_part(expr_column: sp.Matrix, symbols: tuple, what: str, model: str, hint=None) -> sp.Matrix:

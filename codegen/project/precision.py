@@ -7,14 +7,18 @@ physical: a declared fraction of what the sensors' noise already does to the est
 
     [precision]
     fraction = 0.1                       # tolerance = 0.1 x the estimate's RMS response to the sensor noise
-    noise = { y_r = 8.7e-4 }             # input -> standard deviation of its sensor noise [its unit]
+    noise = { y_r = 8.7e-4 }             # input -> std of its sensor noise [its unit]; better: [sensor_noise] r
+                                         # of the parameter file (one place, read by validate too)
     tolerance = { T_d = 0.05 }           # output -> absolute tolerance [its unit], instead of the rule
     uncertified_states = "measured"      # or "refuse" (the default), see below
     accumulation = "compensated"         # or "plain" (the default), see below
 
-The sensor noise of an input not in ``noise`` is the family's validation noise for that signal
-(:meth:`Family.sensor_noise`, a measured ``y_NAME`` or a raw input ``NAME``); an input with
-neither is taken noise free. An output whose estimate no declared noise moves needs a
+The sensor noise is declared once, for every verb, in the parameter file's ``[sensor_noise]``
+table (:mod:`codegen.validation.noise`: by the model's signal name, in its unit); ``noise`` here is
+the former place, still read, and must agree with it (a ConfigurationError naming both files where
+they differ). An input declared in neither takes the family's validation noise for that signal
+(:meth:`Family.sensor_noise`, a measured ``y_NAME`` or a raw input ``NAME``); an input with none
+of them is taken noise free. An output whose estimate no declared noise moves needs a
 ``tolerance``: the build says which.
 
 State with dynamics of its own that no certificate covers (the sliding-mode differentiators:
@@ -72,18 +76,24 @@ def parse(table, source: str) -> PrecisionSettings:
 
 def input_noise(config, inputs) -> dict:
     """{input name: standard deviation} of the sensor noise of an observer's ``inputs``: its observer
-    file's ``[precision] noise`` table, else the family's validation noise of a measured ``y_NAME``
-    or a raw input ``NAME`` (:func:`codegen.families.capabilities.sensor_noise`); an input with
-    neither is left out. The float32 build's tolerance and ``validate --data``'s log checks use it.
+    file's ``[precision] noise`` table (which must agree with the parameter file's ``[sensor_noise]``),
+    else ``[sensor_noise]`` (:mod:`codegen.validation.noise`), else the family's validation noise of a
+    measured ``y_NAME`` or a raw input ``NAME`` (:func:`codegen.families.capabilities.sensor_noise`);
+    an input with none is left out. The float32 build's tolerance and ``validate --data``'s log checks
+    use it.
 
     Raises
     ------
     ConfigurationError
-        a ``[precision] noise`` key that is no input of the observer.
+        a ``[precision] noise`` key that is no input of the observer, or whose level disagrees with
+        ``[sensor_noise]``.
     """
+    import math
     from .. import families
     from ..errors import ConfigurationError
     from ..families.capabilities import sensor_noise
+    from ..model import load_parameters
+    from ..validation import noise as sensor
     spec = config.precision
     inputs = list(inputs)
     source = config.source or f"{config.name}.toml"
@@ -93,11 +103,23 @@ def input_noise(config, inputs) -> dict:
             raise ConfigurationError(f"{source}: [precision.noise] {key}: not an input of {config.name}; its inputs: "
                                      f"{', '.join(inputs)}" + (f" (did you mean {near!r}?)" if near else ""),
                                      source=source, section="precision.noise", key=key, allowed=", ".join(inputs))
+    params = load_parameters(config.parameter_path)
+    declared = sensor.observer_levels(inputs, config.load_model(), params)     # [sensor_noise]: the one place
+    for key, value in spec.noise.items():
+        if key in declared and not math.isclose(float(value), declared[key], rel_tol=1e-9, abs_tol=0.0):
+            raise ConfigurationError(
+                f"{source}: [precision.noise] {key} = {float(value):g} disagrees with the sensor noise {declared[key]:g} "
+                f"that [sensor_noise] of {params.source} declares for it (in the model's unit): declare a sensor's noise "
+                f"once, in [sensor_noise] (read by validate and the float32 build); remove {key} from [precision] noise",
+                source=source, section="precision.noise", key=key,
+                allowed=f"{declared[key]:g} (the [sensor_noise] level), or no entry")
     family = sensor_noise(families.get(config.family))
     out = {}
     for name in inputs:
         if name in spec.noise:
             out[name] = float(spec.noise[name])
+        elif name in declared:
+            out[name] = declared[name]
         elif name.startswith("y_") and name[2:] in family:
             out[name] = float(family[name[2:]])
         elif name in family:

@@ -13,6 +13,7 @@ extensions would be ``_NAME``. Every hint printed names the file by its path.
 """
 from __future__ import annotations
 
+import math
 import re
 import shlex
 from pathlib import Path
@@ -68,6 +69,9 @@ def write(folder: Path, family, name: str | None = None) -> Path:
     outputs.make_folder(folder)
     for dst, src in files.items():
         outputs.write_atomic(dst, src.read_text())
+    params_text = files[folder / "parameters.toml"].read_text()
+    if "sensor_noise" not in _tables(params_text):
+        outputs.write_atomic(folder / "parameters.toml", params_text.rstrip("\n") + "\n\n" + sensor_table(example, family))
     text = Path(example.source).read_text()
     text = re.sub(r'^model = "[^"]*"', 'model = "model.py"', text, count=1, flags=re.M)
     text = re.sub(r'^parameters = "[^"]*"', 'parameters = "parameters.toml"', text, count=1, flags=re.M)
@@ -77,6 +81,43 @@ def write(folder: Path, family, name: str | None = None) -> Path:
             + "".join(f"#   {line}\n" for line in next_steps(target)) + "#\n")
     outputs.write_atomic(target, head + text)
     return target
+
+
+def _tables(text: str) -> dict:
+    import tomllib
+    return tomllib.loads(text)
+
+
+def sensor_table(example, family) -> str:
+    """The starter's ``[sensor_noise]`` table (:mod:`codegen.validation.noise`): a level for each measured
+    signal of the example's model that has one (the example observer file's ``[precision] noise``,
+    else the family's validation noise: the float32 build's levels until now, so it stays as it was),
+    the others as a commented line to fill in from the sensor's datasheet."""
+    from ..families.capabilities import sensor_noise
+    from ..validation.noise import column_signal, measured_signals
+    model = example.load_model()
+    signals = measured_signals(model)
+    units = dict(model.units or {})
+    levels = {}
+    for col, std in example.precision.noise.items():
+        sig = column_signal(col, signals)
+        if sig is not None:
+            levels[sig] = float(std)
+    for sig, std in sensor_noise(family).items():
+        if sig in signals:
+            levels.setdefault(sig, float(std))
+    lines = ["[sensor_noise]   # standard deviation of each measured signal's sensor noise, in its unit (a number) or",
+             "                 # { std = ..., unit = \"deg/s\" }: `uiogen validate --scenario excitation` adds it (seeded);",
+             "                 # the starter's levels are the family's validation noise: put your sensors' figures here"]
+    for sig, kind in signals.items():
+        unit = units.get(sig)
+        note = f"# {unit + ', ' if unit else ''}{kind}"
+        if sig in levels:       # repr: the very level the float32 build took (its tolerance stays as it was)
+            deg = f" ({math.degrees(levels[sig]):.3g} {unit.replace('rad', 'deg')})" if unit in ("rad", "rad/s") else ""
+            lines.append(f"{sig} = {levels[sig]!r}".ljust(31) + " " + note + deg)
+        else:
+            lines.append(f"# {sig} = ...".ljust(31) + " " + note + ": no level declared, read noise free")
+    return "\n".join(lines) + "\n"
 
 
 def next_steps(target: Path) -> list:

@@ -332,9 +332,9 @@ def _units(b) -> dict:
 
 
 def input_noise(config, b) -> dict:
-    """{input name: standard deviation} of the sensor noise: the ``[precision] noise`` table, else
-    the family's validation noise of a measured ``y_NAME`` or a raw input ``NAME``
-    (:func:`codegen.project.precision.input_noise`, which ``validate --data`` judges a log with too)."""
+    """{input name: standard deviation} of the sensor noise: the ``[precision] noise`` table (which must
+    agree with the parameter file's ``[sensor_noise]``), else ``[sensor_noise]``, else the family's validation
+    noise (:func:`codegen.project.precision.input_noise`, which ``validate --data`` judges a log with too)."""
     from ..project.precision import input_noise as table
     return table(config, list(b.input_names))
 

@@ -13,10 +13,13 @@ inputs evaluated continuously between the samples, as a real car's are) with
   file (or, without that table, the input's ``[state_bounds]`` entry: the set a design certifies);
 * the state starting at the centre of its ``[state_bounds]`` box (or at 0).
 
-The compiled step runs over the sampled outputs (noise-free), and its estimates are compared
-with the simulated states and unknown inputs after the settle time; the result has the shape of
-every validation (``observer.SIGNAL.rms``, ``unit``, ``truth_rms``, ``rms_percent``, ``nmse_percent``:
-:func:`codegen.validation.metrics.signal_report`).
+The compiled step runs over the sampled outputs, known inputs and scheduling signals with the
+sensor noise the parameter file declares (``[sensor_noise]``, :mod:`codegen.validation.noise`:
+seeded white noise at those levels, the levels in ``result["noise"]``; none declared, or
+``noise=False`` (``--noise-free``): noise free, and the result says which), and its estimates are
+compared with the simulated states and unknown inputs after the settle time; the result has the
+shape of every validation (``observer.SIGNAL.rms``, ``unit``, ``truth_rms``, ``truth_std``,
+``no_information``, ``rms_percent``, ``nmse_percent``: :func:`codegen.validation.metrics.signal_report`).
 """
 from __future__ import annotations
 
@@ -217,19 +220,54 @@ def _refuse_divergence(model, params, t, truth, states) -> None:
         f"[scheduling.*] range) of {params.source}")
 
 
-def run(config, duration: float | None = None, seed: int = 0, progress=None, observer=None) -> dict:
+def noise_record(input_names, model, params, noise: bool = True, source: str | None = None) -> dict:
+    """What the run's measurements carry: ``levels`` {observer input: standard deviation, in the
+    model's unit of the signal}, ``units``, ``noise_free`` (the inputs read without noise), ``source``
+    (the parameter file as the observer file names it, ``source``: the same project in another folder
+    gives the same record) and ``mode``: "declared" (``[sensor_noise]``), "none declared" (the file has
+    no level for any input the observer reads), or "off" (``noise=False``, ``--noise-free``)."""
+    from . import noise as sensor
+    levels = sensor.observer_levels(input_names, model, params)       # checked even when turned off
+    if not noise:
+        mode, levels = "off", {}
+    else:
+        mode = "declared" if any(levels.values()) else "none declared"
+    units = dict(model.units or {})
+    signals = sensor.measured_signals(model)
+    return {"mode": mode, "levels": levels, "source": source or params.source,
+            "units": {c: units.get(sensor.column_signal(c, signals) or c) for c in levels},
+            "noise_free": [c for c in input_names if not levels.get(c)]}
+
+
+def run(config, duration: float | None = None, seed: int = 0, progress=None, observer=None,
+        noise: bool = True) -> dict:
     """The compiled step (``observer``, default the observer's extension) over the excitation
-    scenario; tables in the shape of every validation."""
+    scenario, its inputs with the declared sensor noise (``noise=False``: without); tables in the
+    shape of every validation."""
     from .. import pipeline
     from ..extension.build import load
+    from . import noise as sensor
     model = config.load_model()
+    params = load_parameters(config.parameter_path)
     truth = simulate(config, duration or DURATION, seed)
     obs = observer if observer is not None else load(config)
     missing = [c for c in obs.input_names if c not in truth]
     if missing:
         raise ModelDefinitionError(f"observer {config.name!r}: its inputs {missing} are not signals of the model")
-    out, status, _ = obs.run(np.column_stack([truth[c] for c in obs.input_names]))
-    lags = pipeline.build(config).output_lags()
+    record = noise_record(list(obs.input_names), model, params, noise, source=str(config.parameters))
+    measured = np.column_stack([truth[c] for c in obs.input_names])
+    if record["levels"]:
+        measured = sensor.add(measured, list(obs.input_names), record["levels"], seed)
+        record["seed"] = int(seed)
+    out, status, _ = obs.run(measured)
+    b = pipeline.build(config)
+    lags = b.output_lags()
+    from .. import families
+    from ..families.capabilities import NoiseBound
+    family = families.get(config.family)
+    if record["mode"] == "declared" and isinstance(family, NoiseBound):
+        # the certificate's noise-to-estimate bound, restated at the levels this run adds
+        record["certified_bound"] = family.noise_bound(b, sensor.declared(model, params))
     units = dict(model.units)
     table, estimates = {}, {}
     for i, s in enumerate(obs.output_names):
@@ -247,8 +285,9 @@ def run(config, duration: float | None = None, seed: int = 0, progress=None, obs
             "status_counts": {k: v for k, v in counts.items() if v},
             "samples": int(len(status)), "max_abs_ay": max_abs_ay(truth),
             "plant": "model", "plant_model": f"{model.name} (its own equations, excitation)",
-            "scenario": "excitation", "table_format": "generic", "units": units,
-            "signals": {"t": truth["t"], "truth": truth, "estimate": estimates, "status": status}}
+            "scenario": "excitation", "table_format": "generic", "units": units, "noise": record,
+            "signals": {"t": truth["t"], "truth": truth, "estimate": estimates, "status": status,
+                        "measured": dict(zip(obs.input_names, measured.T))}}
 
 
 def max_abs_ay(truth: dict) -> float | None:
@@ -260,6 +299,32 @@ def max_abs_ay(truth: dict) -> float | None:
 
 def format_table(result: dict) -> str:
     """Every estimated signal in the one definition of every validation
-    (:func:`codegen.validation.common.format_stats`)."""
+    (:func:`codegen.validation.common.format_stats`), under a line saying the sensor noise of the run."""
     from .common import format_stats
-    return format_stats(result["observer"])
+    return "\n".join(filter(None, [noise_line(result.get("noise")), format_stats(result["observer"])]))
+
+
+def noise_line(record: dict | None) -> str:
+    """The run's sensor noise in words: the levels and where they are declared, or why it is noise free."""
+    if not record:
+        return ""
+    from .metrics import reported_unit
+    if record["mode"] == "off":
+        return "sensor noise: none (--noise-free); the [sensor_noise] levels of the parameter file are not added"
+    if record["mode"] == "none declared":
+        return (f"sensor noise: none declared ({record['source']} has no [sensor_noise] level for the observer's "
+                f"inputs {', '.join(record['noise_free'])}): a noise-free run, the estimates' best case")
+    parts = []
+    for col, std in record["levels"].items():
+        shown, k, _ = reported_unit(record["units"].get(col))
+        parts.append(f"{col} {k * std:.3g}" + (f" {shown}" if shown else ""))
+    free = f"; noise free: {', '.join(record['noise_free'])}" if record["noise_free"] else ""
+    line = (f"sensor noise (std, seeded white, seed {record.get('seed', 0)}, [sensor_noise] of {record['source']}): "
+            f"{', '.join(parts)}{free}")
+    bound = record.get("certified_bound")
+    if bound:
+        at = ", ".join(f"{k} {v:.4g}" for k, v in bound["declared"].items()) or "none of its sensor channels"
+        line += (f"\ncertified at this noise: {bound['norm']} of {bound['error']} <= {bound['bound']:.4g} {bound['unit']} "
+                 f"(declared: {at}; {bound['where']}); at the design's own levels {bound['design_bound']:.4g} "
+                 f"{bound['unit']}")
+    return line

@@ -14,6 +14,10 @@
 ``std``               standard deviation of ``e`` (ddof = 0)
 ``bias``              ``mean(e)``
 ``truth_rms``         ``sqrt(mean(truth²))``, the scale the error is set against
+``truth_std``         ``sqrt(mean((truth - mean(truth))²))``: the error of estimating the truth's
+                      mean all along
+``no_information``    ``rms >= truth_std`` (NMSE <= 0): the estimate says nothing a constant would
+                      not (None for a constant truth); ``uiogen validate`` names such estimates
 ``rms_percent``       ``100 rms / truth_rms`` (None for an all-zero truth)
 ``nmse_percent``      ``100 - 100 Σe² / Σ(truth - mean(truth))²`` (Sentouh et al. 2023 eq. (32):
                       100 is perfect, 0 no better than the truth's mean, negative worse; None
@@ -64,11 +68,20 @@ DEFINITIONS = {
     "std": "standard deviation of e (ddof 0)",
     "bias": "mean(e)",
     "truth_rms": "sqrt(mean(truth^2)) over the same samples",
+    "truth_std": "the truth's RMS about its mean, sqrt(mean((truth - mean(truth))^2)), over the same samples: the "
+                 "error of estimating the truth's mean (a constant) all along",
+    "no_information": "true when rms >= truth_std (NMSE <= 0): the estimate carries no information about the signal's "
+                      "variation, its mean would do as well (null for a constant truth)",
     "rms_percent": "100 rms / truth_rms (null for an all-zero truth)",
     "nmse_percent": "100 - 100 sum(e^2) / sum((truth - mean(truth))^2), Sentouh et al. 2023 eq. (32): 100 perfect, "
                     "0 no better than the truth's mean (null for a constant truth)",
     "samples": "samples compared",
     "after_s": "the samples compared are those at t >= after_s [s] (the settle time); null: every sample",
+    "uninformative": "(top level) the estimates whose no_information is true, by name",
+    "noise": "(top level) the sensor noise of the run; the excitation scenario's: mode (declared: the parameter file's "
+             "[sensor_noise]; none declared; off: --noise-free), levels {observer input: standard deviation in the "
+             "model's unit, units}, noise_free (inputs read without noise), source (the parameter file), seed; a family's "
+             "scenario: {signal: standard deviation} of its paper's noise",
     "max_abs_ay": "(top level) max |a_y| [m/s^2] of the simulated truth's lateral acceleration, the model's output "
                   "named a_y; null when the model has no output of that name (no value is made up)",
 }
@@ -78,7 +91,7 @@ DEFINITIONS = {
 _REPORTED = {"rad": ("deg", 180.0 / math.pi)}
 _CONVERSIONS = {("deg", "rad"): math.pi / 180.0, ("rad", "deg"): 180.0 / math.pi,
                 ("deg/s", "rad/s"): math.pi / 180.0, ("rad/s", "deg/s"): 180.0 / math.pi}
-_SCALED = ("rms", "mae", "max", "std", "bias", "truth_rms")
+_SCALED = ("rms", "mae", "max", "std", "bias", "truth_rms", "truth_std")
 
 __all__ = [
     "MetricInputError", "DEFINITIONS", "reported_unit", "signal_report", "report_from_sums", "convert", "ErrorStats", "error_stats", "mean_abs_error", "max_abs_error",
@@ -311,7 +324,7 @@ def signal_report(reference, estimate, *, unit: str | None) -> dict:
     -------
     dict
         ``unit`` (and ``converted_from``), ``rms``, ``mae``, ``max``, ``std``, ``bias``,
-        ``truth_rms``, ``rms_percent``, ``nmse_percent``, ``samples``.
+        ``truth_rms``, ``truth_std``, ``no_information``, ``rms_percent``, ``nmse_percent``, ``samples``.
 
     Raises
     ------
@@ -345,7 +358,9 @@ def report_from_sums(unit: str | None, *, n: int, abs_sum: float, abs_max: float
     rms = k * math.sqrt(sq_sum / n)
     truth_rms = k * math.sqrt(truth_sq_sum / n)
     row = {"unit": shown, "rms": rms, "mae": k * abs_sum / n, "max": k * abs_max, "std": k * math.sqrt(m2 / n),
-           "bias": k * mean, "truth_rms": truth_rms,
+           "bias": k * mean, "truth_rms": truth_rms, "truth_std": k * math.sqrt(truth_m2 / n),
+           # Σe² >= Σ(y - mean y)²: the truth's mean, a constant, would estimate it as well (NMSE <= 0)
+           "no_information": bool(sq_sum >= truth_m2) if truth_m2 > 0 else None,
            "rms_percent": 100.0 * rms / truth_rms if truth_rms > 0 else None,
            "nmse_percent": 100.0 - 100.0 * sq_sum / truth_m2 if truth_m2 > 0 else None,
            "samples": int(n)}

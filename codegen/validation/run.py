@@ -40,11 +40,13 @@ def progress_bar(label: str):
 
 
 def run_scenario(name, scenario, plant: str = "nominal", duration: float | None = None,
-                 seed: int = 0, progress=None, observer=None) -> dict:
+                 seed: int = 0, progress=None, observer=None, noise: bool = True) -> dict:
     """Simulate the observer's family plant, run the compiled step and the baselines; returns the
     tables (``observer``, ``baselines``), the signals and ``family`` (which formats the table).
     ``observer``: the compiled observer to run (default: the observer's extension), e.g. a
-    :class:`python_bindings.Recorder` of it."""
+    :class:`python_bindings.Recorder` of it. ``noise``: the excitation scenario's measurements carry
+    the parameter file's ``[sensor_noise]`` (False: ``--noise-free``; a family's own scenarios carry
+    their paper's noise, and refuse it)."""
     from ..extension.build import require_current
     config = observers.get(name) if isinstance(name, str) else name
     if duration is not None and not (isinstance(duration, (int, float)) and math.isfinite(duration)
@@ -57,11 +59,17 @@ def run_scenario(name, scenario, plant: str = "nominal", duration: float | None 
                                  "model plant); CommonRoad's vehicle models drive a family's named scenarios (uiogen "
                                  "validate NAME --scenario S --plant commonroad)", source="--plant", key="--plant",
                                  value=plant)
+    if not noise and scenario != "excitation":
+        raise ConfigurationError(f"--noise-free: scenario {scenario!r} is the {config.family} family's, with the sensor "
+                                 f"noise of its paper (or none); --noise-free turns off the [sensor_noise] of the "
+                                 f"excitation scenario (uiogen validate NAME --scenario excitation --noise-free)",
+                                 source="--noise-free", key="--noise-free", value=True,
+                                 allowed="--scenario excitation")
     require_current(config)                 # never the compiled step of an older design
     if scenario == "excitation":            # every model: its own equations, swept and excited
         from . import excitation
         return {"family": config.family, **excitation.run(config, duration, seed, progress=progress,
-                                                          observer=observer)}
+                                                          observer=observer, noise=noise)}
     from ..families.capabilities import Scenarios, require
     family = require(families.get(config.family), Scenarios)
     result = family.validate(config, scenario, plant, duration, seed, progress=progress, observer=observer)
@@ -121,9 +129,11 @@ def failure(result: dict) -> str:
 def to_json(result: dict) -> str:
     """``uiogen validate --json``: every row in the one definition (``definitions`` says what each
     key means and in which unit), and the family's paper format beside it (``paper_format``)."""
+    from . import noise
     keys = ("observer", "baselines", "plant", "plant_model", "scenario", "status_flags", "status_counts", "samples",
-            "max_abs_ay", "paper_format")
-    return json.dumps({**{k: result[k] for k in keys if k in result}, "definitions": metrics.DEFINITIONS},
+            "max_abs_ay", "paper_format", "noise")
+    return json.dumps({**{k: result[k] for k in keys if k in result}, "definitions": metrics.DEFINITIONS,
+                       "uninformative": sorted(noise.uninformative(result.get("observer", {})))},
                       indent=1, sort_keys=True)
 
 

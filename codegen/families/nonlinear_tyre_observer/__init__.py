@@ -20,7 +20,7 @@ class NonlinearTyreObserver(Family):
     observer_keys = {}
     bounds_settings = ("bounds_rel_tol",)
     # capabilities (codegen.families.capabilities): DemoFigures, Applicability, GainForms, LogPeers,
-    # Identification
+    # Identification, NoiseBound
     example = "stanford_sideslip_nonlinear_tyre"
 
     def applicability(self, subject, structure):
@@ -37,6 +37,25 @@ class NonlinearTyreObserver(Family):
                 "contraction_per_step": c["contraction_per_step"], "time_constant_s": c["time_constant_s"],
                 "decay_rate": c["decay_rate"], "best_decay_rate": c["best_decay_rate"], "gamma_deg": c["gamma_deg"],
                 "bound_deg_at_levels": c["bound_deg_at_levels"], "gains": art["gains"]}
+
+    def noise_bound(self, b, levels: dict) -> dict:
+        """The certificate's RMS bound of the sideslip error with its sensor channels (a_y, yaw rate) at
+        the declared sensor noise ``levels`` ({signal: std}, the model's units) and every other channel
+        at the design's level: the multiplier inequality of :mod:`.design` gives RMS(z) <=
+        sqrt(T_s sum_i mu_i (sigma'_i / sigma_i)^2) for channels of RMS sigma'_i (on the gain set)."""
+        import math
+        from .design import CHANNELS
+        names, c = b.rep.signals, b.recheck
+        design = dict(zip(CHANNELS, b.settings.sigma.tolist()))
+        sensors = {"ay": names.a_y, "r": names.yaw_rate}
+        at = {ch: float(levels[sensors[ch]]) if sensors.get(ch) in levels else design[ch] for ch in CHANNELS}
+        share = c["bound_deg_by_channel"]
+        bound = math.sqrt(sum((share[ch] * at[ch] / design[ch]) ** 2 for ch in CHANNELS))
+        return {"error": "beta, the sideslip estimation error", "norm": "rms", "unit": "deg", "bound": bound,
+                "design_bound": float(c["bound_deg_at_levels"]), "levels": at, "design_levels": design,
+                "declared": {sensors[ch]: at[ch] for ch in sensors if sensors[ch] in levels},
+                "where": "on the gain set of the certificate; the other channels (axle force and Euler residuals) "
+                         "at the design's levels"}
 
     def log_peers(self, config, run) -> dict:
         """The EKF and UKF of the same symbolic model and parameter file

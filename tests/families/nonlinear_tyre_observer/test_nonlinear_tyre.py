@@ -191,6 +191,37 @@ def test_level_bound_holds_between_the_vertices_and_is_tighter_than_gamma(built)
     assert z2 <= w2 + e0 @ Q @ e0
 
 
+def test_the_noise_bound_at_the_declared_sensor_noise(built):
+    """Issue 42 item 2: the certificate's RMS bound restated at a parameter file's [sensor_noise] levels
+    (the a_y and yaw-rate channels; the other channels at the design's): sqrt(sum T_s mu_i r_i^2) with
+    r_i = declared / design level; at the design's own levels the certificate's figure; and a trajectory
+    with the channels at those RMS levels, the slopes and speed jumping every sample, stays within it."""
+    c, plant, L = built.recheck, built.plant, built.L
+    Q, mu = _level_bound(built)
+    same = FAMILY.noise_bound(built, {})
+    assert same["bound"] == pytest.approx(c["bound_deg_at_levels"], rel=1e-12) and same["declared"] == {}
+    names = built.rep.signals
+    at = FAMILY.noise_bound(built, {names.a_y: 0.05, names.yaw_rate: np.deg2rad(0.05)})
+    assert at["declared"] == {names.a_y: 0.05, names.yaw_rate: np.deg2rad(0.05)}
+    design = dict(zip(dsn.CHANNELS, built.settings.sigma.tolist()))
+    ratio = np.array([at["levels"][ch] / design[ch] for ch in dsn.CHANNELS])
+    assert ratio[dsn.CHANNELS.index("ay")] == pytest.approx(0.05 / design["ay"])
+    assert at["bound"] == pytest.approx(np.sqrt(float(mu @ ratio ** 2)), rel=1e-9)
+    assert at["bound"] < same["bound"]          # quieter sensors than the design's, a smaller bound
+    rng = np.random.default_rng(3)
+    lo_s, hi_s = (1.0 / built.rep.v_x_box[1], 1.0 / built.rep.v_x_box[0])
+    th_box = [b.theta for b in built.rep.gain_set]
+    e = np.zeros(2)
+    z2, n = 0.0, 20000
+    for _ in range(n):
+        x = dsn.Vertex("inner", rng.uniform(lo_s, hi_s), rng.uniform(*built.rep.v_x_box),
+                       np.array([rng.uniform(*th_box[0]), rng.uniform(*th_box[1])]))
+        A, B, C = _frozen(plant, x, L)
+        z2 += float((C @ e)[0] ** 2)
+        e = A @ e + B @ (ratio * rng.standard_normal(6))      # each channel white at its RMS level
+    assert np.sqrt(z2 / n) <= at["bound"]
+
+
 def test_given_gains_are_certified_not_designed():
     cfg = observers.get(NAME)
     art = _lock()
