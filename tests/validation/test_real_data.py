@@ -44,8 +44,9 @@ def test_cli_json_is_the_run_the_library_makes():
     assert proc.returncode == 0, proc.stderr
     res = json.loads(proc.stdout)
     assert set(res) == {"observer", "baselines", "status_flags", "samples", "peaks", "splits", "warnings",
-                        "log_checks", "definitions"}
+                        "log_checks", "definitions", "uninformative"}
     assert res["warnings"] == [] and {c["verdict"] for c in res["log_checks"]} == {"ok"}
+    assert res["uninformative"] == []           # the sideslip estimate carries information
     # the same numbers as the run made in this process (the CLI formats, it does not compute)
     ref = validate.run_data("stanford_sideslip", "stanford")
     for key in ("observer", "baselines", "status_flags", "samples", "peaks", "splits"):
