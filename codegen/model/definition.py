@@ -791,10 +791,16 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     Duw = _affine_part(h, w, "the derived inputs", model.name)
     Dd = _affine_part(h, d, "the unknown inputs", model.name, hint=lambda s: offer(model, s, params, subs))
     col = lambda syms: sp.Matrix(len(syms), 1, list(syms))   # a (k, 1) column, also for k = 0
-    rest = sp.simplify(f - A * col(x) - B * col(u) - D * col(d)
-                       - (Bw * sp.Matrix(w) if w else sp.zeros(*f.shape))) if x else f
-    h_rest = sp.simplify(h - C * col(x) - Du * col(u) - Dd * col(d)
-                         - (Duw * sp.Matrix(w) if w else sp.zeros(*h.shape)))
+    # what is left once the affine parts are taken, in exact arithmetic: the model's floats as the exact
+    # rationals they are (sympy's simplify on floats inside a denominator, 1/(v_x + 1.1), leaves a
+    # residue of 1e-12 where the exact difference is 0), back to floats for the column it may become
+    exact = {v: sp.Rational(v) for m in (f, h) for e in m for v in sp.sympify(e).atoms(sp.Float)}
+    back = {r: v for v, r in exact.items()}
+    ex = lambda m: m.xreplace(exact)          # noqa: E731
+    rest = sp.simplify(ex(f) - ex(A) * col(x) - ex(B) * col(u) - ex(D) * col(d)
+                       - (ex(Bw) * sp.Matrix(w) if w else sp.zeros(*f.shape))).xreplace(back) if x else f
+    h_rest = sp.simplify(ex(h) - ex(C) * col(x) - ex(Du) * col(u) - ex(Dd) * col(d)
+                         - (ex(Duw) * sp.Matrix(w) if w else sp.zeros(*h.shape))).xreplace(back)
     if any(sp.simplify(e) != 0 for e in (*rest, *h_rest)):
         if not x or any(_is_constant(w) for w in model.derived_inputs):
             raise NotAffineError(f"model {model.name!r}: dynamics or outputs have a term independent of states and "
