@@ -20,6 +20,7 @@ import sympy as sp
 from ..errors import (MissingParameterError, ModelDefinitionError, NotAffineError, SchedulingBoundsError,
                       UnknownParameterError, brief)
 from ..project.settings import Rule, check_keys, config_error, parse_table, parse_value, suggest
+from .floats import FLOAT_NOISE, merge_float_noise  # noqa: F401  (FLOAT_NOISE: re-exported)
 from .names import RULE as NAME_RULE, c_name_problem, suggest as suggest_name
 
 
@@ -697,32 +698,6 @@ def parameter_substitution(model: ModelDefinition, params: ParameterSet) -> dict
     check_units(model)
     check_plausibility(model, params.values, params.source, params.accepted)
     return {p: params.values[str(p)] for p in model.parameters}
-
-
-FLOAT_NOISE = 1e-12
-"""Relative difference below which two numbers of a model's equations are one number (:func:`merge_float_noise`).
-
-``sp.solve`` on equations written with floats returns coefficients computed in a different order in
-each row (0.3 in one, 0.30000000000000004 in the next): a few rounding steps of 2^-53 (1.1e-16) each,
-so a few ulps; 1e-12 is several thousand ulps above that noise and six orders below any difference a
-parameter written with up to ten significant digits can make."""
-
-
-def merge_float_noise(exprs) -> list:
-    """``exprs`` with every two floats that differ by at most :data:`FLOAT_NOISE` (relative) made the
-    same float, the smallest of its cluster (each cluster spans at most FLOAT_NOISE, measured from
-    its first float): the same tyre law written twice by ``sp.solve`` with coefficients that differ
-    in the last digit is then one nonlinearity, one premise, one unmeasured consequent, not two."""
-    exprs = [sp.sympify(e) for e in exprs]
-    floats = sorted({f for e in exprs for f in e.atoms(sp.Float)}, key=float)
-    merge, anchor = {}, None
-    for f in floats:
-        a, b = float(f), None if anchor is None else float(anchor)
-        if b is not None and abs(a - b) <= FLOAT_NOISE * max(abs(a), abs(b)):
-            merge[f] = anchor
-        else:
-            anchor = f
-    return [e.xreplace(merge) for e in exprs] if merge else exprs
 
 
 CONSTANT_INPUT = "one"

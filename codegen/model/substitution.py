@@ -31,6 +31,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelDefinitionError, NotAffineError
+from .floats import merge_float_noise
 
 
 @dataclass(frozen=True)
@@ -92,7 +93,6 @@ def carriers(expr, d) -> tuple:
 
 
 def _rows(model) -> list:
-    from .definition import merge_float_noise
     return merge_float_noise([*list(sp.Matrix(model.dynamics)), *[sp.sympify(e) for _, e in model.outputs]])
 
 

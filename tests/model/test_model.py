@@ -133,7 +133,7 @@ def test_wrong_shape_and_undeclared_symbols():
 
 # -- numbers that differ only by rounding are one number (issue 42, item 6) ---------------------------
 def test_floats_of_rounding_noise_are_merged_and_others_kept():
-    from codegen.model.definition import FLOAT_NOISE, merge_float_noise
+    from codegen.model.floats import FLOAT_NOISE, merge_float_noise
     x = sp.Symbol("x")
     a, b = sp.tanh(sp.Float(12.5) * x), sp.tanh(sp.Float(12.500000000000002) * x)
     merged = merge_float_noise([a, b, sp.Float(12.5 * (1 + 10 * FLOAT_NOISE)) * x])

@@ -29,7 +29,7 @@ from ...representation.bounds import RangeBound, derivative, range_bound
 from ...emit.stepgen import lambdify
 from ...errors import ModelDefinitionError, NotAffineError, SchedulingBoundsError
 from ...model import ModelDefinition, ParameterSet, parameter_substitution
-from ...model.definition import merge_float_noise
+from ...model.floats import merge_float_noise
 from ...representation.polytope import (Premise, affine_decomposition, memberships, nonlinear_factors,
                                         sector_weights_product, vertex_matrices)
 
