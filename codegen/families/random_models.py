@@ -14,7 +14,9 @@ where the family's model is fixed):
 * ``linf_uio``: 2-3 states, scheduling on the speed through 1/v_x (and v_x) terms, 1-2 unknown
   inputs each reaching a measured state's equation, 0-1 known input, outputs that are states or
   combinations of states, sometimes an unknown input in an output (a lateral force seen by an
-  accelerometer), sometimes a second scheduling signal derived from a measured output;
+  accelerometer), sometimes a second scheduling signal derived from a measured output, sometimes a
+  constant term (a known input of value 1) and sometimes one nonlinearity 1/(v_x + c) written into
+  two rows with c differing in the last digit (one premise once merged);
 * ``ts_fuzzy_uio``: a speed state v_x measured (its 1/v_x terms are measured premises), 1-2 more
   states, the unknown inputs reaching measured states, sometimes a known input, sometimes a
   saturating (tanh) tyre law in an unmeasured state;
@@ -244,6 +246,31 @@ def _signal_units(core) -> dict:
     return units
 
 
+def _constant_and_duplicated_terms(rng, rows: list, names: list, values: dict) -> tuple:
+    """Add to ``rows`` (in place), each with probability 0.4: a constant term ``k0_<state>`` in one row
+    (rolling resistance: the design carries it as a known input of value 1), and one nonlinearity
+    ``1/(v_x + c)`` written into two rows with ``c`` differing in the last digit (as ``sp.solve``
+    writes one law twice: merged into one premise). Drawn from a child of the seed's sequence, so
+    the draws of the rest of the model are those of the seed before these terms existed. Returns
+    (constant term drawn, duplicated term drawn)."""
+    side = np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0])
+    constant = bool(side.random() < 0.4)
+    if constant:
+        i = int(side.integers(len(rows)))
+        values[f"k0_{names[i]}"] = _uniform(side, 0.05, 0.5, sign=True)
+        rows[i] = f"{rows[i]} + k0_{names[i]}"
+    duplicated = bool(side.random() < 0.4)
+    if duplicated:
+        i, j = (int(k) for k in side.choice(len(rows), size=2, replace=False))
+        sj = names[int(side.integers(len(names)))]
+        c = float(np.round(side.uniform(0.5, 3.0), 2))
+        c_noisy = float(np.nextafter(np.nextafter(c, np.inf), np.inf))      # 2 ulps: the other row's rounding
+        for row, k, cc in ((i, f"m_{names[i]}_{sj}", c), (j, f"m_{names[j]}_{sj}", c_noisy)):
+            values[k] = _uniform(side, 0.5, 3.0, sign=True)
+            rows[row] = f"{rows[row]} + {k} * {sj} / (v_x + {cc!r})"
+    return constant, duplicated
+
+
 def draw_linf(rng) -> RandomModel:
     core = _draw_lpv_core(rng, "linf_uio")
     names, values = core["names"], core["values"]
@@ -263,6 +290,7 @@ def draw_linf(rng) -> RandomModel:
         values[k] = -_uniform(rng, 0.5, 2.0)
         rows[0] = f"{rows[0]} + {k} * s * {names[0]}"
         derived_note = ", a gain scheduled on the measured first output"
+    constant, duplicated = _constant_and_duplicated_terms(rng, rows, names, values)
     units = _signal_units(core)
     symbols = [(s, "") for s in names] + [(d, "") for d, _ in core["unknown"]] + [(u, "") for u, _ in core["known"]]
     symbols += [("v_x", "positive=True")] + ([("s", "positive=True")] if core["derived"] else [])
@@ -282,13 +310,16 @@ def draw_linf(rng) -> RandomModel:
     structure = {"states": core["n"], "outputs": len(core["outputs"]), "known_inputs": len(core["known"]),
                  "unknown_inputs": len(core["unknown"]), "output_combinations": core["combos"],
                  "ui_feedthrough": core["feedthrough"], "derived_scheduling": core["derived"],
-                 "v_x_terms": v_terms, "ui_units": [u for _, u in core["unknown"]]}
+                 "v_x_terms": v_terms, "ui_units": [u for _, u in core["unknown"]],
+                 "constant_terms": constant, "duplicated_terms": duplicated}
     name = _name("linf", structure)
     inputs = "\n[inputs]\n" + _ui_ranges(core)
     inputs += "".join(f"{u} = {{ min = -0.05, max = 0.05, bandwidth = 0.5 }}\n" for u, _ in core["known"])
+    # quadratic where a premise more would double the PDLF's membership-rate corners (a draw took 10 min)
+    quadratic = core["derived"] or duplicated
     observer = (f'family = "linf_uio"\nmodel = "model.py"\nparameters = "parameters.toml"\npolytope = "sector"\n'
-                f'rate_bounds = "{"none" if core["derived"] else "exact"}"\nsample_time = 0.01\n\n'
-                f'[design]\nalpha = 2.0\nlyapunov = "{"quadratic" if core["derived"] else "pdlf"}"\n'
+                f'rate_bounds = "{"none" if quadratic else "exact"}"\nsample_time = 0.01\n\n'
+                f'[design]\nalpha = 2.0\nlyapunov = "{"quadratic" if quadratic else "pdlf"}"\n'
                 f'gain_bound_times_sample_time = 1.0\n\n[ui_filter]\ntime_constant = 0.02\n')
     model = _model_py(f"Random LPV model (linf_uio): {_describe(structure)}{derived_note}.", symbols, body)
     return RandomModel("linf_uio", name, structure,
@@ -586,7 +617,8 @@ def _name(prefix: str, s: dict) -> str:
     parts = [prefix, f"{s['states']}x", f"{s['outputs']}y", f"{s['known_inputs']}u", f"{s['unknown_inputs']}d"]
     parts += [tag for key, tag in (("output_combinations", "mix"), ("ui_feedthrough", "ff"),
                                    ("derived_scheduling", "der"), ("saturating_tyre", "sat"),
-                                   ("v_x_terms", "vx")) if s.get(key)]
+                                   ("v_x_terms", "vx"), ("constant_terms", "k0"),
+                                   ("duplicated_terms", "dup")) if s.get(key)]
     if any(u.startswith("kN") for u in s.get("ui_units", ())):
         parts.append("kN")
     return "_".join(parts)

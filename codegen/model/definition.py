@@ -20,6 +20,7 @@ import sympy as sp
 from ..errors import (MissingParameterError, ModelDefinitionError, NotAffineError, SchedulingBoundsError,
                       UnknownParameterError, brief)
 from ..project.settings import Rule, check_keys, config_error, parse_table, parse_value, suggest
+from .floats import FLOAT_NOISE, merge_float_noise  # noqa: F401  (FLOAT_NOISE: re-exported)
 from .names import RULE as NAME_RULE, c_name_problem, suggest as suggest_name
 
 
@@ -262,6 +263,32 @@ class LPVModel:
             f"model {self.definition.name!r}: unknown inputs reach the outputs ({', '.join(hits)}); the {family} "
             f"needs y = C x, no input in an output ({reason}). The L-infinity UIO (family linf_uio) takes this "
             f"feedthrough; or measure outputs that no input, known or unknown, reaches")
+
+    def require_no_derived_inputs(self, family: str, reason: str) -> None:
+        """Refuse derived inputs (and the constant terms carried by the input of value 1,
+        :func:`constant_terms_as_input`) for a family whose step takes no such input.
+
+        Raises
+        ------
+        NotAffineError
+            naming the terms, the family and the family that takes them.
+        """
+        inputs = tuple(getattr(self.definition, "derived_inputs", ()))
+        if not inputs:
+            return
+        constant = [w for w in inputs if _is_constant(w)]
+        what = []
+        if constant:
+            col = self.Bw[:, inputs.index(constant[0])] if self.Bw is not None else ()
+            terms = [f"d{self.definition.states[i]}/dt: {brief(e)}" for i, e in enumerate(col) if _nonzero(e)]
+            what.append(f"terms independent of the states and inputs ({'; '.join(terms) or 'in the outputs'}: a "
+                        f"known input of value 1)")
+        others = [str(w.symbol) for w in inputs if not _is_constant(w)]
+        if others:
+            what.append(f"derived inputs ({', '.join(others)})")
+        raise NotAffineError(
+            f"model {self.definition.name!r} has {' and '.join(what)}; the {family} takes no such input ({reason}). "
+            f"The L-infinity UIO (family linf_uio) takes them")
 
     @property
     def nx(self) -> int:
@@ -703,6 +730,40 @@ def parameter_substitution(model: ModelDefinition, params: ParameterSet) -> dict
     return {p: params.values[str(p)] for p in model.parameters}
 
 
+CONSTANT_INPUT = "one"
+"""The name of the known input of value 1 that carries a model's constant terms
+(:func:`constant_terms_as_input`; ``one_w``, ``one_w_w``... where the model uses the name)."""
+
+
+def _is_constant(w) -> bool:
+    """Whether a derived input is the input of value 1 (:func:`constant_terms_as_input`)."""
+    return sp.sympify(w.expr) == 1
+
+
+def constant_terms_as_input(model: ModelDefinition, rest, h_rest) -> ModelDefinition:
+    """The model with its terms free of states and inputs (``rest`` in the dynamics, ``h_rest`` in
+    the outputs: parameters and scheduling signals only) carried by a derived input ``one`` of value 1.
+
+    Rolling resistance ``-f_r g`` is such a term: x' = A x + B u + D d + b0(rho) is x' = A x + B u
+    + D d + b0(rho) * 1, a known input whose column is b0 and whose value the step sets to 1 (no
+    input of the step: the step computes it as it computes every derived input). The equations are
+    unchanged where ``one`` = 1: each row becomes ``f + b0 (one - 1)``, so the plant simulated from
+    the model (derived inputs substituted by their values) is the model as written."""
+    import dataclasses
+    used = {str(s) for s in (*model.states, *model.known_inputs, *model.unknown_inputs, *model.parameters,
+                             *(g.symbol for g in model.scheduling), *(w.symbol for w in model.derived_inputs))}
+    used |= {n for n, _ in model.outputs} | {f"y_{n}" for n, _ in model.outputs}
+    name = CONSTANT_INPUT
+    while name in used:
+        name += "_w"
+    one = sp.Symbol(name)
+    dynamics = sp.Matrix([e + r * (one - 1) for e, r in zip(sp.Matrix(model.dynamics), rest)])
+    outputs = tuple((n, sp.sympify(e) + r * (one - 1)) for (n, e), r in zip(model.outputs, h_rest))
+    units = {**model.units, str(one): "-"}
+    return dataclasses.replace(model, dynamics=dynamics, outputs=outputs, units=units,
+                               derived_inputs=(*model.derived_inputs, DerivedInput(one, sp.Integer(1), "-")))
+
+
 def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     """Substitute a parameter set into a model and extract its LPV matrices.
 
@@ -718,9 +779,11 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
             f"no bounds in {params.source}: add " + "; ".join(f"[scheduling.{n}] with min, max, rate_min, rate_max"
                                                             for n in missing))
     boxes = [params.scheduling[str(sig.symbol)] for sig in model.scheduling]
-    # structure is checked exactly, with the parameters still symbolic; numbers come after
-    f = sp.Matrix(model.dynamics)
-    h = sp.Matrix([expr for _, expr in model.outputs])
+    # structure is checked exactly, with the parameters still symbolic; numbers come after (floats
+    # the model writes that differ only by rounding are one number: merge_float_noise)
+    rows = merge_float_noise([*model.dynamics, *(expr for _, expr in model.outputs)])
+    f = sp.Matrix(rows[:len(model.states)])
+    h = sp.Matrix(rows[len(model.states):])
     x, u, d = tuple(model.states), tuple(model.known_inputs), tuple(model.unknown_inputs)
     w = tuple(g.symbol for g in model.derived_inputs)
     A = _affine_part(f, x, "the states", model.name)
@@ -733,16 +796,23 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     Duw = _affine_part(h, w, "the derived inputs", model.name)
     Dd = _affine_part(h, d, "the unknown inputs", model.name, hint=lambda s: offer(model, s, params, subs))
     col = lambda syms: sp.Matrix(len(syms), 1, list(syms))   # a (k, 1) column, also for k = 0
-    rest = sp.simplify(f - A * col(x) - B * col(u) - D * col(d)
-                       - (Bw * sp.Matrix(w) if w else sp.zeros(*f.shape))) if x else f
-    if any(sp.simplify(e) != 0 for e in rest):
-        raise NotAffineError(f"model {model.name!r}: dynamics have a drift term independent of "
-                             f"states and inputs: {list(rest)}")
-    h_rest = sp.simplify(h - C * col(x) - Du * col(u) - Dd * col(d)
-                         - (Duw * sp.Matrix(w) if w else sp.zeros(*h.shape)))
-    if any(sp.simplify(e) != 0 for e in h_rest):
-        raise NotAffineError(f"model {model.name!r}: outputs must be C(rho) x + Du(rho) u + Dd(rho) d; left over: "
-                             f"{list(h_rest)} (a term independent of states and inputs)")
+    # what is left once the affine parts are taken, in exact arithmetic: the model's floats as the exact
+    # rationals they are (sympy's simplify on floats inside a denominator, 1/(v_x + 1.1), leaves a
+    # residue of 1e-12 where the exact difference is 0), back to floats for the column it may become
+    exact = {v: sp.Rational(v) for m in (f, h) for e in m for v in sp.sympify(e).atoms(sp.Float)}
+    back = {r: v for v, r in exact.items()}
+    ex = lambda m: m.xreplace(exact)          # noqa: E731
+    rest = sp.simplify(ex(f) - ex(A) * col(x) - ex(B) * col(u) - ex(D) * col(d)
+                       - (ex(Bw) * sp.Matrix(w) if w else sp.zeros(*f.shape))).xreplace(back) if x else f
+    h_rest = sp.simplify(ex(h) - ex(C) * col(x) - ex(Du) * col(u) - ex(Dd) * col(d)
+                         - (ex(Duw) * sp.Matrix(w) if w else sp.zeros(*h.shape))).xreplace(back)
+    if any(sp.simplify(e) != 0 for e in (*rest, *h_rest)):
+        if not x or any(_is_constant(w) for w in model.derived_inputs):
+            raise NotAffineError(f"model {model.name!r}: dynamics or outputs have a term independent of states and "
+                                 f"inputs that is left over: {list(rest)}, {list(h_rest)}")
+        # a term free of states and inputs (rolling resistance -f_r g, a drag c v_x^2 of a scheduling
+        # signal) is a known input of value 1: its column is the term, its value computed in the step
+        return instantiate(constant_terms_as_input(model, rest, h_rest), params)
     for mat, label in ((B, "B"), (D, "D"), (C, "C"), (Du, "Du"), (Bw, "Bw"), (Duw, "Duw"), (Dd, "Dd")):
         if any(e.free_symbols & set(x + u + d + w) for e in mat):
             raise NotAffineError(f"model {model.name!r}: {label} depends on states or inputs")
@@ -750,6 +820,11 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     # exactly here, with the parameters symbolic: a float residue of 1e-17 after substitution is not 0)
     Dd = Dd.applyfunc(lambda e: e if _nonzero(e) else sp.S.Zero)
     A, B, D, C, Du, Bw, Duw, Dd = (m.subs(subs) for m in (A, B, D, C, Du, Bw, Duw, Dd))
+    # and after the parameter values: one number computed in two orders (C_f / M and C_f * (1 / M))
+    merged = merge_float_noise([e for m in (A, B, D, C, Du, Bw, Duw, Dd) for e in m])
+    sizes = [len(m) for m in (A, B, D, C, Du, Bw, Duw, Dd)]
+    A, B, D, C, Du, Bw, Duw, Dd = (sp.Matrix(m.shape[0], m.shape[1], merged[sum(sizes[:k]):sum(sizes[:k + 1])])
+                                   for k, m in enumerate((A, B, D, C, Du, Bw, Duw, Dd)))
     sched = tuple(sig.symbol for sig in model.scheduling)
     allowed = set(sched)
     for mat, label in ((A, "A"), (B, "B"), (D, "D"), (C, "C"), (Du, "Du"), (Bw, "Bw"), (Duw, "Duw"), (Dd, "Dd")):

@@ -31,6 +31,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelDefinitionError, NotAffineError
+from .floats import merge_float_noise
 
 
 @dataclass(frozen=True)
@@ -92,7 +93,7 @@ def carriers(expr, d) -> tuple:
 
 
 def _rows(model) -> list:
-    return [*list(sp.Matrix(model.dynamics)), *[sp.sympify(e) for _, e in model.outputs]]
+    return merge_float_noise([*list(sp.Matrix(model.dynamics)), *[sp.sympify(e) for _, e in model.outputs]])
 
 
 def find_carrier(model, d) -> tuple:
@@ -109,9 +110,76 @@ def find_carrier(model, d) -> tuple:
         return None, (f"{d} enters both directly and through {', '.join(sorted(map(str, found)))}: no single "
                       f"expression carries it")
     if len(found) > 1:
-        return None, (f"{d} enters through {len(found)} different expressions ({'; '.join(sorted(map(str, found)))}): "
-                      f"the change of variables needs one")
+        combined = _combined(model, d, found)
+        if combined is None:
+            return None, (f"{d} enters through {len(found)} different expressions "
+                          f"({'; '.join(sorted(map(str, found)))}) that no one expression combines (their "
+                          f"coefficients are not in the same ratio in every equation): the change of variables needs "
+                          f"one")
+        return combined, None
     return next(iter(found)), None
+
+
+def _coefficients(expr, d, nodes) -> list | None:
+    """[coefficient of each node of ``nodes`` in ``expr``, the rest of ``expr``] where ``expr`` is
+    affine in the nodes with coefficients free of ``d``; None where it is not."""
+    zs = [sp.Dummy(f"z{k}") for k in range(len(nodes))]
+    e = sp.sympify(expr).xreplace(dict(zip(nodes, zs)))
+    if d in e.free_symbols:
+        return None
+    coeffs = [sp.diff(e, z) for z in zs]
+    if any(c.free_symbols & set(zs) for c in coeffs):
+        return None
+    return [*coeffs, e.xreplace({z: 0 for z in zs})]
+
+
+def _combined(model, d, found) -> sp.Expr | None:
+    """The one expression ``sum_k v_k g_k`` through which ``d`` enters, where it enters every equation
+    through the nodes ``g_k`` of ``found`` with coefficients in the same ratio ``v`` (a grade
+    through ``m g (sin(theta) + f_r cos(theta))``); None where the ratios differ between equations.
+    ``v`` is scaled to make the simplest expression (a coefficient 1 on one node)."""
+    nodes = sorted(found, key=sp.default_sort_key)
+    rows = []
+    for row in _rows(model):
+        if d not in sp.sympify(row).free_symbols:
+            continue
+        coeffs = _coefficients(row, d, nodes)
+        if coeffs is None:
+            return None
+        rows.append(coeffs[:-1])
+    best = None
+    for k0 in range(len(nodes)):
+        if rows[0][k0] == 0:
+            continue
+        v = [sp.simplify(c / rows[0][k0]) for c in rows[0]]
+        if best is None or sum(sp.count_ops(x) for x in v) < sum(sp.count_ops(x) for x in best[1]):
+            best = (k0, v)
+    if best is None:
+        return None
+    k0, v = best
+    for coeffs in rows[1:]:
+        if any(sp.simplify(c - coeffs[k0] * vk) != 0 for c, vk in zip(coeffs, v)):
+            return None
+    return sp.Add(*(vk * g for vk, g in zip(v, nodes)))
+
+
+def replace_carrier(expr, d, carrier, w) -> sp.Expr:
+    """``expr`` with the carrier of ``d`` replaced by ``w``: the node itself, or for a carrier that
+    combines several nodes (:func:`_combined`), the part ``alpha * carrier`` of ``expr`` by ``alpha * w``
+    (``expr`` unchanged where the nodes are not in the carrier's ratio: the caller finds ``d`` left)."""
+    expr = sp.sympify(expr)
+    found, _ = carriers(carrier, d)
+    if carrier in found or d not in expr.free_symbols:
+        return expr.xreplace({carrier: w})
+    nodes = sorted(found, key=sp.default_sort_key)
+    mine, coeffs = _coefficients(carrier, d, nodes), _coefficients(expr, d, nodes)
+    if mine is None or coeffs is None:
+        return expr
+    k0 = next(k for k, c in enumerate(mine[:-1]) if c != 0)
+    alpha = coeffs[k0] / mine[k0]
+    if any(sp.simplify(c - alpha * m) != 0 for c, m in zip(coeffs[:-1], mine[:-1])):
+        return expr
+    return coeffs[-1] + alpha * (w - mine[-1])
 
 
 def _box(params, symbols, source: str) -> tuple:
@@ -203,12 +271,39 @@ def _inverses(c, d, w) -> list:
             else:
                 return []
         return [target]
+    harmonic = _harmonic(c, d, w)
+    if harmonic:
+        return harmonic
     if sp.sympify(c).is_rational_function(d):
         try:
             return list(sp.solve(sp.Eq(w, c), d))
         except (NotImplementedError, ValueError):
             return []
     return []
+
+
+def _harmonic(c, d, w) -> list:
+    """Candidates for d from w = a sin(E) + b cos(E) (+ c0), a, b, c0 free of d and E of one
+    occurrence of d: a sin(E) + b cos(E) = R sin(E + phi) with R = sqrt(a^2 + b^2), phi = atan2(b, a),
+    so E = asin((w - c0) / R) - phi or pi - asin((w - c0) / R) - phi, each peeled to d."""
+    found, direct = carriers(c, d)
+    if direct or len(found) != 2:
+        return []
+    nodes = sorted(found, key=lambda g: type(g) is sp.sin)        # cos, then sin
+    if [type(g) for g in nodes] != [sp.cos, sp.sin] or nodes[0].args != nodes[1].args:
+        return []
+    inner = nodes[0].args[0]
+    if sp.sympify(inner).count(d) != 1:
+        return []
+    coeffs = _coefficients(c, d, nodes)
+    if coeffs is None:
+        return []
+    b, a, c0 = coeffs          # nodes sorted: cos before sin
+    R, phi = sp.sqrt(a ** 2 + b ** 2), sp.atan2(b, a)
+    out = []
+    for e_val in (sp.asin((w - c0) / R) - phi, sp.pi - sp.asin((w - c0) / R) - phi):
+        out += [sp.sympify(x).xreplace({w: e_val}) for x in _inverses(inner, d, w)]
+    return out
 
 
 def offer(model, d, params=None, subs: dict | None = None) -> str:
@@ -285,8 +380,11 @@ def apply(model, params, subs: dict, table: dict, source: str) -> tuple:
         sub, why = analyse(out, params, subs, uis[key], name)
         if sub is None:
             raise NotAffineError(f"{source}: [substitute] {key}: {why}")
-        rows = sp.Matrix(out.dynamics).xreplace({sub.carrier: sub.symbol})
-        outputs = tuple((n, sp.sympify(e).xreplace({sub.carrier: sub.symbol})) for n, e in out.outputs)
+        merged = _rows(out)           # the rows the carrier was found in (floats of rounding noise merged)
+        rows = sp.Matrix([replace_carrier(e, uis[key], sub.carrier, sub.symbol)
+                          for e in merged[:len(sp.Matrix(out.dynamics))]])
+        outputs = tuple((n, replace_carrier(e, uis[key], sub.carrier, sub.symbol))
+                        for (n, _), e in zip(out.outputs, merged[len(sp.Matrix(out.dynamics)):]))
         left = [str(e) for e in (*rows, *(e for _, e in outputs)) if uis[key] in e.free_symbols]
         if left:
             raise NotAffineError(f"{source}: [substitute] {key}: {key} is still in {left[0]} after the change of "

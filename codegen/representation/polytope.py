@@ -327,16 +327,60 @@ def _range_on_box(expr: sp.Expr, lpv: LPVModel) -> tuple:
     for f in sp.Mul.make_args(factors):
         base, exp = f.as_base_exp()
         if base not in lpv.scheduling_symbols:
-            raise SchedulingBoundsError(f"premise {expr} is not a monomial in the scheduling signals; "
-                                        f"its range over the box cannot be bounded exactly")
+            return _range_of_product(expr, lpv)
         k = lpv.scheduling_symbols.index(base)
         # monotone in each signal on the box: negative powers need a box away from 0,
         # nonnegative powers a box that does not change sign
         if lpv.boxes[k].lower < 0 or (exp < 0 and lpv.boxes[k].lower <= 0):
-            raise SchedulingBoundsError(f"premise {expr}: the box of {base} makes it non-monotone or singular")
+            return _range_of_product(expr, lpv)
     fn = sp.lambdify([lpv.scheduling_symbols[k] for k in used], expr, "math")
     values = [float(fn(*c)) for c in itertools.product(*[(lpv.boxes[k].lower, lpv.boxes[k].upper) for k in used])]
     return min(values), max(values)
+
+
+def _range_of_product(expr: sp.Expr, lpv: LPVModel) -> tuple:
+    """Range over the box of a premise of several signals that is not a monotone monomial.
+
+    A product of factors each of one signal (``a_x / v_x`` with a_x crossing 0, ``1/(J(i_g) v_x)``):
+    each factor's exact range on its interval (:func:`_range_on_interval`), multiplied as intervals,
+    which is the exact range (the factors vary independently, and a product of intervals takes its
+    extremes at their ends). Any other premise: a sound enclosure (interval arithmetic with bisection,
+    :func:`codegen.representation.bounds.range_bound`, to 1e-9 relative): the polytope it spans holds
+    every value the premise takes, wider than the exact one by that tolerance at most.
+
+    Raises
+    ------
+    SchedulingBoundsError
+        a premise that cannot be enclosed, naming the derived scheduling signal that replaces it.
+    """
+    from .bounds import BoundsError, range_bound
+    box = {s: (b.lower, b.upper) for s, b in zip(lpv.scheduling_symbols, lpv.boxes)}
+    coeff, rest = sp.factor(expr).as_coeff_Mul()
+    groups = {}
+    for f in sp.Mul.make_args(rest):
+        used = f.free_symbols & set(box)
+        if len(used) != 1:
+            groups = None
+            break
+        (sym,) = used
+        groups[sym] = groups.get(sym, sp.S.One) * f
+    if groups:
+        lo, hi = float(coeff), float(coeff)
+        for sym, f in groups.items():
+            a, b = _range_on_interval(f, sym, *box[sym])
+            ends = (lo * a, lo * b, hi * a, hi * b)
+            lo, hi = min(ends), max(ends)
+        return lo, hi
+    try:
+        rb = range_bound(expr, {s: box[s] for s in expr.free_symbols if s in box}, rel_tol=1e-9)
+    except BoundsError as exc:
+        used = sorted(map(str, expr.free_symbols & set(box)))
+        raise SchedulingBoundsError(
+            f"{lpv.parameters.source}: premise {expr} of the scheduling signals {', '.join(used)} cannot be bounded "
+            f"on their box ({exc}); declare it a scheduling signal of its own, derived from them in the step: "
+            f"SchedulingSignal(z, derived=<the expression>) with its range in [scheduling.z], and write z where the "
+            f"model has the expression") from None
+    return rb.lower, rb.upper
 
 
 def _single_signal(lpv: LPVModel):

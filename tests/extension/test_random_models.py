@@ -60,12 +60,29 @@ def test_the_draws_cover_the_structures_asked_for():
     assert any(s["ui_feedthrough"] for s in linf)
     assert any(s["derived_scheduling"] for s in linf)
     assert any(s["unknown_inputs"] == 2 for s in linf) and any(s["states"] == 3 for s in linf)
+    assert any(s["constant_terms"] for s in linf) and any(s["duplicated_terms"] for s in linf)
     ts = _structures("ts_fuzzy_uio")
     assert any(s["saturating_tyre"] for s in ts) and any(s["known_inputs"] for s in ts)
     assert {s["relative_degree"] for s in _structures("algebraic_uio")} == {1, 2, 3}
     assert {s["modes"] for s in _structures("switched_pi")} == {2, 3}
     sw = _structures("switched_pi")
     assert any(s["output_combinations"] for s in sw) and any(s["known_inputs"] for s in sw)
+
+
+def test_a_drawn_constant_is_one_known_input_and_a_drawn_duplicate_one_premise(tmp_path):
+    """The draws with a constant term carry it as the known input of value 1; the draws with one
+    nonlinearity 1/(v_x + c) written twice (c differing in the last digit) have it as one premise."""
+    from codegen.model import instantiate, load_parameters
+    from codegen.representation import polytope
+    for seed in SEEDS:
+        m = R.draw("linf_uio", seed)
+        config, model = _load(m, tmp_path / str(seed))
+        lpv = instantiate(model, load_parameters(config.parameter_path))
+        # the input of value 1 exactly where a constant was drawn (sympy's simplify of the floats in
+        # 1/(v_x + c) leaves a 1e-12 residue where the exact rest is 0: seed 3 had one)
+        assert [(str(w), e) for w, e in lpv.derived_inputs] == ([("one", 1)] if m.structure["constant_terms"] else [])
+        shifted = [g for g in polytope.scheduling_nonlinearities(lpv) if "v_x +" in str(g)]
+        assert len(shifted) == m.structure["duplicated_terms"], shifted
 
 
 def _first(family, want):
@@ -77,6 +94,7 @@ CHOSEN = [
     ("linf_uio", "known and unknown input", lambda s: s["known_inputs"] and s["unknown_inputs"]),
     ("linf_uio", "outputs combining states", lambda s: s["output_combinations"]),
     ("linf_uio", "derived scheduling", lambda s: s["derived_scheduling"]),
+    ("linf_uio", "constant term", lambda s: s["constant_terms"]),
     ("ts_fuzzy_uio", "saturating tyre law", lambda s: s["saturating_tyre"]),
     ("switched_pi", "known and unknown input", lambda s: s["known_inputs"]),
     ("algebraic_uio", "relative degree 3", lambda s: s["relative_degree"] == 3),

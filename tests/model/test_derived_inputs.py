@@ -130,3 +130,55 @@ def test_remainders_close_the_plant_aligning_torque_and_force(cr):
     assert t_nl(0.0, 20.0) == 0.0 and f_nf(0.0, 20.0) == 0.0
     # finite for any finite (even overflowing) measurement
     assert all(math.isfinite(f(1e308, 35.0)) for f in (f_nf, t_nl))
+
+
+# -- constant terms: a known input of value 1 (issue 42, item 5) ---------------------------------------
+def _rolling(params_values=None):
+    """v' = u / m - f_r g - c v_x^2 / m + d: rolling resistance (a constant) and drag (of the scheduling)."""
+    x, u, d, v_x = sp.symbols("x u d v_x")
+    m, f_r, g, c = sp.symbols("m f_r g c", positive=True)
+    model = ModelDefinition("rolling", (x,), (u,), (d,), sp.Matrix([-x / v_x + u / m - f_r * g - c * v_x ** 2 / m + d]),
+                            (("x", x), ("a", u / m - f_r * g)), (SchedulingSignal(v_x),), (m, f_r, g, c))
+    params = ParameterSet("rolling.toml", params_values or {"m": 1000.0, "f_r": 0.015, "g": 9.81, "c": 0.4},
+                          {"v_x": SchedulingBox("v_x", 5.0, 40.0, -1.0, 1.0)}, {})
+    return model, params
+
+
+def test_a_constant_term_is_a_known_input_of_value_one():
+    """A term free of states and inputs (rolling resistance -f_r g, a drag of the scheduling signal) was
+    refused ("a drift term independent of states and inputs"): it is the column of a derived input
+    ``one`` of value 1, in the dynamics and the outputs, and the equations are the model's where one = 1."""
+    model, params = _rolling()
+    lpv = instantiate(model, params)
+    v_x = sp.Symbol("v_x")
+    assert [(str(s), e) for s, e in lpv.derived_inputs] == [("one", 1)]
+    assert sp.simplify(lpv.Bw[0, 0] - (-0.015 * 9.81 - 0.4 * v_x ** 2 / 1000.0)) == 0
+    assert sp.simplify(lpv.Duw[1, 0] + 0.015 * 9.81) == 0 and lpv.Duw[0, 0] == 0
+    assert lpv.A == sp.Matrix([[-1 / v_x]]) and lpv.B == sp.Matrix([[1 / 1000.0]])
+    one = sp.Symbol("one")
+    for new, old in zip((*lpv.definition.dynamics, *(e for _, e in lpv.definition.outputs)),
+                        (*model.dynamics, *(e for _, e in model.outputs))):
+        assert sp.simplify(sp.sympify(new).subs(one, 1) - old) == 0
+    # the sector polytope carries it: Bw at each vertex is the term at that vertex's v_x
+    from codegen.representation import polytope
+    poly = polytope.sector_polytope(lpv)
+    assert poly.Bw.shape[-1] == 1
+
+
+def test_a_constant_term_takes_a_name_the_model_does_not_use():
+    x, one, d = sp.symbols("x one d")
+    model = ModelDefinition("named", (x,), (one,), (d,), sp.Matrix([-x + one + 3 + d]), (("x", x),), (), ())
+    lpv = instantiate(model, ParameterSet("p", {}, {}, {}))
+    assert [str(s) for s, _ in lpv.derived_inputs] == ["one_w"] and lpv.Bw == sp.Matrix([[3]])
+
+
+def test_a_family_without_known_inputs_of_its_own_names_the_one_that_takes_constant_terms():
+    """A family whose step has no derived input refuses a constant term by one typed line naming the
+    term and the family that takes it (not a "derived input" the user never wrote)."""
+    model, params = _rolling()
+    lpv = instantiate(model, params)
+    with pytest.raises(NotAffineError, match=r"terms independent of the states and inputs \(dx/dt: -0\.0004\*v_x\*\*2 "
+                                             r"- 0\.14715: a known input of value 1\); the switched observer takes "
+                                             r"no such input \(its paper\)\. The L-infinity UIO \(family \w+\) takes "
+                                             r"them"):
+        lpv.require_no_derived_inputs("switched observer", "its paper")

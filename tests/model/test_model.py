@@ -144,3 +144,29 @@ def test_an_output_that_reads_no_state_is_refused_naming_it():
         with pytest.raises(ModelDefinitionError, match=rf"output 'a' = .* reads no state \({what}\)"):
             model((("y", x1), ("a", expr)))
     assert model((("y", x1), ("a", x2 + u))).output_names == ("y", "a")
+
+
+# -- numbers that differ only by rounding are one number (issue 42, item 6) ---------------------------
+def test_floats_of_rounding_noise_are_merged_and_others_kept():
+    from codegen.model.floats import FLOAT_NOISE, merge_float_noise
+    x = sp.Symbol("x")
+    a, b = sp.tanh(sp.Float(12.5) * x), sp.tanh(sp.Float(12.500000000000002) * x)
+    merged = merge_float_noise([a, b, sp.Float(12.5 * (1 + 10 * FLOAT_NOISE)) * x])
+    assert merged[0] == merged[1] == a                      # 2 ulps apart: one law
+    assert merged[2] != sp.Float(12.5) * x                   # 1e-11 apart: two numbers, kept
+    neg = merge_float_noise([sp.Float(-0.3) * x, sp.Float(-0.30000000000000004) * x])
+    assert neg[0] == neg[1] == sp.Float(-0.30000000000000004) * x      # the smallest of the cluster
+
+
+def test_a_nonlinearity_written_twice_by_sp_solve_is_one_premise(tmp_path):
+    """sp.solve writes one factor 1/(v_x + 0.5) in two rows with coefficients that differ in the last
+    digit: one premise (2 vertices), not two (4)."""
+    from codegen.model import ParameterSet, SchedulingBox
+    from codegen.representation import polytope
+    x1, x2, d, v = sp.symbols("x1 x2 d v_x")
+    f = sp.Matrix([-x1 / (sp.Float(0.1) * v + 1) + x2, -x2 / (sp.Float(0.1 + 1e-17 * 2 ** 4) * v + 1) + d])
+    assert f[0].atoms(sp.Float) != f[1].atoms(sp.Float)
+    model = ModelDefinition("solved", (x1, x2), (), (d,), f, (("x1", x1),), (SchedulingSignal(v),), ())
+    lpv = instantiate(model, ParameterSet("p", {}, {"v_x": SchedulingBox("v_x", 5.0, 40.0, -1.0, 1.0)}, {}))
+    assert len(polytope.scheduling_nonlinearities(lpv)) == 1
+    assert polytope.sector_polytope(lpv).n_vertices == 2

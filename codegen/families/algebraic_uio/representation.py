@@ -228,9 +228,7 @@ def check_structure(lpv: LPVModel) -> None:
         raise ModelDefinitionError(f"model {lpv.definition.name!r}: this family needs a constant output matrix C "
                                    f"(Ichalal and Mammar 2015, eq. (1)); C depends on {sorted(map(str, set().union(*(e.free_symbols for e in C))))}. "
                                    f"The L-infinity UIO (family linf_uio) takes a scheduling-dependent C")
-    if getattr(lpv, "Bw", None) is not None and lpv.Bw.shape[1] > 0:
-        raise ModelDefinitionError(f"model {lpv.definition.name!r}: derived inputs are not supported by the algebraic "
-                                   f"UIO. The L-infinity UIO (family linf_uio) takes them")
+    lpv.require_no_derived_inputs("algebraic UIO", "Ichalal and Mammar 2015, eq. (1): x' = A x + B u + D d")
     if lpv.Du is not None and any(e != 0 for e in lpv.Du):
         raise ModelDefinitionError(f"model {lpv.definition.name!r}: outputs with a known-input feedthrough are not "
                                    f"supported by the algebraic UIO (y = C x). The L-infinity UIO (family linf_uio) "

@@ -41,7 +41,9 @@ def assess(family, subject, structure):
     try:
         poly = polytope.sector_polytope(lpv, rate)
     except UiogenError as exc:
-        return refuse(f"{type(exc).__name__}: {exc}", "fix the scheduling box as the message says")
+        fix = ("declare the premise a scheduling signal of its own, derived in the step, as the message says"
+               if "scheduling signal of its own" in str(exc) else "fix the scheduling box as the message says")
+        return refuse(f"{type(exc).__name__}: {exc}", fix)
     states = lpv.definition.states
     scaled = design._scaled(poly, design.ui_scaling(poly), design.output_scaling(poly))
     where = f"the {poly.n_vertices} vertices of the exact sector polytope in {', '.join(signals)}"

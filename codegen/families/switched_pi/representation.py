@@ -276,6 +276,7 @@ def build(model: ModelDefinition, params: ParameterSet, raw_rule: dict, source: 
             lpvs[overrides] = instantiate(model, boxed)
         lpv = lpvs[overrides]
         lpv.require_no_ui_feedthrough("switched H-infinity PI observer", "Menhour et al. 2014, eq. (2): y = C x")
+        lpv.require_no_derived_inputs("switched H-infinity PI observer", "Menhour et al. 2014: x' = A x + B u + F d")
         subs = {s: point[str(s)] for s in sched}
         for mats, M in ((A, lpv.A), (B, lpv.B), (F, lpv.D), (C, lpv.C)):
             mats.append(np.array(M.subs(subs), dtype=float))

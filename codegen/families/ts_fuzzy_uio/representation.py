@@ -32,6 +32,7 @@ from ...representation.bounds import RangeBound, derivative, range_bound
 from ...emit.stepgen import lambdify
 from ...errors import ModelDefinitionError, NotAffineError, SchedulingBoundsError
 from ...model import ModelDefinition, ParameterSet, parameter_substitution
+from ...model.floats import merge_float_noise
 from ...representation.polytope import (Premise, affine_decomposition, memberships, nonlinear_factors,
                                         sector_weights_product, vertex_matrices)
 
@@ -204,7 +205,8 @@ def split_consequents(model: ModelDefinition, subs: dict) -> dict:
     x, u, d = tuple(model.states), tuple(model.known_inputs), tuple(model.unknown_inputs)
     measured = _output_selection(model)
     unmeasured = tuple(s for s in x if s not in measured)
-    F = sp.Matrix(model.dynamics).subs(subs)
+    # floats that differ only by rounding are one number (sp.solve's rows): one consequent, not two
+    F = sp.Matrix(merge_float_noise(sp.Matrix(model.dynamics).subs(subs)))
     Dv = F.jacobian(sp.Matrix(d)) if d else sp.zeros(len(x), 0)
     if any(e.free_symbols for e in Dv):
         from ...model.substitution import offer

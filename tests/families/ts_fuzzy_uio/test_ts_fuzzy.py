@@ -11,7 +11,7 @@ from codegen import pipeline
 from codegen.families.ts_fuzzy_uio import representation as ts_fuzzy
 from codegen.families.ts_fuzzy_uio import design as ts_fuzzy_uio
 from codegen.errors import RankConditionError, SchedulingBoundsError, ModelDefinitionError
-from codegen.model import ModelDefinition
+from codegen.model import ModelDefinition, load_parameters
 from codegen.families.ts_fuzzy_uio import validation as ts_validation
 from codegen.validation import common
 
@@ -388,3 +388,59 @@ def test_a_measured_consequent_undefined_inside_the_box_is_refused():
     division = _wheel_model(lambda v: 1 / v)
     with pytest.raises(SchedulingBoundsError, match=r"dv/dt is not finite at v = 0, "):
         ts_fuzzy.build(division, _wheel_params((0.0, 40.0)), 0.01)
+
+
+SOLVED_TWICE = '''
+import sympy as sp
+from codegen.model import ModelDefinition, load_parameters
+
+v_y, r, delta, T, F_w = sp.symbols("v_y r delta T F_w")
+v_x = sp.Symbol("v_x", positive=True)
+M, l_f, l_r, l_w, I_e, I_z, F_f, F_r = sp.symbols("M l_f l_r l_w I_e I_z F_f F_r", positive=True)
+# the tyre laws as sp.solve writes them into the two rows: coefficients that differ in the last digit
+k_f, k_f2 = sp.Float(12.5), sp.Float(12.500000000000002)
+k_r, k_r2 = sp.Float(16.428571428571427), sp.Float(16.42857142857143)
+front = lambda k: F_f * sp.tanh(k * (delta - (v_y + l_f * r) / v_x))
+rear = lambda k: F_r * sp.tanh(k * (l_r * r - v_y) / v_x)
+MODEL = ModelDefinition(
+    name="solved_twice", states=(v_x, v_y, r), known_inputs=(delta, T), unknown_inputs=(F_w,),
+    dynamics=sp.Matrix([T / I_e + v_y * r, (front(k_f) + rear(k_r) + F_w) / M - v_x * r,
+                        (l_f * front(k_f2) - l_r * rear(k_r2) + l_w * F_w) / I_z]),
+    outputs=(("v_x", v_x), ("r", r)), scheduling=(), parameters=(M, l_f, l_r, l_w, I_e, I_z, F_f, F_r),
+    units={"v_x": "m/s", "v_y": "m/s", "r": "rad/s", "T": "N m", "F_w": "N", "delta": "rad"})
+'''
+SOLVED_TWICE_PARAMS = """[parameters]
+M = 1600.0
+l_f = 1.25
+l_r = 1.45
+l_w = 0.6
+I_e = 480.0
+I_z = 2300.0
+F_f = 8000.0
+F_r = 7000.0
+
+[state_bounds]
+v_x = [15.0, 30.0]
+v_y = [-0.5, 0.5]
+r = [-0.3, 0.3]
+
+[inputs]
+delta = { min = -0.03, max = 0.03, bandwidth = 0.5 }
+T = { min = -150.0, max = 250.0, bandwidth = 0.3 }
+F_w = { min = -500.0, max = 500.0, bandwidth = 0.2 }
+"""
+
+
+def test_a_tyre_law_written_twice_with_float_noise_is_one_consequent(tmp_path):
+    """Issue 42, item 6: after sp.solve one tyre law sits in two rows with coefficients that differ
+    in the last digit; it is one unmeasured consequent per axle (4 DMVT vertices, not 16), and the
+    design certifies (with 16 vertices Clarabel answered PrimalInfeasible)."""
+    (tmp_path / "car.py").write_text(SOLVED_TWICE)
+    (tmp_path / "car.toml").write_text(SOLVED_TWICE_PARAMS)
+    path = tmp_path / "own.toml"
+    path.write_text(f'family = "{NAME}"\nmodel = "car.py"\nparameters = "car.toml"\nsample_time = 0.01\n')
+    config = observers.get(str(path))
+    ts = ts_fuzzy.build(config.design_model(), load_parameters(config.parameter_path), 0.01)
+    assert len(ts.phi) == 2 and ts.theta_vertices.shape[0] == 4
+    b = pipeline.build(config)
+    assert b.figures()["dmvt_vertices"] == 4
