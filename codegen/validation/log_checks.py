@@ -100,6 +100,11 @@ STEADY_TAU = 2.0
 """[s] The steady state is compared only where the linearized dynamics reach it with time
 constants below STEADY_TAU (all eigenvalues left of -1/STEADY_TAU): not near or above an
 oversteering model's critical speed, where it is slow, huge or unstable."""
+IDENTITY_CLOSE = (1 / 1.1, 1.1)
+"""An identity that holds inside IDENTITY_BAND but whose bracket misses this one is a warning: a scale
+off by more than 10 % on one side (a speed from wheel speeds with a wrong rolling radius, 25 % off,
+passed every check), which the refusing band leaves to real logs' mounting and bank (the shared logs:
+0.997 to 1.013 and 0.977 to 1.002)."""
 WIDE_BAND = (0.5, 2.0)
 """A failed ratio inside WIDE_BAND that no single column explains is a warning, not an error."""
 SMOOTH_S = 0.05
@@ -1037,6 +1042,14 @@ class LogChecks:
                 raise DatasetError(text)
             warnings.append(text + ", or the model's low-slip steady state")
         for r, v in results:
+            if v == "ok" and r.kind != "steady state":
+                k1, lo, hi = r.moments.bracket()
+                if not meets(lo, hi, IDENTITY_CLOSE):
+                    cols = ", ".join(self.columns[s].describe(s) for s in r.inputs if s in self.columns)
+                    warnings.append(f"{self.source}: {r.what} holds with ratio {k1:.4g} (bracket [{lo:.4g}, {hi:.4g}]), "
+                                    f"within its allowed {r.band[0]:.3g} to {r.band[1]:.3g} but more than 10 % off 1: "
+                                    f"check the scale of {cols} (a speed from wheel speeds with another rolling radius, "
+                                    f"an accelerometer's gain or mounting); the estimates inherit it")
             if v == "weak":
                 m = r.moments
                 warnings.append(f"{', '.join(self.columns[s].describe(s) for s in r.inputs if s in self.columns)}: "

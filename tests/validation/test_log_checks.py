@@ -177,6 +177,21 @@ def test_a_steering_ratio_slip_is_a_flagged_warning(tmp_path, log):
 
 
 @pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
+def test_a_speed_25_percent_off_is_a_warning(tmp_path, log):
+    """v_x x 1.25 through the column map (wheel speeds with another rolling radius): the identity
+    a_y = v_x (dbeta/dt + r) holds with ratio 0.8, inside its refusing band (mounting, bank) but more than
+    10 % off: a warning naming the relation and the columns, never silent (it passed every check)."""
+    observer = _observer(tmp_path, v_x='{ column = "vx", unit = "m/s", scale = 1.25 }')
+    proc = _validate(observer, log, "--json")
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads(proc.stdout)
+    said = [w for w in res["warnings"] if "more than 10 % off 1" in w]
+    assert len(said) == 1 and "column 'vx' (v_x, declared m/s, scale 1.25)" in said[0], res["warnings"]
+    ratio = float(re.search(r"holds with ratio ([0-9.]+)", said[0]).group(1))
+    assert 0.75 < ratio < 0.85, said[0]                       # 1 / 1.25, with the log's own spread
+
+
+@pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 def test_a_steering_ratio_slip_in_the_shared_format(tmp_path, log):
     run = S.load(log)
     cols = {c: np.array(getattr(run, c)) for c in S.COLUMNS}
