@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from ..design.solver import progress_after
 from ..errors import UiogenError
 from ..project.settings import toml_repr
 from .subject import Subject
@@ -384,7 +385,7 @@ def observer_table(subject: Subject, app: Applicability, folder: Path, add_state
 
 
 def trial(subject: Subject, app: Applicability, folder: Path, add_states: tuple = (), force: bool = False,
-          complete: bool = False) -> Trial:
+          complete: bool = False, progress=None) -> Trial:
     """Design ``app``'s family for ``subject`` through :func:`codegen.pipeline.solve` from an
     observer file written in ``folder`` (a temporary folder); ``force``: even where the family
     said it does not apply (with ``add_states`` measured, it may)."""
@@ -405,7 +406,7 @@ def trial(subject: Subject, app: Applicability, folder: Path, add_states: tuple 
     key = _trial_key(text, subject, add_states)
     if key in _TRIALS:               # the same observer file on the same files: designed once per process
         return _TRIALS[key]
-    _TRIALS[key] = result = _solve(path, app, label)
+    _TRIALS[key] = result = _solve(path, app, label, progress)
     return result
 
 
@@ -422,13 +423,16 @@ def _trial_key(text: str, subject: Subject, add_states: tuple) -> str:
     return h.hexdigest()
 
 
-def _solve(path: Path, app: Applicability, label: str) -> Trial:
+def _solve(path: Path, app: Applicability, label: str, progress=None) -> Trial:
+    """The trial design of the observer file ``path``; ``progress``: the analysis's, which gets the
+    design's LMI solves once it has run :data:`~codegen.design.solver.PROGRESS_AFTER` seconds."""
     from .. import pipeline
     from ..project import observer_file as observers
     t0 = time.perf_counter()
     try:
         config = observers.get(str(path))
-        b, _ = pipeline.solve(config)
+        b, _ = pipeline.solve(config, progress=progress_after(
+            None if progress is None else (lambda line: progress(f"{app.family}: {line}"))))
     except UiogenError as exc:
         return Trial(app.family, "failed", label, time.perf_counter() - t0,
                      reason=f"{type(exc).__name__}: {str(exc).replace(str(path), label)}", error=type(exc),
@@ -449,7 +453,7 @@ def rank(subject: Subject, structure, design: bool = True, progress=None) -> Ran
             if design and app.applies:
                 if progress is not None:
                     progress(f"designing {app.family} ...")
-                trials[app.family] = trial(subject, app, Path(tmp))
+                trials[app.family] = trial(subject, app, Path(tmp), progress=progress)
                 if own is None:          # from a model alone: the proposal new --from-model writes
                     apps[k], trials[app.family] = _remedied(subject, app, trials[app.family], Path(tmp), progress)
             else:

@@ -47,6 +47,29 @@ def test_fresh_solver_records_by_name_and_refuses_a_second_problem_of_the_same_n
     replay.check_complete()
 
 
+def test_progress_names_every_solve_once_the_design_has_run_long_enough():
+    """A fresh solver reports each problem it solves (a design and an analysis alike, a failed one
+    too); progress_after passes the lines on only after its delay, with the seconds elapsed."""
+    from codegen.design.solver import progress_after
+    lines = []
+    solver = FreshSolver(progress=progress_after(lines.append, seconds=0.0))
+    solver.solve(_lyapunov(data={"rate": 0.5}))
+    solver.solve(_lyapunov("bisection", design=False))
+    bad = lmi.LMIProblem("infeasible", design=False)
+    P = bad.symmetric("P", 1)
+    bad.require_psd("P > 0", P, margin=1e-6)
+    bad.require_nsd("P < 0", P, margin=1e-6)
+    with pytest.raises(Exception):
+        solver.solve(bad)
+    assert len(lines) == 3, lines
+    assert lines[0].startswith("[0 s] lyapunov, rate = 0.5: 2 blocks, solved (") and lines[0].endswith(" s)")
+    assert lines[1].startswith("[0 s] bisection: 2 blocks, solved (")
+    assert lines[2].startswith("[0 s] infeasible: 2 blocks, infeasible or failed (")
+    quiet = []
+    FreshSolver(progress=progress_after(quiet.append, seconds=3600.0)).solve(_lyapunov())
+    assert quiet == [] and progress_after(None) is None
+
+
 def test_replay_refuses_what_does_not_fit():
     rec = FreshSolver()
     rec.solve(_lyapunov(data={"rate": 0.5}))

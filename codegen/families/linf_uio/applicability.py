@@ -93,6 +93,8 @@ def assess(family, subject, structure):
                                          "sqrt(V) of the state error per step, certified at the sample time"),
                 "ui_loop_contraction_per_step": (b.discrete_certificate.ui_loop.contraction, "-",
                                                  "the same with the unknown-input filter loop closed")}
-    cost = "seconds" if poly.n_vertices <= 16 else "minutes"
+    # measured: 32 vertices (four scheduling signals) design in about a minute since the UI-filter loop's
+    # multipliers are constant past 10 vertices (docs/performance.md); beyond, the blocks grow as N^2
+    cost = "seconds" if poly.n_vertices <= 32 else "minutes"
     return Applicability(family.name, True, "attenuated_box", checked=tuple(checked), notes=tuple(notes),
                          observer=observer, why=why, design_cost=cost, figures=figures, decay_key="design.alpha")
