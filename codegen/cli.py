@@ -327,9 +327,23 @@ def cmd_fit(args) -> int:
     return 0
 
 
+def _print_remark_and_files(remark: str, args, page) -> None:
+    """Below a validation's table: the no-information remark, then where the plot, the report and the
+    outputs (``--data ... --out``) were written."""
+    if remark:
+        print(remark)
+    if args.plot:
+        print(f"plot: {args.plot}")
+    if args.report:
+        print(f"report: {page.resolve()}")
+    if getattr(args, "out", None):
+        print(f"outputs: {Path(args.out).resolve()}")
+
+
 def cmd_validate(args) -> int:
     from .validation import noise, run as validate
     config = observers.get(args.name, project=args.project)
+    page = None                                         # the report's page, where --report writes one
     if args.plot and not Path(args.plot).suffix:        # matplotlib adds .png: say the file it writes
         args.plot = f"{args.plot}.png"
     if args.out and not args.data:
@@ -360,14 +374,7 @@ def cmd_validate(args) -> int:
             print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} "
                   f"flagged{warned}")
             print(validate.format_data_table(result))
-            if remark:
-                print(remark)
-            if args.plot:
-                print(f"plot: {args.plot}")
-            if args.report:
-                print(f"report: {page.resolve()}")
-            if args.out:
-                print(f"outputs: {Path(args.out).resolve()}")
+            _print_remark_and_files(remark, args, page)
         return _uninformative_exit(remark, args)
     if not args.scenario:
         raise ConfigurationError("validate needs --scenario S (simulated plant) or --data PATH (logged run)")
@@ -391,12 +398,7 @@ def cmd_validate(args) -> int:
     else:
         print(validate.header(args.name, result))
         print(validate.format_table(result))
-        if remark:
-            print(remark)
-        if args.plot:
-            print(f"plot: {args.plot}")
-        if args.report:
-            print(f"report: {page.resolve()}")
+        _print_remark_and_files(remark, args, page)
     if why:
         print(f"uiogen: validation failed: {why}; the estimates above are not the observer's (an initial estimate "
               f"outside the certified set, a set the run leaves, or a step that is not certified there)", file=sys.stderr)
