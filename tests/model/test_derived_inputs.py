@@ -134,11 +134,12 @@ def test_remainders_close_the_plant_aligning_torque_and_force(cr):
 
 # -- constant terms: a known input of value 1 (issue 42, item 5) ---------------------------------------
 def _rolling(params_values=None):
-    """v' = u / m - f_r g - c v_x^2 / m + d: rolling resistance (a constant) and drag (of the scheduling)."""
+    """v' = u / m - f_r g - c v_x^2 / m + d: rolling resistance (a constant) and drag (of the scheduling); an
+    output that reads the state (an output of no state is refused) beside the constant."""
     x, u, d, v_x = sp.symbols("x u d v_x")
     m, f_r, g, c = sp.symbols("m f_r g c", positive=True)
     model = ModelDefinition("rolling", (x,), (u,), (d,), sp.Matrix([-x / v_x + u / m - f_r * g - c * v_x ** 2 / m + d]),
-                            (("x", x), ("a", u / m - f_r * g)), (SchedulingSignal(v_x),), (m, f_r, g, c))
+                            (("x", x), ("a", u / m - f_r * g - x / v_x)), (SchedulingSignal(v_x),), (m, f_r, g, c))
     params = ParameterSet("rolling.toml", params_values or {"m": 1000.0, "f_r": 0.015, "g": 9.81, "c": 0.4},
                           {"v_x": SchedulingBox("v_x", 5.0, 40.0, -1.0, 1.0)}, {})
     return model, params
