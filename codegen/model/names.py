@@ -11,8 +11,9 @@ called ``NAN``, ``errno`` or ``M_PI`` is a macro there, one called ``int`` a key
   ``NAME_next`` must not hold ``__``);
 * not a keyword of C (C99, C11) or of C++ (the header is included from C++ too);
 * not an object-like macro of the C standard headers, POSIX's ``<math.h>``/``<errno.h>`` or
-  ``<stdbool.h>`` (:data:`MACROS`), nor under a prefix those headers, Python's, numpy's or CasADi's
-  reserve for their macros (:data:`RESERVED_PREFIXES`).
+  ``<stdbool.h>`` (:data:`MACROS`), nor one that GNU C or the C library defines with them in a user's
+  build (``linux``, ``M_PIl``, ``MAXFLOAT``, ``typeof``: :data:`GNU_MACROS`), nor under a prefix those
+  headers, Python's, numpy's or CasADi's reserve for their macros (:data:`RESERVED_PREFIXES`).
 
 It is checked at the first verb that reads the name (``uiogen new``, and any verb that reads the
 observer file or imports the model), as one typed line naming the name and the rule.
@@ -50,6 +51,23 @@ UINTPTR_MAX INTMAX_MAX INTMAX_MIN UINTMAX_MAX SIGABRT SIGFPE SIGILL SIGINT SIGSE
 SIG_IGN LC_ALL LC_COLLATE LC_CTYPE LC_MONETARY LC_NUMERIC LC_TIME FLT_RADIX FLT_ROUNDS FLT_EVAL_METHOD
 """.split())
 
+# what the same headers define beyond the standards in the modes a user's own build compiles them in (GCC's
+# and Clang's default GNU C, glibc's _DEFAULT_SOURCE): the predefined system names (``linux``, ``unix``,
+# ``i386``), GNU C's and C23's keywords ``typeof``/``typeof_unqual``, <math.h>'s typed constants
+# (``M_PIl``, ``M_Ef128``), ``MAXFLOAT``, ``SNAN``, ``HUGE_VAL_F64``, C23's ``*_WIDTH``, and what <stdlib.h>
+# and <stdio.h> pull in (<endian.h>, <sys/select.h>, the wait() options, renameat2's flags)
+_MATH_CONSTANTS = "E LOG2E LOG10E LN2 LN10 PI PI_2 PI_4 1_PI 2_PI 2_SQRTPI SQRT2 SQRT1_2".split()
+_FLOAT_SUFFIXES = ("f", "l", "f16", "f32", "f64", "f128", "f32x", "f64x", "f128x")
+GNU_MACROS = frozenset("""
+linux unix i386 typeof typeof_unqual MAXFLOAT HUGE SNAN SNANF SNANL BIG_ENDIAN LITTLE_ENDIAN PDP_ENDIAN
+BYTE_ORDER FD_SETSIZE NFDBITS L_ctermid L_cuserid P_tmpdir RENAME_EXCHANGE RENAME_NOREPLACE RENAME_WHITEOUT
+SEEK_DATA SEEK_HOLE WNOHANG WUNTRACED WSTOPPED WEXITED WCONTINUED WNOWAIT BOOL_WIDTH BOOL_MAX CHAR_WIDTH
+SCHAR_WIDTH UCHAR_WIDTH SHRT_WIDTH USHRT_WIDTH INT_WIDTH UINT_WIDTH LONG_WIDTH ULONG_WIDTH LLONG_WIDTH
+ULLONG_WIDTH INTMAX_WIDTH UINTMAX_WIDTH INTPTR_WIDTH UINTPTR_WIDTH PTRDIFF_WIDTH SIZE_WIDTH WCHAR_WIDTH WINT_WIDTH
+""".split()) | {f"M_{c}{s}" for c in _MATH_CONSTANTS for s in _FLOAT_SUFFIXES} | {
+    f"{base}{s.upper()}" for base in ("SNAN", "HUGE_VAL_") for s in _FLOAT_SUFFIXES if s[0] == "f" and s != "f"} | {
+    f"SNAN{s.upper()}" for s in _FLOAT_SUFFIXES}
+
 # prefixes of macro families: C's <errno.h> (E + digit or capital), <float.h>, <stdint.h>, <inttypes.h>,
 # <signal.h>, <locale.h>; Python's, numpy's and CasADi's headers
 RESERVED_PREFIXES = ("FLT_", "DBL_", "LDBL_", "INT8_", "INT16_", "INT32_", "INT64_", "UINT8_", "UINT16_",
@@ -69,6 +87,9 @@ def c_name_problem(name: str) -> str | None:
         return "is a C++ keyword (the generated header is included from C++ too)"
     if name in MACROS:
         return "is a macro of the C standard headers the generated C includes"
+    if name in GNU_MACROS:
+        return ("is a macro or keyword of GNU C (the compilers' default mode) or of the C library's headers the "
+                "generated C includes, in a user's build of them")
     if _ERRNO.fullmatch(name):
         return "is in the names <errno.h> reserves for its macros (E followed by a digit or capital)"
     prefix = next((p for p in RESERVED_PREFIXES if name.startswith(p)), None)

@@ -6,10 +6,11 @@ modules beside it that it imports (``from tyre_data import C_SCALE``: followed i
 byte for byte) and the parameter file. A model that reads anything else -- a JSON or CSV file with
 tyre data, a module imported from some other folder by path -- would leave the design, the C and
 the extension current after that file changed. So :func:`watching` records, with an audit hook
-(:func:`sys.addaudithook`, on the importing thread only), every file opened while the model runs,
-and :func:`check` refuses the model when one of them is neither installed code (the standard
-library, site-packages) nor in the stamp: numbers belong in the parameter file, or in a Python
-module beside the model.
+(:func:`sys.addaudithook`, on the importing thread only), every file opened while the model runs
+(SQLite databases too, which are opened in C) and every child process it starts (whose reads no hook
+of this process sees), and :func:`check` refuses the model when it started a process, or when a file
+it read is neither installed code (the standard library, site-packages) nor in the stamp: numbers
+belong in the parameter file, or in a Python module beside the model.
 
 The model's folder is on ``sys.path`` while it is imported, so that the modules beside it import
 whatever the current directory.
@@ -32,9 +33,23 @@ _installed = False
 _CODE = tuple(importlib.machinery.all_suffixes()) + (".pyc",)
 
 
+# the audit events of a child process (whose reads no audit hook of this process sees)
+_PROCESS_EVENTS = frozenset({"subprocess.Popen", "os.system", "os.exec", "os.posix_spawn", "os.spawn", "os.fork",
+                             "os.forkpty", "pty.spawn"})
+
+
 def _hook(event: str, args) -> None:
     reads = getattr(_state, "reads", None)
-    if reads is None or event != "open" or not args:
+    if reads is None or not args and event != "os.fork":
+        return
+    if event == "sqlite3.connect":                       # SQLite opens its database in C, past the "open" event
+        if isinstance(args[0], (str, bytes, os.PathLike)) and os.fsdecode(args[0]) not in ("", ":memory:"):
+            reads.append(os.fsdecode(args[0]))
+        return
+    if event in _PROCESS_EVENTS:
+        reads.append(Process(event, args))
+        return
+    if event != "open":
         return
     path, mode = args[0], args[1] if len(args) > 1 else None
     flags = args[2] if len(args) > 2 else 0
@@ -44,6 +59,27 @@ def _hook(event: str, args) -> None:
         (mode is None and isinstance(flags, int) and (flags & os.O_ACCMODE) == os.O_WRONLY)
     if not writing:
         reads.append(os.fsdecode(path))
+
+
+class Process(tuple):
+    """A child process the model started while imported (its audit event and arguments)."""
+
+    def __new__(cls, event, args):
+        return super().__new__(cls, (event, args))
+
+    def command(self) -> str:
+        event, args = self
+        if event == "os.system" and args:
+            return os.fsdecode(args[0]) if isinstance(args[0], (str, bytes)) else repr(args[0])
+        if event == "os.fork" or len(args) < 2:
+            return event
+        argv = args[1]
+        if isinstance(argv, (str, bytes)):
+            return os.fsdecode(argv)
+        try:
+            return " ".join(os.fsdecode(a) if isinstance(a, (str, bytes, os.PathLike)) else str(a) for a in argv)
+        except TypeError:
+            return repr(argv)
 
 
 @contextlib.contextmanager
@@ -88,6 +124,12 @@ def check(path, reads) -> None:
     stamped = set(user_closure(path))
     prefixes = _installed_prefixes()
     for raw in reads:
+        if isinstance(raw, Process):
+            raise ModelDefinitionError(
+                f"{path}: the model starts a process ({raw.command()[:200]}) while it is imported, whose reads and "
+                f"output no design stamp covers (after a change of what it reads the design, the C and the extension "
+                f"would stay 'current'); put the numbers in the parameter file, or in a Python module beside the "
+                f"model that it imports by name (stamped)")
         f = Path(raw) if os.path.isabs(raw) else Path.cwd() / raw
         try:
             f = f.resolve()

@@ -76,6 +76,8 @@ def test_a_helper_package_beside_the_model_is_followed(project):
 @pytest.mark.parametrize("reader", [
     "import json, pathlib\nC_SCALE = json.loads((pathlib.Path(__file__).parent / 'tyre.json').read_text())['s']\n",
     "import numpy as np, pathlib\nC_SCALE = float(np.loadtxt(pathlib.Path(__file__).parent / 'tyre.csv'))\n",
+    "import sqlite3, pathlib\nC_SCALE = sqlite3.connect(pathlib.Path(__file__).parent / 'tyre.db')"
+    ".execute('select 1.0').fetchone()[0]\n",
 ])
 def test_a_model_that_reads_a_data_file_is_refused_naming_it(project, reader):
     (project / "tyre.json").write_text('{"s": 1.0}')
@@ -87,6 +89,17 @@ def test_a_model_that_reads_a_data_file_is_refused_naming_it(project, reader):
         config.load_definition()
     msg = str(exc.value)
     assert str(model.resolve()) in msg and "reads the file" in msg and "tyre." in msg and "parameter file" in msg
+
+
+def test_a_model_that_starts_a_process_is_refused_naming_the_command(project):
+    """What a child process reads no audit hook of this process sees (``cat tyre.txt``)."""
+    (project / "tyre.txt").write_text("1.0\n")
+    model = project / "model.py"
+    model.write_text("import pathlib, subprocess\nC_SCALE = float(subprocess.run(['cat', str(pathlib.Path(__file__)"
+                     ".parent / 'tyre.txt')], capture_output=True, check=True).stdout)\n" + model.read_text())
+    config = _fresh(project / "obs1.toml")
+    with pytest.raises(ModelDefinitionError, match=r"the model starts a process \(cat .*tyre.txt\) while it is imported"):
+        config.load_definition()
 
 
 def test_a_model_importing_a_module_from_another_folder_is_refused(project, tmp_path):

@@ -300,7 +300,7 @@ def test_an_observer_named_like_a_standard_module_leaves_it_alone(tmp_path):
 # --- signal names: one rule at the model's import (codegen.model.names) --------------------------------------
 
 @pytest.mark.parametrize("bad", ["NAN", "int", "errno", "INFINITY", "M_PI", "EOF", "v y", "\N{ROCKET}", "class", "x_",
-                                 "EPERM", "Py_None", "casadi_real"])
+                                 "EPERM", "Py_None", "casadi_real", "linux", "typeof", "M_PIl", "MAXFLOAT"])
 def test_a_signal_name_that_cannot_be_a_c_field_is_one_line_at_the_first_verb(tmp_path, bad):
     """A state renamed (the symbol's name only): refused at design, before any C is written."""
     proc = _cli("new", str(tmp_path / "p"), "--family", "linf_uio", "--name", "obs1")
