@@ -17,6 +17,7 @@ from codegen.errors import ConfigurationError
 from codegen.model import load_parameters
 from codegen.validation import scenarios
 from codegen.validation.common import scenario_for, truth_plant
+from conftest import HANG_GUARD
 
 pytestmark = pytest.mark.slow          # compiled plants, Dask
 
@@ -187,7 +188,7 @@ def test_an_existing_distributed_cluster_by_address(tmp_path):
         for p in (worker, sched):
             p.terminate()
         for p in (worker, sched):
-            p.wait(timeout=30)
+            p.wait(timeout=HANG_GUARD)
 
 
 # --- campaigns that keep what they did (issue 25) --------------------------------------------------------
@@ -305,7 +306,6 @@ def test_with_its_only_worker_killed_the_campaign_stops_and_keeps_its_runs(tmp_p
     import os
     import signal
     import socket
-    import time
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
@@ -327,18 +327,19 @@ def test_with_its_only_worker_killed_the_campaign_stops_and_keeps_its_runs(tmp_p
         _wait_for_rows(out / engine.JOURNAL, 2, proc)
         worker.send_signal(signal.SIGKILL)
         worker.wait()
-        t0 = time.time()
-        stdout, stderr = proc.communicate(timeout=180)
+        # it stops by itself (after run_timeout = 30 s without a result): ending at all, with the typed
+        # error, is the proof; the bound below only keeps a hung campaign from hanging the suite, 20 x
+        # the run timeout, which no slow machine reaches (issue 39: no wall-clock limit a test can hit)
+        stdout, stderr = proc.communicate(timeout=HANG_GUARD)
         assert proc.returncode == 2 and "Traceback" not in stderr, stderr
         assert "CampaignError" in stderr and "--resume" in stderr and "did not finish" in stderr, stderr
-        assert time.time() - t0 < 120
         kept = _journal_rows(out / engine.JOURNAL)
         assert 2 <= len(kept) < 200
         worker = subprocess.Popen(worker_cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
                                   stderr=subprocess.DEVNULL)
         _wait_for_workers(address, sched, worker)
         res = subprocess.run([*campaign, "--resume", "--json"], cwd=ROOT, capture_output=True, text=True,
-                             timeout=600)
+                             timeout=HANG_GUARD)
         assert res.returncode == 0, res.stderr
         assert json.loads(res.stdout)["resumed_runs"] == len(kept)
         rows = engine.read_rows(out / "runs.csv")
@@ -347,7 +348,7 @@ def test_with_its_only_worker_killed_the_campaign_stops_and_keeps_its_runs(tmp_p
     finally:
         for p in (worker, sched):
             p.kill()
-            p.wait(timeout=30)
+            p.wait(timeout=HANG_GUARD)
 
 
 def test_a_run_that_raises_is_reported_and_the_others_kept(tmp_path):

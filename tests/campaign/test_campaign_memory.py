@@ -12,6 +12,7 @@ import pytest
 
 from codegen.campaign import engine, memory, spec as campaign_spec
 from codegen.errors import ConfigurationError
+from conftest import HANG_GUARD
 
 ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
 OBSERVER = "lpv_linf_driver_torque"
@@ -98,7 +99,7 @@ _MEASURE = textwrap.dedent("""
 def measure_run(duration: float) -> dict:
     env = {**__import__("os").environ, "MALLOC_MMAP_THRESHOLD_": "65536"}
     proc = subprocess.run([sys.executable, "-c", _MEASURE, OBSERVER, str(duration)], capture_output=True, text=True,
-                          cwd=ROOT, env=env, timeout=120)
+                          cwd=ROOT, env=env, timeout=HANG_GUARD)
     assert proc.returncode == 0, proc.stderr
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
@@ -161,7 +162,7 @@ def test_the_cli_refuses_without_a_traceback(tmp_path):
             "resource.setrlimit(resource.RLIMIT_AS, (2 * 2 ** 30, resource.RLIM_INFINITY))\n"
             "sys.exit(main(sys.argv[1:]))\n")
     proc = subprocess.run([sys.executable, "-c", code, "campaign", str(spec), "--workers", "1", "--out", str(out)],
-                          capture_output=True, text=True, cwd=ROOT, timeout=120)
+                          capture_output=True, text=True, cwd=ROOT, timeout=HANG_GUARD)
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr
     assert f"{spec}: duration = 30000.0: the campaign needs about " in proc.stderr

@@ -27,6 +27,7 @@ from codegen import cli, pipeline
 from codegen.emit import generate as emit
 from codegen.project import observer_file as observers
 from codegen.errors import DesignLockError, GenerationError
+from conftest import HANG_GUARD
 
 ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
 NAMES = observers.names()
@@ -199,7 +200,7 @@ def test_two_generate_runs_at_once_are_safe(tmp_path):
     procs = [subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
              for _ in range(2)]
     for p in procs:
-        out, err = p.communicate(timeout=300)
+        out, err = p.communicate(timeout=HANG_GUARD)
         assert p.returncode == 0, err
     committed = ROOT / "generated_c" / name
     _, mismatch, errors = filecmp.cmpfiles(committed, tmp_path / name, _c_files(committed), shallow=False)
@@ -258,7 +259,7 @@ def test_generation_is_byte_identical_on_another_cpu(tmp_path, cpu):
     names = ["lpv_linf_driver_torque", "algebraic_uio_example2", "interconnected_uio"]
     cmd = [QEMU, "-cpu", cpu, sys.executable, "-m", "codegen.cli", "generate", *names, "--force",
            "--out", str(tmp_path)]
-    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=900)
+    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=HANG_GUARD)
     assert proc.returncode == 0, proc.stderr[-2000:]
     for name in names:
         committed = ROOT / "generated_c" / name
@@ -437,7 +438,7 @@ def test_generate_killed_at_each_rename_loses_nothing(tmp_path, when):
     _copy_generated(tmp_path)
     proc = subprocess.run([strace, "-f", "-qq", "-o", os.devnull, "-e", "trace=/^rename",
                            "-e", f"inject=/^rename:signal=KILL:when={when}", *_generate_cmd(tmp_path)],
-                          cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=600)
+                          cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=HANG_GUARD)
     assert (proc.returncode != 0) == (when < 3), (proc.returncode, proc.stderr[-2000:])
     _assert_recovered_without_solving(tmp_path)
 
@@ -451,7 +452,7 @@ def test_design_update_during_a_running_generate_is_kept(tmp_path):
     strace = require_strace()
     project = tmp_path / "project"
     run = lambda *a: subprocess.run([sys.executable, "-m", "codegen.cli", *a], cwd=ROOT, env=_env(),  # noqa: E731
-                                    capture_output=True, text=True, timeout=600)
+                                    capture_output=True, text=True, timeout=HANG_GUARD)
     assert run("new", str(project), "--family", "linf_uio", "--name", "probe").returncode == 0
     source = project / "probe.toml"
     res = run("generate", str(source))
@@ -468,7 +469,7 @@ def test_design_update_during_a_running_generate_is_kept(tmp_path):
         source.write_text(re.sub(r"^alpha = 5\.0", "alpha = 4.0", source.read_text(), count=1, flags=re.M))
         res = run("design", str(source), "--update")
         assert res.returncode == 0, res.stderr
-        assert generate.wait(timeout=300) == 0, generate.stderr.read()
+        assert generate.wait(timeout=HANG_GUARD) == 0, generate.stderr.read()
     finally:
         if generate.poll() is None:
             generate.kill()
@@ -486,7 +487,7 @@ def test_validate_and_export_refuse_what_is_not_built_from_the_current_design(tm
     (and load) name `uiogen build` until it ran; export compiles only C whose stamp matches."""
     project = tmp_path / "project"
     run = lambda *a: subprocess.run([sys.executable, "-m", "codegen.cli", *a], cwd=ROOT, env=_env(),  # noqa: E731
-                                    capture_output=True, text=True, timeout=900)
+                                    capture_output=True, text=True, timeout=HANG_GUARD)
     assert run("new", str(project), "--family", "linf_uio", "--name", "probe").returncode == 0
     source = project / "probe.toml"
     for step in ("generate", "build"):

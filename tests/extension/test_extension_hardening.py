@@ -19,6 +19,7 @@ import pytest
 
 from codegen.extension import build
 from python_bindings import load
+from conftest import HANG_GUARD
 
 pytestmark = pytest.mark.slow          # the compiled extensions, and a build of its own
 
@@ -283,7 +284,7 @@ CHILD = textwrap.dedent("""
 
 def run_child(name, n_expr, path=""):
     proc = subprocess.run([sys.executable, "-c", CHILD, name, str(path), n_expr], cwd=ROOT,
-                          capture_output=True, text=True, timeout=120)
+                          capture_output=True, text=True, timeout=HANG_GUARD)
     assert proc.returncode == 0, (f"run(..., n={n_expr}) killed the interpreter (rc {proc.returncode}):\n"
                                   f"{proc.stdout}{proc.stderr}")
     return json.loads(proc.stdout.strip().splitlines()[-1])
@@ -362,6 +363,6 @@ def test_unoptimized_build_is_safe_too(tmp_path):
         except TypeError as e:
             print(e)
     """)
-    proc = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, timeout=HANG_GUARD)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith("inputs must be a native-endian float64 array"), proc.stdout

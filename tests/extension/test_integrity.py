@@ -18,6 +18,7 @@ from python_bindings import (ChangedSourceError, DamagedExtensionError, SourceFi
                              UiogenError, integrity, load)
 from python_bindings.runtime import open_observer
 from python_bindings.workspace import Workspace
+from conftest import HANG_GUARD
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -195,7 +196,7 @@ def test_a_truncated_or_unrecorded_extension_is_refused_before_it_is_loaded(tmp_
     probe = ("import sys\nfrom python_bindings import load, UiogenError\ntry:\n    load(sys.argv[1])\n"
              "except UiogenError as e:\n    print(type(e).__name__, e)\n")
     run = lambda: subprocess.run([sys.executable, "-c", probe, str(tmp_path / "obs1.toml")], cwd=ROOT,
-                                 capture_output=True, text=True, timeout=60)
+                                 capture_output=True, text=True, timeout=HANG_GUARD)
     proc = run()
     assert proc.returncode == 0, (proc.returncode, proc.stderr)
     assert proc.stdout.startswith("DamagedExtensionError the extension ") and "truncated" in proc.stdout
@@ -256,12 +257,12 @@ def test_the_design_hash_compiled_in_is_that_of_the_lock_compiled(project, monke
         monkeypatch.undo()
         out = subprocess.run([sys.executable, "-c", "import sys\nfrom python_bindings import load\n"
                               "print(load(sys.argv[1]).design_sha256)", str(obs)],
-                             capture_output=True, text=True, timeout=60, cwd=ROOT)
+                             capture_output=True, text=True, timeout=HANG_GUARD, cwd=ROOT)
         assert out.returncode != 0 and "StaleExtensionError" in out.stderr and "another design" in out.stderr
         proc = subprocess.run([sys.executable, "-c", "import sys, importlib.util\n"
                                "s = importlib.util.spec_from_file_location('_obs1', sys.argv[1])\n"
                                "m = importlib.util.module_from_spec(s); s.loader.exec_module(m)\n"
-                               "print(m.DESIGN_SHA256)", str(path)], capture_output=True, text=True, timeout=60, cwd=ROOT)
+                               "print(m.DESIGN_SHA256)", str(path)], capture_output=True, text=True, timeout=HANG_GUARD, cwd=ROOT)
         assert proc.stdout.strip() == hashlib.sha256(compiled).hexdigest()
     finally:
         lock.write_bytes(compiled)
@@ -278,7 +279,7 @@ def test_a_built_extension_records_its_bytes_and_sources_and_load_checks_them(pr
             "    o = load(sys.argv[1]); print('ok', o.run(np.zeros((2, o.n_input)))[1].tolist())\n"
             "except UiogenError as e:\n    print(type(e).__name__, e)\n")
     run = lambda: subprocess.run([sys.executable, "-c", code, str(obs)], capture_output=True, text=True,
-                                 timeout=60, cwd=ROOT).stdout
+                                 timeout=HANG_GUARD, cwd=ROOT).stdout
     assert run().startswith("ok")
     params = project / "parameters.toml"
     before = params.read_text()

@@ -18,6 +18,7 @@ from codegen.extension.build import generated_names
 from python_bindings import Recorder, StaleExtensionError, UnknownObserverError, load
 from python_bindings.integrity import record_path
 from python_bindings.workspace import Workspace
+from conftest import HANG_GUARD
 
 pytestmark = pytest.mark.slow          # the compiled extensions
 
@@ -31,7 +32,7 @@ def _probe(body: str, cwd: Path) -> list:
     """Run ``body`` in a fresh interpreter; the toolchain packages it imported."""
     code = (f"import sys\n{body}\n"
             f"print('imported:' + ','.join(m for m in {TOOLCHAIN!r} if m in sys.modules))")
-    proc = subprocess.run([sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run([sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True, timeout=HANG_GUARD)
     assert proc.returncode == 0, proc.stderr
     return [m for m in proc.stdout.strip().splitlines()[-1].removeprefix("imported:").split(",") if m]
 
@@ -185,7 +186,7 @@ def test_an_observer_pickles_to_a_worker_and_copies_to_itself(project):
     assert copy.copy(obs) is obs and copy.deepcopy(obs) is obs
     code = ("import pickle, sys, numpy as np\nobs = pickle.loads(sys.stdin.buffer.read())\n"
             "print(obs.design_sha256, obs.run(np.full((3, obs.n_input), 0.1))[0][-1].tolist())")
-    proc = subprocess.run([sys.executable, "-c", code], input=pickle.dumps(obs), capture_output=True, timeout=120)
+    proc = subprocess.run([sys.executable, "-c", code], input=pickle.dumps(obs), capture_output=True, timeout=HANG_GUARD)
     assert proc.returncode == 0, proc.stderr.decode()
     sha, last = proc.stdout.decode().split(" ", 1)
     assert sha == obs.design_sha256

@@ -5,6 +5,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import HANG_GUARD
 
 ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
 
@@ -26,7 +27,7 @@ def test_a_reader_that_closes_the_pipe_gets_no_traceback():
                             stderr=subprocess.PIPE, cwd=ROOT)
     proc.stdout.close()
     err = proc.stderr.read().decode()
-    assert proc.wait(timeout=120) == 141 and err == "", err
+    assert proc.wait(timeout=HANG_GUARD) == 141 and err == "", err
 
 
 @pytest.mark.slow       # 15 s in the measured fast lane (pytest --durations, a loaded machine): full lane only

@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from codegen.design import lock as design_lock
+from conftest import HANG_GUARD
 
 pytestmark = pytest.mark.slow          # builds the wheel and installs it into a fresh venv
 
@@ -25,7 +26,7 @@ SOURCE_IGNORE = shutil.ignore_patterns(".git", ".venv*", "build", "generated_c",
                                        ".pytest_cache", "site", "*.so", "*.o")
 
 
-def _run(cmd, cwd, env, timeout=600):
+def _run(cmd, cwd, env, timeout=HANG_GUARD):
     proc = subprocess.run([str(c) for c in cmd], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
     assert proc.returncode == 0, f"$ {' '.join(map(str, cmd))}\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     return proc.stdout

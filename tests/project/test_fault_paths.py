@@ -31,6 +31,7 @@ from codegen.campaign import spec as campaign_spec
 from codegen.errors import CampaignError, ConfigurationError, ModelDefinitionError, OutputError
 from codegen.project import observer_file as observers
 from codegen.project import outputs
+from conftest import HANG_GUARD
 
 ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
 BAD_BYTES = b"\n# \xff\xfe\n"
@@ -46,7 +47,7 @@ M = {{ dist = "uniform", low = 0.95, high = 1.05, relative = true }}
 """
 
 
-def _cli(*args, cwd=ROOT, timeout=600, env=None) -> subprocess.CompletedProcess:
+def _cli(*args, cwd=ROOT, timeout=HANG_GUARD, env=None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "codegen.cli", *args], capture_output=True, text=True, cwd=cwd,
                           timeout=timeout, env=env)
 
@@ -253,7 +254,7 @@ def test_campaign_folder_faults_on_the_command_line(built, tmp_path):
     err = _one_line(_cli("campaign", str(spec), "--workers", "1", "--out", str(out), "--resume"))
     assert f"another campaign is running into {out} (pid {proc.pid})" in err
     proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=120)
+    _, err = proc.communicate(timeout=HANG_GUARD)
     assert proc.returncode == 143 and "Traceback" not in err, err
     assert f"--resume --out {out}` continues" in err
 

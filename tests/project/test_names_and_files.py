@@ -27,6 +27,7 @@ import pytest
 from codegen.errors import ConfigurationError, SampleError
 from codegen.project import observer_file as observers
 from python_bindings import load
+from conftest import HANG_GUARD
 
 ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
 # an observer file of one's own names its parameter file by a path (here the built-in file's, absolute)
@@ -36,7 +37,7 @@ OBSERVER_FILE = re.sub(r'(?m)^parameters = "([^"]+)"',
 DESIGNED = "ts_fuzzy_uio"          # designs in seconds; its lock (10.5 kB) does not fit 8 kB
 
 
-def _cli(*args, cwd=ROOT, preexec=None, timeout=600) -> subprocess.CompletedProcess:
+def _cli(*args, cwd=ROOT, preexec=None, timeout=HANG_GUARD) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "codegen.cli", *args], capture_output=True, text=True, cwd=cwd,
                           preexec_fn=preexec, timeout=timeout)
 

@@ -17,6 +17,7 @@ from codegen.extension.build import build_extension, load
 
 fmpy = pytest.importorskip("fmpy", reason="FMPy is not installed (pip install -c constraints.txt '.[fmu]')")
 from fmpy.validation import validate_fmu  # noqa: E402
+from conftest import HANG_GUARD
 
 pytestmark = [pytest.mark.slow,          # compiles FMU binaries
               pytest.mark.skipif(platform.system() != "Linux" or platform.machine() != "x86_64",
@@ -193,7 +194,7 @@ def _sanitized_driver(fmus, kind: str, driver: str, folder):
     subprocess.run([compiler(), "-O1", "-fsanitize=float-cast-overflow,undefined", "-fno-sanitize-recover=all",
                     token, f"-DSAMPLE_TIME={load(name).sample_time!r}", "-I", str(folder), *srcs,
                     "-o", str(exe), "-lm"], check=True, capture_output=True)
-    return subprocess.run([str(exe)], capture_output=True, text=True, timeout=60)
+    return subprocess.run([str(exe)], capture_output=True, text=True, timeout=HANG_GUARD)
 
 
 DRIVER3 = r"""

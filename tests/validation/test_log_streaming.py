@@ -21,7 +21,7 @@ from codegen.validation import run as validate
 from codegen.validation import stanford as S
 from codegen.validation import streaming
 
-from conftest import require_shared
+from conftest import HANG_GUARD, require_shared
 from test_log_checks import _synthetic, _write
 
 ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
@@ -154,7 +154,7 @@ def test_non_regular_files_are_refused_as_such(tmp_path, kind):
     else:
         path, what = tmp_path, "a directory"
     proc = subprocess.run([sys.executable, "-m", "codegen.cli", "validate", "stanford_sideslip", "--data", str(path)],
-                          capture_output=True, text=True, cwd=ROOT, timeout=120)
+                          capture_output=True, text=True, cwd=ROOT, timeout=HANG_GUARD)
     assert proc.returncode == 2, proc.stderr
     err = proc.stderr.strip()
     assert len(err.splitlines()) == 1 and f"{path} is {what}, not a data file" in err, err

@@ -15,7 +15,7 @@ import pytest
 
 from codegen.validation import report, stanford
 
-from conftest import require_shared
+from conftest import HANG_GUARD, require_shared
 
 ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
 
@@ -41,7 +41,7 @@ def _chromium() -> str:
 def _browser(*args) -> subprocess.CompletedProcess:
     return subprocess.run([_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
                            "--allow-file-access-from-files", "--virtual-time-budget=20000", *args],
-                          capture_output=True, text=True, timeout=180)
+                          capture_output=True, text=True, timeout=HANG_GUARD)
 
 
 def rendered_images(page: Path) -> list:
