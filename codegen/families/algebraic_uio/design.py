@@ -514,13 +514,7 @@ def fixed_modes(dec: rdeg.Decoupling, samples: int = 2000, seed: int = 0, rel_to
         ``count`` (fixed modes per point, the largest seen), ``real_range`` [min, max] of their real
         parts, ``decay_limit`` = -max real part (None when there is none), ``samples``.
     """
-    rng = np.random.default_rng(seed)
-    syms = dec.symbols
-    F0 = _lambdify(syms, dec.F0, np)
-    C = np.array(dec.lpv.C.evalf(), dtype=float)
-    n = C.shape[1]
-    corners = [[dec.boxes[s][(k >> i) & 1] for i, s in enumerate(syms)] for k in range(2 ** len(syms))]
-    points = corners + [[rng.uniform(*dec.boxes[s]) for s in syms] for _ in range(samples)]
+    F0, C, n, points = _mode_points(dec, samples, seed)
     count, reals = 0, []
     for vals in points:
         F = np.asarray(F0(*vals), dtype=float)
@@ -538,18 +532,24 @@ def fixed_modes(dec: rdeg.Decoupling, samples: int = 2000, seed: int = 0, rel_to
             "samples": len(points)}
 
 
+def _mode_points(dec: rdeg.Decoupling, samples: int, seed: int) -> tuple:
+    """(F0 as a numpy function, C, n, the points): where :func:`fixed_modes` and :func:`fixed_mode_states`
+    look for fixed modes, every corner of the box and ``samples`` seeded points inside it."""
+    rng = np.random.default_rng(seed)
+    syms = dec.symbols
+    C = np.array(dec.lpv.C.evalf(), dtype=float)
+    corners = [[dec.boxes[s][(k >> i) & 1] for i, s in enumerate(syms)] for k in range(2 ** len(syms))]
+    points = corners + [[rng.uniform(*dec.boxes[s]) for s in syms] for _ in range(samples)]
+    return _lambdify(syms, dec.F0, np), C, C.shape[1], points
+
+
 def fixed_mode_states(dec: rdeg.Decoupling, samples: int = 200, seed: int = 0, rel_tol: float = 1e-9) -> list:
     """The states along the least stable fixed mode of :func:`fixed_modes` (its eigenvector's entries
     above a tenth of the largest, in the model's units), at the corner or sample where it is least
     stable: what an added output must read to make that mode observable."""
-    rng = np.random.default_rng(seed)
-    syms = dec.symbols
-    F0 = _lambdify(syms, dec.F0, np)
-    C = np.array(dec.lpv.C.evalf(), dtype=float)
-    n = C.shape[1]
-    corners = [[dec.boxes[s][(k >> i) & 1] for i, s in enumerate(syms)] for k in range(2 ** len(syms))]
+    F0, C, n, points = _mode_points(dec, samples, seed)
     best, vector = -np.inf, None
-    for vals in corners + [[rng.uniform(*dec.boxes[s]) for s in syms] for _ in range(samples)]:
+    for vals in points:
         F = np.asarray(F0(*vals), dtype=float)
         scale = max(1.0, float(np.abs(F).max()), float(np.abs(C).max()))
         w, V = np.linalg.eig(F)
