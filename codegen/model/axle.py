@@ -18,6 +18,7 @@ from dataclasses import dataclass, fields
 import sympy as sp
 
 from ..errors import ModelDefinitionError
+from .real import real_valued
 
 
 @dataclass(frozen=True)
@@ -85,7 +86,7 @@ class Axle:
             if expr is None:
                 raise ModelDefinitionError(f"Axle {self.name!r}: {f.name} = {value!r} must be a sympy expression, got "
                                            f"{type(value).__name__}")
-            object.__setattr__(self, f.name, expr)
+            object.__setattr__(self, f.name, real_valued(expr))
         if self.peak_symbol not in sp.sympify(self.law).free_symbols:
             raise ModelDefinitionError(f"Axle {self.name!r}: the law does not use its peak_symbol {self.peak_symbol} "
                                        f"(the law is written in the capacity symbol; peak gives its value)")

@@ -22,6 +22,7 @@ from ..errors import (MissingParameterError, ModelDefinitionError, NotAffineErro
 from ..project.settings import Rule, check_keys, config_error, parse_table, parse_value, suggest
 from .floats import FLOAT_NOISE, merge_float_noise  # noqa: F401  (FLOAT_NOISE: re-exported)
 from .names import RULE as NAME_RULE, c_name_problem, suggest as suggest_name
+from .real import real_valued
 
 
 @dataclass(frozen=True)
@@ -112,6 +113,10 @@ class ModelDefinition:
     def __post_init__(self) -> None:
         _check_field_types(self)
         _check_parameter_ranges(self)
+        # every signal is real: sympy's conjugate/re/im of undeclared-real symbols read as identities (model/real.py)
+        if isinstance(self.dynamics, sp.MatrixBase):
+            object.__setattr__(self, "dynamics", self.dynamics.applyfunc(real_valued))
+        object.__setattr__(self, "outputs", tuple((n, real_valued(e)) for n, e in self.outputs))
         for w in self.derived_inputs:
             if not isinstance(w, DerivedInput):
                 raise ModelDefinitionError(f"model {self.name!r}: derived_inputs must hold DerivedInput, got {w!r}")

@@ -39,13 +39,15 @@ import sympy as sp
 from ...representation.bounds import Interval, range_bound
 from ...errors import CertificateError, ModelDefinitionError, SchedulingBoundsError
 from ...model import parameter_substitution
+from ...model.real import real_valued
 
 
 def numeric(expr, values: dict):
     """``expr`` with the numbers of ``values`` put in, unevaluated: sympy's own simplification of the
-    Min/Max of the combined-slip capacity takes seconds per expression and changes nothing numerically."""
+    Min/Max of the combined-slip capacity takes seconds per expression and changes nothing numerically.
+    Every signal is real (conjugate(x) read as x: :func:`codegen.model.real.real_valued`)."""
     with sp.evaluate(False):
-        return sp.sympify(expr).xreplace(values)
+        return real_valued(sp.sympify(expr)).xreplace(values)
 
 
 @dataclass(frozen=True)

@@ -418,6 +418,35 @@ def test_the_starter_designs_its_own_gains_for_another_car(tmp_path, capsys):
     assert not np.allclose(s["L"], stanford_L, rtol=0.05)     # its own gains, not the Stanford car's
 
 
+def test_the_starter_with_load_transfer_and_a_load_sensitive_stiffness_designs(tmp_path, capsys):
+    """A user's natural edit of the starter: the axle loads move with a_x (CoG height h_cg) and the
+    stiffness with the load. sympy then writes conjugate(...) into the forces (the symbols are not
+    declared real); design used to end in a NameError traceback."""
+    folder = tmp_path / "my_car"
+    assert cli.main(["new", str(folder), "--family", "nonlinear_tyre_observer", "--name", "my_observer"]) == 0
+    capsys.readouterr()
+    model = folder / "model.py"
+    src = model.read_text()
+    edits = {"F_zf = m * g * l_r / _l": "F_zf = m * (g * l_r - h_cg * a_x) / _l",
+             "F_zr = m * g * l_f / _l": "F_zr = m * (g * l_f + h_cg * a_x) / _l",
+             "F_yf = tyres.fiala_slip_force(t_f, C_f, F_maxf)":
+                 "F_yf = tyres.fiala_slip_force(t_f, C_f * (1 + c_load * (F_zf / (m * g * l_r / _l) - 1)), F_maxf)",
+             "parameters=(m, l_f, l_r, I_z, C_f, C_r, mu_f, mu_r, g, brake_front, drive_front, lateral_floor)":
+                 "parameters=(m, l_f, l_r, I_z, C_f, C_r, mu_f, mu_r, g, brake_front, drive_front, lateral_floor, "
+                 "h_cg, c_load)",
+             "t_sym = sp.Symbol(": "h_cg, c_load = sp.symbols(\"h_cg c_load\")\nt_sym = sp.Symbol("}
+    for old, new_ in edits.items():
+        assert src.count(old) == 1, old
+        src = src.replace(old, new_)
+    model.write_text(src)
+    params = folder / "parameters.toml"
+    params.write_text(re.sub(r"^lateral_floor = [^\n]*", lambda m_: m_.group(0) + "\nh_cg = 0.5\nc_load = 1.0",
+                             params.read_text(), count=1, flags=re.M))
+    assert cli.main(["design", str(folder / "my_observer.toml"), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["gains"] == "designed" and s["contraction_per_step"] < 1 and s["gamma_deg"] > 0
+
+
 @pytest.mark.slow          # the compiled observer
 def test_demo_real_data_table_headlines_the_evaluation_part_where_there_is_one():
     from codegen.validation import demo
