@@ -11,6 +11,7 @@ returns the same record. :mod:`codegen.certificate.text` renders it.
 from __future__ import annotations
 
 import dataclasses
+import json
 from dataclasses import dataclass, field
 
 import math
@@ -79,12 +80,63 @@ def check(family, config, gains: dict, source: str) -> GainsCheck:
         try:
             # finite entries can still be unusable: P_i + X singular, or products that overflow (1e308)
             with np.errstate(over="ignore", invalid="ignore"):
-                return family.check_gain_form(config, gains, source)
+                result = family.check_gain_form(config, gains, source)
         except np.linalg.LinAlgError as exc:
             return GainsCheck(config.name, "printed", str(source), False,
                               f"the gains cannot be evaluated in double precision (LinAlgError: {exc}): a matrix the "
                               f"conditions invert is singular, or the entries are so large that products overflow")
+        return _stated_gamma_checked(result, gains, source)
     return check_lock_form(family, config, gains, source)
+
+
+#: the significant digits of a stated gamma compared with the re-derived one at most: a design's own gamma (the
+#: solver's nu, with its margins) and the numpy re-check's smallest nu of the same gains differ from the 5th digit
+#: on (measured: lpv_linf_driver_torque's lock 0.01957027, its re-check 0.0195701 and 0.0195699)
+STATED_DIGITS = 4
+
+
+def _written_digits(value: float) -> int:
+    """The significant digits a number is written with (its shortest repr: 0.0095 has 2), at most
+    :data:`STATED_DIGITS`."""
+    mantissa = repr(abs(float(value))).lower().split("e")[0].replace(".", "").lstrip("0").rstrip("0")
+    return max(1, min(len(mantissa), STATED_DIGITS))
+
+
+def agrees_to_written_digits(stated: float, derived: float) -> bool:
+    """Whether ``derived`` rounds to ``stated`` at the digits ``stated`` is written with (at most
+    :data:`STATED_DIGITS`): half a unit of its last written digit apart, or closer."""
+    if not (math.isfinite(stated) and math.isfinite(derived)) or stated <= 0:
+        return False
+    unit = 10.0 ** (math.floor(math.log10(stated)) - _written_digits(stated) + 1)
+    return abs(stated - derived) <= 0.5 * unit * (1 + 1e-12)
+
+
+def _stated_gamma_checked(result: GainsCheck, gains: dict, source) -> GainsCheck:
+    """A printed-form check whose gains file states ``gamma``: that gamma must be the one the check
+    re-derives from the gains (any of its cases, to the digits written), else the file is refused naming
+    the key -- a forged or stale gamma would otherwise be printed beside PASS. ``gamma_stated`` is a
+    file's quote of its source's claim (the published design's paper), not a claim about what the gains
+    certify: it stays, with what they do certify beside it when the two differ."""
+    derived = [c["gamma"] for c in result.cases.values()
+               if isinstance(c, dict) and isinstance(c.get("gamma"), (int, float)) and math.isfinite(c["gamma"])]
+    if not derived:
+        return result               # no gamma re-derived (a failing check): the FAIL verdict is what is shown
+    shown = " / ".join(dict.fromkeys(f"{g:.6g}" for g in derived))
+    if "gamma" in gains:
+        stated = number(gains["gamma"], "gamma", source, "a positive number")
+        if not any(agrees_to_written_digits(stated, g) for g in derived):
+            allowed = (f"the gamma these gains certify, {shown} (to the digits written, at most {STATED_DIGITS} "
+                       f"significant), or no gamma key; a source's own claim goes under gamma_stated")
+            raise ConfigurationError(f"gains file {source}: gamma = {brief(repr(gains['gamma']))}: these gains certify "
+                                     f"gamma = {shown} (re-checked with numpy), not {stated:.6g}; allowed: {allowed}",
+                                     source=str(source), key="gamma", value=gains["gamma"], allowed=allowed)
+    if isinstance(gains.get("gamma_stated"), (int, float)) and not isinstance(gains["gamma_stated"], bool) \
+            and not any(agrees_to_written_digits(float(gains["gamma_stated"]), g) for g in derived):
+        figures = dict(result.figures)
+        figures["gamma_stated_in_file_checked"] = (f"not certified by these gains: they certify {shown} (the "
+                                                   f"file's quote of its source, shown as written)")
+        result = dataclasses.replace(result, figures=figures)
+    return result
 
 
 # the names of the printed forms' gains (linf_uio: P1..PN, L1..LN, X, alpha; nonlinear_tyre_observer: L), and the
@@ -245,6 +297,26 @@ def is_lock_file(gains: dict) -> bool:
     return isinstance(gains.get("lock"), dict) and "lmi_solutions" in gains["lock"]
 
 
+def _lock_entries_checked(gains: dict, config, build, source) -> None:
+    """A design lock file given as gains, of the observer's current design (its ``design_inputs``): every
+    entry it reports (gamma, gains, the certificate) must be what its LMI solutions give when replayed,
+    as :func:`codegen.design.lock.check_reproduced` requires of a committed lock; a forged entry (gamma
+    x 1000 with the checksums recomputed) is refused naming it. A lock of another configuration is
+    checked for its solutions only (its entries describe that configuration's design)."""
+    from ..design import lock as design_lock
+    if not is_lock_file(gains) or gains["lock"].get("design_inputs") != design_lock.design_inputs(config):
+        return
+    try:
+        design_lock.check_reproduced(gains, build, str(source), config.name if config.builtin else config.source)
+    except DesignLockError as exc:
+        fresh = json.loads(json.dumps({**build.artifact(), "certificate": build.certificate.to_json()},
+                                      sort_keys=True))
+        wrong = sorted(k for k in gains if k != "lock" and (k not in fresh or design_lock._differs(fresh[k], gains[k])))
+        raise ConfigurationError(f"gains file {exc}", source=str(source),
+                                 key=wrong[0] if wrong else None, value=gains.get(wrong[0]) if wrong else None,
+                                 allowed="the entries its own LMI solutions give") from None
+
+
 def check_lock_form(family, config, gains: dict, source: str) -> GainsCheck:
     """The generic check: ``gains["lmi_solutions"]`` replayed through the family's pipeline."""
     import numpy as np
@@ -290,6 +362,7 @@ def check_lock_form(family, config, gains: dict, source: str) -> GainsCheck:
                           f"solution is on the boundary of its LMIs, not inside")
     except DesignLockError as exc:
         raise ConfigurationError(str(exc), source=str(source)) from None
+    _lock_entries_checked(gains, config, build, source)
     cases = {}
     for rec, sol in zip(replay.records, replay.solutions.values()):
         worst = sol.worst

@@ -112,3 +112,84 @@ def test_linf_printed_form_unusable_numbers_are_not_certified(tmp_path, capsys, 
 def test_nonlinear_printed_form_mistakes_are_refused(tmp_path, capsys, gains, words):
     rc, err = check(tmp_path, capsys, "stanford_sideslip_nonlinear_tyre", gains)
     assert rc == 2 and "ConfigurationError: gains file" in err and all(w in err for w in words), err
+
+
+# --- a stated gamma is the one the gains certify (issue 39: a forged gamma_in_file was printed beside PASS) ---
+
+def _observers_with_gamma(printed: bool) -> list:
+    """Built-in observers whose committed lock reports a gamma: those whose family checks a printed form
+    of its gains (the lock's own P_i, L_i are such a form) or those checked in the lock form."""
+    from codegen import families
+    from codegen.families.capabilities import GainForms
+    from codegen.project import observer_file as observers
+    out = []
+    for name in observers.names():
+        family = families.get(observers.get(name).family)
+        if isinstance(family, GainForms) == printed and "gamma" in lock(name):
+            out.append(name)
+    return out
+
+
+@pytest.fixture(scope="module")
+def printed_name():
+    names = _observers_with_gamma(printed=True)
+    assert names
+    return names[0]
+
+
+def test_the_locks_own_gamma_and_a_rounded_one_pass(tmp_path, capsys, printed_name):
+    gains = lock(printed_name)
+    rc, err = check(tmp_path, capsys, printed_name, gains)
+    assert rc == 0, err
+    gains["gamma"] = float(f"{gains['gamma']:.3g}")
+    rc, err = check(tmp_path, capsys, printed_name, gains)
+    assert rc == 0, err
+
+
+@pytest.mark.parametrize("factor", [1000.0, 1e-3, 1.01])
+def test_a_stated_gamma_the_gains_do_not_certify_is_refused_naming_the_key(tmp_path, capsys, printed_name, factor):
+    gains = lock(printed_name)
+    true = gains["gamma"]
+    gains["gamma"] = true * factor
+    rc, err = check(tmp_path, capsys, printed_name, gains)
+    assert rc == 2 and len(err.splitlines()) == 1, err
+    assert err.startswith("uiogen: error: ConfigurationError: gains file") and "gamma = " in err, err
+    import re
+    named = re.search(r"these gains certify gamma = ([0-9.e+-]+)", err)
+    assert named and float(named.group(1)) == pytest.approx(true, rel=1e-4), err      # the re-derived value
+    from codegen.certificate import gains as gains_check
+    with pytest.raises(cli.ConfigurationError) as info:
+        gains_check._stated_gamma_checked(gains_check.GainsCheck("o", "printed", "f.json", True,
+                                                                 cases={"c": {"gamma": true}}), gains, "f.json")
+    assert info.value.key == "gamma" and info.value.source == "f.json"
+
+
+def test_a_stated_claim_of_the_source_is_shown_with_what_the_gains_certify(tmp_path, capsys, printed_name):
+    gains = lock(printed_name)
+    true = gains.pop("gamma")
+    gains["gamma_stated"] = true / 5
+    rc = cli.main(["check-gains", printed_name, "--gains", str(_write(tmp_path, gains))])
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert "gamma_stated_in_file_checked" in out and "not certified by these gains" in out
+
+
+def _write(tmp_path, content) -> Path:
+    path = tmp_path / "gains.json"
+    path.write_text(json.dumps(content))
+    return path
+
+
+def test_a_lock_file_forged_with_its_checksums_is_refused_naming_the_entry(tmp_path, capsys):
+    from codegen.design import lock as design_lock
+    names = _observers_with_gamma(printed=False)
+    assert names
+    name = names[0]
+    rc, err = check(tmp_path, capsys, name, lock(name))           # the committed lock, as gains: it passes
+    assert rc == 0, err
+    data = lock(name)
+    data["gamma"] *= 1000
+    rc, err = check(tmp_path, capsys, name, design_lock.seal(data))
+    assert rc == 2 and len(err.splitlines()) == 1, err
+    assert "ConfigurationError: gains file" in err and "the design lock's gamma is not what its own LMI solutions give" \
+        in err, err

@@ -572,9 +572,9 @@ def test_probe_a_forged_lock_is_refused_or_re_derived_by_every_verb(starter, tmp
     """Every verb on a lock forged with its checksums recomputed (gamma x 1000 and / 1000 through every verb;
     the certificate's bound and a gain through the verbs that re-derive, build or check): it refuses (a
     non-zero exit, one line, which may quote the forged figure as the lock's), or goes on without reporting the
-    forged figure and without writing anything built from it. check-gains echoes a gains file's stated gamma as
-    ``gamma_in_file`` beside the gamma it re-checks (a file's annotation, not judged: the published design's
-    gamma_stated is below its re-check too); the forged figure may appear there only."""
+    forged figure and without writing anything built from it. check-gains refuses a gains file whose gamma is not
+    the one its gains certify (a ConfigurationError naming the file and the key: the forged lock is a gains file
+    there); a file's ``gamma_stated`` (its source's claim) is echoed with what the gains certify beside it."""
     project = _copy(starter, tmp_path / "p")
     obs = project / "obs1.toml"
     for verb in ("generate", "build"):
@@ -610,8 +610,9 @@ def test_probe_a_forged_lock_is_refused_or_re_derived_by_every_verb(starter, tmp
             if "Traceback" in said:
                 findings.append(f"{what}, {verb}: a traceback: {proc.stderr[-300:]}")
             elif proc.returncode != 0:
-                if len(proc.stderr.strip().splitlines()) != 1 or not re.search(r"DesignLock|StaleExtension|Generation",
-                                                                              proc.stderr):
+                typed = (r"DesignLock|StaleExtension|Generation" if not verb.startswith("check-gains") else
+                         r"DesignLock|ConfigurationError: gains file \S+: (gamma = |the design lock's)")
+                if len(proc.stderr.strip().splitlines()) != 1 or not re.search(typed, proc.stderr):
                     findings.append(f"{what}, {verb}: exit {proc.returncode}: {proc.stderr.strip()[-300:]}")
             elif _reports(shown, forged, true):
                 findings.append(f"{what}, {verb}: exit 0, reports the forged {forged:.6g} (true {true:.6g}): "

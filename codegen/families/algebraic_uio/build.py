@@ -40,7 +40,8 @@ from . import representation as rdeg
 from . import design as alg
 from ...representation.differentiators import HosmdSpec, hosmd_step_numpy, hosmd_step_sx
 from ...emit.stepgen import solve_unpivoted
-from ...errors import ModelDefinitionError
+from ...design.solver import FreshSolver
+from ...errors import InfeasibleLMIError, ModelDefinitionError, UiogenError
 from ...model import LPVModel, instantiate, load_parameters
 from ...representation.polytope import sector_weights_product
 
@@ -601,7 +602,15 @@ def build(config, solver, lpv: LPVModel | None = None) -> AlgebraicUIOBuild:
     _check_differentiators(lpv, dec, settings, config)
     classical = alg.classical_uio(lpv, dec.boxes)
     t1 = time.perf_counter()
-    design = alg.design(dec, settings, solver)
+    try:
+        design = alg.design(dec, settings, solver)
+    except InfeasibleLMIError as exc:
+        # the solver's verdict on LMI (39) (status set: not a fixed mode, refused before any solve): the
+        # error names a lower alpha measured to design and certify, when one of a few does
+        if exc.status is None or time.perf_counter() - t1 > RETRY_WITHIN_S:
+            raise
+        exc.args = (f"{config.source}: {exc}{_lower_alpha_that_works(dec, settings, config.sample_time)}",)
+        raise exc from None
     t2 = time.perf_counter()
     cert = alg.certify(design)
     dense = alg.dense_check(dec, design)
@@ -616,6 +625,29 @@ def build(config, solver, lpv: LPVModel | None = None) -> AlgebraicUIOBuild:
     timings = {"derivation_s": t1 - t0, "design_s": t2 - t1, "solve_s": design.solution.solve_time_s,
                "build_s": design.solution.build_time_s, "certificates_s": t3 - t2}
     return AlgebraicUIOBuild(config, lpv, dec, settings, classical, design, cert, dense, disc, aux, compare, timings)
+
+
+#: a solve of LMI (39) found infeasible in less than this many seconds is tried again at lower alphas
+#: (:func:`_lower_alpha_that_works`): a few designs of about its cost, so the error names a measured fix
+RETRY_WITHIN_S = 30.0
+
+
+def _lower_alpha_that_works(dec, settings, h: float) -> str:
+    """After LMI (39) is infeasible at [design] alpha: the design again at alpha / 2, / 10, / 100 (each a
+    measurement with its own solver; nothing is committed); the first that solves, re-checks and passes
+    the Gauss step's certificate at sample time ``h`` is named, else the text says none does."""
+    tried = []
+    for factor in (2, 10, 100):
+        alpha = float(f"{settings.alpha / factor:.3g}")
+        tried.append(f"{alpha:g}")
+        trial = replace(settings, alpha=alpha)
+        try:
+            alg.discrete_certificate(alg.design(dec, trial, FreshSolver()), h)
+        except UiogenError:
+            continue
+        return (f"; measured: with [design] alpha = {alpha:g} the design is solved and certified (a lower alpha "
+                f"certifies a slower decay)")
+    return f"; measured: [design] alpha = {', '.join(tried)} do not solve either"
 
 
 # ---- `uiogen design` report -------------------------------------------------------------------------------

@@ -58,7 +58,7 @@ from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace, un
 from ...model import LPVModel
 from ...representation.polytope import (Premise, affine_decomposition, nonlinear_factors, sector_weights_product,
                                         vertex_matrices)
-from ...project.settings import Rule, number_matrix, parse_settings, parse_table, parse_value, setting
+from ...project.settings import Rule, config_error, number_matrix, parse_settings, parse_table, parse_value, setting
 from ...design.precision import margin_field, precision_field, required_margin
 from ...design import canonical
 from ...design.canonical import decimal_round
@@ -68,6 +68,14 @@ _S3 = math.sqrt(3.0)
 GL_C = (0.5 - _S3 / 6.0, 0.5 + _S3 / 6.0)
 GL_A = ((0.25, 0.25 - _S3 / 6.0), (0.25 + _S3 / 6.0, 0.25))
 GL_B = (0.5, 0.5)
+#: a of :func:`discrete_certificate`: max_i sum_j |a_ij| of the tableau (0.5 + sqrt(3)/6)
+GL_ROW_SUM = max(sum(abs(v) for v in row) for row in GL_A)
+
+
+def decay_limit_of_step(h: float) -> float:
+    """The decay rates the Gauss step can certify at sample time ``h`` are below this: He(X F) <= -2 alpha X
+    gives ||F||_X >= alpha, and :func:`discrete_certificate` needs h a ||F||_X < 1."""
+    return 1.0 / (GL_ROW_SUM * h)
 
 
 
@@ -128,6 +136,13 @@ def settings_from_config(config) -> AlgebraicSettings:
         tbl = parse_table(tbl, DIFFERENTIATOR_RULES, source=config.source, section=f"design.differentiators.{name}")
         specs[name] = HosmdSpec(tbl["order"], tbl["lipschitz"], config.sample_time, name=name)
     settings = parse_settings(AlgebraicSettings, d, source=config.source, section="design", differentiators=specs)
+    limit = decay_limit_of_step(config.sample_time)
+    if not settings.alpha < limit:
+        raise config_error(config.source, "design", "alpha", d.get("alpha", settings.alpha),
+                           f"must be < {limit:.4g} 1/s at sample_time = {config.sample_time:g} s: the 2-stage "
+                           f"Gauss-Legendre step is certified only for h a ||F - L C||_X < 1 (a = {GL_ROW_SUM:.4g}, "
+                           f"the largest row sum of |A| of its tableau), and a decay rate alpha needs ||F - L C||_X "
+                           f">= alpha, so alpha < 1 / (a h); a faster decay needs a shorter sample_time")
     if required_margin(settings):
         # precision = "float32": the Gauss step contracts by sqrt(1 - 2 h alpha (1 - g)^2), g >= 0 from the
         # gains; alpha for g = 0 is the least that can do, the certificate then checks the margin
@@ -621,7 +636,7 @@ def discrete_certificate(d: AlgebraicDesign, h: float, samples: int = 2000, seed
     R, Ri = _x_norm_factor(d.X)
     mats = [F for _, F in d.closed_loop]
     f = max(float(np.linalg.norm(R @ F @ Ri, 2)) for F in mats)
-    a = max(sum(abs(v) for v in row) for row in GL_A)
+    a = GL_ROW_SUM
     haf = h * a * f
     if haf >= 1:
         raise DiscretizationError(f"cannot certify the Gauss-Legendre step at h = {h:g} s: h a ||F||_X = {haf:.3f} >= 1 "

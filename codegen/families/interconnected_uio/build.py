@@ -21,11 +21,12 @@ from ...design.precision import rate_for_backward_euler, required_margin
 from . import representation as icm
 from ...representation.differentiators import MAX_ORDER, HosmdSpec, hosmd_step_numpy, hosmd_step_sx
 from ...emit.stepgen import lambdify, solve_unpivoted
-from ...errors import ModelDefinitionError
+from ...design.solver import FreshSolver
+from ...errors import InfeasibleLMIError, ModelDefinitionError, UiogenError
 from ...representation.polytope import sector_weights_product
 from ...project.settings import Rule, parse_settings, parse_table
 
-from .design import (ICDesign, ICDesignSettings, StepSettings, affine_parts, build_problem, certify,
+from .design import (ICDesign, ICDesignSettings, StepSettings, affine_parts, build_problem, certify, decay_bound,
                      design, discrete_certificate)
 
 # --- the step --------------------------------------------------------------------------------------
@@ -546,6 +547,30 @@ class InterconnectedBuild(ObserverBuild):
         }
 
 
+#: a solve of (27) found infeasible in less than this many seconds is tried again at lower alphas
+#: (:func:`_lower_alpha_that_works`): a few designs of about its cost, so the error names a measured fix
+RETRY_WITHIN_S = 30.0
+
+
+def _lower_alpha_that_works(ts, settings, Ts: float) -> str:
+    """After (27) is infeasible at [design] alpha: the design again at alpha / 2, / 10, / 100 (measurements
+    with their own solver; nothing is committed); the first that solves, re-checks and passes the
+    backward-Euler certificate at ``Ts`` is named, else the text says none does."""
+    tried = []
+    for factor in (2, 10, 100):
+        alpha = float(f"{settings.alpha / factor:.3g}")
+        tried.append(f"{alpha:g}")
+        try:
+            d = design(ts, dataclasses.replace(settings, alpha=alpha), FreshSolver())
+            certify(ts, d)
+            discrete_certificate(ts, d, Ts)
+        except UiogenError:
+            continue
+        return (f"; measured: with [design] alpha = {alpha:g} the design is solved and certified (a lower alpha "
+                f"certifies a slower decay)")
+    return f"; measured: [design] alpha = {', '.join(tried)} do not solve either"
+
+
 def build(config, solver) -> InterconnectedBuild:
     """Sentouh et al. 2023: model -> interconnected T-S form -> (16), (26), LMIs (27), (28) -> certificates -> step."""
     table = dict(config.design)
@@ -559,7 +584,24 @@ def build(config, solver) -> InterconnectedBuild:
     step = step_settings(ts, table, config.sample_time, config.source)
     layout = StepLayout(ts, step)
     t1 = time.perf_counter()
-    d = design(ts, settings, solver)
+    bound, where, vertex = decay_bound(ts, settings)
+    if not settings.alpha < bound:
+        from ...project.settings import config_error
+        raise config_error(config.source, "design", "alpha", table.get("alpha", settings.alpha),
+                           f"must be < {bound:.4g} 1/s with gain_bound = {settings.gain_bound:g}: the gains are "
+                           f"bounded by ||K_i|| <= gain_bound (scaled coordinates), and (27b) then holds for no alpha "
+                           f">= 2 (gain_bound ||C_s||_* - tr Gamma) / n = {bound:.4g} 1/s (its trace at vertex "
+                           f"{vertex + 1} of subsystem {where}); the backward-Euler step at sample_time = "
+                           f"{config.sample_time:g} s contracts by 1 / sqrt(1 + alpha Ts) at any alpha it certifies; a "
+                           f"faster decay needs a larger gain_bound")
+    try:
+        d = design(ts, settings, solver)
+    except InfeasibleLMIError as exc:
+        # the solver's verdict on (27): the error names a lower alpha measured to design and certify
+        if exc.status is None or time.perf_counter() - t1 > RETRY_WITHIN_S:
+            raise
+        exc.args = (f"{config.source}: {exc}{_lower_alpha_that_works(ts, settings, config.sample_time)}",)
+        raise exc from None
     _needed_derivatives(ts, d, layout)
     t2 = time.perf_counter()
     cert = certify(ts, d)

@@ -264,6 +264,28 @@ def _blocks(sub, T, S, W, Z, P, Om, settings, xp):
     return out
 
 
+def decay_bound(ts: icm.InterconnectedTS, settings: ICDesignSettings) -> tuple:
+    """(bound, subsystem name, vertex): no alpha >= bound satisfies (27b) with the gain bound ||K_i|| <= ell.
+
+    The state block of (27b) at vertex i is Gamma' P + P Gamma - C_s' Omega' - Omega C_s + alpha P < 0; its
+    trace in the P metric, with K = P^-1 Omega, is 2 tr(Gamma) - 2 tr(K C_s) + n alpha < 0, and
+    |tr(K C_s)| <= ||K||_2 ||C_s||_* <= ell ||C_s||_* (the gain bound with (27e) P >= I), all in the scaled
+    coordinates of :func:`build_problem`: hence alpha < 2 (ell ||C_s||_* - tr Gamma) / n."""
+    best = (np.inf, "", 0)
+    for sub in ts.subsystems:
+        S, W, _ = scaling(ts, sub)
+        H, T, CBp = decoupling(sub, W, mode=settings.decoupling)
+        S, W, Z = scaling(ts, sub, T)
+        Cs = np.diag(1.0 / W) @ sub.C @ np.diag(S)
+        nuc = float(np.linalg.norm(Cs, "nuc"))
+        for i in range(sub.n_vertices):
+            gam = np.diag(1.0 / S) @ T @ sub.A[i] @ np.diag(S)
+            bound = 2.0 * (settings.gain_bound * nuc - float(np.trace(gam))) / sub.n
+            if bound < best[0]:
+                best = (bound, sub.name, i)
+    return best
+
+
 def build_problem(ts: icm.InterconnectedTS, settings: ICDesignSettings):
     prob = LMIProblem(f"{ts.definition.name}: Sentouh et al. 2023 Theorem 1")
     parts, etas = [], []

@@ -231,6 +231,17 @@ def build(config: ObserverConfig, solver) -> LinfBuild:
             f"(entry A{tuple(err['entry'])} at {poly.signal} = {err['at']:g}: {err['max_abs_error']:.4g}), more than "
             f"[design] taylor_error_limit = {settings.taylor_error_limit:g}; use the exact form, polytope = \"sector\" "
             f"({2 ** len(polytope.scheduling_nonlinearities(lpv))} vertices), or narrow the scheduling box")
+    bound, vertex = linf_uio.decay_bound(poly, settings.gain_bound)
+    if not settings.alpha < bound:
+        from ...project.settings import config_error
+        bound_ts = settings.gain_bound * config.sample_time
+        raise config_error(
+            config.source, "design", "alpha", config.design.get("alpha", settings.alpha),
+            f"must be < {bound:.4g} 1/s with sample_time = {config.sample_time:g} s and gain_bound_times_sample_time "
+            f"= {bound_ts:g}: the observer gain is bounded by ||M|| <= {bound_ts:g} / {config.sample_time:g} s = "
+            f"{settings.gain_bound:.4g} 1/s, and Theorem 1 then certifies no decay rate alpha >= (||M|| ||C||_* - "
+            f"tr A) / n = {bound:.4g} 1/s (the trace of LMI (21) at vertex {vertex + 1}); a faster decay needs a "
+            f"shorter sample_time or a larger gain_bound_times_sample_time")
     try:
         design = linf_uio.design(poly, settings, solver, lpv.definition.states)
         quadratic = design if settings.lyapunov == "quadratic" else \

@@ -144,6 +144,22 @@ def output_scaling(poly: Polytope) -> np.ndarray:
     return np.where(rows > 0, 1.0 / np.where(rows > 0, rows, 1.0), 1.0)
 
 
+def decay_bound(poly: Polytope, gain_bound: float) -> tuple:
+    """(bound, vertex): no decay rate alpha >= bound satisfies Theorem 1 with ||M|| <= ``gain_bound``.
+
+    The diagonal block (21) Y_ii at a zero membership rate (the quadratic design always has it; the PDLF
+    design at every rate box that holds 0) has the state part He(Q_i (A_i + M_i C_i)) + 2 alpha Q_i < 0,
+    M_i = Q_i^-1 L_i. Its trace in the Q_i metric gives tr(A_i + M_i C_i) < -n alpha, and
+    |tr(M C)| <= ||M||_2 ||C||_* (C in the design's output units, :func:`output_scaling`): hence
+    alpha < (gain_bound ||C_i||_* - tr A_i) / n at every vertex i."""
+    C = poly.C * output_scaling(poly)[None, :, None]
+    n = poly.A.shape[1]
+    bounds = [(gain_bound * float(np.linalg.norm(C[i], "nuc")) - float(np.trace(poly.A[i]))) / n
+              for i in range(poly.n_vertices)]
+    i = int(np.argmin(bounds))
+    return bounds[i], i
+
+
 def _scaled(poly: Polytope, scale: np.ndarray, out_scale: np.ndarray | None = None) -> Polytope:
     t = np.ones(poly.C.shape[1]) if out_scale is None else out_scale
     return dataclasses.replace(poly, D=poly.D * scale[None, None, :], C=poly.C * t[None, :, None],
