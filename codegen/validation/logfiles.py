@@ -139,8 +139,10 @@ def _missing(p: Path, what: str, missing: list, names: list) -> DatasetError:
     hints = "; ".join(f"{m!r}: closest in the file {', '.join(repr(x) for x in near[m])}" if near[m]
                       else f"{m!r}: nothing close in the file" for m in missing)
     shown = names if len(names) <= 20 else names[:20] + [f"... ({len(names)} in all)"]
-    return DatasetError(f"{p}: missing {what}(s) {missing} ({hints}); the file has {shown}; allowed: the names "
-                        f"of the file's {what}s in the observer file's [data] table")
+    head = f"{p}: missing {what}(s) {missing} ({hints}); the file has {shown}"
+    exc = DatasetError(f"{head}; allowed: the names of the file's {what}s in the observer file's [data] table")
+    exc.missing, exc.head = list(missing), head     # the shared format's loader says its own allowed names
+    return exc
 
 
 # --- units ----------------------------------------------------------------------------------------
