@@ -351,14 +351,14 @@ class Sampling:
             self.bad += int(bad.sum())
             if self.bad_t is None:
                 self.bad_t = float(t[int(np.flatnonzero(bad)[0])])
-        before = t[:-1] if self.last_t is None else np.concatenate([[self.last_t], t[:-1]])
-        d = np.diff(t) if self.last_t is None else np.diff(np.concatenate([[self.last_t], t]))
+        joined = t if self.last_t is None else np.concatenate([[self.last_t], t])   # the steps across chunks too
+        before, d = joined[:-1], np.diff(joined)
         if self.back is None:
             back = np.flatnonzero(~(d > 0))
             if back.size:
                 i = int(back[0])
-                self.back = (float(before[i]), float(before[i] + d[i]) if np.isfinite(d[i]) else float(t[-1]),
-                             self.n + i + (1 if self.last_t is None else 0))
+                # (time before, time after, the later sample's number from 1)
+                self.back = (float(before[i]), float(joined[i + 1]), self.n + i + (2 if self.last_t is None else 1))
         self.first_t = float(t[0]) if self.first_t is None else self.first_t
         self.last_t = float(t[-1])
         self.n += t.size
@@ -412,9 +412,9 @@ class Sampling:
             raise DatasetError(f"{p}: channel {name!r} has {self.bad} non-finite value(s), first at "
                                f"t = {self.bad_t:.6g} s; allowed: finite numbers")
         if self.back is not None:
-            t0, t1, i = self.back
+            t0, t1, k = self.back
             raise DatasetError(f"{p}: channel {name!r}: time is not strictly increasing: t = {t1!r} s after "
-                               f"t = {t0!r} s (sample {i + 1}); allowed: strictly increasing times")
+                               f"t = {t0!r} s (sample {k}); allowed: strictly increasing times")
         if self.period is None:
             self._settle()
         if self.block:

@@ -110,3 +110,34 @@ def test_a_ros2_bag_streamed_is_the_bag_held_whole(tmp_path, monkeypatch, held):
         assert np.array_equal(got[f"/{name}.data"], values[name]), name
     assert reader.resampling["/on.data"]["method"] == "as recorded"
     assert 0 < held["n"] <= 2 * CHUNK + 4 * 64, held["n"]
+
+
+@pytest.mark.parametrize("fault", ["repeated time", "gap", "non-finite", "rate change"])
+def test_a_channel_judged_in_parts_is_judged_as_a_whole(fault):
+    """Its faults and facts (the refusal, its sample and count; the rate change, the short steps) do not
+    depend on where the parts end: 1000 samples fed whole and cut in 1, 7 and 333-sample parts."""
+    t, x = 0.01 * np.arange(3000), np.zeros(3000)
+    if fault == "repeated time":
+        t[1500] = t[1499]
+    elif fault == "gap":
+        t[2000:] += 0.05
+    elif fault == "non-finite":
+        x[[10, 2500]] = np.nan
+    else:
+        t[2000:] = t[2000] + 0.0125 * np.arange(1000)          # 100 Hz, then 80 Hz
+
+    def judged(size):
+        c = logfiles.Sampling(Path("x.mf4"), "x", None, "hold")
+        for k in range(0, t.size, size):
+            c.feed(t[k:k + size], x[k:k + size])
+        try:
+            c.finish()
+        except logfiles.DatasetError as exc:
+            return str(exc)
+        return (c.period, c.max_step, c.short, c.rate_change and c.rate_change[::2], c.start, c.end)
+    whole = judged(t.size)
+    assert all(judged(size) == whole for size in (1, 7, 333)), [judged(s) for s in (1, 7, 333)]
+    if fault != "rate change":
+        assert isinstance(whole, str) and "x.mf4: channel 'x'" in whole, whole
+    else:
+        assert whole[3] == (20.0, pytest.approx(0.0125)), whole
