@@ -16,10 +16,11 @@ in batches of :data:`BATCH_ROWS` rows (``pyarrow.parquet.ParquetFile.iter_batche
 mapped columns; a column's unit is its field metadata ``unit``.
 
 MDF (:class:`MdfLog`, asammdf) keeps every channel group at its own rate, each channel with its
-group's master (time) channel. Only the mapped channels are read (``MDF.get`` of each; the file's
-other channels are never loaded), each held whole with its timestamps -- memory grows with the
-mapped channels, not with the file -- and put on one time base, the observer's sample time
-(:func:`time_base`, :func:`resample`):
+group's master (time) channel. Only the mapped channels are read (``MDF.iter_get``, fragment by
+fragment of their group's records; the file's other channels are never converted), twice: once to
+judge each one's sampling (:class:`Sampling`), once to put them on one time base, the observer's
+sample time, chunk by chunk (:class:`OnGrid`: :func:`on_grid`, :func:`resample` on the samples around
+each chunk) -- memory grows neither with the file nor with the channels' length:
 
 - the grid: the span where every mapped channel has data; the recorded times of the first mapped
   channel that is sampled at the observer's period without gaps, else ``start + k Ts``;
@@ -845,8 +846,10 @@ class BagLog(OnGrid):
     ``TOPIC.FIELD`` a channel, at its topic's rate, on the observer's grid.
 
     A channel's time is its message's ``header.stamp`` where the message has a header, else the time
-    the bag recorded it. One pass over the messages of the mapped topics only; only the mapped fields
-    are kept. ROS messages carry no units (REP 103: SI), so the map's units apply.
+    the bag recorded it. Only the messages of the mapped topics are read, and only the mapped fields
+    kept, :data:`BAG_BATCH` messages at a time: one pass judges each channel's sampling, a second puts
+    them on the grid chunk by chunk (the bag's order interleaves the topics: :class:`_Demux`). ROS
+    messages carry no units (REP 103: SI), so the map's units apply.
 
     Parameters
     ----------
