@@ -183,9 +183,11 @@ class LogReader:
         if missing:
             spare = [h for h in self.header if h not in self.units]
             hints = [f"{m!r}: did you mean {s!r}?" for m in missing for s in [suggest(m, spare)] if s]
-            raise DatasetError(f"{p}: missing column(s) {missing}; found {self.header}"
+            exc = DatasetError(f"{p}: missing column(s) {missing}; found {self.header}"
                                + (f" ({'; '.join(hints)})" if hints else "") + " (fields separated by "
                                f"{_SEPARATORS[self.sep]}; allowed separators: comma, semicolon or tab)")
+            exc.missing, exc.head = missing, str(exc)      # a caller with a format of its own adds its advice
+            raise exc
         self.rows = 0                # data rows delivered so far
 
     # --- the chunks ------------------------------------------------------------------------------

@@ -401,12 +401,75 @@ def chunks(path="stanford", sample_time=None, block_bytes: int = csvlog.BLOCK_BY
     """
     p = _resolve(path)
     sample_time = _sample_time(sample_time)
-    reader = csvlog.LogReader(p, UNITS, block_bytes)
+    reader, factors = open_log(p, sample_time, block_bytes)
     checks = _Checks(p, sample_time)
     for _, cols in reader.chunks():
+        cols = {c: cols[c] * factors[c] if factors[c] != 1.0 else cols[c] for c in COLUMNS}
         checks.feed(cols)
         yield cols
     checks.finish()
+
+
+_UNITS_TEXT = ", ".join(f"{c} [{u}]" for c, u in UNITS.items())
+CHANNEL_FORMATS = {"rosbag2": ("a ROS 2 bag", "TOPIC.FIELD"), "blf": ("a CAN log (BLF)", "MESSAGE.SIGNAL"),
+                   "asc": ("a CAN log (ASC)", "MESSAGE.SIGNAL")}
+"""The formats whose channels are named by their place in the file, which no column of the format can be."""
+
+
+def _allowed(missing) -> str:
+    """What a log missing the shared format's columns ``missing`` must hold."""
+    text = (f"allowed: the shared format's columns {', '.join(COLUMNS)} (SI units: {_UNITS_TEXT}) as the file's "
+            f"column or channel names")
+    if "yaw_acc" in missing:
+        text += ("; a log that records no yaw acceleration: add yaw_acc, the yaw rate's derivative (e.g. "
+                 "numpy.gradient(yaw_rate, t)) -- uiogen fit uses the log's yaw_acc as recorded, never a derivative "
+                 "of its own")
+    return text
+
+
+def open_log(p: Path, sample_time, block_bytes: int = csvlog.BLOCK_BYTES) -> tuple:
+    """``(reader, {column: factor to its declared unit})``: the shared format's columns of a log in any
+    format ``uiogen validate --data`` reads by name -- a CSV (streamed as before), Parquet, MDF4 --
+    through its reader (:func:`codegen.validation.logfiles.open_log`: the format told by the content,
+    one channel per column, an MDF log's channels on the grid of ``sample_time``). A unit the file
+    states (an MDF channel's, a Parquet field's) is checked against the column's declared unit
+    (:data:`UNITS`) and converted to it (:func:`codegen.validation.logfiles.resolve_unit`); a column
+    without one is in its declared unit, as in the CSV.
+
+    Raises
+    ------
+    DatasetError
+        the reader's (a missing column or channel with the closest names, a gap, a unit of another kind);
+        a ROS 2 bag or a CAN log, whose channels are TOPIC.FIELD or MESSAGE.SIGNAL (they are read through an
+        observer file's ``[data]`` map); an MDF log without a sample time to put it on.
+    """
+    from ..project.columns import UNITS as KNOWN
+    from . import logfiles
+    fmt = logfiles.kind(p)
+    if fmt in CHANNEL_FORMATS:
+        what, names = CHANNEL_FORMATS[fmt]
+        raise DatasetError(f"{p} is {what}, whose channels are named {names}, never the shared format's columns "
+                           f"({', '.join(COLUMNS)}); allowed: a CSV, Parquet or MDF4 log with those columns or "
+                           f"channels (uiogen validate --data reads a {names} log through an observer file's [data] "
+                           f"map)")
+    if fmt == "mdf" and sample_time is None:
+        raise DatasetError(f"{p}: an MDF log's channels are put on the observer's sample time, and none is given; "
+                           f"allowed: the log read for an observer (sample_time = its sample time)")
+    try:
+        reader = logfiles.open_log(p, UNITS, "t", sample_time, block_bytes=block_bytes)
+    except DatasetError as exc:
+        if not getattr(exc, "missing", None):
+            raise
+        raise DatasetError(f"{exc.head}; {_allowed(exc.missing)}") from None
+    factors = {}
+    for c in COLUMNS:
+        if c == "t" and isinstance(reader, logfiles.OnGrid):        # the grid's times are in s
+            factors[c] = 1.0
+            continue
+        what = f"{'channel' if isinstance(reader, logfiles.OnGrid) else 'column'} {c!r}"
+        unit, _ = logfiles.resolve_unit(p, what, reader.file_units.get(c), None, UNITS[c])
+        factors[c] = 1.0 if unit is None else KNOWN[unit][1] / KNOWN[UNITS[c]][1]
+    return reader, factors
 
 
 def load(path="stanford", sample_time=None, block_bytes: int = csvlog.BLOCK_BYTES) -> StanfordRun:

@@ -325,12 +325,17 @@ def test_errors_stay_sample_errors(tmp_path):
         S.load(p)
 
 
-def test_a_parquet_log_is_named_as_such(tmp_path):
-    """A Parquet log was refused as "not UTF-8 text (... can't decode byte 0x90 in position 7)"."""
+def test_a_parquet_log_is_read_and_another_binary_is_named_as_such(tmp_path):
+    """A Parquet log was refused as "not UTF-8 text (... can't decode byte 0x90 in position 7)", then with
+    advice to convert it; it is read now (issue 41: the reader of validate --data), as its CSV. A binary
+    format no reader takes is still named (an HDF5 file)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
     p = tmp_path / "log.parquet"
-    pq.write_table(pa.table(_synthetic(n=50)), p)
-    with pytest.raises(S.DatasetError, match=r"log.parquet: it is a Parquet file; allowed: a CSV log \(plain or "
-                                             r"gzip\); export it as CSV, e.g. pyarrow.csv.write_csv"):
-        S.load(p)
+    cols = _synthetic(n=50)
+    pq.write_table(pa.table(cols), p)
+    assert _same(S.load(p), cols)
+    h = tmp_path / "log.h5"
+    h.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(100))
+    with pytest.raises(S.DatasetError, match=r"log.h5: it is a HDF5 file; allowed: a CSV log \(plain or gzip\)"):
+        S.load(h)

@@ -1,7 +1,12 @@
 """``uiogen fit``: a nonlinear-tyre observer's numbers identified on a declared sample range of a log.
 
 The log must carry a sideslip reference (the shared Stanford format: ``vx``, ``vy``, ``ay``,
-``yaw_rate``, ``yaw_acc``, ``delta``, ``ax``). Only samples A..B-1 are read for any choice. Fitted:
+``yaw_rate``, ``yaw_acc``, ``delta``, ``ax``), as a CSV, Parquet or MDF4 file read by the reader of
+``uiogen validate --data`` (:func:`codegen.validation.stanford.open_log`: the units a file states
+converted, an MDF log's channels put on the observer's sample time). The yaw acceleration is the log's
+``yaw_acc`` as recorded, never a derivative the fit takes (a log without it is refused, with the advice
+to add the yaw rate's derivative: on the shared Ferrari half the gradient instead of the recorded column
+moves the fitted stiffnesses by 0.1 %, mu not at all). Only samples A..B-1 are read for any choice. Fitted:
 
 1. **The tyre** (parameter file): each axle's cornering stiffness and *one* friction coefficient
    for both axles, three numbers, by least squares of the log's a_y and yaw acceleration (the
@@ -323,9 +328,9 @@ def fit(config, path="stanford", samples: str = "", folds: int | None = None, pe
             raise
         # the user mapped their log for validate: say that the fit does not read that map, rather than
         # leave them with the shared format's missing columns (and a did-you-mean to a column in g)
-        raise DatasetError(f"{exc}. uiogen fit reads the shared log's format only (columns "
-                           f"{', '.join(stanford.COLUMNS)}, SI units); the [data] table of {config.source} maps a "
-                           f"log for uiogen validate --data, not for the fit") from None
+        raise DatasetError(f"{exc}. uiogen fit reads the shared log's format only (columns or channels "
+                           f"{', '.join(stanford.COLUMNS)}, in a CSV, Parquet or MDF4 file); the [data] table of "
+                           f"{config.source} maps a log for uiogen validate --data, not for the fit") from None
     a, b = parse_samples(samples, run.n)
     params = load_parameters(config.parameter_path)
     prob = _problem(config, params, run, a, b)
