@@ -53,6 +53,7 @@ def toy(tmp_path, monkeypatch):
     sys.modules.pop("toy_sums", None)
 
 
+@pytest.mark.slow          # compiles what it wrote
 def test_a_toy_target_is_listed_and_exports_through_the_cli(toy, tmp_path, capsys):
     assert cli.main(["export", "--format"]) == 0
     listed = {line.split()[0]: line for line in capsys.readouterr().out.splitlines()}
