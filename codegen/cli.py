@@ -35,7 +35,7 @@ from . import families, pipeline
 from .project import observer_file as observers
 from .project import outputs
 from .commandline import project_option, report_errors
-from .errors import (CertificateError, ConfigurationError, DesignLockError, MissingParameterError,
+from .errors import (ConfigurationError, DesignLockError, MissingParameterError,
                      SchedulingBoundsError, UiogenError, UnknownObserverError, UnknownParameterError)
 
 
@@ -725,8 +725,8 @@ def main(argv=None) -> int:
                                  "(default: build/campaigns/SPEC_STEM of the observer's project)")
     p.set_defaults(func=cmd_campaign)
     p = export = sub.add_parser("export", parents=[project],
-                       help="package a generated observer for another tool (" + ", ".join(targets.names())
-                       + "; uiogen export --format lists them)")
+                                help="package a generated observer for another tool (" + ", ".join(targets.names())
+                                + "; uiogen export --format lists them)")
     p.add_argument("name", nargs="?")
     p.add_argument("--format", choices=targets.names(), required=True, nargs="?", const=None,
                    help="the export target (--format alone lists them with what each writes)")
