@@ -13,7 +13,7 @@
     uiogen demo [--json] [--report DIR]
     uiogen bench [--json]
     uiogen campaign SPEC.toml [--runs N] [--only K] [--resume] [--json] [--scheduler ADDRESS] [--workers N] [--out DIR]
-    uiogen export NAME --format fmu|fmu3 --out FILE.fmu [--project DIR]
+    uiogen export NAME --format TARGET --out FILE|DIR [--project DIR]     (uiogen export --format: the targets)
 
 ``--project DIR``: the project folder whose ``generated_c/`` and ``build/`` the command reads and
 writes (:mod:`python_bindings.workspace`); default: the observer file's folder, or for a built-in
@@ -35,7 +35,7 @@ from . import families, pipeline
 from .project import observer_file as observers
 from .project import outputs
 from .commandline import project_option, report_errors
-from .errors import (CertificateError, ConfigurationError, DesignLockError, MissingParameterError,
+from .errors import (ConfigurationError, DesignLockError, MissingParameterError,
                      SchedulingBoundsError, UiogenError, UnknownObserverError, UnknownParameterError)
 
 
@@ -227,23 +227,12 @@ def cmd_generate(args) -> int:
 
 def cmd_build(args) -> int:
     from .extension import build as extension
-    if not args.float32:
+    from . import targets
+    variant = next((t for t in targets.all_targets()
+                    if isinstance(t, targets.BuildVariant) and getattr(args, t.build_flag, False)), None)
+    if variant is None:
         return extension.main(args.names, project=args.project)
-    from .targets import float32 as precision
-    refused = []
-    for name in args.names or observers.names():
-        config = observers.get(name, project=args.project)
-        name = config.name
-        report = precision.compare(config)
-        print(precision.format_report(report), flush=True)
-        if report["passes"]:
-            print(f"{name}: built {config.workspace.float32 / name / f'lib{name}_f32.so'} (API {name}_f32_*, "
-                  f"CMakeLists.txt and {name}_f32_example.c beside it)", flush=True)
-        else:
-            refused.append(name)
-    if refused:
-        raise CertificateError(f"float32 build refused for {', '.join(refused)} (the reasons and figures above)")
-    return 0
+    return variant.build(args.names, project=args.project)
 
 
 def _load_gains(path: Path) -> dict:
@@ -514,8 +503,12 @@ def cmd_docs(args) -> int:
 
 
 def cmd_export(args) -> int:
-    from .targets import fmu
-    fmu.export_fmu(observers.get(args.name, project=args.project), args.out, fmi_version=fmu.FORMATS[args.format])
+    from . import targets
+    if args.format is None:         # `uiogen export --format`: what is registered
+        for t in targets.all_targets():
+            print(f"{t.name:8s} --out {t.out:9s} {t.title}")
+        return 0
+    targets.get(args.format).export(observers.get(args.name, project=args.project), args.out)
     return 0
 
 
@@ -587,6 +580,7 @@ def main(argv=None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     # The commands that read or write an observer's generated files take its project folder.
     project = project_option()
+    from . import targets          # the export targets and build variants registered (codegen/targets/)
     p = sub.add_parser("list", help="list observer configurations")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_list)
@@ -628,10 +622,9 @@ def main(argv=None) -> int:
     p.set_defaults(func=cmd_generate)
     p = sub.add_parser("build", parents=[project], help="compile the generated C into Python extensions")
     p.add_argument("names", nargs="*")
-    p.add_argument("--float32", action="store_true",
-                   help="emit and build the float (casadi_real) variant into build/float32/NAME/ instead, "
-                        "compared with the double step on the validation scenarios; refused where the "
-                        "certificate's margin does not cover the rounding")
+    for t in targets.all_targets():         # the build variants the registered targets offer (--float32)
+        if isinstance(t, targets.BuildVariant):
+            p.add_argument(f"--{t.build_flag}", action="store_true", help=t.build_help)
     p.set_defaults(func=cmd_build)
     p = sub.add_parser("check-gains", help="verify external gains against an observer's LMIs")
     p.add_argument("name")
@@ -732,18 +725,22 @@ def main(argv=None) -> int:
     p.add_argument("--out", help="directory for runs.csv, summary.json, traces and plots "
                                  "(default: build/campaigns/SPEC_STEM of the observer's project)")
     p.set_defaults(func=cmd_campaign)
-    p = sub.add_parser("export", parents=[project],
-                       help="package a generated observer for another tool (fmu: FMI 2.0, fmu3: FMI 3.0 co-simulation)")
-    p.add_argument("name")
-    p.add_argument("--format", choices=("fmu", "fmu3"), required=True,
-                   help="fmu: FMI 2.0 co-simulation; fmu3: FMI 3.0 co-simulation")
-    p.add_argument("--out", required=True, help="the file to write (FILE.fmu)")
+    p = export = sub.add_parser("export", parents=[project],
+                                help="package a generated observer for another tool (" + ", ".join(targets.names())
+                                + "; uiogen export --format lists them)")
+    p.add_argument("name", nargs="?")
+    p.add_argument("--format", choices=targets.names(), required=True, nargs="?", const=None,
+                   help="the export target (--format alone lists them with what each writes)")
+    p.add_argument("--out", help="what to write: " + "; ".join(f"{t.out} ({t.name})" for t in targets.all_targets()))
     p.set_defaults(func=cmd_export)
     args = parser.parse_args(argv)
     if getattr(args, "runs", None) is not None and args.runs < 1:
         parser.error("--runs must be >= 1")
     if getattr(args, "workers", None) is not None and args.workers < 1:
         parser.error("--workers must be >= 1")
+    if args.command == "export" and args.format is not None and None in (args.name, args.out):
+        export.error("the following arguments are required: "
+                     + ", ".join(n for n, v in (("name", args.name), ("--out", args.out)) if v is None))
     return report_errors(f"uiogen {args.command}", lambda: args.func(args))
 
 

@@ -14,7 +14,7 @@ physical: a declared fraction of what the sensors' noise already does to the est
     accumulation = "compensated"         # or "plain" (the default), see below
 
 The sensor noise is declared once, for every verb, in the parameter file's ``[sensor_noise]``
-table (:mod:`codegen.validation.noise`: by the model's signal name, in its unit); ``noise`` here is
+table (:mod:`codegen.project.sensor_noise`: by the model's signal name, in its unit); ``noise`` here is
 the former place, still read, and must agree with it (a ConfigurationError naming both files where
 they differ). An input declared in neither takes the family's validation noise for that signal
 (:meth:`Family.sensor_noise`, a measured ``y_NAME`` or a raw input ``NAME``); an input with none
@@ -77,7 +77,7 @@ def parse(table, source: str) -> PrecisionSettings:
 def input_noise(config, inputs) -> dict:
     """{input name: standard deviation} of the sensor noise of an observer's ``inputs``: its observer
     file's ``[precision] noise`` table (which must agree with the parameter file's ``[sensor_noise]``),
-    else ``[sensor_noise]`` (:mod:`codegen.validation.noise`), else the family's validation noise of a
+    else ``[sensor_noise]`` (:mod:`codegen.project.sensor_noise`), else the family's validation noise of a
     measured ``y_NAME`` or a raw input ``NAME`` (:func:`codegen.families.capabilities.sensor_noise`);
     an input with none is left out. The float32 build's tolerance and ``validate --data``'s log checks
     use it.
@@ -93,7 +93,7 @@ def input_noise(config, inputs) -> dict:
     from ..errors import ConfigurationError
     from ..families.capabilities import sensor_noise
     from ..model import load_parameters
-    from ..validation import noise as sensor
+    from . import sensor_noise as sensor
     spec = config.precision
     inputs = list(inputs)
     source = config.source or f"{config.name}.toml"

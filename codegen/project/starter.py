@@ -89,12 +89,12 @@ def _tables(text: str) -> dict:
 
 
 def sensor_table(example, family) -> str:
-    """The starter's ``[sensor_noise]`` table (:mod:`codegen.validation.noise`): a level for each measured
+    """The starter's ``[sensor_noise]`` table (:mod:`codegen.project.sensor_noise`): a level for each measured
     signal of the example's model that has one (the example observer file's ``[precision] noise``,
     else the family's validation noise: the float32 build's levels until now, so it stays as it was),
     the others as a commented line to fill in from the sensor's datasheet."""
     from ..families.capabilities import sensor_noise
-    from ..validation.noise import column_signal, measured_signals
+    from .sensor_noise import column_signal, measured_signals
     model = example.load_model()
     signals = measured_signals(model)
     units = dict(model.units or {})

@@ -165,3 +165,57 @@ def test_the_c_hash_covers_the_design_the_emitters_and_the_templates(NAME, monke
     monkeypatch.undo()
     # and the hash moves with the lock's text
     assert emit.emission_inputs(config, lock) != emit.emission_inputs(config, lock + " ")
+
+
+# ---- floors: a stage imports only what stands below it --------------------------------------------------
+
+#: {package of codegen: the packages that stand above it, which it must not import, at module level or
+#: inside a function}: the project (observer files, parameter files, settings) is read by validation,
+#: campaigns, analysis, targets and the command line, never the other way round; a target is driven
+#: by the command line and the tools, never drives them
+ABOVE = {"project": ("validation", "campaign", "analysis", "targets", "tools", "cli"),
+         "targets": ("cli", "tools")}
+
+
+def _upward(edges: dict, above: dict = ABOVE) -> list:
+    out = []
+    for m, ts in edges.items():
+        parts = m.split(".")
+        if parts[0] != "codegen" or len(parts) < 2 or parts[1] not in above:
+            continue
+        for t in sorted(ts):
+            tp = t.split(".")
+            if tp[0] == "codegen" and len(tp) > 1 and tp[1] in above[parts[1]]:
+                out.append(f"{m} -> {t}")
+    return sorted(out)
+
+
+def test_the_floor_check_finds_an_upward_import():
+    assert _upward({"codegen.project.precision": {"codegen.validation.noise", "codegen.project.settings"},
+                    "codegen.validation.noise": {"codegen.project.sensor_noise"}}) == \
+        ["codegen.project.precision -> codegen.validation.noise"]
+
+
+def test_no_stage_imports_a_stage_above_it():
+    assert _upward(_graph()) == [], "upward imports (move the shared part down instead)"
+
+
+def test_the_cli_reaches_a_target_only_through_the_registry():
+    from codegen import targets
+    edges = _graph()
+    named = sorted(t for t in edges["codegen.cli"] if t.startswith("codegen.targets."))
+    assert named == [], f"codegen/cli.py imports target modules by name: {named}"
+    hits = [f"codegen/cli.py:{node.lineno}: {node.value!r}"
+            for node in ast.walk(ast.parse((ROOT / "codegen" / "cli.py").read_text()))
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in targets.names()]
+    assert not hits, "target names in the command line (ask the registry instead):\n" + "\n".join(hits)
+
+
+def test_a_target_is_one_folder_and_one_registry_line():
+    from codegen import targets
+    folders = {p.parent.name for p in (ROOT / "codegen" / "targets").glob("*/__init__.py")}
+    assert folders == set(targets.BUILTIN), "a target folder without its registry line, or the reverse"
+    for name in targets.BUILTIN:
+        target = targets.get(name)
+        assert target.name == name and type(target).__module__ == f"codegen.targets.{name}"
+        assert isinstance(target, targets.Target) and target.title

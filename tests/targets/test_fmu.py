@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from codegen import cli
-from codegen.targets import fmu
+from codegen import targets
+from codegen.targets import fmi
 from codegen.validation import run as validate
 from codegen.extension.build import build_extension, load
 
@@ -43,7 +44,7 @@ def fmus(tmp_path_factory):
 @pytest.mark.parametrize("name,fmt", KEYS)
 def test_fmu_model_description_passes_fmpy_validation(fmus, name, fmt):
     assert validate_fmu(str(fmus[name, fmt])) == []
-    assert fmpy.read_model_description(str(fmus[name, fmt])).fmiVersion == fmu.FORMATS[fmt]
+    assert fmpy.read_model_description(str(fmus[name, fmt])).fmiVersion == targets.get(fmt).fmi_version
 
 
 @pytest.mark.parametrize("name,fmt", KEYS)
@@ -83,7 +84,7 @@ def test_fmu_outputs_bit_identical_to_extension(fmus, name, scenario, fmt):
     obs = load(name)
     inputs = validate.scenario_inputs(name, scenario)
     out, status, _ = obs.run(inputs)
-    f_out, f_status = fmu.run_fmu(fmus[name, fmt], inputs, obs.input_names, obs.output_names)
+    f_out, f_status = fmi.run_fmu(fmus[name, fmt], inputs, obs.input_names, obs.output_names)
     assert f_out.shape == out.shape
     assert np.array_equal(f_out.view(np.uint64), out.view(np.uint64))
     assert np.array_equal(f_status, status)

@@ -10,7 +10,7 @@ import pytest
 
 from codegen.emit.toolchain import render_template
 from codegen.project import observer_file as observers
-from codegen.targets import fmu
+from codegen.targets import fmi, fmu, fmu3
 
 ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
 HEADER = """# roll_bank: linf_uio, chosen by uiogen analyze roll.py
@@ -49,8 +49,8 @@ def test_fmu_description_is_the_header_without_commands_and_a_scheduling_input_s
     scheduling input vx (box [8, 35]) started at 0.0, outside its box: now the header's first
     paragraph without its commands, and vx starts at its box's midpoint (other inputs at 0.0)."""
     b = _build(tmp_path)
-    monkeypatch.setattr(fmu, "variables", _rows)
-    xml = fmu.model_description(b, "{0}", []) if version == "2.0" else fmu.model_description3(b, "{0}")
+    monkeypatch.setattr(fmi, "variables", _rows)
+    xml = fmu.model_description(b, "{0}", []) if version == "2.0" else fmu3.model_description3(b, "{0}")
     md = ET.fromstring(xml)
     assert md.get("description") == ("roll_bank: linf_uio, chosen by uiogen analyze roll.py (the best-ranked family "
                                       "that applies to these sensors: r, ay, p; unknown inputs phir).")
@@ -61,9 +61,9 @@ def test_fmu_description_is_the_header_without_commands_and_a_scheduling_input_s
         starts = {v.get("name"): v.get("start") for v in md.find("ModelVariables") if v.get("causality") == "input"}
     assert starts == {"dw": "0.0", "y_r": "0.0", "y_ay": "0.0", "y_p": "0.0", "vx": "21.5"}
     # the C wrapper starts its inputs at the same values
-    template = "fmu.c.j2" if version == "2.0" else "fmu3.c.j2"
-    c = render_template(template, name="obs", NAME="OBS", ts="0.01", guid="{0}", vr_status=6, stubs="",
-                        input_start=fmu._c_starts(b))
+    template, folder = ("fmu.c.j2", fmu.TEMPLATES) if version == "2.0" else ("fmu3.c.j2", fmu3.TEMPLATES)
+    c = render_template(template, folder, name="obs", NAME="OBS", ts="0.01", guid="{0}", vr_status=6, stubs="",
+                        input_start=fmi.c_starts(b))
     assert "static const double INPUT_START[N_IN] = { 0.0, 0.0, 0.0, 0.0, 21.5 };" in c
     assert "m->input[i] = INPUT_START[i];" in c
 
@@ -74,10 +74,10 @@ def test_a_starter_header_gives_its_first_sentence_and_no_header_the_family(tmp_
             "# (your car; [inputs.NAME] ranges for the excitation scenario), then:\n"
             "#   uiogen design obs.toml --update\n#   uiogen build obs.toml\n#\n# The example's own text.\n")
     b = _build(tmp_path, head + HEADER.split("\n\n", 1)[1])
-    assert fmu.description(b) == ("Observer obs: a starter for your own L-infinity UIO (Nguyen et al. 2019), copied "
+    assert fmi.description(b) == ("Observer obs: a starter for your own L-infinity UIO (Nguyen et al. 2019), copied "
                                   "from the built-in observer lpv_linf_driver_torque.")
     b = _build(tmp_path, HEADER.split("\n\n", 1)[1])
-    assert fmu.description(b).startswith("observer obs: ") and "2019" in fmu.description(b)
+    assert fmi.description(b).startswith("observer obs: ") and "2019" in fmi.description(b)
 
 
 def test_an_fmu_under_a_file_is_an_output_error_naming_it(tmp_path, capsys):

@@ -133,7 +133,7 @@ def renamed(tmp_path_factory):
 
 def test_every_signal_is_named_by_the_model_with_its_unit(renamed):
     from codegen.emit.generate import render, signal_fields
-    from codegen.targets.fmu import unit_of
+    from codegen.emit.header import unit_of
     config, b = renamed
     assert b.state_names == ["vlat_next", "yawr_next", "vlat", "yawr"]
     assert b.output_names == ["vlat", "yawr"]

@@ -47,12 +47,12 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..certificate.contraction import ContractionMetric
-from ..emit import generate as emit
-from ..project import observer_file as observers
-from .. import pipeline
-from ..errors import CertificateError, ConfigurationError, ModelDefinitionError
-from ..emit.toolchain import STRICT_CFLAGS, compile_and_link
+from ...certificate.contraction import ContractionMetric
+from ...emit import generate as emit
+from ...project import observer_file as observers
+from ... import pipeline
+from ...errors import CertificateError, ConfigurationError, ModelDefinitionError
+from ...emit.toolchain import STRICT_CFLAGS, compile_and_link
 
 NOISE_SEED = 0
 CHUNK = 2000          # samples per batched CasADi evaluation
@@ -127,7 +127,7 @@ class FloatObserver:
 
 
 def load_float(observer, out_dir: Path | None = None, build=None) -> FloatObserver:
-    from ..extension.build import load
+    from ...extension.build import load
     config = _config(observer)
     obs = load(config)
     b = build or pipeline.build(config)
@@ -326,7 +326,7 @@ def deviation_bound(metrics: list, state_names: list, J: np.ndarray, d: np.ndarr
 # ---- the tolerance ----------------------------------------------------------------------------------
 
 def _units(b) -> dict:
-    from .fmu import unit_of
+    from ...emit.header import unit_of
     _, _, outputs = b.signal_docs()
     return {s["name"]: unit_of(s["doc"]) for s in outputs}
 
@@ -335,7 +335,7 @@ def input_noise(config, b) -> dict:
     """{input name: standard deviation} of the sensor noise: the ``[precision] noise`` table (which must
     agree with the parameter file's ``[sensor_noise]``), else ``[sensor_noise]``, else the family's validation
     noise (:func:`codegen.project.precision.input_noise`, which ``validate --data`` judges a log with too)."""
-    from ..project.precision import input_noise as table
+    from ...project.precision import input_noise as table
     return table(config, list(b.input_names))
 
 
@@ -352,7 +352,7 @@ def noise_response(obs, inputs: np.ndarray, noise: dict, out_d: np.ndarray) -> n
 
 def _did_you_mean(key: str, names) -> str:
     """" (did you mean 'y_r'?)" for a misspelt signal name (the measured yawr is the input y_yawr), or ""."""
-    from ..project.settings import suggest
+    from ...project.settings import suggest
     near = suggest(key, list(names)) or suggest(f"y_{key}", list(names))
     return f" (did you mean {near!r}?)" if near else ""
 
@@ -373,13 +373,13 @@ def scenario_inputs(config, obs, scenarios=None) -> dict:
     family whose scenarios need another plant) and, for an observer the demo validates on the
     real log (its real-data table), the shared log too: the float build is held to the data it is
     validated on, not to a synthetic run alone."""
-    from ..validation import demo, run as validate
+    from ...validation import demo, run as validate
     out = {}
     todo = list(scenarios or validate.scenario_names(config))
     real_data = (demo.REAL_DATA_OBSERVER, *demo.REAL_DATA_OTHERS)
     if scenarios is None and config.name in real_data and validate.SHARED_LOG not in todo:
         todo.append(validate.SHARED_LOG)
-    from ..model import load_parameters
+    from ...model import load_parameters
     own = load_parameters(config.parameter_path).meta.get("shared_log")       # the car's own shared log
     if scenarios is None and own is not None and f"{own} log" in validate.SHARED_LOGS and f"{own} log" not in todo:
         todo.append(f"{own} log")
@@ -446,7 +446,7 @@ def compare(observer, scenarios=None, out_dir: Path | None = None) -> dict:
     """The float32 step against the double step on the observer's validation scenarios: per
     scenario and output, the certified bound of the deviation, the measured deviation and the
     tolerance (all in the signal's unit); whether the float build passes, and why not."""
-    from ..extension.build import load
+    from ...extension.build import load
     config = _config(observer)
     b = pipeline.build(config)
     obs = load(config)
@@ -547,3 +547,58 @@ def format_report(r: dict) -> str:
             lines.append(f"    {name:14s} bound {s['bound']:9.2e}  deviation {s['deviation']:9.2e}  tolerance "
                          f"{s['tolerance']:9.2e} {s['unit']:8s} {'ok' if s['within'] else 'OVER'}{flag}")
     return "\n".join(lines)
+
+
+# ---- the target: uiogen export --format float32, uiogen build --float32 -------------------------------
+
+from ..base import BuildVariant, Target  # noqa: E402  (the registry's entry, after what it runs)
+
+
+class Float32(Target, BuildVariant):
+    name = "float32"
+    title = "the float32 C package, accepted where the certificate covers the rounding"
+    out = "DIR"
+    build_flag = "float32"
+    build_help = ("emit and build the float (casadi_real) variant into build/float32/NAME/ instead, "
+                  "compared with the double step on the validation scenarios; refused where the "
+                  "certificate's margin does not cover the rounding")
+
+    def export(self, config, out, log=print) -> Path:
+        """The float32 C of ``config`` in ``out``, once :func:`compare` accepts it (its report logged;
+        a refusal is a CertificateError and writes nothing)."""
+        import tempfile
+        from ..base import write_folder
+        from ...extension.build import check_generated
+        check_generated(config)
+        with tempfile.TemporaryDirectory() as tmp:
+            report = compare(config, out_dir=Path(tmp))
+            log(format_report(report))
+            if not report["passes"]:
+                raise CertificateError(f"{config.name}: float32 build refused: {report['reason']}")
+            folder = Path(tmp) / config.name
+            files = {f.name: f.read_bytes() for f in sorted(folder.iterdir())
+                     if f.is_file() and f.suffix in (".c", ".h", ".txt")}
+        out = write_folder(out, files)
+        log(f"{config.name}: wrote {out} (the float32 C package: {len(files)} files, API {config.name}_f32_*)")
+        return out
+
+    def build(self, names, project=None) -> int:
+        """``uiogen build --float32 [NAME ...]``: each observer's float32 library in
+        ``build/float32/NAME/``, its report printed; a CertificateError naming those refused."""
+        refused = []
+        for name in names or observers.names():
+            config = observers.get(name, project=project)
+            name = config.name
+            report = compare(config)
+            print(format_report(report), flush=True)
+            if report["passes"]:
+                print(f"{name}: built {config.workspace.float32 / name / f'lib{name}_f32.so'} (API {name}_f32_*, "
+                      f"CMakeLists.txt and {name}_f32_example.c beside it)", flush=True)
+            else:
+                refused.append(name)
+        if refused:
+            raise CertificateError(f"float32 build refused for {', '.join(refused)} (the reasons and figures above)")
+        return 0
+
+
+TARGET = Float32()

@@ -9,12 +9,12 @@ import argparse
 import re
 import shutil
 import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
-from ..errors import UnknownObserverError, UnsupportedError
-from ..emit.toolchain import STRICT_CFLAGS, run
+from ...errors import UnknownObserverError, UnsupportedError
+from ...emit.toolchain import STRICT_CFLAGS, run
+from ..base import Target
 
 CC = "arm-none-eabi-gcc"
 SIZE = "arm-none-eabi-size"
@@ -38,7 +38,7 @@ def install_hint(tools: str) -> str:
 def command_line(prog: str, description: str) -> argparse.ArgumentParser:
     """The command line of the embedded tools (this module's, :mod:`codegen.tools.m4cycles`'s,
     :mod:`codegen.tools.qemu`'s): NAME ... and ``--project``, as the ``uiogen`` verbs take them."""
-    from ..commandline import project_option
+    from ...commandline import project_option
     parser = argparse.ArgumentParser(prog=prog, description=description, parents=[project_option()])
     parser.add_argument("names", nargs="*", metavar="NAME",
                         help="a built-in observer (uiogen list) or the path of an observer file (.toml), as every "
@@ -52,9 +52,9 @@ def resolve(names=None, project=None) -> list:
     default every built-in observer generated in ``project``; an unknown one is an
     UnknownObserverError before any work, with a did-you-mean: the observer file ``NAME.toml`` in
     the working directory, else the closest built-in name."""
-    from ..extension.build import generated_names
-    from ..project import observer_file as observers
-    from ..project.settings import suggest
+    from ...extension.build import generated_names
+    from ...project import observer_file as observers
+    from ...project.settings import suggest
     configs = []
     for name in names or generated_names(project):
         try:
@@ -108,21 +108,37 @@ def measure(name: str, src_dir: Path, out_dir: Path, precision: str = "double") 
             "stack_bytes": stack, "unbounded": dynamic}
 
 
+def measure_both(config, out: Path, scratch: Path) -> list:
+    """:func:`measure` of one observer (its generated C checked against its stamp first, as ``uiogen
+    build`` does), double and float32: the objects in ``out/NAME_PRECISION/``, the float32 C
+    emitted into ``scratch``."""
+    from .. import float32 as prec
+    from ...extension.build import check_generated, generated_dir
+    check_generated(config)
+    rows = []
+    for p in ("double", "float32"):
+        src = generated_dir(config) if p == "double" else prec.emit_float(config, Path(scratch) / "src")
+        folder = Path(out) / f"{config.name}_{p}"
+        folder.mkdir()
+        rows.append(measure(config.name, src, folder, p))
+    return rows
+
+
 def table(names=None, project=None) -> list:
     """Code, rodata and stack per observer (names or configurations, :func:`resolve`) and precision;
     the generated C is checked against its stamp first (``uiogen build`` does the same)."""
-    from . import float32 as prec
-    from ..extension.build import check_generated, generated_dir
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for config in resolve(names, project):
-            check_generated(config)
-            for p in ("double", "float32"):
-                src = generated_dir(config) if p == "double" else prec.emit_float(config, Path(tmp) / "src")
-                out = Path(tmp) / f"{config.name}_{p}"
-                out.mkdir()
-                rows.append(measure(config.name, src, out, p))
+            rows += measure_both(config, Path(tmp), Path(tmp))
     return rows
+
+
+def table_lines(rows) -> list:
+    lines = [f"{'observer':32s} {'precision':9s} {'code [B]':>9s} {'rodata [B]':>10s} {'stack [B]':>9s}"]
+    lines += [f"{r['observer']:32s} {r['precision']:9s} {r['code_bytes']:9d} {r['rodata_bytes']:10d} "
+              f"{r['stack_bytes']:9d}" for r in rows]
+    return lines
 
 
 PROG = "python -m codegen.targets.cortexm"
@@ -134,7 +150,7 @@ DESCRIPTION = ("Cross-compile each observer's step for the Cortex-M4F (arm-none-
 
 
 def main(argv=None) -> int:
-    from ..commandline import report_errors
+    from ...commandline import report_errors
     args = command_line(PROG, DESCRIPTION).parse_args(argv)
     return report_errors(PROG, lambda: _main(args))
 
@@ -144,11 +160,32 @@ def _main(args) -> int:
     if not available():
         raise UnsupportedError(install_hint(CC if shutil.which(CC) is None else SIZE))
     rows = table(configs)
-    print(f"{'observer':32s} {'precision':9s} {'code [B]':>9s} {'rodata [B]':>10s} {'stack [B]':>9s}")
-    for r in rows:
-        print(f"{r['observer']:32s} {r['precision']:9s} {r['code_bytes']:9d} {r['rodata_bytes']:10d} {r['stack_bytes']:9d}")
+    for line in table_lines(rows):
+        print(line)
     return 0
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+class CortexM(Target):
+    name = "cortexm"
+    title = "Cortex-M4F objects, double and float32, with code, rodata and stack (cortexm.json)"
+    out = "DIR"
+
+    def export(self, config, out, log=print) -> Path:
+        import json
+        from ...project import outputs
+        if not available():
+            raise UnsupportedError(install_hint(CC if shutil.which(CC) is None else SIZE))
+        out = outputs.make_folder(out)
+        for p in ("double", "float32"):
+            if (out / f"{config.name}_{p}").exists():
+                shutil.rmtree(out / f"{config.name}_{p}")
+        with tempfile.TemporaryDirectory() as tmp:
+            rows = measure_both(config, out, Path(tmp))
+        outputs.write_atomic(out / "cortexm.json", json.dumps(rows, indent=1) + "\n")
+        for line in table_lines(rows):
+            log(line)
+        log(f"{config.name}: wrote {out} (Cortex-M4F objects, double and float32, and cortexm.json)")
+        return out
+
+
+TARGET = CortexM()

@@ -22,8 +22,9 @@ import tomllib
 from collections import Counter
 from pathlib import Path
 
-from ..errors import ToolchainError, UnsupportedError
-from ..design.sources import ROOT
+from ...errors import ToolchainError, UnsupportedError
+from ...design.sources import ROOT
+from ..base import Target
 
 DEVIATIONS = ROOT / "misra" / "kernel_deviations.toml"
 _LINE = re.compile(r"^(?P<file>[^:]+):(?P<line>\d+):(?P<id>[\w.-]+)$")
@@ -77,7 +78,7 @@ int main(void)
 def analyse(name: str, src_dir: Path | None = None) -> list:
     """cppcheck's MISRA findings for one observer: [(file name, line, rule)]."""
     if src_dir is None:
-        from ..extension.build import generated_dir
+        from ...extension.build import generated_dir
         src_dir = generated_dir(name)
     src_dir = Path(src_dir)
     with tempfile.TemporaryDirectory() as tmp:
@@ -113,7 +114,7 @@ def deviations(path: Path = DEVIATIONS) -> dict:
 def findings(names=None, log=print) -> dict:
     """cppcheck's MISRA findings of the generated C of ``names`` (default: every generated
     observer): {"observers", "template": [(name, file, line, rule)], "kernel": Counter of rules}."""
-    from ..extension.build import generated_names
+    from ...extension.build import generated_names
     names = list(names or generated_names())
     template, kernel = [], Counter()
     for name in names:
@@ -159,5 +160,44 @@ def main(argv=None) -> int:
     return 1 if r["problems"] else 0
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+def report(name: str, found: list, deviations_path: Path = DEVIATIONS) -> str:
+    """One observer's MISRA report: its findings in the template code (none, or it is refused) and
+    the kernel's, rule by rule, with the reason the deviations file gives."""
+    c = classify(name, found)
+    listed = deviations(deviations_path)
+    kernel = Counter(rule for _, _, rule in c["kernel"])
+    lines = [f"MISRA C:2012 (cppcheck {cppcheck_version()} addon) of {name}: {len(c['template'])} findings in the "
+             f"code our templates write ({name}.c, {name}.h); {sum(kernel.values())} in CasADi's kernel",
+             f"deviations: {DEVIATIONS.relative_to(ROOT)}"]
+    for rule in sorted(kernel, key=lambda r: [int(x) for x in r.split(".")]):
+        reason = listed.get(rule, (0, "NOT LISTED"))[1]
+        lines.append(f"  rule {rule}: {kernel[rule]} in {name}_kernel.c: {reason}")
+    return "\n".join(lines) + "\n"
+
+
+def cppcheck_version() -> str:
+    proc = subprocess.run([cppcheck(), "--version"], capture_output=True, text=True)
+    return proc.stdout.strip().rpartition(" ")[2] or "?"
+
+
+class Misra(Target):
+    name = "misra"
+    title = "the C package with its MISRA C:2012 report (cppcheck); refused on a template finding"
+    out = "DIR"
+
+    def export(self, config, out, log=print) -> Path:
+        from ..base import generated_c, write_folder
+        folder, files = generated_c(config)
+        found = analyse(config.name, folder)
+        template = classify(config.name, found)["template"]
+        if template:
+            raise ToolchainError(f"{config.name}: MISRA C:2012 findings in code our templates write: "
+                                 + "; ".join(f"{f}:{line}: rule {rule}" for f, line, rule in template))
+        text = report(config.name, found)
+        out = write_folder(out, {**files, f"{config.name}_misra.txt": text})
+        log(text.rstrip())
+        log(f"{config.name}: wrote {out} (the C package and {config.name}_misra.txt)")
+        return out
+
+
+TARGET = Misra()
