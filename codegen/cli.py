@@ -130,8 +130,18 @@ def _analysis_of_failure(config, as_json: bool, error: Exception) -> None:
     print("\n".join("  " + line if line else "" for line in result.text().splitlines()))
 
 
+def _check_sensor_noise(config) -> None:
+    """The parameter file's ``[sensor_noise]`` names and units, refused at design as validate and build
+    --float32 refuse them (:func:`codegen.validation.noise.declared`); read here, not by the pipeline, so the
+    table stays out of the design hash."""
+    from .model import load_parameters
+    from .validation import noise
+    noise.declared(config.load_model(), load_parameters(config.parameter_path))
+
+
 def cmd_design(args) -> int:
     config = observers.get(args.name, project=args.project)
+    _check_sensor_noise(config)
     try:
         progress = None if args.json else (lambda line: print(f"  ... {line}", file=sys.stderr, flush=True))
         b, records = pipeline.solve(config, progress=progress_after(progress))

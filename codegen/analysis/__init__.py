@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 from . import ranking as _ranking
 from . import structure as _structure
+from ..model.definition import check_functions
 from ..model.dimensions import unranged_parameters
 from .subject import Subject, load
 
@@ -84,6 +85,7 @@ def analyze(target, parameters: str | None = None, outputs=None, unknown_inputs=
     """
     t0 = time.perf_counter()
     subject = target if isinstance(target, Subject) else load(target, parameters, outputs, unknown_inputs)
+    check_functions(subject.model, subject.model_path)      # a function without C (besselj): one line, no traceback
     structure = _structure.analyze(subject)
     t1 = time.perf_counter()
     ranking = _ranking.rank(subject, structure, design=design, progress=progress) if rank else None

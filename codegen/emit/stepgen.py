@@ -42,6 +42,30 @@ _MATH.update(pi=math.pi, e=math.e, E=math.e, inf=math.inf)
 CASADI_MODULES = [CASADI_FUNCTIONS, _MATH]
 
 
+def supported_functions() -> str:
+    """The functions a model's equations may use, as the errors name them."""
+    return (f"{', '.join(sorted(k for k in CASADI_FUNCTIONS if k.islower() and '_' not in k and k != 'if_else'))}, "
+            f"Abs, Min, Max, Piecewise and Heaviside")
+
+
+def unsupported(expr, constants=()) -> list:
+    """The function applications in ``expr`` that :func:`lambdify` cannot evaluate on CasADi symbols
+    (no C counterpart: ``besselj``, ``sinc``, an undefined ``f(x)``), innermost ones only, in sympy's
+    order; those reading only ``constants`` (parameters, folded to numbers before any C) are left out."""
+    expr = sp.sympify(expr)
+    constants = set(constants)
+    failing = []
+    for atom in sorted(expr.atoms(sp.Function), key=sp.default_sort_key):
+        if not atom.free_symbols - constants:
+            continue
+        free = sorted(atom.free_symbols, key=str)
+        try:
+            lambdify(free, atom)(*[ca.SX.sym(str(s)) for s in free])
+        except Exception:           # NameError, casadi's RuntimeError, the refusal of a math function
+            failing.append(atom)
+    return [a for a in failing if not any(b is not a and a.has(b) for b in failing)]
+
+
 class _IfElse(sp.Function):
     """if_else(condition, then, else) for the CasADi printer (a Piecewise, a Heaviside)."""
 

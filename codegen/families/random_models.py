@@ -19,7 +19,8 @@ where the family's model is fixed):
   two rows with c differing in the last digit (one premise once merged);
 * ``ts_fuzzy_uio``: a speed state v_x measured (its 1/v_x terms are measured premises), 1-2 more
   states, the unknown inputs reaching measured states, sometimes a known input, sometimes a
-  saturating (tanh) tyre law in an unmeasured state;
+  saturating (tanh) tyre law in an unmeasured state, sometimes a constant term (the known input of
+  value 1);
 * ``switched_pi``: 2-3 states, LPV in the speed with 2-3 operating points, one unknown input,
   outputs that are states or combinations, sometimes a known input;
 * ``algebraic_uio``: a chain of 2-3 states with the unknown input at its end (relative degree
@@ -246,6 +247,20 @@ def _signal_units(core) -> dict:
     return units
 
 
+def _constant_term(rng, rows: list, names: list, values: dict) -> bool:
+    """Add to ``rows`` (in place), with probability 0.4, a constant term ``k0_<state>`` in one row
+    (rolling resistance: the design carries it as a known input of value 1), drawn from the second
+    child of the seed's sequence (the rest of each draw unchanged; other seeds than the first child's
+    of :func:`_constant_and_duplicated_terms`). Returns whether one was drawn."""
+    side = np.random.default_rng(rng.bit_generator.seed_seq.spawn(2)[1])
+    if side.random() >= 0.4:
+        return False
+    i = int(side.integers(len(rows)))
+    values[f"k0_{names[i]}"] = _uniform(side, 0.05, 0.5, sign=True)
+    rows[i] = f"{rows[i]} + k0_{names[i]}"
+    return True
+
+
 def _constant_and_duplicated_terms(rng, rows: list, names: list, values: dict) -> tuple:
     """Add to ``rows`` (in place), each with probability 0.4: a constant term ``k0_<state>`` in one row
     (rolling resistance: the design carries it as a known input of value 1), and one nonlinearity
@@ -448,8 +463,9 @@ def draw_ts(rng) -> RandomModel:
     """A longitudinal-lateral model of Nguyen et al. 2021's shape, its structure drawn: the speed
     v_x a measured state (the 1/v_x of the other rows a measured premise), 1-2 more states of which
     some are measured, 1-2 unknown inputs each reaching a measured state, sometimes a known input,
-    sometimes a saturating tyre law (tanh) of an unmeasured state, sometimes a v_y r coupling in the
-    speed's row (a premise in the measured one of the two)."""
+    sometimes a saturating tyre law (tanh) of an unmeasured state, sometimes a coupling of the two
+    other states in the speed's row (v_y r, v_y p, or h p r with a height h: a premise in the measured
+    one of the two), sometimes a constant term (rolling resistance)."""
     extra = [("v_y", "m/s"), ("r", "rad/s"), ("p", "rad/s")]
     n_extra = int(rng.integers(1, 3))
     others = [extra[k] for k in sorted(rng.choice(len(extra), size=n_extra, replace=False))]
@@ -481,7 +497,11 @@ def draw_ts(rng) -> RandomModel:
     coupling = len(others) == 2 and rng.random() < 0.5
     if coupling:
         a, b = others[0][0], others[1][0]
-        rows["v_x"].append(f"{a} * {b}")
+        if {a, b} == {"r", "p"}:        # two rates make no acceleration: a height times them does (h p r)
+            values["h_pr"] = 0.5
+            rows["v_x"].append(f"h_pr * {a} * {b}")
+        else:                           # v_y r, v_y p: a speed times a rate
+            rows["v_x"].append(f"{a} * {b}")
     for si in names[1:]:
         terms = []
         for sj in names[1:]:
@@ -506,6 +526,7 @@ def draw_ts(rng) -> RandomModel:
     for s_ in names:
         rows[s_] = rows[s_] + entries[s_]
     dynamics = [" + ".join(rows[s_]) or "0" for s_ in names]
+    constant = _constant_term(rng, dynamics, names, values)
     lo, hi, _ = _speed_box(rng)
     bounds = {"v_x": [lo, hi], "v_y": [-1.5, 1.5], "r": [-0.6, 0.6], "p": [-0.6, 0.6]}
     tables = "[state_bounds]\n" + "".join(f"{s_} = [{bounds[s_][0]}, {bounds[s_][1]}]\n" for s_ in names)
@@ -530,7 +551,7 @@ def draw_ts(rng) -> RandomModel:
     """
     structure = {"states": len(names), "outputs": len(outputs), "known_inputs": len(known),
                  "unknown_inputs": len(unknown), "saturating_tyre": saturating, "coupling": coupling,
-                 "derived_scheduling": True}
+                 "derived_scheduling": True, "constant_terms": constant}
     name = _name("ts", structure)
     observer = ('family = "ts_fuzzy_uio"\nmodel = "model.py"\nparameters = "parameters.toml"\nsample_time = 0.01\n\n'
                 '[design]\ndecay = 1.0\nmargin = 1e-4\n')

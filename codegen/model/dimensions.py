@@ -11,10 +11,12 @@ not declare is an unknown of the same system, so it constrains nothing by itself
 fits any unit (``Min(a_x, 0)``).
 
 :func:`check_units` refuses a model whose equations contradict its declared units, naming the
-term or the declaration. It reads every number but 1 and -1 as one that may carry a unit (a
-``3000 * sin(...)`` in newtons, a time constant ``(u - x) / 10``), so it refuses only what no
+term or the declaration. It reads every number but 1, -1 and, in a product with a parameter, the
+small ratios p/q with |p|, q <= 4 (:func:`_pure`: the 2 of ``t_f / 2``, ``0.5 * m``, pure numbers) as
+one that may carry a unit (a ``3000 * sin(...)`` in newtons, a time constant ``(u - x) / 10``, a rate
+``-3 * r``), so it refuses only what no
 reading of the numbers makes consistent: ``- r`` in an acceleration, a time constant declared
-in metres. An output declared in a unit of the same dimension as its signal but another scale
+in metres, torques used as forces in ``t_f / 2 * (T_fr - T_fl)``. An output declared in a unit of the same dimension as its signal but another scale
 (``deg/s`` for a yaw rate in ``rad/s``) is refused too, since the step does not convert; so are
 the parts of one sum fixed by the declarations at two scales of one dimension (``delta`` in deg
 beside ``v_y / v_x``), a term at another scale than its equation needs and such an argument of
@@ -186,6 +188,7 @@ class _Unknowns(set):
     def __init__(self, names=(), free_numbers: bool = False):
         super().__init__(names)
         self.free_numbers = free_numbers
+        self.parameters = frozenset(names)          # the model's parameters (the names given)
 
     def fresh(self, label: str) -> str:
         name = f"{label} #{len(self)}"
@@ -241,9 +244,12 @@ def _form(expr, known: dict, params: _Unknowns, constraints: list, where: str) -
             _dimensionless(f - forms[0], f"{where}: terms of a sum", constraints)
         return forms[0]
     if expr.is_Mul:
+        # beside a parameter (which carries the unit), a small ratio is a pure number: t_f / 2, 2 C_f
+        beside = any(str(s) in params.parameters for s in expr.free_symbols)
         out = _Form()
         for a in expr.args:
-            out = out + _form(a, known, params, constraints, where)
+            if not (beside and a.is_Number and _pure(a)):
+                out = out + _form(a, known, params, constraints, where)
         return out
     if expr.is_Pow:
         base, exp = expr.args
@@ -285,6 +291,30 @@ def _form(expr, known: dict, params: _Unknowns, constraints: list, where: str) -
     if isinstance(expr, sp.Derivative):
         raise DimensionError(f"{where}: a derivative inside the model ({expr})")
     return _Form()                             # relational booleans and anything else: no information
+
+
+#: a number p/q with 1 <= |p|, q <= PURE_MAX beside a parameter is a pure number, never a unit (:func:`_pure`)
+PURE_MAX = 4
+
+
+def _pure(expr) -> bool:
+    """Whether the number ``expr`` is a small ratio p/q (1 <= |p|, q <= :data:`PURE_MAX`, written exactly
+    or as the float it rounds to: 2, 1/2, 0.5, 3/4, 1/3), which beside a parameter carries no unit (the
+    parameter does): the half of a half-track ``t_f / 2``, the 2 of two tyres ``2 * C_f``, the 1/2 of
+    ``m v^2 / 2``. A unit carried by such a number would hide a wrong term (torques used as forces in
+    ``t_f / 2 * (T_fr - T_fl)`` passed). With signals alone it may be a rate or a gain (``-3 * r``, a
+    rate of 3 1/s), and a larger number (3000 N, a time constant 1/10 s) may carry the unit its term
+    needs."""
+    import math
+    try:
+        value = float(expr)
+    except TypeError:
+        return False
+    if not math.isfinite(value) or value == 0:
+        return False
+    f = Fraction(value).limit_denominator(PURE_MAX)
+    return (0 < abs(f.numerator) <= PURE_MAX and f.denominator <= PURE_MAX
+            and math.isclose(float(f), value, rel_tol=1e-12, abs_tol=0.0))
 
 
 def _relational(cond, known, params, constraints, where) -> None:
@@ -357,8 +387,9 @@ def check_units(model) -> None:
     if problems:
         raise UnitError(f"model {model.name!r}: its equations contradict its declared units: {'; '.join(problems)} "
                         f"(each term of d x/dt must be in the unit of x per second, an output in its declared unit, "
-                        f"the argument of sin, exp, ... dimensionless; angles are dimensionless; a model in "
-                        f"normalized time declares no unit for its states)")
+                        f"the argument of sin, exp, ... dimensionless; angles are dimensionless; a small number "
+                        f"such as 2, 1/2 or 3/4 beside a parameter is pure (t_f/2: the parameter carries the unit); "
+                        f"a model in normalized time declares no unit for its states)")
     cache.write(UNITS_CHECKED, digest, {"units": "consistent"})
 
 

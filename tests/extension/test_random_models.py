@@ -63,6 +63,7 @@ def test_the_draws_cover_the_structures_asked_for():
     assert any(s["constant_terms"] for s in linf) and any(s["duplicated_terms"] for s in linf)
     ts = _structures("ts_fuzzy_uio")
     assert any(s["saturating_tyre"] for s in ts) and any(s["known_inputs"] for s in ts)
+    assert any(s["constant_terms"] for s in ts) and not all(s["constant_terms"] for s in ts)
     assert {s["relative_degree"] for s in _structures("algebraic_uio")} == {1, 2, 3}
     assert {s["modes"] for s in _structures("switched_pi")} == {2, 3}
     sw = _structures("switched_pi")
@@ -83,6 +84,35 @@ def test_a_drawn_constant_is_one_known_input_and_a_drawn_duplicate_one_premise(t
         assert [(str(w), e) for w, e in lpv.derived_inputs] == ([("one", 1)] if m.structure["constant_terms"] else [])
         shifted = [g for g in polytope.scheduling_nonlinearities(lpv) if "v_x +" in str(g)]
         assert len(shifted) == m.structure["duplicated_terms"], shifted
+
+
+@pytest.mark.parametrize("family", [f for f in sorted(R.DRAWERS) if f not in R.DISPERSED])
+def test_every_drawn_model_passes_the_units_check(family, tmp_path):
+    """A drawn model is one a user could write: its equations agree with its declared units (the TS
+    draws coupled two rates, p r, into the speed's row: refused as a UnitError, not designed)."""
+    from codegen.model import dimensions
+    for seed in range(20):
+        _, model = _load(R.draw(family, seed), tmp_path / str(seed))
+        dimensions.check_units(model)
+
+
+def test_a_drawn_ts_constant_is_in_the_measured_consequent(tmp_path):
+    """The TS draws with a constant term (rolling resistance) carry it, exactly, in the measured
+    consequent f_v of its row (the step evaluates f_v: the constant is estimated with, not dropped)."""
+    import sympy as sp
+    from codegen.families.ts_fuzzy_uio import representation as tsr
+    from codegen.model import load_parameters, parameter_substitution
+    drawn = 0
+    for seed in SEEDS:
+        m = R.draw("ts_fuzzy_uio", seed)
+        config, model = _load(m, tmp_path / str(seed))
+        params = load_parameters(config.parameter_path)
+        f = tsr.split_consequents(model, parameter_substitution(model, params))["f"]
+        constants = [sp.Add(*(t for t in sp.Add.make_args(sp.expand(e)) if not t.free_symbols)) for e in f]
+        want = [params.values.get(f"k0_{s}", 0.0) for s in model.state_names]
+        assert [float(c) for c in constants] == want, (seed, constants, want)
+        drawn += m.structure["constant_terms"]
+    assert drawn
 
 
 def _first(family, want):
@@ -117,6 +147,23 @@ def test_a_drawn_model_is_designed_built_and_conforms(family, what, want, tmp_pa
     seed = _first(family, want)
     outcome = R.run(R.draw(family, seed), tmp_path / family)
     _conforms(outcome)
+
+
+@pytest.mark.slow       # designs, compiles, checks and runs the excitation scenario (about 30 s)
+def test_a_drawn_ts_model_with_a_constant_term_conforms_and_estimates_its_unknown_inputs(tmp_path):
+    """The first TS draw with a constant term designs, builds and conforms, and on its own equations
+    (noise free) estimates every unknown input within 5 % RMS of the input's RMS: the constant, were
+    it dropped, would be an unknown input's bias (k0 / g: hundreds of N m)."""
+    from codegen.validation import run as validate
+    seed = _first("ts_fuzzy_uio", lambda s: s["constant_terms"])
+    model = R.draw("ts_fuzzy_uio", seed)
+    outcome = R.run(model, tmp_path)
+    _conforms(outcome)
+    path = str(tmp_path / f"{model.name}.toml")
+    res = validate.run_scenario(path, "excitation", noise=False)
+    for d in observers.get(path).load_model().unknown_inputs:
+        row = res["observer"][str(d)]
+        assert row["rms"] <= 0.05 * row["truth_std"], (d, row)
 
 
 # draws per family of the long run: fewer where a draw takes longer (the interconnected UIO about 70 s

@@ -250,6 +250,56 @@ def test_numbers_may_carry_units_and_zero_fits_any():
     dimensions.check_units(model)
 
 
+def _yaw_moment(moment, torques: bool, scale=None) -> ModelDefinition:
+    """A yaw rate driven by the wheels' longitudinal forces (N), or by their torques (N m) where the
+    ``moment`` (a function of t_f and the two signals, and of a length parameter x_0) needs forces."""
+    r, left, right, d = sp.symbols("r left right d")
+    t_f, I_z, x_0 = sp.symbols("t_f I_z x_0", positive=True)
+    unit = "N m" if torques else "N"
+    params = (t_f, I_z) + ((x_0,) if scale else ())
+    return ModelDefinition(
+        "yaw_moment", (r,), (left, right), (d,), sp.Matrix([(moment(t_f, left, right, x_0) + d) / I_z]),
+        (("r", r),), (), params,
+        units={"r": "rad/s", "left": unit, "right": unit, "d": "N m", "t_f": "m", "I_z": "kg m^2",
+               **({"x_0": scale} if scale else {})})
+
+
+@pytest.mark.parametrize("moment", [lambda t, fl, fr, _: t / 2 * (fr - fl), lambda t, fl, fr, _: 0.5 * t * (fr - fl),
+                                    lambda t, fl, fr, _: 3 * t / 4 * (fr - fl)],
+                         ids=["t_f/2", "0.5*t_f", "3*t_f/4"])
+def test_a_small_number_carries_no_unit(moment):
+    """Issue 42 item 3: torques used as forces passed the check when a /2 stood in the term (the 2 read as
+    a length); a small ratio (|p|, q <= 4) beside a parameter is a pure number, so the term is refused as
+    it is without it, and the same moment of forces passes."""
+    with pytest.raises(dimensions.UnitError, match=r"the declared unit of t_f is m, the equations make it "
+                                                   r"dimensionless .*a small number such as 2, 1/2 or 3/4 beside a "
+                                                   r"parameter is pure"):
+        dimensions.check_units(_yaw_moment(moment, torques=True))
+    with pytest.raises(dimensions.UnitError):
+        dimensions.check_units(_yaw_moment(lambda t, fl, fr, _: t * (fr - fl), torques=True))   # as without /2
+    dimensions.check_units(_yaw_moment(moment, torques=False))
+
+
+def test_a_length_scale_written_as_a_small_number_beside_a_parameter_is_refused():
+    """atan(t_f / 2) with t_f in metres (a 2 m scale written as the number 2 beside the parameter) is
+    refused; the scale as a parameter with its unit passes, and so does a larger number (20 m), which
+    may carry one; with signals alone (atan(x / 2), -3 r) a small number may still be a scale or a rate."""
+    with pytest.raises(dimensions.UnitError, match=r"a small number such as 2, 1/2 or 3/4 beside a parameter is pure"):
+        dimensions.check_units(_yaw_moment(lambda t, fl, fr, x0: t * sp.atan(t / 2) * (fr - fl), torques=False))
+    dimensions.check_units(_yaw_moment(lambda t, fl, fr, x0: t * sp.atan(t / x0) * (fr - fl), torques=False,
+                                       scale="m"))
+    dimensions.check_units(_yaw_moment(lambda t, fl, fr, x0: t * sp.atan(t / 20) * (fr - fl), torques=False))
+
+
+def test_pure_numbers_are_the_small_ratios():
+    pure = [sp.Integer(2), sp.Rational(1, 2), sp.Float(0.5), sp.Rational(3, 4), sp.Float(1 / 3), sp.Integer(-4),
+            sp.Float(2.0), sp.Rational(4, 3)]
+    free = [sp.Integer(5), sp.Rational(1, 10), sp.Integer(3000), sp.Float(9.81), sp.Float(0.3), sp.Rational(13, 10),
+            sp.pi]
+    assert all(dimensions._pure(n) for n in pure), [n for n in pure if not dimensions._pure(n)]
+    assert not any(dimensions._pure(n) for n in free), [n for n in free if dimensions._pure(n)]
+
+
 def _assist_motor(torque_term=None, units=None) -> ModelDefinition:
     """A steering column with a DC assist motor: current i [A] from the voltage u [V] through
     L di/dt = u - R i - k_e w, the column's rate w driven by k_t i and the driver's torque T_d."""

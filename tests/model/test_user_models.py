@@ -352,3 +352,72 @@ def test_a_feedthrough_whose_coefficient_simplifies_to_zero_is_none(tmp_path):
     config = observers.get(str(obs))
     with pytest.raises(NotAffineError, match=r"a_y <- F"):
         instantiate(config.load_model(), load_parameters(config.parameter_path)).require_no_ui_feedthrough("x", "y")
+
+
+# -- a function the generated C cannot evaluate (issue 42 weak point: besselj in a premise) ---------------
+
+FUNCTION_MODEL = """import sympy as sp
+from codegen.model import ModelDefinition, SchedulingSignal
+x, w, d, a_x, z = sp.symbols("x w d a_x z")
+v_x = sp.Symbol("v_x", positive=True)
+f = sp.Function("f")
+MODEL = ModelDefinition(name="premise_function", states=(x, w), known_inputs=(), unknown_inputs=(d,),
+    dynamics=sp.Matrix([-(2 + {premise}) * x + w + d, -3 * w + x]), outputs=(("x", x), ("w", w)),
+    scheduling=(SchedulingSignal(v_x), SchedulingSignal(a_x){extra}), parameters=())
+"""
+FUNCTION_PARAMS = "[parameters]\n" + "".join(
+    f"[scheduling.{n}]\nmin = {lo}\nmax = {hi}\nrate_min = -1.0\nrate_max = 1.0\n"
+    for n, lo, hi in (("v_x", 5.0, 40.0), ("a_x", -6.0, 4.0), ("z", 0.6, 1.0))) + "[inputs]\nd = { min = -1.0, max = 1.0 }\n"
+MEASURED_FIX = "its column z in the data"
+
+
+def _function_project(tmp_path, premise: str, extra: str = ""):
+    tmp_path.mkdir(exist_ok=True)
+    (tmp_path / "m.py").write_text(FUNCTION_MODEL.format(premise=premise, extra=extra))
+    (tmp_path / "p.toml").write_text(FUNCTION_PARAMS)
+    return tmp_path / "m.py", tmp_path / "p.toml"
+
+
+@pytest.mark.parametrize("premise, extra, name, where, fix", [
+    # a premise of measured scheduling signals: computed outside, read as a scheduling signal of its own
+    ("sp.besselj(0, a_x / v_x)", "", "besselj", "dx/dt: besselj(0, a_x/v_x)", MEASURED_FIX),
+    # a derived scheduling signal the C would have to compute (it designed, then generate had a traceback)
+    ("z", ", SchedulingSignal(z, derived=sp.sinc(a_x / v_x))", "sinc", "scheduling signal z: sinc(a_x/v_x)",
+     MEASURED_FIX),
+    # a function of a state: only a rewrite with the functions the C has
+    ("sp.besselj(1, w)", "", "besselj", "dx/dt: besselj(1, w)", "write besselj(1, w) with those functions"),
+    ("f(w)", "", "f", "dx/dt: f(w)", "write f(w) with those functions"),          # a function never defined
+])
+def test_a_function_without_c_is_one_line_at_analyze_and_design(tmp_path, capsys, premise, extra, name, where, fix):
+    """`uiogen analyze` had a traceback (numpy's lambdify has no besselj) and `uiogen design` named a derived
+    signal, which then failed in `uiogen generate`: both are one line naming the model file, the function,
+    the equation, the functions a model may use and the fix."""
+    model, params = _function_project(tmp_path, premise, extra)
+    assert cli.main(["analyze", str(model), "--parameters", str(params), "--no-design"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert err.startswith(f"uiogen: error: ModelDefinitionError: {model}: model 'premise_function' uses {name} "
+                          f"({where}), which the generated C cannot evaluate; a model's equations may use "), err
+    assert "tanh, Abs, Min, Max, Piecewise and Heaviside" in err and fix in err, err
+
+
+@pytest.mark.slow       # analyze's trial designs, a design and the C (about 40 s)
+def test_the_function_read_as_a_scheduling_signal_designs_and_generates(tmp_path, capsys):
+    """The refusal's fix applied (besselj(0, a_x/v_x) computed outside, read as the scheduling signal z
+    with its box): `uiogen new --from-model` writes the best-ranked family's observer file, which designs
+    and generates; the model with besselj put back is refused by `uiogen design` in the same line, before
+    any design lock is written."""
+    model, params = _function_project(tmp_path, "z", ", SchedulingSignal(z)")
+    assert cli.main(["new", str(tmp_path / "obs"), "--from-model", str(model), "--parameters", str(params)]) == 0
+    (obs,) = (tmp_path / "obs").glob("*.toml")
+    for argv in (["design", str(obs), "--update"], ["generate", str(obs)]):
+        assert cli.main(argv) == 0, argv
+    # the same project with besselj put back (another folder: a process imports a model file once)
+    model, _ = _function_project(tmp_path / "bessel", "sp.besselj(0, a_x / v_x)", ", SchedulingSignal(z)")
+    (tmp_path / "bessel" / "obs").mkdir()
+    (tmp_path / "bessel" / "obs" / obs.name).write_text(obs.read_text())
+    capsys.readouterr()
+    assert cli.main(["design", str(tmp_path / "bessel" / "obs" / obs.name), "--update"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{model}: model 'premise_function' uses besselj" in err, err
+    assert not (tmp_path / "bessel" / "obs" / "generated_c").exists()

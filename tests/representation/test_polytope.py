@@ -118,11 +118,11 @@ def test_a_premise_of_several_signals_is_bounded_exactly(tmp_path, entry, boxes,
 
 
 def test_a_premise_that_cannot_be_enclosed_names_the_derived_signal_that_can(tmp_path):
-    """A premise the interval arithmetic has no rule for (a sinc of a quotient of two signals) is
+    """A premise the interval arithmetic has no rule for (an erf of a quotient of two signals) is
     refused naming a derived scheduling signal; declared so, with its range, the polytope is built."""
     from codegen.errors import SchedulingBoundsError
     boxes = {"v_x": (5.0, 40.0), "a_x": (-6.0, 4.0)}
-    lpv, sig = _two_signal_lpv(tmp_path, "sinc(a_x / v_x)", boxes)
+    lpv, sig = _two_signal_lpv(tmp_path, "erf(a_x / v_x)", boxes)
     with pytest.raises(SchedulingBoundsError, match=r"SchedulingSignal\(z, derived=<the expression>\) with its range "
                                                      r"in \[scheduling.z\]"):
         P.sector_polytope(lpv, "none")
@@ -132,12 +132,12 @@ def test_a_premise_that_cannot_be_enclosed_names_the_derived_signal_that_can(tmp
     model = ModelDefinition(name="derived_z", states=(x,), known_inputs=(), unknown_inputs=(d,),
                             dynamics=sp.Matrix([-z * x + d]), outputs=(("x", x),),
                             scheduling=(SchedulingSignal(sig["v_x"]), SchedulingSignal(sig["a_x"]),
-                                        SchedulingSignal(z, derived=sp.sinc(sig["a_x"] / sig["v_x"]))),
+                                        SchedulingSignal(z, derived=sp.erf(sig["a_x"] / sig["v_x"]))),
                             parameters=())
     (tmp_path / "z.toml").write_text((tmp_path / "p.toml").read_text().replace("J_e = 0.2\nJ_w = 1.1\n", "")
-                                     + "[scheduling.z]\nmin = 0.9\nmax = 1.0\nrate_min = -1.0\nrate_max = 1.0\n")
+                                     + "[scheduling.z]\nmin = -0.95\nmax = 0.75\nrate_min = -1.0\nrate_max = 1.0\n")
     poly = P.sector_polytope(instantiate(model, load_parameters(tmp_path / "z.toml")), "none")
-    assert poly.n_vertices == 2 and (poly.premises[0].lower, poly.premises[0].upper) == (0.9, 1.0)
+    assert poly.n_vertices == 2 and (poly.premises[0].lower, poly.premises[0].upper) == (-0.95, 0.75)
 
 
 def test_the_analysis_names_the_derived_signal_for_a_premise_that_cannot_be_enclosed(tmp_path):
@@ -146,8 +146,8 @@ def test_the_analysis_names_the_derived_signal_for_a_premise_that_cannot_be_encl
     (tmp_path / "m.py").write_text(
         "import sympy as sp\nfrom codegen.model import ModelDefinition, SchedulingSignal\n"
         "x, d, a_x = sp.symbols('x d a_x')\nv_x = sp.Symbol('v_x', positive=True)\n"
-        "MODEL = ModelDefinition(name='sinc_premise', states=(x,), known_inputs=(), unknown_inputs=(d,),\n"
-        "    dynamics=sp.Matrix([-(2 + sp.sinc(a_x / v_x)) * x + d]), outputs=(('x', x),),\n"
+        "MODEL = ModelDefinition(name='erf_premise', states=(x,), known_inputs=(), unknown_inputs=(d,),\n"
+        "    dynamics=sp.Matrix([-(2 + sp.erf(a_x / v_x)) * x + d]), outputs=(('x', x),),\n"
         "    scheduling=(SchedulingSignal(v_x), SchedulingSignal(a_x)), parameters=())\n")
     (tmp_path / "p.toml").write_text("[parameters]\n[scheduling.v_x]\nmin = 5.0\nmax = 40.0\nrate_min = -1.0\nrate_max = 1.0\n"
                                      "[scheduling.a_x]\nmin = -6.0\nmax = 4.0\nrate_min = -1.0\nrate_max = 1.0\n"

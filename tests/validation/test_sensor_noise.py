@@ -262,3 +262,46 @@ def test_a_starter_validates_with_its_declared_noise(tmp_path, capsys):
     data = json.loads(capsys.readouterr().out)
     assert set(unknown) <= set(data["uninformative"]), data["uninformative"]
     assert data["noise"]["levels"] == pytest.approx({k: 100 * v for k, v in noisy["noise"]["levels"].items()})
+
+
+def _misspelt_starter(tmp_path):
+    """The first example's starter with its first [sensor_noise] name misspelt (its underscores dropped,
+    or an x appended): (observer file, parameter file, the right name, the misspelt one)."""
+    import re
+    import tomllib
+    from codegen import families
+    from codegen.project import observer_file as observers, starter
+    family = next(families.get(f) for f in families.names() if families.get(f).example)
+    path = starter.write(tmp_path, family)
+    params = Path(observers.get(str(path)).parameter_path)
+    text = params.read_text()
+    right = next(iter(tomllib.loads(text)["sensor_noise"]))
+    wrong = right.replace("_", "") if "_" in right else right + "x"
+    params.write_text(re.sub(rf"^{right} = ", f"{wrong} = ", text, count=1, flags=re.M))
+    return path, params, right, wrong
+
+
+def test_a_misspelt_noise_name_is_refused_at_design(tmp_path, capsys, monkeypatch):
+    """A [sensor_noise] name that is no measured signal is refused by `uiogen design` as validate and the
+    float32 build refuse it (one line naming the file, the key and the signal meant), before any solve."""
+    from codegen import pipeline
+    path, params, right, wrong = _misspelt_starter(tmp_path)
+    monkeypatch.setattr(pipeline, "solve", lambda *a, **k: pytest.fail("solved a design with a misspelt noise name"))
+    capsys.readouterr()
+    assert cli.main(["design", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert err.startswith(f"uiogen: error: ConfigurationError: {params}: [sensor_noise] {wrong} = "), err
+    assert err.endswith(f"(did you mean '{right}'?)"), err
+
+
+@pytest.mark.slow       # one design of a starter (about 12 s)
+def test_the_name_the_refusal_suggests_designs(tmp_path):
+    """The advice applied (the name it suggests) designs; the table stays out of the design hash."""
+    import re
+    from python_bindings import integrity
+    path, params, right, wrong = _misspelt_starter(tmp_path)
+    misspelt = integrity.parameters_sha256(params)
+    params.write_text(re.sub(rf"^{wrong} = ", f"{right} = ", params.read_text(), count=1, flags=re.M))
+    assert integrity.parameters_sha256(params) == misspelt
+    assert cli.main(["design", str(path)]) == 0

@@ -26,7 +26,7 @@ def assess(family, subject, structure):
                       f"subsystems (longitudinal, lateral) with the coupling between them",
                       "write the model as an InterconnectedModelDefinition (model_defs/interconnected_vehicle.py)")
     try:
-        ts = icm.build(model, subject.parameters)
+        ts = icm.build(model, subject.parameters, subject.model_path)
     except UiogenError as exc:
         return refuse(f"{type(exc).__name__}: {exc}", "fix the model or the parameter file as the message says")
     checked = []

@@ -328,8 +328,31 @@ def _classify_drift(entry, own, own_sched, uis, sched, others, subsystem, state)
     return arow, brow, coupling
 
 
-def build(model: InterconnectedModelDefinition, params: ParameterSet) -> InterconnectedTS:
-    """Derive the interconnected T-S model of Sentouh et al. 2023 (8)-(13) from ``model`` and its parameters.
+def _refuse_constant(model, params: ParameterSet, subs: dict, state, subsystem: str, source) -> None:
+    """Refuse the terms of d``state``/dt made of parameters alone (rolling resistance -f_r g), as
+    written, naming the model file, the exogenous signal that takes them and its nominal value: the
+    family has no input of value 1 (Sentouh et al. 2023 (8): A x + B u + D zeta)."""
+    consts = set(model.parameters)
+    raw = sp.expand(sp.sympify(model.rhs[state]))
+    term = sp.Add(*(t for t in sp.Add.make_args(raw) if not t.free_symbols - consts))
+    value = sp.sympify(term).subs(subs)
+    if term == 0 or not value.is_number or value == 0:
+        return
+    used = {str(x) for x in (*model.states, *model.unknown_inputs, *model.exogenous, *consts)}
+    k = next(n for n in (f"k_{state}", *(f"k_{state}_{i}" for i in range(1, 100))) if n not in used)
+    raise NotAffineError(
+        f"{source or 'model ' + repr(model.name)}: the term {brief(term)} of d{state}/dt (subsystem {subsystem}) is a "
+        f"constant ({float(value):.6g} with the values of {params.source}); the interconnected UIO takes a term as a "
+        f"premise times one own state or unknown input, or a premise times a coupling signal (Sentouh et al. 2023, "
+        f"(8)), and has no input of value 1 (the L-infinity UIO, family linf_uio, takes constant terms): make it an "
+        f"exogenous signal at its nominal value, as the built-in model's rolling resistance F_rr: write {k} for "
+        f"{brief(term)} in d{state}/dt, add {k} to exogenous=(...) of model {model.name!r} and {k} = "
+        f"{float(value)!r} to [exogenous] of {params.source}")
+
+
+def build(model: InterconnectedModelDefinition, params: ParameterSet, source=None) -> InterconnectedTS:
+    """Derive the interconnected T-S model of Sentouh et al. 2023 (8)-(13) from ``model`` and its parameters
+    (``source``: the model file, named by the errors about what it writes).
 
     Raises
     ------
@@ -398,6 +421,7 @@ def build(model: InterconnectedModelDefinition, params: ParameterSet) -> Interco
 
         dmap = {}
         for i, s in enumerate(own):
+            _refuse_constant(model, params, subs, s, sname, source)
             entry = sp.sympify(rhs[s]).subs(subs)
             arow, brow, cpl = _classify_drift(entry, own, own_sched, uis, sched, others, sname, s)
             for st, c in arow.items():
@@ -496,7 +520,7 @@ def load(config) -> InterconnectedTS:
             f"into subsystems: MODEL = InterconnectedModelDefinition(subsystems=..., ...) "
             f"(codegen.families.interconnected_uio.representation); MODEL is a {type(model).__name__}, one system "
             f"of equations, which the other families take ({', '.join(f for f in _families() if f != 'interconnected_uio')})")
-    return build(model, load_parameters(config.parameter_path))
+    return build(model, load_parameters(config.parameter_path), config.model_path)
 
 
 def vertex_check(ts: InterconnectedTS, samples: int = 200, seed: int = 0) -> float:

@@ -388,3 +388,57 @@ def test_identification_calibration_drive_arguments_are_checked():
     # the effective rolling radius comes from a free-rolling rear axle: not on a rear-wheel-drive car
     with pytest.raises(ModelDefinitionError, match="calibration"):
         satory.identify(2, effective_radius=True)
+
+
+def _rolling_resistance_project(tmp_path, fixed: bool):
+    """The built-in model as a user's file with rolling resistance -f_r g written into dv_x/dt (f_r, g
+    parameters), or with the refusal's fix applied to it (``fixed``: the term an exogenous signal k_v_x
+    at its nominal value -f_r g)."""
+    src = (ROOT / "model_defs" / "interconnected_vehicle.py").read_text()
+    model = (src.replace('c_a = sp.Symbol("c_a", nonnegative=True)',
+                         'c_a = sp.Symbol("c_a", nonnegative=True)\nf_r, g = sp.symbols("f_r g", positive=True)')
+             .replace("R_s, B_s, t_sb, c_a),", "R_s, B_s, t_sb, c_a, f_r, g),"))
+    params = (ROOT / "model_defs" / "params" / "sentouh2023_twingo.toml").read_text()
+    params = params.replace("[parameters]\n", "[parameters]\nf_r = 0.012\ng = 9.81\n", 1)
+    if fixed:
+        model = (model.replace('F_rr, F_w = sp.symbols("F_rr F_w")', 'F_rr, F_w, k_v_x = sp.symbols("F_rr F_w k_v_x")')
+                 .replace("exogenous=(F_rr, F_w),", "exogenous=(F_rr, F_w, k_v_x),")
+                 .replace("- F_a - F_rr) / m,", "- F_a - F_rr) / m + k_v_x,", 1))
+        params = params.replace("[exogenous]\n", f"[exogenous]\nk_v_x = {-0.012 * 9.81!r}\n", 1)
+    else:
+        model = model.replace("- F_a - F_rr) / m,", "- F_a - F_rr) / m - f_r * g,", 1)
+    assert model.count("k_v_x" if fixed else "f_r * g,") >= 1
+    (tmp_path / "car.py").write_text(model)
+    (tmp_path / "car.toml").write_text(params)
+    obs = (ROOT / "model_defs" / "observers" / f"{NAME}.toml").read_text()
+    lines = ['model = "car.py"' if ln.startswith("model =") else 'parameters = "car.toml"' if ln.startswith("parameters =")
+             else ln for ln in obs.splitlines()]
+    (tmp_path / "obs.toml").write_text("\n".join(lines) + "\n")
+    return tmp_path / "obs.toml"
+
+
+def test_a_constant_term_is_refused_naming_the_file_the_term_and_the_fix(tmp_path):
+    """Rolling resistance -f_r g (a term of parameters alone) was refused as 'neither a premise times one own
+    state ...' naming neither the file nor the term as written: the refusal names both, its value, what the
+    family takes and the exogenous signal that carries it."""
+    from codegen.errors import NotAffineError
+    config = observers.get(str(_rolling_resistance_project(tmp_path, fixed=False)))
+    with pytest.raises(NotAffineError) as exc:
+        icm.load(config)
+    msg = str(exc.value)
+    assert msg.startswith(f"{tmp_path / 'car.py'}: the term -f_r*g of dv_x/dt (subsystem longitudinal) is a constant "
+                          f"(-0.11772 with the values of {tmp_path / 'car.toml'}); the interconnected UIO takes a term "
+                          f"as a premise times one own state or unknown input, or a premise times a coupling signal"), msg
+    assert msg.endswith(f"write k_v_x for -f_r*g in dv_x/dt, add k_v_x to exogenous=(...) of model "
+                        f"'interconnected_vehicle' and k_v_x = -0.11772 to [exogenous] of {tmp_path / 'car.toml'}"), msg
+
+
+@pytest.mark.slow       # one design of the interconnected UIO (about 10 s)
+def test_the_constant_term_as_the_exogenous_signal_it_names_designs(tmp_path, capsys):
+    """The refusal's fix applied: the constant an exogenous coupling signal at its nominal value designs
+    (its column of D carries it; the lock is the built-in design's structure with one coupling signal more)."""
+    from codegen import cli
+    obs = _rolling_resistance_project(tmp_path, fixed=True)
+    assert cli.main(["design", str(obs)]) == 0
+    lon = icm.load(observers.get(str(obs))).subsystems[0]
+    assert {c.name for c in lon.coupling} == {"r*v_y", "F_rr", "v_x**2", "k_v_x"}
