@@ -399,6 +399,7 @@ class LMIProblem:
     _evaluate: object = None
     _compiled: object = None
     _symmetric: set = field(default_factory=set)      # names of the symmetric matrix variables
+    _scalars: set = field(default_factory=set)        # names declared by scalar(): handed back as numbers
 
     @property
     def block_count(self) -> int:
@@ -420,6 +421,7 @@ class LMIProblem:
         return expr
 
     def scalar(self, name: str) -> Affine:
+        self._scalars.add(name)
         return self._fresh(name, (1, 1), np.zeros((1, 1), dtype=int), 1)
 
     def matrix(self, name: str, rows: int, cols: int) -> Affine:
@@ -855,7 +857,8 @@ class LMIProblem:
 
     def _solution(self, xv, blocks, objective, status, solve_time, build_time, iterations) -> LMISolution:
         values = {k: v.value(xv) for k, v in self._variables.items()}
-        values = {k: (v.item() if v.size == 1 else v) for k, v in values.items()}
+        # a scalar is a number; a matrix or symmetric variable stays a matrix even at 1x1 (a one-state model)
+        values = {k: (v.item() if k in self._scalars else v) for k, v in values.items()}
         checks = self.certify_values(xv, blocks, self._evaluate)
         return LMISolution(values, objective, status, solve_time, build_time, iterations, checks)
 
