@@ -188,7 +188,6 @@ class _Unknowns(set):
     def __init__(self, names=(), free_numbers: bool = False):
         super().__init__(names)
         self.free_numbers = free_numbers
-        self.parameters = frozenset(names)          # the model's parameters (the names given)
 
     def fresh(self, label: str) -> str:
         name = f"{label} #{len(self)}"
@@ -204,11 +203,34 @@ _INERT = {sp.Min: sp.Function("Min"), sp.Max: sp.Function("Max")}
 _MINMAX = (sp.Min, sp.Max, *_INERT.values())
 
 
-def _expanded(expr):
-    """``expr`` expanded into a sum of products, Min and Max kept inert (a Piecewise is left whole)."""
+def _expanded(expr, parameters=frozenset()):
+    """``expr`` expanded into a sum of products, Min and Max kept inert (a Piecewise is left whole), each small
+    ratio written as a factor beside one of ``parameters`` marked pure first (:func:`_mark_pure`)."""
+    expr = _mark_pure(expr, parameters)
     if expr.has(sp.Piecewise):
         return expr
     return sp.expand(_inert(expr))
+
+
+PURE = sp.Symbol("pure number")
+"""Stands for a small ratio written beside a parameter (dimensionless; the space keeps it apart from any name)."""
+
+
+def _mark_pure(expr, parameters):
+    """``expr`` with every small ratio (:func:`_pure`) that is a factor of a product *as written* beside a
+    parameter factor replaced by :data:`PURE`: the 2 of ``t_f / 2 * (T_fr - T_fl)`` and of ``2 * C_f``, but not
+    the 1.5 m of ``C_r * (1.5 * r - v_y)``, a length inside a sum that only expanding puts beside ``C_r``."""
+    if expr.is_Atom or not parameters:
+        return expr
+    args = [_mark_pure(a, parameters) for a in expr.args]
+    if expr.is_Mul and any((a.is_Symbol and str(a) in parameters)
+                           or (a.is_Pow and a.base.is_Symbol and str(a.base) in parameters) for a in args):
+        args = [PURE if (a.is_Number and _pure(a)) else a for a in args]
+    if all(a is b for a, b in zip(args, expr.args)):
+        return expr
+    if expr.is_Add or expr.is_Mul or expr.is_Pow or isinstance(expr, (sp.Min, sp.Max)):
+        return expr.func(*args, evaluate=False)
+    return expr.func(*args)
 
 
 def _inert(expr):
@@ -232,6 +254,8 @@ def _form(expr, known: dict, params: _Unknowns, constraints: list, where: str) -
         if params.free_numbers and not (expr.is_zero or expr in (sp.S.One, sp.S.NegativeOne)):
             return _Form(_ZERO, {params.fresh(f"number {expr}"): 1})
         return _Form()
+    if expr == PURE:
+        return _Form()                          # a small ratio beside a parameter, as written (_mark_pure)
     if expr.is_Symbol:
         name = str(expr)
         if name in known:
@@ -244,12 +268,9 @@ def _form(expr, known: dict, params: _Unknowns, constraints: list, where: str) -
             _dimensionless(f - forms[0], f"{where}: terms of a sum", constraints)
         return forms[0]
     if expr.is_Mul:
-        # beside a parameter (which carries the unit), a small ratio is a pure number: t_f / 2, 2 C_f
-        beside = any(str(s) in params.parameters for s in expr.free_symbols)
         out = _Form()
         for a in expr.args:
-            if not (beside and a.is_Number and _pure(a)):
-                out = out + _form(a, known, params, constraints, where)
+            out = out + _form(a, known, params, constraints, where)
         return out
     if expr.is_Pow:
         base, exp = expr.args
@@ -414,7 +435,7 @@ def _term_mismatches(model) -> list:
     unit is not the one the equation needs (``- r`` in an acceleration)."""
     known, params, out = _signal_units(model), [str(p) for p in model.parameters], []
     for what, dims, expr in _equations(model):
-        e = _expanded(expr)
+        e = _expanded(expr, frozenset(params))
         for term in (e.args if e.is_Add else (e,)):
             f = _form(term, known, _Unknowns(params, free_numbers=True), [], what)
             if not f.coef and tuple(f.const) != tuple(dims):
@@ -565,7 +586,7 @@ def infer(model, declared_parameters: bool = True, free_numbers: bool = False) -
     known = _signal_units(model)
     constraints, unknowns = [], _Unknowns(params, free_numbers)
     for what, dims, expr in _equations(model):
-        f = _form(_expanded(expr), known, unknowns, constraints, what)
+        f = _form(_expanded(expr, frozenset(params)), known, unknowns, constraints, what)
         _dimensionless(f - _Form(dims), what, constraints)
     for name, text in units.items():           # declared parameter units fix the free scales
         if name in params and declared_parameters:

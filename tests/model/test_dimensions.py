@@ -291,6 +291,24 @@ def test_a_length_scale_written_as_a_small_number_beside_a_parameter_is_refused(
     dimensions.check_units(_yaw_moment(lambda t, fl, fr, x0: t * sp.atan(t / 20) * (fr - fl), torques=False))
 
 
+def test_a_small_number_is_pure_only_where_it_is_written_beside_a_parameter():
+    """The rule reads the product as written, not as expanded: in C_r (1.5 r - v_y) / v_x the 1.5 is a length
+    (l_r inline) inside a sum, which expanding puts beside C_r; read as pure, it made r (rad/s) and v_y (m/s)
+    disagree and a correct model was refused."""
+    v_y, r, delta, d = sp.symbols("v_y r delta d")
+    v_x = sp.Symbol("v_x", positive=True)
+    m, C_r = sp.symbols("m C_r", positive=True)
+    for lever in (1.5, sp.Rational(3, 2), 1.2):
+        force = C_r * (lever * r - v_y) / v_x
+        model = ModelDefinition("inline_lever", (v_y,), (delta, r), (d,), sp.Matrix([force / m - v_x * r + d]),
+                                (("v_y", v_y),), (SchedulingSignal(v_x, "m/s"),), (m, C_r),
+                                units={"v_y": "m/s", "r": "rad/s", "delta": "rad", "d": "m/s^2", "v_x": "m/s",
+                                       "m": "kg", "C_r": "N/rad"})
+        dimensions.check_units(model)
+    assert dimensions._mark_pure(C_r * (sp.Rational(3, 2) * r - v_y), {"C_r"}).has(dimensions.PURE) is False
+    assert dimensions._mark_pure(C_r / 2 * (r - v_y), {"C_r"}).has(dimensions.PURE)
+
+
 def test_pure_numbers_are_the_small_ratios():
     pure = [sp.Integer(2), sp.Rational(1, 2), sp.Float(0.5), sp.Rational(3, 4), sp.Float(1 / 3), sp.Integer(-4),
             sp.Float(2.0), sp.Rational(4, 3)]
