@@ -226,7 +226,7 @@ BAD_VALUES = [
     ("ts_fuzzy_uio", r"^margin = 1e-4", 'margin = "small"', "[design] margin = \"small\": must be a finite "
                                                              "number >= 0"),
     ("switched_pi_bank_angle", r"^pole_radius = 100.0", 'pole_radius = "x"', '[design] pole_radius = "x": must be'),
-    ("switched_pi_bank_angle", r"^decay_rate = 1.0", "decay_rate = 200.0", "decay_rate must be in [0, pole_radius)"),
+    ("switched_pi_bank_angle", r"^decay_rate = 1.0", "decay_rate = 200.0", "[design] decay_rate = 200.0: must be < pole_radius = 100 rad/s"),
     ("algebraic_uio_example1", r'^lmi = "product"', 'lmi = "prodcut"', "(did you mean 'product'?)"),
     ("algebraic_uio_example1", r"^compare_gain = .*$", 'compare_gain = [[3.0], ["x"]]',
      "[design] compare_gain = [[3.0], [\"x\"]]: must be an array of rows of finite numbers"),
