@@ -59,7 +59,7 @@ def _statements(path: Path, module_level: bool) -> list:
                                            "python": platform.python_version(),
                                            "code": cache.code_digest(sys.modules[__name__])})
     stored = cache.read(IMPORT_STATEMENTS, digest)
-    if isinstance(stored, list):
+    if _well_formed(stored):
         return stored
     tree = ast.parse(text, str(path))
     found = []
@@ -70,6 +70,17 @@ def _statements(path: Path, module_level: bool) -> list:
             found.append([node.level, node.module, [a.name for a in node.names]])
     cache.write(IMPORT_STATEMENTS, digest, found)
     return found
+
+
+def _well_formed(statements) -> bool:
+    """Whether ``statements`` is what :func:`_statements` writes (an entry that is not is parsed again)."""
+    def names(x):
+        return isinstance(x, list) and all(isinstance(n, str) for n in x)
+    return isinstance(statements, list) and all(
+        isinstance(s, list) and ((len(s) == 2 and s[0] == 0 and names(s[1]))
+                                 or (len(s) == 3 and type(s[0]) is int and s[0] >= 0
+                                     and (s[1] is None or isinstance(s[1], str)) and names(s[2])))
+        for s in statements)
 
 
 @functools.lru_cache(maxsize=None)

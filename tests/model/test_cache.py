@@ -326,3 +326,35 @@ def test_a_build_from_kept_results_is_the_derived_build_to_the_last_bit(fresh, m
             for i in range(f.n_in())]
     for a, b in zip(f(*args) if f.n_out() > 1 else [f(*args)], g(*args) if g.n_out() > 1 else [g(*args)]):
         assert np.array(a).tobytes() == np.array(b).tobytes()
+
+
+@pytest.mark.parametrize("damage", ["none", "edited source", "checksum", "forged shape", "truncated"])
+def test_the_import_statements_of_a_source_are_kept_per_content(fresh, tmp_path, monkeypatch, damage):
+    import ast
+
+    from codegen.design import sources
+    source = tmp_path / "probe_module.py"
+    source.write_text("import codegen.model\nfrom codegen.design import lock\n\ndef f():\n    from . import x\n")
+    parses, real = [], ast.parse
+    monkeypatch.setattr(ast, "parse", lambda *a, **k: parses.append(1) or real(*a, **k))
+    first = sources._statements(source, False)
+    assert first == [[0, ["codegen.model"]], [0, "codegen.design", ["lock"]], [1, None, ["x"]]] and len(parses) == 1
+    _forget_process()
+    (entry,) = (fresh / sources.IMPORT_STATEMENTS).iterdir()
+    record = json.loads(entry.read_text())
+    if damage == "edited source":
+        source.write_text("import codegen.errors\n")
+    elif damage == "checksum":
+        record["payload"] = [[0, ["codegen.cli"]]]
+    elif damage == "forged shape":           # verifies, but is not a list of statements: not believed
+        record["payload"] = [[0, 1, 2, 3], "x"]
+        record["sha256"] = cache._payload_sha(record["payload"])
+    text = json.dumps(record)
+    entry.write_text(text[:len(text) // 2] if damage == "truncated" else text)
+    again = sources._statements(source, False)
+    if damage == "none":
+        assert again == first and len(parses) == 1             # read, not parsed again
+    elif damage == "edited source":
+        assert again == [[0, ["codegen.errors"]]] and len(parses) == 2
+    else:
+        assert again == first and len(parses) == 2
