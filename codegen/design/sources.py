@@ -35,34 +35,77 @@ def _module_file(module: str) -> Path | None:
     return None
 
 
-@functools.lru_cache(maxsize=None)
-def _imports(path: Path, module_level: bool = False) -> tuple:
-    """Project modules imported in ``path`` (absolute names): anywhere, or with ``module_level``
-    only the statements that run when the module is imported."""
+IMPORT_STATEMENTS = "import_statements"
+"""The kind of a source file's import statements kept across runs (:mod:`codegen.model.cache`)."""
+
+
+def _statements(path: Path, module_level: bool) -> list:
+    """The import statements of ``path`` as written: ``[0, names]`` of ``import``, ``[level, module, names]`` of
+    ``from``; anywhere, or with ``module_level`` only the module's own. Parsing every source of a stamp is most of
+    what a verb costs beside its own work, and gives the same statements for the same bytes: kept across runs
+    (:mod:`codegen.model.cache`), keyed by the file's bytes, this module's and Python's version."""
+    import platform
+    import sys
+
+    from ..model import cache
     try:
-        tree = ast.parse(path.read_text(), str(path))
+        data = path.read_bytes()
+        text = data.decode()
     except UnicodeDecodeError as exc:       # a user's model with a stray byte: name the file, not the codec
         from ..errors import ModelDefinitionError
         raise ModelDefinitionError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start}); save it as "
                                    f"UTF-8") from None
+    digest = cache.key(IMPORT_STATEMENTS, {"source": hashlib.sha256(data).hexdigest(), "module_level": module_level,
+                                           "python": platform.python_version(),
+                                           "code": cache.code_digest(sys.modules[__name__])})
+    stored = cache.read(IMPORT_STATEMENTS, digest)
+    if _well_formed(stored):
+        return stored
+    tree = ast.parse(text, str(path))
+    found = []
+    for node in (tree.body if module_level else ast.walk(tree)):
+        if isinstance(node, ast.Import):
+            found.append([0, [a.name for a in node.names]])
+        elif isinstance(node, ast.ImportFrom):
+            found.append([node.level, node.module, [a.name for a in node.names]])
+    cache.write(IMPORT_STATEMENTS, digest, found)
+    return found
+
+
+def _well_formed(statements) -> bool:
+    """Whether ``statements`` is what :func:`_statements` writes (an entry that is not is parsed again)."""
+    def names(x):
+        return isinstance(x, list) and all(isinstance(n, str) for n in x)
+    return isinstance(statements, list) and all(
+        isinstance(s, list) and ((len(s) == 2 and s[0] == 0 and names(s[1]))
+                                 or (len(s) == 3 and type(s[0]) is int and s[0] >= 0
+                                     and (s[1] is None or isinstance(s[1], str)) and names(s[2])))
+        for s in statements)
+
+
+@functools.lru_cache(maxsize=None)
+def _imports(path: Path, module_level: bool = False) -> tuple:
+    """Project modules imported in ``path`` (absolute names): anywhere, or with ``module_level``
+    only the statements that run when the module is imported."""
+    statements = _statements(path, module_level)
     try:
         rel = path.relative_to(ROOT).with_suffix("")
         package = list(rel.parts[:-1])      # the package a relative import starts from
     except ValueError:                      # a file outside the project: no relative imports
         package = []
     found = []
-    nodes = tree.body if module_level else ast.walk(tree)
-    for node in nodes:
-        if isinstance(node, ast.Import):
-            found += [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package[:len(package) - node.level + 1]
-                mod = ".".join(base + ([node.module] if node.module else []))
+    for statement in statements:
+        if statement[0] == 0 and len(statement) == 2:
+            found += statement[1]
+        else:
+            level, module, names = statement
+            if level:
+                base = package[:len(package) - level + 1]
+                mod = ".".join(base + ([module] if module else []))
             else:
-                mod = node.module or ""
-            for a in node.names:     # "from pkg import module" imports the module, else pkg's names
-                found.append(f"{mod}.{a.name}" if _module_file(f"{mod}.{a.name}") is not None else mod)
+                mod = module or ""
+            for name in names:       # "from pkg import module" imports the module, else pkg's names
+                found.append(f"{mod}.{name}" if _module_file(f"{mod}.{name}") is not None else mod)
     return tuple(m for m in found if m and m.split(".")[0] in PACKAGES)
 
 

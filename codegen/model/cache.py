@@ -18,6 +18,7 @@ import functools
 import hashlib
 import json
 import os
+import sys
 import tempfile
 from pathlib import Path
 
@@ -142,3 +143,208 @@ def write(kind: str, digest: str, payload, base: Path | None = None) -> bool:
 def forget() -> None:
     """Drop what this process holds in memory (the files stay): the next read verifies the file."""
     _memory.clear()
+
+
+# --- whole results: a family's representation, kept as data ----------------------------------------------------
+#
+# A representation is a tree of dataclasses, tuples, mappings, numpy arrays, numbers and sympy expressions. It is
+# kept as JSON that says every bit of it: sympy trees node by node (the class, its arguments; a symbol with its
+# assumptions; a Float by its binary mantissa and exponent), arrays by their bytes, floats as Python writes them
+# (which reads back to the same double). Read back, it is rebuilt as it was, without evaluating anything: an entry
+# is written only when reading it back gives the same data again, so what a second run gets is the first run's
+# result to the last bit. Classes are found by name only among sympy's and this package's own, never imported
+# from elsewhere.
+
+
+class Unkept(Exception):
+    """A value :func:`encode` cannot write exactly (a callable, an undefined sympy function, ...): the result is
+    then computed every time, never kept in part."""
+
+
+_OWN = ("codegen.", "model_defs.")
+
+
+def encode(x):
+    """``x`` as JSON data (section comment above); :class:`Unkept` when some part of it cannot be written exactly."""
+    import base64
+    import dataclasses
+    from pathlib import PurePath
+
+    import numpy as np
+    import sympy as sp
+    if x is None or type(x) in (bool, str, int):
+        return x
+    if type(x) is float:
+        return x if x == x and x not in (float("inf"), float("-inf")) else ["f", repr(x)]
+    if isinstance(x, sp.Basic):
+        return _encode_sympy(x)
+    if isinstance(x, sp.MatrixBase):
+        cls = type(x)
+        return ["M", cls.__module__, cls.__qualname__, x.rows, x.cols, [_encode_sympy(e) for e in x]]
+    if isinstance(x, np.ndarray):
+        if x.dtype.hasobject:
+            raise Unkept(f"an array of Python objects ({x.dtype})")
+        order = "F" if x.flags.f_contiguous and not x.flags.c_contiguous else "C"     # its layout too: a sum's order
+        return ["N", x.dtype.str, list(x.shape), order, base64.b64encode(x.tobytes(order)).decode()]
+    if isinstance(x, np.generic):
+        return ["n", x.dtype.str, base64.b64encode(np.asarray(x).tobytes()).decode()]
+    if isinstance(x, tuple) and not hasattr(x, "_fields"):
+        return ["T", [encode(v) for v in x]]
+    if isinstance(x, list):
+        return ["L", [encode(v) for v in x]]
+    if type(x) is dict:
+        return ["D", [[encode(k), encode(v)] for k, v in x.items()]]
+    if isinstance(x, (set, frozenset)):
+        items = sorted((encode(v) for v in x), key=lambda e: json.dumps(e, sort_keys=True))
+        return ["S" if isinstance(x, set) else "Z", items]
+    if isinstance(x, PurePath):
+        return ["P", str(x)]
+    if dataclasses.is_dataclass(x) and not isinstance(x, type) and (type(x).__module__ or "").startswith(_OWN):
+        cls = type(x)
+        return ["C", cls.__module__, cls.__qualname__,
+                [[f.name, encode(getattr(x, f.name))] for f in dataclasses.fields(x)]]
+    raise Unkept(f"a {type(x).__module__}.{type(x).__qualname__}")
+
+
+def _encode_sympy(e):
+    import sympy as sp
+    cls = type(e)
+    if not (cls.__module__ or "").startswith("sympy."):
+        raise Unkept(f"the sympy object {cls.__name__} of {cls.__module__}")
+    if isinstance(e, sp.Dummy):
+        return ["y", e.name, e.dummy_index, _assumptions(e)]
+    if isinstance(e, sp.Symbol):
+        if cls is not sp.Symbol:
+            raise Unkept(f"a symbol of class {cls.__name__}")
+        return ["s", e.name, _assumptions(e)]
+    if isinstance(e, sp.Float):
+        sign, man, exp, bc = e._mpf_
+        return ["F", sign, str(int(man)), exp, bc, e._prec]
+    if isinstance(e, sp.Rational):
+        return ["Q", str(e.p), str(e.q)]
+    return ["E", cls.__module__, cls.__qualname__, [_encode_sympy(a) for a in e.args]]
+
+
+def _assumptions(sym) -> dict:
+    orig = getattr(sym, "_assumptions_orig", None)
+    return {k: bool(v) for k, v in sorted((orig if orig is not None else sym.assumptions0).items())}
+
+
+def _class(module: str, qualname: str, own: tuple):
+    """The class ``module.qualname``, looked up only in modules of ``own`` (never imported from elsewhere)."""
+    import importlib
+    if not module.startswith(own):
+        raise ValueError(f"a class of {module}")
+    obj = importlib.import_module(module)
+    for part in qualname.split("."):
+        obj = getattr(obj, part)
+    if not isinstance(obj, type):
+        raise ValueError(f"{module}.{qualname} is not a class")
+    return obj
+
+
+def decode(data):
+    """The value :func:`encode` wrote (ValueError, TypeError or another error when ``data`` is not its output)."""
+    import sympy as sp
+    from sympy.core.parameters import evaluate
+    with evaluate(False):
+        return _decode(data, sp)
+
+
+def _decode(d, sp):
+    import base64
+    import dataclasses
+
+    import numpy as np
+    if d is None or isinstance(d, (bool, str, int, float)):
+        return d
+    tag = d[0]
+    if tag == "f":
+        return float(d[1])
+    if tag in ("s", "y", "F", "Q", "E"):
+        return _decode_sympy(d, sp)
+    if tag == "M":
+        cls = _class(d[1], d[2], ("sympy.",))
+        return cls(d[3], d[4], [_decode_sympy(e, sp) for e in d[5]])
+    if tag == "N":
+        flat = np.frombuffer(base64.b64decode(d[4]), dtype=np.dtype(d[1]))
+        return np.array(flat.reshape(d[2], order=d[3]), order=d[3])
+    if tag == "n":
+        return np.frombuffer(base64.b64decode(d[2]), dtype=np.dtype(d[1]))[0]
+    if tag == "T":
+        return tuple(_decode(v, sp) for v in d[1])
+    if tag == "L":
+        return [_decode(v, sp) for v in d[1]]
+    if tag == "D":
+        return {_decode(k, sp): _decode(v, sp) for k, v in d[1]}
+    if tag in ("S", "Z"):
+        return (set if tag == "S" else frozenset)(_decode(v, sp) for v in d[1])
+    if tag == "P":
+        return Path(d[1])
+    if tag == "C":
+        cls = _class(d[1], d[2], _OWN)
+        if not dataclasses.is_dataclass(cls):
+            raise ValueError(f"{d[1]}.{d[2]} is not a dataclass")
+        obj = object.__new__(cls)           # as it was written: no __init__ or __post_init__ run again
+        for name, v in d[3]:
+            object.__setattr__(obj, name, _decode(v, sp))
+        return obj
+    raise ValueError(f"unknown tag {tag!r}")
+
+
+def _decode_sympy(d, sp):
+    tag = d[0]
+    if tag == "s":
+        return sp.Symbol(d[1], **d[2])
+    if tag == "y":
+        return sp.Dummy(d[1], dummy_index=d[2], **d[3])
+    if tag == "F":
+        from mpmath.libmp import MPZ
+        return sp.Float._new((d[1], MPZ(int(d[2])), d[3], d[4]), d[5])
+    if tag == "Q":
+        return sp.Rational(int(d[1]), int(d[2]))
+    if tag == "E":
+        cls = _class(d[1], d[2], ("sympy.",))
+        if not issubclass(cls, sp.Basic):
+            raise ValueError(f"{d[1]}.{d[2]} is not a sympy class")
+        return cls(*(_decode_sympy(a, sp) for a in d[3]))
+    raise ValueError(f"unknown sympy tag {tag!r}")
+
+
+def remembered(kind: str, parts: dict, compute, *modules):
+    """``compute()``, or what it returned before for the same ``parts`` (everything the result derives from),
+    the deriving ``modules`` (byte for byte: this one is always among them) and package versions. A result is
+    kept only when it reads back exactly (:func:`encode`); an entry that does not verify or does not read back
+    is computed again; an exception of ``compute`` (a refusal) propagates and nothing is kept."""
+    import platform
+
+    import numpy as np
+    import sympy as sp
+    digest = key(kind, {**parts, "sympy": sp.__version__, "numpy": np.__version__,
+                        "python": platform.python_version(),
+                        "code": code_digest(sys.modules[__name__], *modules)})
+    stored = read(kind, digest)
+    if stored is not None:
+        try:
+            return decode(stored)
+        except Exception:           # noqa: BLE001 -- an entry that does not read back is not believed
+            _memory.pop((kind, digest), None)
+    value = compute()
+    try:
+        data = encode(value)
+        if encode(decode(data)) == data:
+            write(kind, digest, data)
+    except Exception:               # noqa: BLE001 -- not writable exactly: computed every time, never kept in part
+        pass
+    return value
+
+
+def observer_parts(config, **more) -> dict:
+    """What a result derived from an observer file's model, parameters and settings is keyed by: the design's
+    inputs as the design lock hashes them (:func:`codegen.design.lock.design_inputs`: the parameter file and the
+    model as they read, every module the family and the model import byte for byte, the observer file as parsed,
+    the numeric packages' versions), the files' paths (which messages and results name), and ``more``."""
+    from ..design import lock
+    return {"design_inputs": lock.design_inputs(config), "source": str(config.source),
+            "parameters": str(config.parameter_path), "model": str(config.model_path),
+            **{k: _canonical(v) for k, v in more.items()}}

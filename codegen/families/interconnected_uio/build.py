@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import sys
 import time
 from dataclasses import dataclass
 from functools import cached_property
@@ -23,6 +24,7 @@ from ...representation.differentiators import MAX_ORDER, HosmdSpec, hosmd_step_n
 from ...emit.stepgen import lambdify, solve_unpivoted
 from ...design.solver import FreshSolver
 from ...errors import InfeasibleLMIError, ModelDefinitionError, UiogenError
+from ...model import cache
 from ...representation.polytope import sector_weights_product
 from ...project.settings import Rule, parse_settings, parse_table
 
@@ -570,6 +572,10 @@ def _lower_alpha_that_works(ts, settings, Ts: float) -> str:
                 f"certifies a slower decay)")
     return f"; measured: [design] alpha = {', '.join(tried)} do not solve either"
 
+REPRESENTATION = "interconnected_representation"
+"""The kind of the kept interconnected T-S forms (:func:`codegen.model.cache.remembered`: the same for the same
+model and parameters every run)."""
+
 
 def build(config, solver) -> InterconnectedBuild:
     """Sentouh et al. 2023: model -> interconnected T-S form -> (16), (26), LMIs (27), (28) -> certificates -> step."""
@@ -580,7 +586,8 @@ def build(config, solver) -> InterconnectedBuild:
         need = rate_for_backward_euler(required_margin(settings), config.sample_time, factor=1.0)
         settings = dataclasses.replace(settings, alpha=max(settings.alpha, need))
     t0 = time.perf_counter()
-    ts = icm.load(config)
+    ts = cache.remembered(REPRESENTATION, cache.observer_parts(config), lambda: icm.load(config),
+                          sys.modules[__name__], icm)
     step = step_settings(ts, table, config.sample_time, config.source)
     layout = StepLayout(ts, step)
     t1 = time.perf_counter()

@@ -203,7 +203,22 @@ def _settings(config: ObserverConfig, lyapunov: str | None = None) -> linf_uio.L
     return settings
 
 
+REPRESENTATION = "linf_representation"
+"""The kind of the kept representations (:func:`codegen.model.cache.remembered`)."""
+
+
 def representation(config: ObserverConfig):
+    """(LPV model, polytope, its Taylor error or None) of ``config``: the same for the same model, parameters
+    and settings every run, so kept across runs (:func:`codegen.model.cache.remembered`, keyed by the design's
+    inputs)."""
+    import sys
+
+    from ...model import cache
+    return cache.remembered(REPRESENTATION, cache.observer_parts(config), lambda: _representation(config),
+                            sys.modules[__name__])
+
+
+def _representation(config: ObserverConfig):
     lpv = instantiate(config.design_model(), load_parameters(config.parameter_path))
     if config.polytope == "taylor_reduced":
         poly = polytope.taylor_reduced_polytope(lpv, config.rate_bounds)

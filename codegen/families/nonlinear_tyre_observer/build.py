@@ -36,6 +36,7 @@ measured).
 """
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass
 
@@ -399,14 +400,26 @@ def parse(config, tol=None) -> NonlinearTyreSettings:
                           **({"tol": tol} if tol is not None else {}))
 
 
+REPRESENTATION = "tyre_representation"
+"""The kind of the kept representations (:func:`codegen.model.cache.remembered`): the force form, the slip sets'
+slope bounds and the boxes are the same for the same model, parameters and settings, every run."""
+
+
 def build(config, solver, params=None):
     """model -> force form + sound axle Jacobian bounds on the sets -> vertex LMIs (gains and P,
     answered by ``solver``: :mod:`codegen.design.solver`) -> numpy re-check -> step. ``params``: a :class:`~codegen.model.ParameterSet` instead of the
     observer's parameter file (identification: :mod:`.fit`)."""
     settings = parse(config, solver.tol)
     t0 = time.perf_counter()
-    params = load_parameters(config.parameter_path) if params is None else params
-    rep = represent(config.load_model_module(), params, settings, config.source)
+    if params is None:          # the observer file's own parameters: kept across runs (REPRESENTATION)
+        from ...model import cache
+        from . import representation as tyre_representation
+        rep = cache.remembered(REPRESENTATION, cache.observer_parts(config, settings=settings),
+                               lambda: represent(config.load_model_module(), load_parameters(config.parameter_path),
+                                                 settings, config.source),
+                               sys.modules[__name__], tyre_representation)
+    else:                       # another car's (identification, :mod:`.fit`): derived each time
+        rep = represent(config.load_model_module(), params, settings, config.source)
     t1 = time.perf_counter()
     d = float(np.sqrt(rep.v_x_box[0] * rep.v_x_box[1]))
     plant = dsn.Plant(config.sample_time, rep.G_f, rep.G_a, np.array(rep.lever), settings.sigma, np.diag([1.0, d]))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import re
+import sys
 import time
 from dataclasses import dataclass
 
@@ -20,7 +21,7 @@ from ...certificate.contraction import ContractionMetric
 from . import representation as switched
 from . import design as switched_pi
 from ...errors import SolverError, UiogenError
-from ...model import load_parameters
+from ...model import cache, load_parameters
 from ...project.observer_file import ObserverConfig
 
 
@@ -240,12 +241,20 @@ def settings_of(config: ObserverConfig, tol: float | None = None) -> switched_pi
     return settings
 
 
+REPRESENTATION = "switched_pi_representation"
+"""The kind of the kept switched models (:func:`codegen.model.cache.remembered`: the same for the same model,
+parameters and rule every run)."""
+
+
 def build(config: ObserverConfig, solver) -> SwitchedPIBuild:
     """Menhour et al. 2014: modes from the model and the rule -> A1/A2 -> LMIs (20) -> re-check, H-inf check -> ZOH step;
     the LMIs answered by ``solver`` (:mod:`codegen.design.solver`)."""
     settings = settings_of(config, solver.tol)
     t0 = time.perf_counter()
-    sm = switched.build(config.design_model(), load_parameters(config.parameter_path), config.switching, config.source)
+    sm = cache.remembered(REPRESENTATION, cache.observer_parts(config),
+                          lambda: switched.build(config.design_model(), load_parameters(config.parameter_path),
+                                                 config.switching, config.source),
+                          sys.modules[__name__], switched)
     t1 = time.perf_counter()
     try:
         design = switched_pi.design(sm, settings, solver)

@@ -3,6 +3,7 @@ LMIs (27) -> certificates -> discrete step (16) (:class:`TSFuzzyBuild`)."""
 from __future__ import annotations
 
 import dataclasses
+import sys
 import time
 from dataclasses import dataclass
 
@@ -12,7 +13,7 @@ from ...certificate.artifact import artifact_head, significant, solver_certifica
 from ...certificate.certificate import Certificate, Recheck, Step
 from ...certificate.contraction import ContractionMetric
 from ...design.precision import required_margin
-from ...model import load_parameters
+from ...model import cache, load_parameters
 from ...project.observer_file import ObserverConfig
 from ..base import ObserverBuild, StepNotes
 from . import design as ts_fuzzy_uio
@@ -171,6 +172,11 @@ class TSFuzzyBuild(ObserverBuild):
         }
 
 
+REPRESENTATION = "ts_fuzzy_representation"
+"""The kind of the kept TS forms and Jacobian bounds (:func:`codegen.model.cache.remembered`: the same for the
+same model, parameters and settings every run; a size guard's refusal is never kept)."""
+
+
 def build(config: ObserverConfig, solver) -> TSFuzzyBuild:
     """Nguyen et al. 2021: model -> TS form + Jacobian bounds -> rank conditions, (30), LMIs (27) -> certificates;
     the LMIs answered by ``solver`` (:mod:`codegen.design.solver`)."""
@@ -180,10 +186,13 @@ def build(config: ObserverConfig, solver) -> TSFuzzyBuild:
     if required_margin(settings):       # precision = "float32": (27) imposes lambda <= 1 - float32_margin
         settings = dataclasses.replace(settings, decay=min(settings.decay, 1.0 - required_margin(settings)))
     t0 = time.perf_counter()
-    ts = ts_fuzzy.build(config.design_model(), load_parameters(config.parameter_path), config.sample_time,
-                        rel_tol=settings.bounds_rel_tol, max_boxes=settings.bounds_max_boxes,
-                        before_bounds=lambda n, nx, ny, nphi: ts_fuzzy_uio.size_guard(n, nx, ny, 1, settings,
-                                                                                      config.source))
+    ts = cache.remembered(
+        REPRESENTATION, cache.observer_parts(config, settings=settings),
+        lambda: ts_fuzzy.build(config.design_model(), load_parameters(config.parameter_path), config.sample_time,
+                               rel_tol=settings.bounds_rel_tol, max_boxes=settings.bounds_max_boxes,
+                               before_bounds=lambda n, nx, ny, nphi: ts_fuzzy_uio.size_guard(n, nx, ny, 1, settings,
+                                                                                             config.source)),
+        sys.modules[__name__], ts_fuzzy)
     t1 = time.perf_counter()
     design = ts_fuzzy_uio.design(ts, settings, solver)
     t2 = time.perf_counter()
