@@ -155,13 +155,16 @@ def _blf(folder: Path, cols: dict) -> tuple:
 
 
 def _fitted(capsys, observer, data, *extra) -> list:
-    """The fit's printed lines less the files' (the observer files differ) and with the log's name as LOG."""
+    """The fit's printed lines less the files' (the observer files differ), the log's name as LOG, the judged
+    runs' rows without their (path-truncated) labels."""
     assert cli.main(["fit", str(observer), "--data", str(data), "--samples", f"0:{ROWS}", "--folds", "0", *extra]) == 0
     out = capsys.readouterr().out.replace(str(data), "LOG")
-    return [x for x in out.splitlines() if not x.endswith(("equals the fit", "(--write puts it there)"))]
+    lines = [x for x in out.splitlines() if not x.endswith(("equals the fit", "(--write puts it there)"))]
+    judged = next((k for k, x in enumerate(lines) if x.startswith("  the fitted numbers on the fit run")), len(lines))
+    return lines[:judged + 2] + [x[4 + 44:] for x in lines[judged + 2:]]
 
 
-@pytest.mark.slow       # three fits of 3000 samples with the EKF grid: about 30 s
+@pytest.mark.slow       # three fits of 3000 samples with the EKF grid, two judged runs: about 45 s
 def test_the_fit_on_a_ros2_bag_and_a_blf_prints_the_csv_fit(tmp_path, capsys):
     pytest.importorskip("rosbags")
     require_shared(stanford.STANFORD_PATH, "shared Stanford log")
@@ -169,14 +172,15 @@ def test_the_fit_on_a_ros2_bag_and_a_blf_prints_the_csv_fit(tmp_path, capsys):
     cols = {c: table.column(c).to_numpy() for c in table.column_names}
     csv = tmp_path / "no_yaw_acc.csv"               # the shared format without a recorded yaw acceleration
     pcsv.write_csv(table.drop_columns(["yaw_acc"]), csv)
-    ref = _fitted(capsys, NAME, csv)
+    ref = _fitted(capsys, NAME, csv, "--judge", str(csv))         # --judge: the same rows, judged
     assert ref[1] == f"  {fit.DERIVED_YAW_ACC}", ref
+    assert ref[-4].startswith("  the fitted numbers on the fit run"), ref            # two rows: the fit, the judged
     bag_dir, can_dir = tmp_path / "bag_obs", tmp_path / "can_obs"
     bag_dir.mkdir(), can_dir.mkdir()
     bag = _bag(tmp_path / "bag", cols)
-    assert _fitted(capsys, _mapped_observer(bag_dir, BAG), bag) == ref
+    assert _fitted(capsys, _mapped_observer(bag_dir, BAG), bag, "--judge", str(bag)) == ref
     blf, signals = _blf(can_dir, cols)
-    assert _fitted(capsys, _mapped_observer(can_dir, signals, units=False, dbc="vehicle.dbc"), blf) == ref
+    assert _fitted(capsys, _mapped_observer(can_dir, signals, units=False, dbc="vehicle.dbc"), blf) == ref[:-4]
 
 
 def test_the_yaw_acceleration_is_derived_on_the_range_alone(tmp_path):
