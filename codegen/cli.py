@@ -645,9 +645,10 @@ def main(argv=None) -> int:
     p.set_defaults(func=cmd_check_gains)
     p = sub.add_parser("fit", help="identify an observer's numbers (tyre, noise levels) on a sample range of a log")
     p.add_argument("name")
-    p.add_argument("--data", required=True, help="a logged run in the shared format (CSV, plain or .gz; Parquet; "
-                                                 "MDF4) with a sideslip reference; 'stanford', 'niki' = the shared logs "
-                                                 "(Ferrari, GTI)")
+    p.add_argument("--data", required=True, help="a logged run with a sideslip reference, read as validate --data "
+                                                 "reads it: through the observer file's [data] map (CSV, Parquet, MDF4, "
+                                                 "ROS 2 bag, CAN log), else the shared format; 'stanford', 'niki' = the "
+                                                 "shared logs (Ferrari, GTI)")
     p.add_argument("--samples", required=True, metavar="A:B", help="the samples A..B-1 the fit may read (e.g. 0:13750)")
     p.add_argument("--folds", type=int, default=None, help="cross-validate inside the range with K contiguous folds: "
                                                            "each tyre set (fitted; the parameter file's [prior] "

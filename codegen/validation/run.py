@@ -260,7 +260,7 @@ def run_data(name, path: str = "stanford", block_bytes: int | None = None, batch
             pk.add(t, truth, beta, tp)
         kept.add({"t": t, "beta_true": truth, "beta": beta, "status": status})
         if whole is not None:
-            for c in stanford.COLUMNS:
+            for c in cols:                        # a column of stanford.OPTIONAL the log lacks stays empty
                 whole[c].append(cols[c])
             if n > BASELINE_MAX_SAMPLES:
                 whole = None                      # too long for the baselines: stop holding the run
@@ -272,7 +272,7 @@ def run_data(name, path: str = "stanford", block_bytes: int | None = None, batch
     signals = kept.signals()
     estimates = {}
     if whole is not None:
-        run = stanford.StanfordRun(source=result["data"], **{c: np.concatenate(v) for c, v in whole.items()})
+        run = stanford.StanfordRun(source=result["data"], **{c: np.concatenate(v) if v else None for c, v in whole.items()})
         estimates = _baselines(config, run)
         result["baselines"] = {k: _table(run, b) for k, b in estimates.items()}
         signals.update(estimates)

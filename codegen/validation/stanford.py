@@ -87,7 +87,12 @@ def peak_times(path) -> tuple:
 
 COLUMNS = ("t", "vx", "vy", "beta_true", "ax", "ay", "yaw_rate", "yaw_acc",
            "delta", "delta_fl", "delta_fr")
-"""Required CSV columns, SI units (s, m/s, rad, m/s², rad/s, rad/s²); see :data:`UNITS`."""
+"""The format's columns, SI units (s, m/s, rad, m/s², rad/s, rad/s²); see :data:`UNITS`. Every one is
+required but :data:`OPTIONAL`."""
+
+OPTIONAL = ("yaw_acc",)
+"""Columns a log may lack: most logs record no yaw acceleration (the run's ``yaw_acc`` is then None;
+``uiogen fit`` derives it from the yaw rate and says so)."""
 
 UNITS = {"t": "s", "vx": "m/s", "vy": "m/s", "beta_true": "rad", "ax": "m/s^2", "ay": "m/s^2",
          "yaw_rate": "rad/s", "yaw_acc": "rad/s^2", "delta": "rad", "delta_fl": "rad",
@@ -144,8 +149,8 @@ class StanfordRun:
         Longitudinal and lateral acceleration at the CoG [m/s²].
     yaw_rate : ndarray
         [rad/s].
-    yaw_acc : ndarray
-        [rad/s²].
+    yaw_acc : ndarray or None
+        [rad/s²]; None when the log records none (:data:`OPTIONAL`).
     delta, delta_fl, delta_fr : ndarray
         Road-wheel steering angles (mean, front left, front right) [rad].
     source : str
@@ -159,7 +164,7 @@ class StanfordRun:
     ax: np.ndarray
     ay: np.ndarray
     yaw_rate: np.ndarray
-    yaw_acc: np.ndarray
+    yaw_acc: np.ndarray | None
     delta: np.ndarray
     delta_fl: np.ndarray
     delta_fr: np.ndarray
@@ -301,11 +306,11 @@ class _Checks:
     """Every check of the format, chunk by chunk: ranges, the time column and
     :func:`_check_physics`; :meth:`finish` raises the first failure, in that order."""
 
-    def __init__(self, p: Path, sample_time):
+    def __init__(self, p: Path, sample_time, columns=COLUMNS):
         self.p = p
         self.time = csvlog.TimeCheck(p, sample_time)
-        self.ranges = {c: [math.inf, -math.inf] for c in _LIMITS}
-        self.rules = _rules()
+        self.ranges = {c: [math.inf, -math.inf] for c in _LIMITS if c in columns}
+        self.rules = [r for r in _rules() if set(_INVOLVED[r.col]) <= set(columns)]   # a column the log lacks
         self.window = None
         self.pending = []            # chunks held until the period (the averaging window) is known
         self.n = 0
@@ -402,9 +407,9 @@ def chunks(path="stanford", sample_time=None, block_bytes: int = csvlog.BLOCK_BY
     p = _resolve(path)
     sample_time = _sample_time(sample_time)
     reader, factors = open_log(p, sample_time, block_bytes)
-    checks = _Checks(p, sample_time)
+    checks = _Checks(p, sample_time, tuple(factors))
     for _, cols in reader.chunks():
-        cols = {c: cols[c] * factors[c] if factors[c] != 1.0 else cols[c] for c in COLUMNS}
+        cols = {c: cols[c] * factors[c] if factors[c] != 1.0 else cols[c] for c in factors}
         checks.feed(cols)
         yield cols
     checks.finish()
@@ -418,17 +423,13 @@ CHANNEL_FORMATS = {"rosbag2": ("a ROS 2 bag", "TOPIC.FIELD"), "blf": ("a CAN log
 
 def _allowed(missing) -> str:
     """What a log missing the shared format's columns ``missing`` must hold."""
-    text = (f"allowed: the shared format's columns {', '.join(COLUMNS)} (SI units: {_UNITS_TEXT}) as the file's "
-            f"column or channel names")
-    if "yaw_acc" in missing:
-        text += ("; a log that records no yaw acceleration: add yaw_acc, the yaw rate's derivative (e.g. "
-                 "numpy.gradient(yaw_rate, t)) -- uiogen fit uses the log's yaw_acc as recorded, never a derivative "
-                 "of its own")
-    return text
+    return (f"allowed: the shared format's columns {', '.join(COLUMNS)} (SI units: {_UNITS_TEXT}; "
+            f"{', '.join(OPTIONAL)} may be left out) as the file's column or channel names")
 
 
 def open_log(p: Path, sample_time, block_bytes: int = csvlog.BLOCK_BYTES) -> tuple:
-    """``(reader, {column: factor to its declared unit})``: the shared format's columns of a log in any
+    """``(reader, {column: factor to its declared unit})``: the shared format's columns of a log (those of
+    :data:`OPTIONAL` the log lacks left out of both) in any
     format ``uiogen validate --data`` reads by name -- a CSV (streamed as before), Parquet, MDF4 --
     through its reader (:func:`codegen.validation.logfiles.open_log`: the format told by the content,
     one channel per column, an MDF log's channels on the grid of ``sample_time``). A unit the file
@@ -450,19 +451,28 @@ def open_log(p: Path, sample_time, block_bytes: int = csvlog.BLOCK_BYTES) -> tup
         what, names = CHANNEL_FORMATS[fmt]
         raise DatasetError(f"{p} is {what}, whose channels are named {names}, never the shared format's columns "
                            f"({', '.join(COLUMNS)}); allowed: a CSV, Parquet or MDF4 log with those columns or "
-                           f"channels (uiogen validate --data reads a {names} log through an observer file's [data] "
-                           f"map)")
+                           f"channels (uiogen validate --data and uiogen fit read a {names} log through an observer "
+                           f"file's [data] map)")
     if fmt == "mdf" and sample_time is None:
         raise DatasetError(f"{p}: an MDF log's channels are put on the observer's sample time, and none is given; "
                            f"allowed: the log read for an observer (sample_time = its sample time)")
+    columns = dict(UNITS)
     try:
-        reader = logfiles.open_log(p, UNITS, "t", sample_time, block_bytes=block_bytes)
+        try:
+            reader = logfiles.open_log(p, columns, "t", sample_time, block_bytes=block_bytes)
+        except DatasetError as exc:
+            lacks = set(getattr(exc, "missing", None) or ()) & set(OPTIONAL)
+            if not lacks:
+                raise
+            # the log records none of them: without them (a required column missing is then said alone)
+            columns = {c: u for c, u in UNITS.items() if c not in lacks}
+            reader = logfiles.open_log(p, columns, "t", sample_time, block_bytes=block_bytes)
     except DatasetError as exc:
         if not getattr(exc, "missing", None):
             raise
         raise DatasetError(f"{exc.head}; {_allowed(exc.missing)}") from None
     factors = {}
-    for c in COLUMNS:
+    for c in columns:
         if c == "t" and isinstance(reader, logfiles.OnGrid):        # the grid's times are in s
             factors[c] = 1.0
             continue
@@ -507,10 +517,12 @@ def load(path="stanford", sample_time=None, block_bytes: int = csvlog.BLOCK_BYTE
     parts = {c: [] for c in COLUMNS}
     p = _resolve(path)
     for cols in chunks(p, sample_time, block_bytes):
-        for c in COLUMNS:
+        for c in cols:
             parts[c].append(cols[c])
-    out = {}
+    out = {c: None for c in OPTIONAL}              # a column the log lacks
     for c in COLUMNS:
+        if not parts[c]:
+            continue
         a = np.concatenate(parts[c])
         a.setflags(write=False)
         out[c] = a

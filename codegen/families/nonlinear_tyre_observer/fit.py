@@ -1,12 +1,17 @@
 """``uiogen fit``: a nonlinear-tyre observer's numbers identified on a declared sample range of a log.
 
-The log must carry a sideslip reference (the shared Stanford format: ``vx``, ``vy``, ``ay``,
-``yaw_rate``, ``yaw_acc``, ``delta``, ``ax``), as a CSV, Parquet or MDF4 file read by the reader of
-``uiogen validate --data`` (:func:`codegen.validation.stanford.open_log`: the units a file states
-converted, an MDF log's channels put on the observer's sample time). The yaw acceleration is the log's
-``yaw_acc`` as recorded, never a derivative the fit takes (a log without it is refused, with the advice
-to add the yaw rate's derivative: on the shared Ferrari half the gradient instead of the recorded column
-moves the fitted stiffnesses by 0.1 %, mu not at all). Only samples A..B-1 are read for any choice. Fitted:
+The log must carry a sideslip reference, and is read as ``uiogen validate --data`` reads it
+(:func:`read_run`): an observer file with a ``[data]`` map reads any log the map names -- CSV, Parquet,
+MDF4, a ROS 2 bag (``TOPIC.FIELD``), a CAN log with its DBC (``MESSAGE.SIGNAL``) -- through the same
+reader (:class:`codegen.validation.logs.MappedLog`: the file's units converted, every channel on the
+observer's sample time, the model's physics checked), the lateral speed reference its ``[data.truth]``
+entry; without a map, the shared Stanford format (``vx``, ``vy``, ``ay``, ``yaw_rate``, ``delta``,
+``ax``, optionally ``yaw_acc``) in a CSV, Parquet or MDF4 file (:func:`codegen.validation.stanford.open_log`).
+The yaw acceleration is the log's ``yaw_acc`` where it records one; where it records none (a mapped log,
+most logs), the yaw rate's derivative ``numpy.gradient(yaw_rate, t)`` on the observer's grid over the
+range, said in the printed output (on the shared Ferrari half, samples 0:13750, the gradient instead of
+the recorded column moves the fitted stiffnesses by 0.1 %, mu not at all, the sideslip RMS by 1e-5 deg).
+Only samples A..B-1 are read for any choice. Fitted:
 
 1. **The tyre** (parameter file): each axle's cornering stiffness and *one* friction coefficient
    for both axles, three numbers, by least squares of the log's a_y and yaw acceleration (the
@@ -47,7 +52,7 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
-from ...errors import CertificateError, ConfigurationError, DatasetError, SampleError
+from ...errors import CertificateError, ConfigurationError, SampleError
 from ...model import load_parameters
 from ...validation import stanford
 from .representation import numeric
@@ -121,6 +126,74 @@ def log_columns(module, source: str) -> dict:
             f"y_{s.a_y}": "ay", f"y_{s.yaw_rate_output}": "yaw_rate"}
 
 
+DERIVED_YAW_ACC = ("yaw acceleration: the log records none; derived from the yaw rate as numpy.gradient(yaw_rate, t) "
+                   "on the observer's grid over the samples read")
+"""The line the fit prints when it derives the yaw acceleration."""
+
+
+def yaw_acceleration(run, a: int, b: int) -> np.ndarray:
+    """The yaw acceleration [rad/s^2] over samples a..b-1: the log's ``yaw_acc`` where it records one, else
+    ``numpy.gradient(yaw_rate, t)`` of the range alone (no sample outside it is read)."""
+    if run.yaw_acc is not None:
+        return np.asarray(run.yaw_acc, float)[a:b]
+    return np.gradient(np.asarray(run.yaw_rate, float)[a:b], np.asarray(run.t, float)[a:b])
+
+
+def read_run(config, path) -> tuple:
+    """``(run, notes)``: a log as the fit reads it (a :class:`~codegen.validation.stanford.StanfordRun`,
+    ``yaw_acc`` None where the log records none) and the lines its reading adds to the output (the channels
+    resampled, the log checks' warnings): through the observer file's ``[data]`` map when it has one, as
+    ``uiogen validate --data`` reads it (:class:`codegen.validation.logs.MappedLog`), else in the shared
+    format (:func:`codegen.validation.stanford.load`)."""
+    if config.column_map is None:
+        return stanford.load(path, sample_time=config.sample_time), []
+    from ...project.columns import UNITS, model_unit
+    from ...validation import logs
+    from .representation import signals
+    module = config.load_model_module()
+    s = signals(module, config.source)
+    inputs = [*s.known_inputs, *(f"y_{n}" for n in s.outputs), s.speed]
+    outputs = [s.lateral_speed, s.yaw_rate]
+    cmap = config.column_map
+    if s.lateral_speed not in cmap.truth:
+        raise ConfigurationError(f"{cmap.source}: [data.truth] {s.lateral_speed} is missing: uiogen fit judges the "
+                                 f"sideslip atan2({s.lateral_speed}, {s.speed}) against the log's reference; allowed: "
+                                 f"{s.lateral_speed} = {{ column = \"...\", unit = \"...\" }} in [data.truth], the "
+                                 f"log's lateral speed reference", source=cmap.source, section="data.truth",
+                                 key=s.lateral_speed, allowed="the log's lateral speed reference")
+    p = stanford._resolve(path)
+    log = logs.MappedLog(config, p, inputs, outputs, config.sample_time)
+    parts = {}
+    for t, ins, refs in log.chunks():
+        for k, v in {"t": t, **ins, **{f"truth:{n}": x for n, x in refs.items()}}.items():
+            parts.setdefault(k, []).append(v)
+    report = log.finish()
+    notes = [x for x in [logs.resampled_line(log.resampling)] if x]
+    notes += [f"warning: {w}" for w in [*log.warnings, *report["warnings"]]]
+    model, cols, out = module.MODEL, log_columns(module, config.source), {"t": np.concatenate(parts["t"])}
+    for key in [*inputs, *(f"truth:{n}" for n in outputs)]:        # a measured input before a reference
+        sig = key.removeprefix("truth:")
+        col = cols.get(sig)
+        if col is None or col in out or key not in parts:
+            continue
+        x = np.concatenate(parts[key])                  # in the model's unit: to the shared format's (SI)
+        unit, shared = model_unit(model, sig), stanford.UNITS[col]
+        if unit in UNITS and UNITS[unit][0] == UNITS[shared][0] and unit != shared:
+            x = x * (UNITS[unit][1] / UNITS[shared][1])
+        out[col] = x
+    lacking = [c for c in ("vx", "vy", "ay", "yaw_rate", "delta", "ax") if c not in out]
+    if lacking:
+        said = ", ".join(f"{k} as {v}" for k, v in cols.items())
+        raise ConfigurationError(f"{cmap.source}: uiogen fit reads {', '.join(lacking)} through the observer's inputs "
+                                 f"and outputs ({said}); model {model.name!r} has no signal for them",
+                                 source=cmap.source, section="data")
+    vx, vy = out["vx"], out["vy"]
+    # delta_fl, delta_fr: the fit reads neither (the mean road-wheel angle stands for both)
+    return stanford.StanfordRun(t=out["t"], vx=vx, vy=vy, beta_true=np.arctan2(vy, vx), ax=out["ax"], ay=out["ay"],
+                                yaw_rate=out["yaw_rate"], yaw_acc=None, delta=out["delta"], delta_fl=out["delta"],
+                                delta_fr=out["delta"], source=str(p)), notes
+
+
 def _problem(config, params, run, a: int, b: int) -> _Problem:
     module = config.load_model_module()
     model = module.MODEL
@@ -144,7 +217,7 @@ def _problem(config, params, run, a: int, b: int) -> _Problem:
     signals = {s: np.asarray(getattr(run, columns[str(s)]), float)[a:b] for s in symbols}
     in_forces = [sp.sympify(e).subs(subs) for e in (module.A_Y_IN_FORCES, module.DYNAMICS_IN_FORCES[1])]
     G2 = np.array(sp.Matrix(in_forces).jacobian(sp.Matrix(module.FORCES)).tolist(), dtype=float)
-    meas = np.linalg.solve(G2, np.vstack([np.asarray(run.ay, float)[a:b], np.asarray(run.yaw_acc, float)[a:b]])).T
+    meas = np.linalg.solve(G2, np.vstack([np.asarray(run.ay, float)[a:b], yaw_acceleration(run, a, b)])).T
     values = {**keep, **zero_w, **{f: mu for f in fric}}
     exprs = [numeric(e, values) for e in (module.Phi_f, module.Phi_r)]
     fns = [sp.lambdify([*symbols, *stiff, mu], e, "numpy") for e in exprs]
@@ -255,7 +328,8 @@ def observer_beta(config, params, design: dict, run, a: int, b: int) -> np.ndarr
 
 
 def _sub_run(run, a: int, b: int):
-    return stanford.StanfordRun(**{f.name: (getattr(run, f.name)[a:b] if f.name != "source" else run.source)
+    return stanford.StanfordRun(**{f.name: (getattr(run, f.name)[a:b] if getattr(run, f.name) is not None
+                                            and f.name != "source" else getattr(run, f.name))
                                    for f in dataclasses.fields(run)})
 
 
@@ -321,16 +395,7 @@ def fit(config, path="stanford", samples: str = "", folds: int | None = None, pe
     if folds is not None and (not isinstance(folds, int) or isinstance(folds, bool) or folds < 0 or folds == 1):
         raise ConfigurationError(f"--folds {folds!r}: 0 (no cross-validation) or an integer >= 2",
                                  source="--folds", key="--folds", value=folds)
-    try:
-        run = stanford.load(path, sample_time=config.sample_time)
-    except DatasetError as exc:
-        if config.column_map is None:
-            raise
-        # the user mapped their log for validate: say that the fit does not read that map, rather than
-        # leave them with the shared format's missing columns (and a did-you-mean to a column in g)
-        raise DatasetError(f"{exc}. uiogen fit reads the shared log's format only (columns or channels "
-                           f"{', '.join(stanford.COLUMNS)}, in a CSV, Parquet or MDF4 file); the [data] table of "
-                           f"{config.source} maps a log for uiogen validate --data, not for the fit") from None
+    run, notes = read_run(config, path)
     a, b = parse_samples(samples, run.n)
     params = load_parameters(config.parameter_path)
     prob = _problem(config, params, run, a, b)
@@ -360,6 +425,8 @@ def fit(config, path="stanford", samples: str = "", folds: int | None = None, pe
            "t_range": [float(run.t[a] - run.t[0]), float(run.t[b - 1] - run.t[0])],
            "parameters": tyre, "design": {**levels, **chosen}, "start": prob.start.tolist(), "choice": choice,
            "window_samples": prob.window, "mu_reached": _round(prob.mu_reached)}
+    if run.yaw_acc is None:
+        out["yaw_acceleration"] = "derived"
     if prob.prior is not None:
         out["prior"] = {k: dict(v) for k, v in params.prior.items()}
     if settings_table is not None:
@@ -370,7 +437,13 @@ def fit(config, path="stanford", samples: str = "", folds: int | None = None, pe
         out["peer_grid"] = [[fy, ay if ay is not None else "highpass", rms] for fy, ay, rms in rows]
         if cv:
             _peer_folds(config, params, run, a, b, cv, choice, best)
-    judged = [stanford.load(p, sample_time=config.sample_time) for p in judge]     # every log read before the work
+    judged = []
+    for p in judge:                                   # every log read before the work
+        other, said = read_run(config, p)
+        judged.append(other)
+        notes += [f"{p}: {x}" for x in said]
+    if notes:
+        out["log_notes"] = notes
     beta = observer_beta(config, fitted_params, levels, run, a, b)
     out["observer_beta_rms_deg"] = _rms_deg(beta - run.beta_true[a:b])
     if judge:
@@ -640,6 +713,8 @@ def lines(result: dict) -> list:
     unc = result.get("uncertainty", {})
     out = [f"uiogen fit {result['observer']} on {result['data']}, samples {a}:{b} (t - t_0 in [{t0:g}, {t1:g}] s, "
            f"{b - a} samples)",
+           *(f"  {x}" for x in result.get("log_notes", ())),
+           *([f"  {DERIVED_YAW_ACC}"] if result.get("yaw_acceleration") == "derived" else []),
            f"  tyre (least squares of a_y and {YAW_LEVER:g} m x the yaw acceleration against the model's at the log's "
            f"own velocities, {AVERAGE_S:g} s averages"
            + (f" of {result['window_samples']} samples" if "window_samples" in result else "") + "):"]

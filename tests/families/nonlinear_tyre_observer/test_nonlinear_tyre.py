@@ -516,11 +516,11 @@ def test_peer_comparison_record_reproduces():
         assert row["low"] <= row["difference"] <= row["high"]
 
 
-def test_fit_on_a_mapped_log_says_it_reads_the_shared_format_only(tmp_path):
-    """An observer file with a [data] table and a log in the user's own columns: the fit answered
-    with the shared format's eleven missing columns and "'ax': did you mean 'ax_g'?" (a column in g),
-    never saying that the map it had been given is for validate only."""
-    from codegen.errors import DatasetError
+def test_fit_on_a_mapped_log_reads_it_through_the_map(tmp_path):
+    """An observer file with a [data] table and a log in the user's own columns: the fit reads it through the
+    map, as validate does (it answered with the shared format's missing columns, then with "the map is for
+    validate only"); a map without the lateral speed reference names the key, and with it the log is read."""
+    from codegen.errors import ConfigurationError
     from codegen.families.nonlinear_tyre_observer import fit
     from model_defs import PARAMS_DIR
     text = (PARAMS_DIR.parent / "observers" / "stanford_sideslip_nonlinear_tyre.toml").read_text()
@@ -532,12 +532,15 @@ def test_fit_on_a_mapped_log_says_it_reads_the_shared_format_only(tmp_path):
              'v_x = { column = "vx_kmh", unit = "km/h" }\n')
     (tmp_path / "mine.toml").write_text(text)
     log = tmp_path / "mine.csv"
-    log.write_text("zeit_ms,steer_deg,ax_g,ay_g,yaw_dps,vx_kmh\n0,0,0,0,0,72\n10,0,0,0,0,72\n")
+    log.write_text("zeit_ms,steer_deg,ax_g,ay_g,yaw_dps,vx_kmh,vy_kmh\n0,0,0,0,0,72,0\n10,0,0,0,0,72,0\n")
     cfg = observers.get(str(tmp_path / "mine.toml"))
-    with pytest.raises(DatasetError, match=r"missing column.*uiogen fit reads the shared log's format only \(columns "
-                                           r"t, vx, vy, .*, SI units\); the \[data\] table of .*mine.toml maps a log "
-                                           r"for uiogen validate --data, not for the fit"):
+    with pytest.raises(ConfigurationError, match=r"mine.toml: \[data.truth\] v_y is missing: uiogen fit judges the "
+                                                 r"sideslip atan2\(v_y, v_x\) .* in \[data.truth\]"):
         fit.fit(cfg, str(log), "0:2", peers=False)
+    (tmp_path / "mine.toml").write_text(text + '\n[data.truth]\nv_y = { column = "vy_kmh", unit = "km/h" }\n')
+    cfg = observers.get(str(tmp_path / "mine.toml"))
+    with pytest.raises(ConfigurationError, match=r"--samples 0:2: 2 samples; a fit needs at least"):
+        fit.fit(cfg, str(log), "0:2", peers=False)          # the log read through the map: its two samples
 
 
 def test_slope_bounds_are_kept_across_runs_and_never_stale(tmp_path, monkeypatch):
