@@ -209,7 +209,7 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | N
     require_map(config)
     obs = load(config)
     model = config.load_model()
-    log = MappedLog(config, path, obs.input_names, obs.output_names, obs.sample_time, block_bytes, batch_rows)
+    log = MappedLog(config, path, obs.input_names, obs.output_names, config.sample_time, block_bytes, batch_rows)
     cmap, p, fmt, reader = config.column_map, log.path, log.fmt, log.reader
     declared = {n: model_unit(model, n) for n in obs.output_names}
     compared = {n: streaming.ErrorStats(declared[n], settle=SETTLE_TIME) for n in cmap.truth}
