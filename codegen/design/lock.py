@@ -275,3 +275,15 @@ def variable_spread(reference: dict, other: dict) -> dict:
                 size = max(np.abs(b).max(initial=0.0), 1e-3 * big, 1e-300)
                 out[key] = float(np.abs(a - b).max(initial=0.0) / size)
     return out
+
+
+def cache_parts(config, **more) -> dict:
+    """What a result derived from an observer file's model, parameters and settings is keyed by: the design's
+    inputs as the design lock hashes them (:func:`design_inputs`: the parameter file and the
+    model as they read, every module the family and the model import byte for byte, the observer file as parsed,
+    the numeric packages' versions), the files' paths (which messages and results name), and ``more``; for :func:`codegen.model.cache.remembered`
+    (here, above the cache: the model stage does not read the design stage)."""
+    from ..model import cache
+    return {"design_inputs": design_inputs(config), "source": str(config.source),
+            "parameters": str(config.parameter_path), "model": str(config.model_path),
+            **{k: cache.canonical(v) for k, v in more.items()}}

@@ -57,7 +57,7 @@ def _file_digest(path: Path, mtime_ns: int) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _canonical(x):
+def canonical(x):
     """``x`` as JSON-able data that says everything it means: sympy objects by ``srepr`` (with every
     symbol's assumptions), dataclasses field by field, mappings in key order."""
     import dataclasses
@@ -66,11 +66,11 @@ def _canonical(x):
     if isinstance(x, (sp.Basic, sp.MatrixBase)):
         return sp.srepr(x)
     if dataclasses.is_dataclass(x) and not isinstance(x, type):
-        return {"type": type(x).__name__, **{f.name: _canonical(getattr(x, f.name)) for f in dataclasses.fields(x)}}
+        return {"type": type(x).__name__, **{f.name: canonical(getattr(x, f.name)) for f in dataclasses.fields(x)}}
     if isinstance(x, dict) or hasattr(x, "items"):
-        return [[str(k), _canonical(v)] for k, v in sorted(x.items(), key=lambda kv: str(kv[0]))]
+        return [[str(k), canonical(v)] for k, v in sorted(x.items(), key=lambda kv: str(kv[0]))]
     if isinstance(x, (list, tuple)):
-        return [_canonical(v) for v in x]
+        return [canonical(v) for v in x]
     if x is None or isinstance(x, (str, int, float, bool)):
         return x
     return repr(x)
@@ -82,7 +82,7 @@ def model_digest(model) -> str:
     ``srepr`` is the cost: the unit check and the unit analysis key on the same model)."""
     held = _digests.get(id(model))
     if held is None or held[0] is not model:
-        text = json.dumps(_canonical(model), sort_keys=True, separators=(",", ":"))
+        text = json.dumps(canonical(model), sort_keys=True, separators=(",", ":"))
         held = (model, hashlib.sha256(text.encode()).hexdigest())
         _digests[id(model)] = held
     return held[1]
@@ -337,14 +337,3 @@ def remembered(kind: str, parts: dict, compute, *modules):
     except Exception:               # noqa: BLE001 -- not writable exactly: computed every time, never kept in part
         pass
     return value
-
-
-def observer_parts(config, **more) -> dict:
-    """What a result derived from an observer file's model, parameters and settings is keyed by: the design's
-    inputs as the design lock hashes them (:func:`codegen.design.lock.design_inputs`: the parameter file and the
-    model as they read, every module the family and the model import byte for byte, the observer file as parsed,
-    the numeric packages' versions), the files' paths (which messages and results name), and ``more``."""
-    from ..design import lock
-    return {"design_inputs": lock.design_inputs(config), "source": str(config.source),
-            "parameters": str(config.parameter_path), "model": str(config.model_path),
-            **{k: _canonical(v) for k, v in more.items()}}

@@ -7,6 +7,7 @@ import pytest
 import sympy as sp
 
 from codegen.errors import UnitError
+from codegen.design import lock
 from codegen.model import ModelDefinition, cache, dimensions
 from codegen.project import observer_file as observers
 
@@ -207,7 +208,7 @@ def test_each_input_of_a_kept_result_recomputes_it(fresh, starter_project, monke
 
     def run():
         cfg = observers.get(str(starter_project))
-        return cache.remembered("probe", cache.observer_parts(cfg), lambda: calls_of(cfg), deriving)
+        return cache.remembered("probe", lock.cache_parts(cfg), lambda: calls_of(cfg), deriving)
     first = run()
     _forget_process()
     if change == "model":                      # an equation's meaning (a comment would not be one)
@@ -236,7 +237,7 @@ def test_a_kept_result_that_does_not_verify_or_read_back_is_computed_again(fresh
 
     def run():
         cfg = observers.get(str(starter_project))
-        return cache.remembered("probe", cache.observer_parts(cfg), lambda: compute(cfg))
+        return cache.remembered("probe", lock.cache_parts(cfg), lambda: compute(cfg))
     first = run()
     (entry,) = (fresh / "probe").iterdir()
     record = json.loads(entry.read_text())
@@ -263,7 +264,7 @@ def test_a_refusal_is_never_kept(fresh, starter_project):
         raise ModelDefinitionError("refused")
     for _ in range(2):
         with pytest.raises(ModelDefinitionError):
-            cache.remembered("probe", cache.observer_parts(cfg), refuse)
+            cache.remembered("probe", lock.cache_parts(cfg), refuse)
         _forget_process()
     assert not (fresh / "probe").exists()
 
@@ -284,7 +285,7 @@ def test_concurrent_writers_leave_one_whole_entry(fresh, starter_project):
     calls = []
     _forget_process()
     cfg = observers.get(str(starter_project))
-    kept = cache.remembered("probe", cache.observer_parts(cfg), lambda: _probe(calls)(cfg))
+    kept = cache.remembered("probe", lock.cache_parts(cfg), lambda: _probe(calls)(cfg))
     assert not calls and sp.Matrix(kept["dynamics"]) == cfg.load_model().dynamics
 
 
@@ -292,7 +293,7 @@ def _derive_in_child(path):
     cache.forget()
     cfg = observers.get(path)
     for _ in range(5):
-        cache.remembered("probe", cache.observer_parts(cfg), lambda: _probe([])(cfg))
+        cache.remembered("probe", lock.cache_parts(cfg), lambda: _probe([])(cfg))
         cache.forget()
 
 

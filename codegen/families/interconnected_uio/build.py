@@ -24,6 +24,7 @@ from ...representation.differentiators import MAX_ORDER, HosmdSpec, hosmd_step_n
 from ...emit.stepgen import lambdify, solve_unpivoted
 from ...design.solver import FreshSolver
 from ...errors import InfeasibleLMIError, ModelDefinitionError, UiogenError
+from ...design import lock
 from ...model import cache
 from ...representation.polytope import sector_weights_product
 from ...project.settings import Rule, parse_settings, parse_table
@@ -586,7 +587,7 @@ def build(config, solver) -> InterconnectedBuild:
         need = rate_for_backward_euler(required_margin(settings), config.sample_time, factor=1.0)
         settings = dataclasses.replace(settings, alpha=max(settings.alpha, need))
     t0 = time.perf_counter()
-    ts = cache.remembered(REPRESENTATION, cache.observer_parts(config), lambda: icm.load(config),
+    ts = cache.remembered(REPRESENTATION, lock.cache_parts(config), lambda: icm.load(config),
                           sys.modules[__name__], icm)
     step = step_settings(ts, table, config.sample_time, config.source)
     layout = StepLayout(ts, step)

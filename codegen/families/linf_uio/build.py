@@ -16,6 +16,7 @@ from ...certificate.artifact import artifact_head, significant
 from ...certificate.certificate import Bound, Certificate, Recheck, Step, unit_ratio
 from ...certificate.contraction import ContractionMetric
 from ...design.precision import required_margin
+from ...design import lock
 from ...model import LPVModel, instantiate, load_parameters
 from ...project.observer_file import ObserverConfig
 from ...errors import (CertificateError, ModelDefinitionError, RankConditionError, RepresentationError, SolverError, UILoopError,
@@ -214,7 +215,7 @@ def representation(config: ObserverConfig):
     import sys
 
     from ...model import cache
-    return cache.remembered(REPRESENTATION, cache.observer_parts(config), lambda: _representation(config),
+    return cache.remembered(REPRESENTATION, lock.cache_parts(config), lambda: _representation(config),
                             sys.modules[__name__])
 
 

@@ -46,6 +46,7 @@ import sympy as sp
 
 from ...certificate.artifact import artifact_head, significant, solver_certificate
 from ...certificate.certificate import Bound, Certificate, Recheck, Step
+from ...design import lock
 from ...model import load_parameters
 from ...project.settings import Rule, parse_settings, setting
 from ...design.precision import margin_field, precision_field
@@ -414,7 +415,7 @@ def build(config, solver, params=None):
     if params is None:          # the observer file's own parameters: kept across runs (REPRESENTATION)
         from ...model import cache
         from . import representation as tyre_representation
-        rep = cache.remembered(REPRESENTATION, cache.observer_parts(config, settings=settings),
+        rep = cache.remembered(REPRESENTATION, lock.cache_parts(config, settings=settings),
                                lambda: represent(config.load_model_module(), load_parameters(config.parameter_path),
                                                  settings, config.source),
                                sys.modules[__name__], tyre_representation)

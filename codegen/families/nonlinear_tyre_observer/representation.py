@@ -235,9 +235,9 @@ def _axle_bounds(k, a, subs, measured_boxes, rho, delta, d_box, t_sym, vx, vy, s
     from ...model import cache
     from ...representation import bounds as bounds_module
     digest = cache.key(AXLE_BOUNDS, {
-        "axle": cache._canonical(a), "subs": cache._canonical(subs), "boxes": cache._canonical(measured_boxes),
-        "rho": rho, "delta": cache._canonical(delta), "d_box": list(d_box), "t": cache._canonical(t_sym),
-        "vx": cache._canonical(vx), "vy": cache._canonical(vy), "stiffness_range": list(stiffness_range),
+        "axle": cache.canonical(a), "subs": cache.canonical(subs), "boxes": cache.canonical(measured_boxes),
+        "rho": rho, "delta": cache.canonical(delta), "d_box": list(d_box), "t": cache.canonical(t_sym),
+        "vx": cache.canonical(vx), "vy": cache.canonical(vy), "stiffness_range": list(stiffness_range),
         "friction_range": list(friction_range), "rel_tol": rel_tol, "through": through, "sympy": sp.__version__,
         "numpy": np.__version__, "code": cache.code_digest(sys.modules[__name__], bounds_module)})
     stored = cache.read(AXLE_BOUNDS, digest)

@@ -21,6 +21,7 @@ from ...certificate.contraction import ContractionMetric
 from . import representation as switched
 from . import design as switched_pi
 from ...errors import SolverError, UiogenError
+from ...design import lock
 from ...model import cache, load_parameters
 from ...project.observer_file import ObserverConfig
 
@@ -251,7 +252,7 @@ def build(config: ObserverConfig, solver) -> SwitchedPIBuild:
     the LMIs answered by ``solver`` (:mod:`codegen.design.solver`)."""
     settings = settings_of(config, solver.tol)
     t0 = time.perf_counter()
-    sm = cache.remembered(REPRESENTATION, cache.observer_parts(config),
+    sm = cache.remembered(REPRESENTATION, lock.cache_parts(config),
                           lambda: switched.build(config.design_model(), load_parameters(config.parameter_path),
                                                  config.switching, config.source),
                           sys.modules[__name__], switched)

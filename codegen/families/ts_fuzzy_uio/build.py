@@ -13,6 +13,7 @@ from ...certificate.artifact import artifact_head, significant, solver_certifica
 from ...certificate.certificate import Certificate, Recheck, Step
 from ...certificate.contraction import ContractionMetric
 from ...design.precision import required_margin
+from ...design import lock
 from ...model import cache, load_parameters
 from ...project.observer_file import ObserverConfig
 from ..base import ObserverBuild, StepNotes
@@ -187,7 +188,7 @@ def build(config: ObserverConfig, solver) -> TSFuzzyBuild:
         settings = dataclasses.replace(settings, decay=min(settings.decay, 1.0 - required_margin(settings)))
     t0 = time.perf_counter()
     ts = cache.remembered(
-        REPRESENTATION, cache.observer_parts(config, settings=settings),
+        REPRESENTATION, lock.cache_parts(config, settings=settings),
         lambda: ts_fuzzy.build(config.design_model(), load_parameters(config.parameter_path), config.sample_time,
                                rel_tol=settings.bounds_rel_tol, max_boxes=settings.bounds_max_boxes,
                                before_bounds=lambda n, nx, ny, nphi: ts_fuzzy_uio.size_guard(n, nx, ny, 1, settings,
