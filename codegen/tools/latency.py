@@ -255,7 +255,9 @@ def _floor(kind: str, floors: dict) -> tuple:
 
 def _median_floors(runs: list) -> dict:
     keys = set().union(*runs) if runs else set()
-    return {k: statistics.median([r[k] for r in runs if k in r]) for k in keys}
+    def median(values):         # a count (solves, samples) stays a whole number
+        return statistics.median_low(values) if all(isinstance(v, int) for v in values) else statistics.median(values)
+    return {k: median([r[k] for r in runs if k in r]) for k in keys}
 
 
 def _uptime() -> dict:
