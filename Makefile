@@ -7,7 +7,7 @@
 #   make check   reliability suite (hostile input, sanitizers, static facts, determinism) and the long runs
 #   make docs    re-run demo and bench into docs/data/, rewrite the docs' tables, build the site
 #   make generate | build | bench | clean   (bench: also campaign runs/s, 1 and 2 workers, 10,000 runs, and
-#                                            every verb's latency against its floor)
+#                                            every verb's latency against its floor; LATENCY=--quick: a few minutes)
 #   make lock    refresh constraints.txt (exact versions of everything the targets install)
 PYTHON ?= python3
 VENV   := .venv
@@ -17,6 +17,8 @@ STAMP  := $(VENV)/.installed-stamp
 PIP    := $(BIN)/python -m pip --disable-pip-version-check
 PIN    := -c constraints.txt
 CC     ?= cc
+# Options of make bench's latency table (python -m codegen.tools.latency --help), e.g. LATENCY=--quick
+LATENCY ?=
 export CC
 
 .PHONY: all venv generate build demo test test-fast check bench docs clean lock misra embedded-tools
@@ -70,7 +72,7 @@ bench: build
 	$(PIP) install --quiet $(PIN) --no-build-isolation -e '.[bench]'
 	$(BIN)/uiogen bench
 	$(BIN)/python -m codegen.campaign.bench --target
-	$(BIN)/python -m codegen.tools.latency
+	$(BIN)/python -m codegen.tools.latency $(LATENCY)
 
 # The docs: re-run the demo and the benchmark, rewrite the docs' tables from them, build the site.
 docs: build

@@ -17,8 +17,8 @@ kind and an argument:
 * ``real_data -``: the shared Stanford log, every estimator's sideslip error;
 * ``bench -``: the step cost and design time of every observer (``make bench``);
 * ``spread -``: how far a re-solve moves (``python -m codegen.tools.spread``);
-* ``record NAME``: the ``table`` ({"header", "rows"}) of a study's record ``docs/data/NAME.json``
-  (the command that writes it is named where the region sits).
+* ``record NAME``: the ``table`` ({"header", "rows"}, and a "note" line under it where there is one) of a
+  study's record ``docs/data/NAME.json`` (the command that writes it is named where the region sits).
 """
 from __future__ import annotations
 
@@ -171,7 +171,10 @@ def _render(kind: str, arg: str, demo: dict | None, bench: dict | None, spread: 
         return None if record is None else sweep_table(record)
     if kind == "record":
         record = _load(DATA / f"{arg}.json")
-        return None if record is None else _table(record["table"]["header"], record["table"]["rows"])
+        if record is None:
+            return None
+        note = record["table"].get("note")         # a line under the table (how and where it was measured)
+        return _table(record["table"]["header"], record["table"]["rows"]) + (f"\n{note}\n" if note else "")
     if kind == "family_bench":
         return None if bench is None else family_bench_table(bench, arg)
     if kind == "spread":
