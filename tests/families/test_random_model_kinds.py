@@ -169,7 +169,9 @@ def _run_kind(family, kind, tmp_path, noisy: bool):
     refusals = []
     for seed in range(40):
         m = R.draw(family, seed)
-        if not m.structure[kind] or (kind != "sensor_noise" and m.structure["sensor_noise"]):
+        # one scheduling signal: a signal derived from an output (linf_uio's s) leaves its drawn box in the
+        # excitation run (seed 0: SCHEDULING_CLAMPED in 1489 of 3000 samples), which the flags would count
+        if not m.structure[kind] or m.structure.get("derived_scheduling") and family != "ts_fuzzy_uio":
             continue
         outcome = R.run(m, tmp_path / str(seed))
         if outcome.status == "refused":
