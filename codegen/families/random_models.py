@@ -29,6 +29,12 @@ where the family's model is fixed):
 * ``interconnected_uio`` and ``nonlinear_tyre_observer`` (whose theory fixes the model): their
   built-in model with every physical parameter dispersed (mass, inertias, lengths, stiffnesses).
 
+and, from a generator of their own (:func:`_kinds_rng`: the rest of a seed's draw unchanged), the kinds
+of equations of issue 42 (:data:`KINDS`): an exact constant beside a parameter, terms that are 0 once
+simplified (in a row, and as an unknown input's coefficient in an output), a coupling whose
+coefficient crosses zero inside the speed box (``linf_uio``, ``switched_pi``, ``ts_fuzzy_uio``), and
+a ``[sensor_noise]`` table (those and ``algebraic_uio``).
+
 A design the family refuses is an acceptable outcome only as a typed error (exit 2, one line, no
 traceback); :func:`acceptance` reports how many draws design.
 """
