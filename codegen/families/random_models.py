@@ -29,6 +29,12 @@ where the family's model is fixed):
 * ``interconnected_uio`` and ``nonlinear_tyre_observer`` (whose theory fixes the model): their
   built-in model with every physical parameter dispersed (mass, inertias, lengths, stiffnesses).
 
+and, from a generator of their own (:func:`_kinds_rng`: the rest of a seed's draw unchanged), the kinds
+of equations of issue 42 (:data:`KINDS`): an exact constant beside a parameter, terms that are 0 once
+simplified (in a row, and as an unknown input's coefficient in an output), a coupling whose
+coefficient crosses zero inside the speed box (``linf_uio``, ``switched_pi``, ``ts_fuzzy_uio``), and
+a ``[sensor_noise]`` table (those and ``algebraic_uio``).
+
 A design the family refuses is an acceptable outcome only as a typed error (exit 2, one line, no
 traceback); :func:`acceptance` reports how many draws design.
 """
@@ -38,9 +44,11 @@ import argparse
 import contextlib
 import io
 import json
+import re
 import sys
 import textwrap
 import time
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -286,6 +294,110 @@ def _constant_and_duplicated_terms(rng, rows: list, names: list, values: dict) -
     return constant, duplicated
 
 
+#: the levels of the drawn [sensor_noise] per unit (a car's sensors: a gyro, GNSS speed, a steering
+#: angle sensor, a camera's lateral offset), multiplied by a drawn factor in 10^[-0.3, 0.5]
+NOISE_LEVELS = {"rad/s": 8.7e-4, "m/s": 0.02, "rad": 1e-3, "m": 0.01}
+NOISE_SPEED = 0.05            # m/s: the measured scheduling speed (wheel speeds, GNSS)
+#: the kinds of equations issue 42 asks the draws to hold (each a key of a draw's ``structure`` where its
+#: family takes it): an exact constant beside a parameter, terms that are 0 once simplified, a coefficient
+#: whose zero crosses the scheduling box, the sensors' noise declared in ``[sensor_noise]``
+KINDS = ("exact_constants", "zero_terms", "zero_crossing", "sensor_noise")
+#: the key of the child seed sequence the kinds of issue 42 are drawn from (exact constants, terms that
+#: simplify to zero, a coefficient whose zero crosses the scheduling box, sensor noise)
+KINDS_KEY = 42
+
+
+def _kinds_rng(rng, family: str):
+    """A generator of its own for the kinds of issue 42: the child (``KINDS_KEY``, crc32 of the family's
+    name) of the seed's sequence (so every other draw of a seed is the one it was before these kinds
+    existed, and one seed draws other kinds in each family)."""
+    ss = rng.bit_generator.seed_seq
+    key = (KINDS_KEY, zlib.crc32(family.encode()))
+    return np.random.default_rng(np.random.SeedSequence(ss.entropy, spawn_key=tuple(ss.spawn_key) + key))
+
+
+def _exact_constant(side, rows: list, values: dict) -> str:
+    """Rewrite, with probability 0.4, one term ``k * ...`` of a row (a drawn parameter k leading it)
+    with an exact constant beside k, its value rescaled so the model's numbers are those drawn:
+    ``k / 2 * ...`` (a half track), ``sp.Rational(3, 4) * k * ...`` or ``2 * k * ...``. Returns the
+    form written ("" when none)."""
+    if side.random() >= 0.4:
+        return ""
+    terms = [(i, k) for i, row in enumerate(rows) for k in values
+             if re.search(rf"(?<![\w.]){k} \* ", row) and not k.startswith(("z_", "t_"))]
+    if not terms:
+        return ""
+    i, k = terms[int(side.integers(len(terms)))]
+    form, factor = (("{k} / 2 * ", 2.0), ("sp.Rational(3, 4) * {k} * ", 4.0 / 3.0),
+                    ("2 * {k} * ", 0.5))[int(side.integers(3))]
+    values[k] = values[k] * factor
+    rows[i] = re.sub(rf"(?<![\w.]){k} \* ", form.format(k=k), rows[i], count=1)
+    return form.format(k="k").strip(" *")
+
+
+def _zero_terms(side, rows: list, names: list, values: dict, outputs: list | None, d: str | None) -> str:
+    """Add, with probability 0.4, terms that simplify to zero: in a row ``(z_a + z_b) * x - z_a * x -
+    z_b * x`` and ``(sin(z_th)^2 + cos(z_th)^2 - 1) * z_c * x / v_x`` (exactly 0, a float residue once the
+    parameters are numbers), and where an output list and an unknown input are given, ``(sin(z_th)^2 +
+    cos(z_th)^2 - 1) * z_y * d`` in the first output (a feedthrough that is none). Returns where ("")."""
+    if side.random() >= 0.4:
+        return ""
+    i = int(side.integers(len(rows)))
+    sj = names[int(side.integers(len(names)))]
+    values["z_a"] = _uniform(side, 0.3, 2.0, sign=True)
+    values["z_b"] = _uniform(side, 0.3, 2.0, sign=True)
+    values["z_th"] = _uniform(side, 0.1, 1.5)
+    values["z_c"] = _uniform(side, 2.0, 15.0, sign=True)
+    trig = "(sp.sin(z_th) ** 2 + sp.cos(z_th) ** 2 - 1)"
+    rows[i] = f"{rows[i]} + (z_a + z_b) * {sj} - z_a * {sj} - z_b * {sj} + {trig} * z_c * {sj} / v_x"
+    where = "row"
+    if outputs is not None and d is not None:
+        values["z_y"] = _uniform(side, 0.5, 2.0)
+        name, expr = outputs[0]
+        outputs[0] = (name, f"{expr} + {trig} * z_y * {d}")
+        where = "row and output"
+    return where
+
+
+def _zero_crossing(side, rows: list, names: list, values: dict, lo: float, hi: float) -> float | None:
+    """Add, with probability 0.4, a coupling ``t_c * (v_x - t_v0) * x / 10`` (x another row's state) to one row whose
+    coefficient changes sign at t_v0, drawn inside the speed box [lo, hi] (in its middle 60 %).
+    Returns t_v0 (None when not drawn)."""
+    if side.random() >= 0.4:
+        return None
+    i, j = (int(k) for k in side.choice(len(rows), size=2, replace=False))
+    sj = names[j]                   # a coupling (on the diagonal, it could make the drawn car unstable)
+    values["t_c"] = _uniform(side, 0.05, 0.2, sign=True)
+    v0 = float(np.round(side.uniform(lo + 0.2 * (hi - lo), hi - 0.2 * (hi - lo)), 2))
+    values["t_v0"] = v0
+    rows[i] = f"{rows[i]} + t_c * (v_x - t_v0) * {sj} / 10"
+    return v0
+
+
+def _noise_table(side, signals: dict) -> str:
+    """With probability 0.6, the parameter file's ``[sensor_noise]`` table of the measured ``signals``
+    ({name: unit}): each at the level of its unit (:data:`NOISE_LEVELS`, the speed at
+    :data:`NOISE_SPEED`) times a factor drawn in 10^[-0.3, 0.5]; "" when not drawn."""
+    if side.random() >= 0.6:
+        return ""
+    lines = []
+    for name, unit in signals.items():
+        base = NOISE_SPEED if name == "v_x" else NOISE_LEVELS[unit]
+        lines.append(f"{name} = {float(base * 10 ** side.uniform(-0.3, 0.5)):.3g}")
+    return "\n[sensor_noise]\n" + "\n".join(lines) + "\n"
+
+
+def _measured_units(core, speed: bool = True) -> dict:
+    """{measured signal: unit} of an LPV draw: its outputs (the unit of the state each starts with),
+    its known inputs, and the scheduling speed."""
+    units = dict(core["states"])
+    out = {name: units[expr.split()[0]] for name, expr in core["outputs"]}
+    out.update(dict(core["known"]))
+    if speed:
+        out["v_x"] = "m/s"
+    return out
+
+
 def draw_linf(rng) -> RandomModel:
     core = _draw_lpv_core(rng, "linf_uio")
     names, values = core["names"], core["values"]
@@ -306,6 +418,11 @@ def draw_linf(rng) -> RandomModel:
         rows[0] = f"{rows[0]} + {k} * s * {names[0]}"
         derived_note = ", a gain scheduled on the measured first output"
     constant, duplicated = _constant_and_duplicated_terms(rng, rows, names, values)
+    side = _kinds_rng(rng, "linf_uio")
+    exact = _exact_constant(side, rows, values)
+    zero = _zero_terms(side, rows, names, values, core["outputs"], core["unknown"][0][0])
+    crossing = _zero_crossing(side, rows, names, values, lo, hi)
+    noise = _noise_table(side, _measured_units(core))
     units = _signal_units(core)
     symbols = [(s, "") for s in names] + [(d, "") for d, _ in core["unknown"]] + [(u, "") for u, _ in core["known"]]
     symbols += [("v_x", "positive=True")] + ([("s", "positive=True")] if core["derived"] else [])
@@ -326,7 +443,8 @@ def draw_linf(rng) -> RandomModel:
                  "unknown_inputs": len(core["unknown"]), "output_combinations": core["combos"],
                  "ui_feedthrough": core["feedthrough"], "derived_scheduling": core["derived"],
                  "v_x_terms": v_terms, "ui_units": [u for _, u in core["unknown"]],
-                 "constant_terms": constant, "duplicated_terms": duplicated}
+                 "constant_terms": constant, "duplicated_terms": duplicated, "exact_constants": exact,
+                 "zero_terms": zero, "zero_crossing": crossing, "sensor_noise": bool(noise)}
     name = _name("linf", structure)
     inputs = "\n[inputs]\n" + _ui_ranges(core)
     inputs += "".join(f"{u} = {{ min = -0.05, max = 0.05, bandwidth = 0.5 }}\n" for u, _ in core["known"])
@@ -338,7 +456,7 @@ def draw_linf(rng) -> RandomModel:
                 f'gain_bound_times_sample_time = 1.0\n\n[ui_filter]\ntime_constant = 0.02\n')
     model = _model_py(f"Random LPV model (linf_uio): {_describe(structure)}{derived_note}.", symbols, body)
     return RandomModel("linf_uio", name, structure,
-                       {"model.py": model, "parameters.toml": _params_toml(values, tables + inputs),
+                       {"model.py": model, "parameters.toml": _params_toml(values, tables + inputs + noise),
                         f"{name}.toml": observer})
 
 
@@ -353,6 +471,11 @@ def draw_switched(rng) -> RandomModel:
     rows, v_terms = _linear_rows(rng, names, core["entries"], values, "v_x", rng.random() < 0.5)
     n_modes = int(rng.integers(2, 4))
     centres = [float(np.round(c, 2)) for c in np.linspace(lo + 0.2 * (hi - lo), hi - 0.2 * (hi - lo), n_modes)]
+    side = _kinds_rng(rng, "switched_pi")
+    exact = _exact_constant(side, rows, values)
+    zero = _zero_terms(side, rows, names, values, core["outputs"], core["unknown"][0][0])
+    crossing = _zero_crossing(side, rows, names, values, lo, hi)
+    noise = _noise_table(side, _measured_units(core))
     units = _signal_units(core)
     symbols = [(s_, "") for s_ in names] + [(d, "") for d, _ in core["unknown"]] + [(u, "") for u, _ in core["known"]]
     symbols += [("v_x", "positive=True")] + [(k, "real=True") for k in values]
@@ -370,11 +493,12 @@ def draw_switched(rng) -> RandomModel:
     """
     structure = {"states": core["n"], "outputs": len(core["outputs"]), "known_inputs": len(core["known"]),
                  "unknown_inputs": 1, "output_combinations": core["combos"], "modes": n_modes, "v_x_terms": v_terms,
-                 "ui_units": [u for _, u in core["unknown"]]}
+                 "ui_units": [u for _, u in core["unknown"]], "exact_constants": exact, "zero_terms": zero,
+                 "zero_crossing": crossing, "sensor_noise": bool(noise)}
     name = _name("switched", structure) + f"_{n_modes}m"
     tables = f"[scheduling.v_x]\nmin = {lo}\nmax = {hi}\nrate_min = {-rate}\nrate_max = {rate}\n"
     tables += "\n[inputs]\n" + _ui_ranges(core)
-    tables += "".join(f"{u} = {{ min = -0.05, max = 0.05, bandwidth = 0.5 }}\n" for u, _ in core["known"])
+    tables += "".join(f"{u} = {{ min = -0.05, max = 0.05, bandwidth = 0.5 }}\n" for u, _ in core["known"]) + noise
     points = ", ".join(f"{{ v_x = {c} }}" for c in centres)
     observer = (f'family = "switched_pi"\nmodel = "model.py"\nparameters = "parameters.toml"\nsample_time = 0.01\n\n'
                 f'[design]\npole_radius = 50.0\ndecay_rate = 0.5\n\n[switching]\nperformance = ["{names[0]}"]\n'
@@ -448,6 +572,10 @@ def draw_algebraic(rng) -> RandomModel:
     tables = (f"[scheduling.v_x]\nmin = {lo}\nmax = {hi}\nrate_min = {-rate}\nrate_max = {rate}\n"
               f"derivative_bounds = [{bounds}]\n\n[inputs]\nM_d = {{ min = -1.0, max = 1.0, bandwidth = 0.5 }}\n")
     tables += "".join("delta = { min = -0.05, max = 0.05, bandwidth = 0.5 }\n" for _ in known)
+    noise = _noise_table(_kinds_rng(rng, "algebraic_uio"), {names[0]: dict(states)[names[0]], **dict(known), "v_x": "m/s"})
+    tables += noise
+    structure["sensor_noise"] = bool(noise)
+    name += "_noise" if noise else ""
     observer = (f'family = "algebraic_uio"\nmodel = "model.py"\nparameters = "parameters.toml"\nsample_time = 0.002\n\n'
                 f'[design]\nlmi = "direct"\nalpha = 1.0\nmargin = 1e-4\n\n'
                 f'[design.differentiators.y_{names[0]}]\norder = {order}\nlipschitz = 1000.0\n\n'
@@ -528,6 +656,12 @@ def draw_ts(rng) -> RandomModel:
     dynamics = [" + ".join(rows[s_]) or "0" for s_ in names]
     constant = _constant_term(rng, dynamics, names, values)
     lo, hi, _ = _speed_box(rng)
+    side = _kinds_rng(rng, "ts_fuzzy_uio")
+    outputs = [(m, m) for m in measured]
+    exact = _exact_constant(side, dynamics, values)
+    zero = _zero_terms(side, dynamics, names, values, outputs, unknown[0][0])
+    crossing = _zero_crossing(side, dynamics, names, values, lo, hi)
+    noise = _noise_table(side, {**{m: dict(states)[m] for m in measured}, **dict(known)})
     bounds = {"v_x": [lo, hi], "v_y": [-1.5, 1.5], "r": [-0.6, 0.6], "p": [-0.6, 0.6]}
     tables = "[state_bounds]\n" + "".join(f"{s_} = [{bounds[s_][0]}, {bounds[s_][1]}]\n" for s_ in names)
     tables += "\n[inputs]\n" + "".join(f"{d} = {{ min = {-200.0}, max = {200.0}, bandwidth = 0.5 }}\n"
@@ -536,7 +670,6 @@ def draw_ts(rng) -> RandomModel:
     units = {**dict(states), **dict(unknown), **dict(known)}
     symbols = [(s_, "positive=True" if s_ == "v_x" else "") for s_ in names]
     symbols += [(d, "") for d, _ in unknown] + [(u, "") for u, _ in known] + [(k, "real=True") for k in values]
-    outputs = [(m, m) for m in measured]
     body = f"""
     MODEL = ModelDefinition(
         name="random_ts",
@@ -551,14 +684,16 @@ def draw_ts(rng) -> RandomModel:
     """
     structure = {"states": len(names), "outputs": len(outputs), "known_inputs": len(known),
                  "unknown_inputs": len(unknown), "saturating_tyre": saturating, "coupling": coupling,
-                 "derived_scheduling": True, "constant_terms": constant}
+                 "derived_scheduling": True, "constant_terms": constant, "exact_constants": exact, "zero_terms": zero,
+                 "zero_crossing": crossing, "sensor_noise": bool(noise)}
     name = _name("ts", structure)
     observer = ('family = "ts_fuzzy_uio"\nmodel = "model.py"\nparameters = "parameters.toml"\nsample_time = 0.01\n\n'
                 '[design]\ndecay = 1.0\nmargin = 1e-4\n')
     model = _model_py(f"Random TS model (ts_fuzzy_uio): {_describe(structure)}; the 1/v_x premise from the "
                       f"measured speed.", symbols, body)
     return RandomModel("ts_fuzzy_uio", name, structure,
-                       {"model.py": model, "parameters.toml": _params_toml(values, tables), f"{name}.toml": observer})
+                       {"model.py": model, "parameters.toml": _params_toml(values, tables + noise),
+                        f"{name}.toml": observer})
 
 
 # -- interconnected_uio, nonlinear_tyre_observer: their built-in model, its parameters dispersed ------
@@ -639,7 +774,8 @@ def _name(prefix: str, s: dict) -> str:
     parts += [tag for key, tag in (("output_combinations", "mix"), ("ui_feedthrough", "ff"),
                                    ("derived_scheduling", "der"), ("saturating_tyre", "sat"),
                                    ("v_x_terms", "vx"), ("constant_terms", "k0"),
-                                   ("duplicated_terms", "dup")) if s.get(key)]
+                                   ("duplicated_terms", "dup"), ("exact_constants", "ex"), ("zero_terms", "z0"),
+                                   ("zero_crossing", "zc"), ("sensor_noise", "noise")) if s.get(key)]
     if any(u.startswith("kN") for u in s.get("ui_units", ())):
         parts.append("kN")
     return "_".join(parts)

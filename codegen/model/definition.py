@@ -20,7 +20,7 @@ import sympy as sp
 from ..errors import (MissingParameterError, ModelDefinitionError, NotAffineError, SchedulingBoundsError,
                       UnknownParameterError, brief)
 from ..project.settings import Rule, check_keys, config_error, parse_table, parse_value, suggest
-from .floats import FLOAT_NOISE, merge_float_noise  # noqa: F401  (FLOAT_NOISE: re-exported)
+from .floats import FLOAT_NOISE, drop_zero_terms, merge_float_noise  # noqa: F401  (FLOAT_NOISE: re-exported)
 from .names import RULE as NAME_RULE, c_name_problem, suggest as suggest_name
 from .real import real_valued
 
@@ -819,7 +819,11 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     boxes = [params.scheduling[str(sig.symbol)] for sig in model.scheduling]
     # structure is checked exactly, with the parameters still symbolic; numbers come after (floats
     # the model writes that differ only by rounding are one number: merge_float_noise)
-    rows = merge_float_noise([*model.dynamics, *(expr for _, expr in model.outputs)])
+    signals = (*model.states, *model.known_inputs, *model.unknown_inputs, *(g.symbol for g in model.scheduling),
+               *(w.symbol for w in model.derived_inputs))
+    # a term that is 0 (simplified, or cancelled once expanded) is no term: dropped before the parameters
+    # are numbers, which would leave a residue of 1e-16 (a coupling, a premise, a feedthrough)
+    rows = merge_float_noise(drop_zero_terms([*model.dynamics, *(expr for _, expr in model.outputs)], signals))
     f = sp.Matrix(rows[:len(model.states)])
     h = sp.Matrix(rows[len(model.states):])
     x, u, d = tuple(model.states), tuple(model.known_inputs), tuple(model.unknown_inputs)

@@ -28,3 +28,41 @@ def merge_float_noise(exprs) -> list:
         else:
             anchor = f
     return [e.xreplace(merge) for e in exprs] if merge else exprs
+
+
+def _is_zero(c) -> bool:
+    """Whether ``c`` is 0 once simplified; a number away from 0 at one point of its free symbols (each
+    set to a fixed value in [0.6, 1.4]) decides "not zero" without simplifying."""
+    if c == 0:
+        return True
+    point = {s: sp.Float(0.6 + 0.8 * ((7 * k + 3) % 11) / 10) for k, s in enumerate(sorted(c.free_symbols, key=str))}
+    try:
+        value = complex(c.xreplace(point).evalf())
+        if abs(value) > 1e-9:
+            return False
+    except (TypeError, ValueError, ZeroDivisionError):
+        pass
+    return sp.simplify(c) == 0
+
+
+def drop_zero_terms(exprs, signals) -> list:
+    """``exprs`` without their terms that are 0: the coefficient of a product of ``signals`` that
+    simplifies to 0 ((sin(th)^2 + cos(th)^2 - 1) k x), and terms that cancel once expanded ((a + b) x
+    - a x - b x): decided exactly, with the parameters still symbols (substituted first, they leave a
+    float residue of 1e-16, a term the design would carry: a coupling, a premise, a constant input).
+    An expression with no such term is returned as it is (its form, so every design from it, unchanged)."""
+    signals = tuple(signals)
+    out = []
+    for e in exprs:
+        e = sp.sympify(e)
+        expanded = sp.expand(e)
+        n_terms = sum(len(sp.Add.make_args(sp.expand(t))) for t in sp.Add.make_args(e))
+        groups: dict = {}                 # {the term's factor in the signals: the sum of its coefficients}
+        for t in sp.Add.make_args(expanded):
+            c, m = t.as_independent(*signals, as_Add=False) if signals else (t, sp.S.One)
+            groups[m] = groups.get(m, sp.S.Zero) + c
+        keep = {m: c for m, c in groups.items() if not _is_zero(c)}
+        if len(keep) < len(groups) or len(sp.Add.make_args(expanded)) < n_terms:
+            e = sp.Add(*(m * c for m, c in keep.items()))
+        out.append(e)
+    return out

@@ -32,7 +32,7 @@ from ...representation.bounds import RangeBound, derivative, range_bound
 from ...emit.stepgen import lambdify
 from ...errors import ModelDefinitionError, NotAffineError, SchedulingBoundsError
 from ...model import ModelDefinition, ParameterSet, parameter_substitution
-from ...model.floats import merge_float_noise
+from ...model.floats import drop_zero_terms, merge_float_noise
 from ...representation.polytope import (Premise, affine_decomposition, memberships, nonlinear_factors,
                                         sector_weights_product, vertex_matrices)
 
@@ -155,11 +155,19 @@ class TSFuzzyModel:
         }
 
 
+def _signals(model: ModelDefinition) -> tuple:
+    """The model's states, inputs and scheduling signals (what a term's coefficient multiplies)."""
+    return (*model.states, *model.known_inputs, *model.unknown_inputs, *(g.symbol for g in model.scheduling))
+
+
 def _output_selection(model: ModelDefinition) -> tuple:
     """Measured states: every output must be one state (y = C x with C a selection)."""
     measured = []
     for name, expr in model.outputs:
         expr = sp.sympify(expr)
+        if expr not in model.states:
+            # a term that is 0 (v_x + (sin^2 + cos^2 - 1) k d) is no term: the output is the state
+            expr = drop_zero_terms([expr], _signals(model))[0]
         if expr not in model.states:
             raise ModelDefinitionError(
                 f"model {model.name!r}: output {name!r} = {expr} is not a state; the TS fuzzy UIO needs "
@@ -206,7 +214,8 @@ def split_consequents(model: ModelDefinition, subs: dict) -> dict:
     measured = _output_selection(model)
     unmeasured = tuple(s for s in x if s not in measured)
     # floats that differ only by rounding are one number (sp.solve's rows): one consequent, not two
-    F = sp.Matrix(merge_float_noise(sp.Matrix(model.dynamics).subs(subs)))
+    # and a term that is 0 is none (dropped exactly, before the parameters leave a residue of 1e-16)
+    F = sp.Matrix(merge_float_noise(sp.Matrix(drop_zero_terms(model.dynamics, _signals(model))).subs(subs)))
     Dv = F.jacobian(sp.Matrix(d)) if d else sp.zeros(len(x), 0)
     if any(e.free_symbols for e in Dv):
         from ...model.substitution import offer
