@@ -46,6 +46,17 @@ def new_starter(folder: Path, family: str = "linf_uio", name: str = "obs1") -> P
     return Path(folder)
 
 
+def with_setting(toml: Path, key: str, value: str):
+    """The observer file ``toml`` with its line ``key = ...`` set to ``value`` (the line must be there; a
+    trailing comment stays), read back as the CLI reads it."""
+    import re
+    from codegen.project import observer_file as observers
+    text = toml.read_text()
+    assert re.search(rf"(?m)^{key} = ", text), key
+    toml.write_text(re.sub(rf"(?m)^{key} = [^ #\n]*", f"{key} = {value}", text))
+    return observers.get(str(toml))
+
+
 def require_strace() -> str:
     """The path of strace (the kill-at-each-syscall tests): skipped where it is missing, a failure
     in CI (CI=true), where .ci/run installs it."""

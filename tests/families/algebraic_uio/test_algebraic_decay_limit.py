@@ -9,8 +9,7 @@ import pytest
 from codegen import pipeline
 from codegen.errors import ConfigurationError, InfeasibleLMIError
 from codegen.families.algebraic_uio import design as alg
-from codegen.project import observer_file as observers
-from tests.conftest import new_starter
+from tests.conftest import new_starter, with_setting
 
 FAMILY = "algebraic_uio"
 
@@ -20,13 +19,6 @@ def toml(tmp_path_factory) -> Path:
     return new_starter(tmp_path_factory.mktemp("decay") / "p", FAMILY) / "obs1.toml"
 
 
-def _with_alpha(toml: Path, alpha: str) -> observers.ObserverConfig:
-    text = toml.read_text()
-    assert re.search(r"(?m)^alpha = ", text)
-    toml.write_text(re.sub(r"(?m)^alpha = .*$", f"alpha = {alpha}", text))
-    return observers.get(str(toml))
-
-
 def test_the_bound_follows_from_the_gauss_tableau():
     assert alg.GL_ROW_SUM == pytest.approx(0.5 + 3 ** 0.5 / 6)
     assert alg.decay_limit_of_step(0.001) == pytest.approx(1.0 / (0.001 * (0.5 + 3 ** 0.5 / 6)))
@@ -34,7 +26,7 @@ def test_the_bound_follows_from_the_gauss_tableau():
 
 @pytest.mark.parametrize("alpha", ["1e9", "2000.0"])
 def test_an_alpha_past_the_step_is_refused_naming_the_file_the_key_and_the_bound(toml, alpha):
-    config = _with_alpha(toml, alpha)
+    config = with_setting(toml, "alpha", alpha)
     limit = alg.decay_limit_of_step(config.sample_time)
     with pytest.raises(ConfigurationError) as info:
         pipeline.solve(config)
@@ -47,12 +39,12 @@ def test_an_alpha_past_the_step_is_refused_naming_the_file_the_key_and_the_bound
 
 @pytest.mark.slow       # four designs (the failed one and its measured retries)
 def test_a_legal_alpha_lmi_39_cannot_meet_names_a_lower_alpha_that_designs(toml):
-    config = _with_alpha(toml, "300.0")
+    config = with_setting(toml, "alpha", "300.0")
     assert 300.0 < alg.decay_limit_of_step(config.sample_time)
     with pytest.raises(InfeasibleLMIError) as info:
         pipeline.solve(config)
     said = re.search(r"measured: with \[design\] alpha = ([0-9.e+-]+) the design is solved and certified",
                      str(info.value))
     assert said, str(info.value)
-    b, _ = pipeline.solve(_with_alpha(toml, said.group(1)))       # the advice applied: it designs
+    b, _ = pipeline.solve(with_setting(toml, "alpha", said.group(1)))       # the advice applied: it designs
     assert b.settings.alpha == float(said.group(1))

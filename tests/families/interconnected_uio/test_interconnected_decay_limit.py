@@ -9,9 +9,8 @@ import pytest
 from codegen import pipeline
 from codegen.errors import ConfigurationError, InfeasibleLMIError
 from codegen.families.interconnected_uio import design as du, representation as icm
-from codegen.project import observer_file as observers
 from codegen.project.settings import parse_settings
-from tests.conftest import new_starter
+from tests.conftest import new_starter, with_setting
 
 FAMILY = "interconnected_uio"
 
@@ -19,13 +18,6 @@ FAMILY = "interconnected_uio"
 @pytest.fixture(scope="module")
 def toml(tmp_path_factory) -> Path:
     return new_starter(tmp_path_factory.mktemp("decay") / "p", FAMILY) / "obs1.toml"
-
-
-def _with_alpha(toml: Path, alpha: str) -> observers.ObserverConfig:
-    text = toml.read_text()
-    assert re.search(r"(?m)^alpha = ", text)
-    toml.write_text(re.sub(r"(?m)^alpha = [^ #]*", f"alpha = {alpha}", text))
-    return observers.get(str(toml))
 
 
 def _bound(config) -> float:
@@ -36,7 +28,7 @@ def _bound(config) -> float:
 
 @pytest.mark.parametrize("alpha", ["1e9", "1000.0"])
 def test_an_alpha_past_the_gain_bound_is_refused_naming_the_key_and_the_bound(toml, alpha):
-    config = _with_alpha(toml, alpha)
+    config = with_setting(toml, "alpha", alpha)
     bound = _bound(config)
     assert 0 < bound < float(alpha)
     with pytest.raises(ConfigurationError) as info:
@@ -49,12 +41,12 @@ def test_an_alpha_past_the_gain_bound_is_refused_naming_the_key_and_the_bound(to
 
 @pytest.mark.slow       # four designs (the failed one and its measured retries)
 def test_a_legal_alpha_27_cannot_meet_names_a_lower_alpha_that_designs(toml):
-    config = _with_alpha(toml, "100.0")
+    config = with_setting(toml, "alpha", "100.0")
     assert 100.0 < _bound(config)
     with pytest.raises(InfeasibleLMIError) as info:
         pipeline.solve(config)
     said = re.search(r"measured: with \[design\] alpha = ([0-9.e+-]+) the design is solved and certified",
                      str(info.value))
     assert said, str(info.value)
-    b, _ = pipeline.solve(_with_alpha(toml, said.group(1)))
+    b, _ = pipeline.solve(with_setting(toml, "alpha", said.group(1)))
     assert b.design.settings.alpha == float(said.group(1))

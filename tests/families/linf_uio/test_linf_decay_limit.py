@@ -10,8 +10,7 @@ import pytest
 from codegen import pipeline
 from codegen.errors import ConfigurationError, SolverError
 from codegen.families.linf_uio import build as lb, design as ld
-from codegen.project import observer_file as observers
-from tests.conftest import new_starter
+from tests.conftest import new_starter, with_setting
 
 FAMILY = "linf_uio"
 
@@ -21,17 +20,10 @@ def toml(tmp_path_factory) -> Path:
     return new_starter(tmp_path_factory.mktemp("decay") / "p", FAMILY) / "obs1.toml"
 
 
-def _with_alpha(toml: Path, alpha: str) -> observers.ObserverConfig:
-    text = toml.read_text()
-    assert re.search(r"(?m)^alpha = ", text)
-    toml.write_text(re.sub(r"(?m)^alpha = [^ #]*", f"alpha = {alpha}", text))
-    return observers.get(str(toml))
-
-
 def test_the_bound_is_the_trace_of_21_under_the_gain_bound(toml):
     """Any gains within the bound leave the frozen error matrix a trace >= -n alpha_max: an error matrix
     A + M C with ||M|| <= g has an eigenvalue with real part >= tr / n, so no such M decays faster."""
-    config = _with_alpha(toml, "5.0")
+    config = with_setting(toml, "alpha", "5.0")
     _, poly, _ = lb.representation(config)
     g = lb._settings(config).gain_bound
     bound, i = ld.decay_bound(poly, g)
@@ -45,7 +37,7 @@ def test_the_bound_is_the_trace_of_21_under_the_gain_bound(toml):
 
 
 def test_alpha_1e9_is_refused_naming_the_sample_time_and_the_bound(toml):
-    config = _with_alpha(toml, "1e9")
+    config = with_setting(toml, "alpha", "1e9")
     _, poly, _ = lb.representation(config)
     bound, _ = ld.decay_bound(poly, lb._settings(config).gain_bound)
     with pytest.raises(ConfigurationError) as info:
@@ -58,12 +50,12 @@ def test_alpha_1e9_is_refused_naming_the_sample_time_and_the_bound(toml):
 
 @pytest.mark.slow       # four designs (the failed one and its measured retries)
 def test_a_legal_alpha_that_does_not_solve_names_a_lower_alpha_that_designs(toml):
-    config = _with_alpha(toml, "100.0")
+    config = with_setting(toml, "alpha", "100.0")
     _, poly, _ = lb.representation(config)
     assert 100.0 < ld.decay_bound(poly, lb._settings(config).gain_bound)[0]
     with pytest.raises(SolverError) as info:
         pipeline.solve(config)
     said = re.search(r"measured: with \[design\] alpha = ([0-9.e+-]+) the design is solved", str(info.value))
     assert said, str(info.value)
-    b, _ = pipeline.solve(_with_alpha(toml, said.group(1)))
+    b, _ = pipeline.solve(with_setting(toml, "alpha", said.group(1)))
     assert b.design.settings.alpha == float(said.group(1))

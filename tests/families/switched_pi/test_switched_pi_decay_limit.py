@@ -8,8 +8,7 @@ import pytest
 
 from codegen import pipeline
 from codegen.errors import ConfigurationError, SolverError
-from codegen.project import observer_file as observers
-from tests.conftest import new_starter
+from tests.conftest import new_starter, with_setting
 
 FAMILY = "switched_pi"
 
@@ -19,17 +18,10 @@ def toml(tmp_path_factory) -> Path:
     return new_starter(tmp_path_factory.mktemp("decay") / "p", FAMILY) / "obs1.toml"
 
 
-def _with(toml: Path, key: str, value: str) -> observers.ObserverConfig:
-    text = toml.read_text()
-    assert re.search(rf"(?m)^{key} = ", text)
-    toml.write_text(re.sub(rf"(?m)^{key} = [^ #]*", f"{key} = {value}", text))
-    return observers.get(str(toml))
-
-
 @pytest.mark.parametrize("rate", ["1e9", "100.0"])
 def test_a_decay_rate_past_the_pole_disk_is_refused_naming_the_key_and_the_bound(toml, rate):
-    _with(toml, "pole_radius", "100.0")
-    config = _with(toml, "decay_rate", rate)
+    with_setting(toml, "pole_radius", "100.0")
+    config = with_setting(toml, "decay_rate", rate)
     with pytest.raises(ConfigurationError) as info:
         pipeline.solve(config)
     exc = info.value
@@ -40,13 +32,13 @@ def test_a_decay_rate_past_the_pole_disk_is_refused_naming_the_key_and_the_bound
 
 @pytest.mark.slow       # four designs (the failed one and its measured retries)
 def test_a_legal_decay_rate_theorem_2_cannot_meet_names_a_lower_one_that_designs(toml):
-    _with(toml, "pole_radius", "100.0")
-    config = _with(toml, "decay_rate", "50.0")
+    with_setting(toml, "pole_radius", "100.0")
+    config = with_setting(toml, "decay_rate", "50.0")
     with pytest.raises(SolverError) as info:
         pipeline.solve(config)
     said = re.search(r"measured: with \[design\] decay_rate = ([0-9.e+-]+) the design is solved and certified",
                      str(info.value))
     assert said, str(info.value)
     assert "loosen the tolerance" not in str(info.value)
-    b, _ = pipeline.solve(_with(toml, "decay_rate", said.group(1)))
+    b, _ = pipeline.solve(with_setting(toml, "decay_rate", said.group(1)))
     assert b.design.settings.decay_rate == float(said.group(1))
