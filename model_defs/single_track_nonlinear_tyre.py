@@ -90,7 +90,10 @@ MODEL = ModelDefinition(
     scheduling=(SchedulingSignal(v_x, "m/s"),),
     parameters=(m, l_f, l_r, I_z, C_f, C_r, mu_f, mu_r, g, brake_front, drive_front, lateral_floor),
     units={"v_y": "m/s", "r": "rad/s", "delta": "rad", "a_x": "m/s^2", "w_f": "-", "w_r": "-", "a_y": "m/s^2",
-           "v_x": "m/s"},
+           "v_x": "m/s",
+           # the parameters' units: a value in kN/rad or t where N/rad or kg is meant is refused (dimensions)
+           "m": "kg", "l_f": "m", "l_r": "m", "I_z": "kg m^2", "C_f": "N/rad", "C_r": "N/rad", "mu_f": "-",
+           "mu_r": "-", "g": "m/s^2", "brake_front": "-", "drive_front": "-", "lateral_floor": "-"},
     parameter_ranges={"brake_front": (0.0, 1.0), "drive_front": (0.0, 1.0), "lateral_floor": (0.0, 1.0, "(]")},
     doc=__doc__,
 )
