@@ -128,8 +128,11 @@ def test_ctrl_c_during_a_design_is_one_line(project):
     model = project / "model.py"
     model.write_text(f"import pathlib, time\npathlib.Path({str(marker)!r}).touch()\ntime.sleep(60)\n"
                      + model.read_text())
+    # Ctrl-C as a terminal delivers it: SIGINT at its default disposition in the child (a runner that starts the
+    # tests in the background, `cmd &` in a script, has it ignored, and Python then installs no handler)
     proc = subprocess.Popen([sys.executable, "-m", "codegen.cli", "design", str(project / "obs1.toml"), "--update"],
-                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     # waits for events (the marker, the exit), never for a time a loaded machine could overrun
     while not marker.exists():
         assert proc.poll() is None, proc.communicate()
