@@ -232,9 +232,24 @@ class Build(ObserverBuild):
         return np.array([vy_n, r_n, z[0], z[1]], dtype=float), float(excess)
 
     def contraction_metrics(self):
-        """The common P over the DMVT vertices of the certified set: the prediction (v_y, r)."""
+        """The common P over the DMVT vertices of the certified set: the prediction (v_y, r).
+
+        With ``through_sliding`` the step is not flagged beyond that set, so the decay set's P says
+        nothing there: the metric is then the through-sliding P_t, whose certificate holds at every slip
+        with the rate a phi - eps (1 - phi). Its c is the rate at full slope on both axles; at a sample
+        with less slope the step's own gain in the P_t norm (its Jacobian at the sample, which the
+        through-sliding blocks bound by sqrt(1 - T_s (a phi - eps (1 - phi))), above 1 only where both
+        axles slide) replaces it (:func:`codegen.targets.float32.deviation_bound`)."""
         from ...certificate.contraction import ContractionMetric
         D = self.plant.D            # P is solved in the scaled state D x (certify: D' P D)
+        if self.through is not None:
+            c = float(np.sqrt(1.0 - self.config.sample_time * self.through.rate))
+            return [ContractionMetric(c, (D.T @ self.through.P @ D,), tuple(self.state_names[:2]),
+                                      f"through-sliding P_t at every slip: A' P_t A <= c^2 P_t at full slope (rate "
+                                      f"{self.through.rate:.4g} 1/s), the step's own gain where the axles slide "
+                                      f"(growth at most {self.through.growth:.3g} 1/s)",
+                                      knob="[design] decay or decay_fraction (the gains' rate), or through_sliding "
+                                           "= false")]
         return [ContractionMetric(float(self.recheck["contraction_per_step"]), (D.T @ self.P @ D,),
                                   tuple(self.state_names[:2]),
                                   "common P over the DMVT vertices: A' P A <= c^2 P, on the certified slip set",

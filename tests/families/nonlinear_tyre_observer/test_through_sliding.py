@@ -168,3 +168,55 @@ def test_fit_writes_a_chosen_bool_as_toml():
     text = "[design]\nsliding_fraction = 0.95   # x\nthrough_sliding = true\n"
     out = _set_values(text, "design", {"through_sliding": False, "decay_fraction": 0.1})
     assert "through_sliding = false" in out and "decay_fraction = 0.1" in out and "sliding_fraction = 0.95" in out
+
+
+def test_the_float32_norm_is_the_through_certificate_at_every_slip(built):
+    # beyond the decay set the through-sliding step is not flagged, so the decay set's P (which says nothing
+    # there) must not bound a float32 deviation: the metric is P_t, c its rate at full slope, and the step's own
+    # gain in that norm (the float32 recursion's per-sample factor) stays within the claim at the local slope
+    (m,) = built.contraction_metrics()
+    D = built.plant.D
+    assert np.array_equal(m.P[0], D.T @ built.through.P @ D)
+    c = built.recheck
+    Ts = built.config.sample_time
+    assert m.contraction == pytest.approx(np.sqrt(1 - Ts * c["through_rate"]), rel=1e-12) and m.contraction < 0.99
+    _, _, forces, ratio = _model_functions(built.config)
+    full = [b.theta[0] for b in built.rep.through_set]
+    rng = np.random.default_rng(11)
+    h, sliding, gains = 1e-6, 0, []
+    for _ in range(400):
+        u, v = [rng.uniform(-0.2, 0.2), rng.uniform(-15, 10)], rng.uniform(15, 65)
+        xh = np.array([rng.uniform(-6, 6), rng.uniform(-0.6, 0.6)])
+        y = [rng.uniform(-10, 10), xh[1] + rng.uniform(-0.05, 0.05)]
+        J = np.zeros((2, 2))
+        for j in range(2):
+            dz = np.zeros(4)
+            dz[j] = h
+            hi = built.reference_step(np.array([*xh, 0, 0]) + dz, u, y, [v])[0][:2]
+            lo = built.reference_step(np.array([*xh, 0, 0]) - dz, u, y, [v])[0][:2]
+            J[:, j] = (hi - lo) / (2 * h)
+        # the local slope of each axle force along v_y at the estimate (r measured inside the forces)
+        theta = [v * (F(xh[0] + h, y[1], *u, v) - F(xh[0] - h, y[1], *u, v)) / (2 * h) for F in forces]
+        phi = float(np.mean([th / fl for th, fl in zip(theta, full)]))
+        claimed = np.sqrt(1.0 - Ts * dsn.through_rate(phi, c["through_rate"], c["sliding_growth"]))
+        g = float(m.self_gain(J[None])[0])
+        assert g <= max(m.contraction, claimed) * (1 + 1e-6)
+        gains.append(g)
+        sliding += all(q(xh[0], y[1], *u, v) > 1.0 for q in ratio)
+    assert sliding > 20 and max(gains) > m.contraction             # the per-sample gain is what carries sliding
+
+
+def test_float32_accepts_the_through_sliding_step_on_the_log(tmp_path):
+    # the Ferrari's starter with every slip certified: no sample of the shared log outside the certified set,
+    # and the float32 deviation bounded in the through-sliding norm within 0.1 x the noise response
+    from codegen.targets import float32
+    folder = new_starter(tmp_path / "p", "nonlinear_tyre_observer", "tyre_f32")
+    obs = folder / "tyre_f32.toml"
+    obs.write_text(obs.read_text().replace("through_sliding = false", "through_sliding = true"))
+    for verb in ("design", "generate", "build"):
+        assert cli.main([verb, str(obs)]) == 0
+    r = float32.compare(str(obs), scenarios=["stanford log"])
+    row = r["scenarios"]["stanford log"]
+    assert r["passes"] and row["outside_certified_set"] == 0 and row["bound_covers_deviation"]
+    assert "through-sliding" in r["metrics"][0]["source"]
+    assert row["signals"]["v_y"]["bound"] < 0.2 * row["signals"]["v_y"]["tolerance"]
