@@ -241,7 +241,7 @@ def cmd_build(args) -> int:
     variant = next((t for t in targets.all_targets()
                     if isinstance(t, targets.BuildVariant) and getattr(args, t.build_flag, False)), None)
     if variant is None:
-        return extension.main(args.names, project=args.project)
+        return extension.main(args.names, project=args.project, force=args.force)
     return variant.build(args.names, project=args.project)
 
 
@@ -632,6 +632,9 @@ def main(argv=None) -> int:
     p.set_defaults(func=cmd_generate)
     p = sub.add_parser("build", parents=[project], help="compile the generated C into Python extensions")
     p.add_argument("names", nargs="*")
+    p.add_argument("--force", action="store_true", help="compile and check again an extension whose generated C "
+                                                         "and files are unchanged since it was built (skipped "
+                                                         "otherwise)")
     for t in targets.all_targets():         # the build variants the registered targets offer (--float32)
         if isinstance(t, targets.BuildVariant):
             p.add_argument(f"--{t.build_flag}", action="store_true", help=t.build_help)

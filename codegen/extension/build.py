@@ -232,6 +232,7 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
             where = str(src_dir / lock_name)
             design_lock.verify(data, where, config.name if config.builtin else config.source)
             report = conformance.check(pipeline.build(config, design_lock.replay(data, where)), module, snap, data)
+            key = build_key(snap, sources, extra, suffix, module_file)
             with outputs.writing(target):
                 outputs.write_atomic(integrity.record_path(target),
                                      integrity.record_text(candidate.read_bytes(), module_file))
@@ -240,11 +241,52 @@ def build_extension(observer, extra_flags: list | None = None, ext_dir: Path | N
             shutil.rmtree(staging, ignore_errors=True)
         # the evidence the extension was installed on, beside its objects: a reader checks that its
         # design hash is the installed module's (a build killed between the two writes leaves them apart)
-        record = {"extension": module_file, "design_sha256": module.DESIGN_SHA256, **report.as_record()}
+        record = {"extension": module_file, "design_sha256": module.DESIGN_SHA256, "build_key": key,
+                  **report.as_record()}
         outputs.write_atomic(build_dir / CONFORMANCE_RECORD, json.dumps(record, indent=1) + "\n")
     if log is not None:
         log(f"{name}: {report.line()}")
     return target
+
+
+def build_key(generated: Path, sources: str, extra: list, suffix: str, module_file: str) -> str:
+    """The SHA-256 of everything an installed extension is made from and checked by: every file of the
+    generated folder ``generated`` (the C, the header, the design lock), the hashes of the files the design
+    is made from (``sources``), the compiler and every flag, the Python ABI and numpy the glue is compiled
+    against, the glue's template and the conformance check that let it be installed."""
+    import numpy
+    from . import conformance
+    from ..emit.toolchain import TEMPLATES
+    h = hashlib.sha256()
+    for p in sorted(q for q in generated.iterdir() if q.is_file()):
+        h.update(p.name.encode() + b"\0" + hashlib.sha256(p.read_bytes()).digest())
+    for part in (sources, compiler(), " ".join(STRICT_FLAGS), " ".join(GLUE_FLAGS), " ".join(extra), suffix,
+                 module_file, sys.version, numpy.__version__):
+        h.update(part.encode() + b"\0")
+    for f in (TEMPLATES / "pymodule.c.j2", Path(conformance.__file__), Path(__file__)):
+        h.update(hashlib.sha256(f.read_bytes()).digest())
+    return h.hexdigest()
+
+
+def installed_unchanged(config: observers.ObserverConfig, extra_flags: list | None = None) -> dict | None:
+    """The conformance record of ``config``'s installed extension when nothing it is made from changed since
+    it was built and checked (:func:`build_key` of the generated folder now, under the lock of ``generate``,
+    equals the one recorded, and the extension's bytes are those its build record holds); else None."""
+    name = config.name
+    src_dir = generated_dir(config)
+    target = config.workspace.extensions / config.workspace.extension(name).name
+    record = conformance_record(config)
+    if not record.get("build_key") or record.get("extension") != target.name or not target.is_file():
+        return None
+    if integrity.binary_mismatch(target):
+        return None
+    extra = SPEED_FLAGS + (LTO_FLAGS if lto_supported() else []) + list(extra_flags or [])
+    sources = json.dumps(source_record(config), sort_keys=True)
+    with _flock(src_dir.parent / ".generate.lock", fcntl.LOCK_SH):
+        if not src_dir.is_dir():
+            return None
+        key = build_key(src_dir, sources, extra, "", target.name)
+    return record if key == record["build_key"] else None
 
 
 def source_record(config: observers.ObserverConfig) -> dict:
@@ -337,12 +379,20 @@ def require_current(config: observers.ObserverConfig) -> None:
                               f"`uiogen build {how}`")
 
 
-def main(argv=None, project: Path | None = None) -> int:
+def main(argv=None, project: Path | None = None, force: bool = False) -> int:
     """``uiogen build [NAME ...]``: compile the named observers (default: every generated built-in
-    one) into their project's ``build/extensions/``, or ``project``'s."""
+    one) into their project's ``build/extensions/``, or ``project``'s. An observer whose installed
+    extension was built and checked from exactly what is there now (:func:`installed_unchanged`) is
+    skipped, saying so, unless ``force``."""
     names = (argv if argv is not None else sys.argv[1:]) or generated_names(project)
     for name in names:
         config = observers.get(name, project=project)
+        kept = None if force else installed_unchanged(config)
+        if kept is not None:
+            print(f"{config.name}: unchanged (the installed extension was built from this generated C and these "
+                  f"files, and passed its conformance check: {kept.get('samples', '?')} samples), skipped; "
+                  f"--force builds and checks it again")
+            continue
         path = build_extension(config, log=print)
         try:
             shown = path.relative_to(config.workspace.root)
