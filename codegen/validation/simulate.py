@@ -64,12 +64,45 @@ def plant_rhs(lpv: LPVModel, definition=None):
     return rhs, nx, nu, nd
 
 
+def scenario_digest(scn) -> str:
+    """SHA-256 of everything a closed-loop run of scenario ``scn`` reads: its name, seed and rate, every array
+    byte for byte, the circle, the driver's gains and the friction."""
+    import hashlib
+    import json
+    h = hashlib.sha256(json.dumps([scn.name, scn.seed, scn.sample_rate, scn.circle, scn.mu,
+                                   None if scn.driver is None else vars(scn.driver)], default=repr).encode())
+    for key, arr in sorted(scn.arrays().items()):
+        a = np.ascontiguousarray(arr, dtype=float)
+        h.update(key.encode() + b"\0" + str(a.shape).encode() + a.tobytes())
+    return h.hexdigest()
+
+
+NOMINAL = "nominal_plant"
+"""The kind of the kept closed-loop runs (:func:`codegen.model.cache.remembered`): the same model, parameters,
+sample time and scenario give the same truth, every run."""
+
+
 def nominal_plant(config, lpv: LPVModel, scn, definition=None, progress=None) -> dict:
     """The observer's own symbolic model, integrated exactly (RK4 at Ts/10: true 1/v_x terms, no
     polytope, no Taylor reduction) with planar pose kinematics, closed with the scenario's driver.
 
     Returns the truth per sample: t, v_x, beta, r, delta, delta_dot, T_d, T_a and
-    a_y = v_x (beta_dot + r) (for the baselines' measurement)."""
+    a_y = v_x (beta_dot + r) (for the baselines' measurement). A run is kept across runs, keyed by the
+    model's content (and the truth plant's), the parameter values, the sample time and the scenario
+    (:func:`scenario_digest`), with this module's and the driver's code; ``progress`` is then not called."""
+    import sys
+
+    from ..model import cache
+    from . import scenarios
+    parts = {"model": cache.model_digest(lpv.definition),
+             "plant": None if definition is None else cache.model_digest(definition),
+             "values": dict(lpv.parameters.values), "plant_values": dict(lpv.parameters.plant),
+             "sample_time": float(config.sample_time), "scenario": scenario_digest(scn)}
+    return cache.remembered(NOMINAL, parts, lambda: _integrate(config, lpv, scn, definition, progress),
+                            sys.modules[__name__], scenarios)
+
+
+def _integrate(config, lpv: LPVModel, scn, definition=None, progress=None) -> dict:
     d = lpv.definition
     names = d.state_names
     if not {"beta", "r", "delta", "delta_dot"} <= set(names):
