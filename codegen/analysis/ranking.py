@@ -131,10 +131,25 @@ class Trial:
     reason: str = ""
     error: type | None = None       # the exception class of a failed design
     remedy: dict = field(default_factory=dict)  # a failed design's measured fix {dotted key: value} (UILoopError)
+    kept: bool = False              # the design's outcome kept from an earlier run on the same inputs
+
+    def record(self) -> dict:
+        """The trial as data (:func:`codegen.model.cache.remembered` keeps it): the error by its name."""
+        return {"family": self.family, "status": self.status, "settings": self.settings, "seconds": self.seconds,
+                "headline": self.headline, "figures": {k: list(v) for k, v in self.figures.items()},
+                "reason": self.reason, "error": None if self.error is None else self.error.__name__,
+                "remedy": dict(self.remedy)}
+
+    @classmethod
+    def from_record(cls, r: dict, kept: bool) -> "Trial":
+        from .. import errors
+        error = None if r["error"] is None else getattr(errors, r["error"], UiogenError)
+        return cls(r["family"], r["status"], r["settings"], r["seconds"], r["headline"],
+                   {k: tuple(v) for k, v in r["figures"].items()}, r["reason"], error, dict(r["remedy"]), kept)
 
     def to_json(self) -> dict:
         return {"family": self.family, "status": self.status, "settings": self.settings, "seconds": self.seconds,
-                "headline": self.headline, "reason": self.reason,
+                "kept": self.kept, "headline": self.headline, "reason": self.reason,
                 "figures": {k: {"value": v, "unit": u, "meaning": m} for k, (v, u, m) in self.figures.items()}}
 
 
@@ -423,9 +438,35 @@ def _trial_key(text: str, subject: Subject, add_states: tuple) -> str:
     return h.hexdigest()
 
 
+TRIAL = "analysis_trial"
+"""The kind of the kept trial designs (:func:`codegen.model.cache.remembered`): the same observer file on the
+same model and parameters, with the same code and packages, designs the same way every run."""
+
+
 def _solve(path: Path, app: Applicability, label: str, progress=None) -> Trial:
     """The trial design of the observer file ``path``; ``progress``: the analysis's, which gets the
-    design's LMI solves once it has run :data:`~codegen.design.solver.PROGRESS_AFTER` seconds."""
+    design's LMI solves once it has run :data:`~codegen.design.solver.PROGRESS_AFTER` seconds. Its outcome
+    is kept across runs, keyed by the design's inputs as the design lock hashes them (the observer file as
+    parsed, the model and parameter files as they read, every module the family and the model import, the
+    packages' versions), the files' paths and this module's code (``Trial.kept`` says so)."""
+    import sys
+
+    from ..design import lock
+    from ..model import cache
+    from ..project import observer_file as observers
+    try:
+        config = observers.get(str(path))
+        parts = {"design_inputs": lock.design_inputs(config), "model": str(config.model_path),
+                 "parameters": str(config.parameter_path), "family": app.family, "settings": label}
+    except UiogenError:             # the file itself is refused: the trial says why, every time
+        return _design(path, app, label, progress)
+    designed = []
+    record = cache.remembered(TRIAL, parts, lambda: designed.append(1) or _design(path, app, label, progress).record(),
+                              sys.modules[__name__])
+    return Trial.from_record(record, kept=not designed)
+
+
+def _design(path: Path, app: Applicability, label: str, progress=None) -> Trial:
     from .. import pipeline
     from ..project import observer_file as observers
     t0 = time.perf_counter()

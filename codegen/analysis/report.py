@@ -98,10 +98,10 @@ def family_lines(ranking: Ranking) -> list:
         if not app.applies and app.fix:
             lines.append(f"       fix: {app.fix}")
         if trial.status == "certified":
-            lines.append(f"       trial design ({trial.settings}): certified in {trial.seconds:.1f} s: "
+            lines.append(f"       trial design ({trial.settings}): certified {_took(trial)}: "
                          f"{_figures(trial.figures) or trial.headline}")
         elif trial.status == "failed":
-            lines.append(f"       trial design ({trial.settings}): FAILED in {trial.seconds:.1f} s: "
+            lines.append(f"       trial design ({trial.settings}): FAILED {_took(trial)}: "
                          f"{trial.reason}")
         elif app.applies:
             lines.append(f"       trial design: not tried ({trial.reason})")
@@ -157,6 +157,11 @@ def explain(ranking: Ranking) -> str:
     return text + f"; the observer file's family {own} ranks {k + 1}: {why}"
 
 
+def _took(trial) -> str:
+    """How long the trial design took, and whether this run kept its outcome from an earlier one."""
+    return f"in {trial.seconds:.1f} s" + (" (kept: an earlier run designed the same inputs)" if trial.kept else "")
+
+
 def lines(analysis) -> list:
     out = subject_lines(analysis.subject, analysis.structure) + [""] + structure_lines(analysis.structure) + [""] \
         + estimable_lines(analysis.structure)
@@ -165,7 +170,7 @@ def lines(analysis) -> list:
         c = analysis.ranking.completed
         if c is not None:
             t = c["trial"]
-            result = (f"certified in {t.seconds:.1f} s: {_figures(t.figures) or t.headline}" if t.status == "certified"
+            result = (f"certified {_took(t)}: {_figures(t.figures) or t.headline}" if t.status == "certified"
                       else f"{t.status}: {t.reason}")
             added = "; ".join(f"{k} = {toml_repr(v, 10 ** 6)}" for k, v in c["added"].items())
             out.append(f"the fix, measured: the observer file's settings completed with {added}: the {c['family']} "
@@ -173,7 +178,7 @@ def lines(analysis) -> list:
         w = analysis.ranking.what_if
         if w is not None:
             t = w["trial"]
-            result = (f"certified in {t.seconds:.1f} s: {_figures(t.figures) or t.headline}" if t.status == "certified"
+            result = (f"certified {_took(t)}: {_figures(t.figures) or t.headline}" if t.status == "certified"
                       else f"{t.status}: {t.reason}")
             out.append(f"the fix, measured: with {w['sensor']} measured too ({w['fact']}), the observer file's "
                        f"{w['family']} design is {result}")
