@@ -82,7 +82,11 @@ DYNAMICS = {
 UNITS = {"v_x": "m/s", "omega_f": "rad/s", "omega_r": "rad/s", "F_xf": "N", "F_xr": "N", "v_y": "m/s",
          "r": "rad/s", "psi_L": "rad", "y_L": "m", "F_yf": "N", "F_yr": "N", "delta": "rad",
          "delta_dot": "rad/s", "T_Bf": "N m", "B_r": "N m", "T_s": "N m", "kappa": "1/m",
-         "a_x": "m/s^2", "a_y": "m/s^2", "F_rr": "N", "F_w": "N"}
+         "a_x": "m/s^2", "a_y": "m/s^2", "F_rr": "N", "F_w": "N",
+         # the parameters' units: a value in t, kN/rad or mm where kg, N/rad or m is meant is refused (dimensions)
+         "m": "kg", "I_z": "kg m^2", "l_f": "m", "l_r": "m", "l_s": "m", "l_w": "m", "R": "m",
+         "I_wf": "kg m^2", "I_wr": "kg m^2", "C_f": "N/rad", "C_r": "N/rad", "C_lf": "N", "C_lr": "N",
+         "sigma": "m", "I_s": "kg m^2", "R_s": "-", "B_s": "N m s/rad", "t_sb": "N m/rad", "c_a": "kg/m"}
 
 MODEL = InterconnectedModelDefinition(
     name="interconnected_vehicle",

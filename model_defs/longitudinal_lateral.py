@@ -39,7 +39,12 @@ def _dynamics(F_yf, F_yr):
 _F_yf = 2 * C_f * (delta - (v_y + l_f * r) / v_x)
 _F_yr = 2 * C_r * (l_r * r - v_y) / v_x
 
-UNITS = {"v_x": "m/s", "v_y": "m/s", "r": "rad/s", "T_eng": "N m", "delta": "rad"}
+UNITS = {"v_x": "m/s", "v_y": "m/s", "r": "rad/s", "T_eng": "N m", "delta": "rad",
+         # the parameters' units (a value in t or kN/rad where kg or N/rad is meant is refused): I_e is the
+         # paper's equivalent inertia of the driveline at the wheel, T_eng / I_e an acceleration, so kg m;
+         # the drag terms C_x v_x^2 (a torque, like T_eng) and C_y v_y^2 (a force)
+         "M": "kg", "l_f": "m", "l_r": "m", "I_e": "kg m", "I_z": "kg m^2", "C_f": "N/rad", "C_r": "N/rad",
+         "C_x": "N s^2/m", "C_y": "N s^2/m^2", "mu": "-", "g": "m/s^2", "C_pac": "-", "E_pac": "-"}
 
 MODEL = ModelDefinition(
     name="longitudinal_lateral",

@@ -37,7 +37,11 @@ m, m_s, I_x, I_z, l_f, l_r, h_r, K_r, b_r, C_f, C_r, g = sp.symbols(
     "m m_s I_x I_z l_f l_r h_r K_r b_r C_f C_r g", positive=True)
 
 UNITS = {"beta": "rad", "r": "rad/s", "phi": "rad", "phi_dot": "rad/s", "delta": "rad", "phi_r": "rad",
-         "v_x": "m/s", "v_y": "m/s", "a_x": "m/s^2"}
+         "v_x": "m/s", "v_y": "m/s", "a_x": "m/s^2",
+         # the parameters' units: a value in t, kN/rad or mm where kg, N/rad or m is meant is refused (dimensions)
+         "m": "kg", "m_s": "kg", "I_x": "kg m^2", "I_z": "kg m^2", "l_f": "m", "l_r": "m", "h_r": "m",
+         "K_r": "N m/rad", "b_r": "N m s/rad", "C_f": "N/rad", "C_r": "N/rad", "g": "m/s^2",
+         "mu": "-", "h_cg": "m", "C_pac": "-", "E_pac": "-"}
 
 
 def balances(a, phi_dd, F_yf, F_yr, sin_bank, gravity_moment, cos_phi=1, centripetal=0):
