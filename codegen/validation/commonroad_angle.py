@@ -73,6 +73,10 @@ C_y = 0.0
 v_x = [5.0, 30.0]     # m/s, Nguyen et al. 2021 eq. (5)
 v_y = [-1.5, 1.5]     # m/s
 r = [-0.55, 0.55]     # rad/s
+
+[plausibility]
+# C_x has the dimension of a mass (N m per (m/s)^2, a drag torque coefficient), not the value of one
+accept = ["C_x"]
 """
 
 
