@@ -36,11 +36,15 @@ COLUMN_KEYS = {"column": Rule(str, required=True, doc="the log's column (CSV hea
                "resample": Rule(str, doc='a channel at another rate than the observer\'s: "hold" (default: the last '
                                          'sample) or "linear" (causal, delayed by its sampling step)')}
 RESAMPLE = ("hold", "linear")
+FIT_SIGNALS = {"yaw_acceleration": "rad/s^2"}
+"""The signals a ``[data.fit]`` table may map (``uiogen fit`` reads them; ``validate`` does not), and their unit."""
 PHYSICS_CHECKS = ("refuse", "warn")
 TIME_KEYS = {k: v for k, v in COLUMN_KEYS.items() if k != "resample"}   # the time base is not resampled
 DATA_KEYS = {"time": Rule(None, required=True, doc='"COLUMN" (seconds) or { column = ..., unit = ... }'),
              "inputs": Rule(dict, required=True, doc="{ OBSERVER_INPUT = { column = ..., unit = ... } }"),
              "truth": Rule(dict, doc="{ OBSERVER_OUTPUT = { column = ..., unit = ... } }"),
+             "fit": Rule(dict, doc="{ yaw_acceleration = { column = ..., unit = ... } }: what only `uiogen fit` "
+                                   "reads beside the inputs and the references (absent: derived from the yaw rate)"),
              "dbc": Rule(str, doc='the DBC a CAN log (BLF, ASC) is decoded with, relative to the observer file; '
                                   'columns are then "MESSAGE.SIGNAL"'),
              "can_channel": Rule(int, ge=1, doc="the bus of a CAN log recorded on several, numbered as Vector's "
@@ -73,6 +77,7 @@ class ColumnMap:
     time: Column
     inputs: dict = field(default_factory=dict)
     truth: dict = field(default_factory=dict)
+    fit: dict = field(default_factory=dict)     # FIT_SIGNALS the log records ([data.fit])
     dbc: str | None = None          # the DBC of a CAN log, as a path (relative ones resolved against the source)
     physics_checks: str = "refuse"  # "warn": a failed physics relation of the log checks is a warning
     can_channel: int | None = None  # the bus of a multi-bus CAN log (1 = CAN 1); None: the log must not need one
@@ -124,6 +129,13 @@ def parse(table, source: str) -> ColumnMap:
                                                                     if dim == "time"), keys=TIME_KEYS)
     inputs = {k: _column(v, source, "data.inputs", k) for k, v in table["inputs"].items()}
     truth = {k: _column(v, source, "data.truth", k) for k, v in table.get("truth", {}).items()}
+    for k, v in table.get("fit", {}).items():
+        if k not in FIT_SIGNALS:
+            raise config_error(source, "data.fit", k, v, f"one of {', '.join(FIT_SIGNALS)} (what uiogen fit reads "
+                               f"beside the inputs and the references)", suggest(k, list(FIT_SIGNALS)))
+    fit = {k: _column(v, source, "data.fit", k) for k, v in table.get("fit", {}).items()}
+    for k, c in fit.items():
+        factor(c, FIT_SIGNALS[k], source, "data.fit", k)           # its unit of the signal's kind, now
     dbc = parsed.get("dbc")
     if dbc is not None:
         if not dbc.strip():
@@ -135,7 +147,7 @@ def parse(table, source: str) -> ColumnMap:
     if can_channel is not None and dbc is None:
         raise config_error(source, "data", "can_channel", can_channel, "a bus number beside dbc = \"FILE.dbc\" (it "
                            "chooses the frames of a CAN log, which only a DBC decodes)")
-    return ColumnMap(source, time, inputs, truth, dbc, parsed.get("physics_checks", "refuse"), can_channel)
+    return ColumnMap(source, time, inputs, truth, fit, dbc, parsed.get("physics_checks", "refuse"), can_channel)
 
 
 def model_unit(model, signal: str) -> str | None:

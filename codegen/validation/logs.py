@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigurationError, DatasetError
-from ..project.columns import UNITS, Column, factor, model_unit
+from ..project.columns import FIT_SIGNALS, UNITS, Column, factor, model_unit
 from ..project.settings import config_error, suggest
 from . import csvlog, log_checks, logfiles, streaming
 from .common import SETTLE_TIME, format_stats
@@ -88,7 +88,7 @@ class MappedLog:
     """
 
     def __init__(self, config, path, input_names, output_names, sample_time: float,
-                 block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | None = None):
+                 block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | None = None, fit_signals=()):
         from ..model import load_parameters
         require_map(config)
         cmap = config.column_map
@@ -110,7 +110,10 @@ class MappedLog:
                                      f"observer input ({', '.join(input_names)}); missing: {', '.join(missing)}",
                                      source=cmap.source, section="data.inputs", key=missing[0],
                                      allowed="a column for every observer input")
-        names = {**cmap.inputs, **{f"truth:{k}": c for k, c in cmap.truth.items()}}
+        # what the caller reads of [data.fit] (uiogen fit: a recorded yaw acceleration), in its FIT_SIGNALS unit
+        fit = {k: c for k, c in cmap.fit.items() if k in fit_signals}
+        names = {**cmap.inputs, **{f"truth:{k}": c for k, c in cmap.truth.items()},
+                 **{f"fit:{k}": c for k, c in fit.items()}}
         p = Path(path)
         units = {cmap.time.column: cmap.time.unit or "s"}
         for c in names.values():
@@ -129,9 +132,11 @@ class MappedLog:
         # the units the file states (an MDF channel's, a Parquet field's) against the map's and the model's
         mapped, declared_by = {}, {}
         for n, c in names.items():
-            signal = n.removeprefix("truth:")
-            unit, source = logfiles.resolve_unit(p, f"{word} {c.column!r} ({n.replace('truth:', 'reference of ')})",
-                                                 reader.file_units.get(c.column), c.unit, model_unit(model, signal))
+            signal = n.removeprefix("truth:").removeprefix("fit:")
+            want = FIT_SIGNALS[signal] if n.startswith("fit:") else model_unit(model, signal)
+            what = n.replace("truth:", "reference of ").replace("fit:", "[data.fit] ")
+            unit, source = logfiles.resolve_unit(p, f"{word} {c.column!r} ({what})",
+                                                 reader.file_units.get(c.column), c.unit, want)
             mapped[n] = Column(c.column, unit, c.scale, c.resample)
             declared_by[n] = "file" if source == "file" and c.unit is None else "map"
         in_cols = {n: mapped[n] for n in cmap.inputs}
@@ -139,6 +144,8 @@ class MappedLog:
         scale = {k: factor(c, model_unit(model, k), cmap.source, "data.inputs", k) for k, c in in_cols.items()}
         scale.update({f"truth:{k}": factor(c, model_unit(model, k), cmap.source, "data.truth", k)
                       for k, c in truth.items()})
+        self.fit = {k: mapped[f"fit:{k}"] for k in fit}
+        scale.update({f"fit:{k}": factor(c, FIT_SIGNALS[k], cmap.source, "data.fit", k) for k, c in self.fit.items()})
         time = csvlog.TimeCheck(p, sample_time, column=cmap.time.column)
         if mdf:                 # every channel's own times, in s: the map's time entry is not read
             t_factor = 1.0
@@ -179,7 +186,13 @@ class MappedLog:
             self.checks.feed(t, inputs)
             truth = {n: cols[c.column] * self.scale[f"truth:{n}"] for n, c in cmap.truth.items()}
             self.checks.feed_truth(truth)
-            yield t, inputs, truth
+            fit = {n: cols[c.column] * self.scale[f"fit:{n}"] for n, c in self.fit.items()}
+            for n, x in fit.items():
+                if not np.all(np.isfinite(x)):
+                    k = int(np.flatnonzero(~np.isfinite(x))[0])
+                    raise DatasetError(f"{self.path}: [data.fit] {n}: {self.fit[n].column!r} is not a finite number "
+                                       f"at t = {t[k]:g} s (every sample the fit reads must be)")
+            yield t, inputs, truth, fit
 
     def finish(self) -> dict:
         self.time.finish()
@@ -221,7 +234,7 @@ def run(config, path, block_bytes: int = csvlog.BLOCK_BYTES, batch_rows: int | N
         from . import logout
         written = logout.OutputLog(out, declared, f"uiogen validate {config.name} --data {p}")
     try:
-        for t, ins, refs in log.chunks():
+        for t, ins, refs, _ in log.chunks():
             inputs = np.column_stack([ins[n] for n in obs.input_names])
             est, status, state = obs.run(inputs, state)
             flags += int(np.count_nonzero(status))

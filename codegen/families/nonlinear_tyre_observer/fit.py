@@ -7,8 +7,8 @@ reader (:class:`codegen.validation.logs.MappedLog`: the file's units converted, 
 observer's sample time, the model's physics checked), the lateral speed reference its ``[data.truth]``
 entry; without a map, the shared Stanford format (``vx``, ``vy``, ``ay``, ``yaw_rate``, ``delta``,
 ``ax``, optionally ``yaw_acc``) in a CSV, Parquet or MDF4 file (:func:`codegen.validation.stanford.open_log`).
-The yaw acceleration is the log's ``yaw_acc`` where it records one; where it records none (a mapped log,
-most logs), the yaw rate's derivative ``numpy.gradient(yaw_rate, t)`` on the observer's grid over the
+The yaw acceleration is the log's ``yaw_acc`` where it records one (a mapped log: the channel its ``[data.fit]
+yaw_acceleration`` names, converted to rad/s^2); where it records none (most logs), the yaw rate's derivative ``numpy.gradient(yaw_rate, t)`` on the observer's grid over the
 range, said in the printed output (on the shared Ferrari half, samples 0:13750, the gradient instead of
 the recorded column moves the fitted stiffnesses by 0.1 %, mu not at all, the sideslip RMS by 1e-5 deg).
 Only samples A..B-1 are read for any choice. Fitted:
@@ -127,7 +127,7 @@ def log_columns(module, source: str) -> dict:
 
 
 DERIVED_YAW_ACC = ("yaw acceleration: the log records none; derived from the yaw rate as numpy.gradient(yaw_rate, t) "
-                   "on the observer's grid over the samples read")
+                   "on the observer's grid over the samples read (a recorded one: [data.fit] yaw_acceleration)")
 """The line the fit prints when it derives the yaw acceleration."""
 
 
@@ -162,10 +162,11 @@ def read_run(config, path) -> tuple:
                                  f"log's lateral speed reference", source=cmap.source, section="data.truth",
                                  key=s.lateral_speed, allowed="the log's lateral speed reference")
     p = stanford._resolve(path)
-    log = logs.MappedLog(config, p, inputs, outputs, config.sample_time)
+    log = logs.MappedLog(config, p, inputs, outputs, config.sample_time, fit_signals=("yaw_acceleration",))
     parts = {}
-    for t, ins, refs in log.chunks():
-        for k, v in {"t": t, **ins, **{f"truth:{n}": x for n, x in refs.items()}}.items():
+    for t, ins, refs, extra in log.chunks():
+        for k, v in {"t": t, **ins, **{f"truth:{n}": x for n, x in refs.items()},
+                     **{f"fit:{n}": x for n, x in extra.items()}}.items():
             parts.setdefault(k, []).append(v)
     report = log.finish()
     notes = [x for x in [logs.resampled_line(log.resampling)] if x]
@@ -190,7 +191,9 @@ def read_run(config, path) -> tuple:
     vx, vy = out["vx"], out["vy"]
     # delta_fl, delta_fr: the fit reads neither (the mean road-wheel angle stands for both)
     return stanford.StanfordRun(t=out["t"], vx=vx, vy=vy, beta_true=np.arctan2(vy, vx), ax=out["ax"], ay=out["ay"],
-                                yaw_rate=out["yaw_rate"], yaw_acc=None, delta=out["delta"], delta_fl=out["delta"],
+                                yaw_rate=out["yaw_rate"], yaw_acc=(np.concatenate(parts["fit:yaw_acceleration"])
+                                                                   if "fit:yaw_acceleration" in parts else None),
+                                delta=out["delta"], delta_fl=out["delta"],
                                 delta_fr=out["delta"], source=str(p)), notes
 
 

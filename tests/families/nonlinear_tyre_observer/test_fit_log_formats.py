@@ -217,3 +217,37 @@ def test_a_mapped_log_needs_the_lateral_speed_reference(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and err.startswith("uiogen: error: ConfigurationError: "), err
     assert str(observer) in err and "[data.truth] v_y is missing" in err and "in [data.truth]" in err, err
+
+
+@pytest.mark.slow       # two fits of 3000 samples with the EKF grid: about 15 s
+def test_a_recorded_yaw_acceleration_is_mapped_by_data_fit(tmp_path, capsys):
+    """[data.fit] yaw_acceleration names the log's recorded yaw acceleration (in its unit): the mapped Parquet
+    half fits as the shared CSV with its yaw_acc column does, and says nothing of a derivative."""
+    require_shared(stanford.STANFORD_PATH, "shared Stanford log")
+    table = pcsv.read_csv(stanford.STANFORD_PATH).slice(0, ROWS)
+    csv = tmp_path / "half.csv"
+    pcsv.write_csv(table, csv)
+    ref = _fitted(capsys, NAME, csv)
+    assert f"  {fit.DERIVED_YAW_ACC}" not in ref
+    cols = {c: table.column(c).to_numpy() for c in table.column_names}
+    import pyarrow as pa
+    log = tmp_path / "half.parquet"                 # the yaw acceleration logged in deg/s^2
+    pq.write_table(pa.table({**cols, "yaw_acc": cols["yaw_acc"] * 180 / np.pi}), log)
+    obs = _mapped_observer(tmp_path, {k: c for k, (c, _) in MAPPED.items()})
+    obs.write_text(obs.read_text() + '\n[data.fit]\nyaw_acceleration = { column = "yaw_acc", unit = "deg/s^2" }\n')
+    mapped = _fitted(capsys, obs, log)
+    assert mapped[0] == ref[0] and len(mapped) == len(ref)
+    # the same numbers but for the last digits the unit's round trip leaves
+    num = re.compile(r"[-+]?\d+\.?\d*(?:e[-+]?\d+)?")
+    for a, b in zip(mapped[1:], ref[1:]):
+        assert num.sub("#", a) == num.sub("#", b), (a, b)
+        for x, y in zip(num.findall(a), num.findall(b)):
+            assert float(x) == pytest.approx(float(y), rel=2e-3, abs=1e-9), (a, b)
+    # a key that is not a fit signal, a unit of another kind: one typed line naming the table and the key
+    for bad, said in (('yaw_accel = "yaw_acc"', "[data.fit] yaw_accel"),
+                      ('yaw_acceleration = { column = "yaw_acc", unit = "m/s^2" }', "a unit of angular acceleration")):
+        obs.write_text(obs.read_text().rsplit("[data.fit]\n", 1)[0] + f"[data.fit]\n{bad}\n")
+        assert cli.main(["fit", str(obs), "--data", str(log), "--samples", "0:500", "--folds", "0"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and err.startswith("uiogen: error: ConfigurationError: "), err
+        assert str(obs) in err and said in err, err
