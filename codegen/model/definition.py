@@ -63,8 +63,12 @@ class SchedulingBox:
     name: str
     lower: float
     upper: float
-    rate_lower: float
-    rate_upper: float
+    rate_lower: float | None        # None (rate_min, rate_max not given): the signal may jump (a gear ratio)
+    rate_upper: float | None
+
+    @property
+    def rate_bounded(self) -> bool:
+        return self.rate_lower is not None
 
 
 @dataclass(frozen=True)
@@ -398,18 +402,24 @@ def load_parameters(path: str | Path) -> ParameterSet:
         if not isinstance(table, dict):
             raise config_error(str(path), "scheduling", key, table, "must be a table [scheduling.NAME] with min, "
                                "max, rate_min, rate_max")
-        missing = [k for k in ("min", "max", "rate_min", "rate_max") if k not in table]
+        missing = [k for k in ("min", "max") if k not in table]
         if missing:
             raise SchedulingBoundsError(
                 f"{path}: scheduling signal {key!r} lacks {', '.join(missing)}")
+        rates = [k for k in ("rate_min", "rate_max") if k in table]
+        if len(rates) == 1:
+            other = "rate_max" if rates == ["rate_min"] else "rate_min"
+            raise SchedulingBoundsError(f"{path}: scheduling signal {key!r} gives {rates[0]} without {other}: both "
+                                        f"(the bounds of its rate) or neither (a signal that may jump, as a gear "
+                                        f"ratio: only designs that hold for any rate take it)")
         table = parse_table(table, SCHEDULING_KEYS, source=str(path), section=section)
         for m, pair in enumerate(table.get("derivative_bounds", ()), start=2):
             _pair(pair, path, section, f"derivative_bounds[{m - 2}]")
-        box = SchedulingBox(key, table["min"], table["max"], table["rate_min"], table["rate_max"])
+        box = SchedulingBox(key, table["min"], table["max"], table.get("rate_min"), table.get("rate_max"))
         if not box.lower < box.upper:
             raise SchedulingBoundsError(f"{path}: scheduling {key!r} needs min < max, got "
                                         f"[{box.lower}, {box.upper}]")
-        if not box.rate_lower <= box.rate_upper:
+        if box.rate_bounded and not box.rate_lower <= box.rate_upper:
             raise SchedulingBoundsError(f"{path}: scheduling {key!r} needs rate_min <= rate_max")
         boxes[key] = box
     meta = {k: str(v) for k, v in _table(data, "meta", path).items()}

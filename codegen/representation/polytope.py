@@ -444,11 +444,16 @@ def vertex_matrices(decomp, premise_values_at_vertex):
     return mats
 
 
-def _rate_bounds(memberships, signal, box, mode, expansion_point):
+def _rate_bounds(memberships, signal, box, mode, expansion_point, source=""):
     if mode == "none":
         # no rate information: only valid for designs whose Lyapunov matrix does not depend
         # on the memberships (the quadratic variant); the PDLF design refuses it
         return np.zeros((len(memberships), 2))
+    if not box.rate_bounded:
+        raise SchedulingBoundsError(
+            f"{source}: [scheduling.{box.name}] gives no rate_min, rate_max, and rate_bounds = {mode!r} bounds the "
+            f"membership rates by them: declare them, or, for a signal that jumps (a gear ratio), set rate_bounds = "
+            f"\"none\" and lyapunov = \"quadratic\" in the observer file (one Lyapunov matrix for every rate)")
     bounds = []
     for eta in memberships:
         # simplified first: the stationary points come from the numerator of the derivative, whose
@@ -491,7 +496,7 @@ def sector_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polytope:
                for idx in range(2 ** p)]
     mats = vertex_matrices(decomp, corners)
     etas = memberships(premises)
-    rates = _rate_bounds(etas, lpv.scheduling_symbols[0], lpv.boxes[0], rate_bounds, None)
+    rates = _rate_bounds(etas, lpv.scheduling_symbols[0], lpv.boxes[0], rate_bounds, None, lpv.parameters.source)
     return Polytope("sector", tuple(lpv.scheduling_symbols), tuple(b.lower for b in lpv.boxes),
                     tuple(b.upper for b in lpv.boxes), premises, nonlin, mats["A"], mats["B"],
                     mats["C"], mats["D"], etas, rates, rate_bounds, None, mats["Du"], mats["Bw"], mats["Duw"],
@@ -546,7 +551,7 @@ def taylor_reduced_polytope(lpv: LPVModel, rate_bounds: str = "exact") -> Polyto
     etas = memberships((premise,))
     return Polytope("taylor_reduced", (signal,), (box.lower,), (box.upper,), (premise,), nonlin, mats["A"],
                     mats["B"], mats["C"], mats["D"], etas,
-                    _rate_bounds(etas, signal, box, rate_bounds, expansion_point), rate_bounds,
+                    _rate_bounds(etas, signal, box, rate_bounds, expansion_point, lpv.parameters.source), rate_bounds,
                     expansion_point, mats["Du"], mats["Bw"], mats["Duw"], mats["Dd"])
 
 

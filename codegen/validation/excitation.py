@@ -55,11 +55,19 @@ def _smooth(t: np.ndarray, rng, lo: float, hi: float, bandwidth: float):
     return lambda tt: lo + (0.05 + 0.9 * (raw(tt) - x_min) / width) * (hi - lo)
 
 
+STEP_S = 2.0
+"""s a signal without rate bounds holds each level of its staircase (it may jump: a gear ratio)."""
+
+
 def _sweep(box, lower: float, upper: float):
     mid, half = 0.5 * (lower + upper), 0.45 * (upper - lower)
-    rate = min(abs(box.rate_lower), abs(box.rate_upper))
     if half <= 0:
         return lambda tt: np.full(np.shape(np.atleast_1d(tt)), mid)
+    if not box.rate_bounded:
+        # five levels across 90 % of the box, up and down, each held STEP_S: every jump between neighbours
+        levels = mid + half * np.array([-1.0, -0.5, 0.0, 0.5, 1.0, 0.5, 0.0, -0.5])
+        return lambda tt: levels[(np.floor(np.atleast_1d(tt) / STEP_S).astype(int)) % len(levels)]
+    rate = min(abs(box.rate_lower), abs(box.rate_upper))
     if rate <= 0:
         return lambda tt: np.full(np.shape(np.atleast_1d(tt)), mid)
     omega = 0.9 * rate / half                  # |d/dt half sin(omega t)| <= 0.9 rate

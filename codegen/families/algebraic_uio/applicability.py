@@ -22,7 +22,8 @@ def _lipschitz(subject, signal: str, order: int) -> tuple:
         import tomllib
         with open(subject.parameter_path, "rb") as fh:
             higher = tomllib.load(fh).get("scheduling", {}).get(signal, {}).get("derivative_bounds", [])
-        bounds = {1: (box.rate_lower, box.rate_upper), **{m: tuple(p) for m, p in enumerate(higher, start=2)}}
+        bounds = {**({1: (box.rate_lower, box.rate_upper)} if box.rate_bounded else {}),
+                  **{m: tuple(p) for m, p in enumerate(higher, start=2)}}
         if order + 1 in bounds:
             lo, hi = bounds[order + 1]
             return max(abs(lo), abs(hi), 1e-9), (f"bound of |{signal}^({order + 1})| from "

@@ -84,7 +84,8 @@ def derivative_boxes(lpv: LPVModel) -> dict:
     out = {}
     for sym, box in zip(lpv.scheduling_symbols, lpv.boxes):
         out[sym] = (box.lower, box.upper)
-        out[derivative_symbol(sym, 1)] = (box.rate_lower, box.rate_upper)
+        if box.rate_bounded:            # else the signal may jump: a derivative that needs its rate has no bound
+            out[derivative_symbol(sym, 1)] = (box.rate_lower, box.rate_upper)
         higher = raw.get(str(sym), {}).get("derivative_bounds", [])
         if not isinstance(higher, list):
             raise SchedulingBoundsError(f"{lpv.parameters.source}: [scheduling.{sym}] derivative_bounds must be "
