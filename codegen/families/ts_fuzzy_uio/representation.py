@@ -169,10 +169,17 @@ def _output_selection(model: ModelDefinition) -> tuple:
             # a term that is 0 (v_x + (sin^2 + cos^2 - 1) k d) is no term: the output is the state
             expr = drop_zero_terms([expr], _signals(model))[0]
         if expr not in model.states:
+            states = set(model.states)
+            # an output nonlinear in the states (a tyre law of v_y in a_y) is no y = C(rho) x + Du(rho) u: the
+            # L-infinity UIO cannot take it either, and saying so spares a user the detour
+            nonlinear = sorted(str(x) for x in states if sp.diff(expr, x).free_symbols & states)
             raise ModelDefinitionError(
                 f"model {model.name!r}: output {name!r} = {expr} is not a state; the TS fuzzy UIO needs "
-                f"outputs that measure states directly (its premises are measured states). The L-infinity UIO "
-                f"(family linf_uio) takes outputs y = C(rho) x + Du(rho) u")
+                f"outputs that measure states directly (its premises are measured states). "
+                + (f"It is nonlinear in {', '.join(nonlinear)}, which no linear-output family takes (linf_uio "
+                   f"needs y = C(rho) x + Du(rho) u); the nonlinear-tyre observer takes a_y through axle tyre "
+                   f"laws of a single-track model; otherwise measure the state itself or drop the output"
+                   if nonlinear else "The L-infinity UIO (family linf_uio) takes outputs y = C(rho) x + Du(rho) u"))
         measured.append(expr)
     return tuple(measured)
 
