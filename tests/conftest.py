@@ -80,6 +80,17 @@ def require_embedded_tool(ok: bool, what: str) -> None:
         pytest.skip(message)
 
 
+@pytest.fixture()
+def fresh_cache(tmp_path, monkeypatch):
+    """An empty derived-results cache of the test's own (``$UIOGEN_CACHE_DIR``), nothing held in memory: what a
+    test reads back was kept by the test itself."""
+    from codegen.model import cache
+    monkeypatch.setenv("UIOGEN_CACHE_DIR", str(tmp_path / "cache"))
+    cache.forget()
+    yield
+    cache.forget()
+
+
 @pytest.fixture(scope="session")
 def config():
     return observers.get(NAME)

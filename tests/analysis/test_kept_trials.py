@@ -4,20 +4,11 @@ the same answer; an edited input designs again."""
 import shutil
 from pathlib import Path
 
-import pytest
 
 from codegen import analysis
 from codegen.model import cache
 
 CASE = Path(__file__).resolve().parent / "models" / "algebraic_no_differentiators"
-
-
-@pytest.fixture()
-def fresh_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("UIOGEN_CACHE_DIR", str(tmp_path / "cache"))
-    cache.forget()
-    yield
-    cache.forget()
 
 
 def _trials(a) -> dict:

@@ -14,11 +14,8 @@ ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml"
 
 
 @pytest.mark.slow          # the compiled observer
-def test_nominal_plant_short_run(tmp_path, monkeypatch):
+def test_nominal_plant_short_run(fresh_cache):
     # progress is reported while the plant runs: a run kept from another test would not run it
-    from codegen.model import cache
-    monkeypatch.setenv("UIOGEN_CACHE_DIR", str(tmp_path / "cache"))
-    cache.forget()
     ticks = []
     r = validate.run_scenario("lpv_linf_driver_torque", "zigzag_constant_speed_assist", "nominal", duration=8.0,
                               progress=ticks.append)

@@ -3,7 +3,6 @@ a second run is the first run's truth to the last bit, and an edit of any input 
 import dataclasses
 
 import numpy as np
-import pytest
 
 from codegen.model import cache
 from codegen.project import observer_file as observers
@@ -11,14 +10,6 @@ from codegen.validation import common, simulate
 from codegen.families.linf_uio.build import representation
 
 NAME = "lpv_linf_driver_torque"
-
-
-@pytest.fixture()
-def fresh_cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("UIOGEN_CACHE_DIR", str(tmp_path / "cache"))
-    cache.forget()
-    yield
-    cache.forget()
 
 
 def test_a_closed_loop_run_is_kept_and_every_input_runs_it_again(fresh_cache, monkeypatch):
