@@ -17,6 +17,9 @@ unit the model declares for that signal) or an explicit scale::
     [data.truth]                                          # optional: references of the estimates
     v_y = { column = "vy_ref", unit = "m/s" }
 
+    [data.fit]                                            # optional: read by `uiogen fit` only
+    yaw_acceleration = { column = "yaw_acc", unit = "deg/s^2" }
+
 A column's value in the model's unit is ``value * unit factor * scale`` (:mod:`codegen.project.columns`
 parses the map with the observer file). The log is read in chunks by
 :mod:`codegen.validation.csvlog` (separator, decimal mark, finite values, the sample time of the
