@@ -237,7 +237,7 @@ def truth(config, scenario: str, plant: str = "nominal", duration: float | None 
     params = load_parameters(config.parameter_path)
     scn = truncate(scenarios.make(scenario, sample_rate=1.0 / config.sample_time), duration)
     if plant in ("nominal", "model"):
-        out = banked_plant(config, params, scn, progress=progress, exact_model=plant == "model")
+        out = dict(_kept_banked_plant(config, params, scn, progress, exact_model=plant == "model"))
         out["plant_model"] = ("roll_single_track (exact linear model, true speed)" if plant == "model"
                               else "roll_single_track_pacejka_bank_plant")
     elif plant == "commonroad":
@@ -252,6 +252,28 @@ def truth(config, scenario: str, plant: str = "nominal", duration: float | None 
         raise ModelDefinitionError(f"plant must be 'nominal', 'model' or 'commonroad', got {plant!r}")
     _TRUTH_CACHE[key] = out
     return out
+
+
+BANKED = "switched_pi_banked_plant"
+"""The kind of the kept closed-loop runs of :func:`banked_plant` (:func:`codegen.model.cache.remembered`)."""
+
+
+def _kept_banked_plant(config, params, scn, progress, exact_model: bool) -> dict:
+    """:func:`banked_plant`, kept across runs: keyed by the parameter values (and the plant's), the sample time,
+    the scenario byte for byte, which model, and the code (this module, the roll model's and its tyres');
+    ``progress`` is not called when it is kept."""
+    import sys
+
+    from ...model import cache
+    from ...project.observer_file import builtin_model
+    from ...validation.simulate import scenario_digest
+    mod = builtin_model("roll_single_track")
+    tyres = sys.modules[mod.magic_formula_axle.__module__]
+    parts = {"values": dict(params.values), "plant": dict(params.plant), "sample_time": float(config.sample_time),
+             "scenario": scenario_digest(scn), "exact_model": exact_model}
+    return cache.remembered(BANKED, parts, lambda: banked_plant(config, params, scn, progress=progress,
+                                                                exact_model=exact_model),
+                            sys.modules[__name__], mod, tyres)
 
 
 def _flat(scn):
