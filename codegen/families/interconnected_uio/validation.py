@@ -302,6 +302,62 @@ def simulate_commonroad(track: Track, mu: float, vehicle: int, l_s: float, durat
     return out
 
 
+COMMONROAD = "interconnected_commonroad_run"
+"""The kind of the kept CommonRoad runs of :func:`simulate_commonroad` (:func:`codegen.model.cache.remembered`)."""
+
+
+def _kept_commonroad(track: Track, mu: float, vehicle: int, l_s: float, duration, sample_rate: float,
+                     progress=None) -> dict:
+    """:func:`simulate_commonroad`, kept across runs: keyed by the track (its name and every point), the
+    friction, the car, the lane sensor's distance, the duration and the rate, with the code (this module, the
+    CommonRoad plant's, the integrator's) and the vehicle models' version; ``progress`` is not called when it is
+    kept. The arrays come back read-only, as the run gives them."""
+    import importlib.metadata
+    import sys
+
+    from ...model import cache
+    from ...validation import commonroad_plant, simulate
+    parts = {"track": _track_digest(track), "mu": float(mu), "vehicle": int(vehicle), "l_s": float(l_s),
+             "duration": None if duration is None else float(duration), "sample_rate": float(sample_rate),
+             "vehiclemodels": importlib.metadata.version("commonroad-vehicle-models")}
+    out = cache.remembered(COMMONROAD, parts, lambda: simulate_commonroad(track, mu, vehicle, l_s, duration,
+                                                                          sample_rate, progress=progress),
+                           sys.modules[__name__], commonroad_plant, simulate)
+    for a in out.values():
+        a.setflags(write=False)
+    return out
+
+
+def _track_digest(track: Track) -> str:
+    import hashlib
+    h = hashlib.sha256(track.name.encode())
+    for a in (track.s, track.X, track.Y, track.theta, track.kappa):
+        a = np.ascontiguousarray(a, dtype=float)
+        h.update(str(a.shape).encode() + a.tobytes())
+    return h.hexdigest()
+
+
+MODEL_RUN = "interconnected_model_run"
+"""The kind of the kept runs of :func:`simulate_model` (:func:`codegen.model.cache.remembered`)."""
+
+
+def _kept_model_run(config, ts, track: Track, mu: float, split: tuple, duration, sample_rate: float,
+                    progress=None) -> dict:
+    """:func:`simulate_model` of the observer's own model, kept across runs: keyed by the design's inputs as
+    the design lock hashes them (the model, its parameters, every module they import), the track, the
+    friction, the axle split, the duration and the rate, with this module's code."""
+    import sys
+
+    from ...design import lock
+    from ...model import cache
+    parts = {"design_inputs": lock.design_inputs(config), "track": _track_digest(track), "mu": float(mu),
+             "split": [float(x) for x in split], "duration": None if duration is None else float(duration),
+             "sample_rate": float(sample_rate)}
+    return cache.remembered(MODEL_RUN, parts, lambda: simulate_model(ts, track, mu, *split, duration=duration,
+                                                                     sample_rate=sample_rate, progress=progress),
+                            sys.modules[__name__])
+
+
 def simulate_model(ts, track: Track, mu: float, brake_front: float, drive_front: float,
                    duration: float | None = None, sample_rate: float = 100.0, dt_internal: float = 1e-3,
                    progress=None) -> dict:
@@ -596,8 +652,8 @@ def run(name: str, mu: float = 1.0, plant: str = "commonroad", duration: float |
             if vehicle not in ("1", "2", "3"):
                 raise ModelDefinitionError(f"observer {name!r} was not designed for a CommonRoad car; validate "
                                            f"interconnected_uio_ford_escort on the CommonRoad plant")
-            truth = simulate_commonroad(track, mu, int(vehicle), _l_s(config), duration, 1.0 / config.sample_time,
-                                        progress=progress)
+            truth = _kept_commonroad(track, mu, int(vehicle), _l_s(config), duration, 1.0 / config.sample_time,
+                                     progress)
         elif plant == "model":
             ts = interconnected.load(config)
             meta = load_parameters(config.parameter_path).meta
@@ -608,8 +664,7 @@ def run(name: str, mu: float = 1.0, plant: str = "commonroad", duration: float |
                 split = (pv.T_sb, pv.T_se)
             else:
                 split = (0.66, 1.0)
-            truth = simulate_model(ts, track, mu, *split, duration=duration, sample_rate=1.0 / config.sample_time,
-                                   progress=progress)
+            truth = _kept_model_run(config, ts, track, mu, split, duration, 1.0 / config.sample_time, progress)
         else:
             raise ModelDefinitionError(f"plant must be 'commonroad' or 'model', got {plant!r}")
     obs = observer if observer is not None else load(config)
