@@ -55,14 +55,22 @@ def drop_zero_terms(exprs, signals) -> list:
     out = []
     for e in exprs:
         e = sp.sympify(e)
-        expanded = sp.expand(e)
-        n_terms = sum(len(sp.Add.make_args(sp.expand(t))) for t in sp.Add.make_args(e))
+        # every Min and Max held as one symbol while the expression is expanded and grouped: sympy rebuilds
+        # them on every construction with a search for equal arguments (factor_terms over each pair), tens of
+        # seconds on a tyre law; their arguments are not expanded into the sum, so nothing is lost. One that
+        # reads a signal counts as a signal.
+        held = {f: sp.Dummy(f"m{k}") for k, f in enumerate(sorted(e.atoms(sp.Min, sp.Max), key=sp.default_sort_key))}
+        back = {d: f for f, d in held.items()}
+        flat = e.xreplace(held)
+        factors = signals + tuple(d for f, d in held.items() if f.free_symbols & set(signals))
+        expanded = sp.expand(flat)
+        n_terms = sum(len(sp.Add.make_args(sp.expand(t))) for t in sp.Add.make_args(flat))
         groups: dict = {}                 # {the term's factor in the signals: the sum of its coefficients}
         for t in sp.Add.make_args(expanded):
-            c, m = t.as_independent(*signals, as_Add=False) if signals else (t, sp.S.One)
+            c, m = t.as_independent(*factors, as_Add=False) if factors else (t, sp.S.One)
             groups[m] = groups.get(m, sp.S.Zero) + c
-        keep = {m: c for m, c in groups.items() if not _is_zero(c)}
+        keep = {m: c for m, c in groups.items() if not _is_zero(c.xreplace(back))}
         if len(keep) < len(groups) or len(sp.Add.make_args(expanded)) < n_terms:
-            e = sp.Add(*(m * c for m, c in keep.items()))
+            e = sp.Add(*(m * c for m, c in keep.items())).xreplace(back)
         out.append(e)
     return out
