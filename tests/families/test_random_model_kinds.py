@@ -61,6 +61,14 @@ def test_zero_terms_simplify_away_exactly():
                           (x, v, d))
     assert [sp.simplify(e - want) for e, want in zip(out, (k * x, x, a * x / v))] == [0, 0, 0]
     assert out[3] is kept
+    # a Min or Max (a tyre law's saturation) is one factor: dropped with its zero coefficient, kept as it is
+    # otherwise, its arguments not expanded into the sum
+    sat = sp.Max(-a, sp.Min(a, k * (x + v)))
+    law = b * sat + x
+    out = drop_zero_terms([law, trig * sat * d + x, sat * b - sat * b + v * d, law], (x, v, d))
+    assert out[0] is law and out[3] is law
+    assert sp.simplify(out[1] - x) == 0 and sp.simplify(out[2] - v * d) == 0
+    assert sat in drop_zero_terms([sat * a + trig * x], (x, v, d))[0].atoms(sp.Max)
 
 
 def _ts_split(model, params) -> dict:
