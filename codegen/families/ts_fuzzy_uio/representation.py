@@ -169,10 +169,11 @@ def _output_selection(model: ModelDefinition) -> tuple:
             # a term that is 0 (v_x + (sin^2 + cos^2 - 1) k d) is no term: the output is the state
             expr = drop_zero_terms([expr], _signals(model))[0]
         if expr not in model.states:
-            states = set(model.states)
-            # an output nonlinear in the states (a tyre law of v_y in a_y) is no y = C(rho) x + Du(rho) u: the
-            # L-infinity UIO cannot take it either, and saying so spares a user the detour
-            nonlinear = sorted(str(x) for x in states if sp.diff(expr, x).free_symbols & states)
+            # an output nonlinear in the unmeasured states (a tyre law of v_y in a_y) is no y = C(rho) x + Du(rho)
+            # u, whatever it does with the measured ones (scheduling): the L-infinity UIO cannot take it either,
+            # and saying so spares a user the detour
+            unmeasured = set(model.states) - {sp.sympify(e) for _, e in model.outputs}
+            nonlinear = sorted(str(x) for x in unmeasured if sp.diff(expr, x).free_symbols & unmeasured)
             raise ModelDefinitionError(
                 f"model {model.name!r}: output {name!r} = {expr} is not a state; the TS fuzzy UIO needs "
                 f"outputs that measure states directly (its premises are measured states). "
