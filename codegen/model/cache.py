@@ -59,12 +59,17 @@ def _file_digest(path: Path, mtime_ns: int) -> str:
 
 def canonical(x):
     """``x`` as JSON-able data that says everything it means: sympy objects by ``srepr`` (with every
-    symbol's assumptions), dataclasses field by field, mappings in key order."""
+    symbol's assumptions), arrays by their type, shape and the SHA-256 of their bytes (their ``repr`` elides
+    the middle of a long one), dataclasses field by field, mappings in key order."""
     import dataclasses
 
+    import numpy as np
     import sympy as sp
     if isinstance(x, (sp.Basic, sp.MatrixBase)):
         return sp.srepr(x)
+    if isinstance(x, np.ndarray) and not x.dtype.hasobject:
+        return {"ndarray": x.dtype.str, "shape": list(x.shape),
+                "sha256": hashlib.sha256(np.ascontiguousarray(x).tobytes()).hexdigest()}
     if dataclasses.is_dataclass(x) and not isinstance(x, type):
         return {"type": type(x).__name__, **{f.name: canonical(getattr(x, f.name)) for f in dataclasses.fields(x)}}
     if isinstance(x, dict) or hasattr(x, "items"):

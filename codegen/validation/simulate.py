@@ -69,12 +69,10 @@ def scenario_digest(scn) -> str:
     byte for byte, the circle, the driver's gains and the friction."""
     import hashlib
     import json
-    h = hashlib.sha256(json.dumps([scn.name, scn.seed, scn.sample_rate, scn.circle, scn.mu,
-                                   None if scn.driver is None else vars(scn.driver)], default=repr).encode())
-    for key, arr in sorted(scn.arrays().items()):
-        a = np.ascontiguousarray(arr, dtype=float)
-        h.update(key.encode() + b"\0" + str(a.shape).encode() + a.tobytes())
-    return h.hexdigest()
+
+    from ..model import cache
+    parts = [scn.name, scn.seed, scn.sample_rate, scn.circle, scn.mu, scn.driver, scn.arrays()]
+    return hashlib.sha256(json.dumps(cache.canonical(parts), sort_keys=True).encode()).hexdigest()
 
 
 NOMINAL = "nominal_plant"

@@ -359,3 +359,15 @@ def test_the_import_statements_of_a_source_are_kept_per_content(fresh, tmp_path,
         assert again == [[0, ["codegen.errors"]]] and len(parses) == 2
     else:
         assert again == first and len(parses) == 2
+
+
+def test_arrays_are_keyed_by_every_byte():
+    """A long array's repr elides its middle: two arrays that differ there must still be two keys."""
+    import numpy as np
+    from codegen.model import cache
+    a = np.zeros(5000)
+    b = a.copy()
+    b[2500] = 1e-9
+    assert repr(a) == repr(b)
+    assert cache.canonical(a) != cache.canonical(b) and cache.canonical(a) == cache.canonical(a.copy())
+    assert cache.canonical(a) != cache.canonical(a.astype(np.float32))

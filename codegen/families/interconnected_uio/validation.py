@@ -317,7 +317,7 @@ def _kept_commonroad(track: Track, mu: float, vehicle: int, l_s: float, duration
 
     from ...model import cache
     from ...validation import commonroad_plant, simulate
-    parts = {"track": _track_digest(track), "mu": float(mu), "vehicle": int(vehicle), "l_s": float(l_s),
+    parts = {"track": cache.canonical(track), "mu": float(mu), "vehicle": int(vehicle), "l_s": float(l_s),
              "duration": None if duration is None else float(duration), "sample_rate": float(sample_rate),
              "vehiclemodels": importlib.metadata.version("commonroad-vehicle-models")}
     out = cache.remembered(COMMONROAD, parts, lambda: simulate_commonroad(track, mu, vehicle, l_s, duration,
@@ -326,15 +326,6 @@ def _kept_commonroad(track: Track, mu: float, vehicle: int, l_s: float, duration
     for a in out.values():
         a.setflags(write=False)
     return out
-
-
-def _track_digest(track: Track) -> str:
-    import hashlib
-    h = hashlib.sha256(track.name.encode())
-    for a in (track.s, track.X, track.Y, track.theta, track.kappa):
-        a = np.ascontiguousarray(a, dtype=float)
-        h.update(str(a.shape).encode() + a.tobytes())
-    return h.hexdigest()
 
 
 MODEL_RUN = "interconnected_model_run"
@@ -350,7 +341,7 @@ def _kept_model_run(config, ts, track: Track, mu: float, split: tuple, duration,
 
     from ...design import lock
     from ...model import cache
-    parts = {"design_inputs": lock.design_inputs(config), "track": _track_digest(track), "mu": float(mu),
+    parts = {"design_inputs": lock.design_inputs(config), "track": cache.canonical(track), "mu": float(mu),
              "split": [float(x) for x in split], "duration": None if duration is None else float(duration),
              "sample_rate": float(sample_rate)}
     return cache.remembered(MODEL_RUN, parts, lambda: simulate_model(ts, track, mu, *split, duration=duration,
