@@ -85,6 +85,39 @@ def test_ui_loop_bisection_stops_once_the_committed_rate_is_settled(build):
     assert all(" blocks, " in line and line.endswith(" s)") for line in lines)
 
 
+def test_committed_rate_search_asks_few_and_finds_the_largest():
+    """The search over the committable rates finds the largest that holds for every threshold of a
+    monotone answer (none, the smallest, the top, anywhere between), asking about candidates only,
+    at most 2 log2(n) + 2 of them, and one or two when the answer is at the top."""
+    rng = np.random.default_rng(3)
+    for top in [*rng.uniform(1e-3, 100.0, 200), 2.55]:
+        candidates = discrete._committable_rates(top)
+        assert candidates == sorted(set(candidates)) and candidates[-1] <= top
+        assert all(discrete._round_down(q) == q for q in candidates)
+        assert discrete._round_down(top) == candidates[-1]
+        for k in {-1, 0, len(candidates) - 1, len(candidates) - 2, int(rng.integers(len(candidates)))}:
+            asked = []
+
+            def holds(q):
+                asked.append(q)
+                return candidates.index(q) <= k
+            assert discrete._largest_holding(candidates, holds) == (candidates[k] if k >= 0 else None)
+            assert len(asked) <= 2 * np.log2(len(candidates)) + 2
+            if k == len(candidates) - 1:
+                assert len(asked) == 1
+
+
+def test_grid_matrices_are_those_of_one_point_at_a_time(build):
+    """The evidence grids evaluate Aa at every point at once; each matrix equals, bit for bit, the
+    one :func:`augmented_matrices` gives at that point alone (the committed grid figures stay)."""
+    data = build.data
+    grid = discrete.signal_grid(data.poly, n_single=101)
+    batch = discrete.augmented_state_matrices(data, discrete._grid_premises(data.poly, grid))
+    for k, rho in enumerate(grid):
+        one = discrete.augmented_matrices(data, np.array(discrete.premise_of_signal(data.poly, rho), float))[0]
+        assert np.array_equal(one, batch[k])
+
+
 def test_lyapunov_decrease_along_random_scheduling(build):
     """V_k >= kappa V_{k+1} for e_d = 0 along random speed sequences obeying |a_x| <= 4."""
     data, poly, c = build.data, build.poly, build.discrete_certificate

@@ -160,6 +160,32 @@ def augmented_matrices(data: ObserverData, theta: np.ndarray):
     return Aa, Ba, By
 
 
+def _grid_premises(poly: Polytope, grid: np.ndarray) -> np.ndarray:
+    """The premises at every grid point, point by point (a premise such as v_x**-2 evaluated on a whole
+    array takes numpy's vectorized power, which can differ from the scalar one in the last bit)."""
+    return np.array([premise_of_signal(poly, s) for s in grid], dtype=float)
+
+
+def augmented_state_matrices(data: ObserverData, theta: np.ndarray) -> np.ndarray:
+    """Aa of :func:`augmented_matrices` at every row of ``theta`` (points, premises) at once: the dense
+    evidence grids. Each matrix is formed by the same operations in the same order as one call of
+    :func:`augmented_matrices` (the blends term by term, one LAPACK solve per point), so every entry
+    is the same to the last bit, without a Python loop over the points."""
+    eta = sector_weights_product(np.asarray(theta, float), data.poly.premises)
+
+    def blend(mats):
+        total = eta[:, 0, None, None] * mats[0]
+        for k in range(1, len(mats)):
+            total = total + eta[:, k, None, None] * mats[k]
+        return total
+    A, C, D, Dd = (blend(m) for m in (data.poly.A, data.poly.C, data.poly.D, data.Dd))
+    M = np.linalg.solve(blend(data.Q), blend(data.L))
+    Dp = np.linalg.pinv(D) if data.poly.D_varies else np.broadcast_to(data.Dp, (len(eta), *data.Dp.shape))
+    top = np.concatenate([A + M @ C, D + M @ Dd], axis=2)
+    bottom = np.concatenate([Dp @ M @ C / data.Tf, Dp @ M @ Dd / data.Tf], axis=2)
+    return np.concatenate([top, bottom], axis=1)
+
+
 def derived_input_matrix(data: ObserverData, theta: np.ndarray) -> np.ndarray:
     """Bwa at premise values ``theta``: z' = ... + Bwa w for the derived known inputs w."""
     eta = sector_weights_product(np.asarray(theta, float), data.poly.premises)
@@ -562,21 +588,60 @@ def slowest_grid_decay(data: ObserverData, Tf: float | None = None, n_grid: int 
     """(min over a dense grid of -max Re eig Aa(th), where): evidence, and the ceiling of the
     certified decay (a common P with He(P Aa) <= -2 beta P forces Re eig Aa <= -beta)."""
     d = data if Tf is None else dataclasses.replace(data, Tf=Tf)
-    worst, at = np.inf, None
-    for s in signal_grid(d.poly, n_single=n_grid):
-        Aa = augmented_matrices(d, np.array(premise_of_signal(d.poly, s), float))[0]
-        decay = -float(np.linalg.eigvals(Aa).real.max())
-        if decay < worst:
-            worst, at = decay, s
-    return worst, at
+    grid = signal_grid(d.poly, n_single=n_grid)
+    decay = -np.linalg.eigvals(augmented_state_matrices(d, _grid_premises(d.poly, grid))).real.max(axis=1)
+    k = int(np.argmin(decay))
+    return float(decay[k]), grid[k]
+
+
+UI_LOOP_RESOLUTION = 2.0 ** -14
+"""The smallest committable rate, as a fraction of the ceiling (a 14-step bisection's resolution)."""
+
+
+def _committable_rates(top: float) -> list:
+    """Every rate the design can commit up to ``top``, ascending: the numbers of two significant
+    digits (:func:`_round_down`'s values) in [UI_LOOP_RESOLUTION top, top]."""
+    import decimal
+    if top <= 0:
+        return []
+    low = UI_LOOP_RESOLUTION * top
+    out = []
+    for exponent in range(int(np.floor(np.log10(low))) - 1, int(np.floor(np.log10(top))) + 1):
+        for mantissa in range(10, 100):
+            q = float(decimal.Decimal(mantissa).scaleb(exponent))
+            if low <= q <= top:
+                out.append(q)
+    return out
+
+
+def _largest_holding(candidates: list, holds) -> float | None:
+    """The largest of the ascending ``candidates`` for which ``holds`` (true up to some point, false
+    above it: a decay rate a common Lyapunov function proves, it proves every smaller one), or None.
+
+    The committed rate is one of these numbers, so the search asks about them and nothing else:
+    down from the top in growing steps (the dense grid's ceiling is usually close above the
+    answer: one to three solves), then by halving between the last that failed and the first that
+    held. It gives what a bisection of the rate would round to, with fewer solves."""
+    lo, hi, step = -1, len(candidates), 1       # candidates[hi:] fail; candidates[lo] holds (-1: none known)
+    while hi > 0:
+        i = max(hi - step, 0)
+        if holds(candidates[i]):
+            lo = i
+            break
+        hi, step = i, 2 * step
+    while hi - lo > 1 and lo >= 0:
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if holds(candidates[mid]) else (lo, mid)
+    return candidates[lo] if lo >= 0 else None
 
 
 def certify_ui_loop(data: ObserverData, solver, min_margin: float = 0.0) -> UILoopCertificate:
     """Prove that the observer's full error, UI filter loop closed, contracts over the whole box.
 
-    At design time the largest decay rate beta a common Lyapunov function certifies is found by
-    bisection (analysis solves below the dense grid's slowest decay, the ceiling), rounded down
-    to two significant digits, and solved once more as a design problem: that solution goes to
+    At design time the decay rate beta committed is the largest number of two significant digits
+    that is UI_LOOP_BACKOFF of a rate a common Lyapunov function certifies (analysis solves below
+    the dense grid's slowest decay, the ceiling: :func:`_largest_holding`), solved once more as a
+    design problem: that solution goes to
     the design lock with its beta and Tf, and every later ``generate`` re-checks the committed
     matrices block by block (numpy) instead of solving (``solver``: :mod:`codegen.design.solver`).
 
@@ -596,23 +661,19 @@ def certify_ui_loop(data: ObserverData, solver, min_margin: float = 0.0) -> UILo
         beta = float(committed["beta"])
     else:
         ceiling, at = slowest_grid_decay(data)
-        zero_checked = False
-        lo, hi = 0.0, ceiling
-        for _ in range(14):
-            # the committed rate is UI_LOOP_BACKOFF lo rounded down: once both ends round alike (and the
-            # float32 rate is not between them) no further step can change it, and each one is a solve
-            if lo > 0 and _round_down(UI_LOOP_BACKOFF * lo) == _round_down(UI_LOOP_BACKOFF * hi) \
-                    and not lo < need <= hi:
-                break
-            # a decay of 0 is proven by any feasible step: it is asked only while none has been
-            if lo == 0 and not zero_checked and (ceiling <= 0 or hi < ceiling):
-                zero_checked = True
-                if ceiling <= 0 or not _ui_loop_feasible(data, 0.0, data.Tf, solver):
-                    message, remedy = _ui_loop_advice(data, ceiling, at)
-                    raise UILoopError(message, remedy=remedy)
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if _ui_loop_feasible(data, mid, data.Tf, solver) else (lo, mid)
-        if lo < need:
+        if ceiling <= 0:
+            message, remedy = _ui_loop_advice(data, ceiling, at)
+            raise UILoopError(message, remedy=remedy)
+
+        def holds(q):       # the committed rate q is UI_LOOP_BACKOFF of a feasible one
+            return _ui_loop_feasible(data, q / UI_LOOP_BACKOFF, data.Tf, solver)
+        best = _largest_holding(_committable_rates(UI_LOOP_BACKOFF * ceiling), holds)
+        # a decay of 0 is proven by any rate that holds: it is asked only when none does
+        if best is None and not _ui_loop_feasible(data, 0.0, data.Tf, solver):
+            message, remedy = _ui_loop_advice(data, ceiling, at)
+            raise UILoopError(message, remedy=remedy)
+        lo = 0.0 if best is None else best / UI_LOOP_BACKOFF
+        if lo < need and not (need <= ceiling and _ui_loop_feasible(data, need, data.Tf, solver)):
             c = 1.0 / np.sqrt(1.0 + 2.0 * lo * data.Ts)
             raise DiscretizationError(
                 f"[design] precision = \"float32\" needs the UI-filter loop to decay at {need:.4g} 1/s (a contraction "
@@ -620,7 +681,7 @@ def certify_ui_loop(data: ObserverData, solver, min_margin: float = 0.0) -> UILo
                 f"{lo:.4g} 1/s (margin {1 - c:.4g}). Options: [design] alpha (the state error's decay), "
                 f"[ui_filter] time_constant, or a smaller [design] float32_margin")
         # committed inside the feasible set, not on its edge: the re-check keeps a margin
-        beta = max(_round_down(UI_LOOP_BACKOFF * lo), need)
+        beta = max(best or 0.0, need)
     try:
         sol = solver.solve(_ui_loop_problem(data, beta, data.Tf, design=True), tol=1e-9)
     except (SolverError, CertificateError) as exc:
@@ -719,11 +780,9 @@ def certify_step(data: ObserverData, alpha: float, solver, n_grid: int = 2001, m
     kappa = 1.0 + 2.0 * alpha * Ts - worst
     sig = signal_grid(poly, n_single=n_grid)
     nx = data.nx
-    err_r, aug_r = [], []
-    for s in sig:
-        Aa = augmented_matrices(data, np.array(premise_of_signal(poly, s), float))[0]
-        aug_r.append(float(np.abs(np.linalg.eigvals(np.linalg.inv(np.eye(data.nz) - Ts * Aa))).max()))
-        err_r.append(float(np.abs(np.linalg.eigvals(np.linalg.inv(np.eye(nx) - Ts * Aa[:nx, :nx]))).max()))
+    Aa = augmented_state_matrices(data, _grid_premises(poly, sig))
+    aug_r = np.abs(np.linalg.eigvals(np.linalg.inv(np.eye(data.nz) - Ts * Aa))).max(axis=1).tolist()
+    err_r = np.abs(np.linalg.eigvals(np.linalg.inv(np.eye(nx) - Ts * Aa[:, :nx, :nx]))).max(axis=1).tolist()
     k = int(np.argmax(aug_r))
     if kappa <= 1.0:
         raise DiscretizationError(
