@@ -408,9 +408,10 @@ def represent(module, params, settings, source: str) -> TyreRepresentation:
     # the model is the force form with the (clamped) Fiala forces: checked at random points of S
     symbols = (vy, r, *model.known_inputs, vx)
     mods = [{"Min": min, "Max": max, "Abs": abs}, "math"]
-    model_forces = [sp.lambdify(symbols, numeric(e, {**subs, **zero_w}), mods) for e in (module.Phi_f, module.Phi_r)]
+    model_forces = [_with_parameters(symbols, numeric(e, zero_w), subs) for e in (module.Phi_f, module.Phi_r)]
     in_force_fns = [sp.lambdify([*symbols, *Phi], e, mods) for e in in_forces]
-    model_fns = [sp.lambdify(symbols, e, mods) for e in (*f, a_y)]
+    model_fns = [_with_parameters(symbols, numeric(e, zero_w), subs)
+                 for e in (*model.dynamics, dict(model.outputs)[names.a_y])]
     rng = np.random.default_rng(0)
     for _ in range(5):
         pt = [rng.uniform(-1, 1), rng.uniform(-0.5, 0.5), *[rng.uniform(*b) for _, b in boxes], rng.uniform(*v_box)]
@@ -427,6 +428,23 @@ def represent(module, params, settings, source: str) -> TyreRepresentation:
         _check_constant_beyond(axles, model_forces, symbols, subs, boxes, v_box, t, model_file, rng)
     return TyreRepresentation(f, a_y, G[:2], G[2], sets[0], sets[1], slips, sliding, settings.sliding_fraction,
                               v_box, tuple(boxes), symbols, tuple(lever), names, through)
+
+
+@functools.lru_cache(maxsize=32)
+def _parametric(args: tuple, expr):
+    return sp.lambdify(args, expr, [{"Min": min, "Max": max, "Abs": abs}, "math"])
+
+
+def _with_parameters(symbols: tuple, expr, subs: dict):
+    """``expr`` as a function of ``symbols`` at the parameter values ``subs``, for the structure checks.
+
+    Its parameters stay arguments: the compiled function is kept per model expression in this
+    process (sympy's printing of a tyre law is most of a representation's time), so the folds of
+    ``uiogen fit``, which change only the tyre's numbers, compile it once."""
+    names = tuple(subs)
+    fn = _parametric((*symbols, *names), expr)
+    values = tuple(float(subs[k]) for k in names)
+    return lambda *point: fn(*point, *values)
 
 
 THROUGH_REL_TOL = 1e-6
