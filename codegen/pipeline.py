@@ -90,10 +90,10 @@ def build(config: ObserverConfig, solver=None):
     return b
 
 
-def solve(config: ObserverConfig, tol: float | None = None, progress=None) -> tuple:
+def solve(config: ObserverConfig, tol: float | None = None, progress=None, least_norm: bool = True) -> tuple:
     """A fresh design of ``config`` and the LMI solutions it solved: (build, [SolveRecord]);
-    ``progress``: see :class:`~codegen.design.solver.FreshSolver`."""
-    solver = FreshSolver(tol, progress)
+    ``progress``, ``least_norm``: see :class:`~codegen.design.solver.FreshSolver`."""
+    solver = FreshSolver(tol, progress, least_norm)
     b = build(config, solver)
     return b, solver.records
 

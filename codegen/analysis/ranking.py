@@ -472,8 +472,9 @@ def _design(path: Path, app: Applicability, label: str, progress=None) -> Trial:
     t0 = time.perf_counter()
     try:
         config = observers.get(str(path))
+        # a trial commits nothing: a feasibility problem's first certified point will do
         b, _ = pipeline.solve(config, progress=progress_after(
-            None if progress is None else (lambda line: progress(f"{app.family}: {line}"))))
+            None if progress is None else (lambda line: progress(f"{app.family}: {line}"))), least_norm=False)
     except UiogenError as exc:
         return Trial(app.family, "failed", label, time.perf_counter() - t0,
                      reason=f"{type(exc).__name__}: {str(exc).replace(str(path), label)}", error=type(exc),

@@ -406,6 +406,11 @@ class LMIProblem:
         """How many PSD/NSD blocks the problem requires."""
         return len(self._constraints)
 
+    @property
+    def has_objective(self) -> bool:
+        """Whether the problem minimizes something (else it asks for a feasible point)."""
+        return self._objective is not None
+
     # -- decision variables -------------------------------------------------
     def _fresh(self, name: str, shape: tuple, slots: np.ndarray, count: int) -> Affine:
         """Affine matrix whose entry (i, j) is variable ``first + slots[i, j]`` (-1: zero)."""

@@ -85,11 +85,17 @@ class FreshSolver:
     progress : callable, optional
         Called with one line after every problem it solves (design, and the analyses a family hands
         it: a bisection's steps), naming the problem, its blocks, the outcome and the seconds taken.
+    least_norm : bool, optional
+        False: a design problem without an objective is answered by the solver's first feasible
+        point instead of the least-norm one (:meth:`LMIProblem.solve`'s ``unique``), which only makes
+        a committed solution the same on every machine: for a trial design that commits nothing
+        (``uiogen analyze``). Every block is re-checked either way.
     """
 
-    def __init__(self, tol: float | None = None, progress=None):
+    def __init__(self, tol: float | None = None, progress=None, least_norm: bool = True):
         self.tol = tol
         self.progress = progress
+        self.least_norm = least_norm
         self._records: dict = {}       # problem name -> SolveRecord, in solve order
 
     @property
@@ -101,6 +107,8 @@ class FreshSolver:
         if not problem.design:
             return self._timed(problem, options)
         _refuse_twice(problem.name, self._records, "solves")
+        if not self.least_norm and not problem.has_objective:
+            options = {**options, "unique": False}
         sol = self._timed(problem, options)
         self._records[problem.name] = SolveRecord(problem.name, exact_json(sol.values), sol.objective, sol.iterations,
                                                   dict(problem.data))

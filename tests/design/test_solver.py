@@ -47,6 +47,28 @@ def test_fresh_solver_records_by_name_and_refuses_a_second_problem_of_the_same_n
     replay.check_complete()
 
 
+def test_a_trial_solver_answers_a_feasibility_design_by_its_first_point():
+    """FreshSolver(least_norm=False) (analyze's trial designs, which commit nothing) hands a design
+    problem without an objective its first certified point, not the least-norm one; a problem with
+    an objective keeps its unique optimum, so a trial's gamma is the design's."""
+    def feasibility():
+        prob = lmi.LMIProblem("feasibility", design=True)
+        P = prob.symmetric("P", 2)
+        A = np.array([[-1.0, 2.0], [0.0, -3.0]])
+        prob.require_psd("P > I", P, margin=1.0)
+        prob.require_nsd("A'P + PA < 0", A.T @ P + P @ A, margin=1e-6)
+        return prob
+    first = feasibility().solve(unique=False)
+    least = feasibility().solve(unique=True)
+    trial = FreshSolver(least_norm=False).solve(feasibility())
+    np.testing.assert_array_equal(trial["P"], first["P"])
+    assert not np.array_equal(first["P"], least["P"])          # the two points differ on this problem
+    assert all(c.certified for c in trial.checks)
+    np.testing.assert_array_equal(FreshSolver().solve(feasibility())["P"], least["P"])
+    np.testing.assert_array_equal(FreshSolver(least_norm=False).solve(_lyapunov())["P"],
+                                  FreshSolver().solve(_lyapunov())["P"])
+
+
 def test_progress_names_every_solve_once_the_design_has_run_long_enough():
     """A fresh solver reports each problem it solves (a design and an analysis alike, a failed one
     too); progress_after passes the lines on only after its delay, with the seconds elapsed."""
