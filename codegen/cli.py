@@ -302,7 +302,7 @@ def cmd_fit(args) -> int:
     from .design.sweep import parse_set
     choose = [parse_set(text, "--choose") for text in args.choose or ()]
     result = family.fit(cfg, args.data, args.samples, folds=args.folds, judge=tuple(args.judge or ()),
-                        choose=choose)
+                        choose=choose, jobs=args.jobs)
     if args.plot:
         with outputs.writing(args.plot):
             family.fit_plot(result, args.plot)
@@ -665,6 +665,9 @@ def main(argv=None) -> int:
     p.add_argument("--choose", action="append", metavar="KEY=[V, ...]",
                    help="a [design] setting and the values to judge on the held-out folds with the tyre sets, e.g. "
                         "design.decay_fraction=[0.1, 0.2]; repeat for a grid; the best is written")
+    p.add_argument("--jobs", type=int, default=None, metavar="N",
+                   help="processes for the folds' designs and the peers' grid (default: every CPU); the same result "
+                        "with any number")
     p.add_argument("--plot", metavar="FILE.png", help="with --judge: the sideslip of every run, truth and estimates")
     p.add_argument("--report", metavar="DIR", help="an HTML page DIR/index.html: the runs (with --judge) and their "
                                                    "figure, the held-out folds, the output")

@@ -140,10 +140,12 @@ class LogPeers(Protocol):
 class Identification(Protocol):
     """``uiogen fit``: the observer's numbers identified on part of a log."""
 
-    def fit(self, config, path, samples: str, folds: int | None = None, judge=(), choose=()) -> dict:
+    def fit(self, config, path, samples: str, folds: int | None = None, judge=(), choose=(),
+            jobs: int | None = None) -> dict:
         """Identify the observer's numbers on samples A..B-1 (``samples`` = "A:B") of a log; ``judge``:
         other runs of the same car to run the identified observer and its peers on (``result["runs"]``);
-        ``choose``: ``[(KEY, [values...]), ...]`` of settings chosen on the held-out folds."""
+        ``choose``: ``[(KEY, [values...]), ...]`` of settings chosen on the held-out folds; ``jobs``: the
+        processes the work may use (None: every CPU), the result the same with any number."""
 
     def fit_plot(self, result: dict, path) -> None:
         """The fit run and the judged runs of ``result`` as a figure (PNG) at ``path``."""

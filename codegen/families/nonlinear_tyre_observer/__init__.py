@@ -67,9 +67,10 @@ class NonlinearTyreObserver(Family):
             return {}
         return {k: v.beta for k, v in stanford.nonlinear_tyre_peers(run, config.parameter_path).items()}
 
-    def fit(self, config, path, samples: str, folds: int | None = None, judge=(), choose=()) -> dict:
+    def fit(self, config, path, samples: str, folds: int | None = None, judge=(), choose=(),
+            jobs: int | None = None) -> dict:
         from .fit import fit
-        return fit(config, path, samples, folds, judge=judge, choose=choose)
+        return fit(config, path, samples, folds, judge=judge, choose=choose, jobs=jobs)
 
     def fit_plot(self, result: dict, path) -> None:
         from .fit import plot_runs

@@ -68,6 +68,31 @@ PEER_GRID = {"sigma_fy": (0.02, 0.05, 0.1, 0.2), "sigma_ay": (None, 0.3, 1.0)}
 MIN_SAMPLES = 500
 
 
+def parse_jobs(jobs) -> int:
+    """``--jobs``: the processes the folds and the peers' grid run on; None: every CPU of the machine."""
+    import os
+    if jobs is None:
+        return max(1, os.cpu_count() or 1)
+    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+        raise ConfigurationError(f"--jobs {jobs!r}: an integer >= 1 (the processes the folds run on)",
+                                 source="--jobs", key="--jobs", value=jobs)
+    return jobs
+
+
+def _map(fn, tasks: list, jobs: int) -> list:
+    """``[fn(*task) for task in tasks]``, in order, over up to ``jobs`` worker processes (forked: they
+    start with this process's modules and compiled expressions). Each task is a whole design or Kalman
+    run, deterministic and independent of the others, so the result is the same with any ``jobs``;
+    a task's error is raised here as it was raised there. One job, one task, or a platform without
+    fork: in this process."""
+    import multiprocessing
+    if jobs <= 1 or len(tasks) <= 1 or "fork" not in multiprocessing.get_all_start_methods():
+        return [fn(*task) for task in tasks]
+    from concurrent.futures import ProcessPoolExecutor
+    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=multiprocessing.get_context("fork")) as pool:
+        return list(pool.map(fn, *zip(*tasks)))
+
+
 def parse_samples(text: str, n: int) -> tuple:
     """``"A:B"`` -> (A, B) with 0 <= A < B <= n and B - A >= MIN_SAMPLES (ConfigurationError naming --samples)."""
     m = re.fullmatch(r"\s*(\d+)\s*:\s*(\d+)\s*", str(text))
@@ -347,17 +372,17 @@ def _same_tyre_peers(config, params, run, noises, which=("ekf_nonlinear_tyre",))
         return [stanford.nonlinear_tyre_peers(run, path, noise, which=which) for noise in noises]
 
 
-def _ekf_betas(config, params, run, a: int, b: int, noises) -> list:
-    """The same-tyre EKF's sideslip [rad] over samples a..b-1, one array per {sigma_fy, sigma_ay} of ``noises``."""
-    return [p["ekf_nonlinear_tyre"].beta for p in _same_tyre_peers(config, params, _sub_run(run, a, b), noises)]
+def _ekf_beta(config, params, run, a: int, b: int, noise: dict) -> np.ndarray:
+    """The same-tyre EKF's sideslip [rad] over samples a..b-1 at the {sigma_fy, sigma_ay} ``noise``."""
+    return _same_tyre_peers(config, params, _sub_run(run, a, b), [noise])[0]["ekf_nonlinear_tyre"].beta
 
 
-def _peers(config, params, run, a: int, b: int) -> tuple:
+def _peers(config, params, run, a: int, b: int, jobs: int = 1) -> tuple:
     """The EKF grid on the range: (best {sigma_fy, sigma_ay}, [(sigma_fy, sigma_ay, rms), ...])."""
     grid = [{"sigma_fy": fy, "sigma_ay": ay} for fy in PEER_GRID["sigma_fy"] for ay in PEER_GRID["sigma_ay"]]
     truth = np.asarray(run.beta_true, float)[a:b]
-    rows = [(g["sigma_fy"], g["sigma_ay"], _rms_deg(beta - truth))
-            for g, beta in zip(grid, _ekf_betas(config, params, run, a, b, grid))]
+    betas = _map(_ekf_beta, [(config, params, run, a, b, g) for g in grid], jobs)
+    rows = [(g["sigma_fy"], g["sigma_ay"], _rms_deg(beta - truth)) for g, beta in zip(grid, betas)]
     fy, ay, _ = min(rows, key=lambda t: t[2])
     return {"sigma_fy": fy, "sigma_ay": ay}, rows
 
@@ -372,14 +397,12 @@ def _max_deg(err: np.ndarray) -> float:
     return float(np.degrees(np.max(np.abs(err))))
 
 
-def _judged(config, params, prob, run, a: int, b: int, x: np.ndarray, mask: np.ndarray) -> dict:
-    """The rounded tyre of ``x``, the noise levels on ``mask`` and the designed observer's sideslip error
-    [rad] over the range."""
+def _identified(config, prob, run, a: int, b: int, x: np.ndarray, mask: np.ndarray) -> dict:
+    """The rounded tyre of ``x`` and the noise levels on ``mask``: what the observer of a fold is designed with."""
     tyre = tyre_values(config, x)
     levels = {k: _round(v) for k, v in _levels(prob, _rounded(config, tyre), run, a, b, config.sample_time,
                                                 mask).items()}
-    beta = observer_beta(config, _with_values(params, tyre), levels, run, a, b)
-    return {"parameters": tyre, "design": levels, "error": beta - run.beta_true[a:b]}
+    return {"parameters": tyre, "design": levels}
 
 
 DEFAULT_FOLDS = 5
@@ -388,13 +411,16 @@ sets is made on held-out data, never by default for the fitted one."""
 
 
 def fit(config, path="stanford", samples: str = "", folds: int | None = None, peers: bool = True, judge=(),
-        choose=()) -> dict:
+        choose=(), jobs: int | None = None) -> dict:
     """Identify the tyre, the noise levels and the peers' noise levels on samples A..B-1 of a log; with
     ``folds`` >= 2, judge every tyre set of :data:`CANDIDATES` the parameter file allows on held-out
     contiguous folds and keep the better (module docstring); ``judge``: other runs of the same car (paths
     or shorthands), on which the observer designed with the fitted numbers and its same-tyre peers run
     (:func:`_run_row`); ``choose``: ``[(KEY, [values...]), ...]`` of ``design.*`` settings, every
-    combination cross-validated with the tyre sets and the best written (:func:`_chosen_design`)."""
+    combination cross-validated with the tyre sets and the best written (:func:`_chosen_design`); ``jobs``:
+    the processes the folds' designs and the peers' grid run on (:func:`parse_jobs`; the result is the same
+    with any number)."""
+    jobs = parse_jobs(jobs)
     if folds is not None and (not isinstance(folds, int) or isinstance(folds, bool) or folds < 0 or folds == 1):
         raise ConfigurationError(f"--folds {folds!r}: 0 (no cross-validation) or an integer >= 2",
                                  source="--folds", key="--folds", value=folds)
@@ -413,9 +439,9 @@ def fit(config, path="stanford", samples: str = "", folds: int | None = None, pe
             raise ConfigurationError("--choose picks settings by their pooled held-out sideslip RMS: it needs "
                                      "--folds K (K >= 2)", source="--choose", key="--choose", value=choose)
         config, chosen, settings_table, cv = _chosen_design(config, params, prob, run, a, b, folds, candidates,
-                                                            choose)
+                                                            choose, jobs)
     else:
-        cv = _cross_validate(config, params, prob, run, a, b, folds, candidates) if folds else None
+        cv = _cross_validate(config, params, prob, run, a, b, folds, candidates, jobs) if folds else None
     choice = min(candidates, key=lambda c: cv["pooled"][c]) if cv else "fitted"
     half = prob.window // 2
     full = np.ones(b - a - 2 * half, bool)
@@ -435,11 +461,11 @@ def fit(config, path="stanford", samples: str = "", folds: int | None = None, pe
     if settings_table is not None:
         out["settings"] = settings_table
     if peers:
-        best, rows = _peers(config, fitted_params, run, a, b)
+        best, rows = _peers(config, fitted_params, run, a, b, jobs)
         out["peers"] = {k: (v if v is not None else "highpass") for k, v in best.items()}
         out["peer_grid"] = [[fy, ay if ay is not None else "highpass", rms] for fy, ay, rms in rows]
         if cv:
-            _peer_folds(config, params, run, a, b, cv, choice, best)
+            _peer_folds(config, params, run, a, b, cv, choice, best, jobs)
     judged = []
     for p in judge:                                   # every log read before the work
         other, said = read_run(config, p)
@@ -582,31 +608,35 @@ def _check_folds(folds: int, a: int, b: int, n: int = WINDOW) -> None:
                              f"100 Hz); allowed: {allowed}", source="--folds", key="--folds", value=folds)
 
 
-def _cross_validate(config, params, prob, run, a, b, folds, candidates) -> dict:
+def _cross_validate(config, params, prob, run, a, b, folds, candidates, jobs: int = 1) -> dict:
     """Each candidate fitted on the range less one contiguous fold (and a guard of one average on each
-    side), designed, run over the range and judged on the fold."""
+    side), designed, run over the range and judged on the fold; the designs and runs over ``jobs``
+    processes (:func:`_map`)."""
     n = prob.window
     half = n // 2
     edges = _fold_edges(a, b, folds)
     idx = np.arange(a + half, b - half)              # samples the averages cover
-    rows, errors = [], {c: [] for c in candidates}
+    fitted = []
     for k in range(folds):
         lo, hi = edges[k], edges[k + 1]
         train = (idx < lo - n) | (idx >= hi + n)
-        row = {"fold": [lo, hi]}
-        for c in candidates:
-            judged = _judged(config, params, prob, run, a, b, _tyre_fit(prob, train, c), train)
-            err = judged.pop("error")
-            errors[c].append(err[lo - a:hi - a])
-            row[c] = {**judged, "held_out_rms_deg": _rms_deg(err[lo - a:hi - a]),
+        fitted += [(k, c, _identified(config, prob, run, a, b, _tyre_fit(prob, train, c), train)) for c in candidates]
+    betas = _map(observer_beta, [(config, _with_values(params, f["parameters"]), f["design"], run, a, b)
+                                 for _, _, f in fitted], jobs)
+    rows = [{"fold": [edges[k], edges[k + 1]]} for k in range(folds)]
+    errors = {c: [] for c in candidates}
+    for (k, c, identified), beta in zip(fitted, betas):
+        lo, hi = edges[k], edges[k + 1]
+        err = beta - run.beta_true[a:b]
+        errors[c].append(err[lo - a:hi - a])
+        rows[k][c] = {**identified, "held_out_rms_deg": _rms_deg(err[lo - a:hi - a]),
                       "training_rms_deg": _rms_deg(np.concatenate([err[:lo - a], err[hi - a:]]))}
-        rows.append(row)
     pooled = {c: _rms_deg(np.concatenate(errors[c])) for c in candidates}
     biggest = {c: _max_deg(np.concatenate(errors[c])) for c in candidates}
     return {"folds": rows, "pooled": pooled, "max": biggest}
 
 
-def _chosen_design(config, params, prob, run, a, b, folds, candidates, choose) -> tuple:
+def _chosen_design(config, params, prob, run, a, b, folds, candidates, choose, jobs: int = 1) -> tuple:
     """Every combination of the ``design.*`` values of ``choose`` cross-validated with every tyre set;
     (the config with the best combination, {key: value} of it, the table of every combination, its
     cross-validation). A combination the design refuses (no certificate) is a row of the table."""
@@ -625,7 +655,7 @@ def _chosen_design(config, params, prob, run, a, b, folds, candidates, choose) -
         setting = {k.split(".", 1)[1]: v for k, v in zip(keys, values)}
         cfg = dataclasses.replace(config, design={**config.design, **setting})
         try:
-            cv = _cross_validate(cfg, params, prob, run, a, b, folds, candidates)
+            cv = _cross_validate(cfg, params, prob, run, a, b, folds, candidates, jobs)
         except REFUSALS as exc:
             rows.append([*values, *([None] * len(candidates)), f"{type(exc).__name__}: {str(exc).splitlines()[0]}"])
             continue
@@ -641,13 +671,14 @@ def _chosen_design(config, params, prob, run, a, b, folds, candidates, choose) -
     return best[1], best[2], table, best[3]
 
 
-def _peer_folds(config, params, run, a: int, b: int, cv: dict, choice: str, noise: dict) -> None:
+def _peer_folds(config, params, run, a: int, b: int, cv: dict, choice: str, noise: dict, jobs: int = 1) -> None:
     """The same-tyre EKF on each fold with the tyre ``choice`` fitted without it (its two noise levels
     those the grid chose on the whole range: an advantage to the peer), added to ``cv``."""
     truth, errors = np.asarray(run.beta_true, float)[a:b], []
-    for row in cv["folds"]:
+    betas = _map(_ekf_beta, [(config, _with_values(params, row[choice]["parameters"]), run, a, b, noise)
+                             for row in cv["folds"]], jobs)
+    for row, beta in zip(cv["folds"], betas):
         lo, hi = row["fold"]
-        beta = _ekf_betas(config, _with_values(params, row[choice]["parameters"]), run, a, b, [noise])[0]
         err = (beta - truth)[lo - a:hi - a]
         row["ekf_held_out_rms_deg"] = _rms_deg(err)
         errors.append(err)

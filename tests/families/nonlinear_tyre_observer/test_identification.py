@@ -88,6 +88,20 @@ def test_niki_fit_judges_published_against_fitted_on_held_out_folds_and_reproduc
     assert rows[-1][0] == "0–17630: published (written)"
 
 
+def test_the_fit_is_the_same_on_any_number_of_processes(capsys):
+    """--jobs spreads the folds' designs and the peers' Kalman runs over processes: the result, every
+    number of it, is the one a single process gives; a count below 1 is one typed line."""
+    require_shared(stanford.NIKI_PATH, "shared run of the second car")
+    cfg = observers.get(NIKI)
+    one = fit.fit(cfg, "niki", "0:12000", folds=2, jobs=1)
+    two = fit.fit(cfg, "niki", "0:12000", folds=2, jobs=2)
+    assert repr(one) == repr(two)
+    assert len(one["cross_validation"]) == 2 and "peer_cross_validated_rms_deg" in one
+    assert cli.main(["fit", NIKI, "--data", "niki", "--samples", "0:6000", "--jobs", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "--jobs 0: an integer >= 1" in err and "Traceback" not in err
+
+
 @pytest.mark.slow       # two designs of the built-in Ferrari, a few seconds each
 def test_the_noise_bound_objective_certifies_a_lower_bound_at_the_levels():
     """objective = "noise_bound" minimizes the RMS bound at the noise levels over the gains: its certified
