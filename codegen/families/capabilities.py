@@ -158,6 +158,15 @@ class Identification(Protocol):
 
 
 @runtime_checkable
+class RandomModels(Protocol):
+    """Random small valid models of the family, for the acceptance of C == model on models nobody wrote
+    (:mod:`codegen.tools.random_models`): every registered family with this capability is drawn."""
+
+    def draw_random_model(self, rng):
+        """A :class:`codegen.families.random_models.RandomModel` drawn from the numpy generator ``rng``."""
+
+
+@runtime_checkable
 class NoiseBound(Protocol):
     """A certificate that bounds the estimation error from the sensors' noise, restated at the levels
     the parameter file's ``[sensor_noise]`` declares (``uiogen validate`` prints it beside the run)."""

@@ -15,6 +15,7 @@ import pytest
 
 from codegen.project import observer_file as observers
 from codegen.families import random_models as R
+from codegen.tools import random_models as H
 
 # the first seeds of each family (the fast lane reads these draws without designing them)
 SEEDS = range(12)
@@ -26,7 +27,7 @@ def _load(model: R.RandomModel, folder):
     return config, config.load_model()
 
 
-@pytest.mark.parametrize("family", sorted(R.DRAWERS))
+@pytest.mark.parametrize("family", sorted(R.drawers()))
 def test_every_draw_is_a_valid_model_with_the_drawn_structure(family, tmp_path):
     """Each draw loads as an observer file and a model of its family, with the structure it records."""
     for seed in SEEDS[:4]:
@@ -86,7 +87,7 @@ def test_a_drawn_constant_is_one_known_input_and_a_drawn_duplicate_one_premise(t
         assert len(shifted) == m.structure["duplicated_terms"], shifted
 
 
-@pytest.mark.parametrize("family", [f for f in sorted(R.DRAWERS) if f not in R.DISPERSED])
+@pytest.mark.parametrize("family", [f for f in sorted(R.drawers()) if f not in R.DISPERSED])
 def test_every_drawn_model_passes_the_units_check(family, tmp_path):
     """A drawn model is one a user could write: its equations agree with its declared units (the TS
     draws coupled two rates, p r, into the speed's row: refused as a UnitError, not designed)."""
@@ -133,7 +134,7 @@ CHOSEN = [
 ]
 
 
-def _conforms(outcome: R.Outcome):
+def _conforms(outcome: H.Outcome):
     assert outcome.status == "conforms", (outcome.model.name, outcome.status, outcome.error)
     assert outcome.build_line.startswith(f"{outcome.model.name}: conformance:") or "conformance:" in outcome.build_line
     rep = outcome.report
@@ -145,7 +146,7 @@ def _conforms(outcome: R.Outcome):
 @pytest.mark.parametrize("family,what,want", CHOSEN, ids=[f"{f}-{w.replace(' ', '_')}" for f, w, _ in CHOSEN])
 def test_a_drawn_model_is_designed_built_and_conforms(family, what, want, tmp_path):
     seed = _first(family, want)
-    outcome = R.run(R.draw(family, seed), tmp_path / family)
+    outcome = H.run(R.draw(family, seed), tmp_path / family)
     _conforms(outcome)
 
 
@@ -157,7 +158,7 @@ def test_a_drawn_ts_model_with_a_constant_term_conforms_and_estimates_its_unknow
     from codegen.validation import run as validate
     seed = _first("ts_fuzzy_uio", lambda s: s["constant_terms"])
     model = R.draw("ts_fuzzy_uio", seed)
-    outcome = R.run(model, tmp_path)
+    outcome = H.run(model, tmp_path)
     _conforms(outcome)
     path = str(tmp_path / f"{model.name}.toml")
     res = validate.run_scenario(path, "excitation", noise=False)
@@ -179,8 +180,8 @@ def test_acceptance_rate_and_every_designed_model_conforms(tmp_path):
     outcomes = []
     for family, n in LONG_DRAWS.items():
         for seed in range(100, 100 + n):
-            outcomes.append(R.run(R.draw(family, seed), tmp_path / family / str(seed)))
-    rates = R.acceptance(outcomes)
+            outcomes.append(H.run(R.draw(family, seed), tmp_path / family / str(seed)))
+    rates = H.acceptance(outcomes)
     assert not [o for o in outcomes if o.status == "failed"], [(o.model.name, o.error) for o in outcomes
                                                                if o.status == "failed"]
     for o in outcomes:

@@ -18,6 +18,7 @@ import sympy as sp
 
 from codegen import families
 from codegen.families import random_models as R
+from codegen.tools import random_models as H
 from codegen.project import observer_file as observers
 
 SEEDS = range(12)
@@ -30,7 +31,7 @@ def _load(model: R.RandomModel, folder):
 
 def _drawn_families() -> list:
     """The registry's families whose models are drawn (not a built-in model on a dispersed car)."""
-    return [f for f in families.names() if f in R.DRAWERS and f not in R.DISPERSED]
+    return [f for f in families.names() if f in R.drawers() and f not in R.DISPERSED]
 
 
 def _families_with(kind) -> list:
@@ -181,7 +182,7 @@ def _run_kind(family, kind, tmp_path, noisy: bool):
         # excitation run (seed 0: SCHEDULING_CLAMPED in 1489 of 3000 samples), which the flags would count
         if not m.structure[kind] or m.structure.get("derived_scheduling") and family != "ts_fuzzy_uio":
             continue
-        outcome = R.run(m, tmp_path / str(seed))
+        outcome = H.run(m, tmp_path / str(seed))
         if outcome.status == "refused":
             assert "\n" not in outcome.error and outcome.error.startswith("uiogen: error: ")
             refusals.append((seed, outcome.error[:160]))

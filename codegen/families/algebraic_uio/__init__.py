@@ -58,5 +58,10 @@ class AlgebraicUIO(Family):
                 "classical_uio_exists": art["classical_uio_11"]["exists"],
                 "worst_lmi_margin": art["certificate"]["extras"]["recheck"]["worst_min_eig"], "discrete": art["discrete"]}
 
+    def draw_random_model(self, rng):
+        """A random small valid model of this family (:mod:`codegen.families.random_models`)."""
+        from ..random_models import draw_algebraic
+        return draw_algebraic(rng)
+
 
 FAMILY = AlgebraicUIO()

@@ -47,5 +47,10 @@ class InterconnectedUIO(Family):
         return {"worst_lmi_margin": cert["worst_min_eig"], "worst_lmi_block": cert["worst_block"],
                 "discrete": extras["discrete"]}
 
+    def draw_random_model(self, rng):
+        """A random small valid model of this family (:mod:`codegen.families.random_models`)."""
+        from ..random_models import draw_interconnected
+        return draw_interconnected(rng)
+
 
 FAMILY = InterconnectedUIO()

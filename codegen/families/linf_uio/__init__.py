@@ -132,5 +132,10 @@ class LinfUIO(Family):
                                         f"a block's state part is not negative definite (blocks above)")
         return GainsCheck(config.name, "theorem_1", str(source), not failed, reason, None, cases, figures)
 
+    def draw_random_model(self, rng):
+        """A random small valid model of this family (:mod:`codegen.families.random_models`)."""
+        from ..random_models import draw_linf
+        return draw_linf(rng)
+
 
 FAMILY = LinfUIO()

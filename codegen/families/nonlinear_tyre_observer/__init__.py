@@ -124,5 +124,10 @@ class NonlinearTyreObserver(Family):
         case = {"blocks_checked": c["blocks"], **{k: c[k] for k in ("worst_block", "worst_min_eig", "slowest_vertex")}}
         return GainsCheck(config.name, "L", str(source), True, "", b.certificate, {"vertex LMIs": case}, figures)
 
+    def draw_random_model(self, rng):
+        """A random small valid model of this family (:mod:`codegen.families.random_models`)."""
+        from ..random_models import draw_nonlinear_tyre
+        return draw_nonlinear_tyre(rng)
+
 
 FAMILY = NonlinearTyreObserver()

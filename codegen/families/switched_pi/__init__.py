@@ -55,5 +55,10 @@ class SwitchedPI(Family):
                 "discrete": {k: art["discrete"][k] for k in ("contraction_per_step", "spectral_radius_max")},
                 "modes": len(art["switched_model"]["points"])}
 
+    def draw_random_model(self, rng):
+        """A random small valid model of this family (:mod:`codegen.families.random_models`)."""
+        from ..random_models import draw_switched
+        return draw_switched(rng)
+
 
 FAMILY = SwitchedPI()

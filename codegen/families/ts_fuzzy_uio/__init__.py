@@ -62,5 +62,10 @@ class TSFuzzyUIO(Family):
         from .scaling import lines
         return ["design growth with the number of rules (one model family, fresh process per point):", *lines(rows)]
 
+    def draw_random_model(self, rng):
+        """A random small valid model of this family (:mod:`codegen.families.random_models`)."""
+        from ..random_models import draw_ts
+        return draw_ts(rng)
+
 
 FAMILY = TSFuzzyUIO()
