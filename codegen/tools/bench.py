@@ -40,7 +40,7 @@ from ..representation import differentiators
 from .. import families, pipeline
 from ..families.capabilities import BenchFigures, BenchStudy
 from . import harness
-from .flops import ARITHMETIC_OPS, flop_count  # noqa: F401  (the floor of every figure here)
+from ..emit.flops import ARITHMETIC_OPS, flop_count  # noqa: F401  (the floor of every figure here)
 from ..project import observer_file as observers
 
 def callgrind_instructions_per_step(name: str, n1: int = 2000, n2: int = 12000) -> float | None:

@@ -223,7 +223,7 @@ def flops(name) -> int:
     (``name``: a name, an observer-file path or a configuration)."""
     from .. import pipeline
     from ..project import observer_file as observers
-    from .flops import flop_count
+    from ..emit.flops import flop_count
     return int(flop_count(pipeline.build(observers.get(name)).step_function())["total"])
 
 

@@ -11,8 +11,6 @@ only as a typed error (exit 2, one line, no traceback); :func:`acceptance` repor
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import json
 import sys
 import time
@@ -42,15 +40,11 @@ class Outcome:
 
 
 def _cli(argv: list) -> tuple:
-    """(exit code, stdout, stderr) of ``uiogen ARGV`` in this process."""
-    from .. import cli
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            code = cli.main([str(a) for a in argv])
-        except SystemExit as exc:           # argparse
-            code = exc.code if isinstance(exc.code, int) else 2
-    return code, out.getvalue(), err.getvalue()
+    """(exit code, stdout, stderr) of ``uiogen ARGV`` in this process (:func:`codegen.tools.verbs.run_cli`);
+    a traceback, which the console script would print, is the end of stderr."""
+    from .verbs import run_cli
+    r = run_cli(argv)
+    return r["code"], r["stdout"], r["stderr"] + (r["traceback"] or "")
 
 
 def run(model: RandomModel, folder: Path) -> Outcome:

@@ -47,7 +47,7 @@ class AlgebraicUIO(Family):
 
     def bench_figures(self, build) -> dict:
         from ...representation import differentiators
-        from ...tools.bench import flop_count
+        from ...emit.flops import flop_count
         specs = build.settings.differentiators
         return {"hosmd_flops_per_step": sum(flop_count(differentiators.hosmd_function(s))["total"]
                                             for s in specs.values()),

@@ -1,5 +1,6 @@
 """The floating-point operation count of a CasADi step: the floor every cost figure is set
-against (``uiogen bench``, the Cortex-M4F cycle count of :mod:`codegen.tools.m4cycles`)."""
+against (``uiogen bench``, the Cortex-M4F cycle count of :mod:`codegen.tools.m4cycles`, a family's
+own bench figures)."""
 from __future__ import annotations
 
 import casadi as ca
