@@ -198,7 +198,7 @@ def cmd_sweep(args) -> int:
     known once it has designed): an unknown ``--show`` name is a ConfigurationError with a
     did-you-mean; without ``--show``, the default columns the family reports. Rows before the
     columns are known (refusals) wait for them, so the table has one header."""
-    from .design import sweep
+    from .analysis import sweep
     grid = [sweep.parse_set(text) for text in args.sets]
     requested = None if args.show is None else [c.strip() for c in args.show.split(",") if c.strip()]
     result = {"observer": args.name, "grid": dict(grid), "points": []}
@@ -299,7 +299,7 @@ def cmd_fit(args) -> int:
                                  source="--plot", key="--plot", value=args.plot)
     if args.plot and not Path(args.plot).suffix:        # matplotlib adds .png: say the file it writes
         args.plot = f"{args.plot}.png"
-    from .design.sweep import parse_set
+    from .project.settings import parse_set
     choose = [parse_set(text, "--choose") for text in args.choose or ()]
     result = family.fit(cfg, args.data, args.samples, folds=args.folds, judge=tuple(args.judge or ()),
                         choose=choose, jobs=args.jobs)

@@ -193,6 +193,12 @@ class CampaignError(UiogenError, RuntimeError):
     results of another campaign; the runs already finished are kept (the message says where)."""
 
 
+#: The errors with which a design refuses a setting: in a study over settings (``uiogen sweep``, ``uiogen fit
+#: --choose``) such a point is a result, not a failure; anything else (a misspelt key, a value out of range:
+#: ConfigurationError) stops the study.
+REFUSALS = (SolverError, CertificateError, DiscretizationError, RankConditionError, RepresentationError)
+
+
 def brief(expr, limit: int = 160) -> str:
     """``expr`` as text for an error message: whole when short, else its head and its length (the
     derivative of a user's tyre law can run to thousands of characters, which no reader needs)."""

@@ -11,7 +11,8 @@
   invertibility, invariant zeros, strong detectability, relative degrees, what is estimable);
 * :mod:`.ranking`: every registered family's answer (``Family.applicability``), trial designs
   where they are cheap, the families ranked; the observer file ``uiogen new --from-model`` writes;
-* :mod:`.report`: the text.
+* :mod:`.report`: the text;
+* :mod:`.sweep`: ``uiogen sweep``, one observer designed over a grid of its settings.
 
 Nothing here is imported by a family's pipeline: analyzing never makes a design lock stale.
 """

@@ -31,6 +31,7 @@ import difflib
 import math
 import re
 import types
+import tomllib
 import typing
 from dataclasses import MISSING, dataclass
 from typing import Any, Callable, Mapping
@@ -446,3 +447,25 @@ def number_matrix(value) -> tuple:
             or len({len(row) for row in value}) != 1):
         raise ValueError("an array of rows of finite numbers, all rows of the same length (e.g. [[3.0], [0.0]])")
     return tuple(tuple(float(v) for v in row) for row in value)
+
+
+def parse_set(text: str, source: str = "--set") -> tuple:
+    """``KEY=[v1, v2, ...]`` (a TOML array of the values to try) as ``(KEY, [v1, v2, ...])``.
+
+    A single TOML value (``design.alpha=5``) is a grid of one point. An array-valued setting is
+    given as an array of arrays (``design.performance=[["beta"], ["beta", "r"]]``).
+    """
+    key, sep, rhs = text.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise ConfigurationError(f"{source} {text!r}: expected KEY=[VALUE, ...] (a dotted key of the observer "
+                                 f"file, e.g. design.pole_radius=[50, 100])", source=source, key=text)
+    try:
+        value = tomllib.loads(f"v = {rhs.strip()}")["v"]
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigurationError(f"{source} {key}: {rhs.strip()!r} is not a TOML value or array ({exc})",
+                                 source=source, key=key, value=rhs) from None
+    values = value if isinstance(value, list) else [value]
+    if not values:
+        raise ConfigurationError(f"{source} {key}: an empty list of values", source=source, key=key, value=rhs)
+    return key, values

@@ -188,7 +188,7 @@ def test_without_the_shared_log_the_stanford_shorthand_and_the_demo_say_so(tmp_p
 
 def _fake_sweep(monkeypatch, figures):
     """sweep.point answers at once: the first point refused, the others certified with ``figures``."""
-    from codegen.design import sweep
+    from codegen.analysis import sweep
     calls = []
 
     def point(name, overrides):

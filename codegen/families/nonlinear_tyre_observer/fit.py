@@ -641,7 +641,7 @@ def _chosen_design(config, params, prob, run, a, b, folds, candidates, choose, j
     (the config with the best combination, {key: value} of it, the table of every combination, its
     cross-validation). A combination the design refuses (no certificate) is a row of the table."""
     import itertools
-    from ...design.sweep import REFUSALS
+    from ...errors import REFUSALS
     keys = [k for k, _ in choose]
     bad = [k for k in keys if not k.startswith("design.") or k.count(".") != 1]
     if bad:

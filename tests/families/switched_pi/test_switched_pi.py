@@ -205,7 +205,7 @@ POLE_RADIUS_CURVE = {(35.0, 1.0): (0.07765, 0.01), (50.0, 1.0): (0.022136, 0.01)
 def test_gamma_is_set_by_the_pole_radius():
     """gamma of Theorem 2 with the pole disk falls with the radius; the paper's 2.1 lies at the
     feasibility edge (r = 29 rad/s infeasible without decay region, 30.5 already gives 0.43)."""
-    from codegen.design import sweep
+    from codegen.analysis import sweep
     got = {}
     for (r, a), (gamma, rel) in POLE_RADIUS_CURVE.items():
         row = sweep.point(SPEED, {"design.pole_radius": r, "design.decay_rate": a})
@@ -221,7 +221,7 @@ def test_gamma_is_set_by_the_pole_radius():
 
 
 def test_sweep_refuses_a_misspelt_setting_by_name():
-    from codegen.design import sweep
+    from codegen.analysis import sweep
     from codegen.errors import ConfigurationError
     with pytest.raises(ConfigurationError, match="pole_radus"):
         sweep.point(SPEED, {"design.pole_radus": 50.0})

@@ -12,39 +12,11 @@ from __future__ import annotations
 
 import itertools
 import time
-import tomllib
 
 from ..project import observer_file as observers
 from .. import pipeline
-from ..errors import (CertificateError, ConfigurationError, DiscretizationError, RankConditionError,
-                      RepresentationError, SolverError)
-
-# A point of the grid that the method refuses is a result of the study, not a failure of it.
-# Anything else (a misspelt key, a value out of range: ConfigurationError) stops the sweep.
-REFUSALS = (SolverError, CertificateError, DiscretizationError, RankConditionError, RepresentationError)
-
-
-def parse_set(text: str, source: str = "--set") -> tuple:
-    """``KEY=[v1, v2, ...]`` (a TOML array of the values to try) as ``(KEY, [v1, v2, ...])``.
-
-    A single TOML value (``design.alpha=5``) is a grid of one point. An array-valued setting is
-    given as an array of arrays (``design.performance=[["beta"], ["beta", "r"]]``).
-    """
-    key, sep, rhs = text.partition("=")
-    key = key.strip()
-    if not sep or not key:
-        raise ConfigurationError(f"{source} {text!r}: expected KEY=[VALUE, ...] (a dotted key of the observer "
-                                 f"file, e.g. design.pole_radius=[50, 100])", source=source, key=text)
-    try:
-        value = tomllib.loads(f"v = {rhs.strip()}")["v"]
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigurationError(f"{source} {key}: {rhs.strip()!r} is not a TOML value or array ({exc})",
-                                 source=source, key=key, value=rhs) from None
-    values = value if isinstance(value, list) else [value]
-    if not values:
-        raise ConfigurationError(f"{source} {key}: an empty list of values", source=source, key=key, value=rhs)
-    return key, values
-
+from ..errors import REFUSALS, ConfigurationError
+from ..project.settings import parse_set  # noqa: F401  (the grid's syntax, --set)
 
 def _scalars(summary: dict) -> dict:
     """The numeric and text scalars of a design summary (tables and arrays left out)."""
