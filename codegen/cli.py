@@ -299,7 +299,7 @@ def cmd_fit(args) -> int:
                                  source="--plot", key="--plot", value=args.plot)
     if args.plot and not Path(args.plot).suffix:        # matplotlib adds .png: say the file it writes
         args.plot = f"{args.plot}.png"
-    from .project.settings import parse_set
+    from .settings import parse_set
     choose = [parse_set(text, "--choose") for text in args.choose or ()]
     result = family.fit(cfg, args.data, args.samples, folds=args.folds, judge=tuple(args.judge or ()),
                         choose=choose, jobs=args.jobs)

@@ -19,7 +19,7 @@ class ConfigurationError(ModelDefinitionError):
     """A key or value of an observer file, a parameter file or a design table is not allowed.
 
     The message reads ``FILE: [section] key = value: what is allowed`` (with a did-you-mean for a
-    misspelt key or choice); the parts are also attributes, for scripts. :mod:`codegen.project.settings`
+    misspelt key or choice); the parts are also attributes, for scripts. :mod:`codegen.settings`
     raises it.
     """
 

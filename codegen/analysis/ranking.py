@@ -32,7 +32,7 @@ from typing import Callable
 
 from ..design.solver import progress_after
 from ..errors import UiogenError
-from ..project.settings import toml_repr
+from ..settings import toml_repr
 from .subject import Subject
 
 #: guarantee classes, strongest first: (rank, what the certificate says)

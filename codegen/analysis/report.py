@@ -4,7 +4,7 @@ designs side by side, and why the first one is first."""
 from __future__ import annotations
 
 from ..model.dimensions import unranged_note
-from ..project.settings import toml_repr
+from ..settings import toml_repr
 from .ranking import GUARANTEES, Ranking, sort_key, substitution_text
 from .structure import BASIS
 

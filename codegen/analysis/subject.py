@@ -25,7 +25,7 @@ import sympy as sp
 from ..errors import ConfigurationError, ModelDefinitionError, NotAffineError
 from ..model import ParameterSet, load_parameters, parameter_substitution
 from ..project import observer_file as observers
-from ..project.settings import suggest
+from ..settings import suggest
 
 #: sample time of the analysis (TS discretization, trial designs) when no observer file gives one
 DEFAULT_SAMPLE_TIME = 0.01

@@ -16,7 +16,7 @@ import time
 from ..project import observer_file as observers
 from .. import pipeline
 from ..errors import REFUSALS, ConfigurationError
-from ..project.settings import parse_set  # noqa: F401  (the grid's syntax, --set)
+from ..settings import parse_set  # noqa: F401  (the grid's syntax, --set)
 
 def _scalars(summary: dict) -> dict:
     """The numeric and text scalars of a design summary (tables and arrays left out)."""
@@ -70,7 +70,7 @@ def columns(name: str, row: dict, requested=None) -> list:
     (a family's figures are known once it has designed): ``requested`` (``--show``) when every one
     is a figure of it, else ConfigurationError naming the unknown one, a did-you-mean and the
     figures there are; None: :data:`DEFAULT_COLUMNS` the family reports, else :data:`FALLBACK_COLUMN`."""
-    from ..project.settings import suggest
+    from ..settings import suggest
     names = figure_names(row)
     if requested is None:
         return [c for c in DEFAULT_COLUMNS if c in names] or [FALLBACK_COLUMN]

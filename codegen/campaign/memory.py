@@ -267,7 +267,7 @@ def check(spec, workers: int, limit: Limit | None = None) -> Estimate:
         limit and its source, and what would fit (the longest duration, the most workers).
     """
     from ..errors import ConfigurationError
-    from ..project.settings import config_error
+    from ..settings import config_error
     limit = limit or memory_limit()
     est = estimate(spec, workers)
     if est.total <= limit.bytes:

@@ -73,7 +73,7 @@ def _excitation(spec, config, seed: int):
     held whole: its stage inputs, the plant's trajectory) is the campaign file's mistake, named.
     :func:`codegen.campaign.memory.check` refuses the whole campaign before it starts; this is the
     check of one run where it runs (a worker of another machine, behind ``--scheduler``)."""
-    from ..project.settings import config_error
+    from ..settings import config_error
     from ..validation import excitation
     from . import memory
     duration = spec.duration or excitation.DURATION

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import ConfigurationError
-from ..project.settings import Rule, check_keys, config_error, parse_table, suggest
+from ..settings import Rule, check_keys, config_error, parse_table, suggest
 from ..validation.common import SETTLE_TIME
 
 MAX_RUNS = 10_000_000

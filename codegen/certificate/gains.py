@@ -156,7 +156,7 @@ def _printed_form_entries(gains: dict, source) -> None:
     Keys resembling no gain stay allowed: a design artifact or a published design carries annotations
     (``source``, ``gamma_stated``, ``certificate``, ...) beside its gains.
     """
-    from ..project.settings import suggest
+    from ..settings import suggest
     present = [k for k in gains if _PRINTED.match(k)]
     vertices = max([int(k[1:]) for k in present if k[1:].isdigit()] + [0])
     names = ["X", "L", "alpha", "lmi_solutions", *(f"{c}{i}" for c in "PL" for i in range(1, vertices + 2))]
@@ -240,7 +240,7 @@ def refuse_misspelt(gains: dict, read: list, source, allowed: str) -> None:
     Keys that resemble no read key stay allowed: a design artifact or a published design carries
     annotations (``source``, ``gamma_stated``, ``certificate``, ...) beside its gains.
     """
-    from ..project.settings import suggest
+    from ..settings import suggest
     for key in gains:
         if key in read:
             continue
@@ -263,7 +263,7 @@ def _lock_records(raw: list, source) -> list:
         if not isinstance(rec, dict):
             raise ConfigurationError(f"gains file {source}: {where} = {brief(repr(rec))} is not an object; allowed: "
                                      f"{allowed}", source=str(source), key=where, value=rec, allowed=allowed)
-        from ..project.settings import suggest
+        from ..settings import suggest
         for key in rec:
             if key not in RECORD_KEYS:
                 hint = suggest(key, RECORD_KEYS)
@@ -326,7 +326,7 @@ def check_lock_form(family, config, gains: dict, source: str) -> GainsCheck:
     if raw is None and isinstance(gains.get("lock"), dict):      # a design lock file, as committed
         raw = gains["lock"].get("lmi_solutions")
     if not isinstance(raw, list):
-        from ..project.settings import suggest
+        from ..settings import suggest
         near = next((k for k in gains if k != "lmi_solutions" and suggest(k, ["lmi_solutions"])), None)
         what = ("no lmi_solutions" if raw is None and near is None
                 else f"key {near!r} is not read (did you mean 'lmi_solutions'?)" if raw is None
@@ -338,7 +338,7 @@ def check_lock_form(family, config, gains: dict, source: str) -> GainsCheck:
             f"(see generated_c/{config.name}/{config.name}_design.json)", key="lmi_solutions", source=str(source))
     if not is_lock_file(gains):
         # a hand-written file holds lmi_solutions alone: any other key would be silently unused
-        from ..project.settings import suggest
+        from ..settings import suggest
         stray = sorted(k for k in gains if k != "lmi_solutions")
         if stray:
             hint = suggest(stray[0], ["lmi_solutions"])

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 
 from ..errors import DiscretizationError
-from ..project.settings import setting
+from ..settings import setting
 
 PRECISIONS = ("double", "float32")
 FLOAT32_MARGIN = 0.01

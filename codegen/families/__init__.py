@@ -57,7 +57,7 @@ def get(name: str) -> Family:
     try:
         return _REGISTRY[name]
     except KeyError:
-        from ..project.settings import suggest
+        from ..settings import suggest
         close = suggest(str(name), names())
         raise UnknownFamilyError(f"unknown observer family {name!r}" + (f" (did you mean {close!r}?)" if close else "")
                                  + f"; known: {', '.join(names())}",

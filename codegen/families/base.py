@@ -161,7 +161,7 @@ class Family(abc.ABC):
     citation: str = ""
     #: the paper, short ("Nguyen et al. 2019"), for generated headers and reports
     short_citation: str = ""
-    #: top-level observer-file keys beyond the common ones: {key: codegen.project.settings.Rule}
+    #: top-level observer-file keys beyond the common ones: {key: codegen.settings.Rule}
     observer_keys: dict = {}
     #: the built-in observer ``uiogen new DIR --family NAME`` copies as a starter ("": none)
     example: str = ""

@@ -19,7 +19,7 @@ import sympy as sp
 
 from ..errors import (MissingParameterError, ModelDefinitionError, NotAffineError, SchedulingBoundsError,
                       UnknownParameterError, brief)
-from ..project.settings import Rule, check_keys, config_error, parse_table, parse_value, suggest
+from ..settings import Rule, check_keys, config_error, parse_table, parse_value, suggest
 from .floats import FLOAT_NOISE, drop_zero_terms, merge_float_noise  # noqa: F401  (FLOAT_NOISE: re-exported)
 from .names import RULE as NAME_RULE, c_name_problem, suggest as suggest_name
 from .real import real_valued
@@ -734,7 +734,7 @@ def check_signal_tables(model: ModelDefinition, params: ParameterSet) -> None:
     ConfigurationError
         naming the file, the table, the key, the model's signals and the nearest one.
     """
-    from ..project.settings import check_keys
+    from ..settings import check_keys
     signals = {*model.state_names, *(str(s) for s in (*model.known_inputs, *model.unknown_inputs)),
                *(str(g.symbol) for g in model.scheduling), *model.output_names,
                *(str(w.symbol) for w in model.derived_inputs)}

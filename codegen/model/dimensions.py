@@ -680,7 +680,7 @@ def check_plausibility(model, values: dict, source: str, accepted=()) -> None:
         naming the file, the parameter(s), the values, the dimension and the ratio, with the
         ``[plausibility] accept`` that overrides.
     """
-    from ..project.settings import config_error
+    from ..settings import config_error
     analysis = analysis_of(model)
     accepted = set(accepted)
     declared = {p: u for p, u in (getattr(model, "units", None) or {}).items() if p in analysis.dims}

@@ -367,7 +367,7 @@ def apply(model, params, subs: dict, table: dict, source: str) -> tuple:
     ConfigurationError
         a key that is not an unknown input, or a name already used.
     """
-    from ..project.settings import config_error, suggest
+    from ..settings import config_error, suggest
     uis = {str(d): d for d in model.unknown_inputs}
     taken = {str(s) for s in _variables(model)} | {str(p) for p in model.parameters}
     out, done = model, []

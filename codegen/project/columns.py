@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .settings import Rule, config_error, parse_table, suggest
+from ..settings import Rule, config_error, parse_table, suggest
 
 # unit -> (dimension, factor to the dimension's SI unit)
 UNITS = {

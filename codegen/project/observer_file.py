@@ -27,7 +27,7 @@ from ..model import ModelDefinition
 from ..model.definition import check_unit_keys
 from ..model.names import RULE as NAME_RULE, c_name_problem, suggest as suggest_name
 from . import columns, model_reads, precision
-from .settings import Rule, config_error, parse_table, suggest, toml_error
+from ..settings import Rule, config_error, parse_table, suggest, toml_error
 from python_bindings.workspace import PACKAGE_ROOT, Workspace
 
 MODELS_DIR = PACKAGE_ROOT / "model_defs"

@@ -44,7 +44,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .settings import Rule, parse_settings, setting, suggest
+from ..settings import Rule, parse_settings, setting, suggest
 
 DEFAULT_FRACTION = 0.1
 

@@ -27,7 +27,7 @@ so declaring or editing it re-solves nothing and keeps every extension current.
 from __future__ import annotations
 
 from ..errors import UnitError
-from .settings import config_error, suggest
+from ..settings import config_error, suggest
 
 
 def measured_signals(model) -> dict:

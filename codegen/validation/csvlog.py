@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DatasetError
-from ..project.settings import suggest
+from ..settings import suggest
 
 PERIOD_RTOL = 0.01
 """Relative tolerance of ``load(..., sample_time=Ts)``: the log's median period must be Ts (1 ± 0.01)."""

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ModelDefinitionError
-from ..project.settings import config_error, suggest
+from ..settings import config_error, suggest
 from ..model import load_parameters, parameter_substitution
 from . import model_plant
 from .common import SETTLE_TIME, signal_stats

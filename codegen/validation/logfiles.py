@@ -58,7 +58,7 @@ import numpy as np
 
 from ..errors import DatasetError, UnsupportedError, install_hint
 from ..project.columns import UNITS, normalize_unit
-from ..project.settings import suggest
+from ..settings import suggest
 from .csvlog import GAP_FACTOR, MEDIAN_STEPS, PERIOD_RTOL, SHORT_FACTOR, LogReader, regular_file
 
 PARQUET_MAGIC = b"PAR1"

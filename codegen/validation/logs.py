@@ -46,7 +46,7 @@ import numpy as np
 
 from ..errors import ConfigurationError, DatasetError
 from ..project.columns import FIT_SIGNALS, UNITS, Column, factor, model_unit
-from ..project.settings import config_error, suggest
+from ..settings import config_error, suggest
 from . import csvlog, log_checks, logfiles, streaming
 from .common import SETTLE_TIME, format_stats
 

@@ -26,7 +26,7 @@ from codegen.design.canonical import decimal_round, matmul, solve
 from codegen.errors import CertificateError, UnsupportedError
 from codegen.families import Family, ObserverBuild
 from codegen.model import instantiate, load_parameters
-from codegen.project.settings import parse_settings, setting
+from codegen.settings import parse_settings, setting
 
 
 @dataclasses.dataclass(frozen=True)

@@ -447,7 +447,7 @@ def test_cli_list_refuses_a_bad_file(tmp_path, monkeypatch, capsys):
 # ---- nothing lost: committed files parse exactly as before --------------------------------------------
 
 def _old_parse(path: Path) -> observers.ObserverConfig:
-    """The parser before codegen.project.settings (commit 45597f5), for valid files."""
+    """The parser before codegen.settings (commit 45597f5), for valid files."""
     import tomllib
     data = tomllib.loads(path.read_text())
     doc = ""
@@ -582,7 +582,7 @@ def test_committed_parameter_files_load_and_pass():
             instantiate(cfg.load_model(), load_parameters(cfg.parameter_path))
 
 
-# ---- codegen.project.settings itself ---------------------------------------------------------------------------
+# ---- codegen.settings itself ---------------------------------------------------------------------------
 
 @dataclasses.dataclass(frozen=True)
 class _Toy:

@@ -10,7 +10,7 @@ HOSMD); ``validation``: the paper's examples, scenarios as data in the observer 
 """
 from __future__ import annotations
 
-from ...project.settings import Rule
+from ...settings import Rule
 from ..base import Family
 
 

@@ -58,7 +58,7 @@ from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace, un
 from ...model import LPVModel
 from ...representation.polytope import (Premise, affine_decomposition, nonlinear_factors, sector_weights_product,
                                         vertex_matrices)
-from ...project.settings import Rule, config_error, number_matrix, parse_settings, parse_table, parse_value, setting
+from ...settings import Rule, config_error, number_matrix, parse_settings, parse_table, parse_value, setting
 from ...design.precision import margin_field, precision_field, required_margin
 from ...design import canonical
 from ...design.canonical import decimal_round
@@ -127,7 +127,7 @@ DIFFERENTIATOR_RULES = {"order": Rule(int, ge=1, le=MAX_ORDER, required=True, do
 
 
 def settings_from_config(config) -> AlgebraicSettings:
-    """The ``[design]`` table as :class:`AlgebraicSettings` (every key and value checked, see codegen.project.settings)."""
+    """The ``[design]`` table as :class:`AlgebraicSettings` (every key and value checked, see codegen.settings)."""
     d = dict(config.design)
     specs = {}
     diffs = parse_value(d.get("differentiators", {}), Rule(dict), source=config.source, section="design",

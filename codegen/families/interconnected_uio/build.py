@@ -27,7 +27,7 @@ from ...errors import InfeasibleLMIError, ModelDefinitionError, UiogenError
 from ...design import lock
 from ...model import cache
 from ...representation.polytope import sector_weights_product
-from ...project.settings import Rule, parse_settings, parse_table
+from ...settings import Rule, parse_settings, parse_table
 
 from .design import (ICDesign, ICDesignSettings, StepSettings, affine_parts, build_problem, certify, decay_bound,
                      design, discrete_certificate)
@@ -594,7 +594,7 @@ def build(config, solver) -> InterconnectedBuild:
     t1 = time.perf_counter()
     bound, where, vertex = decay_bound(ts, settings)
     if not settings.alpha < bound:
-        from ...project.settings import config_error
+        from ...settings import config_error
         raise config_error(config.source, "design", "alpha", table.get("alpha", settings.alpha),
                            f"must be < {bound:.4g} 1/s with gain_bound = {settings.gain_bound:g}: the gains are "
                            f"bounded by ||K_i|| <= gain_bound (scaled coordinates), and (27b) then holds for no alpha "

@@ -77,7 +77,7 @@ import scipy.linalg
 from . import representation as icm
 from ...errors import CertificateError, DiscretizationError, ModelDefinitionError, RankConditionError
 from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, uncertified
-from ...project.settings import setting
+from ...settings import setting
 from ...design.precision import margin_field, precision_field
 from ...design import canonical
 from ...design.canonical import decimal_round

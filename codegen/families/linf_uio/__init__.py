@@ -16,7 +16,7 @@ import re
 import numpy as np
 
 from ...errors import ConfigurationError, brief
-from ...project.settings import Rule, parse_table
+from ...settings import Rule, parse_table
 from ..base import Family
 
 UI_FILTER_KEYS = {"time_constant": Rule(float, gt=0, doc="T_f of the UI filter (47), s")}

@@ -179,13 +179,13 @@ class LinfBuild(ObserverBuild):
 
 
 def _settings(config: ObserverConfig, lyapunov: str | None = None) -> linf_uio.LinfDesignSettings:
-    """The ``[design]`` table, every key and value checked (codegen.project.settings).
+    """The ``[design]`` table, every key and value checked (codegen.settings).
 
     The TOML key ``gain_bound_times_sample_time`` (default 1.0) is the bound on ||M|| Ts: the field
     ``gain_bound`` is its value / sample_time (``gain_bound`` itself is not a key). ``lyapunov``
     overrides the table's.
     """
-    from ...project.settings import Alias, config_error, parse_settings, suggest
+    from ...settings import Alias, config_error, parse_settings, suggest
     settings = parse_settings(
         linf_uio.LinfDesignSettings, config.design, source=config.source, section="design",
         aliases={"gain_bound_times_sample_time": Alias("gain_bound", lambda v: v / config.sample_time, default=1.0)},
@@ -249,7 +249,7 @@ def build(config: ObserverConfig, solver) -> LinfBuild:
             f"({2 ** len(polytope.scheduling_nonlinearities(lpv))} vertices), or narrow the scheduling box")
     bound, vertex = linf_uio.decay_bound(poly, settings.gain_bound)
     if not settings.alpha < bound:
-        from ...project.settings import config_error
+        from ...settings import config_error
         bound_ts = settings.gain_bound * config.sample_time
         raise config_error(
             config.source, "design", "alpha", config.design.get("alpha", settings.alpha),

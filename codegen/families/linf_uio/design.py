@@ -33,7 +33,7 @@ from ...errors import ConfigurationError, RankConditionError
 from ...errors import SolverError
 from ...design.lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks, uncertified
 from ...representation.polytope import Polytope
-from ...project.settings import Rule, setting
+from ...settings import Rule, setting
 from ...design.precision import margin_field, precision_field
 
 

@@ -48,7 +48,7 @@ from ...certificate.artifact import artifact_head, significant, solver_certifica
 from ...certificate.certificate import Bound, Certificate, Recheck, Step
 from ...design import lock
 from ...model import load_parameters
-from ...project.settings import Rule, parse_settings, setting
+from ...settings import Rule, parse_settings, setting
 from ...design.precision import margin_field, precision_field
 from ...emit.stepgen import lambdify
 from ..base import ObserverBuild, StepNotes

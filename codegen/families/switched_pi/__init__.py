@@ -11,7 +11,7 @@ LMIs (20), the H-infinity check and the exact ZOH of each mode; ``build``: the p
 """
 from __future__ import annotations
 
-from ...project.settings import Rule
+from ...settings import Rule
 from ..base import Family
 
 

@@ -219,11 +219,11 @@ def _lower_decay_that_works(sm, settings, Ts: float) -> str:
 
 
 def settings_of(config: ObserverConfig, tol: float | None = None) -> switched_pi.SwitchedPIDesignSettings:
-    """The ``[design]`` table, every key and value checked (codegen.project.settings); ``tol`` overrides its tol."""
+    """The ``[design]`` table, every key and value checked (codegen.settings); ``tol`` overrides its tol."""
     import dataclasses
-    from ...project.settings import parse_settings
+    from ...settings import parse_settings
     from ...design.precision import rate_for_exact_step, required_margin
-    from ...project.settings import config_error
+    from ...settings import config_error
     fields = switched_pi.SwitchedPIDesignSettings.__dataclass_fields__
     rate = config.design.get("decay_rate", fields["decay_rate"].default)
     radius = config.design.get("pole_radius", fields["pole_radius"].default)

@@ -51,7 +51,7 @@ import numpy as np
 
 from ...errors import CertificateError, ConfigurationError, DiscretizationError, RankConditionError, SolverError
 from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, uncertified
-from ...project.settings import setting
+from ...settings import setting
 from ...design.precision import margin_field, precision_field
 from .representation import SwitchedModel
 from ...design import canonical

@@ -181,7 +181,7 @@ same model, parameters and settings every run; a size guard's refusal is never k
 def build(config: ObserverConfig, solver) -> TSFuzzyBuild:
     """Nguyen et al. 2021: model -> TS form + Jacobian bounds -> rank conditions, (30), LMIs (27) -> certificates;
     the LMIs answered by ``solver`` (:mod:`codegen.design.solver`)."""
-    from ...project.settings import parse_settings
+    from ...settings import parse_settings
     settings = parse_settings(ts_fuzzy_uio.TSDesignSettings, config.design, source=config.source, section="design",
                               **({"tol": solver.tol} if solver.tol is not None else {}))
     if required_margin(settings):       # precision = "float32": (27) imposes lambda <= 1 - float32_margin

@@ -32,7 +32,7 @@ from ...errors import CertificateError, ConfigurationError, RankConditionError, 
 from ...emit.stepgen import solve_unpivoted
 from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace, uncertified
 from ...representation.polytope import sector_weights_product
-from ...project.settings import setting
+from ...settings import setting
 from ...design.precision import margin_field, precision_field
 from .representation import TSFuzzyModel
 from ...design import canonical

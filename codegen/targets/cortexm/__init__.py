@@ -54,7 +54,7 @@ def resolve(names=None, project=None) -> list:
     the working directory, else the closest built-in name."""
     from ...extension.build import generated_names
     from ...project import observer_file as observers
-    from ...project.settings import suggest
+    from ...settings import suggest
     configs = []
     for name in names or generated_names(project):
         try:

@@ -352,7 +352,7 @@ def noise_response(obs, inputs: np.ndarray, noise: dict, out_d: np.ndarray) -> n
 
 def _did_you_mean(key: str, names) -> str:
     """" (did you mean 'y_r'?)" for a misspelt signal name (the measured yawr is the input y_yawr), or ""."""
-    from ...project.settings import suggest
+    from ...settings import suggest
     near = suggest(key, list(names)) or suggest(f"y_{key}", list(names))
     return f" (did you mean {near!r}?)" if near else ""
 

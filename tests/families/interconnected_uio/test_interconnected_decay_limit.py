@@ -9,7 +9,7 @@ import pytest
 from codegen import pipeline
 from codegen.errors import ConfigurationError, InfeasibleLMIError
 from codegen.families.interconnected_uio import design as du, representation as icm
-from codegen.project.settings import parse_settings
+from codegen.settings import parse_settings
 from tests.conftest import new_starter, with_setting
 
 FAMILY = "interconnected_uio"

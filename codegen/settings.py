@@ -36,7 +36,7 @@ import typing
 from dataclasses import MISSING, dataclass
 from typing import Any, Callable, Mapping
 
-from ..errors import ConfigurationError
+from .errors import ConfigurationError
 
 __all__ = ["Rule", "Alias", "setting", "rule_of", "settings_rules", "parse_value", "parse_table",
            "parse_settings", "check_keys", "config_error", "toml_repr", "suggest"]
