@@ -15,7 +15,8 @@ import sympy as sp
 
 from codegen import cli, pipeline
 from codegen.design.solver import FreshSolver
-from codegen.project import observer_file as observers, settings
+from codegen import settings
+from codegen.project import observer_file as observers
 from codegen.representation import polytope
 from codegen.families.switched_pi import build as switched_pipeline
 from codegen.families.ts_fuzzy_uio import representation as ts_fuzzy
