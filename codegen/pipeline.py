@@ -30,7 +30,8 @@ def _family_build(config: ObserverConfig, solver):
     (``Family.bounds_settings``) where it has them."""
     family = families.get(config.family)
     from .model import load_parameters
-    from .model.definition import check_functions, check_signal_tables
+    from .emit.stepgen import check_functions
+    from .model.definition import check_signal_tables
     model = config.load_model()
     check_functions(model, config.model_path)
     check_signal_tables(model, load_parameters(config.parameter_path))

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 from . import ranking as _ranking
 from . import structure as _structure
-from ..model.definition import check_functions
+from ..emit.stepgen import check_functions
 from ..model.dimensions import unranged_parameters
 from .subject import Subject, load
 

@@ -13,7 +13,8 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
-from ..errors import ModelDefinitionError
+from ..errors import ModelDefinitionError, brief
+from ..model.definition import model_equations
 
 # The functions a model's expressions may use, for every CasADi lambdify of the toolchain (sympy
 # prints them unqualified). One table, so a function a user's model uses (tanh of a tyre, say) is
@@ -64,6 +65,38 @@ def unsupported(expr, constants=()) -> list:
         except Exception:           # NameError, casadi's RuntimeError, the refusal of a math function
             failing.append(atom)
     return [a for a in failing if not any(b is not a and a.has(b) for b in failing)]
+
+
+def check_functions(model, source) -> None:
+    """Refuse a model whose equations use a function the generated C cannot evaluate (``besselj``,
+    ``sinc``, an undefined ``f(x)``): every verb would otherwise fail later, the structural analysis
+    with a traceback, the C's emission after a design that looked fine. Applications of parameters
+    alone are folded to numbers before any C and pass.
+
+    Raises
+    ------
+    ModelDefinitionError
+        naming ``source`` (the model file), the function, the equation and what the model may use; a
+        function of measured scheduling signals alone can be computed outside the observer and read
+        as a scheduling signal of its own, which the error says.
+    """
+    constants = set(getattr(model, "parameters", ()))
+    measured = {g.symbol for g in getattr(model, "scheduling", ()) if g.derived is None}
+    for where, expr in model_equations(model):
+        bad = unsupported(expr, constants)
+        if not bad:
+            continue
+        atom = bad[0]
+        name = getattr(atom.func, "__name__", str(atom.func))
+        if atom.free_symbols - constants <= measured:
+            fix = (f"compute {brief(atom)} outside the observer and read it as a scheduling signal of its own: "
+                   f"SchedulingSignal(z) in the model with z where {brief(atom)} is, its box in [scheduling.z] of "
+                   f"the parameter file and its column z in the data")
+        else:
+            fix = f"write {brief(atom)} with those functions (an approximation over the box the model runs in)"
+        raise ModelDefinitionError(f"{source}: model {model.name!r} uses {name} ({where}: {brief(atom)}), which the "
+                                   f"generated C cannot evaluate; a model's equations may use {supported_functions()}; "
+                                   f"{fix}")
 
 
 class _IfElse(sp.Function):

@@ -633,7 +633,7 @@ def check_parameter_values(model, values: Mapping[str, float], source: str, sect
                                + (f" (model {model.name!r} declares {p}: {reasons})" if reasons else ""))
 
 
-def _model_equations(model) -> list:
+def model_equations(model) -> list:
     """[(where, expression)] of every equation a design evaluates."""
     dynamics = list(getattr(model, "dynamics", ()))
     pairs = dynamics if dynamics and isinstance(dynamics[0], tuple) else zip(getattr(model, "states", ()), dynamics)
@@ -685,41 +685,8 @@ def check_singular_values(model, values: Mapping[str, float], source: str) -> No
             return
         for a in e.args:
             visit(where, a)
-    for where, expr in _model_equations(model):
+    for where, expr in model_equations(model):
         visit(where, sp.sympify(expr))
-
-
-def check_functions(model, source) -> None:
-    """Refuse a model whose equations use a function the generated C cannot evaluate (``besselj``,
-    ``sinc``, an undefined ``f(x)``): every verb would otherwise fail later, the structural analysis
-    with a traceback, the C's emission after a design that looked fine. Applications of parameters
-    alone are folded to numbers before any C and pass.
-
-    Raises
-    ------
-    ModelDefinitionError
-        naming ``source`` (the model file), the function, the equation and what the model may use; a
-        function of measured scheduling signals alone can be computed outside the observer and read
-        as a scheduling signal of its own, which the error says.
-    """
-    from ..emit.stepgen import supported_functions, unsupported
-    constants = set(getattr(model, "parameters", ()))
-    measured = {g.symbol for g in getattr(model, "scheduling", ()) if g.derived is None}
-    for where, expr in _model_equations(model):
-        bad = unsupported(expr, constants)
-        if not bad:
-            continue
-        atom = bad[0]
-        name = getattr(atom.func, "__name__", str(atom.func))
-        if atom.free_symbols - constants <= measured:
-            fix = (f"compute {brief(atom)} outside the observer and read it as a scheduling signal of its own: "
-                   f"SchedulingSignal(z) in the model with z where {brief(atom)} is, its box in [scheduling.z] of "
-                   f"the parameter file and its column z in the data")
-        else:
-            fix = f"write {brief(atom)} with those functions (an approximation over the box the model runs in)"
-        raise ModelDefinitionError(f"{source}: model {model.name!r} uses {name} ({where}: {brief(atom)}), which the "
-                                   f"generated C cannot evaluate; a model's equations may use {supported_functions()}; "
-                                   f"{fix}")
 
 
 def check_signal_tables(model: ModelDefinition, params: ParameterSet) -> None:
