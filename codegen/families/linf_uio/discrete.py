@@ -621,14 +621,20 @@ def _largest_holding(candidates: list, holds) -> float | None:
     The committed rate is one of these numbers, so the search asks about them and nothing else:
     down from the top in growing steps (the dense grid's ceiling is usually close above the
     answer: one to three solves), then by halving between the last that failed and the first that
-    held. It gives what a bisection of the rate would round to, with fewer solves."""
+    held. After two that fail it asks the smallest, so that where none holds (a loop that no common
+    Lyapunov function proves) three questions say so. It gives what a bisection of the rate would
+    round to, with fewer solves."""
     lo, hi, step = -1, len(candidates), 1       # candidates[hi:] fail; candidates[lo] holds (-1: none known)
-    while hi > 0:
+    while hi > 0 and lo < 0:
         i = max(hi - step, 0)
         if holds(candidates[i]):
             lo = i
             break
         hi, step = i, 2 * step
+        if step == 4 and hi > 0:                # two have failed
+            if not holds(candidates[0]):
+                return None
+            lo = 0
     while hi - lo > 1 and lo >= 0:
         mid = (lo + hi) // 2
         lo, hi = (mid, hi) if holds(candidates[mid]) else (lo, mid)
