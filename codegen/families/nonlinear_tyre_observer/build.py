@@ -74,6 +74,11 @@ class NonlinearTyreSettings:
     sliding_growth: float | None = setting(None, gt=0, doc="epsilon [1/s]: the growth of V the through-sliding "
                                                            "certificate allows where both axles slide (v_y is "
                                                            "unobservable there); absent: 1e-3")
+    fallback_growth: float | None = setting(None, gt=0, doc="epsilon_fb [1/s]: certify the kinematic fallback too "
+                                                            "(the gains designed with it): on a sample flagged for "
+                                                            "its estimated slip alone V grows at most by 1 + Ts "
+                                                            "epsilon_fb, whatever the true slip; absent: the "
+                                                            "fallback is not certified")
     gain_sliding_fraction: float = setting(0.3, gt=0, lt=1, doc="the set of the l2 gain bound, <= sliding_fraction")
     decay: float | None = setting(None, gt=0, lt=1, doc="lambda: V(e+) <= lambda^2 V(e) required; absent: "
                                                         "decay_fraction of the largest certifiable rate")
@@ -107,6 +112,10 @@ class NonlinearTyreSettings:
             raise ValueError(f"sliding_growth = {self.sliding_growth:g} is read with through_sliding = true only (the "
                              f"growth the certificate at every slip allows where both axles slide); set both, or "
                              f"neither")
+        if self.fallback_growth is not None and self.through_sliding:
+            raise ValueError(f"fallback_growth = {self.fallback_growth:g} certifies the kinematic fallback beyond "
+                             f"sliding_fraction, which through_sliding = true replaces by the tyre correction; set "
+                             f"one of them")
         if self.gain_sliding_fraction > self.sliding_fraction:
             raise ValueError(f"gain_sliding_fraction = {self.gain_sliding_fraction:g} must not exceed "
                              f"sliding_fraction = {self.sliding_fraction:g} (the gain set lies in the certified set)")
@@ -321,7 +330,7 @@ class Build(ObserverBuild):
                    f"{c['best_decay_rate']:.4g} 1/s), and on the gain set (|t_k| <= {s.gain_sliding_fraction:g} "
                    f"t_sl,k) the sideslip error has the l2 gain gamma from the disturbances normalized by their "
                    f"levels, and (per-channel multipliers, a second Lyapunov matrix) an RMS bound with every "
-                   f"channel at its level" + self._through_claim()),
+                   f"channel at its level" + self._through_claim() + self._fallback_claim()),
             plant_class=(f"the single-track model {self.config.model} with the tyre law of its AXLES per axle "
                          f"(the capacity from the measured signals), Euler-discretized at Ts = "
                          f"{self.config.sample_time:g} s, parameters of "
@@ -335,6 +344,9 @@ class Build(ObserverBuild):
                          f"signals) for the true AND the estimated state; SCHEDULING_CLAMPED flags the estimated "
                          f"slip or a measured signal ({measured} where the law reads it) outside the set: the "
                          f"true slip is not seen ({self.rep.signals.lateral_speed} is not measured)"
+                         + ("" if s.fallback_growth is None else
+                            f"; a sample flagged for its estimated slip alone is covered by the fallback's bound (V "
+                            f"grows at most by 1 + Ts {s.fallback_growth:g}), one flagged for a measured signal is not")
                          if self.through is None else
                          f"every slip for the true and the estimated state (each axle force constant beyond its "
                          f"sliding slip, checked on the model at |t| = 1 to 3 t_sl; the front slip angle within "
@@ -353,6 +365,13 @@ class Build(ObserverBuild):
                           "multipliers: " + ", ".join(f"{k} {v:.3g}" for k, v in c["bound_deg_by_channel"].items())
                           + " deg)")),
             extras=solver_certificate(self.solution, recheck=self.recheck))
+
+    def _fallback_claim(self) -> str:
+        if self.settings.fallback_growth is None:
+            return ""
+        return (f"; on a sample flagged for its estimated slip alone (the kinematic fallback, the measured signals in "
+                f"their boxes) V(e+) <= (1 + Ts eps_fb) V(e), eps_fb = {self.settings.fallback_growth:.4g} 1/s, "
+                f"whatever the true slip (the same Lyapunov matrix)")
 
     def _through_claim(self) -> str:
         if self.through is None:
@@ -405,6 +424,7 @@ class Build(ObserverBuild):
                 "noise_levels": dict(zip(dsn.CHANNELS, s.sigma.tolist())),
                 "input_boxes": {n: list(b) for n, b in self.rep.input_boxes}, "v_x_box": list(self.rep.v_x_box),
                 "sample_time": self.config.sample_time, "through_sliding": s.through_sliding,
+                **({} if s.fallback_growth is None else {"fallback_growth": s.fallback_growth}),
                 **({} if self.through is None else {
                     "theta_through": [list(b.theta) for b in self.rep.through_set],
                     "through_rate": c["through_rate"], "sliding_growth": c["sliding_growth"],
@@ -448,7 +468,7 @@ def build(config, solver, params=None):
         through_verts = tuple(dsn.through_vertices(rep))
         through = dsn.through_sliding(plant, through_verts, settings, design, solver)
     t2 = time.perf_counter()
-    cert = dsn.certify(plant, decay_verts, gain_verts, design, level, through, through_verts)
+    cert = dsn.certify(plant, decay_verts, gain_verts, design, level, through, through_verts, settings.fallback_growth)
     t3 = time.perf_counter()
     return Build(config, rep, settings, plant, design, level, decay_verts, gain_verts, cert,
                  {"representation_s": t1 - t0, "design_s": t2 - t1, "solve_s": design.solution.solve_time_s,

@@ -147,6 +147,37 @@ def gain_block(plant, x, P, Y, eta, xp=np):
     return cat([[-(PF + PF.T) - C.T @ C / plant.Ts, -PG, r * PF.T], [-PG.T, W, r * PG.T], [r * PF, r * PG, P]])
 
 
+def fallback_vertices(decay_verts) -> list:
+    """Vertices (s, theta_f, theta_r) of the kinematic fallback's error step: s over the speed box, each
+    axle's theta from its full slope (the end of the certified set's box farthest from 0, reached at zero
+    slip) to 0 (sliding): the true slip is anywhere when the estimated one is beyond the set."""
+    theta = np.array([x.theta for x in decay_verts])
+    full = [theta[np.argmax(np.abs(theta[:, k])), k] for k in range(theta.shape[1])]
+    out = []
+    for s in sorted({x.s for x in decay_verts}):
+        for th in itertools.product(*[(f, 0.0) for f in full]):
+            out.append(Vertex(f"fallback s={s:.6g} theta=({th[0]:.6g}, {th[1]:.6g})", s, 1.0 / s, np.array(th)))
+    return out
+
+
+def fallback_block(plant, x, P, growth, xp=np):
+    """V(e+) <= (1 + Ts growth) V(e) for the fallback's error step at vertex ``x`` (Schur form, P scaled):
+    e_vy+ = e_vy (the exact kinematics with the measured a_y), e_r+ = Ts df_r/dv_y e_vy (r_hat reset to the
+    measured r plus one Euler step of the model); the gains do not enter."""
+    A = np.array([[1.0, 0.0], [plant.Ts * (plant.G_f @ x.theta)[1] * x.s, 0.0]])
+    Ah = plant.D @ A @ np.linalg.inv(plant.D)
+    cat = np.block if xp is np else bmat
+    return cat([[(1.0 + plant.Ts * growth) * P, Ah.T @ P], [P @ Ah, P]])
+
+
+def _fallback_blocks(prob, plant, P, decay_verts, settings) -> None:
+    if getattr(settings, "fallback_growth", None) is None:
+        return
+    for x in fallback_vertices(decay_verts):
+        prob.require_psd(x.label, fallback_block(plant, x, P, settings.fallback_growth, LMIProblem),
+                         margin=settings.margin, hint="raise fallback_growth")
+
+
 def _decay_feasible(plant, verts, rate, L_scaled, settings) -> bool:
     prob = LMIProblem("nonlinear-tyre observer: decay rate (analysis)", design=False)
     P = prob.symmetric("P", 2)
@@ -154,6 +185,7 @@ def _decay_feasible(plant, verts, rate, L_scaled, settings) -> bool:
     prob.require_psd("P >= I", P, margin=1.0)
     for x in verts:
         prob.require_psd(f"decay {x.label}", decay_block(plant, x, P, Y, rate, LMIProblem), margin=settings.margin)
+    _fallback_blocks(prob, plant, P, verts, settings)
     try:
         prob.solve(tol=settings.tol, unique=False)
     except (SolverError, CertificateError):
@@ -175,7 +207,9 @@ def best_decay_rate(plant, verts, settings, L_scaled=None, iterations: int = 30)
 
 def lmi_problem(plant, decay_verts, gain_verts, settings, rate, best_rate, L_scaled=None) -> LMIProblem:
     """The design problem: decay ``rate`` at ``decay_verts``, the l2 gain minimized at ``gain_verts``."""
-    prob = LMIProblem(problem_name(L_scaled is not None), data={"best_decay_rate": best_rate, "decay_rate": rate})
+    growth = getattr(settings, "fallback_growth", None)
+    prob = LMIProblem(problem_name(L_scaled is not None), data={"best_decay_rate": best_rate, "decay_rate": rate}
+                      | ({} if growth is None else {"fallback_growth": growth}))
     P = prob.symmetric("P", 2)
     Y = prob.matrix("Y", 2, 2) if L_scaled is None else P @ L_scaled
     prob.require_psd("P >= I", P, margin=1.0)
@@ -183,6 +217,7 @@ def lmi_problem(plant, decay_verts, gain_verts, settings, rate, best_rate, L_sca
     for x in decay_verts:
         prob.require_psd(f"decay {x.label}", decay_block(plant, x, P, Y, rate, LMIProblem), margin=settings.margin,
                          hint=hint)
+    _fallback_blocks(prob, plant, P, decay_verts, settings)
     if getattr(settings, "objective", "gamma") == "noise_bound" and L_scaled is None:
         # one multiplier per channel, their sum minimized: the RMS bound at the levels (level_bound_problem)
         # with the gains free. eta = max(mu) then certifies the uniform gain with the same P (the block
@@ -389,7 +424,7 @@ def level_bound(plant, gain_verts, settings, design: Design, solver) -> LevelBou
 
 
 def certify(plant, decay_verts, gain_verts, design: Design, level: LevelBound, through: Through | None = None,
-            through_verts=()) -> dict:
+            through_verts=(), fallback_growth: float | None = None) -> dict:
     """Independent numpy re-check of every block on the emitted (rounded) P, L, Q and multipliers (and the
     through-sliding P); the contraction per step at the decay vertices, the certified gain and the bound at
     the levels."""
@@ -399,6 +434,8 @@ def certify(plant, decay_verts, gain_verts, design: Design, level: LevelBound, t
     blocks = {"P > 0": design.P}
     blocks.update({f"decay {x.label}": decay_block(plant, x, design.P, Y, design.rate) for x in decay_verts})
     blocks.update({f"l2 gain {x.label}": gain_block(plant, x, design.P, Y, design.eta) for x in gain_verts})
+    if fallback_growth is not None:
+        blocks.update({x.label: fallback_block(plant, x, design.P, fallback_growth) for x in fallback_vertices(decay_verts)})
     blocks["Q > 0"] = level.Q
     YQ = level.Q @ (D @ design.L @ np.linalg.inv(D))
     blocks.update({f"level bound {x.label}": gain_block(plant, x, level.Q, YQ, np.diag(level.mu)) for x in gain_verts})
@@ -429,6 +466,8 @@ def certify(plant, decay_verts, gain_verts, design: Design, level: LevelBound, t
     gamma = float(np.sqrt(design.eta * plant.Ts))
     extra = {} if through is None else {"through_rate": through.rate, "sliding_growth": through.growth,
                                         "through_time_constant_s": 2.0 / through.rate if through.rate > 0 else None}
+    if fallback_growth is not None:
+        extra["fallback_growth"] = fallback_growth
     return {**extra, "blocks": len(checks), "worst_block": worst.label, "worst_min_eig": worst.min_eig,
             "worst_relative_margin": worst.relative_margin, "max_ratio": ratio,
             "contraction_per_step": float(np.sqrt(ratio)), "slowest_vertex": slowest,
