@@ -199,7 +199,8 @@ def cmd_sweep(args) -> int:
     did-you-mean; without ``--show``, the default columns the family reports. Rows before the
     columns are known (refusals) wait for them, so the table has one header."""
     from .analysis import sweep
-    grid = [sweep.parse_set(text) for text in args.sets]
+    from .settings import parse_set
+    grid = [parse_set(text) for text in args.sets]
     requested = None if args.show is None else [c.strip() for c in args.show.split(",") if c.strip()]
     result = {"observer": args.name, "grid": dict(grid), "points": []}
     state = {"columns": None, "waiting": [], "printed": False}

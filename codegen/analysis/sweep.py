@@ -16,7 +16,6 @@ import time
 from ..project import observer_file as observers
 from .. import pipeline
 from ..errors import REFUSALS, ConfigurationError
-from ..settings import parse_set  # noqa: F401  (the grid's syntax, --set)
 
 def _scalars(summary: dict) -> dict:
     """The numeric and text scalars of a design summary (tables and arrays left out)."""

@@ -171,7 +171,7 @@ def fallback_block(plant, x, P, growth, xp=np):
 
 
 def _fallback_blocks(prob, plant, P, decay_verts, settings) -> None:
-    if getattr(settings, "fallback_growth", None) is None:
+    if settings.fallback_growth is None:
         return
     for x in fallback_vertices(decay_verts):
         prob.require_psd(x.label, fallback_block(plant, x, P, settings.fallback_growth, LMIProblem),
@@ -207,7 +207,7 @@ def best_decay_rate(plant, verts, settings, L_scaled=None, iterations: int = 30)
 
 def lmi_problem(plant, decay_verts, gain_verts, settings, rate, best_rate, L_scaled=None) -> LMIProblem:
     """The design problem: decay ``rate`` at ``decay_verts``, the l2 gain minimized at ``gain_verts``."""
-    growth = getattr(settings, "fallback_growth", None)
+    growth = settings.fallback_growth
     prob = LMIProblem(problem_name(L_scaled is not None), data={"best_decay_rate": best_rate, "decay_rate": rate}
                       | ({} if growth is None else {"fallback_growth": growth}))
     P = prob.symmetric("P", 2)

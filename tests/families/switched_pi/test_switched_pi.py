@@ -223,14 +223,15 @@ def test_gamma_is_set_by_the_pole_radius():
 def test_sweep_refuses_a_misspelt_setting_by_name():
     from codegen.analysis import sweep
     from codegen.errors import ConfigurationError
+    from codegen.settings import parse_set
     with pytest.raises(ConfigurationError, match="pole_radus"):
         sweep.point(SPEED, {"design.pole_radus": 50.0})
     with pytest.raises(ConfigurationError, match="pole_radius"):
         sweep.point(SPEED, {"design.pole_radius": -1.0})
-    assert sweep.parse_set("design.pole_radius=[50, 100]") == ("design.pole_radius", [50, 100])
-    assert sweep.parse_set("design.alpha=5") == ("design.alpha", [5])
+    assert parse_set("design.pole_radius=[50, 100]") == ("design.pole_radius", [50, 100])
+    assert parse_set("design.alpha=5") == ("design.alpha", [5])
     with pytest.raises(ConfigurationError, match="KEY="):
-        sweep.parse_set("design.alpha")
+        parse_set("design.alpha")
 
 
 def test_without_decay_region_the_bank_estimate_does_not_converge(builds):
