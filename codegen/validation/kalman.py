@@ -25,6 +25,7 @@ signals (``u[k-1]``, ``rho[k-1]``), as the source repository's MATLAB filter doe
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import casadi as ca
@@ -50,8 +51,7 @@ def to_casadi(exprs, symbols, values) -> list:
     ModelDefinitionError
         An expression uses a function with no CasADi counterpart here (e.g. Piecewise, sign).
     """
-    exprs = [sp.sympify(e) for e in exprs]
-    fn = sp.lambdify(list(symbols), exprs, [_CASADI_NAMESPACE, "math"])
+    fn = _compiled(tuple(symbols), tuple(sp.sympify(e) for e in exprs))
     try:
         out = fn(*values)
     except (TypeError, RuntimeError, NotImplementedError) as exc:
@@ -59,6 +59,14 @@ def to_casadi(exprs, symbols, values) -> list:
             f"cannot convert to CasADi ({exc}); the models of the Kalman baselines may use "
             f"{', '.join(sorted(_CASADI_NAMESPACE))} and arithmetic") from None
     return [ca.SX(o) for o in out]
+
+
+@functools.lru_cache(maxsize=16)
+def _compiled(symbols: tuple, exprs: tuple):
+    """The expressions compiled once per process: the parameters are arguments (``kalman_model`` passes
+    their values), so the Kalman runs of ``uiogen fit``, one per tyre set and noise level, print a tyre law
+    once (sympy's printing is most of a Kalman model's time) and give the same CasADi graph."""
+    return sp.lambdify(list(symbols), list(exprs), [_CASADI_NAMESPACE, "math"])
 
 
 @dataclass(frozen=True, eq=False)
