@@ -5,6 +5,7 @@ import pytest
 from codegen.families.linf_uio import discrete
 from codegen.families.linf_uio import design as linf_uio
 from codegen.errors import DiscretizationError
+from codegen.design import rates
 from codegen.design.solver import FreshSolver
 
 
@@ -79,34 +80,10 @@ def test_ui_loop_bisection_stops_once_the_committed_rate_is_settled(build):
     for _ in range(14):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if discrete._ui_loop_feasible(data, mid, data.Tf) else (lo, mid)
-    assert cert.beta == discrete._round_down(discrete.UI_LOOP_BACKOFF * lo) == 2.4
+    assert cert.beta == rates.round_down(discrete.UI_LOOP_BACKOFF * lo, 2) == 2.4
     analyses = [line for line in lines if line.startswith(discrete.UI_LOOP_PROBLEM + ", beta")]
     assert 2 <= len(analyses) < 15            # the feasibility at 0, the steps taken, the design solve
     assert all(" blocks, " in line and line.endswith(" s)") for line in lines)
-
-
-def test_committed_rate_search_asks_few_and_finds_the_largest():
-    """The search over the committable rates finds the largest that holds for every threshold of a
-    monotone answer (none, the smallest, the top, anywhere between), asking about candidates only,
-    at most 2 log2(n) + 3 of them, one when the answer is the top and three when there is none."""
-    rng = np.random.default_rng(3)
-    for top in [*rng.uniform(1e-3, 100.0, 200), 2.55]:
-        candidates = discrete._committable_rates(top)
-        assert candidates == sorted(set(candidates)) and candidates[-1] <= top
-        assert all(discrete._round_down(q) == q for q in candidates)
-        assert discrete._round_down(top) == candidates[-1]
-        for k in {-1, 0, len(candidates) - 1, len(candidates) - 2, int(rng.integers(len(candidates)))}:
-            asked = []
-
-            def holds(q):
-                asked.append(q)
-                return candidates.index(q) <= k
-            assert discrete._largest_holding(candidates, holds) == (candidates[k] if k >= 0 else None)
-            assert len(asked) <= 2 * np.log2(len(candidates)) + 3
-            if k == len(candidates) - 1:
-                assert len(asked) == 1
-            if k == -1:                     # none holds: the top, the next, the smallest
-                assert len(asked) <= 3
 
 
 def test_grid_matrices_are_those_of_one_point_at_a_time(build):

@@ -36,7 +36,7 @@ import numpy as np
 import sympy as sp
 from scipy.linalg import eigh
 
-from ...design import canonical
+from ...design import canonical, rates
 from ...errors import CertificateError, ConfigurationError, DiscretizationError, SolverError, UILoopError
 from ...design.lmi import LMIProblem
 from ...representation.polytope import Polytope, sector_weights_product
@@ -573,17 +573,6 @@ def _ui_loop_feasible(data: ObserverData, beta: float, Tf: float, solver=None) -
         return False
 
 
-def _round_down(x: float, digits: int = 2) -> float:
-    """``x`` rounded down to ``digits`` significant digits, in decimal arithmetic (the same on
-    every machine): the decay rate the committed certificate is solved at."""
-    import decimal
-    if x <= 0:
-        return 0.0
-    d = decimal.Decimal(repr(float(x)))
-    quantum = decimal.Decimal(1).scaleb(d.adjusted() - digits + 1)
-    return float((d / quantum).to_integral_value(rounding=decimal.ROUND_FLOOR) * quantum)
-
-
 def slowest_grid_decay(data: ObserverData, Tf: float | None = None, n_grid: int = 401) -> tuple:
     """(min over a dense grid of -max Re eig Aa(th), where): evidence, and the ceiling of the
     certified decay (a common P with He(P Aa) <= -2 beta P forces Re eig Aa <= -beta)."""
@@ -598,55 +587,12 @@ UI_LOOP_RESOLUTION = 2.0 ** -14
 """The smallest committable rate, as a fraction of the ceiling (a 14-step bisection's resolution)."""
 
 
-def _committable_rates(top: float) -> list:
-    """Every rate the design can commit up to ``top``, ascending: the numbers of two significant
-    digits (:func:`_round_down`'s values) in [UI_LOOP_RESOLUTION top, top]."""
-    import decimal
-    if top <= 0:
-        return []
-    low = UI_LOOP_RESOLUTION * top
-    out = []
-    for exponent in range(int(np.floor(np.log10(low))) - 1, int(np.floor(np.log10(top))) + 1):
-        for mantissa in range(10, 100):
-            q = float(decimal.Decimal(mantissa).scaleb(exponent))
-            if low <= q <= top:
-                out.append(q)
-    return out
-
-
-def _largest_holding(candidates: list, holds) -> float | None:
-    """The largest of the ascending ``candidates`` for which ``holds`` (true up to some point, false
-    above it: a decay rate a common Lyapunov function proves, it proves every smaller one), or None.
-
-    The committed rate is one of these numbers, so the search asks about them and nothing else:
-    down from the top in growing steps (the dense grid's ceiling is usually close above the
-    answer: one to three solves), then by halving between the last that failed and the first that
-    held. After two that fail it asks the smallest, so that where none holds (a loop that no common
-    Lyapunov function proves) three questions say so. It gives what a bisection of the rate would
-    round to, with fewer solves."""
-    lo, hi, step = -1, len(candidates), 1       # candidates[hi:] fail; candidates[lo] holds (-1: none known)
-    while hi > 0 and lo < 0:
-        i = max(hi - step, 0)
-        if holds(candidates[i]):
-            lo = i
-            break
-        hi, step = i, 2 * step
-        if step == 4 and hi > 0:                # two have failed
-            if not holds(candidates[0]):
-                return None
-            lo = 0
-    while hi - lo > 1 and lo >= 0:
-        mid = (lo + hi) // 2
-        lo, hi = (mid, hi) if holds(candidates[mid]) else (lo, mid)
-    return candidates[lo] if lo >= 0 else None
-
-
 def certify_ui_loop(data: ObserverData, solver, min_margin: float = 0.0) -> UILoopCertificate:
     """Prove that the observer's full error, UI filter loop closed, contracts over the whole box.
 
     At design time the decay rate beta committed is the largest number of two significant digits
     that is UI_LOOP_BACKOFF of a rate a common Lyapunov function certifies (analysis solves below
-    the dense grid's slowest decay, the ceiling: :func:`_largest_holding`), solved once more as a
+    the dense grid's slowest decay, the ceiling: :func:`codegen.design.rates.largest_holding`), solved once more as a
     design problem: that solution goes to
     the design lock with its beta and Tf, and every later ``generate`` re-checks the committed
     matrices block by block (numpy) instead of solving (``solver``: :mod:`codegen.design.solver`).
@@ -673,7 +619,7 @@ def certify_ui_loop(data: ObserverData, solver, min_margin: float = 0.0) -> UILo
 
         def holds(q):       # the committed rate q is UI_LOOP_BACKOFF of a feasible one
             return _ui_loop_feasible(data, q / UI_LOOP_BACKOFF, data.Tf, solver)
-        best = _largest_holding(_committable_rates(UI_LOOP_BACKOFF * ceiling), holds)
+        best = rates.largest_holding(rates.committable_rates(UI_LOOP_BACKOFF * ceiling, 2, UI_LOOP_RESOLUTION), holds)
         # a decay of 0 is proven by any rate that holds: it is asked only when none does
         if best is None and not _ui_loop_feasible(data, 0.0, data.Tf, solver):
             message, remedy = _ui_loop_advice(data, ceiling, at)

@@ -24,8 +24,8 @@ a decay near 1 leaves the solver a difference of nearly equal numbers):
   [[-(PF + F'P) - C'C/T_s, -PG, sqrt(T_s) F'P], [-G'P, eta I, sqrt(T_s) G'P],
    [sqrt(T_s) PF, sqrt(T_s) PG, P]] >= 0,  gamma^2 = eta T_s.
 
-Design: the largest certifiable decay rate a* by bisection (analysis problems), then one design
-problem: the decay rate ``decay_fraction`` a* (or the observer file's ``decay``) required, the
+Design: the largest certifiable decay rate a* of three significant digits (analysis problems), then one
+design problem: the decay rate ``decay_fraction`` a* (or the observer file's ``decay``) required, the
 gain minimized; L = P^-1 Y. Then, with L fixed, the RMS bound at the noise levels: the same
 bounded-real block at the same vertices with its own Lyapunov matrix Q and one multiplier per
 channel, eta I -> diag(mu), sum(mu) minimized. Summed over a trajectory in the gain set it gives
@@ -38,12 +38,12 @@ d = sqrt(v_min v_max) [m/s] (r times a speed is a lateral speed, or an accelerat
 """
 from __future__ import annotations
 
-import decimal
 import itertools
 from dataclasses import dataclass
 
 import numpy as np
 
+from ...design import rates
 from ...design.canonical import decimal_round
 from ...design.precision import required_margin
 from ...errors import CertificateError, SolverError
@@ -59,13 +59,19 @@ def problem_name(given_gains: bool) -> str:
             "nonlinear-tyre observer: gains, decay and l2 gain over the DMVT vertices")
 
 
-def _round_down(x: float, digits: int = 3) -> float:
-    """``x`` rounded down to ``digits`` significant digits in decimal arithmetic (the same on every machine)."""
-    if x <= 0:
-        return 0.0
-    d = decimal.Decimal(repr(float(x)))
-    quantum = decimal.Decimal(1).scaleb(d.adjusted() - digits + 1)
-    return float((d / quantum).to_integral_value(rounding=decimal.ROUND_FLOOR) * quantum)
+RATE_DIGITS = 3
+"""Significant digits of a committed decay rate (rounded down: :func:`codegen.design.rates.round_down`)."""
+
+RATE_RESOLUTION = 2.0 ** -30
+"""The smallest committable rate as a fraction of 1/T_s (a 30-step bisection's resolution)."""
+
+
+def _largest_rate(plant, feasible) -> float:
+    """The largest rate of RATE_DIGITS significant digits in (0, 1/T_s] that ``feasible`` holds at (a binary
+    search over those numbers, :mod:`codegen.design.rates`: what a bisection of the rate rounds down to, in
+    half the solves); 0 when none."""
+    candidates = rates.committable_rates(1.0 / plant.Ts, RATE_DIGITS, RATE_RESOLUTION)
+    return rates.largest_holding(candidates, feasible, near_top=False) or 0.0
 
 
 @dataclass(frozen=True)
@@ -193,16 +199,12 @@ def _decay_feasible(plant, verts, rate, L_scaled, settings) -> bool:
     return True
 
 
-def best_decay_rate(plant, verts, settings, L_scaled=None, iterations: int = 30) -> float:
-    """The largest decay rate a [1/s] a common Lyapunov matrix certifies at ``verts`` (bisection on
-    [0, 1/T_s]), rounded down to three significant digits; 0 when none is certified."""
-    lo, hi = 0.0, 1.0 / plant.Ts
+def best_decay_rate(plant, verts, settings, L_scaled=None) -> float:
+    """The largest decay rate a [1/s] a common Lyapunov matrix certifies at ``verts``, rounded down to
+    three significant digits (:func:`_largest_rate`); 0 when none is certified."""
     if not _decay_feasible(plant, verts, 0.0, L_scaled, settings):
         return 0.0
-    for _ in range(iterations):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if _decay_feasible(plant, verts, mid, L_scaled, settings) else (lo, mid)
-    return _round_down(lo)
+    return _largest_rate(plant, lambda a: _decay_feasible(plant, verts, a, L_scaled, settings))
 
 
 def lmi_problem(plant, decay_verts, gain_verts, settings, rate, best_rate, L_scaled=None) -> LMIProblem:
@@ -279,13 +281,13 @@ def synthesize(plant, decay_verts, gain_verts, settings, solver) -> Design:
                 + ("given gains" if given else "designed gains") + " over the certified set's vertices; lower "
                 "sliding_fraction (the tyre slope near sliding leaves v_y unobservable)")
         if settings.decay is not None:
-            rate = _round_down((1.0 - settings.decay ** 2) / plant.Ts, 6)
+            rate = rates.round_down((1.0 - settings.decay ** 2) / plant.Ts, 6)
             if rate > best:
                 raise CertificateError(f"nonlinear-tyre observer: decay = {settings.decay:g} per step needs the rate "
                                        f"{rate:.4g} 1/s; the largest a common Lyapunov matrix certifies on the set is "
                                        f"{best:.4g} 1/s (decay {np.sqrt(1 - plant.Ts * best):.6f})")
         else:
-            rate = _round_down(settings.decay_fraction * best)
+            rate = rates.round_down(settings.decay_fraction * best, RATE_DIGITS)
         # [design] precision = "float32": sqrt(1 - Ts rate) <= 1 - float32_margin
         m = required_margin(settings)
         need = (1.0 - (1.0 - m) ** 2) / plant.Ts if m else 0.0
@@ -357,10 +359,10 @@ class Through:
     solution: object
 
 
-def through_sliding(plant, verts, settings, design: Design, solver, iterations: int = 24) -> Through:
+def through_sliding(plant, verts, settings, design: Design, solver) -> Through:
     """The largest rate a at full slope for which one P gives V(e+) <= (1 - T_s (a phi - epsilon (1 - phi))) V(e)
-    at every vertex of the through-sliding bounds, the emitted gains fixed (bisection on [0, 1/T_s], rounded
-    down to three digits); the problem at that rate answered by ``solver`` (recorded in the design lock). A
+    at every vertex of the through-sliding bounds, the emitted gains fixed (three significant digits:
+    :func:`_largest_rate`); the problem at that rate answered by ``solver`` (recorded in the design lock). A
     CertificateError when not even a = 0 (V growing at most at epsilon everywhere) is certified."""
     L_scaled = plant.D @ design.L @ np.linalg.inv(plant.D)
     growth = SLIDING_GROWTH if settings.sliding_growth is None else settings.sliding_growth
@@ -382,11 +384,7 @@ def through_sliding(plant, verts, settings, design: Design, solver, iterations: 
                 f"gains (at full sliding of both axles v_y is unobservable, and the gains' r correction must not "
                 f"drive it); raise sliding_growth, or set through_sliding = false (the kinematic fallback beyond "
                 f"sliding_fraction, not certified there)")
-        lo, hi = 0.0, 1.0 / plant.Ts
-        for _ in range(iterations):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if feasible(mid) else (lo, mid)
-        rate = _round_down(lo)
+        rate = _largest_rate(plant, feasible)
     sol = solver.solve(_through_problem(plant, verts, rate, growth, L_scaled, settings, design=True),
                        tol=settings.tol)
     return Through(decimal_round(0.5 * (sol["P_through"] + sol["P_through"].T)), rate, growth, sol)
