@@ -36,6 +36,7 @@ measured).
 """
 from __future__ import annotations
 
+import functools
 import sys
 import time
 from dataclasses import dataclass
@@ -152,6 +153,26 @@ def _functions(rep: TyreRepresentation, xp):
             [lambdify(args, rep.rho * e, xp) for e in rep.sliding], [lambdify(args, t, xp) for t in rep.slips])
 
 
+@functools.lru_cache(maxsize=64)
+def _compiled_once(args: tuple, expr):
+    return lambdify(args, expr, ca)
+
+
+def _parametric_functions(rep: TyreRepresentation):
+    """What :func:`_functions` gives for CasADi, compiled once per model expression in this process with the
+    parameters as arguments and their numbers passed in: the same step up to the order of a few operations on
+    the numbers (the emitted C is compiled from :func:`_functions`). The folds of ``uiogen fit`` change only
+    the tyre's numbers: sympy's printing of the tyre laws, most of a fold's step, is then done once."""
+    symbols, values = tuple(p for p, _ in rep.parameters), tuple(v for _, v in rep.parameters)
+    args = (*rep.symbols, *symbols)
+
+    def bound(expr):
+        fn = _compiled_once(args, expr)
+        return lambda *signals: fn(*signals, *values)
+    f, a_y, sliding, slips = rep.forms
+    return [bound(e) for e in f], bound(a_y), [bound(rep.rho * e) for e in sliding], [bound(t) for t in slips]
+
+
 def step_parts(rep, L, Ts, z, u, y, rho, fns, xp=np):
     """(x_next, excess): z = [x_hat_k (prediction from k-1)]; u = the known inputs (delta, a_x), y = the
     outputs in the model's order (a_y and r), rho = [v_x]."""
@@ -224,11 +245,13 @@ class Build(ObserverBuild):
     nu = property(lambda self: len(self.rep.input_boxes))
     ny = property(lambda self: 2)
 
-    def step_function(self):
+    def step_function(self, parametric: bool = False):
+        """The step as a CasADi function (what is emitted as C); ``parametric``: the same step from the model's
+        expressions compiled once per process (:func:`_parametric_functions`), for the many designs of a fit."""
         nu = self.nu
         z, u, y, rho = ca.SX.sym("z", 4), ca.SX.sym("u", nu), ca.SX.sym("y", 2), ca.SX.sym("rho", 1)
-        (vy_n, r_n), excess = step_parts(self.rep, self.L, self.config.sample_time, z, u, y, rho,
-                                         _functions(self.rep, ca), xp=ca)
+        fns = _parametric_functions(self.rep) if parametric else _functions(self.rep, ca)
+        (vy_n, r_n), excess = step_parts(self.rep, self.L, self.config.sample_time, z, u, y, rho, fns, xp=ca)
         # the sympy expressions are put together unevaluated (representation.numeric): one cos(delta),
         # one capacity per axle, ... instead of one per use
         outs = ca.cse([ca.vertcat(vy_n, r_n, z[0], z[1]), excess])

@@ -45,6 +45,7 @@ from a fixed start, fixed grids).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import re
 from pathlib import Path
 
@@ -79,18 +80,39 @@ def parse_jobs(jobs) -> int:
     return jobs
 
 
-def _map(fn, tasks: list, jobs: int) -> list:
-    """``[fn(*task) for task in tasks]``, in order, over up to ``jobs`` worker processes (forked: they
-    start with this process's modules and compiled expressions). Each task is a whole design or Kalman
-    run, deterministic and independent of the others, so the result is the same with any ``jobs``;
-    a task's error is raised here as it was raised there. One job, one task, or a platform without
-    fork: in this process."""
-    import multiprocessing
-    if jobs <= 1 or len(tasks) <= 1 or "fork" not in multiprocessing.get_all_start_methods():
-        return [fn(*task) for task in tasks]
-    from concurrent.futures import ProcessPoolExecutor
-    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=multiprocessing.get_context("fork")) as pool:
-        return list(pool.map(fn, *zip(*tasks)))
+class Workers:
+    """Up to ``jobs`` worker processes for the independent runs of one fit (folds, designs, Kalman runs),
+    started at the first :meth:`map` of more than one call and kept until the fit ends: forked, they start
+    with this process's modules and compiled expressions, and keep what they compile (a model's printed
+    expressions, a Kalman model's graph) from one map to the next. One job, or a platform without fork:
+    everything in this process."""
+
+    def __init__(self, jobs: int):
+        import multiprocessing
+        self.jobs = jobs if "fork" in multiprocessing.get_all_start_methods() else 1
+        self._pool = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self._pool is not None:
+            self._pool.shutdown()
+        return False
+
+    def map(self, calls) -> list:
+        """``[fn(*args) for fn, args in calls]``, in order. Each call is deterministic and independent of the
+        others, so the result is the same with any ``jobs``; a call's error is raised here as it was raised
+        there. ``calls`` may be a generator: each call is handed to the workers as soon as it is made, so
+        what this process does to make the next (a fold's tyre fit) overlaps the workers' runs."""
+        if self.jobs <= 1:
+            return [fn(*args) for fn, args in calls]
+        if self._pool is None:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+            self._pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=multiprocessing.get_context("fork"))
+        futures = [self._pool.submit(fn, *args) for fn, args in calls]
+        return [f.result() for f in futures]
 
 
 def parse_samples(text: str, n: int) -> tuple:
@@ -130,13 +152,25 @@ class _Problem:
 
     signals: dict           # the model's symbols -> arrays over the range
     measured: np.ndarray    # (n, 2) axle forces from (a_y, yaw acceleration)
-    forces: object          # (fitted values...) -> (n, 2) model axle forces
+    force_laws: tuple       # the axle forces in (the model's signals..., C_f, C_r, mu), the rest substituted
     fitted: tuple           # (C_f, C_r, mu) symbols; mu stands for every axle's friction
     start: np.ndarray
     G2: np.ndarray
     window: int             # samples of the moving averages (AVERAGE_S at the observer's sample time)
     prior: tuple            # published (C_f, C_r) of the parameter file's [prior], or None
     mu_reached: float       # the friction the log's combined acceleration reaches (ENVELOPE_QUANTILE)
+
+    def forces(self, x) -> np.ndarray:
+        """(n, 2) model axle forces over the range at the fitted values ``x`` = (C_f, C_r, mu)."""
+        args = self.signals.values()
+        return np.column_stack([fn(*args, *x) for fn in _force_functions(tuple(self.signals), self.fitted,
+                                                                         self.force_laws)])
+
+
+@functools.lru_cache(maxsize=8)
+def _force_functions(symbols: tuple, fitted: tuple, laws: tuple) -> list:
+    """The force laws as numpy functions, compiled once per process (a fold's worker compiles them once)."""
+    return [sp.lambdify([*symbols, *fitted], e, "numpy") for e in laws]
 
 
 def log_columns(module, source: str) -> dict:
@@ -247,12 +281,7 @@ def _problem(config, params, run, a: int, b: int) -> _Problem:
     G2 = np.array(sp.Matrix(in_forces).jacobian(sp.Matrix(module.FORCES)).tolist(), dtype=float)
     meas = np.linalg.solve(G2, np.vstack([np.asarray(run.ay, float)[a:b], yaw_acceleration(run, a, b)])).T
     values = {**keep, **zero_w, **{f: mu for f in fric}}
-    exprs = [numeric(e, values) for e in (module.Phi_f, module.Phi_r)]
-    fns = [sp.lambdify([*symbols, *stiff, mu], e, "numpy") for e in exprs]
-    args = [signals[s] for s in symbols]
-
-    def forces(x):
-        return np.column_stack([fn(*args, *x) for fn in fns])
+    laws = tuple(numeric(e, values) for e in (module.Phi_f, module.Phi_r))
     others = {u: 0 for u in model.known_inputs if columns[str(u)] != "delta"}     # the static capacity: a_x = 0
     static = [float(numeric(ax.peak, {**subs, **{f: 1 for f in fric}, **others})) for ax in axles]
     start = np.array([15.0 * fz for fz in static] + [1.0])       # 15 F_z per rad, mu = 1: a physical prior
@@ -260,7 +289,7 @@ def _problem(config, params, run, a: int, b: int) -> _Problem:
     prior = None
     if all(str(c) in params.prior for c in stiff):
         prior = tuple(float(params.prior[str(c)]["value"]) for c in stiff)
-    return _Problem(signals, meas, forces, (*stiff, mu), start, G2, n, prior, mu_reached(run, a, b, n, subs))
+    return _Problem(signals, meas, laws, (*stiff, mu), start, G2, n, prior, mu_reached(run, a, b, n, subs))
 
 
 ENVELOPE_QUANTILE = 0.995
@@ -345,7 +374,7 @@ def observer_beta(config, params, design: dict, run, a: int, b: int) -> np.ndarr
     from .build import build
     cfg = dataclasses.replace(config, design={**config.design, **design})
     obs = build(cfg, FreshSolver(), params=params)
-    f = obs.step_function()
+    f = obs.step_function(parametric=True)
     nu = obs.nu
     z, x = ca.SX.sym("z", 4), ca.SX.sym("x", nu + 3)
     step = ca.Function("step", [z, x], [f(z, x[:nu], x[nu:nu + 2], x[nu + 2:])[0]])
@@ -377,12 +406,15 @@ def _ekf_beta(config, params, run, a: int, b: int, noise: dict) -> np.ndarray:
     return _same_tyre_peers(config, params, _sub_run(run, a, b), [noise])[0]["ekf_nonlinear_tyre"].beta
 
 
-def _peers(config, params, run, a: int, b: int, jobs: int = 1) -> tuple:
-    """The EKF grid on the range: (best {sigma_fy, sigma_ay}, [(sigma_fy, sigma_ay, rms), ...])."""
-    grid = [{"sigma_fy": fy, "sigma_ay": ay} for fy in PEER_GRID["sigma_fy"] for ay in PEER_GRID["sigma_ay"]]
+PEER_NOISES = tuple({"sigma_fy": fy, "sigma_ay": ay} for fy in PEER_GRID["sigma_fy"] for ay in PEER_GRID["sigma_ay"])
+"""The EKF grid's noise levels, in the order of its table."""
+
+
+def _best_peer(betas: list, run, a: int, b: int) -> tuple:
+    """The EKF grid on the range from its runs at :data:`PEER_NOISES`: (best {sigma_fy, sigma_ay},
+    [(sigma_fy, sigma_ay, rms), ...])."""
     truth = np.asarray(run.beta_true, float)[a:b]
-    betas = _map(_ekf_beta, [(config, params, run, a, b, g) for g in grid], jobs)
-    rows = [(g["sigma_fy"], g["sigma_ay"], _rms_deg(beta - truth)) for g, beta in zip(grid, betas)]
+    rows = [(g["sigma_fy"], g["sigma_ay"], _rms_deg(beta - truth)) for g, beta in zip(PEER_NOISES, betas)]
     fy, ay, _ = min(rows, key=lambda t: t[2])
     return {"sigma_fy": fy, "sigma_ay": ay}, rows
 
@@ -420,7 +452,11 @@ def fit(config, path="stanford", samples: str = "", folds: int | None = None, pe
     combination cross-validated with the tyre sets and the best written (:func:`_chosen_design`); ``jobs``:
     the processes the folds' designs and the peers' grid run on (:func:`parse_jobs`; the result is the same
     with any number)."""
-    jobs = parse_jobs(jobs)
+    with Workers(parse_jobs(jobs)) as workers:
+        return _fit(config, path, samples, folds, peers, judge, choose, workers)
+
+
+def _fit(config, path, samples: str, folds, peers: bool, judge, choose, workers: Workers) -> dict:
     if folds is not None and (not isinstance(folds, int) or isinstance(folds, bool) or folds < 0 or folds == 1):
         raise ConfigurationError(f"--folds {folds!r}: 0 (no cross-validation) or an integer >= 2",
                                  source="--folds", key="--folds", value=folds)
@@ -439,9 +475,9 @@ def fit(config, path="stanford", samples: str = "", folds: int | None = None, pe
             raise ConfigurationError("--choose picks settings by their pooled held-out sideslip RMS: it needs "
                                      "--folds K (K >= 2)", source="--choose", key="--choose", value=choose)
         config, chosen, settings_table, cv = _chosen_design(config, params, prob, run, a, b, folds, candidates,
-                                                            choose, jobs)
+                                                            choose, workers)
     else:
-        cv = _cross_validate(config, params, prob, run, a, b, folds, candidates, jobs) if folds else None
+        cv = _cross_validate(config, params, prob, run, a, b, folds, candidates, workers) if folds else None
     choice = min(candidates, key=lambda c: cv["pooled"][c]) if cv else "fitted"
     half = prob.window // 2
     full = np.ones(b - a - 2 * half, bool)
@@ -460,20 +496,22 @@ def fit(config, path="stanford", samples: str = "", folds: int | None = None, pe
         out["prior"] = {k: dict(v) for k, v in params.prior.items()}
     if settings_table is not None:
         out["settings"] = settings_table
-    if peers:
-        best, rows = _peers(config, fitted_params, run, a, b, jobs)
-        out["peers"] = {k: (v if v is not None else "highpass") for k, v in best.items()}
-        out["peer_grid"] = [[fy, ay if ay is not None else "highpass", rms] for fy, ay, rms in rows]
-        if cv:
-            _peer_folds(config, params, run, a, b, cv, choice, best, jobs)
     judged = []
     for p in judge:                                   # every log read before the work
         other, said = read_run(config, p)
         judged.append(other)
         notes += [f"{p}: {x}" for x in said]
+    # the observer of the written numbers and the peers' grid: independent runs, over the same processes
+    beta, *peer_betas = workers.map([(observer_beta, (config, fitted_params, levels, run, a, b)),
+                                     *((_ekf_beta, (config, fitted_params, run, a, b, g)) for g in PEER_NOISES if peers)])
+    if peers:
+        best, rows = _best_peer(peer_betas, run, a, b)
+        out["peers"] = {k: (v if v is not None else "highpass") for k, v in best.items()}
+        out["peer_grid"] = [[fy, ay if ay is not None else "highpass", rms] for fy, ay, rms in rows]
+        if cv:
+            _peer_folds(config, params, run, a, b, cv, choice, best, workers)
     if notes:
         out["log_notes"] = notes
-    beta = observer_beta(config, fitted_params, levels, run, a, b)
     out["observer_beta_rms_deg"] = _rms_deg(beta - run.beta_true[a:b])
     if judge:
         noise = _peer_levels(config, out)
@@ -608,21 +646,24 @@ def _check_folds(folds: int, a: int, b: int, n: int = WINDOW) -> None:
                              f"100 Hz); allowed: {allowed}", source="--folds", key="--folds", value=folds)
 
 
-def _cross_validate(config, params, prob, run, a, b, folds, candidates, jobs: int = 1) -> dict:
+def _cross_validate(config, params, prob, run, a, b, folds, candidates, workers: Workers) -> dict:
     """Each candidate fitted on the range less one contiguous fold (and a guard of one average on each
-    side), designed, run over the range and judged on the fold; the designs and runs over ``jobs``
-    processes (:func:`_map`)."""
+    side), designed, run over the range and judged on the fold; the folds over ``workers``."""
     n = prob.window
     half = n // 2
     edges = _fold_edges(a, b, folds)
     idx = np.arange(a + half, b - half)              # samples the averages cover
     fitted = []
-    for k in range(folds):
-        lo, hi = edges[k], edges[k + 1]
-        train = (idx < lo - n) | (idx >= hi + n)
-        fitted += [(k, c, _identified(config, prob, run, a, b, _tyre_fit(prob, train, c), train)) for c in candidates]
-    betas = _map(observer_beta, [(config, _with_values(params, f["parameters"]), f["design"], run, a, b)
-                                 for _, _, f in fitted], jobs)
+
+    def designs():                          # each fold's design goes to the workers once its tyre is fitted
+        for k in range(folds):
+            lo, hi = edges[k], edges[k + 1]
+            train = (idx < lo - n) | (idx >= hi + n)
+            for c in candidates:
+                fitted.append((k, c, _identified(config, prob, run, a, b, _tyre_fit(prob, train, c), train)))
+                f = fitted[-1][2]
+                yield observer_beta, (config, _with_values(params, f["parameters"]), f["design"], run, a, b)
+    betas = workers.map(designs())
     rows = [{"fold": [edges[k], edges[k + 1]]} for k in range(folds)]
     errors = {c: [] for c in candidates}
     for (k, c, identified), beta in zip(fitted, betas):
@@ -636,7 +677,7 @@ def _cross_validate(config, params, prob, run, a, b, folds, candidates, jobs: in
     return {"folds": rows, "pooled": pooled, "max": biggest}
 
 
-def _chosen_design(config, params, prob, run, a, b, folds, candidates, choose, jobs: int = 1) -> tuple:
+def _chosen_design(config, params, prob, run, a, b, folds, candidates, choose, workers: Workers) -> tuple:
     """Every combination of the ``design.*`` values of ``choose`` cross-validated with every tyre set;
     (the config with the best combination, {key: value} of it, the table of every combination, its
     cross-validation). A combination the design refuses (no certificate) is a row of the table."""
@@ -655,7 +696,7 @@ def _chosen_design(config, params, prob, run, a, b, folds, candidates, choose, j
         setting = {k.split(".", 1)[1]: v for k, v in zip(keys, values)}
         cfg = dataclasses.replace(config, design={**config.design, **setting})
         try:
-            cv = _cross_validate(cfg, params, prob, run, a, b, folds, candidates, jobs)
+            cv = _cross_validate(cfg, params, prob, run, a, b, folds, candidates, workers)
         except REFUSALS as exc:
             rows.append([*values, *([None] * len(candidates)), f"{type(exc).__name__}: {str(exc).splitlines()[0]}"])
             continue
@@ -671,12 +712,12 @@ def _chosen_design(config, params, prob, run, a, b, folds, candidates, choose, j
     return best[1], best[2], table, best[3]
 
 
-def _peer_folds(config, params, run, a: int, b: int, cv: dict, choice: str, noise: dict, jobs: int = 1) -> None:
+def _peer_folds(config, params, run, a: int, b: int, cv: dict, choice: str, noise: dict, workers: Workers) -> None:
     """The same-tyre EKF on each fold with the tyre ``choice`` fitted without it (its two noise levels
     those the grid chose on the whole range: an advantage to the peer), added to ``cv``."""
     truth, errors = np.asarray(run.beta_true, float)[a:b], []
-    betas = _map(_ekf_beta, [(config, _with_values(params, row[choice]["parameters"]), run, a, b, noise)
-                             for row in cv["folds"]], jobs)
+    betas = workers.map([(_ekf_beta, (config, _with_values(params, row[choice]["parameters"]), run, a, b, noise))
+                         for row in cv["folds"]])
     for row, beta in zip(cv["folds"], betas):
         lo, hi = row["fold"]
         err = (beta - truth)[lo - a:hi - a]

@@ -80,6 +80,8 @@ class TyreRepresentation:
     lever: tuple              # (l_f, -l_r): slip t_k depends on v_y + lever_k r (yaw-rate noise enters there)
     signals: "Signals"        # the model's names of the roles, and their units
     through_set: tuple | None = None   # AxleBounds per axle at every slip (``through_sliding``), else None
+    forms: tuple = ()         # (f, a_y, sliding, slips) with the parameters as symbols
+    parameters: tuple = ()    # ((parameter symbol, value), ...): what f, a_y, sliding and slips have put in
 
     @property
     def theta(self) -> tuple:
@@ -393,14 +395,17 @@ def represent(module, params, settings, source: str) -> TyreRepresentation:
                                      settings.stiffness_range, settings.friction_range, source,
                                      min(settings.bounds_rel_tol, THROUGH_REL_TOL), through=True)
                         for k, a in enumerate(axles))
-    f = tuple(numeric(e, {**subs, **zero_w}) for e in model.dynamics)
-    a_y = numeric(dict(model.outputs)[names.a_y], {**subs, **zero_w})
-    slips = tuple(sp.sympify(a.slip).subs(subs) for a in axles)
-    sliding = tuple(numeric(numeric(a.sliding, {a.peak_symbol: a.peak}), subs) for a in axles)
+    # the step's expressions with the parameters as symbols, then with their numbers
+    forms = (tuple(numeric(e, zero_w) for e in model.dynamics), numeric(dict(model.outputs)[names.a_y], zero_w),
+             tuple(numeric(a.sliding, {a.peak_symbol: a.peak}) for a in axles), tuple(sp.sympify(a.slip) for a in axles))
+    f = tuple(numeric(e, subs) for e in forms[0])
+    a_y = numeric(forms[1], subs)
+    sliding = tuple(numeric(e, subs) for e in forms[2])
+    slips = tuple(e.subs(subs) for e in forms[3])
     # slip t_k depends on v_y + lever_k r: read from the slip expressions (checked, not assumed)
     lever = []
     for a, tk in zip(axles, slips):
-        ratio = sp.simplify(sp.diff(tk, r) / sp.diff(tk, vy))
+        ratio = _lever(tk, r, vy)
         if ratio.free_symbols:
             raise ModelDefinitionError(f"{source}: axle {a.name}: its slip depends on v_y and r other than through "
                                        f"v_y + c r (dt/dr / dt/dv_y = {ratio})")
@@ -427,7 +432,16 @@ def represent(module, params, settings, source: str) -> TyreRepresentation:
     if through is not None:
         _check_constant_beyond(axles, model_forces, symbols, subs, boxes, v_box, t, model_file, rng)
     return TyreRepresentation(f, a_y, G[:2], G[2], sets[0], sets[1], slips, sliding, settings.sliding_fraction,
-                              v_box, tuple(boxes), symbols, tuple(lever), names, through)
+                              v_box, tuple(boxes), symbols, tuple(lever), names, through, forms,
+                              tuple((p, float(v)) for p, v in subs.items()))
+
+
+@functools.lru_cache(maxsize=32)
+def _lever(slip, r, vy):
+    """dt/dr / dt/dv_y of a slip (simplified: the lever when the slip depends on v_y + lever r). Kept per slip
+    expression in this process: the slips read the geometry alone, so the folds of ``uiogen fit``, which change
+    only the tyre's numbers, simplify them once."""
+    return sp.simplify(sp.diff(slip, r) / sp.diff(slip, vy))
 
 
 @functools.lru_cache(maxsize=32)
