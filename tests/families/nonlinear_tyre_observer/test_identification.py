@@ -241,3 +241,33 @@ def test_the_axle_contract_is_a_typed_class_that_checks_its_fields(tmp_path):
     err = proc.stderr.strip()
     assert proc.returncode == 2 and len(err.splitlines()) == 1 and "Traceback" not in err, err
     assert "ModelDefinitionError" in err and str(model) in err and "Axle 'front': stiffness = 110000.0" in err
+
+
+def test_a_folds_parametric_step_is_the_emitted_step():
+    """The folds of a fit run the step compiled once per model with the parameters passed in
+    (``step_function(parametric=True)``): at random points of every box, with other tyre numbers than
+    the committed ones, beyond the certified set (the fallback) and outside the boxes, it gives the step
+    the C is emitted from to the last few bits."""
+    import dataclasses
+    from codegen.design.solver import FreshSolver
+    from codegen.families.nonlinear_tyre_observer.build import build
+    cfg = observers.get(NIKI)
+    params = load_parameters(cfg.parameter_path)
+    other = dataclasses.replace(params, values={**params.values, "C_f": 95000.0, "mu_f": 1.1, "mu_r": 1.2})
+    rng = np.random.default_rng(11)
+    for p in (params, other):
+        obs = build(cfg, FreshSolver(), params=p)
+        emitted, parametric = obs.step_function(), obs.step_function(parametric=True)
+        boxes = [b for _, b in obs.rep.input_boxes]
+        flagged = 0
+        for _ in range(300):
+            z = rng.uniform([-3, -1, -3, -1], [3, 1, 3, 1])
+            u = [rng.uniform(lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo)) for lo, hi in boxes]
+            y = [rng.uniform(-12, 12), rng.uniform(-1, 1)]
+            v = [rng.uniform(obs.rep.v_x_box[0] - 2, obs.rep.v_x_box[1] + 2)]
+            a = [np.array(o.full()).ravel() for o in emitted(z, u, y, v)]
+            b = [np.array(o.full()).ravel() for o in parametric(z, u, y, v)]
+            flagged += a[1][0] > 0
+            np.testing.assert_allclose(b[0], a[0], rtol=1e-12, atol=1e-12)
+            assert (a[1][0] > 0) == (b[1][0] > 0)
+        assert 30 < flagged < 270             # both branches compared
