@@ -46,17 +46,19 @@ def largest_holding(candidates: list, holds, near_top: bool = True) -> float | N
     above it), or None.
 
     ``near_top``: the answer is expected close below the top (a ceiling from a dense grid): the search
-    steps down from the top in growing steps (one to three solves), then halves between the last that
-    failed and the first that held; after two that fail it asks the smallest, so that where none holds
-    three questions say so. Otherwise a plain binary search (about log2 of the count)."""
-    lo, hi, step = -1, len(candidates), 1       # candidates[hi:] fail; candidates[lo] holds (-1: none known)
+    asks the top and the one below it (one or two solves where the ceiling is close), then steps down in
+    growing steps and halves between the last that failed and the first that held; after two that fail it
+    asks the smallest, so that where none holds three questions say so. Otherwise a plain binary search
+    (about log2 of the count)."""
+    lo, hi, step, failed = -1, len(candidates), 1, 0    # candidates[hi:] fail; candidates[lo] holds (-1: none known)
     while near_top and hi > 0 and lo < 0:
         i = max(hi - step, 0)
         if holds(candidates[i]):
             lo = i
             break
-        hi, step = i, 2 * step
-        if step == 4 and hi > 0:                # two have failed
+        hi, failed = i, failed + 1
+        step = 1 if failed == 1 else 2 * step
+        if failed == 2 and hi > 0:
             if not holds(candidates[0]):
                 return None
             lo = 0

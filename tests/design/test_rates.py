@@ -23,7 +23,7 @@ def test_candidates_are_every_rounded_rate_below_the_top(digits, resolution):
 def test_search_asks_few_and_finds_the_largest(near_top):
     """For every threshold of a monotone answer (none, the smallest, the top, anywhere between) the
     largest candidate that holds, asking about candidates only: at most 2 log2(n) + 3 of them near the
-    top (one when the answer is the top, three when there is none), log2(n) + 1 otherwise."""
+    top (one when the answer is the top, two when it is the one below, three when there is none), log2(n) + 1 otherwise."""
     rng = np.random.default_rng(3)
     for top in [*rng.uniform(1e-3, 100.0, 100), 2.55]:
         candidates = rates.committable_rates(top, 2 if near_top else 3, 2.0 ** -14 if near_top else 2.0 ** -30)
@@ -38,6 +38,8 @@ def test_search_asks_few_and_finds_the_largest(near_top):
                 assert len(asked) <= 2 * np.log2(len(candidates)) + 3
                 if k == len(candidates) - 1:
                     assert len(asked) == 1
+                if k == len(candidates) - 2:            # the one below the top: two questions
+                    assert len(asked) == 2
                 if k == -1:                     # none holds: the top, the next, the smallest
                     assert len(asked) <= 3
             else:
