@@ -599,7 +599,7 @@ class LMIProblem:
 
     def solve(self, tol: float = 1e-9, max_iter: int = 200, max_abs_value: float = 1e9,
               verbose: bool = False, reduce: bool = False, unique: bool | None = None,
-              optimality_slack: float = OPTIMALITY_SLACK) -> LMISolution:
+              optimality_slack: float = OPTIMALITY_SLACK, refine: bool = False) -> LMISolution:
         """Solve with Clarabel, then re-check every block with numpy eigenvalues.
 
         ``unique`` (default: a design problem's ``design`` flag): the optimum of an SDP is often a face, not a point (the interconnected
@@ -609,6 +609,10 @@ class LMIProblem:
         objective over a convex set has exactly one minimizer, so a re-solve on another machine
         gives materially the same design. Problems without an objective get the least-norm
         feasible point directly.
+
+        ``refine`` (with ``unique`` false): the optimum itself, accurately (the first stage of the unique point:
+        solved again in scaled coordinates), not the least-norm point near it: for an analysis that reads
+        the optimal value alone.
 
         ``reduce``: hand Clarabel the exactly equivalent problem of :meth:`_reduce` (fewer and
         smaller cones, fewer variables: fewer and cheaper iterations). Off by default: the
@@ -637,11 +641,14 @@ class LMIProblem:
         zero_P = sparse.csc_matrix((kept.size, kept.size))
         # with the refining stages to follow, an AlmostSolved first point is a good enough start
         result, solve_time = self._clarabel(zero_P, red.q, red.A, red.b, red.cones, red.blocks, tol, max_iter, verbose,
-                                            stage="first solve" if unique else "")
+                                            stage="first solve" if unique or refine else "")
         iterations = int(result.iterations)
         xs = np.asarray(result.x, dtype=float)
         if unique:
             xs, its, dt = self._unique_point(red, blocks, xs, tol, max_iter, verbose, optimality_slack)
+            iterations, solve_time = iterations + its, solve_time + dt
+        elif refine:
+            _, xs, _, its, dt = self._refined_optimum(red, xs, tol, max_iter, verbose)
             iterations, solve_time = iterations + its, solve_time + dt
         xv = np.zeros(nvar)
         xv[kept] = xs   # variables left out by _reduce are 0
@@ -669,26 +676,8 @@ class LMIProblem:
            solved again (at most three times). If the stage does not converge in either
            coordinates, the refined optimum is returned (certified, not unique).
         """
-        its, secs = 0, 0.0
-        n = x0.size
-        scale = np.ones(n)
-        floor = SCALE_FLOOR * np.abs(x0).max(initial=0.0)
-        for slots in self._variable_slots(red.kept_variables).values():
-            m = max(np.abs(x0[slots]).max(initial=0.0), floor)
-            if m > 0:
-                scale[slots] = 2.0 ** np.round(np.log2(m))
+        t_best, x_best, scale, its, secs = self._refined_optimum(red, x0, tol, max_iter, verbose)
         has_objective = bool(np.any(red.q))
-        t_best, x_best = float(red.q @ x0), x0
-        if has_objective and np.any(scale != 1.0):
-            try:
-                result, dt = self._clarabel(sparse.csc_matrix((n, n)), red.q * scale, red.A @ sparse.diags(scale),
-                                            red.b, red.cones, red.blocks, tol, max_iter, verbose, stage="scaled optimum")
-                its, secs = its + int(result.iterations), secs + dt
-                x_scaled = scale * np.asarray(result.x, dtype=float)
-                if float(red.q @ x_scaled) < t_best:
-                    t_best, x_best = float(red.q @ x_scaled), x_scaled
-            except (InaccurateSolveError, InfeasibleLMIError):
-                pass        # the unscaled optimum stands
         bound = objective_bound(t_best, slack) if has_objective else None
         b = red.b.copy()
         evaluate = self._evaluate
@@ -730,6 +719,31 @@ class LMIProblem:
                 if rows.stop - rows.start == r.size:       # a block the reduction left whole
                     b[np.arange(rows.start, rows.stop)[diag]] -= 2.0 * abs(lo)
         return x, its, secs
+
+    def _refined_optimum(self, red: "ReducedProblem", x0: np.ndarray, tol, max_iter, verbose) -> tuple:
+        """Stage 1 of :meth:`_unique_point`: (objective, point, the variables' power-of-two scale, iterations,
+        seconds) of the better of ``x0`` and the optimum solved again with each variable measured in a power of
+        two of its magnitude at ``x0``."""
+        its, secs = 0, 0.0
+        n = x0.size
+        scale = np.ones(n)
+        floor = SCALE_FLOOR * np.abs(x0).max(initial=0.0)
+        for slots in self._variable_slots(red.kept_variables).values():
+            m = max(np.abs(x0[slots]).max(initial=0.0), floor)
+            if m > 0:
+                scale[slots] = 2.0 ** np.round(np.log2(m))
+        t_best, x_best = float(red.q @ x0), x0
+        if bool(np.any(red.q)) and np.any(scale != 1.0):
+            try:
+                result, dt = self._clarabel(sparse.csc_matrix((n, n)), red.q * scale, red.A @ sparse.diags(scale),
+                                            red.b, red.cones, red.blocks, tol, max_iter, verbose, stage="scaled optimum")
+                its, secs = its + int(result.iterations), secs + dt
+                x_scaled = scale * np.asarray(result.x, dtype=float)
+                if float(red.q @ x_scaled) < t_best:
+                    t_best, x_best = float(red.q @ x_scaled), x_scaled
+            except (InaccurateSolveError, InfeasibleLMIError):
+                pass        # the unscaled optimum stands
+        return t_best, x_best, scale, its, secs
 
     def _norm_weights(self, red, scale) -> np.ndarray:
         """Weights of the least-norm stage: each variable in its own magnitude; the symmetric

@@ -304,7 +304,7 @@ def ui_gain(poly: Polytope, settings: LinfDesignSettings, solver, performance: n
     for rounding in (np.round, np.floor):
         try:
             prob, _ = build_problem(poly, settings, performance, states, k, design=False)
-            nu = float(prob.solve(tol=settings.tol, unique=True)["nu"])     # AlmostSolved is a fine start
+            nu = float(prob.solve(tol=settings.tol, unique=False, refine=True)["nu"])   # the optimum, accurately
         except SolverError:
             return k            # the design's own solve reports what fails
         if not (np.isfinite(nu) and nu > 0):

@@ -202,7 +202,7 @@ def solver_scale(sm: SwitchedModel, T: np.ndarray, settings: "SwitchedPIDesignSe
     # random models (gamma ~ 1e-3, k up to 2^23), turned solvable problems into NumericalError or
     # PrimalInfeasible ones. The scale is for a problem the solver cannot answer in the model's units.
     try:
-        build_problem(sm, T, settings, np.ones(sm.nw), design=False).solve(tol=settings.tol, unique=True)
+        build_problem(sm, T, settings, np.ones(sm.nw), design=False).solve(tol=settings.tol, unique=False, refine=True)
         return np.ones(sm.nw)
     except SolverError:
         pass
@@ -210,7 +210,7 @@ def solver_scale(sm: SwitchedModel, T: np.ndarray, settings: "SwitchedPIDesignSe
     for _ in range(2):
         try:
             prob = build_problem(sm, T, settings, k, design=False)
-            gamma_s = float(np.sqrt(prob.solve(tol=settings.tol, unique=True)["gamma2"]))  # AlmostSolved: a fine start
+            gamma_s = float(np.sqrt(prob.solve(tol=settings.tol, unique=False, refine=True)["gamma2"]))  # the optimum
         except SolverError:
             return k            # the design's own solve reports what fails
         p = unit_power(gamma_s)
