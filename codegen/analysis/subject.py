@@ -162,12 +162,23 @@ class Subject:
         return tuple(n for n in self.declared_outputs if n not in self.outputs)
 
     # -- the equations --------------------------------------------------------------------------------
-    @cached_property
+    @property
     def lpv(self):
         """:func:`codegen.model.instantiate` of the model, once for every family that asks (its typed
-        error, NotAffineError and the like, is raised again on every ask)."""
+        error, NotAffineError and the like, is raised again on every ask, without deriving it again)."""
+        value, error = self._lpv_outcome
+        if error is not None:
+            raise error
+        return value
+
+    @cached_property
+    def _lpv_outcome(self) -> tuple:
+        from ..errors import UiogenError
         from ..model import instantiate
-        return instantiate(self.model, self.parameters)
+        try:
+            return instantiate(self.model, self.parameters), None
+        except UiogenError as exc:
+            return None, exc
 
     @cached_property
     def equations(self) -> Equations:
@@ -180,14 +191,31 @@ class Subject:
         return dataclasses.replace(self, model=model)
 
 
+EQUATIONS = "analysis_equations"
+"""The kind of the kept :class:`Equations` (:func:`codegen.model.cache.remembered`): the parameters put into a
+model's equations give the same expressions every run (sympy re-evaluating its tyre laws' Min/Max with the
+numbers in is seconds, on every ``analyze``)."""
+
+
 def equations_of(model, params: ParameterSet) -> Equations:
     """The :class:`Equations` of a model definition with its parameter file.
 
     A model that splits its states into subsystems (``subsystems``, ``rhs``, ``exogenous``,
     ``switched``: the interconnected vehicle of Sentouh et al. 2023) is read as one system: its
     switched signals by their definitions, its exogenous inputs at their nominal values
-    (``[exogenous]``).
+    (``[exogenous]``). Kept across runs, keyed by the model's content, the parameter set as read and
+    the parameter file's bytes (its ``[exogenous]`` table), with this module's code.
     """
+    import sys
+
+    from ..model import cache
+    parameter_file = Path(params.source)
+    parts = {"model": cache.model_digest(model), "parameters": cache.canonical(params),
+             "file": hashlib.sha256(parameter_file.read_bytes()).hexdigest() if parameter_file.is_file() else None}
+    return cache.remembered(EQUATIONS, parts, lambda: _equations_of(model, params), sys.modules[__name__])
+
+
+def _equations_of(model, params: ParameterSet) -> Equations:
     subs = parameter_substitution(model, params)
     states = tuple(model.states)
     unknown = tuple(model.unknown_inputs)
