@@ -103,7 +103,7 @@ def sensor_noise(family) -> dict:
     (:class:`Campaigns`), else the common one of the library's validations."""
     if isinstance(family, Campaigns):
         return family.sensor_noise()
-    from ..validation.common import SENSOR_NOISE
+    from ..project.sensor_noise import SENSOR_NOISE
     return dict(SENSOR_NOISE)
 
 

@@ -26,8 +26,16 @@ so declaring or editing it re-solves nothing and keeps every extension current.
 """
 from __future__ import annotations
 
+import numpy as np
+
 from ..errors import UnitError
 from ..settings import config_error, suggest
+
+SENSOR_NOISE = {"r": np.deg2rad(0.05), "delta": np.deg2rad(0.02), "delta_dot": np.deg2rad(0.2), "a_y": 0.05}
+"""The library's own validation runs: the standard deviation they add per measured signal (a family's own
+levels where it has them, :func:`codegen.families.capabilities.sensor_noise`). Here, beside the car's
+declared noise, not with the validation: the float32 build reads it, and a design's stamp stays off the
+validation's modules."""
 
 
 def measured_signals(model) -> dict:

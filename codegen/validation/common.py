@@ -8,10 +8,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import ModelDefinitionError, SampleError
+from ..project.sensor_noise import SENSOR_NOISE
 from . import metrics, scenarios
 
-SENSOR_NOISE = {"r": np.deg2rad(0.05), "delta": np.deg2rad(0.02), "delta_dot": np.deg2rad(0.2),
-                "a_y": 0.05}
 SETTLE_TIME = 2.0
 
 

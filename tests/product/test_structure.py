@@ -141,6 +141,20 @@ def test_design_hash_covers_every_module_the_pipeline_imports(NAME):
 
 
 
+UNSTAMPED = ("validation", "analysis", "campaign", "targets", "tools", "cli.py", "commandline.py")
+"""What no design and no generated C derives from: editing a metric, a plot, a campaign, an export target, a
+maintainer tool or the command line re-solves and regenerates nothing."""
+
+
+def test_no_design_or_c_stamp_reaches_validation_campaigns_targets_tools_or_the_cli():
+    stamped = set(sources.closure("codegen.emit.generate"))
+    for name in observers.names():
+        stamped |= set(design_lock.design_sources(observers.get(name)))
+    reached = sorted(str(f.relative_to(ROOT)) for f in stamped
+                     if f.is_relative_to(ROOT / "codegen") and f.relative_to(ROOT / "codegen").parts[0] in UNSTAMPED)
+    assert not reached, f"a design or C stamp reads {reached}"
+
+
 @pytest.mark.parametrize("NAME", ["lpv_linf_driver_torque", "interconnected_uio"])
 def test_the_c_hash_covers_the_design_the_emitters_and_the_templates(NAME, monkeypatch):
     # the files emission_inputs really hashes (read off sources.digest as it is called)

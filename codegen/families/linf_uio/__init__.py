@@ -57,7 +57,7 @@ class LinfUIO(Family):
         return format_table(result)
 
     def sensor_noise(self) -> dict:
-        from ...validation.common import SENSOR_NOISE
+        from ...project.sensor_noise import SENSOR_NOISE
         return dict(SENSOR_NOISE)
 
     def demo_report(self, art: dict) -> dict:
