@@ -623,24 +623,36 @@ class OnGrid:
 
 class TableOnGrid(OnGrid):
     """A CSV or Parquet log sampled at another rate than the observer's, on the observer's grid: its
-    mapped columns read whole through ``table`` (the streaming reader, every check of its format), each
-    a :class:`Channel` on the log's one time column (converted to s by ``time_factor``), then put on the
-    grid like an MDF log's channels (``methods``: ``hold`` or ``linear`` per column). A log at the
-    observer's rate is streamed instead (:func:`period_of`): this one holds its mapped columns."""
+    mapped columns streamed through ``table`` (the streaming reader, every check of its format), each
+    a channel on the log's one time column (converted to s by ``time_factor``), put on the grid like an
+    MDF log's channels (``methods``: ``hold`` or ``linear`` per column). The table is read twice, chunk
+    by chunk (one pass judges each channel's sampling, a second puts them on the grid), so memory does
+    not grow with the log. A log at the observer's rate is streamed as it is (:func:`period_of`)."""
 
     def __init__(self, table, time_key: str, time_factor: float, methods, sample_time: float,
                  chunk_rows: int = BATCH_ROWS):
         self.path, self.time_key, self.chunk_rows = table.path, time_key, int(chunk_rows)
+        self._table, self._time_factor = table, time_factor
         self.file_units = dict(getattr(table, "file_units", {}))
-        names = [c for c in table.units if c != time_key]
-        parts = {c: [] for c in (time_key, *names)}
-        for _, cols in table.chunks():
-            for c in parts:
-                parts[c].append(cols[c])
-        t = np.concatenate(parts[time_key]) * time_factor
-        self.channels = [Channel(self.path, c, t, np.concatenate(parts[c]), self.file_units.get(c),
-                                 (methods or {}).get(c, DEFAULT_METHOD)) for c in names]
+        self.channels = [Sampling(self.path, c, self.file_units.get(c), (methods or {}).get(c, DEFAULT_METHOD))
+                         for c in table.units if c != time_key]
+        for part in self._batches():
+            for c in self.channels:
+                c.feed(*part[c.name])
+        for c in self.channels:
+            c.finish()
         self._put_on_grid(sample_time)
+
+    def _batches(self):
+        """``{channel: (t [s], x)}`` per chunk of the table, every channel at the table's times."""
+        for _, cols in self._table.chunks():
+            t = cols[self.time_key] * self._time_factor
+            yield {c.name: (t, cols[c.name]) for c in self.channels}
+
+    def _parts(self):
+        import contextlib
+        demux = _Demux(self._batches(), [c.name for c in self.channels])
+        return contextlib.nullcontext({c.name: demux.parts(c.name) for c in self.channels})
 
 
 def period_of(table, time_key: str, time_factor: float) -> float:
@@ -985,6 +997,8 @@ class _Demux:
 # --- CAN logs (BLF, ASC) decoded with a DBC ---------------------------------------------------------
 
 CAN_FORMATS = ("blf", "asc")
+CAN_BATCH = 8192
+"""Decoded frames of a CAN log read before their samples are handed on (per channel, as arrays)."""
 TICKS = 1_000_000
 """Frame times are rounded to 1 us (1 / TICKS s) from the log's first frame: python-can gives a BLF frame's time as the
 file's start (Unix time, ~1.7e9 s) plus its offset in one float64, which holds it to ~0.2 us; 1 us is far
@@ -1034,10 +1048,11 @@ class CanLog(OnGrid):
     """A CAN log (Vector BLF or ASC, read by python-can) decoded with a DBC (cantools): every mapped
     ``MESSAGE.SIGNAL`` a channel at its message's rate, on the observer's grid.
 
-    The file is streamed frame by frame; only the frames of the mapped messages are decoded (their ids
-    looked up in a dict: the others cost a lookup), and only the mapped signals are kept, each with the
-    times of the frames that carry it (a multiplexed signal: only the frames of its multiplexer value), so
-    memory grows with the mapped signals, not with the log. A channel's times are its frames' timestamps
+    The file is streamed frame by frame, twice (as a bag: one pass judges each channel's sampling, a
+    second puts the channels on the grid chunk by chunk): only the frames of the mapped messages are
+    decoded (their ids looked up in a dict: the others cost a lookup), only the mapped signals kept, each
+    with the times of the frames that carry it (a multiplexed signal: only the frames of its multiplexer
+    value), :data:`CAN_BATCH` frames at a time, so memory does not grow with the log. A channel's times are its frames' timestamps
     relative to the log's first frame (any id), rounded to 1 us (:data:`TICKS`); its values are the DBC's
     physical values (cantools applies the scale and offset), its unit the DBC signal's.
 
@@ -1060,10 +1075,10 @@ class CanLog(OnGrid):
 
     def __init__(self, path, channels, time_key: str, methods, sample_time: float, dbc, chunk_rows: int = BATCH_ROWS,
                  bus: int | None = None):
-        can, _ = _can()
+        _can()
         p = Path(path)
         self.path, self.units, self.time_key, self.chunk_rows = p, dict(channels), time_key, int(chunk_rows)
-        self.format = kind(p)
+        self.format, self._dbc, self._bus = kind(p), dbc, bus
         db = load_dbc(dbc)
         wanted, self.file_units = {}, {}        # (frame id, extended) -> (message, [(channel, signal)])
         for name in self.units:
@@ -1071,22 +1086,62 @@ class CanLog(OnGrid):
             key = (msg.frame_id, bool(msg.is_extended_frame))
             wanted.setdefault(key, (msg, []))[1].append((name, sig.name))
             self.file_units[name] = sig.unit or None
-        times = {n: [] for n in self.units}
-        values = {n: [] for n in self.units}
-        seen, first = set(), None
+        self._wanted = wanted
+        self.channels = [Sampling(p, name, self.file_units[name], methods.get(name, DEFAULT_METHOD))
+                         for name in self.units]
+        by_name = {c.name: c for c in self.channels}
+        seen = set()            # the (frame id, extended) of every frame on the bus read
         buses = {}              # mapped (frame id, extended) -> the buses (1 = CAN 1) its frames came on
         on_bus = set()          # the buses of every frame
+        with self._reading(seen, buses, on_bus) as batches:
+            for part in batches:
+                for name, (t, x) in part.items():
+                    by_name[name].feed(t, x)
+        listed = ", ".join("CAN " + str(b) if b is not None else "a bus with no number" for b in sorted(
+            on_bus, key=lambda b: (b is None, b or 0)))
+        if bus is not None and bus not in on_bus:
+            raise DatasetError(f"{p}: [data] can_channel = {bus}: the log has no frame on CAN {bus}; its frames are on "
+                               f"{listed or 'no bus'}; allowed: one of those")
+        mixed = {k: b for k, b in buses.items() if len(b) > 1}
+        if mixed:
+            k, b = next(iter(mixed.items()))
+            raise DatasetError(f"{p}: message {wanted[k][0].name!r} (frame id {frame_id(k)}) comes on "
+                               f"{len(b)} buses ({', '.join('CAN ' + str(x) for x in sorted(b, key=lambda x: x or 0))}): "
+                               f"two sources of one signal would be mixed; allowed: [data] can_channel = N (N: the "
+                               f"bus to read, as numbered in the log)")
+        absent = [k for k in wanted if k not in seen]
+        if absent:
+            ids = sorted(seen)
+            shown = [frame_id(k) for k in ids[:30]] + ([f"... ({len(ids)} in all)"] if len(ids) > 30 else [])
+            names = ", ".join(f"{wanted[k][0].name!r} (frame id {frame_id(k)})" for k in absent)
+            raise DatasetError(f"{p}: message(s) {names} of the DBC {dbc} never appear in the log"
+                               + (f" on CAN {bus}" if bus is not None else "") + "; the log has "
+                               + (f"frame ids {', '.join(shown)}" if ids else "no CAN frames")
+                               + "; allowed: messages the log holds (is the DBC the log's bus's?)")
+        for c in self.channels:
+            c.finish()
+        self._put_on_grid(float(sample_time))
+
+    def _reading(self, seen: set, buses: dict, on_bus: set):
+        """A context manager giving the mapped signals' samples, ``{channel: (t, x)}`` of up to :data:`CAN_BATCH`
+        decoded frames at a time, in the log's order (one pass over the file, frame by frame). ``seen``,
+        ``buses``, ``on_bus`` are filled with the frame ids of the bus read, the buses of each mapped message and
+        of every frame. A channel's times are its frames' timestamps relative to the log's first frame (any id),
+        rounded to 1 us (:data:`TICKS`). A reading error of python-can a DatasetError."""
+        import contextlib
+        can, _ = _can()
+        p, wanted, bus, dbc = self.path, self._wanted, self._bus, self._dbc
         what = "BLF" if self.format == "blf" else "ASC"
-        reader = None
-        try:
-            if self.format == "blf":
-                reader = can.BLFReader(str(p))
-                size = p.stat().st_size
-                if reader.file_size > size:     # python-can reads a file cut short as if it ended there
-                    raise DatasetError(f"cannot read {p}: not a readable BLF file (cut short: {size} bytes of the "
-                                       f"{reader.file_size} its header states)")
-            else:
-                reader = can.ASCReader(str(p))
+
+        def arrays(times: dict, values: dict, first: float) -> dict:
+            # whole microseconds divided by TICKS: the closest float64 to each time (10.01 s, not 10.010000000000002)
+            return {n: (np.round((np.asarray(times[n], dtype=float) - first) * TICKS) / TICKS,
+                        np.asarray(values[n], dtype=float)) for n in times}
+
+        def batches(reader):
+            times = {n: [] for n in self.units}
+            values = {n: [] for n in self.units}
+            first, count = None, 0
             for frame in reader:
                 if frame.is_error_frame or frame.is_remote_frame:
                     continue
@@ -1113,42 +1168,49 @@ class CanLog(OnGrid):
                     if sig in decoded:      # a multiplexed signal is only in its multiplexer value's frames
                         times[name].append(frame.timestamp)
                         values[name].append(float(decoded[sig]))
-        except DatasetError:
-            raise
-        except (can.CanError, can.io.blf.BLFParseError, struct.error, zlib.error, ValueError, IndexError, OSError,
-                EOFError) as exc:
-            raise DatasetError(f"cannot read {p}: not a readable {what} file ({type(exc).__name__}: {exc})") from None
-        finally:
-            if reader is not None:
-                reader.stop()
-        listed = ", ".join("CAN " + str(b) if b is not None else "a bus with no number" for b in sorted(
-            on_bus, key=lambda b: (b is None, b or 0)))
-        if bus is not None and bus not in on_bus:
-            raise DatasetError(f"{p}: [data] can_channel = {bus}: the log has no frame on CAN {bus}; its frames are on "
-                               f"{listed or 'no bus'}; allowed: one of those")
-        mixed = {k: b for k, b in buses.items() if len(b) > 1}
-        if mixed:
-            k, b = next(iter(mixed.items()))
-            raise DatasetError(f"{p}: message {wanted[k][0].name!r} (frame id {frame_id(k)}) comes on "
-                               f"{len(b)} buses ({', '.join('CAN ' + str(x) for x in sorted(b, key=lambda x: x or 0))}): "
-                               f"two sources of one signal would be mixed; allowed: [data] can_channel = N (N: the "
-                               f"bus to read, as numbered in the log)")
-        absent = [k for k in wanted if k not in seen]
-        if absent:
-            ids = sorted(seen)
-            shown = [frame_id(k) for k in ids[:30]] + ([f"... ({len(ids)} in all)"] if len(ids) > 30 else [])
-            names = ", ".join(f"{wanted[k][0].name!r} (frame id {frame_id(k)})" for k in absent)
-            raise DatasetError(f"{p}: message(s) {names} of the DBC {dbc} never appear in the log"
-                               + (f" on CAN {bus}" if bus is not None else "") + "; the log has "
-                               + (f"frame ids {', '.join(shown)}" if ids else "no CAN frames")
-                               + "; allowed: messages the log holds (is the DBC the log's bus's?)")
-        self.channels = []
-        for name in self.units:
-            # whole microseconds divided by TICKS: the closest float64 to each time (10.01 s, not 10.010000000000002)
-            t = np.round((np.asarray(times[name], dtype=float) - first) * TICKS) / TICKS
-            self.channels.append(Channel(p, name, t, np.asarray(values[name], dtype=float), self.file_units[name],
-                                         methods.get(name, DEFAULT_METHOD)))
-        self._put_on_grid(float(sample_time))
+                count += 1
+                if count == CAN_BATCH:
+                    yield arrays(times, values, first)
+                    times = {n: [] for n in times}
+                    values = {n: [] for n in values}
+                    count = 0
+            if count:
+                yield arrays(times, values, first)
+
+        @contextlib.contextmanager
+        def reading():
+            reader = None
+            try:
+                if self.format == "blf":
+                    reader = can.BLFReader(str(p))
+                    size = p.stat().st_size
+                    if reader.file_size > size:     # python-can reads a file cut short as if it ended there
+                        raise DatasetError(f"cannot read {p}: not a readable BLF file (cut short: {size} bytes of the "
+                                           f"{reader.file_size} its header states)")
+                else:
+                    reader = can.ASCReader(str(p))
+                yield batches(reader)
+            except DatasetError:
+                raise
+            except (can.CanError, can.io.blf.BLFParseError, struct.error, zlib.error, ValueError, IndexError, OSError,
+                    EOFError) as exc:
+                raise DatasetError(f"cannot read {p}: not a readable {what} file ({type(exc).__name__}: {exc})") \
+                    from None
+            finally:
+                if reader is not None:
+                    reader.stop()
+        return reading()
+
+    def _parts(self):
+        """The second pass: every channel's samples put on the grid as the file is read again (:class:`_Demux`)."""
+        import contextlib
+
+        @contextlib.contextmanager
+        def parts():
+            with self._reading(set(), {}, set()) as batches:
+                demux = _Demux(batches, [c.name for c in self.channels])
+                yield {c.name: demux.parts(c.name) for c in self.channels}
+        return parts()
 
     @staticmethod
     def _signal(db, dbc: Path, name: str):

@@ -229,6 +229,26 @@ def test_a_log_of_two_buses_needs_its_bus_named(data, quantized, tmp_path):
     assert "can_channel = 0" in err and ">= 1" in err
 
 
+@pytest.mark.parametrize("suffix", [".blf", ".asc"])
+def test_the_log_is_streamed_in_batches_with_the_same_figures(data, quantized, monkeypatch, suffix):
+    """The log is read twice, :data:`~codegen.validation.logfiles.CAN_BATCH` decoded frames at a time (one
+    pass judges the sampling, one puts the channels on the grid): batches of 7 frames give the figures of
+    one batch number for number; grid chunks of 100 samples on top, the same estimates (the statistics
+    merged chunk by chunk, to the last bits)."""
+    log = quantized[suffix[1:]]
+    monkeypatch.setattr(logfiles, "CAN_BATCH", 10 ** 9)
+    whole = _run(quantized["observer"], log)
+    monkeypatch.setattr(logfiles, "CAN_BATCH", 7)
+    small = _run(quantized["observer"], log)
+    assert small["samples"] == whole["samples"] == ROWS
+    assert small["observer"] == whole["observer"] and small["resampling"] == whole["resampling"]
+    for key in ("t", "beta"):
+        assert np.array_equal(small["signals"][key], whole["signals"][key])
+    chunked = _run(quantized["observer"], log, batch_rows=100)
+    assert np.array_equal(chunked["signals"]["beta"], whole["signals"]["beta"])
+    assert chunked["observer"]["beta"]["rms"] == pytest.approx(whole["observer"]["beta"]["rms"], rel=1e-13)
+
+
 def test_staggered_frames_are_held(data, tmp_path):
     """Frames of one period spread over the bus (each message 0.3 ms after the one before): the grid is
     the first channel's times, the later messages' samples fall after its times and are held, one period
