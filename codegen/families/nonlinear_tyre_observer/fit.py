@@ -45,7 +45,6 @@ from a fixed start, fixed grids).
 from __future__ import annotations
 
 import dataclasses
-import functools
 import re
 from pathlib import Path
 
@@ -82,7 +81,7 @@ def parse_jobs(jobs) -> int:
 
 class Workers:
     """Up to ``jobs`` worker processes for the independent runs of one fit (folds, designs, Kalman runs),
-    started at the first :meth:`map` of more than one call and kept until the fit ends: forked, they start
+    started at the first :meth:`map` and kept until the fit ends: forked, they start
     with this process's modules and compiled expressions, and keep what they compile (a model's printed
     expressions, a Kalman model's graph) from one map to the next. One job, or a platform without fork:
     everything in this process."""
@@ -152,25 +151,13 @@ class _Problem:
 
     signals: dict           # the model's symbols -> arrays over the range
     measured: np.ndarray    # (n, 2) axle forces from (a_y, yaw acceleration)
-    force_laws: tuple       # the axle forces in (the model's signals..., C_f, C_r, mu), the rest substituted
+    forces: object          # (fitted values...) -> (n, 2) model axle forces
     fitted: tuple           # (C_f, C_r, mu) symbols; mu stands for every axle's friction
     start: np.ndarray
     G2: np.ndarray
     window: int             # samples of the moving averages (AVERAGE_S at the observer's sample time)
     prior: tuple            # published (C_f, C_r) of the parameter file's [prior], or None
     mu_reached: float       # the friction the log's combined acceleration reaches (ENVELOPE_QUANTILE)
-
-    def forces(self, x) -> np.ndarray:
-        """(n, 2) model axle forces over the range at the fitted values ``x`` = (C_f, C_r, mu)."""
-        args = self.signals.values()
-        return np.column_stack([fn(*args, *x) for fn in _force_functions(tuple(self.signals), self.fitted,
-                                                                         self.force_laws)])
-
-
-@functools.lru_cache(maxsize=8)
-def _force_functions(symbols: tuple, fitted: tuple, laws: tuple) -> list:
-    """The force laws as numpy functions, compiled once per process (a fold's worker compiles them once)."""
-    return [sp.lambdify([*symbols, *fitted], e, "numpy") for e in laws]
 
 
 def log_columns(module, source: str) -> dict:
@@ -281,7 +268,12 @@ def _problem(config, params, run, a: int, b: int) -> _Problem:
     G2 = np.array(sp.Matrix(in_forces).jacobian(sp.Matrix(module.FORCES)).tolist(), dtype=float)
     meas = np.linalg.solve(G2, np.vstack([np.asarray(run.ay, float)[a:b], yaw_acceleration(run, a, b)])).T
     values = {**keep, **zero_w, **{f: mu for f in fric}}
-    laws = tuple(numeric(e, values) for e in (module.Phi_f, module.Phi_r))
+    exprs = [numeric(e, values) for e in (module.Phi_f, module.Phi_r)]
+    fns = [sp.lambdify([*symbols, *stiff, mu], e, "numpy") for e in exprs]
+    args = [signals[s] for s in symbols]
+
+    def forces(x):
+        return np.column_stack([fn(*args, *x) for fn in fns])
     others = {u: 0 for u in model.known_inputs if columns[str(u)] != "delta"}     # the static capacity: a_x = 0
     static = [float(numeric(ax.peak, {**subs, **{f: 1 for f in fric}, **others})) for ax in axles]
     start = np.array([15.0 * fz for fz in static] + [1.0])       # 15 F_z per rad, mu = 1: a physical prior
@@ -289,7 +281,7 @@ def _problem(config, params, run, a: int, b: int) -> _Problem:
     prior = None
     if all(str(c) in params.prior for c in stiff):
         prior = tuple(float(params.prior[str(c)]["value"]) for c in stiff)
-    return _Problem(signals, meas, laws, (*stiff, mu), start, G2, n, prior, mu_reached(run, a, b, n, subs))
+    return _Problem(signals, meas, forces, (*stiff, mu), start, G2, n, prior, mu_reached(run, a, b, n, subs))
 
 
 ENVELOPE_QUANTILE = 0.995
