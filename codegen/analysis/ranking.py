@@ -327,22 +327,22 @@ def wrapper_model(subject: Subject, add_states: tuple = (), beside: Path | None 
     what was analyzed. ``beside``: the folder the file is written to, which it then imports the
     model relative to (``uiogen new --from-model --outputs``: a project that moves as a whole)."""
     import os
+
+    from ..design import sources
     from ..project import observer_file as observers
     path = subject.model_path
     shown = str(path)
     if path.parent == observers.MODELS_DIR:
-        load = f"_base = observers.builtin_model({path.stem!r})"
-    elif beside is not None:
-        shown = os.path.relpath(path.resolve(), Path(beside).resolve())
-        rel = os.path.relpath(path.resolve(), Path(beside).resolve())
-        load = (f"_base = observers.load_module((Path(__file__).resolve().parent / {rel!r}).resolve(), "
-                f"'uiogen_sensors_base_' + {path.stem!r})")
+        load = [f"_base = observers.builtin_model({path.stem!r})"]
     else:
-        load = f"_base = observers.load_module(Path({str(path)!r}), 'uiogen_analysis_base_' + {path.stem!r})"
+        # BASE_MODEL names the file it builds on, which the design's stamp then holds (codegen.design.sources)
+        shown = os.path.relpath(path.resolve(), Path(beside).resolve()) if beside is not None else str(path)
+        load = [f"{sources.BASE_MODEL} = {shown!r}   # the model this file builds on (in the design's stamp)",
+                f"_base = observers.load_base(__file__, {sources.BASE_MODEL})"]
     outputs = list(subject.outputs)
     lines = ['"""uiogen analyze: the model of ' + shown + ' with the sensors and unknown inputs analyzed."""',
              "import dataclasses", "from pathlib import Path", "",
-             "from codegen.project import observer_file as observers", "", load,
+             "from codegen.project import observer_file as observers", "", *load,
              "globals().update({k: v for k, v in vars(_base).items() if not k.startswith('__')})",
              "_m = _base.MODEL",
              f"_add = {list(add_states)!r}",

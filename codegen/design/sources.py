@@ -122,35 +122,58 @@ def _beside(folder: Path, module: str) -> list:
     return out
 
 
-@functools.lru_cache(maxsize=None)
+BASE_MODEL = "BASE_MODEL"
+"""The name a model file gives the model file it builds on (``BASE_MODEL = "../model.py"``: a path relative to
+its folder, or absolute), which it loads with :func:`codegen.project.observer_file.load_module`: the file
+``uiogen new --from-model --outputs`` writes over the user's model. That file is in the stamp with the modules
+beside it that it imports, as an imported module is."""
+
+
 def _user_imports(path: Path) -> tuple:
-    """Module names imported anywhere in a user's file (absolute, or relative to its folder)."""
+    """(module names imported anywhere in a user's file, absolute or relative to its folder; the files its
+    module-level ``BASE_MODEL = "PATH"`` names); read again once the file changes."""
+    try:
+        st = path.stat()
+    except OSError:
+        return (), ()
+    return _user_imports_of(path, st.st_mtime_ns, st.st_size)
+
+
+@functools.lru_cache(maxsize=None)
+def _user_imports_of(path: Path, mtime_ns: int, size: int) -> tuple:
     try:
         tree = ast.parse(path.read_text(), str(path))
     except (SyntaxError, UnicodeDecodeError, ValueError):
-        return ()               # refused with its own message where the file is imported
-    found = []
+        return (), ()           # refused with its own message where the file is imported
+    found, bases = [], []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             found += [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom) and node.level <= 1:
             mod = node.module or ""
             found += [f"{mod}.{a.name}" if mod else a.name for a in node.names] + ([mod] if mod else [])
-    return tuple(found)
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == BASE_MODEL for t in node.targets) \
+                and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str):
+            base = (path.parent / node.value.value).resolve()
+            if base.is_file():
+                bases.append(base)
+    return tuple(found), tuple(bases)
 
 
 def user_closure(path) -> list:
     """A user's file and every module beside it that it imports, transitively (a helper module
-    with the tyre data is as much a design input as the model)."""
+    with the tyre data is as much a design input as the model), and the model file it builds on
+    (:data:`BASE_MODEL`) with its own."""
     start = Path(path).resolve()
     seen, todo = {start}, [start]
     while todo:
         f = todo.pop()
-        for mod in _user_imports(f):
-            for g in _beside(f.parent, mod):
-                if g not in seen:
-                    seen.add(g)
-                    todo.append(g)
+        modules, bases = _user_imports(f)
+        for g in [*(g for mod in modules for g in _beside(f.parent, mod)), *bases]:
+            if g not in seen:
+                seen.add(g)
+                todo.append(g)
     return sorted(seen, key=_order)
 
 

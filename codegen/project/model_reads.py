@@ -10,7 +10,8 @@ the extension current after that file changed. So :func:`watching` records, with
 (SQLite databases too, which are opened in C) and every child process it starts (whose reads no hook
 of this process sees), and :func:`check` refuses the model when it started a process, or when a file
 it read is neither installed code (the standard library, site-packages) nor in the stamp: numbers
-belong in the parameter file, or in a Python module beside the model.
+belong in the parameter file, or in a Python module beside the model; a model file built on another
+one names it (``BASE_MODEL = "../model.py"``, :data:`codegen.design.sources.BASE_MODEL`).
 
 The model's folder is on ``sys.path`` while it is imported, so that the modules beside it import
 whatever the current directory.
@@ -85,7 +86,9 @@ class Process(tuple):
 @contextlib.contextmanager
 def watching(path):
     """Record the files opened on this thread while the block runs (the model file's import), with
-    the model's folder first on ``sys.path``."""
+    the model's folder first on ``sys.path``. A model loaded while another is (the file ``uiogen new
+    --from-model --outputs`` writes loads the user's model) is read for both: what it reads counts for
+    the outer model too, whose stamp must then hold it (:data:`codegen.design.sources.BASE_MODEL`)."""
     global _installed
     if not _installed:
         sys.addaudithook(_hook)          # cannot be removed: it records only inside this block
@@ -98,8 +101,30 @@ def watching(path):
         yield reads
     finally:
         _state.reads = outer
+        if outer is not None:
+            outer.extend(reads)
         with contextlib.suppress(ValueError):
             sys.path.remove(folder)
+
+
+def replay(reads) -> None:
+    """Count ``reads`` (what a model module read when it was imported) for the model being imported now,
+    which loads that module again from this process's modules: the same files, read once."""
+    current = getattr(_state, "reads", None)
+    if current is not None:
+        current.extend(reads)
+
+
+@contextlib.contextmanager
+def unwatched():
+    """Nothing recorded while the block runs: the toolchain's own reads after a model's import (its
+    checks parse the model's sources) are not the model's."""
+    outer = getattr(_state, "reads", None)
+    _state.reads = None
+    try:
+        yield
+    finally:
+        _state.reads = outer
 
 
 def _installed_prefixes() -> list:
@@ -120,7 +145,7 @@ def check(path, reads) -> None:
     ModelDefinitionError
         naming the model file, the file it read and what to do instead.
     """
-    from ..design.sources import ROOT, user_closure
+    from ..design.sources import BASE_MODEL, ROOT, user_closure
     stamped = set(user_closure(path))
     prefixes = _installed_prefixes()
     for raw in reads:
@@ -146,4 +171,5 @@ def check(path, reads) -> None:
         raise ModelDefinitionError(
             f"{path}: the model {what} {f} while it is imported, which no design stamp covers (after an edit "
             f"of it the design, the C and the extension would stay 'current'); put the numbers in the parameter "
-            f"file, or in a Python module beside the model that it imports by name (stamped)")
+            f"file, or in a Python module beside the model that it imports by name (stamped)"
+            + (f"; a model file built on another names it: {BASE_MODEL} = \"PATH\" (stamped)" if code else ""))

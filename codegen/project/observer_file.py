@@ -114,7 +114,7 @@ class ObserverConfig:
         f = self.model_path
         if f.parent == MODELS_DIR:
             return f"model_defs.{f.stem}"
-        return f"uiogen_user_model_{hashlib.sha256(str(f).encode()).hexdigest()[:12]}_{f.stem}"
+        return module_name(f)
 
     def load_model_module(self):
         return load_module(self.model_path, self.model_module)
@@ -194,9 +194,26 @@ def builtin_model(name: str):
     return load_module(MODELS_DIR / f"{name}.py", f"model_defs.{name}")
 
 
+_READS: dict = {}       # {module name: the files it read when imported}
+
+
+def module_name(path: Path) -> str:
+    """The importable name of a user's model file: one per file (its path in the name's hash)."""
+    return f"uiogen_user_model_{hashlib.sha256(str(path).encode()).hexdigest()[:12]}_{path.stem}"
+
+
+def load_base(model_file, base: str):
+    """The model module a model file builds on: ``base`` (its ``BASE_MODEL``, a path relative to the folder
+    of ``model_file``, or absolute), loaded once per process under its own name (:func:`module_name`)."""
+    path = (Path(model_file).resolve().parent / base).resolve()
+    return load_module(path, module_name(path))
+
+
 def load_module(path: Path, name: str):
-    """Import a model module from its file (once per process; built-in models by their package name)."""
+    """Import a model module from its file (once per process; built-in models by their package name). What
+    it read is kept with it (:mod:`.model_reads`): a model that loads it again counts those files too."""
     if name in sys.modules:
+        model_reads.replay(_READS.get(name, ()))
         return sys.modules[name]
     if name.startswith("model_defs."):
         return importlib.import_module(name)
@@ -208,9 +225,11 @@ def load_module(path: Path, name: str):
     try:
         with model_reads.watching(path) as reads:
             spec.loader.exec_module(module)
-        model_reads.check(path, reads)
-        if isinstance(getattr(module, "MODEL", None), ModelDefinition):
-            check_unit_keys(module.MODEL)
+        with model_reads.unwatched():
+            model_reads.check(path, reads)
+            if isinstance(getattr(module, "MODEL", None), ModelDefinition):
+                check_unit_keys(module.MODEL)
+        _READS[name] = tuple(reads)
     except ModelDefinitionError as exc:
         del sys.modules[name]
         # a check of ModelDefinition itself (a field of the wrong type, a misspelt units key): name the file
