@@ -155,9 +155,7 @@ def _user_imports_of(path: Path, mtime_ns: int, size: int) -> tuple:
     for node in tree.body:
         if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == BASE_MODEL for t in node.targets) \
                 and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str):
-            base = (path.parent / node.value.value).resolve()
-            if base.is_file():
-                bases.append(base)
+            bases.append((path.parent / node.value.value).resolve())
     return tuple(found), tuple(bases)
 
 
@@ -170,7 +168,7 @@ def user_closure(path) -> list:
     while todo:
         f = todo.pop()
         modules, bases = _user_imports(f)
-        for g in [*(g for mod in modules for g in _beside(f.parent, mod)), *bases]:
+        for g in [*(g for mod in modules for g in _beside(f.parent, mod)), *(b for b in bases if b.is_file())]:
             if g not in seen:
                 seen.add(g)
                 todo.append(g)

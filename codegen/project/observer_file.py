@@ -206,6 +206,10 @@ def load_base(model_file, base: str):
     """The model module a model file builds on: ``base`` (its ``BASE_MODEL``, a path relative to the folder
     of ``model_file``, or absolute), loaded once per process under its own name (:func:`module_name`)."""
     path = (Path(model_file).resolve().parent / base).resolve()
+    if not path.is_file():
+        raise ModelDefinitionError(f"{model_file}: BASE_MODEL = {str(base)!r}: there is no file {path} (the model "
+                                   f"file this one builds on, relative to its folder); allowed: the path of that "
+                                   f"file (a project moved without it: move it along, or correct the path)")
     return load_module(path, module_name(path))
 
 

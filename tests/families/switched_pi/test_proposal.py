@@ -178,3 +178,12 @@ def test_a_model_that_loads_another_without_naming_it_is_refused_naming_the_fix(
     assert f"{wrapper}: the model imports the module {model.resolve()}" in err and 'BASE_MODEL = "PATH"' in err, err
     wrapper.write_text(text)
     assert cli.main(["design", str(obs), "--update"]) == 0
+    # the project moved without the model it builds on: one line naming BASE_MODEL and the file (a process of
+    # its own: this one holds the modules it loaded)
+    import subprocess
+    import sys
+    model.rename(tmp_path / "elsewhere.py")
+    proc = subprocess.run([sys.executable, "-m", "codegen.cli", "design", str(obs)], capture_output=True, text=True)
+    err = proc.stderr.strip()
+    assert proc.returncode == 2 and len(err.splitlines()) == 1, (proc.returncode, err)
+    assert f"BASE_MODEL = '../model.py': there is no file {model.resolve()}" in err, err
