@@ -124,7 +124,7 @@ def _beside(folder: Path, module: str) -> list:
 
 BASE_MODEL = "BASE_MODEL"
 """The name a model file gives the model file it builds on (``BASE_MODEL = "../model.py"``: a path relative to
-its folder, or absolute), which it loads with :func:`codegen.project.observer_file.load_module`: the file
+its folder, or absolute), which it loads with :func:`codegen.project.observer_file.load_base`: the file
 ``uiogen new --from-model --outputs`` writes over the user's model. That file is in the stamp with the modules
 beside it that it imports, as an imported module is."""
 
