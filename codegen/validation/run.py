@@ -313,16 +313,27 @@ def _model_or_none(config):
 
 def _baselines(config, run) -> dict:
     """beta of every baseline of the shared log: the source repository's linear KF, the EKF, and the
-    same-model peers of an observer of the nonlinear-tyre model."""
-    from . import stanford
-    kf, ekf = stanford.linear_kf(run), stanford.ekf(run)
-    estimates = {"linear_kf": kf.beta, "ekf": ekf.beta}
-    # the family's peers of the observer's own model and parameter file, in the same run (LogPeers)
+    same-model peers of an observer of the nonlinear-tyre model (:class:`~codegen.families.capabilities.LogPeers`),
+    the two groups on two processes (:class:`~.workers.Workers`: independent runs, the same estimates)."""
+    import os
+
     from ..families.capabilities import LogPeers
+    from .workers import Workers
     family = families.get(config.family)
-    if isinstance(family, LogPeers):
-        estimates.update(family.log_peers(config, run))
+    calls = [(_source_baselines, (run,))]
+    if isinstance(family, LogPeers):        # the family's peers of the observer's own model and parameter file
+        calls.append((family.log_peers, (config, run)))
+    with Workers(min(len(calls), os.cpu_count() or 1)) as workers:
+        estimates = {}
+        for part in workers.map(calls):
+            estimates.update(part)
     return estimates
+
+
+def _source_baselines(run) -> dict:
+    """beta of the source repository's linear KF and of its EKF on the shared log."""
+    from . import stanford
+    return {"linear_kf": stanford.linear_kf(run).beta, "ekf": stanford.ekf(run).beta}
 
 
 def _table(run, b) -> dict:

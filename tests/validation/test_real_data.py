@@ -70,3 +70,22 @@ def test_cli_json_is_the_run_the_library_makes():
         assert {"rms", "mae", "max", "truth_rms", "rms_percent"} <= set(table["beta"])
         assert (table["beta"]["unit"], table["beta"]["converted_from"], table["vy"]["unit"]) == ("deg", "rad", "m/s")
     assert res["splits"]["unit"] == "deg"
+
+
+def test_the_peers_run_on_two_processes_with_the_estimates_of_one(monkeypatch):
+    """The shared log's baselines (the source's KF and EKF) and an observer family's peers (the same-tyre EKF
+    and UKF) run on two worker processes (:class:`codegen.validation.workers.Workers`): the estimates are
+    those of one process, number for number."""
+    import dataclasses
+
+    from codegen.project import observer_file as observers
+    config = observers.get("stanford_sideslip_nonlinear_tyre")
+    full = stanford.load(stanford.STANFORD_PATH)
+    run = stanford.StanfordRun(**{f.name: (v[:3000] if isinstance(v, np.ndarray) else v)
+                                  for f in dataclasses.fields(full) for v in [getattr(full, f.name)]})
+    two = validate._baselines(config, run)
+    monkeypatch.setattr("os.cpu_count", lambda: 1)
+    one = validate._baselines(config, run)
+    assert set(two) == set(one) == {"linear_kf", "ekf", "ekf_nonlinear_tyre", "ukf_nonlinear_tyre"}
+    for name in one:
+        assert np.array_equal(two[name], one[name]), name

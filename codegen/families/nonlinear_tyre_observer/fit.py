@@ -55,6 +55,7 @@ import sympy as sp
 from ...errors import CertificateError, ConfigurationError, SampleError
 from ...model import load_parameters
 from ...validation import stanford
+from ...validation.workers import Workers
 from .representation import numeric
 
 AVERAGE_S = 0.21            # s, the span of the moving averages: the accelerometers' vibration is not force
@@ -77,41 +78,6 @@ def parse_jobs(jobs) -> int:
         raise ConfigurationError(f"--jobs {jobs!r}: an integer >= 1 (the processes the folds run on)",
                                  source="--jobs", key="--jobs", value=jobs)
     return jobs
-
-
-class Workers:
-    """Up to ``jobs`` worker processes for the independent runs of one fit (folds, designs, Kalman runs),
-    started at the first :meth:`map` and kept until the fit ends: forked, they start
-    with this process's modules and compiled expressions, and keep what they compile (a model's printed
-    expressions, a Kalman model's graph) from one map to the next. One job, or a platform without fork:
-    everything in this process."""
-
-    def __init__(self, jobs: int):
-        import multiprocessing
-        self.jobs = jobs if "fork" in multiprocessing.get_all_start_methods() else 1
-        self._pool = None
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        if self._pool is not None:
-            self._pool.shutdown()
-        return False
-
-    def map(self, calls) -> list:
-        """``[fn(*args) for fn, args in calls]``, in order. Each call is deterministic and independent of the
-        others, so the result is the same with any ``jobs``; a call's error is raised here as it was raised
-        there. ``calls`` may be a generator: each call is handed to the workers as soon as it is made, so
-        what this process does to make the next (a fold's tyre fit) overlaps the workers' runs."""
-        if self.jobs <= 1:
-            return [fn(*args) for fn, args in calls]
-        if self._pool is None:
-            import multiprocessing
-            from concurrent.futures import ProcessPoolExecutor
-            self._pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=multiprocessing.get_context("fork"))
-        futures = [self._pool.submit(fn, *args) for fn, args in calls]
-        return [f.result() for f in futures]
 
 
 def parse_samples(text: str, n: int) -> tuple:
