@@ -278,8 +278,7 @@ def _load_model(path: Path):
     if path.parent == observers.MODELS_DIR:
         module = observers.builtin_model(path.stem)
     else:
-        tag = hashlib.sha256(str(path).encode()).hexdigest()[:12]
-        module = observers.load_module(path, f"uiogen_user_model_{tag}_{path.stem}")
+        module = observers.load_module(path, observers.module_name(path))
     model = getattr(module, "MODEL", None)
     if model is None or not hasattr(model, "states") or not hasattr(model, "outputs"):
         raise ModelDefinitionError(f"{path} does not define MODEL = ModelDefinition(...)")

@@ -765,7 +765,7 @@ class LMIProblem:
         or None. The least-norm point of what is left is then interior, as the solver's own
         optimum was, instead of on the boundary where least norm alone would put it (smallest
         gains: a sluggish observer at the same gamma)."""
-        import decimal
+        from .rates import round_down
         n = red.q.size
         xv = np.zeros(len(self._names))
         xv[red.kept_variables] = x1
@@ -804,9 +804,7 @@ class LMIProblem:
         s_star = float(np.asarray(result.x)[n])
         if not s_star > 0:
             return None
-        d = decimal.Decimal(repr(float(s_star * (1.0 - CENTRAL_GIVE))))
-        quantum = decimal.Decimal(1).scaleb(d.adjusted() - 2)
-        s_keep = float((d / quantum).to_integral_value(rounding=decimal.ROUND_FLOOR) * quantum)
+        s_keep = round_down(s_star * (1.0 - CENTRAL_GIVE), 3)
         return b - s_keep * col, int(result.iterations), dt
 
     def _least_norm(self, red, b, bound, scale, coordinates, tol, max_iter, verbose) -> tuple:
