@@ -17,6 +17,7 @@ import dataclasses
 from dataclasses import dataclass, field
 
 from ..errors import DesignLockError
+from ..design.lmi import worst_block
 from .artifact import significant
 
 #: norms a :class:`Bound` may be stated in
@@ -68,7 +69,7 @@ class Recheck:
     def of(cls, checks) -> "Recheck":
         """From :class:`~codegen.design.lmi.BlockCheck` s (the worst by relative margin)."""
         checks = list(checks)
-        worst = min(checks, key=lambda c: c.relative_margin)
+        worst = worst_block(checks)
         return cls(len(checks), worst.label, worst.min_eig, worst.relative_margin)
 
 

@@ -265,6 +265,24 @@ class BlockCheck:
         return f"smallest eigenvalue {self.min_eig:.3e}{floor}, block scale {self.scale:.3e}"
 
 
+def worst_block(checks, by: str = "relative_margin") -> BlockCheck:
+    """The block with the least margin (``by``: ``"relative_margin"`` or ``"min_eig"``), named the same on every
+    machine: mirror-image blocks (two vertices of one symmetric polytope) have equal eigenvalues but for their
+    last bits, and those bits differ from one CPU to another; of the blocks within the eigensolver's rounding
+    (or 1e-9 relative) of the least, the first in order is taken."""
+    checks = list(checks)
+    relative = by == "relative_margin"
+
+    def value(c):
+        return c.relative_margin if relative else c.min_eig
+
+    def noise(c):
+        return c.rounding_floor / max(c.scale, 1e-300) if relative else c.rounding_floor
+    least = min(checks, key=value)
+    return next(c for c in checks
+                if value(c) <= value(least) + max(noise(c), noise(least), 1e-9 * abs(value(least))))
+
+
 def uncertified(checks) -> BlockCheck | None:
     """The block with the least relative margin among those that fail, or None when all are certified."""
     failed = [c for c in checks if not c.certified]
@@ -285,7 +303,7 @@ class LMISolution:
 
     @property
     def worst(self) -> BlockCheck:
-        return min(self.checks, key=lambda c: c.relative_margin)
+        return worst_block(self.checks)
 
     def __getitem__(self, name: str):
         return self.values[name]

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from codegen.errors import CertificateError, InfeasibleLMIError, LMIShapeError, NonAffineLMIError
-from codegen.design.lmi import LMIProblem, bmat, check_blocks, svec, trace, uncertified, unsvec
+from codegen.design.lmi import BlockCheck, LMIProblem, bmat, check_blocks, svec, trace, uncertified, unsvec, worst_block
 
 
 def test_svec_roundtrip_and_order():
@@ -131,3 +131,17 @@ def test_replay_of_a_singular_solution_fails_the_recheck():
     rec = SolveRecord(prob.name, {"P": np.zeros((2, 2)).tolist()}, 0.0, 0, dict(prob.data))
     with pytest.raises(CertificateError, match="'P > 0' fails the numpy re-check: smallest eigenvalue 0"):
         prob.replay(rec)
+
+
+def test_the_worst_block_is_named_alike_on_every_machine():
+    """Mirror-image blocks have equal eigenvalues but for their last bits, which differ between CPUs: of the
+    blocks within the eigensolver's rounding of the least margin, the first in order is named, whichever of
+    them is smaller by a bit here (a lock written on one machine replays on another)."""
+    eps = np.finfo(float).eps
+    a, b = BlockCheck("(27a) l=1", 6, 1e-3, 2.0), BlockCheck("(27a) l=3", 6, 1e-3 * (1 - 4 * eps), 2.0)
+    far = BlockCheck("(27b)", 6, 5e-3, 2.0)
+    for by in ("relative_margin", "min_eig"):
+        assert worst_block([far, a, b], by).label == "(27a) l=1"
+        assert worst_block([far, b, a], by).label == "(27a) l=3"
+    clearly = BlockCheck("(27c)", 6, 0.9e-3, 2.0)            # smaller beyond the rounding: named
+    assert worst_block([a, b, clearly]).label == "(27c)"

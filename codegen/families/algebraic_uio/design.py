@@ -54,7 +54,7 @@ from ...representation.differentiators import MAX_ORDER, HosmdSpec
 from ...emit.stepgen import lambdify
 from ...errors import (CertificateError, DesignLockError, DiscretizationError, InaccurateSolveError,
                       InfeasibleLMIError, ModelDefinitionError, SolverError)
-from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace, uncertified
+from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace, uncertified, worst_block
 from ...model import LPVModel
 from ...representation.polytope import (Premise, affine_decomposition, nonlinear_factors, sector_weights_product,
                                         vertex_matrices)
@@ -474,7 +474,7 @@ def certify(d: AlgebraicDesign) -> dict:
         Fs = (1.0 / S)[:, None] * F * S[None, :]
         named[label] = -(Xs @ Fs + Fs.T @ Xs + 2 * d.settings.alpha * Xs)
     checks = check_blocks(named)
-    worst = min(checks, key=lambda c: c.min_eig)
+    worst = worst_block(checks, "min_eig")
     failed = uncertified(checks)
     if failed is not None:
         raise CertificateError(f"LMI (39) block {failed.label!r} fails the numpy re-check on the emitted gains: "
@@ -731,7 +731,7 @@ def aux_design(lpv: LPVModel, boxes: dict, mode: str, alpha: float, solver, tol:
         As = Si[:, None] * Acl * S[None, :]
         blocks[f"aux vertex {v + 1}"] = -(Xs @ As + As.T @ Xs + 2 * rate * Xs)
     checks = check_blocks(blocks)
-    worst = min(checks, key=lambda c: c.min_eig)
+    worst = worst_block(checks, "min_eig")
     failed = uncertified(checks)
     if failed is not None:
         raise CertificateError(f"auxiliary-system certificate fails the numpy re-check ({failed.label}: {failed.failure()})")

@@ -76,7 +76,7 @@ import scipy.linalg
 
 from . import representation as icm
 from ...errors import CertificateError, DiscretizationError, ModelDefinitionError, RankConditionError
-from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, uncertified
+from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, uncertified, worst_block
 from ...settings import setting
 from ...design.precision import margin_field, precision_field
 from ...design import canonical
@@ -385,7 +385,7 @@ def certify(ts: icm.InterconnectedTS, d: ICDesign) -> dict:
         blocks[f"(27e) {sub.name}"] = sd.P - np.eye(n)
         checks = check_blocks(blocks)
         gain = max(float(np.linalg.norm(np.linalg.solve(sd.P, o), 2)) for o in sd.Omega)
-        worst = min(checks, key=lambda c: c.min_eig)
+        worst = worst_block(checks, "min_eig")
         failed = uncertified(checks)
         if failed is not None:
             raise CertificateError(f"Sentouh et al. 2023 LMI {failed.label!r} fails the numpy re-check on the emitted matrices: "

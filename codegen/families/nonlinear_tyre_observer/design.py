@@ -47,7 +47,7 @@ from ...design import rates
 from ...design.canonical import decimal_round
 from ...design.precision import required_margin
 from ...errors import CertificateError, SolverError
-from ...design.lmi import LMIProblem, bmat, check_blocks, objective_bound, uncertified
+from ...design.lmi import LMIProblem, bmat, check_blocks, objective_bound, uncertified, worst_block
 
 DEG = 180.0 / np.pi
 CHANNELS = ("force_front", "force_rear", "ay", "r", "euler_vy", "euler_r")
@@ -444,7 +444,7 @@ def certify(plant, decay_verts, gain_verts, design: Design, level: LevelBound, t
                                                          through_rate(phi, through.rate, through.growth))
                        for x, phi in through_verts})
     checks = check_blocks(blocks)
-    worst = min(checks, key=lambda c: c.relative_margin)
+    worst = worst_block(checks)
     failed = uncertified(checks)
     if failed is not None:
         raise CertificateError(f"nonlinear-tyre observer: LMI {failed.label!r} fails the numpy re-check on the emitted "

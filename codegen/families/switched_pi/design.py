@@ -50,7 +50,7 @@ import casadi as ca
 import numpy as np
 
 from ...errors import CertificateError, ConfigurationError, DiscretizationError, RankConditionError, SolverError
-from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, uncertified
+from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, uncertified, worst_block
 from ...settings import setting
 from ...design.precision import margin_field, precision_field
 from .representation import SwitchedModel
@@ -357,7 +357,7 @@ def certify(sm: SwitchedModel, d: SwitchedPIDesign) -> dict:
                               d.settings.decay_rate, np):
         blocks[label] = -blk
     checks = check_blocks(blocks)
-    worst = min(checks, key=lambda c: c.min_eig)
+    worst = worst_block(checks, "min_eig")
     failed = uncertified(checks)
     if failed is not None:
         raise CertificateError(f"Menhour et al. 2014 LMI {failed.label!r} fails the numpy re-check on the emitted matrices: "

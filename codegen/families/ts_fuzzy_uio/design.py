@@ -30,7 +30,7 @@ import numpy as np
 
 from ...errors import CertificateError, ConfigurationError, RankConditionError, RepresentationError
 from ...emit.stepgen import solve_unpivoted
-from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace, uncertified
+from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, trace, uncertified, worst_block
 from ...representation.polytope import sector_weights_product
 from ...settings import setting
 from ...design.precision import margin_field, precision_field
@@ -257,7 +257,7 @@ def certify(ts: TSFuzzyModel, d: TSDesign) -> dict:
     """Independent numpy check of (27) on the emitted (rounded) matrices; no solver involved."""
     checks = check_blocks({f"P{i + 1} > 0": p for i, p in enumerate(d.P)})
     checks += check_blocks(dict(_blocks(ts, d.T, d.P, d.M, d.L, d.settings.decay, np, d.P_bar)))
-    worst = min(checks, key=lambda c: c.min_eig)
+    worst = worst_block(checks, "min_eig")
     failed = uncertified(checks)
     if failed is not None:
         raise CertificateError(f"Nguyen et al. 2021 LMI {failed.label!r} fails the numpy re-check on the emitted "
