@@ -43,7 +43,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of interconnected_uio_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define INTERCONNECTED_UIO_DESIGN_HASH "d107409155fa81b8cd5bbf03b7f337a08559d669a127ec633b3196ebd63880ed"
+#define INTERCONNECTED_UIO_DESIGN_HASH "5e50ede6b3385dc44752b2fa57e216c6187dbe570f7c4a4410c6e2030a593b94"
 
 /* Status bits returned by interconnected_uio_step; a sample's status is their OR (interconnected_uio_status). */
 typedef enum {

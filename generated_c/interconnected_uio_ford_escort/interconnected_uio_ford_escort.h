@@ -43,7 +43,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of interconnected_uio_ford_escort_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define INTERCONNECTED_UIO_FORD_ESCORT_DESIGN_HASH "8a3babc6f77b28fd9ec50947b6136355ae5e5555517ac3ad2f33db65c9fd1e4b"
+#define INTERCONNECTED_UIO_FORD_ESCORT_DESIGN_HASH "1388abb4b3c3538aedf74c7abd27a46bb73e933594f6124c0a76373eaf6d4d3f"
 
 /* Status bits returned by interconnected_uio_ford_escort_step; a sample's status is their OR (interconnected_uio_ford_escort_status). */
 typedef enum {

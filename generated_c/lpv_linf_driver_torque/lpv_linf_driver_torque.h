@@ -28,7 +28,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of lpv_linf_driver_torque_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define LPV_LINF_DRIVER_TORQUE_DESIGN_HASH "3bdbaecbd3fe9a14a21e64e71e758da9ad9617822527b4ba013068b752855704"
+#define LPV_LINF_DRIVER_TORQUE_DESIGN_HASH "32e606637894c592083c68e0f5fa984b250f3ab4d122c4a95755e3c24455a901"
 
 /* Status bits returned by lpv_linf_driver_torque_step; a sample's status is their OR (lpv_linf_driver_torque_status). */
 typedef enum {

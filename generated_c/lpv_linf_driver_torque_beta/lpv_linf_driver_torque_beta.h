@@ -28,7 +28,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of lpv_linf_driver_torque_beta_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define LPV_LINF_DRIVER_TORQUE_BETA_DESIGN_HASH "ea8b0b9b8f6011f5f6e78745fee04dfe3592ebbf9565e0744507a16d7b9a7002"
+#define LPV_LINF_DRIVER_TORQUE_BETA_DESIGN_HASH "1484ff5a619b22920f86dcd7c64f8f072d1444c1a0b1706ed16ee17231a657b9"
 
 /* Status bits returned by lpv_linf_driver_torque_beta_step; a sample's status is their OR (lpv_linf_driver_torque_beta_status). */
 typedef enum {

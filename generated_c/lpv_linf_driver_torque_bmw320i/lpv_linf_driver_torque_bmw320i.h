@@ -32,7 +32,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of lpv_linf_driver_torque_bmw320i_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define LPV_LINF_DRIVER_TORQUE_BMW320I_DESIGN_HASH "c811b11e2645772b835f817147441a29ac17c0e86a389d4f24e727b3d63f9c87"
+#define LPV_LINF_DRIVER_TORQUE_BMW320I_DESIGN_HASH "63695b460d5ea84bcbf079f25401c0fab4ea6a5bf408dcc23b0451decc6c8cac"
 
 /* Status bits returned by lpv_linf_driver_torque_bmw320i_step; a sample's status is their OR (lpv_linf_driver_torque_bmw320i_status). */
 typedef enum {

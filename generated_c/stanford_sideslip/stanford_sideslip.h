@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of stanford_sideslip_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define STANFORD_SIDESLIP_DESIGN_HASH "1a5bab2c9f7ac3c1ca9bf3b6072caff1cb2e482a269dfc82468a0642828a70d1"
+#define STANFORD_SIDESLIP_DESIGN_HASH "a6fe89dc3da279777daf827f760d00dc3201a07ec2a1563aab066df98658c8ff"
 
 /* Status bits returned by stanford_sideslip_step; a sample's status is their OR (stanford_sideslip_status). */
 typedef enum {

@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of stanford_sideslip_nonlinear_tyre_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define STANFORD_SIDESLIP_NONLINEAR_TYRE_DESIGN_HASH "dbfd80a1fc2c5a406354391bee082227fa6e3678060b99bfba34c88bbfc61060"
+#define STANFORD_SIDESLIP_NONLINEAR_TYRE_DESIGN_HASH "65447f932d65a108731470f8e193b15b1c3ab05c55838952ee8f647ba4199826"
 
 /* Status bits returned by stanford_sideslip_nonlinear_tyre_step; a sample's status is their OR (stanford_sideslip_nonlinear_tyre_status). */
 typedef enum {

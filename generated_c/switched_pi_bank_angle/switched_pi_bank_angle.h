@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of switched_pi_bank_angle_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define SWITCHED_PI_BANK_ANGLE_DESIGN_HASH "94bdac0c5883dcef0cfcd9bf7b4ef95227e85d931d6b773bf518b2f8d88148d5"
+#define SWITCHED_PI_BANK_ANGLE_DESIGN_HASH "17e4c99f13125f14209465bfb58319e750bd627233623b120fa99fc28c67dd87"
 
 /* Status bits returned by switched_pi_bank_angle_step; a sample's status is their OR (switched_pi_bank_angle_status). */
 typedef enum {

@@ -31,7 +31,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of switched_pi_bank_angle_fine_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define SWITCHED_PI_BANK_ANGLE_FINE_DESIGN_HASH "5c51727630f3843fe26b2f0c9bcc6df6b011e4bcf431b9acc3513f78f7cfc34e"
+#define SWITCHED_PI_BANK_ANGLE_FINE_DESIGN_HASH "7ed14c1231a3229cee789926e7b8808c6a0ea0b180293219d3097c31243f39fd"
 
 /* Status bits returned by switched_pi_bank_angle_fine_step; a sample's status is their OR (switched_pi_bank_angle_fine_status). */
 typedef enum {

@@ -15,7 +15,7 @@
 #define TS_FUZZY_UIO_SZ_ARG 4
 #define TS_FUZZY_UIO_SZ_RES 3
 #define TS_FUZZY_UIO_SZ_IW 1
-#define TS_FUZZY_UIO_SZ_W 34
+#define TS_FUZZY_UIO_SZ_W 33
 
 void ts_fuzzy_uio_init(ts_fuzzy_uio_state *s)
 {

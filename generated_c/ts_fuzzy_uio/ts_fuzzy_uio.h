@@ -34,7 +34,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of ts_fuzzy_uio_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define TS_FUZZY_UIO_DESIGN_HASH "8ecd34226bc51d191b0c25eee4a829d6899b693e63e4324f27a55fca686770ae"
+#define TS_FUZZY_UIO_DESIGN_HASH "c8bcbff6db00344eaacc6861fa022052f01af8332fe7de618916c4db12924575"
 
 /* Status bits returned by ts_fuzzy_uio_step; a sample's status is their OR (ts_fuzzy_uio_status). */
 typedef enum {

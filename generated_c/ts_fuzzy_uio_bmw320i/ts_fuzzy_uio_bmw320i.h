@@ -34,7 +34,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of ts_fuzzy_uio_bmw320i_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define TS_FUZZY_UIO_BMW320I_DESIGN_HASH "9759d0382ffd8b39d30a9d28995585648036e72c12a790e2c25bdfb28ffe204c"
+#define TS_FUZZY_UIO_BMW320I_DESIGN_HASH "a65e0d625e71bfccf266d4bb52d20e656a1746f1f23eac1bd6730853bf59d663"
 
 /* Status bits returned by ts_fuzzy_uio_bmw320i_step; a sample's status is their OR (ts_fuzzy_uio_bmw320i_status). */
 typedef enum {

@@ -34,7 +34,7 @@ extern "C" {
 
 /* The design this C implements: the design hash of ts_fuzzy_uio_stanford_design.json (a build can check that the
  * step it links is the one it was validated with). */
-#define TS_FUZZY_UIO_STANFORD_DESIGN_HASH "9950d7a85c363dce5deb02395e2ee0c1ebc6bf1f4ee15059ac526c28f3738ee9"
+#define TS_FUZZY_UIO_STANFORD_DESIGN_HASH "f7f3b2762669d4c78fc82024f7b4dbc1b84ef0e8c1ff04294fd03a391ee59a19"
 
 /* Status bits returned by ts_fuzzy_uio_stanford_step; a sample's status is their OR (ts_fuzzy_uio_stanford_status). */
 typedef enum {
