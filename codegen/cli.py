@@ -13,6 +13,7 @@
     uiogen demo [--json] [--report DIR]
     uiogen bench [--json]
     uiogen campaign SPEC.toml [--runs N] [--only K] [--resume] [--json] [--scheduler ADDRESS] [--workers N] [--out DIR]
+                    [--project DIR]
     uiogen export NAME --format TARGET --out FILE|DIR [--project DIR]     (uiogen export --format: the targets)
 
 ``--project DIR``: the project folder whose ``generated_c/`` and ``build/`` the command reads and
@@ -530,7 +531,7 @@ def cmd_bench(args) -> int:
 
 def cmd_campaign(args) -> int:
     from .campaign import engine, memory, report, runner, spec as campaign_spec
-    spec = campaign_spec.load(args.spec)
+    spec = campaign_spec.load(args.spec, project=args.project)
     if args.runs is not None:
         spec = spec.with_runs(args.runs)
     if args.only is not None:
@@ -546,7 +547,7 @@ def cmd_campaign(args) -> int:
         else:
             print(report.format_row(row))
         return 0
-    out = Path(args.out) if args.out else observers.get(spec.observer).workspace.campaigns / Path(args.spec).stem
+    out = Path(args.out) if args.out else spec.config().workspace.campaigns / Path(args.spec).stem
     import signal
     previous = signal.signal(signal.SIGTERM, _terminate)       # SIGTERM: as Ctrl-C, with the --resume hint
     try:
@@ -730,7 +731,8 @@ def main(argv=None) -> int:
     p = sub.add_parser("bench", help="benchmarks (C step, Python call, design time)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_bench)
-    p = sub.add_parser("campaign", help="dispersed runs of an observer on its compiled truth plant, on Dask")
+    p = sub.add_parser("campaign", parents=[project],
+                       help="dispersed runs of an observer on its compiled truth plant or its logs, on Dask")
     p.add_argument("spec", help="a campaign file (TOML), e.g. docs/campaigns/lpv_linf_driver_torque.toml")
     p.add_argument("--runs", type=int, help="number of runs (default: the file's runs)")
     p.add_argument("--only", type=int, metavar="K", help="re-run run K alone (no cluster) and print its row")

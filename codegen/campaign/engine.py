@@ -77,6 +77,8 @@ def identity(spec, design_hash: str) -> dict:
     import dataclasses
     rows_from = {k: getattr(spec, k) for k in ("observer", "scenarios", "seed", "duration", "scenario_seed",
                                                "parameters", "driver", "sensors")}
+    if spec.logs:            # a log rewritten since is another run: its size and time of change
+        rows_from["logs"] = [[name, *_stat(spec.log_path(name))] for name in spec.logs]
     text = json.dumps(rows_from, sort_keys=True, default=lambda d: dataclasses.asdict(d))
     return {"format": JOURNAL_FORMAT, "observer": spec.observer, "design": design_hash,
             "spec_sha256": hashlib.sha256(text.encode()).hexdigest()}
@@ -231,10 +233,16 @@ def exclusive(out_dir: Path, source: str = "SPEC"):
             fcntl.flock(fh, fcntl.LOCK_UN)
 
 
+def _stat(path: Path) -> list:
+    """[bytes, mtime_ns] of a log (a ROS 2 bag: of each file in its folder)."""
+    files = sorted(f for f in path.rglob("*") if f.is_file()) if path.is_dir() else [path]
+    return [[f.name, f.stat().st_size, f.stat().st_mtime_ns] for f in files]
+
+
 def _failed_rows(spec, runs, status: str, error: str) -> list:
     """Rows of runs that produced no result (their worker died, or the run raised): the run, its
-    scenario, the status and what happened; counted, never scored."""
-    return [{"run": int(k), "scenario": spec.scenarios[int(k) % len(spec.scenarios)], "status": status,
+    scenario (or log), the status and what happened; counted, never scored."""
+    return [{"run": int(k), spec.run_source(int(k))[0]: spec.run_source(int(k))[1], "status": status,
              "error": error} for k in runs]
 
 
@@ -483,6 +491,8 @@ def read_rows(path) -> list:
                     continue
                 if k in ("run", "scenario_seed"):
                     row[k] = int(v)
+                elif k in ("scenario", "log", "status", "error"):      # names, whatever they look like
+                    row[k] = v
                 else:
                     try:
                         row[k] = float(v)

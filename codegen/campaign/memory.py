@@ -40,6 +40,9 @@ CASADI_COPIES = 7
 # the estimate of a run's peak is within this factor of the measured one (from above: it is an
 # upper bound at long durations, where the per-sample arrays dominate)
 FACTOR = 2.0
+# a run over a log streams it (a campaign over ``logs``): the peak of ``uiogen validate --data`` on a 1 GB
+# MDF4 file, 396 MB (docs/validation.md, 'Large logs'), rounded up; its trace is kept decimated
+LOG_RUN_BYTES = 512 * 2 ** 20
 
 
 # --- the limit -----------------------------------------------------------------------------------------
@@ -154,6 +157,7 @@ class Sizes:
     observer: int           # the observer's inputs and outputs, and the measured signals
     errors: int             # the signals whose errors are scored (traces: truth and estimate of each)
     columns: int            # the columns of a run's summary row
+    streamed: bool = False  # a run over a log: read chunk by chunk, ``samples`` the decimated trace's
 
 
 def run_bytes(s: Sizes) -> int:
@@ -170,6 +174,8 @@ def run_bytes(s: Sizes) -> int:
     parameters and states over the chunk).
     """
     from .plants import CHUNK
+    if s.streamed:               # a log's run: the stream's peak and its decimated trace (time, truth, estimate)
+        return LOG_RUN_BYTES + 8 * (1 + 2 * s.errors) * s.samples
     per_sample = s.inputs + s.signals + 1 + s.trajectory + s.observer + 1 + 4 * s.errors
     per_chunk = (CASADI_COPIES * s.inputs + s.plant) * min(s.samples, CHUNK)
     return 8 * (per_sample * s.samples + per_chunk)
@@ -198,12 +204,17 @@ def sizes(spec) -> Sizes:
     no run (a library scenario, 60 s or so, is built to count its samples)."""
     import json
     from ..design import lock as design_lock
-    from ..project import observer_file as observers
     from ..validation import excitation, scenarios as scn_lib
     from ..validation.common import truncate
     from .plants import EXCITATION, KINDS, plant_kind
     from .spec import _error_signals
-    config = observers.get(spec.observer)
+    config = spec.config()
+    if spec.logs:
+        from ..validation.streaming import KEEP_SAMPLES
+        from .spec import log_error_signals
+        errors = len(log_error_signals(config))
+        return Sizes(samples=KEEP_SAMPLES, sample_time=config.sample_time, inputs=0, signals=0, plant=0, trajectory=0,
+                     observer=0, errors=errors, columns=6 + len(spec.dispersed()) + 2 * errors + 3, streamed=True)
     kind = plant_kind(config, spec.scenarios)
     plant = KINDS[kind][0](config)
     art = json.loads(design_lock.path(config).read_text())
@@ -289,6 +300,10 @@ def check(spec, workers: int, limit: Limit | None = None) -> Estimate:
         raise config_error(spec.source, None, "runs", spec.runs,
                            f"{figures}: the coordinator keeps every run's row ({_gib(rows)}); at most about "
                            f"{fit} runs fit: split the campaign into several of fewer runs")
+    if s.streamed:               # a log's run has no length to shorten: it is streamed
+        raise config_error(spec.source, None, "logs", list(spec.logs),
+                           f"{figures}: a run over a log streams it, and even one worker's does not fit; run the "
+                           f"campaign where more memory is available (--scheduler ADDRESS)")
     # the total is affine in a run's samples beyond one chunk of the plant, fixed + slope N (below, the
     # chunk is shorter and the total under the line): solved for the limit, with one worker (the
     # coordinator alone when the workers are elsewhere), and with the workers asked for

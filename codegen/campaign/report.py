@@ -61,9 +61,11 @@ def summarize(spec, rows, wall_s: float, workers: int, scheduler: str) -> dict:
     ok = _ok(rows)
     gamma = ok[0]["gamma"] if ok else None
     ratios = [r["ratio"] for r in ok]
-    from ..project import observer_file as observers
-    cert = certified_gain_norm(observers.get(spec.observer))
+    cert = certified_gain_norm(spec.config())
     s = {"observer": spec.observer, "spec": spec.source, "scenarios": list(spec.scenarios), "seed": spec.seed,
+         **({"logs": list(spec.logs)} if spec.logs else {}),
+         # what each run that produced no result raised (a log refused by its checks, say), by run
+         "errors": {str(r["run"]): r["error"] for r in rows if r.get("status") == "error"},
          # every run that is not "ok" (flagged samples, a spun or diverged plant, a lost worker, an
          # error) is counted here by its status and left out of every distribution below
          "runs": len(rows), "runs_ok": len(ok), "runs_failed": {st: sum(r["status"] == st for r in rows)
@@ -91,7 +93,7 @@ def format_summary(s: dict) -> str:
     speed = f"{s['runs_per_s']:.1f} runs/s, " if s.get("runs_per_s") else ""
     resumed = f", {s['resumed_runs']} of them from the results kept before" if s.get("resumed_runs") else ""
     lines = [f"{s['observer']}: {s['runs']} runs ({s['runs_ok']} ok{'; not ok: ' + failed if failed else ''}) "
-             f"of {', '.join(s['scenarios'])} in {s['wall_s']:.1f} s ({speed}{s['scheduler']}{resumed})",
+             f"of {', '.join(s.get('logs') or s['scenarios'])} in {s['wall_s']:.1f} s ({speed}{s['scheduler']}{resumed})",
              f"{'RMS error':14s} {'mean':>10s} {'p50':>10s} {'p90':>10s} {'p99':>10s} {'max':>10s}"]
     for sig, d in s["rms"].items():
         if d:
@@ -105,6 +107,7 @@ def format_summary(s: dict) -> str:
     lines.append(f"SCHEDULING_CLAMPED: mean fraction {sc['fraction_of_samples'].get('mean', 0):.4g} of samples, "
                  f"{sc['runs_with_any']} runs with any")
     lines.append(f"worst runs by RMS {s['rank_by']}: {s['worst_runs']} (uiogen campaign SPEC --only K)")
+    lines += [f"run {k}: {e}" for k, e in list(s.get("errors", {}).items())[:5]]
     sens = s["sensitivity_spearman"].get(s["rank_by"], {})
     if sens:
         top = sorted(sens.items(), key=lambda kv: -abs(kv[1]))[:4]

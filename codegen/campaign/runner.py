@@ -33,18 +33,17 @@ def _cached(key, make):
 
 
 def _config(spec):
-    from ..project import observer_file as observers
-    return _cached(("config", spec.observer), lambda: observers.get(spec.observer))
+    return _cached(("config", spec.observer, spec.project), spec.config)
 
 
 def _observer(spec):
     from ..extension.build import load
-    return _cached(("obs", spec.observer), lambda: load(spec.observer))
+    return _cached(("obs", spec.observer, spec.project), lambda: load(_config(spec)))
 
 
 def _artifact(spec) -> dict:
     from ..design import lock as design_lock
-    return _cached(("art", spec.observer), lambda: json.loads(design_lock.path(_config(spec)).read_text()))
+    return _cached(("art", spec.observer, spec.project), lambda: json.loads(design_lock.path(_config(spec)).read_text()))
 
 
 def _plant(spec, n: int):
@@ -107,6 +106,9 @@ def draw(spec, run: int) -> dict:
     one independent stream per kind of draw, so adding a dispersion of one kind leaves the others'."""
     ss = np.random.SeedSequence([spec.seed, run])
     s_scn, s_par, s_drv, s_sen, s_noise = (np.random.default_rng(s) for s in ss.spawn(5))
+    if spec.logs:          # a recorded run: its sensors alone are dispersed, from no noise of their own
+        values = {f"sensor.{sig}.{f}": d.draw(s_sen, 0.0) for sig, fields in spec.sensors for f, d in fields}
+        return {"log": spec.run_source(run)[1], "values": values, "noise_rng": s_noise}
     name = spec.scenarios[run % len(spec.scenarios)]
     seed = int(s_scn.integers(0, 2 ** 31 - 1)) if spec.scenario_seed == "per_run" else None
     config = _config(spec)
@@ -144,8 +146,10 @@ def _measure(spec, truth: dict, values: dict, rng, sample_time: float) -> dict:
 
 
 def _error_signals(spec) -> tuple:
-    from .spec import _error_signals as errs
+    from .spec import _error_signals as errs, log_error_signals
     from .plants import plant_kind
+    if spec.logs:
+        return _cached(("errs", spec.observer, "logs"), lambda: log_error_signals(_config(spec)))
     return _cached(("errs", spec.observer, spec.scenarios),
                    lambda: errs(_config(spec), plant_kind(_config(spec), spec.scenarios)))
 
@@ -154,6 +158,8 @@ def run_one(spec, run: int, traces: bool = False):
     """The summary row of run ``run`` (a dict of numbers and strings); with ``traces``, also
     (row, signals) with the truth and the estimates of the error signals over time."""
     from ..validation import simulate
+    if spec.logs:
+        return _run_log(spec, run, traces)
     config, obs = _config(spec), _observer(spec)
     d = draw(spec, run)
     scn, plant, values = d["scn"], d["plant"], d["values"]
@@ -195,6 +201,95 @@ def run_one(spec, run: int, traces: bool = False):
         return row, {"t": truth["t"], **{f"{s}_truth": truth[s] for s in signals},
                      **{f"{s}_estimate": est[s] for s in signals}}
     return row
+
+
+def _run_log(spec, run: int, traces: bool):
+    """Run ``run`` of a campaign over logs: the log read chunk by chunk through the observer file's ``[data]``
+    map (:class:`codegen.validation.logs.MappedLog`, every check of ``validate --data``), the sensors' drawn
+    bias, delay and noise added to the recorded inputs, the compiled step run with its state carried over,
+    the errors scored against the map's references after the settle time. The traces are kept decimated
+    (:class:`codegen.validation.streaming.Decimated`): a log of any length runs in bounded memory."""
+    from ..validation import streaming
+    from ..validation.logs import MappedLog
+    config, obs = _config(spec), _observer(spec)
+    d = draw(spec, run)
+    values = d["values"]
+    row = {"run": int(run), "log": d["log"], **values}
+    signals = _error_signals(spec)
+    units = _cached(("units", spec.observer), lambda: dict(config.load_model().units))
+    log = MappedLog(config, spec.log_path(d["log"]), obs.input_names, obs.output_names, config.sample_time)
+    sensors = _LogSensors(spec, obs.input_names, values, d["noise_rng"], config.sample_time)
+    bits = obs.status_bits
+    flagged_bits = bits["NONFINITE_INPUT"] | bits["NUMERICAL_FAILURE"]
+    sq = {s: [] for s in signals}
+    peak = {s: 0.0 for s in signals}
+    kept = {s: 0 for s in signals}
+    finite = True
+    n = clamped = flagged = 0
+    state, t0 = obs.initial_state(), None
+    trace = streaming.Decimated() if traces else None
+    for t, ins, refs, _ in log.chunks():
+        t0 = t[0] if t0 is None else t0
+        t = t - t0
+        if spec.duration is not None and t[-1] > spec.duration:
+            cut = int(np.searchsorted(t, spec.duration, side="right"))
+            t, ins, refs = t[:cut], {k: v[:cut] for k, v in ins.items()}, {k: v[:cut] for k, v in refs.items()}
+        inputs = np.column_stack([sensors.measure(name, ins[name]) for name in obs.input_names])
+        out, status, state = obs.run(inputs, state)
+        n += status.size
+        clamped += int(np.count_nonzero(status & bits["SCHEDULING_CLAMPED"]))
+        flagged += int(np.count_nonzero(status & flagged_bits))
+        keep = t >= SETTLE_TIME
+        for s in signals:
+            scale = 180.0 / math.pi if units.get(s, "").startswith("rad") else 1.0
+            e = (out[:, obs.output_names.index(s)] - refs[s])[keep] * scale
+            finite = finite and bool(np.all(np.isfinite(e)))
+            if finite and e.size:
+                sq[s].append(_sum(e * e))
+                peak[s] = max(peak[s], float(np.max(np.abs(e))))
+                kept[s] += e.size
+        if trace is not None:
+            trace.add({"t": t, **{f"{s}_truth": refs[s] for s in signals},
+                       **{f"{s}_estimate": out[:, obs.output_names.index(s)] for s in signals}})
+        if spec.duration is not None and t.size and t[-1] >= spec.duration - 0.5 * config.sample_time:
+            break
+    log.finish()                 # the time and physics checks of what was read (a DatasetError: no row)
+    row["clamped_fraction"] = clamped / n if n else math.nan
+    row["flagged_fraction"] = flagged / n if n else math.nan
+    ok = finite and all(kept[s] for s in signals)
+    row["status"] = "observer_nonfinite" if not ok else "flagged" if flagged else "ok"
+    for s in signals:
+        row[f"rms.{s}"] = math.sqrt(math.fsum(sq[s]) / kept[s]) if ok else math.nan
+        row[f"max.{s}"] = peak[s] if ok else math.nan
+    row["ratio"] = math.nan        # the certified gains' ratio needs the unknown input's truth: a log has none
+    row["gamma"] = float(_artifact(spec).get("gamma", math.nan))
+    if traces:
+        return row, trace.signals()
+    return row
+
+
+class _LogSensors:
+    """The drawn bias, delay and noise of ``[sensors.X]`` added to a recorded input, chunk by chunk: the delay
+    holds the first recorded value, then the samples carried over from the chunk before."""
+
+    def __init__(self, spec, input_names, values: dict, rng, sample_time: float):
+        self.rng, self.fields = rng, {}
+        for sig, fields in spec.sensors:
+            name = sig if sig in input_names else f"y_{sig}"
+            self.fields[name] = {f: values[f"sensor.{sig}.{f}"] for f, _ in fields}
+        self.delay = {k: int(round(v.get("delay", 0.0) / sample_time)) for k, v in self.fields.items()}
+        self.held: dict = {}
+
+    def measure(self, name: str, y: np.ndarray) -> np.ndarray:
+        f = self.fields.get(name)
+        if f is None:
+            return y
+        k = self.delay[name]
+        if k > 0 and y.size:
+            before = self.held.get(name, np.full(k, y[0]))
+            both = np.concatenate([before, y])
+            y, self.held[name] = both[:y.size], both[-k:]
+        return y + f.get("bias", 0.0) + f.get("noise", 0.0) * self.rng.standard_normal(y.shape)
 
 
 def _sum(x) -> float:
@@ -245,6 +340,8 @@ def prepare(spec) -> str:
     from .memory import excitation_samples
     from .plants import EXCITATION
     design = design_hash(spec)
+    if spec.logs:                   # read where they run: each worker streams its own
+        return design
     for name in spec.scenarios:
         if name == EXCITATION:       # its length alone: the run itself would stay in the coordinator's cache
             _plant(spec, excitation_samples(spec.duration or excitation.DURATION, _config(spec).sample_time))

@@ -24,6 +24,12 @@
     bias = { dist = "normal", mean = 0.0, std = 0.0005 }
     delay = { dist = "uniform", low = 0.0, high = 0.02 }
 
+Or, in place of ``scenarios``, recorded runs of the car: ``logs = ["runs/a.mf4", "runs/b.blf"]`` (relative to
+this file; run K reads ``logs[K % len(logs)]`` through the observer file's ``[data]`` map, every format
+``validate --data`` reads). A log is the car itself: ``[parameters]``, ``[driver]`` and ``scenario_seed`` have
+nothing to disperse and are refused; ``[sensors]`` adds its noise, bias and delay to the recorded signal (no
+noise unless stated: the log has its own); the errors are scored against the map's ``[data.truth]``.
+
 A distribution is a number (a constant) or a table ``dist`` = ``"uniform"`` (``low``, ``high``)
 or ``"normal"`` (``mean``, ``std``), with ``relative = true`` for a factor on the nominal value.
 Every value a distribution can draw must be admissible: a plant parameter within the range its
@@ -48,8 +54,11 @@ MAX_RUNS = 10_000_000
 TOP = {
     "observer": Rule(str, required=True, doc="a built-in observer name, or an observer file (.toml, relative to "
                                              "this file)"),
-    "scenarios": Rule(list, items=Rule(str), required=True, doc="scenario names, cycled over the runs: the library's "
-                                                                "(families with a plant of their own) or excitation"),
+    "scenarios": Rule(list, items=Rule(str), doc="scenario names, cycled over the runs: the library's (families "
+                                                 "with a plant of their own) or excitation"),
+    "logs": Rule(list, items=Rule(str), doc="recorded runs (files or ROS 2 bag folders, relative to this file), "
+                                            "cycled over the runs in place of scenarios; read through the observer "
+                                            "file's [data] map"),
     "runs": Rule(int, ge=1, le=MAX_RUNS, required=True, doc="number of dispersed runs"),
     "seed": Rule(int, ge=0, doc="campaign seed: run K draws from SeedSequence([seed, K])"),
     "duration": Rule(float, gt=SETTLE_TIME, doc=f"truncate every scenario to this many seconds (errors are "
@@ -112,7 +121,24 @@ class CampaignSpec:
     parameters: tuple = ()           # ((name, Dist), ...) in file order
     driver: tuple = ()
     sensors: tuple = ()              # ((signal, ((field, Dist), ...)), ...)
+    logs: tuple = ()                 # recorded runs, as written in the file (resolved by log_path)
+    project: str | None = None       # the observer's project folder (``uiogen campaign --project``)
     raw: dict = field(default_factory=dict, compare=False, hash=False, repr=False)
+
+    def config(self):
+        """The observer's configuration, in the campaign's project."""
+        from ..project import observer_file as observers
+        return observers.get(self.observer, project=self.project)
+
+    def log_path(self, name: str) -> Path:
+        """A log of ``logs`` as a path: relative to the campaign file."""
+        return Path(self.source).resolve().parent / name
+
+    def run_source(self, run: int) -> tuple:
+        """("log", name) or ("scenario", name): what run ``run`` reads."""
+        if self.logs:
+            return "log", self.logs[run % len(self.logs)]
+        return "scenario", self.scenarios[run % len(self.scenarios)]
 
     def with_runs(self, runs: int) -> "CampaignSpec":
         from dataclasses import replace
@@ -180,8 +206,9 @@ def check_support(d: Dist, nominal: float, conditions, *, source: str, section: 
     raise config_error(source, sec, side, d.a if low_side else d.b, f"must keep every draw of {rule}{relative}")
 
 
-def load(path) -> CampaignSpec:
-    """Parse a campaign file; every key checked against the observer, its plant and its sensors."""
+def load(path, project: str | None = None) -> CampaignSpec:
+    """Parse a campaign file; every key checked against the observer, its plant and its sensors.
+    ``project``: the folder of the observer's design and extension (the default rule otherwise)."""
     path = Path(path)
     source = str(path)
     try:
@@ -195,10 +222,10 @@ def load(path) -> CampaignSpec:
                                  source=source) from None
     except IsADirectoryError:
         raise ConfigurationError(f"{source}: a folder, not a campaign file", source=source) from None
-    return parse(data, source)
+    return parse(data, source, project)
 
 
-def parse(data: dict, source: str) -> CampaignSpec:
+def parse(data: dict, source: str, project: str | None = None) -> CampaignSpec:
     from ..project import observer_file as observers
     from ..errors import UnknownObserverError
     from ..validation import scenarios as scn_lib
@@ -211,11 +238,17 @@ def parse(data: dict, source: str) -> CampaignSpec:
     if observers.is_path(name):             # an observer file, relative to the campaign file
         name = str((Path(source).resolve().parent / name).resolve())
     try:
-        config = observers.get(name)
+        config = observers.get(name, project=project)
     except UnknownObserverError:
         raise config_error(source, None, "observer", name, "must be a built-in observer ("
                            + ", ".join(observers.names()) + ") or an observer file (.toml) relative to "
                            + str(Path(source).resolve().parent), suggest(name, observers.names())) from None
+    if ("scenarios" in top) == ("logs" in top):
+        raise ConfigurationError(f"{source}: {'both scenarios and logs' if 'logs' in top else 'scenarios missing'}: "
+                                 f"a campaign runs either simulated scenarios (scenarios = [...]) or recorded runs "
+                                 f"(logs = [...])", source=source, key="scenarios", allowed="scenarios or logs, one")
+    if "logs" in top:
+        return _parse_logs(top, data, source, name, config, project)
     if not top["scenarios"]:
         raise config_error(source, None, "scenarios", [], "must name at least one scenario")
     known = (EXCITATION, *scn_lib.names())
@@ -284,7 +317,73 @@ def parse(data: dict, source: str) -> CampaignSpec:
                         scenario_seed=top.get("scenario_seed", "fixed"), worst=top.get("worst", 3), rank_by=rank,
                         chunk=top.get("chunk"), run_timeout=top.get("run_timeout", 60.0),
                         parameters=tuple(params), driver=tuple(driver),
-                        sensors=tuple(sensors), raw=data)
+                        sensors=tuple(sensors), project=project, raw=data)
+
+
+def _parse_logs(top: dict, data: dict, source: str, name: str, config, project) -> CampaignSpec:
+    """A campaign over recorded runs: every log readable through the observer's ``[data]`` map,
+    dispersions of the sensors alone, the errors scored against the map's references."""
+    from ..errors import DatasetError
+    from ..validation import logfiles
+    if not top["logs"]:
+        raise config_error(source, None, "logs", [], "must name at least one log")
+    for key in ("parameters", "driver", "scenario_seed"):
+        if key in top:
+            raise config_error(source, None, key, top[key], "not set in a campaign over logs: a log is the recorded "
+                               "car, whose parameters, driver and scenario are what they were; allowed there: "
+                               "[sensors.SIGNAL] (noise, bias, delay added to the recorded signal)")
+    if config.column_map is None:
+        raise config_error(source, None, "logs", top["logs"], f"logs the observer file of {name!r} maps: it has no "
+                           f"[data] table naming the log's columns for its inputs (docs/validation.md, 'Your own logs')")
+    base = Path(source).resolve().parent
+    for i, log in enumerate(top["logs"]):
+        try:
+            logfiles.kind(base / log)
+        except DatasetError as exc:
+            raise config_error(source, None, f"logs[{i}]", log, f"a readable log relative to {base} ({exc})") from None
+    if len(set(top["logs"])) != len(top["logs"]):
+        twice = next(x for x in top["logs"] if top["logs"].count(x) > 1)
+        raise config_error(source, None, "logs", top["logs"], f"each log once ({twice!r} is named twice): runs cycle "
+                           f"over the logs, and runs = N x len(logs) reads each N times")
+    measured = _measured_signals(config)
+    sensors = []
+    for sig, table in top.get("sensors", {}).items():
+        if sig not in measured:
+            raise config_error(source, "sensors", sig, table, "must be a signal the observer reads: "
+                               + ", ".join(measured), suggest(sig, measured))
+        sec = f"sensors.{sig}"
+        if not isinstance(table, dict):
+            raise config_error(source, "sensors", sig, table, "must be a table with noise, bias, delay")
+        check_keys(table, SENSOR_KEYS, source=source, section=sec)
+        fields = []
+        for f in (f for f in SENSOR_KEYS if f in table):
+            d = parse_dist(table[f], source=source, section=sec, key=f)
+            if f in ("noise", "delay"):
+                check_support(d, 0.0, [(">=", 0.0, "")], source=source, section=sec, key=f,
+                              what=f"the {'standard deviation' if f == 'noise' else 'delay'} of sensor {sig}")
+            fields.append((f, d))
+        sensors.append((sig, tuple(fields)))
+    signals = log_error_signals(config)
+    if not signals:
+        raise config_error(source, None, "logs", top["logs"], f"logs with a reference to score: the [data.truth] table "
+                           f"of {config.column_map.source} maps no output of the observer")
+    rank = top.get("rank_by", signals[0])
+    if rank not in signals:
+        raise config_error(source, None, "rank_by", rank, "must be an estimated signal with a reference in [data.truth]: "
+                           + ", ".join(signals), suggest(rank, signals))
+    return CampaignSpec(source=source, observer=name, scenarios=(), runs=top["runs"], seed=top.get("seed", 0),
+                        duration=top.get("duration"), worst=top.get("worst", 3), rank_by=rank, chunk=top.get("chunk"),
+                        run_timeout=top.get("run_timeout", 60.0), sensors=tuple(sensors), logs=tuple(top["logs"]),
+                        project=project, raw=data)
+
+
+def log_error_signals(config) -> tuple:
+    """The observer's outputs the ``[data.truth]`` map gives a reference for, in the observer's order."""
+    import json
+    from ..design import lock as design_lock
+    art = json.loads(design_lock.path(config).read_text())
+    outputs = art["signals"].get("output", art["signals"]["state"])
+    return tuple(s for s in outputs if s in config.column_map.truth)
 
 
 def _run_duration(config, names, duration) -> float | None:
