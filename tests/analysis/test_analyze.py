@@ -199,14 +199,24 @@ REPRESENTATIVES = ["algebraic_uio_example1", "interconnected_uio", "lpv_linf_dri
                    "stanford_sideslip_nonlinear_tyre", "switched_pi_bank_angle", "ts_fuzzy_uio"]
 
 
+#: families a built-in's own family may follow, each with a trial design that certifies on some CPUs only:
+#: the roll model's algebraic UIO at the analysis's decay 1 (LMI (39) borderline: Clarabel stops at a margin
+#: of 7e-7 where 1e-6 is asked on one machine, reports it infeasible on another; docs/analyze.md)
+BORDERLINE = {name: ("algebraic_uio",) for name in ("switched_pi_bank_angle", "switched_pi_bank_angle_fine",
+                                                    "switched_pi_bank_angle_slip")}
+
+
 def _ranks_own_family_first(name):
     a = analysis.analyze(name)
     own = observers.get(name).family
-    first, trial = a.ranking.entries[0]
+    at = a.ranking.position(own)
+    ahead = a.ranking.entries[:at]
+    _, trial = a.ranking.entries[at]
     text = a.text()
-    assert first.family == own, text
+    # first, or behind a borderline family whose trial certified here (and then ranks above by its guarantee)
+    assert all(app.family in BORDERLINE.get(name, ()) and t.status == "certified" for app, t in ahead), text
     assert trial.status == "certified" and trial.settings == "the observer file's settings", text
-    assert "it is the observer file's own family" in text
+    assert ("it is the observer file's own family" in text) == (at == 0), text
     return a
 
 
@@ -242,8 +252,15 @@ def test_switched_pi_bank_angle_explains_the_other_families_with_what_it_measure
     entries = {app.family: (app, trial) for app, trial in a.ranking.entries}
     assert entries["linf_uio"][0].applies and entries["linf_uio"][1].status == "failed"
     assert "UILoopError" in entries["linf_uio"][1].reason and "time_constant" in entries["linf_uio"][1].reason
-    assert entries["algebraic_uio"][1].status == "failed"
-    assert a.ranking.position("switched_pi") == 0
+    # LMI (39) at the analysis's decay 1 is borderline (BORDERLINE): failed, with the LMI named, or certified
+    # at that decay, and then ranked above by its guarantee
+    algebraic = entries["algebraic_uio"][1]
+    assert algebraic.status in ("failed", "certified"), algebraic
+    if algebraic.status == "failed":
+        assert "(39)" in algebraic.reason, algebraic.reason
+    else:
+        assert algebraic.figures["alpha"][0] == 1.0
+    assert a.ranking.position("switched_pi") == (0 if algebraic.status == "failed" else 1)
 
 
 # ---- the three refusals of issue 28, end to end ----------------------------------------------------------

@@ -220,10 +220,14 @@ def test_a_solver_failure_names_the_setting_that_solves_and_it_designs(config):
     with pytest.raises(InfeasibleLMIError) as err:
         pipeline.solve(high)
     text = str(err.value)
-    found = re.search(r"measured: with \[design\] alpha = ([0-9.]+) the design is solved and certified", text)
+    # which of the tries solves first (alpha halved, alone or with one Lyapunov matrix) depends on the
+    # solver's last digits near the feasibility boundary, which differ between CPUs: either is a remedy
+    found = re.search(r"measured: with \[design\] (lyapunov = \"quadratic\" with )?alpha = ([0-9.]+) the design is "
+                      r"solved and certified", text)
     assert found, text
-    alpha = float(found.group(1))
-    assert err.value.remedy == {"design.alpha": alpha} and alpha < 60.0
+    alpha = float(found.group(2))
+    change = {"alpha": alpha, **({"lyapunov": "quadratic"} if found.group(1) else {})}
+    assert err.value.remedy == {f"design.{k}": v for k, v in change.items()} and alpha < 60.0
     assert "loosen the tolerance" not in text
-    b, _ = pipeline.solve(dataclasses.replace(config, design={**config.design, "alpha": alpha}))
+    b, _ = pipeline.solve(dataclasses.replace(config, design={**config.design, **change}))
     assert b.design.settings.alpha == alpha and b.recheck["feasible"]
