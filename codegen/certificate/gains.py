@@ -5,8 +5,9 @@ The generic form is the design lock's, ``{"lmi_solutions": [{"problem", "variabl
 :class:`~codegen.design.solver.LockReplay`, matched by problem name), every block is re-checked
 with numpy and the discrete step certified; the result carries the build's
 :class:`~codegen.certificate.certificate.Certificate`. A family with a printed form of its gains
-(the :class:`~codegen.families.capabilities.GainForms` capability) checks that form itself and
-returns the same record. :mod:`codegen.certificate.text` renders it.
+(the :class:`GainForms` capability, defined here where it is asked for and listed with the others in
+:mod:`codegen.families.capabilities`) checks that form itself and returns the same record.
+:mod:`codegen.certificate.text` renders it.
 """
 from __future__ import annotations
 
@@ -16,10 +17,21 @@ from dataclasses import dataclass, field
 
 import math
 import re
+from typing import Protocol, runtime_checkable
 
 from ..errors import (CertificateError, ConfigurationError, DesignLockError, DiscretizationError,
                       InfeasibleLMIError, brief)
 from .certificate import Certificate
+
+@runtime_checkable
+class GainForms(Protocol):
+    """Gains in the paper's printed form, checked by ``uiogen check-gains`` (the design-lock form
+    ``lmi_solutions`` works for every family without this)."""
+
+    def check_gain_form(self, config, gains: dict, source: str):
+        """A :class:`GainsCheck` of ``gains`` (read from ``source``), which are not in the design-lock form;
+        a :class:`~codegen.errors.ConfigurationError` naming both forms when they are in neither."""
+
 
 # the keys of one record of lmi_solutions (codegen.design.lmi.SolveRecord)
 RECORD_KEYS = ("problem", "variables", "objective", "iterations", "data")
@@ -73,7 +85,6 @@ def check(family, config, gains: dict, source: str) -> GainsCheck:
     """
     import numpy as np
 
-    from ..families.capabilities import GainForms
     if isinstance(family, GainForms) and "lmi_solutions" not in gains:
         if not is_lock_file(gains):
             _printed_form_entries(gains, source)

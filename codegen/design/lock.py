@@ -29,6 +29,7 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -36,7 +37,23 @@ from . import sources
 from ..errors import DesignLockError
 from .lmi import SolveRecord
 from .solver import LockReplay
-from ..project.observer_file import ObserverConfig
+
+
+class ObserverConfig(Protocol):
+    """What the design lock reads of an observer's configuration: a
+    :class:`codegen.project.observer_file.ObserverConfig`, handed down by the layer that read the observer
+    file (its family resolved there: ``family_type``)."""
+
+    name: str
+    source: str
+    builtin: bool
+    doc: str
+    family_type: type
+    model_path: Path
+    parameter_path: Path
+    workspace: object
+
+    def to_json(self) -> dict: ...
 
 FORMAT = 2
 # The entries of the lock record that seal the rest (not covered by themselves).
@@ -58,8 +75,7 @@ def design_sources(config: ObserverConfig) -> list:
     outside the project by its own file). The observer file enters as parsed
     (:func:`observer_file_digest`)."""
     import inspect
-    from .. import families
-    family = type(families.get(config.family))
+    family = config.family_type          # resolved by the layer that read the observer file
     extra = [config.model_path]
     if family.__module__.split(".")[0] not in sources.PACKAGES:      # a family registered by a user's code
         extra.append(Path(inspect.getsourcefile(family)))

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from typing import Protocol, runtime_checkable
 
+from ..certificate.gains import GainForms  # noqa: F401 -- defined where check-gains asks for it, listed here
 from ..errors import UnsupportedError
 
 
@@ -114,17 +115,6 @@ class Applicability(Protocol):
     def applicability(self, subject, structure):
         """A :class:`codegen.analysis.ranking.Applicability` for ``subject`` (a model with its
         sensors and unknown inputs) given its ``structure``; None: the family does not say."""
-
-
-@runtime_checkable
-class GainForms(Protocol):
-    """Gains in the paper's printed form, checked by ``uiogen check-gains`` (the design-lock form
-    ``lmi_solutions`` works for every family without this)."""
-
-    def check_gain_form(self, config, gains: dict, source: str):
-        """A :class:`~codegen.certificate.gains.GainsCheck` of ``gains`` (read from ``source``),
-        which are not in the design-lock form; a :class:`~codegen.errors.ConfigurationError` naming
-        both forms when they are in neither."""
 
 
 @runtime_checkable

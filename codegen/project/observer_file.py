@@ -161,6 +161,13 @@ class ObserverConfig:
         return apply(model, params, parameter_substitution(model, params), self.substitute, self.source)
 
     @property
+    def family_type(self) -> type:
+        """The class of the observer's family, from the registry (this layer reads the observer file and
+        knows the families; the design stages below are handed the class, never look it up)."""
+        from .. import families
+        return type(families.get(self.family))
+
+    @property
     def parameter_path(self) -> Path:
         return _parameter_file(self.parameters, self.folder)
 

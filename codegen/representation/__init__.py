@@ -1,3 +1,4 @@
 """Stage 2, the representation the families share: the LPV polytope (:mod:`.polytope`), sound
-interval bounds of expressions over a box (:mod:`.bounds`) and the HOSMD differentiators
-(:mod:`.differentiators`)."""
+interval bounds of expressions over a box (:mod:`.bounds`), the HOSMD differentiators
+(:mod:`.differentiators`; their stand-alone C: :mod:`codegen.emit.hosmd`) and the machine-independent
+numbers of everything emitted (:mod:`.canonical`)."""

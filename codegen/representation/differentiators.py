@@ -73,17 +73,14 @@ from __future__ import annotations
 
 import functools
 import math
-import subprocess
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 from scipy.linalg import expm
 
-from ..design import canonical
-from ..emit.toolchain import casadi_sources, compile_and_link, render_template
-from ..errors import ModelDefinitionError, SampleError, ToolchainError
+from . import canonical
+from ..errors import ModelDefinitionError, SampleError
 
 # Levant (2003), Int. J. Control 76(9/10): lambda_0..lambda_5 of the recursive form, "suitable for k <= 5".
 LEVANT_RECURSIVE_GAINS = (1.1, 1.5, 2.0, 3.0, 5.0, 8.0)
@@ -219,7 +216,7 @@ def _constants(spec: HosmdSpec) -> _Constants:
     # Everything in time-scaled coordinates zeta_i = tau^i z_i, where Phi and O are pure numbers.
     Phi_s = np.array([[1.0 / math.factorial(j - i) if j >= i else 0.0 for j in range(n)] for i in range(n)])
     O_s = np.array([[float(m) ** j / math.factorial(j) for j in range(n)] for m in range(n)])  # rows c^T Phi^m
-    # emitted constants: exact arithmetic (codegen.design.canonical), the same on every machine
+    # emitted constants: exact arithmetic (codegen.representation.canonical), the same on every machine
     g_s = canonical.solve(O_s, np.eye(n)[:, -1])
     N_s = Phi_s - np.eye(n)
     cols, v = [], g_s
@@ -398,33 +395,3 @@ def hosmd_function(spec: HosmdSpec, name: str = "hosmd_step") -> ca.Function:
     z = ca.SX.sym("z", spec.n_state)
     f = ca.SX.sym("f")
     return ca.Function(name, [z, f], [hosmd_step_sx(spec, z, f)], ["z", "f"], ["z_next"])
-
-
-# ---- stand-alone C (tests and `uiogen bench`) --------------------------------------------------------
-
-def c_sources(spec: HosmdSpec) -> dict:
-    """CasADi C of the step (function ``hosmd_step``) plus the driver
-    (``templates/hosmd_driver.c.j2``), as {file name: text}."""
-    code, header = casadi_sources(hosmd_function(spec, "hosmd_step"))
-    return {"hosmd_kernel.c": code, "hosmd_kernel.h": header,
-            "hosmd_driver.c": render_template("hosmd_driver.c.j2", n_state=spec.n_state)}
-
-
-def build_c_driver(spec: HosmdSpec, out_dir: Path, cc: str = "gcc", extra_flags=()) -> Path:
-    """Compile the step and its driver with the project's strict flags; returns the executable."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    for fname, text in c_sources(spec).items():
-        (out_dir / fname).write_text(text)
-    return compile_and_link([out_dir / "hosmd_kernel.c", out_dir / "hosmd_driver.c"], out_dir / "hosmd_driver",
-                            include=[out_dir], extra_flags=extra_flags, cc=cc)
-
-
-def run_c_driver(exe: Path, spec: HosmdSpec, samples, z0) -> np.ndarray:
-    """Stream ``samples`` through a compiled driver; row j is the state before the update with f_j."""
-    data = (np.asarray(z0, dtype=np.float64).tobytes()
-            + np.ascontiguousarray(samples, dtype=np.float64).tobytes())
-    proc = subprocess.run([str(exe)], input=data, capture_output=True)
-    if proc.returncode != 0:
-        raise ToolchainError(f"{exe} exited with {proc.returncode}: {proc.stderr.decode(errors='replace')}")
-    return np.frombuffer(proc.stdout, dtype=np.float64).reshape(-1, spec.n_state)

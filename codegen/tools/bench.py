@@ -36,6 +36,7 @@ from ..errors import InaccurateSolveError
 
 from ..certificate import text
 from ..design import lock as design_lock
+from ..emit import hosmd
 from ..representation import differentiators
 from .. import families, pipeline
 from ..families.capabilities import BenchFigures, BenchStudy
@@ -272,7 +273,7 @@ def bench_hosmd_cost(n: int = 200000, repeats: int = 15) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(1, differentiators.MAX_ORDER + 1):
             spec = differentiators.HosmdSpec(k, 1.0, 1e-3)
-            exe = differentiators.build_c_driver(spec, Path(tmp) / f"k{k}")
+            exe = hosmd.build_c_driver(spec, Path(tmp) / f"k{k}")
             proc = subprocess.run([str(exe), str(n), str(repeats)], capture_output=True, text=True, check=True)
             ns = np.array([float(v) for v in proc.stdout.split()])
             instr = _callgrind_hosmd(exe)

@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from codegen.design import canonical, lock as design_lock, lmi, sources
+from codegen.design import lock as design_lock, lmi, sources
+from codegen.representation import canonical
 from codegen import cli, pipeline
 from codegen.emit import generate as emit
 from codegen.project import observer_file as observers

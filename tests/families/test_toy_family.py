@@ -22,7 +22,7 @@ from codegen.emit import generate as emit
 from codegen.project import observer_file as observers
 from codegen.certificate.artifact import artifact_head, significant, solver_certificate
 from codegen.certificate.certificate import Certificate, Recheck, Step
-from codegen.design.canonical import decimal_round, matmul, solve
+from codegen.representation.canonical import decimal_round, matmul, solve
 from codegen.errors import CertificateError, UnsupportedError
 from codegen.families import Family, ObserverBuild
 from codegen.model import instantiate, load_parameters

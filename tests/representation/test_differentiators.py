@@ -8,6 +8,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from codegen.emit import hosmd as H
 from codegen.representation import differentiators as D
 from codegen.errors import ModelDefinitionError, SampleError, UiogenError
 
@@ -128,7 +129,7 @@ def test_step_is_finite_and_continuous_at_zero_error(k):
 def test_generated_c_is_safe_at_zero_error(k):
     """Read the CasADi C: pow only with a literal exponent in (0, 1), sqrt only of |.| or sqrt, and
     the one division is by fmax(., positive literal) -- nothing can be 0^-p, x/0 or sqrt(<0)."""
-    code = D.c_sources(D.HosmdSpec(k, 1.0, 0.01))["hosmd_kernel.c"]
+    code = H.c_sources(D.HosmdSpec(k, 1.0, 0.01))["hosmd_kernel.c"]
     body = code[code.index("static int casadi_f0"):].split("\n")
     last = {}
     literal = re.compile(r"^-?[0-9.]+(e[+-]?[0-9]+)?$")
@@ -266,10 +267,10 @@ def cc(request):
 @pytest.mark.parametrize("k", ORDERS)
 def test_compiled_c_agrees_with_numpy_and_casadi(tmp_path, cc, k):
     s = D.HosmdSpec(k, 4.0 ** (k + 1), 0.005)
-    exe = D.build_c_driver(s, tmp_path, cc=cc)
+    exe = H.build_c_driver(s, tmp_path, cc=cc)
     f = _signal(2000, s.sample_time, seed=k)
     z0 = s.initial_state(f[0])
-    zc = D.run_c_driver(exe, s, f, z0)
+    zc = H.run_c_driver(exe, s, f, z0)
     assert zc.shape == (f.size, k + 1) and np.all(np.isfinite(zc))
     # every step on its own: C's z_{j+1} against numpy's step from C's z_j (relative 1e-12)
     ref = np.array([D.hosmd_step_numpy(s, zc[j], f[j]) for j in range(f.size - 1)])
@@ -284,7 +285,7 @@ def test_compiled_c_agrees_with_numpy_and_casadi(tmp_path, cc, k):
     # exp(x) - 1 carries a relative error ~2.2e-16/|x| that the reference's expm1 does not
     rng = np.random.default_rng(7 + k)
     wild = rng.choice([-1.0, 1.0], 3000) * 10.0 ** rng.uniform(-12, 6, 3000)
-    zc = D.run_c_driver(exe, s, wild, np.zeros(k + 1))
+    zc = H.run_c_driver(exe, s, wild, np.zeros(k + 1))
     ref = np.array([D.hosmd_step_numpy(s, zc[j], wild[j]) for j in range(wild.size - 1)])
     rel = np.max(np.abs(zc[1:] - ref), axis=1) / np.maximum(np.max(np.abs(ref), axis=1), 1e-300)
     K = D._constants(s)
@@ -297,7 +298,7 @@ def test_compiled_c_agrees_with_numpy_and_casadi(tmp_path, cc, k):
 
 def test_c_step_is_heap_free_and_strict_clean(tmp_path):
     s = D.HosmdSpec(3, 1.0, 0.01)
-    D.build_c_driver(s, tmp_path)
+    H.build_c_driver(s, tmp_path)
     syms = subprocess.run(["nm", "-u", str(tmp_path / "hosmd_kernel.o")], capture_output=True, text=True).stdout
     assert not {"malloc", "calloc", "realloc", "free"} & set(syms.split())
 

@@ -60,8 +60,8 @@ from ...representation.polytope import (Premise, affine_decomposition, nonlinear
                                         vertex_matrices)
 from ...settings import Rule, config_error, number_matrix, parse_settings, parse_table, parse_value, setting
 from ...design.precision import margin_field, precision_field, required_margin
-from ...design import canonical
-from ...design.canonical import decimal_round
+from ...representation import canonical
+from ...representation.canonical import decimal_round
 
 # 2-stage Gauss-Legendre (order 4)
 _S3 = math.sqrt(3.0)
@@ -454,7 +454,7 @@ def design(dec: rdeg.Decoupling, settings: AlgebraicSettings, solver) -> Algebra
             raise type(first)(f"{first} (posed again in the matrix-balanced state scaling {balanced.tolist()}, "
                               f"outputs scaled by {Wb.tolist()}: {type(second).__name__}: {second})") from None
     Xs = decimal_round(0.5 * (sol["X"] + sol["X"].T))
-    # emitted: solved exactly (codegen.design.canonical), the same on every machine
+    # emitted: solved exactly (codegen.representation.canonical), the same on every machine
     Ls = [canonical.solve(Xs, np.atleast_2d(sol[f"K{j + 1}"]).reshape(n, ny)) for j in range(len(K))]
     # back to the model's coordinates: x = S x_s, y = W y_s, L = S L_s W^-1, X = S^-1 X_s S^-1 (powers of 2: exact)
     L = tuple(decimal_round(S[:, None] * l / W[None, :]) for l in Ls)

@@ -79,8 +79,8 @@ from ...errors import CertificateError, DiscretizationError, ModelDefinitionErro
 from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, uncertified, worst_block
 from ...settings import setting
 from ...design.precision import margin_field, precision_field
-from ...design import canonical
-from ...design.canonical import decimal_round
+from ...representation import canonical
+from ...representation.canonical import decimal_round
 
 FAMILY = "interconnected_uio"
 
@@ -163,7 +163,7 @@ class SubsystemDesign:
     def M(self, Ts: float) -> tuple:
         """M_i = P (I - Ts S^-1 N_i S) of the backward-Euler step (scaled coordinates)."""
         S, Si = np.diag(self.S), np.diag(1.0 / self.S)
-        # emitted: exact arithmetic (codegen.design.canonical); S is diagonal, so S^-1 N S is exact as it is
+        # emitted: exact arithmetic (codegen.representation.canonical); S is diagonal, so S^-1 N S is exact as it is
         return tuple(canonical.matmul(self.P, np.eye(len(self.S)) - Ts * (Si @ n @ S)) for n in self.N)
 
 
@@ -189,7 +189,7 @@ def decoupling(sub: icm.SubsystemTS, W: np.ndarray | None = None, rank_tol: floa
     RankConditionError
         naming the subsystem and the ranks.
     """
-    CB = canonical.matmul(sub.C, sub.B)      # (26)-(30) are emitted: exact arithmetic (codegen.design.canonical)
+    CB = canonical.matmul(sub.C, sub.B)      # (26)-(30) are emitted: exact arithmetic (codegen.representation.canonical)
     r_cb = np.linalg.matrix_rank(CB, tol=rank_tol * max(np.abs(CB).max(), 1e-300))
     r_b = np.linalg.matrix_rank(sub.B, tol=rank_tol * max(np.abs(sub.B).max(), 1e-300))
     if r_cb != r_b:
@@ -364,7 +364,7 @@ def affine_parts(sub: icm.SubsystemTS, mats) -> tuple:
 
 def _gains(sub, H, T, CBp, S, W, Z, P, Om, eta) -> SubsystemDesign:
     Sd = np.diag(S)
-    # the emitted gains (28): exact arithmetic (codegen.design.canonical), the same on every machine
+    # the emitted gains (28): exact arithmetic (codegen.representation.canonical), the same on every machine
     K = tuple(canonical.matmul(Sd, canonical.solve(P, o), np.diag(1.0 / W)) for o in Om)
     N = tuple(canonical.matmul(T, sub.A[i]) - canonical.matmul(K[i], sub.C) for i in range(sub.n_vertices))
     L = tuple(K[i] - canonical.matmul(N[i], H) for i in range(sub.n_vertices))

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...design.canonical import decimal_round
+from ...representation.canonical import decimal_round
 from ...errors import ConfigurationError, RankConditionError
 from ...errors import SolverError
 from ...design.lmi import BlockCheck, LMIProblem, LMISolution, bmat, check_blocks, uncertified

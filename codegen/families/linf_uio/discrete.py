@@ -36,7 +36,8 @@ import numpy as np
 import sympy as sp
 from scipy.linalg import eigh
 
-from ...design import canonical, rates
+from ...design import rates
+from ...representation import canonical
 from ...errors import CertificateError, ConfigurationError, DiscretizationError, SolverError, UILoopError
 from ...design.lmi import LMIProblem
 from ...representation.polytope import Polytope, sector_weights_product
@@ -86,7 +87,7 @@ class ObserverData:
 
     @cached_property
     def Dp(self):
-        """pinv(D) for a constant D (emitted: machine-independent, see codegen.design.canonical)."""
+        """pinv(D) for a constant D (emitted: machine-independent, see codegen.representation.canonical)."""
         return canonical.pinv(self.poly.D[0])
 
     def Dp_at(self, eta) -> np.ndarray:
@@ -243,7 +244,7 @@ def gain_factorization(data: ObserverData):
     if parts is None:
         return None
     Q0, Q1, L0, L1 = parts
-    lam, V = canonical.eigh(Q1, Q0)     # emitted: machine-independent (see codegen.design.canonical)
+    lam, V = canonical.eigh(Q1, Q0)     # emitted: machine-independent (see codegen.representation.canonical)
     return lam, V, canonical.matmul(V.T, L0), canonical.matmul(V.T, L1)
 
 

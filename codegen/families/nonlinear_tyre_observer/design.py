@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...design import rates
-from ...design.canonical import decimal_round
+from ...representation.canonical import decimal_round
 from ...design.precision import required_margin
 from ...errors import CertificateError, SolverError
 from ...design.lmi import LMIProblem, bmat, check_blocks, objective_bound, uncertified, worst_block

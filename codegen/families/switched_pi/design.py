@@ -54,8 +54,8 @@ from ...design.lmi import LMIProblem, LMISolution, bmat, check_blocks, uncertifi
 from ...settings import setting
 from ...design.precision import margin_field, precision_field
 from .representation import SwitchedModel
-from ...design import canonical
-from ...design.canonical import decimal_round
+from ...representation import canonical
+from ...representation.canonical import decimal_round
 
 
 @dataclass(frozen=True)
@@ -93,7 +93,7 @@ class SwitchedPIDesignSettings:
 def decoupling_matrices(C: np.ndarray) -> tuple:
     """(T, N) with [T N] = [I; C]^+ (Algorithm 1 step 1); T + N C = I exactly up to round-off."""
     n = C.shape[1]
-    TN = canonical.pinv(np.vstack([np.eye(n), C]))     # emitted: machine-independent (codegen.design.canonical)
+    TN = canonical.pinv(np.vstack([np.eye(n), C]))     # emitted: machine-independent (codegen.representation.canonical)
     T, N = TN[:, :n], TN[:, n:]
     residual = np.abs(T + N @ C - np.eye(n)).max()
     if residual > 1e-12:
@@ -329,7 +329,7 @@ def design(sm: SwitchedModel, settings: SwitchedPIDesignSettings, solver) -> Swi
     gamma = float(np.sqrt(decimal_round(sol["gamma2"]))) / float(k.min())
     K, KI, Pi, Kp = [], [], [], []
     for i in range(sm.n_modes):
-        # the emitted gains: exact arithmetic (codegen.design.canonical), the same on every machine
+        # the emitted gains: exact arithmetic (codegen.representation.canonical), the same on every machine
         Ka = -canonical.solve(P, G[i])
         K.append(Ka[:sm.n])
         KI.append(Ka[sm.n:])

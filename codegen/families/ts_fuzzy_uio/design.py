@@ -35,8 +35,8 @@ from ...representation.polytope import sector_weights_product
 from ...settings import setting
 from ...design.precision import margin_field, precision_field
 from .representation import TSFuzzyModel
-from ...design import canonical
-from ...design.canonical import decimal_round
+from ...representation import canonical
+from ...representation.canonical import decimal_round
 
 
 @dataclass(frozen=True)

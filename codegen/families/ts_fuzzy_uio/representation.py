@@ -27,7 +27,7 @@ from functools import cached_property
 import numpy as np
 import sympy as sp
 
-from ...design import canonical
+from ...representation import canonical
 from ...representation.bounds import RangeBound, derivative, range_bound
 from ...emit.stepgen import lambdify
 from ...errors import ModelDefinitionError, NotAffineError, SchedulingBoundsError

@@ -189,7 +189,7 @@ def test_design_certificates(builds, name):
     for i in range(sm.n_modes):                                 # Algorithm 1 step 3
         np.testing.assert_allclose(d.Pi[i], d.T @ sm.A[i] - d.K[i] @ sm.C[i], atol=1e-9)
         np.testing.assert_allclose(d.Kp[i], d.K[i] + d.Pi[i] @ d.N, atol=1e-9)
-        K = np.vstack([d.K[i], d.KI[i]])                         # exact (codegen.design.canonical) vs LAPACK
+        K = np.vstack([d.K[i], d.KI[i]])                         # exact (codegen.representation.canonical) vs LAPACK
         np.testing.assert_allclose(-np.linalg.solve(d.P, d.Gamma[i]), K, rtol=1e-10, atol=1e-12 * np.abs(K).max())
 
 
