@@ -216,7 +216,7 @@ def _run_log(spec, run: int, traces: bool):
     values = d["values"]
     row = {"run": int(run), "log": d["log"], **values}
     signals = _error_signals(spec)
-    units = _cached(("units", spec.observer), lambda: dict(config.load_model().units))
+    units = _cached(("units", spec.observer, spec.project), lambda: dict(config.load_model().units))
     log = MappedLog(config, spec.log_path(d["log"]), obs.input_names, obs.output_names, config.sample_time)
     sensors = _LogSensors(spec, obs.input_names, values, d["noise_rng"], config.sample_time)
     bits = obs.status_bits
@@ -231,8 +231,11 @@ def _run_log(spec, run: int, traces: bool):
     for t, ins, refs, _ in log.chunks():
         t0 = t[0] if t0 is None else t0
         t = t - t0
-        if spec.duration is not None and t[-1] > spec.duration:
+        last = spec.duration is not None and t[-1] >= spec.duration - 0.5 * config.sample_time
+        if spec.duration is not None and t[-1] > spec.duration:         # truncated: the samples up to it
             cut = int(np.searchsorted(t, spec.duration, side="right"))
+            if cut == 0:
+                break
             t, ins, refs = t[:cut], {k: v[:cut] for k, v in ins.items()}, {k: v[:cut] for k, v in refs.items()}
         inputs = np.column_stack([sensors.measure(name, ins[name]) for name in obs.input_names])
         out, status, state = obs.run(inputs, state)
@@ -251,7 +254,7 @@ def _run_log(spec, run: int, traces: bool):
         if trace is not None:
             trace.add({"t": t, **{f"{s}_truth": refs[s] for s in signals},
                        **{f"{s}_estimate": out[:, obs.output_names.index(s)] for s in signals}})
-        if spec.duration is not None and t.size and t[-1] >= spec.duration - 0.5 * config.sample_time:
+        if last:
             break
     log.finish()                 # the time and physics checks of what was read (a DatasetError: no row)
     row["clamped_fraction"] = clamped / n if n else math.nan

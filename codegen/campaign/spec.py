@@ -358,6 +358,9 @@ def _parse_logs(top: dict, data: dict, source: str, name: str, config, project) 
         fields = []
         for f in (f for f in SENSOR_KEYS if f in table):
             d = parse_dist(table[f], source=source, section=sec, key=f)
+            if d.relative:
+                raise config_error(source, f"{sec}.{f}", "relative", True, "not set over logs: a recorded sensor has no "
+                                   "nominal noise, bias or delay to scale; give the value itself")
             if f in ("noise", "delay"):
                 check_support(d, 0.0, [(">=", 0.0, "")], source=source, section=sec, key=f,
                               what=f"the {'standard deviation' if f == 'noise' else 'delay'} of sensor {sig}")

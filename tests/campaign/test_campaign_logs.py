@@ -149,6 +149,8 @@ def test_a_log_refused_by_its_checks_is_a_run_without_result(logs, tmp_path):
     ('logs = ["first.csv"]\nruns = 2\n[sensors.a_x]\nbias = 0.1\n', "a_x"),
     ('logs = ["first.csv"]\nruns = 2\n[sensors.r]\nnoise = -0.1\n', "noise"),
     ('logs = ["first.csv"]\nruns = 2\nrank_by = "r"\n', "rank_by"),
+    ('logs = ["first.csv"]\nruns = 2\n[sensors.r]\nnoise = { dist = "uniform", low = 0.5, high = 2.0, relative = true }\n',
+     "relative"),
 ])
 def test_campaign_over_logs_mistakes_are_typed(logs, body, key):
     path = _spec(logs["folder"], body, name="wrong.toml")
@@ -163,6 +165,20 @@ def test_an_observer_without_a_data_map_is_named(logs, tmp_path):
     with pytest.raises(ConfigurationError, match=r"no \[data\] table") as err:
         campaign_spec.load(path)
     assert err.value.key == "logs"
+
+
+def test_duration_truncates_each_log(logs):
+    """``duration`` scores each log's first seconds: the row of a 12 s truncation is the full run's statistics
+    over those samples (the trace ends there)."""
+    spec = campaign_spec.load(_spec(logs["folder"], 'logs = ["first.csv"]\nruns = 1\nduration = 12.0\n',
+                                    name="short.toml"), project=ROOT)
+    row, trace = runner.run_one(spec, 0, traces=True)
+    assert trace["t"][-1] == pytest.approx(12.0) and row["status"] == "ok"
+    err = (trace["beta_estimate"] - trace["beta_truth"])[trace["t"] >= 2.0] * 180 / math.pi
+    assert row["rms.beta"] == pytest.approx(math.sqrt(np.mean(err ** 2)), rel=1e-12)
+    full = runner.run_one(campaign_spec.load(_spec(logs["folder"], 'logs = ["first.csv"]\nruns = 1\n',
+                                                   name="whole.toml"), project=ROOT), 0)
+    assert row["rms.beta"] != full["rms.beta"]
 
 
 def test_the_memory_of_a_log_campaign_is_its_stream(logs):
