@@ -374,10 +374,19 @@ def _parse_logs(top: dict, data: dict, source: str, name: str, config, project) 
     if rank not in signals:
         raise config_error(source, None, "rank_by", rank, "must be an estimated signal with a reference in [data.truth]: "
                            + ", ".join(signals), suggest(rank, signals))
+    # a log's run takes the time its file takes to read: about 0.6 s per MB for a ROS 2 bag or a CAN log
+    # (docs/validation.md, 'Large logs'), so the default per-run timeout grows with the largest log
+    largest = max(_bytes(base / log) for log in top["logs"])
     return CampaignSpec(source=source, observer=name, scenarios=(), runs=top["runs"], seed=top.get("seed", 0),
                         duration=top.get("duration"), worst=top.get("worst", 3), rank_by=rank, chunk=top.get("chunk"),
-                        run_timeout=top.get("run_timeout", 60.0), sensors=tuple(sensors), logs=tuple(top["logs"]),
+                        run_timeout=top.get("run_timeout", 60.0 + largest / 1e6), sensors=tuple(sensors),
+                        logs=tuple(top["logs"]),
                         project=project, raw=data)
+
+
+def _bytes(path: Path) -> int:
+    """The size of a log: a file's, or a ROS 2 bag folder's files together."""
+    return sum(f.stat().st_size for f in path.rglob("*") if f.is_file()) if path.is_dir() else path.stat().st_size
 
 
 def log_error_signals(config) -> tuple:
