@@ -284,29 +284,9 @@ def parse(data: dict, source: str, project: str | None = None) -> CampaignSpec:
             raise config_error(source, "driver", k, v, ("must be a gain of the driver: " + ", ".join(gains)) if gains
                                else f"not set: the {EXCITATION} scenario has no driver", suggest(k, gains))
         driver.append((k, parse_dist(v, source=source, section="driver", key=k)))
-    measured = _measured_signals(config)
     run_s = _run_duration(config, top["scenarios"], top.get("duration"))
-    sensors = []
-    for sig, table in top.get("sensors", {}).items():
-        if sig not in measured:
-            raise config_error(source, "sensors", sig, table, "must be a signal the observer reads: "
-                               + ", ".join(measured), suggest(sig, measured))
-        sec = f"sensors.{sig}"
-        if not isinstance(table, dict):
-            raise config_error(source, "sensors", sig, table, "must be a table with noise, bias, delay")
-        check_keys(table, SENSOR_KEYS, source=source, section=sec)
-        fields = []
-        for f in (f for f in SENSOR_KEYS if f in table):
-            d = parse_dist(table[f], source=source, section=sec, key=f)
-            if f in ("noise", "delay"):
-                nominal = sensor_noise(families.get(config.family)).get(sig, 0.0) if f == "noise" else 0.0
-                # a delay as long as the run leaves the observer nothing but the first sample (1e9 s was
-                # accepted): it must be shorter than the shortest run
-                bound = [("<", run_s, f"shorter than the run: {run_s:g} s")] if f == "delay" and run_s else []
-                check_support(d, nominal, [(">=", 0.0, ""), *bound], source=source, section=sec, key=f,
-                              what=f"the {'standard deviation' if f == 'noise' else 'delay'} of sensor {sig}")
-            fields.append((f, d))
-        sensors.append((sig, tuple(fields)))
+    sensors = _sensors(top.get("sensors", {}), source, _measured_signals(config),
+                       sensor_noise(families.get(config.family)), run_s)
     signals = _error_signals(config, kind)
     rank = top.get("rank_by", signals[0])
     if rank not in signals:
@@ -317,7 +297,7 @@ def parse(data: dict, source: str, project: str | None = None) -> CampaignSpec:
                         scenario_seed=top.get("scenario_seed", "fixed"), worst=top.get("worst", 3), rank_by=rank,
                         chunk=top.get("chunk"), run_timeout=top.get("run_timeout", 60.0),
                         parameters=tuple(params), driver=tuple(driver),
-                        sensors=tuple(sensors), project=project, raw=data)
+                        sensors=sensors, project=project, raw=data)
 
 
 def _parse_logs(top: dict, data: dict, source: str, name: str, config, project) -> CampaignSpec:
@@ -345,27 +325,7 @@ def _parse_logs(top: dict, data: dict, source: str, name: str, config, project) 
         twice = next(x for x in top["logs"] if top["logs"].count(x) > 1)
         raise config_error(source, None, "logs", top["logs"], f"each log once ({twice!r} is named twice): runs cycle "
                            f"over the logs, and runs = N x len(logs) reads each N times")
-    measured = _measured_signals(config)
-    sensors = []
-    for sig, table in top.get("sensors", {}).items():
-        if sig not in measured:
-            raise config_error(source, "sensors", sig, table, "must be a signal the observer reads: "
-                               + ", ".join(measured), suggest(sig, measured))
-        sec = f"sensors.{sig}"
-        if not isinstance(table, dict):
-            raise config_error(source, "sensors", sig, table, "must be a table with noise, bias, delay")
-        check_keys(table, SENSOR_KEYS, source=source, section=sec)
-        fields = []
-        for f in (f for f in SENSOR_KEYS if f in table):
-            d = parse_dist(table[f], source=source, section=sec, key=f)
-            if d.relative:
-                raise config_error(source, f"{sec}.{f}", "relative", True, "not set over logs: a recorded sensor has no "
-                                   "nominal noise, bias or delay to scale; give the value itself")
-            if f in ("noise", "delay"):
-                check_support(d, 0.0, [(">=", 0.0, "")], source=source, section=sec, key=f,
-                              what=f"the {'standard deviation' if f == 'noise' else 'delay'} of sensor {sig}")
-            fields.append((f, d))
-        sensors.append((sig, tuple(fields)))
+    sensors = _sensors(top.get("sensors", {}), source, _measured_signals(config), None, None)
     signals = log_error_signals(config)
     if not signals:
         raise config_error(source, None, "logs", top["logs"], f"logs with a reference to score: the [data.truth] table "
@@ -379,9 +339,40 @@ def _parse_logs(top: dict, data: dict, source: str, name: str, config, project) 
     largest = max(_bytes(base / log) for log in top["logs"])
     return CampaignSpec(source=source, observer=name, scenarios=(), runs=top["runs"], seed=top.get("seed", 0),
                         duration=top.get("duration"), worst=top.get("worst", 3), rank_by=rank, chunk=top.get("chunk"),
-                        run_timeout=top.get("run_timeout", 60.0 + largest / 1e6), sensors=tuple(sensors),
+                        run_timeout=top.get("run_timeout", 60.0 + largest / 1e6), sensors=sensors,
                         logs=tuple(top["logs"]),
                         project=project, raw=data)
+
+
+def _sensors(tables: dict, source: str, measured: tuple, noise: dict | None, run_s: float | None) -> tuple:
+    """The ``[sensors.X]`` dispersions, each of a signal the observer reads: ((signal, ((field, Dist), ...)), ...).
+    ``noise``: the nominal noise of each signal (a relative dispersion's scale); None over logs, whose sensors
+    have no nominal (``relative`` refused). ``run_s``: the shortest run, which a delay must stay under."""
+    sensors = []
+    for sig, table in tables.items():
+        if sig not in measured:
+            raise config_error(source, "sensors", sig, table, "must be a signal the observer reads: "
+                               + ", ".join(measured), suggest(sig, measured))
+        sec = f"sensors.{sig}"
+        if not isinstance(table, dict):
+            raise config_error(source, "sensors", sig, table, "must be a table with noise, bias, delay")
+        check_keys(table, SENSOR_KEYS, source=source, section=sec)
+        fields = []
+        for f in (f for f in SENSOR_KEYS if f in table):
+            d = parse_dist(table[f], source=source, section=sec, key=f)
+            if d.relative and noise is None:
+                raise config_error(source, f"{sec}.{f}", "relative", True, "not set over logs: a recorded sensor has no "
+                                   "nominal noise, bias or delay to scale; give the value itself")
+            if f in ("noise", "delay"):
+                nominal = (noise or {}).get(sig, 0.0) if f == "noise" else 0.0
+                # a delay as long as the run leaves the observer nothing but the first sample (1e9 s was
+                # accepted): it must be shorter than the shortest run
+                bound = [("<", run_s, f"shorter than the run: {run_s:g} s")] if f == "delay" and run_s else []
+                check_support(d, nominal, [(">=", 0.0, ""), *bound], source=source, section=sec, key=f,
+                              what=f"the {'standard deviation' if f == 'noise' else 'delay'} of sensor {sig}")
+            fields.append((f, d))
+        sensors.append((sig, tuple(fields)))
+    return tuple(sensors)
 
 
 def _bytes(path: Path) -> int:
