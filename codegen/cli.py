@@ -546,7 +546,7 @@ def cmd_campaign(args) -> int:
             print(json.dumps(row, indent=1))
         else:
             print(report.format_row(row))
-        return 0
+        return 1 if row.get("status") == "error" else 0        # a log refused by its checks: no result
     out = Path(args.out) if args.out else spec.config().workspace.campaigns / Path(args.spec).stem
     import signal
     previous = signal.signal(signal.SIGTERM, _terminate)       # SIGTERM: as Ctrl-C, with the --resume hint

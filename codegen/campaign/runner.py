@@ -159,7 +159,14 @@ def run_one(spec, run: int, traces: bool = False):
     (row, signals) with the truth and the estimates of the error signals over time."""
     from ..validation import simulate
     if spec.logs:
-        return _run_log(spec, run, traces)
+        from ..errors import UiogenError
+        try:
+            return _run_log(spec, run, traces)
+        except UiogenError as exc:      # the log refused by its checks: a run without result, said in its row
+            d = draw(spec, run)
+            row = {"run": int(run), "log": d["log"], **d["values"], "status": "error",
+                   "error": f"{type(exc).__name__}: {exc}"}
+            return (row, None) if traces else row
     config, obs = _config(spec), _observer(spec)
     d = draw(spec, run)
     scn, plant, values = d["scn"], d["plant"], d["values"]

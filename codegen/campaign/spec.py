@@ -328,8 +328,10 @@ def _parse_logs(top: dict, data: dict, source: str, name: str, config, project) 
     sensors = _sensors(top.get("sensors", {}), source, _measured_signals(config), None, None)
     signals = log_error_signals(config)
     if not signals:
+        outputs = _outputs(config)
         raise config_error(source, None, "logs", top["logs"], f"logs with a reference to score: the [data.truth] table "
-                           f"of {config.column_map.source} maps no output of the observer")
+                           f"of {config.column_map.source} maps no output of the observer (its outputs: "
+                           f"{', '.join(outputs)})")
     rank = top.get("rank_by", signals[0])
     if rank not in signals:
         raise config_error(source, None, "rank_by", rank, "must be an estimated signal with a reference in [data.truth]: "
@@ -380,13 +382,17 @@ def _bytes(path: Path) -> int:
     return sum(f.stat().st_size for f in path.rglob("*") if f.is_file()) if path.is_dir() else path.stat().st_size
 
 
-def log_error_signals(config) -> tuple:
-    """The observer's outputs the ``[data.truth]`` map gives a reference for, in the observer's order."""
+def _outputs(config) -> tuple:
+    """The observer's outputs, as its design lock names them."""
     import json
     from ..design import lock as design_lock
     art = json.loads(design_lock.path(config).read_text())
-    outputs = art["signals"].get("output", art["signals"]["state"])
-    return tuple(s for s in outputs if s in config.column_map.truth)
+    return tuple(art["signals"].get("output", art["signals"]["state"]))
+
+
+def log_error_signals(config) -> tuple:
+    """The observer's outputs the ``[data.truth]`` map gives a reference for, in the observer's order."""
+    return tuple(s for s in _outputs(config) if s in config.column_map.truth)
 
 
 def _run_duration(config, names, duration) -> float | None:

@@ -136,6 +136,10 @@ def test_a_log_refused_by_its_checks_is_a_run_without_result(logs, tmp_path):
     rows = engine.read_rows(tmp_path / "out" / "runs.csv")
     assert rows[0]["status"] == "ok" and rows[1]["status"] == "error" and rows[1]["log"] == "gap.csv"
     assert "1 of 2 runs produced no result (error: 1)" in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr                 # said in the row, not raised through Dask's log
+    again = subprocess.run([sys.executable, "-m", "codegen.cli", "campaign", str(path), "--only", "1", "--project",
+                            str(ROOT)], capture_output=True, text=True, cwd=ROOT)
+    assert again.returncode == 1 and "DatasetError" in again.stdout and "gap.csv" in again.stdout, again
 
 
 @pytest.mark.parametrize("body, key", [
