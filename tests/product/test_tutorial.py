@@ -120,6 +120,21 @@ def test_an_mdf4_log_at_its_own_rates(tutorial):
     assert force.unit == "N" and force.samples.size == status.samples.size == mdf["samples"]
 
 
+def test_a_ros2_bag_gives_the_figures_of_its_samples(tutorial):
+    """The tutorial's ROS 2 bag (MCAP, written by rosbags): every topic at the observer's rate, the header
+    stamps and the recording times on the grid, so the force estimate is the one of the same samples run
+    through the step directly (the simulated run's own inputs, no file between)."""
+    from codegen.validation import excitation
+    from codegen.validation import run as validate
+    from codegen.project import observer_file
+    bag = validate.run_data(str(tutorial / "disturbance_bag.toml"), str(tutorial / "drive_bag"))
+    assert bag["format"] == "rosbag2" and {r["method"] for r in bag["resampling"].values()} == {"as recorded"}
+    run = excitation.simulate(observer_file.get(str(tutorial / "disturbance.toml")), duration=20.0)
+    assert bag["samples"] == run["t"].size
+    assert np.abs(bag["signals"]["F_truth"] - run["F"]).max() <= 1e-9 * np.abs(run["F"]).max()
+    assert bag["observer"]["F"]["rms"] <= 0.05 * np.sqrt(np.mean(run["F"][run["t"] >= 2.0] ** 2))
+
+
 def test_the_saturating_tyre_observer_tracks_its_model(tutorial):
     from codegen.validation import run as validate
     res = validate.run_scenario(str(tutorial / "saturating.toml"), "excitation")
