@@ -550,6 +550,7 @@ def cmd_campaign(args) -> int:
     out = Path(args.out) if args.out else spec.config().workspace.campaigns / Path(args.spec).stem
     import signal
     previous = signal.signal(signal.SIGTERM, _terminate)       # SIGTERM: as Ctrl-C, with the --resume hint
+    previous_int = signal.signal(signal.SIGINT, _interrupt)
     try:
         summary = engine.run(spec, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
                              progress=None if args.json else engine.progress_bar())
@@ -560,6 +561,7 @@ def cmd_campaign(args) -> int:
         return 143 if isinstance(exc, _Terminated) else 130
     finally:
         signal.signal(signal.SIGTERM, previous)
+        signal.signal(signal.SIGINT, previous_int)
     if args.json:
         _print_json(summary)
     else:
@@ -582,8 +584,23 @@ class _Terminated(KeyboardInterrupt):
     """SIGTERM, raised where the process is (a campaign stops as on Ctrl-C, its runs kept)."""
 
 
+def _quiet_dask_shutdown() -> None:
+    """Interrupted inside a Dask call (``distributed.utils.sync``) before its coroutine has started, Dask's
+    own clean-up callback reads a variable it has not set yet and tornado logs that NameError with its
+    traceback (``sync.<locals>.cancel`` of distributed 2026.8.0): the user stopped the campaign, and what they
+    get is the line that says where the runs are kept, not a library's shutdown noise."""
+    import logging
+    logging.getLogger("tornado.application").disabled = True
+
+
 def _terminate(signum, frame):
+    _quiet_dask_shutdown()          # before the raise: Dask schedules its clean-up while the exception unwinds
     raise _Terminated()
+
+
+def _interrupt(signum, frame):
+    _quiet_dask_shutdown()
+    raise KeyboardInterrupt()
 
 
 def main(argv=None) -> int:
