@@ -425,11 +425,8 @@ def _measured_signals(config) -> tuple:
 
 
 def _error_signals(config, kind: str) -> tuple:
-    import json
-    from ..design import lock as design_lock
     from .plants import KINDS
-    art = json.loads(design_lock.path(config).read_text())
-    outputs = art["signals"].get("output", art["signals"]["state"])
+    outputs = _outputs(config)
     spec = KINDS[kind][0](config)
     truth = set(spec.output_names) | {"phi_r"} | set(getattr(spec.extra, "external", ()))   # a model plant's inputs
     return tuple(s for s in outputs if s in truth)
