@@ -332,8 +332,8 @@ def _baselines(config, run) -> dict:
 
 def _source_baselines(run) -> dict:
     """beta of the source repository's linear KF and of its EKF on the shared log."""
-    from . import stanford
-    return {"linear_kf": stanford.linear_kf(run).beta, "ekf": stanford.ekf(run).beta}
+    from . import peers
+    return {"linear_kf": peers.linear_kf(run).beta, "ekf": peers.ekf(run).beta}
 
 
 def _table(run, b) -> dict:

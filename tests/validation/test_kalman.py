@@ -7,7 +7,7 @@ import sympy as sp
 from codegen.errors import ModelDefinitionError, SampleError
 from codegen.model import ModelDefinition, SchedulingSignal
 from codegen.validation import kalman
-from codegen.validation.stanford import STANFORD_CAR
+from codegen.validation.peers import STANFORD_CAR
 from model_defs import baselines
 from model_defs import single_track_saturating as observer_model
 

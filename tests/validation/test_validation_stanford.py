@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from codegen.errors import ModelDefinitionError, SampleError
-from codegen.validation import stanford as S
+from codegen.validation import peers as P, stanford as S
 
 from conftest import require_shared
 
@@ -77,21 +77,21 @@ def test_missing_file_is_typed(tmp_path):
 
 def test_bad_vehicle_and_ekf_params():
     with pytest.raises(ModelDefinitionError):
-        S.VehicleParams(m=-1, lf=1, lr=1, iz=1, cf=1, cr=1)
+        P.VehicleParams(m=-1, lf=1, lr=1, iz=1, cf=1, cr=1)
     with pytest.raises(ModelDefinitionError):
-        S.EKFConfig(mu=0.0)
+        P.EKFConfig(mu=0.0)
 
 
 def test_highpass_filter_blocks_low_frequencies():
     t = np.arange(20000) * 0.01
     low = np.sin(2 * np.pi * 1.0 * t)               # 1 Hz: stop band
     high = np.sin(2 * np.pi * 30.0 * t)             # 30 Hz: pass band
-    assert S.highpass_std(low) < 2e-3
-    assert S.highpass_std(high) == pytest.approx(np.std(high, ddof=1), rel=0.15)
+    assert P.highpass_std(low) < 2e-3
+    assert P.highpass_std(high) == pytest.approx(np.std(high, ddof=1), rel=0.15)
 
 
 def test_linear_kf_reproduces_source(run):
-    res = S.linear_kf(run)
+    res = P.linear_kf(run)
     rmse = res.beta_stats.rms
     print(f"\nlinear KF beta RMSE {rmse:.4f} deg, max {res.beta_stats.e_max:.3f} deg")
     assert rmse == pytest.approx(0.68, abs=0.02)          # data README: about 0.68 deg
@@ -102,7 +102,7 @@ def test_linear_kf_reproduces_source(run):
 def test_ekf_beats_zero_predictor(run):
     short = S.StanfordRun(**{k: (getattr(run, k)[:6000] if k != "source" else run.source)
                              for k in S.StanfordRun.__dataclass_fields__})
-    res = S.ekf(short)
+    res = P.ekf(short)
     zero = np.degrees(np.sqrt(np.mean(short.beta_true ** 2)))
     print(f"\nEKF (first 60 s) beta RMSE {res.beta_stats.rms:.4f} deg vs zero predictor {zero:.3f}")
     assert res.beta_stats.rms < zero
@@ -110,7 +110,7 @@ def test_ekf_beats_zero_predictor(run):
 
 
 def test_ekf_on_the_full_log(run):
-    res = S.ekf(run)
+    res = P.ekf(run)
     print(f"\nEKF beta RMSE {res.beta_stats.rms:.4f} deg, max {res.beta_stats.e_max:.3f} deg")
     assert res.beta_stats.rms == pytest.approx(0.527, abs=5e-4)     # README figure
-    assert res.beta_stats.rms < S.linear_kf(run).beta_stats.rms
+    assert res.beta_stats.rms < P.linear_kf(run).beta_stats.rms

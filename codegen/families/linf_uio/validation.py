@@ -27,7 +27,7 @@ def baselines(config, truth, noisy, units: dict, traces: dict | None = None) -> 
     with the observer's car: axle stiffness = 2 x tyre stiffness, mu = 1), on the same noisy measurements;
     ``units``: the model's declared units of beta and r. ``traces``: a dict that receives each
     baseline's estimates ({name: {"beta": ..., "r": ...}}), for plots."""
-    from ...validation import stanford
+    from ...validation import peers, stanford
     car_ = car(config)
     run = stanford.StanfordRun(t=truth["t"], vx=truth["v_x"], vy=np.tan(truth["beta"]) * truth["v_x"],
                                beta_true=truth["beta"], ax=np.zeros_like(truth["t"]), ay=noisy["a_y"],
@@ -35,8 +35,8 @@ def baselines(config, truth, noisy, units: dict, traces: dict | None = None) -> 
                                delta=noisy["delta"], delta_fl=noisy["delta"], delta_fr=noisy["delta"],
                                source="simulation")
     out = {}
-    for name, res in (("linear_kf", stanford.linear_kf(run, car_)),
-                      ("ekf", stanford.ekf(run, car_, stanford.EKFConfig(mu=1.0)))):
+    for name, res in (("linear_kf", peers.linear_kf(run, car_)),
+                      ("ekf", peers.ekf(run, car_, peers.EKFConfig(mu=1.0)))):
         out[name] = {"beta": signal_stats(truth["beta"], res.beta, truth["t"], unit=units.get("beta", "rad")),
                      "r": signal_stats(truth["r"], res.r, truth["t"], unit=units.get("r", "rad/s"))}
         if traces is not None:
@@ -46,10 +46,10 @@ def baselines(config, truth, noisy, units: dict, traces: dict | None = None) -> 
 
 def car(config):
     from ...model import load_parameters
-    from ...validation import stanford
+    from ...validation import peers
     v = load_parameters(config.parameter_path).values
     # axle cornering stiffness of the single-track baselines: two tyres per axle
-    return stanford.VehicleParams(m=v["M"], lf=v["l_f"], lr=v["l_r"], iz=v["I_z"], cf=2 * v["C_f"], cr=2 * v["C_r"])
+    return peers.VehicleParams(m=v["M"], lf=v["l_f"], lr=v["l_r"], iz=v["I_z"], cf=2 * v["C_f"], cr=2 * v["C_r"])
 
 
 def run(config, scenario, plant: str = "nominal", duration: float | None = None, seed: int = 0,

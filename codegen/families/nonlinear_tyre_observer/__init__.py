@@ -59,13 +59,13 @@ class NonlinearTyreObserver(Family):
 
     def log_peers(self, config, run) -> dict:
         """The EKF and UKF of the same symbolic model and parameter file
-        (:func:`codegen.validation.stanford.nonlinear_tyre_peers`), for an observer of that model
+        (:func:`codegen.validation.peers.nonlinear_tyre_peers`), for an observer of that model
         (``model_defs/single_track_nonlinear_tyre.py`` or an unedited copy of it)."""
         from ...project.observer_file import builtin_model
-        from ...validation import stanford
+        from ...validation import peers
         if config.load_model() != builtin_model("single_track_nonlinear_tyre").MODEL:
             return {}
-        return {k: v.beta for k, v in stanford.nonlinear_tyre_peers(run, config.parameter_path).items()}
+        return {k: v.beta for k, v in peers.nonlinear_tyre_peers(run, config.parameter_path).items()}
 
     def fit(self, config, path, samples: str, folds: int | None = None, judge=(), choose=(),
             jobs: int | None = None) -> dict:

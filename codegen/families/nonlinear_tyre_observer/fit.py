@@ -26,7 +26,7 @@ Only samples A..B-1 are read for any choice. Fitted:
 2. **The noise levels** of the l2-gain design (observer file ``[design] sigma_*``), each by its
    definition on the range: the axle force residual (RMS of the averages, per axle), the
    sensors' vibration (standard deviation of a_y and r after the source repository's high-pass
-   filter, :func:`codegen.validation.stanford.highpass_std`), the Euler residual T_s/2 |x''| (RMS,
+   filter, :func:`codegen.validation.peers.highpass_std`), the Euler residual T_s/2 |x''| (RMS,
    from the reference's second derivative).
 3. **The Kalman peers' two noise levels** (parameter file ``[meta] peer_sigma_fy``,
    ``peer_sigma_ay``): the grid sigma_fy in {0.02, 0.05, 0.1, 0.2} x sigma_ay in {high-pass std, 0.3,
@@ -55,6 +55,7 @@ import sympy as sp
 from ...errors import CertificateError, ConfigurationError, SampleError
 from ...model import load_parameters
 from ...validation import stanford
+from ...validation.peers import highpass_std, nonlinear_tyre_peers, peer_noise
 from ...validation.workers import Workers
 from .representation import numeric
 
@@ -301,8 +302,8 @@ def _levels(prob: _Problem, x: np.ndarray, run, a: int, b: int, Ts: float, mask:
     inner[half:b - a - half] = mask
     return {"sigma_force_front": float(np.sqrt(np.mean(res[:, 0] ** 2))),
             "sigma_force_rear": float(np.sqrt(np.mean(res[:, 1] ** 2))),
-            "sigma_ay": stanford.highpass_std(np.asarray(run.ay, float)[a:b][inner]),
-            "sigma_r": stanford.highpass_std(np.asarray(run.yaw_rate, float)[a:b][inner]),
+            "sigma_ay": highpass_std(np.asarray(run.ay, float)[a:b][inner]),
+            "sigma_r": highpass_std(np.asarray(run.yaw_rate, float)[a:b][inner]),
             "sigma_euler_vy": float(0.5 * Ts * np.sqrt(np.mean(ddv ** 2))),
             "sigma_euler_r": float(0.5 * Ts * np.sqrt(np.mean(ddr ** 2)))}
 
@@ -350,13 +351,13 @@ def _sub_run(run, a: int, b: int):
 
 def _same_tyre_peers(config, params, run, noises, which=("ekf_nonlinear_tyre",)) -> list:
     """The same-tyre Kalman peers ``which`` on ``run`` with the numbers of ``params`` (through a parameter
-    file of their own, as :func:`codegen.validation.stanford.nonlinear_tyre_peers` reads one), one
+    file of their own, as :func:`codegen.validation.peers.nonlinear_tyre_peers` reads one), one
     {peer: BaselineResult} per {sigma_fy, sigma_ay} of ``noises``."""
     import tempfile
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "parameters.toml"
         path.write_text(_parameter_text(config.parameter_path, params.values, {}))
-        return [stanford.nonlinear_tyre_peers(run, path, noise, which=which) for noise in noises]
+        return [nonlinear_tyre_peers(run, path, noise, which=which) for noise in noises]
 
 
 def _ekf_beta(config, params, run, a: int, b: int, noise: dict) -> np.ndarray:
@@ -496,7 +497,7 @@ def _peer_levels(config, result: dict) -> dict:
     """The peers' two noise levels: the fit's grid choice, else the parameter file's ``[meta]``."""
     if "peers" in result:
         return {k: (None if v == "highpass" else float(v)) for k, v in result["peers"].items()}
-    return stanford.peer_noise(config.parameter_path)
+    return peer_noise(config.parameter_path)
 
 
 def _run_row(config, params, levels: dict, noise: dict, run, label: str, beta=None) -> dict:

@@ -14,7 +14,7 @@ identification part, the evaluation part and the whole log::
 Each point is certified again (the gains given, :func:`.build.build`) before it runs.
 
 **The peers** (``--peers``): the sideslip RMS of the committed observer against the same-tyre EKF
-and UKF (:func:`codegen.validation.stanford.nonlinear_tyre_peers`) on the evaluation part, with
+and UKF (:func:`codegen.validation.peers.nonlinear_tyre_peers`) on the evaluation part, with
 the paired moving-block bootstrap interval of the difference
 (:func:`codegen.validation.metrics.rms_difference_interval`) for blocks of 5, 10 and 20 s::
 
@@ -31,7 +31,7 @@ import numpy as np
 from ...design import lock as design_lock
 from ...project import observer_file as observers
 from ...model import load_parameters
-from ...validation import metrics, stanford
+from ...validation import metrics, peers, stanford
 
 BLOCKS_S = (5.0, 10.0, 20.0)
 """Bootstrap block lengths [s]: a cornering manoeuvre of the log lasts a few seconds."""
@@ -113,7 +113,7 @@ def peer_comparison(name: str = "stanford_sideslip_nonlinear_tyre", path="stanfo
     where = "evaluation part" if _has_evaluation_part(su) else "whole log"
     beta = observer_beta(su.config, su.params, su.gains, run, 0, run.n)
     errors = {"observer": np.degrees(beta - run.beta_true)[part]}
-    for peer, res in stanford.nonlinear_tyre_peers(run, su.config.parameter_path).items():
+    for peer, res in peers.nonlinear_tyre_peers(run, su.config.parameter_path).items():
         errors[peer] = np.degrees(res.beta - run.beta_true)[part]
     rms = {k: float(np.sqrt(np.mean(e ** 2))) for k, e in errors.items()}
     rows = []
