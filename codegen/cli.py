@@ -32,6 +32,7 @@ import numpy as np
 from .design import lock as design_lock
 from .design.solver import progress_after
 from .emit import generate as emit
+from . import workflow
 from . import families, pipeline
 from .project import observer_file as observers
 from .project import outputs
@@ -232,7 +233,7 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_generate(args) -> int:
-    emit.generate(args.names or None, Path(args.out) if args.out else None, force=args.force,
+    workflow.generate(args.names or None, Path(args.out) if args.out else None, force=args.force,
                   project=args.project)
     return 0
 
@@ -293,7 +294,7 @@ def cmd_fit(args) -> int:
     """Identify an observer's numbers on samples A..B-1 of a log (the family's ``fit``); print them,
     say whether the committed files hold them, and with --write put them there."""
     from .certificate import text
-    from .families.capabilities import Identification, require
+    from .contract.capabilities import Identification, require
     cfg = observers.get(args.name)
     family = require(families.get(cfg.family), Identification)
     if args.plot and not args.judge:
@@ -342,7 +343,7 @@ def _print_remark_and_files(remark: str, args, page) -> None:
 
 
 def cmd_validate(args) -> int:
-    from .validation import noise, run as validate
+    from .validation import logs, noise, run as validate
     config = observers.get(args.name, project=args.project)
     page = None                                         # the report's page, where --report writes one
     if args.plot and not Path(args.plot).suffix:        # matplotlib adds .png: say the file it writes
@@ -353,10 +354,10 @@ def cmd_validate(args) -> int:
         if args.out:
             from .validation import logout
             logout.check_path(args.out)             # a suffix it cannot write is refused before the run
-        result = validate.run_data(config, args.data, out=args.out)
+        result = logs.run(config, args.data, out=args.out)
         if args.plot:
             with outputs.writing(args.plot):
-                validate.plot_data(result, args.plot)
+                logs.plot(result, args.plot)
         if args.report:
             from .validation import report
             with outputs.writing(args.report):
@@ -374,7 +375,7 @@ def cmd_validate(args) -> int:
             warned = f", {len(result['warnings'])} warning(s) below" if result.get("warnings") else ""
             print(f"{args.name} on {result['data']}: {result['samples']} samples, {result['status_flags']} "
                   f"flagged{warned}")
-            print(validate.format_data_table(result))
+            print(logs.format_table(result))
             _print_remark_and_files(remark, args, page)
         return _uninformative_exit(remark, args)
     if not args.scenario:
@@ -701,7 +702,7 @@ def main(argv=None) -> int:
                                   "BLF or ASC, decoded with the DBC of [data] dbc; told by the content): the columns "
                                   "or channels mapped by the observer file's [data] table, or "
                                   "else the shared CSV format; 'stanford', 'niki' = the shared logs (Ferrari, GTI)")
-    p.add_argument("--out", metavar="FILE", help="with --data and a [data] table: write the observer's outputs and "
+    p.add_argument("--out", metavar="FILE", help="with --data: write the observer's outputs and "
                                                  "status, with their units, on the log's time base to FILE.mf4 (MDF4) "
                                                  "or FILE.parquet (whole or not at all)")
     p.add_argument("--plant", choices=("nominal", "model", "commonroad"), default="nominal",

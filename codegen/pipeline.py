@@ -10,7 +10,6 @@ from __future__ import annotations
 from .design import lock as design_lock
 from .design.solver import FreshSolver, LockReplay
 from .design import precision
-from . import families
 from .errors import BoundsError
 from .project.observer_file import ObserverConfig
 
@@ -28,7 +27,7 @@ def _family_build(config: ObserverConfig, solver):
     """The family's pipeline; an expression it cannot bound is reported with what the user can change:
     the boxes of the parameter file it was bounded over, and the family's bounds settings
     (``Family.bounds_settings``) where it has them."""
-    family = families.get(config.family)
+    family = config.observer_family
     from .model import load_parameters
     from .emit.stepgen import check_functions
     from .model.definition import check_signal_tables
@@ -80,7 +79,7 @@ def build(config: ObserverConfig, solver=None):
     default :func:`committed`. A replay must use every committed solution. The unknown inputs of
     ``[substitute]`` are recovered after the family's step. Use :func:`solve` to also get the LMI
     solutions of a fresh design."""
-    from .families.substituted import wrap
+    from .emit.substituted import wrap
     solver = committed(config) if solver is None else solver
     b = wrap(_checked(_family_build(config, solver)))
     if isinstance(solver, LockReplay):

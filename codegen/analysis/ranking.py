@@ -197,7 +197,7 @@ def not_affine_fix(subject: Subject, exc, default: str) -> str:
     for an unknown input inside a nonlinearity, the change of variables (``[substitute]``) or why
     none applies on the box (:attr:`Subject.substitution_refusals`); ``default`` (a measured
     scheduling signal, ...) when a state or a known input is not affine."""
-    from ..model.substitution import find_carrier, new_name
+    from ..representation.substitution import find_carrier, new_name
     names = getattr(exc, "unknown_inputs", ())
     if not names:
         return default
@@ -252,11 +252,11 @@ def _with_substitution(subject: Subject, app: Applicability) -> Applicability:
 def assess(subject: Subject, structure) -> list:
     """Every registered family's :class:`Applicability` for ``subject``, in registry order (with the
     subject's ``[substitute]`` table in each family's settings, :func:`_with_substitution`)."""
-    from .. import families
-    from ..families.capabilities import Applicability as HasApplicability
+    from ..contract import registry
+    from ..contract.capabilities import Applicability as HasApplicability
     out = []
-    for name in families.names():
-        fam = families.get(name)
+    for name in registry.names():
+        fam = registry.get(name)
         try:
             app = fam.applicability(subject, structure) if isinstance(fam, HasApplicability) else None
         except UiogenError as exc:          # the family's own refusal is its condition

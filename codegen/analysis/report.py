@@ -85,10 +85,10 @@ def estimable_lines(structure) -> list:
 
 
 def family_lines(ranking: Ranking) -> list:
-    from .. import families
+    from ..contract import registry
     lines = ["observer families, best first:"]
     for k, (app, trial) in enumerate(ranking.entries, start=1):
-        fam = families.get(app.family)
+        fam = registry.get(app.family)
         head = f"  {k}. {app.family} ({fam.short_citation or fam.title})"
         if app.applies:
             head += f": applies; {GUARANTEES[app.guarantee][1]}"

@@ -9,8 +9,8 @@ declares (the others are sensors the car could have: the analysis proposes them 
 known). An unknown input that enters only through one nonlinear expression (``g sin(phi_r)``) is
 analyzed through that expression's value, as an observer file's ``[substitute]`` table has the
 family design it: the file's own table, else the one the analysis finds and proves
-(:func:`codegen.model.substitution.propose`), applied by the same
-:func:`codegen.model.substitution.apply`. Nothing here writes a file.
+(:func:`codegen.representation.substitution.propose`), applied by the same
+:func:`codegen.representation.substitution.apply`. Nothing here writes a file.
 """
 from __future__ import annotations
 
@@ -175,8 +175,9 @@ class Subject:
     def _lpv_outcome(self) -> tuple:
         from ..errors import UiogenError
         from ..model import instantiate
+        from ..representation.substitution import offer
         try:
-            return instantiate(self.model, self.parameters), None
+            return instantiate(self.model, self.parameters, unknown_input_hint=offer), None
         except UiogenError as exc:
             return None, exc
 
@@ -340,14 +341,14 @@ def load(target: str, parameters: str | None = None, outputs=None, unknown_input
 def _substituted(model, params: ParameterSet, config, parameters) -> tuple:
     """(model, params, [Substitution], origin, {unknown input: why not}): ``model`` with the unknown
     inputs that enter through a nonlinearity replaced by their carriers' values, through
-    :func:`codegen.model.substitution.apply`, the code path of an observer file's ``[substitute]``:
+    :func:`codegen.representation.substitution.apply`, the code path of an observer file's ``[substitute]``:
     the observer file's own table when it has one, else the table
-    :func:`codegen.model.substitution.propose` finds (each carrier proven invertible on the box),
+    :func:`codegen.representation.substitution.propose` finds (each carrier proven invertible on the box),
     the inputs it cannot replace with the reason. ``params`` gains the range each carrier takes on
     the box, the box of the new unknown input. A model that is not a ModelDefinition (a family's
     richer definition) is analyzed as it is, an observer file's table applied as the family does."""
     from ..model import ModelDefinition
-    from ..model import substitution as substitution_rules
+    from ..representation import substitution as substitution_rules
     if config is not None and config.substitute and parameters is None and not isinstance(model, ModelDefinition):
         model, subs = config.design_model(), config.substitutions()
         return model, _with_carrier_ranges(params, subs), subs, "the observer file", {}

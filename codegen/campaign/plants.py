@@ -288,7 +288,7 @@ def families_with_plants() -> list:
     """The registered families with a compiled plant of their own library scenarios (the
     ``Campaigns`` capability); every family has the ``model`` plant of the excitation scenario."""
     from .. import families
-    from ..families.capabilities import Campaigns
+    from ..contract.capabilities import Campaigns
     return [n for n in families.names() if isinstance(families.get(n), Campaigns)]
 
 
@@ -296,7 +296,7 @@ def plant_kind(config, scenarios=(EXCITATION,)) -> str:
     """The kind of compiled plant of a campaign of ``config`` on ``scenarios``: ``model`` for the
     excitation scenario (every family), else the family's own (``Family.campaign_plant``)."""
     from .. import families
-    from ..families.capabilities import Campaigns
+    from ..contract.capabilities import Campaigns
     if scenarios and all(s == EXCITATION for s in scenarios):
         return "model"
     family = families.get(config.family)

@@ -21,7 +21,7 @@ def certified_gain_norm(config) -> str | None:
     sup_t |x - x_hat|_2 over the model's states / sup_t |d|), "l2" (H-infinity, |xi - xi_hat|_2 /
     |w|_2 with xi the performance outputs), or None."""
     from .. import families
-    from ..families.capabilities import Campaigns
+    from ..contract.capabilities import Campaigns
     family = families.get(config.family)
     return family.certified_gain_norm if isinstance(family, Campaigns) else None
 
@@ -97,7 +97,7 @@ def default_noise(config) -> dict:
     """The sensor noise of the family's own validation (std per measured signal): the family's
     (``Campaigns.sensor_noise``), else the common one of the library's validations."""
     from .. import families
-    from ..families.capabilities import sensor_noise
+    from ..project.sensor_noise import sensor_noise
     return sensor_noise(families.get(config.family))
 
 

@@ -230,7 +230,7 @@ def parse(data: dict, source: str, project: str | None = None) -> CampaignSpec:
     from ..errors import UnknownObserverError
     from ..validation import scenarios as scn_lib
     from .. import families
-    from ..families.capabilities import sensor_noise
+    from ..project.sensor_noise import sensor_noise
     from ..model.definition import parameter_conditions
     from .plants import BANKED_DRIVER_KEYS, DRIVER_KEYS, EXCITATION, KINDS, families_with_plants, plant_kind
     top = parse_table(data, TOP, source=source)

@@ -6,7 +6,7 @@ The generic form is the design lock's, ``{"lmi_solutions": [{"problem", "variabl
 with numpy and the discrete step certified; the result carries the build's
 :class:`~codegen.certificate.certificate.Certificate`. A family with a printed form of its gains
 (the :class:`GainForms` capability, defined here where it is asked for and listed with the others in
-:mod:`codegen.families.capabilities`) checks that form itself and returns the same record.
+:mod:`codegen.contract.capabilities`) checks that form itself and returns the same record.
 :mod:`codegen.certificate.text` renders it.
 """
 from __future__ import annotations

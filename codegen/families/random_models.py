@@ -2,10 +2,10 @@
 
 A seeded numpy generator draws, per family, a model a user could have written (its equations as a
 ``model.py``, its numbers as a parameter file, an observer file beside them). Each family hands its
-drawer in through its own capability (:class:`~codegen.families.capabilities.RandomModels`:
+drawer in through its own capability (:class:`~codegen.contract.capabilities.RandomModels`:
 ``draw_random_model``), so :func:`drawers` is every registered family that draws, a family of a user's
 included; the acceptance that writes the models into folders and takes them through the user's commands
-is a maintainer tool, :mod:`codegen.tools.random_models` (the property tests of the C == model check,
+is a maintainer tool, :mod:`codegen.acceptance.random_models` (the property tests of the C == model check,
 ``tests/extension/test_random_models.py``, run it).
 
 What is drawn, per family (the structure where the family's theory allows it, plausible numbers
@@ -36,7 +36,7 @@ coefficient crosses zero inside the speed box (``linf_uio``, ``switched_pi``, ``
 a ``[sensor_noise]`` table (those and ``algebraic_uio``).
 
 A design the family refuses is an acceptable outcome only as a typed error (exit 2, one line, no
-traceback); :func:`codegen.tools.random_models.acceptance` reports how many draws design.
+traceback); :func:`codegen.acceptance.random_models.acceptance` reports how many draws design.
 """
 from __future__ import annotations
 
@@ -767,14 +767,14 @@ def _describe(s: dict) -> str:
 
 def drawers() -> dict:
     """{name: family} of every registered family that draws random models (the capability
-    :class:`~codegen.families.capabilities.RandomModels`), in the registry's order."""
+    :class:`~codegen.contract.capabilities.RandomModels`), in the registry's order."""
     from . import get, names
-    from .capabilities import RandomModels
+    from ..contract.capabilities import RandomModels
     return {n: get(n) for n in names() if isinstance(get(n), RandomModels)}
 
 
 def draw(family: str, seed: int) -> RandomModel:
     """The model the family ``family`` draws from ``numpy.random.default_rng(seed)``."""
     from . import get
-    from .capabilities import RandomModels, require
+    from ..contract.capabilities import RandomModels, require
     return require(get(family), RandomModels).draw_random_model(np.random.default_rng(seed))

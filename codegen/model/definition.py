@@ -779,8 +779,13 @@ def constant_terms_as_input(model: ModelDefinition, rest, h_rest) -> ModelDefini
                                derived_inputs=(*model.derived_inputs, DerivedInput(one, sp.Integer(1), "-")))
 
 
-def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
+def instantiate(model: ModelDefinition, params: ParameterSet, unknown_input_hint=None) -> LPVModel:
     """Substitute a parameter set into a model and extract its LPV matrices.
+
+    ``unknown_input_hint(model, d, params, subs)``: the sentence a "not affine in the unknown inputs" error
+    ends with, for the unknown input ``d`` (the pipeline passes
+    :func:`codegen.representation.substitution.offer`: the change of variables that makes it affine, proven
+    on the parameter file's boxes); None: the error without one.
 
     Raises
     ------
@@ -808,12 +813,12 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
     A = _affine_part(f, x, "the states", model.name)
     B = _affine_part(f, u, "the known inputs", model.name)
     Bw = _affine_part(f, w, "the derived inputs", model.name)
-    from .substitution import offer
-    D = _affine_part(f, d, "the unknown inputs", model.name, hint=lambda s: offer(model, s, params, subs))
+    hint = None if unknown_input_hint is None else (lambda s: unknown_input_hint(model, s, params, subs))
+    D = _affine_part(f, d, "the unknown inputs", model.name, hint=hint)
     C = _affine_part(h, x, "the states", model.name)
     Du = _affine_part(h, u, "the known inputs", model.name)
     Duw = _affine_part(h, w, "the derived inputs", model.name)
-    Dd = _affine_part(h, d, "the unknown inputs", model.name, hint=lambda s: offer(model, s, params, subs))
+    Dd = _affine_part(h, d, "the unknown inputs", model.name, hint=hint)
     col = lambda syms: sp.Matrix(len(syms), 1, list(syms))   # a (k, 1) column, also for k = 0
     # what is left once the affine parts are taken, in exact arithmetic: the model's floats as the exact
     # rationals they are (sympy's simplify on floats inside a denominator, 1/(v_x + 1.1), leaves a
@@ -831,7 +836,7 @@ def instantiate(model: ModelDefinition, params: ParameterSet) -> LPVModel:
                                  f"inputs that is left over: {list(rest)}, {list(h_rest)}")
         # a term free of states and inputs (rolling resistance -f_r g, a drag c v_x^2 of a scheduling
         # signal) is a known input of value 1: its column is the term, its value computed in the step
-        return instantiate(constant_terms_as_input(model, rest, h_rest), params)
+        return instantiate(constant_terms_as_input(model, rest, h_rest), params, unknown_input_hint)
     for mat, label in ((B, "B"), (D, "D"), (C, "C"), (Du, "Du"), (Bw, "Bw"), (Duw, "Duw"), (Dd, "Dd")):
         if any(e.free_symbols & set(x + u + d + w) for e in mat):
             raise NotAffineError(f"model {model.name!r}: {label} depends on states or inputs")

@@ -49,7 +49,7 @@ COMMON_KEYS = {
     "data": Rule(dict, doc="the column map of a logged run (uiogen validate --data; codegen.project.columns)"),
     "precision": Rule(dict, doc="the float32 build's tolerances (codegen.project.precision)"),
     "substitute": Rule(dict, doc="{UNKNOWN_INPUT = \"NEW_NAME\"}: design for the value of the one expression an "
-                                 "unknown input enters through (codegen.model.substitution)"),
+                                 "unknown input enters through (codegen.representation.substitution)"),
 }
 
 
@@ -147,7 +147,7 @@ class ObserverConfig:
         return self._substituted()[0]
 
     def substitutions(self) -> list:
-        """[:class:`~codegen.model.substitution.Substitution`] of the ``[substitute]`` table."""
+        """[:class:`~codegen.representation.substitution.Substitution`] of the ``[substitute]`` table."""
         return self._substituted()[1]
 
     def _substituted(self) -> tuple:
@@ -156,16 +156,22 @@ class ObserverConfig:
             return model, []
         from ..model import load_parameters
         from ..model.definition import parameter_substitution
-        from ..model.substitution import apply
+        from ..representation.substitution import apply
         params = load_parameters(self.parameter_path)
         return apply(model, params, parameter_substitution(model, params), self.substitute, self.source)
 
     @property
+    def observer_family(self):
+        """The observer's family (a :class:`~codegen.contract.family.Family`), the one this file names: the
+        reader of the observer file resolves the name (:mod:`codegen.contract.registry`); every stage below
+        is handed the family on the configuration, never looks it up."""
+        from ..contract import registry
+        return registry.get(self.family)
+
+    @property
     def family_type(self) -> type:
-        """The class of the observer's family, from the registry (this layer reads the observer file and
-        knows the families; the design stages below are handed the class, never look it up)."""
-        from .. import families
-        return type(families.get(self.family))
+        """The class of :attr:`observer_family` (what a design's stamp follows)."""
+        return type(self.observer_family)
 
     @property
     def parameter_path(self) -> Path:
@@ -313,7 +319,7 @@ def _suggest_name(name: str) -> str:
 
 
 def _parse(path: Path, overrides: dict | None = None, project: str | Path | None = None) -> ObserverConfig:
-    from .. import families
+    from ..contract import registry
     path = Path(path)
     from . import outputs           # a `uiogen fit --write` killed half-way: its files all new, first
     outputs.finish_pending(path, log=lambda text: print(f"uiogen: {text}", file=sys.stderr))
@@ -332,11 +338,11 @@ def _parse(path: Path, overrides: dict | None = None, project: str | Path | None
     check_name(path.stem, source)
     if overrides:
         data = apply_overrides(data, overrides, source)
-    known = families.names()
+    known = registry.names()
     if "family" not in data:
         raise config_error(source, None, "family", None, f"missing; one of {', '.join(known)}")
     parse_table({"family": data["family"]}, {"family": Rule(str, choices=known, required=True)}, source=source)
-    family = families.get(data["family"])
+    family = registry.get(data["family"])
     parse_table(data, {**COMMON_KEYS, **family.observer_keys}, source=source, what=f"for family {family.name}")
     builtin = path.resolve().parent == OBSERVERS_DIR
     folder = path.resolve().parent

@@ -78,7 +78,7 @@ def input_noise(config, inputs) -> dict:
     """{input name: standard deviation} of the sensor noise of an observer's ``inputs``: its observer
     file's ``[precision] noise`` table (which must agree with the parameter file's ``[sensor_noise]``),
     else ``[sensor_noise]`` (:mod:`codegen.project.sensor_noise`), else the family's validation noise of a
-    measured ``y_NAME`` or a raw input ``NAME`` (:func:`codegen.families.capabilities.sensor_noise`);
+    measured ``y_NAME`` or a raw input ``NAME`` (:func:`codegen.project.sensor_noise.sensor_noise`);
     an input with none is left out. The float32 build's tolerance and ``validate --data``'s log checks
     use it.
 
@@ -89,9 +89,7 @@ def input_noise(config, inputs) -> dict:
         ``[sensor_noise]``.
     """
     import math
-    from .. import families
     from ..errors import ConfigurationError
-    from ..families.capabilities import sensor_noise
     from ..model import load_parameters
     from . import sensor_noise as sensor
     spec = config.precision
@@ -113,7 +111,7 @@ def input_noise(config, inputs) -> dict:
                 f"once, in [sensor_noise] (read by validate and the float32 build); remove {key} from [precision] noise",
                 source=source, section="precision.noise", key=key,
                 allowed=f"{declared[key]:g} (the [sensor_noise] level), or no entry")
-    family = sensor_noise(families.get(config.family))
+    family = sensor.sensor_noise(config.observer_family)
     out = {}
     for name in inputs:
         if name in spec.noise:

@@ -33,9 +33,18 @@ from ..settings import config_error, suggest
 
 SENSOR_NOISE = {"r": np.deg2rad(0.05), "delta": np.deg2rad(0.02), "delta_dot": np.deg2rad(0.2), "a_y": 0.05}
 """The library's own validation runs: the standard deviation they add per measured signal (a family's own
-levels where it has them, :func:`codegen.families.capabilities.sensor_noise`). Here, beside the car's
+levels where it has them, :func:`sensor_noise`). Here, beside the car's
 declared noise, not with the validation: the float32 build reads it, and a design's stamp stays off the
 validation's modules."""
+
+
+def sensor_noise(family) -> dict:
+    """Standard deviation per measured signal of ``family``'s validation runs: its own
+    (:class:`~codegen.contract.capabilities.Campaigns`), else the common one of the library's validations."""
+    from ..contract.capabilities import Campaigns
+    if isinstance(family, Campaigns):
+        return family.sensor_noise()
+    return dict(SENSOR_NOISE)
 
 
 def measured_signals(model) -> dict:

@@ -93,8 +93,7 @@ def sensor_table(example, family) -> str:
     signal of the example's model that has one (the example observer file's ``[precision] noise``,
     else the family's validation noise: the float32 build's levels until now, so it stays as it was),
     the others as a commented line to fill in from the sensor's datasheet."""
-    from ..families.capabilities import sensor_noise
-    from .sensor_noise import column_signal, measured_signals
+    from .sensor_noise import column_signal, measured_signals, sensor_noise
     model = example.load_model()
     signals = measured_signals(model)
     units = dict(model.units or {})

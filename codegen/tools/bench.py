@@ -39,7 +39,7 @@ from ..design import lock as design_lock
 from ..emit import hosmd
 from ..representation import differentiators
 from .. import families, pipeline
-from ..families.capabilities import BenchFigures, BenchStudy
+from ..contract.capabilities import BenchFigures, BenchStudy
 from . import harness
 from ..emit.flops import ARITHMETIC_OPS, flop_count  # noqa: F401  (the floor of every figure here)
 from ..project import observer_file as observers

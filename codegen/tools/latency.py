@@ -55,11 +55,11 @@ def _choice(family) -> tuple:
     registries: the family's first built-in that reads a shared log (``validate --data``, and ``fit``
     where the family identifies), and its first built-in with a scenario of its own (the family's first
     demo scenario, else the excitation run)."""
-    from ..families.capabilities import Scenarios
+    from ..contract.capabilities import Scenarios
     from ..model import load_parameters
     from ..project import observer_file as observers
     from ..validation import demo
-    from ..validation.run import reads_the_log
+    from ..validation.logs import reads_the_log
     own = [observers.get(n) for n in observers.names() if observers.get(n).family == family.name]
     if not own:
         return None
@@ -148,18 +148,17 @@ def _log_floors(name: str, data: str) -> dict:
     import numpy as np
     from ..extension.build import load
     from ..project import observer_file as observers
-    from ..validation import run as validation_run
-    from ..validation import stanford
+    from ..validation import logs, stanford
     config = observers.get(name)
     obs = load(config)
     t0 = time.perf_counter()
     run = stanford.load(data, sample_time=obs.sample_time)
     t1 = time.perf_counter()
-    X = np.column_stack([getattr(run, validation_run.DATA_COLUMNS[c]) for c in obs.input_names])
+    X = np.column_stack([getattr(run, logs.DATA_COLUMNS[c]) for c in obs.input_names])
     t2 = time.perf_counter()
     obs.run(X, obs.initial_state())
     t3 = time.perf_counter()
-    validation_run._baselines(config, run)
+    logs._baselines(config, run)
     t4 = time.perf_counter()
     return {"read_log_s": t1 - t0, "observer_run_s": t3 - t2, "peers_s": t4 - t3, "samples": int(run.n)}
 
@@ -173,7 +172,7 @@ PREREQUISITES = {"build": ("generate",)}
 
 
 def _builtin_case(family, work: Path) -> dict:
-    from ..families.capabilities import Identification
+    from ..contract.capabilities import Identification
     from ..project import observer_file as observers
     name, data, scen_obs, scenario = _choice(family)
     project = work / f"gen_{name}"

@@ -172,7 +172,7 @@ def missing() -> str:
 def record_inputs(name: str, scenario: str | None = None, samples: int = SAMPLES) -> tuple:
     """The first ``samples`` rows of the input sequence the observer is given on a validation
     scenario (its first demo scenario, else the generic excitation): (scenario, array)."""
-    from ..validation import run as validate
+    from ..validation import logs, run as validate
     from ..errors import ModelDefinitionError
     tried = [scenario] if scenario else list(validate.scenario_names(name)) + ["excitation"]
     last = None
@@ -183,9 +183,9 @@ def record_inputs(name: str, scenario: str | None = None, samples: int = SAMPLES
             last = exc
     # an observer of the real log (its validation is the shared Stanford run): the log's first rows
     from ..extension.build import load
-    log = None if scenario else validate.shared_log_inputs(load(name).input_names)
+    log = None if scenario else logs.shared_log_inputs(load(name).input_names)
     if log is not None:
-        return validate.SHARED_LOG, np.ascontiguousarray(log[:samples])
+        return logs.SHARED_LOG, np.ascontiguousarray(log[:samples])
     raise last
 
 

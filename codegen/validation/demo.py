@@ -4,7 +4,7 @@ For every built-in observer: its certificate and design figures (from the design
 certificate, and the family's ``DemoFigures``), then the compiled C step on its family's demo
 scenarios (``Scenarios.demo_scenarios``) against the plant its family names for it (``DemoPlant``,
 else the nominal one), beside the baselines, in the table format of its paper; then the real-data
-table (the shared Stanford log). Capabilities: :mod:`codegen.families.capabilities`.
+table (the shared Stanford log). Capabilities: :mod:`codegen.contract.capabilities`.
 """
 from __future__ import annotations
 
@@ -13,11 +13,11 @@ import json
 from ..certificate import text
 from ..certificate.certificate import Certificate, of_lock
 from ..design import lock as design_lock
-from .. import families
-from ..families.capabilities import DemoFigures, DemoPlant, Scenarios
+from ..contract import registry
+from ..contract.capabilities import DemoFigures, DemoPlant, Scenarios
 from ..project import observer_file as observers
 from ..errors import UnsupportedError
-from . import run as validate, stanford
+from . import logs, run as validate, stanford
 
 REAL_DATA_OBSERVER = "stanford_sideslip"
 REAL_DATA_OTHERS = ("ts_fuzzy_uio_stanford", "stanford_sideslip_nonlinear_tyre")     # same log, other families
@@ -35,7 +35,7 @@ def run_all(names=None) -> dict:
         if names is not None and name not in names:
             continue
         config = observers.get(name)
-        family = families.get(config.family)
+        family = config.observer_family
         art = json.loads(design_lock.path(config).read_text())
         certificate = of_lock(art, str(design_lock.path(config)))
         plant = family.demo_plant(config) if isinstance(family, DemoPlant) else "nominal"
@@ -48,7 +48,7 @@ def run_all(names=None) -> dict:
 
 def entry_lines(entry: dict) -> list:
     """The design part of an observer's demo entry as text (:func:`codegen.certificate.text.demo_lines`)."""
-    return text.demo_lines(families.get(entry["family"]), Certificate.from_json(entry["certificate"]))
+    return text.demo_lines(registry.get(entry["family"]), Certificate.from_json(entry["certificate"]))
 
 
 def main(json_output: bool = False, report_dir=None) -> int:
@@ -81,7 +81,7 @@ def main(json_output: bool = False, report_dir=None) -> int:
         return 0
     plot = observers.get(REAL_DATA_OBSERVER).workspace.plots / f"{REAL_DATA_OBSERVER}_real_data.png"
     plot.parent.mkdir(parents=True, exist_ok=True)
-    validate.plot_data(real, str(plot))
+    logs.plot(real, str(plot))
     for name, e in report.items():
         print(f"== {name}")
         for line in entry_lines(e):
@@ -112,9 +112,9 @@ def summary_lines(report: dict, real: dict, others: dict) -> list:
 def run_real_data() -> tuple:
     """The real-data part of the demo: (run of REAL_DATA_OBSERVER, {other observer: its run}) on the
     shared log, each run with its own baselines (an observer of the nonlinear-tyre model brings its
-    same-tyre EKF and UKF peers, :func:`codegen.validation.run.run_data`)."""
-    real = validate.run_data(REAL_DATA_OBSERVER, "stanford")
-    others = {n: validate.run_data(n, "stanford") for n in REAL_DATA_OTHERS if n in observers.names()}
+    same-tyre EKF and UKF peers, :func:`codegen.validation.logs.run`)."""
+    real = logs.run(REAL_DATA_OBSERVER, "stanford")
+    others = {n: logs.run(n, "stanford") for n in REAL_DATA_OTHERS if n in observers.names()}
     return real, others
 
 
@@ -143,7 +143,7 @@ def real_data_json(real: dict, others: dict) -> dict:
 
 def _note(name: str) -> str:
     config = observers.get(name)
-    return families.get(config.family).title
+    return config.observer_family.title
 
 
 def real_data_lines(real: dict, others: dict) -> list:
@@ -151,7 +151,7 @@ def real_data_lines(real: dict, others: dict) -> list:
     baselines, then each other observer on the same log with the peers only its run has."""
     lines = [f"== real data: {REAL_DATA_OBSERVER} on {real['data']} ({real['samples']} samples at 100 Hz, "
              f"sideslip reference atan2(vy, vx) of the log's velocities; {real['status_flags']} flagged)",
-             "   " + validate.format_data_table(real).replace("\n", "\n   ")]
+             "   " + logs.format_table(real).replace("\n", "\n   ")]
     for n, r in others.items():
         t = r["observer"]
         line = (f"   {n} (same log; {_note(n)}; {r['status_flags']} flagged): beta RMSE {t['beta']['rms']:.4f} deg, "

@@ -270,9 +270,8 @@ def run(config, duration: float | None = None, seed: int = 0, progress=None, obs
     out, status, _ = obs.run(measured)
     b = pipeline.build(config)
     lags = b.output_lags()
-    from .. import families
-    from ..families.capabilities import NoiseBound
-    family = families.get(config.family)
+    from ..contract.capabilities import NoiseBound
+    family = config.observer_family
     if record["mode"] == "declared" and isinstance(family, NoiseBound):
         # the certificate's noise-to-estimate bound, restated at the levels this run adds
         record["certified_bound"] = family.noise_bound(b, sensor.declared(model, params))

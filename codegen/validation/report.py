@@ -17,7 +17,7 @@ import numpy as np
 
 from ..project import outputs
 from . import metrics
-from . import run as validate
+from . import logs, run as validate
 
 PAGE = "index.html"
 COLORS = ("tab:blue", "tab:green", "tab:purple", "tab:orange", "tab:cyan", "tab:brown")
@@ -110,9 +110,9 @@ def scenario_figure(result: dict, path: Path) -> Path:
 def data_figure(result: dict, path: Path) -> Path:
     """A logged run: sideslip reference, the observer and every peer run on the same log, their
     errors below; the large-sideslip windows and the evaluation split marked, flagged samples
-    shaded. A user's column-mapped log: its own plot (:func:`codegen.validation.run.plot_data`)."""
-    if result.get("kind") == "column_map":
-        validate.plot_data(result, str(path))
+    shaded. A user's column-mapped log: its own plot (:func:`codegen.validation.logs.plot`)."""
+    if "estimates" in result:
+        logs.plot(result, str(path))
         return path
     plt = outputs.pyplot()
     sig = result["signals"]
@@ -130,7 +130,7 @@ def data_figure(result: dict, path: Path) -> Path:
         ax[1].plot(t, b - truth, label=label, **style)
     for pk in result.get("peaks", ()):
         for a in ax:
-            a.axvspan(pk["t"] - validate.PEAK_HALF_WIDTH, pk["t"] + validate.PEAK_HALF_WIDTH, color="0.9", zorder=0)
+            a.axvspan(pk["t"] - logs.PEAK_HALF_WIDTH, pk["t"] + logs.PEAK_HALF_WIDTH, color="0.9", zorder=0)
     if "splits" in result:
         for a in ax:
             a.axvline(result["splits"]["t_split"], color="k", ls=":", lw=0.8)
@@ -166,7 +166,7 @@ def data_section(name: str, result: dict, out_dir: Path, level: int = 3) -> list
     fig = data_figure({**result, "name": name}, out_dir / f"{_slug(name)}__data.png")
     return [f"<h{level}>{html.escape(name)} on {html.escape(Path(str(result['data'])).name)}</h{level}>",
             f'<p class="note">{result["samples"]} samples, {result["status_flags"]} flagged</p>',
-            _pre(validate.format_data_table(result)),
+            _pre(logs.format_table(result)),
             _img(fig, f"{name}: sideslip against the log's reference, peers and errors")]
 
 
@@ -244,12 +244,12 @@ def write_demo(report: dict, runs: dict, out_dir) -> Path:
     design figures, tables and figures. ``report``: {name: demo entry} as built by
     :func:`codegen.validation.demo.run_all`; ``runs``: {observer: its run on the shared log}, the
     demo's main real-data observer first."""
-    from .. import families
+    from ..contract import registry
     from ..certificate import text
     from ..certificate.certificate import Certificate
 
     def entry_lines(entry):        # the design part of a demo entry, from its typed certificate
-        return text.demo_lines(families.get(entry["family"]), Certificate.from_json(entry["certificate"]))
+        return text.demo_lines(registry.get(entry["family"]), Certificate.from_json(entry["certificate"]))
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     ranking = rank_real_data(runs)
@@ -275,7 +275,7 @@ def write_demo(report: dict, runs: dict, out_dir) -> Path:
     for n, e in report.items():
         if n in order:
             continue
-        family = families.get(e["family"])
+        family = registry.get(e["family"])
         body.append(f'<h2 id="{_slug(n)}">{html.escape(n)}</h2>')
         body.append(f'<p class="note">{html.escape(family.title)}</p>')
         body.append(_pre("\n".join(entry_lines(e))))

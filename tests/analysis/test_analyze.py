@@ -176,7 +176,7 @@ def test_outputs_and_unknown_inputs_options_select_and_name_the_left_out_sensors
 def test_a_family_without_applicability_is_ranked_last_and_says_so():
     """The ranking iterates the registry: a family registered without ``applicability`` answers
     "no applicability check", never a name comparison."""
-    from codegen.families.base import Family
+    from codegen.contract.family import Family
 
     class Silent(Family):
         name = "silent_family_for_test"

@@ -20,7 +20,7 @@ from codegen.campaign import engine, runner
 from codegen.campaign import spec as campaign_spec
 from codegen.errors import ConfigurationError
 from codegen.project import observer_file as observers
-from codegen.validation import run as validate
+from codegen.validation import logs as data_logs
 from codegen.validation import stanford as S
 
 from conftest import require_shared
@@ -66,7 +66,7 @@ def logs(tmp_path_factory):
     mdf.close()
     observer = _observer(folder)
     config = observers.get(str(observer), project=ROOT)
-    single = {log: validate.run_data(config, str(folder / log)) for log in ("first.csv", "second.mf4")}
+    single = {log: data_logs.run(config, str(folder / log)) for log in ("first.csv", "second.mf4")}
     return {"folder": folder, "observer": observer, "validate": single}
 
 

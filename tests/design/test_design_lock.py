@@ -26,6 +26,7 @@ from codegen.design import lock as design_lock, lmi, sources
 from codegen.representation import canonical
 from codegen import cli, pipeline
 from codegen.emit import generate as emit
+from codegen import workflow
 from codegen.project import observer_file as observers
 from codegen.errors import DesignLockError, GenerationError
 from conftest import HANG_GUARD
@@ -50,7 +51,7 @@ def test_generation_never_solves_with_a_current_lock(tmp_path, monkeypatch):
         raise AssertionError("generation called the SDP solver although the design lock is current")
     monkeypatch.setattr(lmi.clarabel, "DefaultSolver", no_solver)
     names = ["lpv_linf_driver_torque", "switched_pi_bank_angle", "ts_fuzzy_uio"]
-    emit.generate(names, out_dir=tmp_path, force=True, log=lambda *_: None)
+    workflow.generate(names, out_dir=tmp_path, force=True, log=lambda *_: None)
     for name in names:
         committed = ROOT / "generated_c" / name
         files = _c_files(committed) + [f"{name}_design.json"]
@@ -101,7 +102,7 @@ def test_a_stale_lock_is_resolved_by_generate(tmp_path):
     data["lock"]["design_inputs"] = "0" * 64
     lock.write_text(json.dumps(data))
     lines = []
-    emit.generate(["lpv_linf_driver_torque"], log=lines.append, project=tmp_path)
+    workflow.generate(["lpv_linf_driver_torque"], log=lines.append, project=tmp_path)
     assert "design inputs changed" in lines[0] and "design re-solved" in lines[-1]
     assert design_lock.status(observers.get("lpv_linf_driver_torque", project=tmp_path))[0] is not None
     assert design_lock.status(observers.get("lpv_linf_driver_torque"))[0] is not None   # the checkout's untouched
@@ -180,17 +181,17 @@ def test_installed_versions_are_the_pinned_ones():
 
 def test_an_edited_or_truncated_output_is_regenerated(tmp_path):
     name = "lpv_linf_driver_torque"
-    emit.generate([name], out_dir=tmp_path, force=True, log=lambda *_: None)
+    workflow.generate([name], out_dir=tmp_path, force=True, log=lambda *_: None)
     header = tmp_path / name / f"{name}_kernel.h"
     good = header.read_bytes()
     header.write_bytes(good[: len(good) // 2])                  # half-written under a valid stamp
     lines = []
-    emit.generate([name], out_dir=tmp_path, log=lines.append)
+    workflow.generate([name], out_dir=tmp_path, log=lines.append)
     assert "generated" in lines[-1] and header.read_bytes() == good
     (tmp_path / name / "stray.c").write_text("int x;\n")         # an extra file is not "unchanged"
-    emit.generate([name], out_dir=tmp_path, log=lines.append)
+    workflow.generate([name], out_dir=tmp_path, log=lines.append)
     assert "generated" in lines[-1] and not (tmp_path / name / "stray.c").exists()
-    emit.generate([name], out_dir=tmp_path, log=lines.append)
+    workflow.generate([name], out_dir=tmp_path, log=lines.append)
     assert "unchanged" in lines[-1]
 
 
@@ -213,7 +214,7 @@ def test_two_generate_runs_at_once_are_safe(tmp_path):
 def test_one_failing_observer_does_not_stop_the_others(tmp_path, capsys):
     lines = []
     with pytest.raises(GenerationError, match="1 observer"):
-        emit.generate(["no_such_observer", "lpv_linf_driver_torque"], out_dir=tmp_path, log=lines.append)
+        workflow.generate(["no_such_observer", "lpv_linf_driver_torque"], out_dir=tmp_path, log=lines.append)
     assert (tmp_path / "lpv_linf_driver_torque" / "lpv_linf_driver_torque_kernel.c").is_file()
     assert any("no_such_observer: FAILED" in line for line in lines)
     code = cli.main(["generate", "no_such_observer", "--out", str(tmp_path)])
@@ -347,7 +348,7 @@ def test_an_edited_lock_is_refused_naming_the_entry(tmp_path, capsys, entry):
     before = {p.name: p.read_bytes() for p in lock.parent.iterdir()}
     lines = []
     with pytest.raises(GenerationError):
-        emit.generate([LINF], log=lines.append, project=tmp_path)
+        workflow.generate([LINF], log=lines.append, project=tmp_path)
     assert "DesignLockError" in lines[-1] and "edited after uiogen wrote it" in lines[-1], lines
     assert entry in lines[-1] and f"uiogen design {LINF} --update" in lines[-1]
     assert {p.name: p.read_bytes() for p in lock.parent.iterdir()} == before      # nothing rewritten
@@ -418,7 +419,7 @@ def _assert_recovered_without_solving(project: Path, name: str = LINF) -> None:
     """A plain generate after an interrupted one: nothing re-solved, the committed set complete,
     no leftovers."""
     lines = []
-    emit.generate([name], log=lines.append, project=project)
+    workflow.generate([name], log=lines.append, project=project)
     assert not any("solving" in line for line in lines), lines
     committed, here = ROOT / "generated_c" / name, project / "generated_c" / name
     files = [p.name for p in committed.iterdir()]

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from codegen.emit import generate as emit
+from codegen import workflow
 from codegen.extension.build import STRICT_FLAGS, generated_names, observer_sources
 
 ROOT = next(p for p in Path(__file__).resolve().parents if (p / "pyproject.toml").is_file())
@@ -16,7 +16,7 @@ NAMES = generated_names()
 @pytest.mark.slow          # CasADi generation of every observer
 @pytest.mark.parametrize("NAME", NAMES)
 def test_regeneration_is_byte_identical(tmp_path, NAME):
-    emit.generate([NAME], out_dir=tmp_path, force=True, log=lambda *_: None)
+    workflow.generate([NAME], out_dir=tmp_path, force=True, log=lambda *_: None)
     committed = ROOT / "generated_c" / NAME
     fresh = tmp_path / NAME
     names = sorted(p.name for p in committed.iterdir())

@@ -9,6 +9,7 @@ import pytest
 from codegen import pipeline
 from codegen.design import lock as design_lock
 from codegen.emit import generate as emit
+from codegen import workflow
 from codegen.errors import GenerationError
 from codegen.project import observer_file as observers
 from tests.conftest import new_starter
@@ -19,14 +20,14 @@ pytestmark = pytest.mark.slow       # a starter designed and generated (about 10
 @pytest.fixture(scope="module")
 def project(tmp_path_factory) -> Path:
     folder = new_starter(tmp_path_factory.mktemp("forged") / "p")
-    emit.generate([str(folder / "obs1.toml")], log=lambda line: None)
+    workflow.generate([str(folder / "obs1.toml")], log=lambda line: None)
     return folder
 
 
 def _generate(config) -> list:
     said = []
     try:
-        emit.generate([config], log=said.append)
+        workflow.generate([config], log=said.append)
     except GenerationError:
         said.append("GenerationError")
     return said
@@ -36,7 +37,7 @@ def _restamp(config, folder: Path) -> None:
     """The stamp recomputed over the folder as it is (what a forger who knows the format does)."""
     lock_text = design_lock.path(config).read_text()
     files = {f.name: f.read_text() for f in folder.iterdir() if f.name != emit.STAMP}
-    (folder / emit.STAMP).write_text(emit._stamp_text(emit.emission_inputs(config, lock_text), files))
+    (folder / emit.STAMP).write_text(emit.stamp_text(emit.emission_inputs(config, lock_text), files))
 
 
 def test_an_unchanged_folder_is_skipped_without_a_replay(project, monkeypatch):

@@ -224,12 +224,12 @@ def test_a_truncated_or_unrecorded_extension_is_refused_before_it_is_loaded(tmp_
 @pytest.fixture(scope="module")
 def project(tmp_path_factory):
     """A project made by ``uiogen new`` (linf_uio), generated once for the module's builds."""
-    from codegen.emit import generate as emit
+    from codegen import workflow
     from codegen.project import starter
     root = tmp_path_factory.mktemp("integrity")
     from codegen import families
     starter.write(root, families.get("linf_uio"), "obs1")
-    emit.generate([str(root / "obs1.toml")], log=lambda *_: None)
+    workflow.generate([str(root / "obs1.toml")], log=lambda *_: None)
     return root
 
 

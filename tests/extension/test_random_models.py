@@ -15,7 +15,7 @@ import pytest
 
 from codegen.project import observer_file as observers
 from codegen.families import random_models as R
-from codegen.tools import random_models as H
+from codegen.acceptance import random_models as H
 
 # the first seeds of each family (the fast lane reads these draws without designing them)
 SEEDS = range(12)

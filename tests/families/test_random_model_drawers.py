@@ -1,5 +1,5 @@
 """Each family contributes its own random-model drawer (the capability RandomModels, issue 40): the
-acceptance of C == model (codegen.tools.random_models) draws every registered family that has one, a
+acceptance of C == model (codegen.acceptance.random_models) draws every registered family that has one, a
 family registered by a user's code included, and names the registered families that have none."""
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import pytest
 
 from codegen import families
 from codegen.families import random_models as R
-from codegen.families.capabilities import RandomModels
-from codegen.tools import random_models as H
+from codegen.contract.capabilities import RandomModels
+from codegen.acceptance import random_models as H
 
 LINF = families.get("linf_uio")
 

@@ -18,7 +18,7 @@ import sympy as sp
 
 from codegen import families
 from codegen.families import random_models as R
-from codegen.tools import random_models as H
+from codegen.acceptance import random_models as H
 from codegen.project import observer_file as observers
 
 SEEDS = range(12)

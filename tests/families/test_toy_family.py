@@ -1,8 +1,8 @@
 """A new family is one folder and one line: a toy family defined and registered here, in the
 test itself, goes through design -> certificate -> C -> extension without touching any other file.
-It implements the required protocol only (codegen.families.base): build(config, solver) and an
+It implements the required protocol only (codegen.contract.family): build(config, solver) and an
 ObserverBuild with its signals, step, reference step, certificate and artifact; no optional
-capability (codegen.families.capabilities), and uiogen refuses what needs one, by name.
+capability (codegen.contract.capabilities), and uiogen refuses what needs one, by name.
 
 The toy is a Luenberger observer of an LTI model (x' = A x + B u, y = C x) with a decay-rate
 LMI: find P > 0, Y with He(P A - Y C) + 2 alpha P < 0, gain L = P^-1 Y; the step is backward
@@ -18,7 +18,7 @@ import pytest
 
 from codegen import cli, families, pipeline
 from codegen.design import lock as design_lock, lmi
-from codegen.emit import generate as emit
+from codegen import workflow
 from codegen.project import observer_file as observers
 from codegen.certificate.artifact import artifact_head, significant, solver_certificate
 from codegen.certificate.certificate import Certificate, Recheck, Step
@@ -181,7 +181,7 @@ def test_a_family_registered_from_outside_goes_to_a_compiled_step(toy, capsys):
     assert "toy Luenberger observer" in out and "certified: He(P (A - L C))" in out
     lock = design_lock.path(config)
     assert lock.is_file() and lock.parent == path.parent / "generated_c" / "toy_msd"
-    emit.generate([str(path)], log=lambda *_: None)
+    workflow.generate([str(path)], log=lambda *_: None)
     assert cli.main(["build", str(path)]) == 0
     from python_bindings import load
     obs = load(str(path))

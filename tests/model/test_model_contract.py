@@ -325,19 +325,19 @@ def test_check_gains_takes_a_design_lock_as_committed():
 
 
 def test_the_shared_logs_peaks_are_the_logs_not_the_observers():
-    from codegen.validation import run as validate, stanford
+    from codegen.validation import logs, stanford
     assert stanford.peak_times("stanford") == stanford.PEAK_TIMES
     assert stanford.peak_times("/elsewhere/my_log.csv") == ()
 
 
 @pytest.mark.slow       # runs the compiled step and the Kalman baselines over the shared log twice
 def test_the_same_log_elsewhere_has_no_peaks_of_ours(tmp_path):
-    from codegen.validation import run as validate, stanford
-    here = validate.run_data("stanford_sideslip", "stanford")
+    from codegen.validation import logs, stanford
+    here = logs.run("stanford_sideslip", "stanford")
     assert [round(p["t"]) for p in here["peaks"]] == [round(t) for t in stanford.PEAK_TIMES]
     copy = tmp_path / "my_log.csv.gz"
     copy.write_bytes(stanford._resolve("stanford").read_bytes())
-    there = validate.run_data("stanford_sideslip", str(copy))
+    there = logs.run("stanford_sideslip", str(copy))
     assert there["peaks"] == [] and there["observer"] == here["observer"]
 
 

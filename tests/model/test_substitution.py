@@ -1,4 +1,4 @@
-"""Unknown inputs that enter through a nonlinearity (codegen.model.substitution).
+"""Unknown inputs that enter through a nonlinearity (codegen.representation.substitution).
 
 A road bank angle entering as g sin(phi_r) (L-infinity family) and a steering angle inside a
 saturating front tyre (TS family): the family's refusal offers the change of variables; with
@@ -17,7 +17,8 @@ import sympy as sp
 from codegen import cli
 from codegen.emit import stepgen
 from codegen.errors import ModelDefinitionError, NotAffineError
-from codegen.model import load_parameters, substitution
+from codegen.model import load_parameters
+from codegen.representation import substitution
 from codegen.project import observer_file as observers
 
 BANK_MODEL = '''

@@ -14,7 +14,7 @@ import pytest
 
 from codegen import cli, pipeline
 from codegen.design.solver import FreshSolver
-from codegen.emit import generate as emit
+from codegen import workflow
 from codegen.project import observer_file as observers
 from codegen.errors import RepresentationError
 from codegen.families.linf_uio import build as linf_build
@@ -180,7 +180,7 @@ def test_uiogen_new_writes_a_starter_that_designs_generates_and_builds(tmp_path,
     toml = folder / "my_observer.toml"
     assert toml.is_file() and (folder / "model.py").is_file() and (folder / "parameters.toml").is_file()
     assert cli.main(["design", str(toml), "--update"]) == 0
-    emit.generate([str(toml)], log=lambda *_: None)
+    workflow.generate([str(toml)], log=lambda *_: None)
     assert cli.main(["build", str(toml)]) == 0
     from python_bindings import load
     obs = load(str(toml))
@@ -279,7 +279,7 @@ def test_scheduling_dependent_D_with_feedthrough_designs_and_tracks(tmp_path):
         from codegen.families.linf_uio import discrete
         ref = discrete.step_numpy(b.data, z, u, y, rho)[0]
         assert np.abs(z_ca - ref).max() <= 1e-10 * max(1.0, np.abs(ref).max())
-    emit.generate([str(obs)], log=lambda *_: None)
+    workflow.generate([str(obs)], log=lambda *_: None)
     extension.build_extension(str(obs))
     res = validate.run_scenario(str(obs), "excitation")
     keep = res["signals"]["t"] >= 2.0

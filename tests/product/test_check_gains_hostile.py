@@ -120,7 +120,7 @@ def _observers_with_gamma(printed: bool) -> list:
     """Built-in observers whose committed lock reports a gamma: those whose family checks a printed form
     of its gains (the lock's own P_i, L_i are such a form) or those checked in the lock form."""
     from codegen import families
-    from codegen.families.capabilities import GainForms
+    from codegen.contract.capabilities import GainForms
     from codegen.project import observer_file as observers
     out = []
     for name in observers.names():

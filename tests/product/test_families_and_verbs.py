@@ -1,7 +1,7 @@
 """Every verb for every family (issue 23 items 5 and 6): each family's starter, from ``uiogen new``
 in an empty folder outside the checkout, through design, generate, build, validate (excitation,
 and a logged run with a column map), check-gains, the FMU, the float32 build and a campaign on
-the model's own equations (:mod:`codegen.tools.verbs`). The committed record the docs' table is rendered
+the model's own equations (:mod:`codegen.acceptance.verbs`). The committed record the docs' table is rendered
 from (``docs/data/families_and_verbs.json``; ``tests/product/test_docs.py`` compares the page) must say
 what the run measured."""
 import json
@@ -9,7 +9,8 @@ import json
 import pytest
 
 from codegen import families
-from codegen.tools import docs, verbs
+from codegen.acceptance import verbs
+from codegen.tools import docs
 
 FAMILIES = [f for f in families.names() if families.get(f).example]
 _ROWS: dict = {}
@@ -44,7 +45,7 @@ def test_the_starter_takes_every_verb(family, base):
 def test_the_record_of_every_family(base, tmp_path):
     """The committed record (docs/data, rendered into docs/families_and_verbs.md) says what this run
     measured: the same outcome in every cell. The test writes its own copy, never the docs; the
-    record is refreshed by ``python -m codegen.tools.verbs --out docs/data/families_and_verbs.json``."""
+    record is refreshed by ``python -m codegen.acceptance.verbs --out docs/data/families_and_verbs.json``."""
     rows = {f: row(f, base) for f in FAMILIES}
     path = verbs.write_record(rows, tmp_path / "record.json")
     rec = json.loads(path.read_text())

@@ -17,6 +17,7 @@ from codegen.tools import harness
 from codegen.project import observer_file as observers
 from codegen import pipeline
 from codegen.validation import simulate, run as validate
+from codegen.validation import logs
 from codegen.families.linf_uio import build as linf_build
 from codegen.validation import common
 from python_bindings import load
@@ -212,7 +213,7 @@ def test_generate_killed_at_every_file_operation_loses_nothing(tmp_path):
     plain generate after it re-solves nothing and leaves the committed set, complete, and no
     leftover (the design lock is never lost, whatever the point)."""
     from conftest import require_strace
-    from codegen.emit import generate as emit
+    from codegen import workflow
     import filecmp
     import shutil
     strace = require_strace()
@@ -238,7 +239,7 @@ def test_generate_killed_at_every_file_operation_loses_nothing(tmp_path):
         last = [x for x in log.read_text().splitlines() if f" {call}(" in x][-1]
         assert str(project / "generated_c") in last, f"killed at {last}, not at {line}"
         lines = []
-        emit.generate([name], log=lines.append, project=project)
+        workflow.generate([name], log=lines.append, project=project)
         assert not any("solving" in x for x in lines), (line, lines)
         _, mismatch, errors = filecmp.cmpfiles(committed, here, [p.name for p in committed.iterdir()], shallow=False)
         assert not mismatch and not errors, (line, mismatch, errors)
@@ -249,10 +250,10 @@ def test_generate_killed_at_every_file_operation_loses_nothing(tmp_path):
 def realistic_inputs(name, obs):
     """The real log for observers that consume its signals and whose boxes it fits (observers
     designed for that car), else the nominal closed-loop plant."""
-    if all(c in validate.DATA_COLUMNS for c in obs.input_names):
+    if all(c in logs.DATA_COLUMNS for c in obs.input_names):
         from codegen.validation import stanford
         run = stanford.load("stanford")
-        log = np.column_stack([getattr(run, validate.DATA_COLUMNS[c]) for c in obs.input_names])
+        log = np.column_stack([getattr(run, logs.DATA_COLUMNS[c]) for c in obs.input_names])
         boxes, _ = scheduling_boxes(name, obs)
         if all(lo <= log[:, c].min() and log[:, c].max() <= hi for c, (lo, hi) in boxes.items()):
             return log

@@ -598,7 +598,7 @@ def test_probe_a_forged_lock_is_refused_or_re_derived_by_every_verb(starter, tmp
         design_lock.verify(json.loads(text), str(lock))                 # the checksums alone do not see it
         if stamp != "lock only":
             files = {f.name: f.read_text() for f in folder.iterdir() if f.name != emit.STAMP}
-            (folder / emit.STAMP).write_text(emit._stamp_text(emit.emission_inputs(config, text), files))
+            (folder / emit.STAMP).write_text(emit.stamp_text(emit.emission_inputs(config, text), files))
         lock_copy = tmp_path / "forged_lock.json"
         lock_copy.write_text(text)
         for verb, args in _verbs(project, obs, lock_copy, every=what.startswith("gamma")).items():

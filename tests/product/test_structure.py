@@ -141,7 +141,8 @@ def test_design_hash_covers_every_module_the_pipeline_imports(NAME):
 
 
 
-UNSTAMPED = ("validation", "analysis", "campaign", "targets", "tools", "cli.py", "commandline.py")
+UNSTAMPED = ("validation", "analysis", "campaign", "targets", "workflow.py", "tools", "cli.py", "commandline.py",
+             "acceptance")
 """What no design and no generated C derives from: editing a metric, a plot, a campaign, an export target, a
 maintainer tool or the command line re-solves and regenerates nothing."""
 
@@ -183,20 +184,17 @@ def test_the_c_hash_covers_the_design_the_emitters_and_the_templates(NAME, monke
 
 # ---- floors: a stage imports only what stands below it --------------------------------------------------
 
-#: {package of codegen: the packages that stand above it, which it must not import, at module level or
-#: inside a function}: the project (observer files, parameter files, settings) is read by validation,
-#: campaigns, analysis, targets and the command line, never the other way round; a target is driven
-#: by the command line and the tools, never drives them
-ABOVE = {"project": ("validation", "campaign", "analysis", "targets", "tools", "cli"),
-         "targets": ("cli", "tools"),
-         # the typed settings every file is parsed with stand on the errors alone; the model's definitions
-         # and its parameter files on them (the model still asks representation for the bounds of a
-         # substitution: issue 40)
-         "settings": ("model", "project", "representation", "design", "certificate", "emit", "extension",
-                      "families", "pipeline", "validation", "campaign", "analysis", "targets", "tools", "cli"),
-         "model": ("project", "design", "certificate", "emit", "extension", "families", "pipeline", "validation",
-                   "campaign", "analysis", "targets", "tools", "cli"),
-         "design": ("pipeline", "validation", "campaign", "analysis", "targets", "tools", "cli")}
+#: The floors, from the ground up: the stages in pipeline order (the model, its representation, the LMI design, the
+#: certificate), the contract a family and the toolchain agree on (codegen.contract), the project's files (observer
+#: and parameter files, what a command writes), C emission, the pipeline that runs a family's stages, the compiled
+#: extension; then what uses them: validation, analysis, the families themselves (each one folder, over the stages
+#: and the validation it runs), campaigns, export targets, the loops of `uiogen generate`, the maintainer tools and
+#: the command line. A package of codegen (or a top-level module) imports only what stands below it, at module level
+#: or inside a function; the family is handed down (config.observer_family), never imported from below.
+FLOORS = ("errors", "settings", "model", "representation", "design", "certificate", "contract", "project", "emit",
+          "pipeline", "extension", "validation", "analysis", "families", "commandline", "campaign", "targets",
+          "workflow", "tools", "cli", "acceptance")
+ABOVE = {f: FLOORS[i + 1:] for i, f in enumerate(FLOORS)}
 
 
 def _upward(edges: dict, above: dict = ABOVE) -> list:
@@ -220,6 +218,12 @@ def test_the_floor_check_finds_an_upward_import():
 
 def test_no_stage_imports_a_stage_above_it():
     assert _upward(_graph()) == [], "upward imports (move the shared part down instead)"
+
+
+def test_every_package_of_codegen_stands_on_a_floor():
+    children = {p.stem if p.is_file() else p.name for p in (ROOT / "codegen").iterdir()
+                if (p.suffix == ".py" and p.stem != "__init__") or (p / "__init__.py").is_file()}
+    assert children == set(FLOORS), f"not on a floor: {sorted(children - set(FLOORS))}; gone: {sorted(set(FLOORS) - children)}"
 
 
 def test_the_cli_reaches_a_target_only_through_the_registry():

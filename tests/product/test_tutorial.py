@@ -48,9 +48,10 @@ def test_the_tutorial_runs_from_an_empty_folder(tutorial):
 
 
 def test_the_force_estimate_is_within_five_percent_and_unit_free(tutorial):
-    from codegen.emit import generate as emit
+    from codegen import workflow
     from codegen.extension import build as extension
     from codegen.validation import run as validate
+    from codegen.validation import logs
     res = validate.run_scenario(str(tutorial / "disturbance.toml"), "excitation")
     truth = res["signals"]["truth"]["F"]
     keep = res["signals"]["t"] >= 2.0
@@ -65,7 +66,7 @@ def test_the_force_estimate_is_within_five_percent_and_unit_free(tutorial):
                                                   .replace('"lateral.py"', '"lateral_kn.py"')
                                                   .replace('"car.toml"', '"car_kn.toml"'))
     kn = str(tutorial / "disturbance_kn.toml")
-    emit.generate([kn], log=lambda *_: None)
+    workflow.generate([kn], log=lambda *_: None)
     extension.build_extension(kn)
     res_kn = validate.run_scenario(kn, "excitation")
     f_n = res["signals"]["estimate"]["F"][keep]
@@ -78,7 +79,7 @@ def test_the_force_estimate_is_within_five_percent_and_unit_free(tutorial):
     (tutorial / "disturbance_deg_g.toml").write_text((tutorial / "disturbance.toml").read_text()
                                                      .replace('"lateral.py"', '"lateral_deg_g.py"'))
     other = str(tutorial / "disturbance_deg_g.toml")
-    emit.generate([other], log=lambda *_: None)
+    workflow.generate([other], log=lambda *_: None)
     extension.build_extension(other)
     f_deg_g = validate.run_scenario(other, "excitation")["signals"]["estimate"]["F"][keep]
     assert np.abs(f_deg_g - f_n).max() <= 1e-3 * np.abs(f_n).max()
@@ -89,9 +90,10 @@ def test_a_log_in_its_own_units_gives_the_same_estimates(tutorial):
     the observer over the log gives what it gives over the simulated SI signals."""
     from codegen.project import observer_file as observers
     from codegen.validation import run as validate
+    from codegen.validation import logs
     from codegen.extension.build import load
     from codegen.validation import excitation
-    res = validate.run_data(str(tutorial / "disturbance.toml"), str(tutorial / "log.csv"))
+    res = logs.run(str(tutorial / "disturbance.toml"), str(tutorial / "log.csv"))
     run = excitation.simulate(observers.get(str(tutorial / "disturbance.toml")), duration=20.0)
     obs = load(str(tutorial / "disturbance.toml"))
     out = obs.run(np.column_stack([run[n] for n in obs.input_names]))[0]
@@ -108,8 +110,9 @@ def test_an_mdf4_log_at_its_own_rates(tutorial):
     CSV's, and --out's estimates read back with their units."""
     import asammdf
     from codegen.validation import run as validate
-    csv = validate.run_data(str(tutorial / "disturbance.toml"), str(tutorial / "log.csv"))
-    mdf = validate.run_data(str(tutorial / "disturbance.toml"), str(tutorial / "log.mf4"))
+    from codegen.validation import logs
+    csv = logs.run(str(tutorial / "disturbance.toml"), str(tutorial / "log.csv"))
+    mdf = logs.run(str(tutorial / "disturbance.toml"), str(tutorial / "log.mf4"))
     assert mdf["format"] == "mdf"
     assert mdf["resampling"]["speed_kmh"] == {"rate_hz": pytest.approx(50), "method": "hold", "latency_s": 0.0}
     assert any("'speed_kmh' is sampled at 50 Hz" in w for w in mdf["warnings"])
@@ -126,8 +129,9 @@ def test_a_ros2_bag_gives_the_figures_of_its_samples(tutorial):
     through the step directly (the simulated run's own inputs, no file between)."""
     from codegen.validation import excitation
     from codegen.validation import run as validate
+    from codegen.validation import logs
     from codegen.project import observer_file
-    bag = validate.run_data(str(tutorial / "disturbance_bag.toml"), str(tutorial / "drive_bag"))
+    bag = logs.run(str(tutorial / "disturbance_bag.toml"), str(tutorial / "drive_bag"))
     assert bag["format"] == "rosbag2" and {r["method"] for r in bag["resampling"].values()} == {"as recorded"}
     run = excitation.simulate(observer_file.get(str(tutorial / "disturbance.toml")), duration=20.0)
     assert bag["samples"] == run["t"].size
@@ -137,6 +141,7 @@ def test_a_ros2_bag_gives_the_figures_of_its_samples(tutorial):
 
 def test_the_saturating_tyre_observer_tracks_its_model(tutorial):
     from codegen.validation import run as validate
+    from codegen.validation import logs
     res = validate.run_scenario(str(tutorial / "saturating.toml"), "excitation")
     obs = res["observer"]
     assert obs["v_y"]["rms"] < 0.01 and obs["T_eng"]["nmse_percent"] > 95 and obs["delta"]["nmse_percent"] > 95
@@ -146,11 +151,11 @@ def test_the_saturating_tyre_observer_tracks_its_model(tutorial):
 def mapped(tutorial):
     """A copy of the disturbance observer, built; its column map is then edited per case (the map
     is not part of the design: the build stays current)."""
-    from codegen.emit import generate as emit
+    from codegen import workflow
     from codegen.extension import build as extension
     path = tutorial / "disturbance_map.toml"
     path.write_text((tutorial / "disturbance.toml").read_text())
-    emit.generate([str(path)], log=lambda *_: None)
+    workflow.generate([str(path)], log=lambda *_: None)
     extension.build_extension(str(path))
     return path
 
@@ -178,14 +183,15 @@ def test_column_map_mistakes_name_the_file_and_key(tutorial, mapped, capsys, old
 
 
 def test_editing_the_column_map_never_re_solves(tutorial, mapped):
-    from codegen.emit import generate as emit
+    from codegen import workflow
     from codegen.validation import run as validate
+    from codegen.validation import logs
     text = (tutorial / "disturbance.toml").read_text()
     mapped.write_text(text.replace('unit = "deg/s" }', 'unit = "rad/s", scale = 0.017453292519943295 }'))
     lines = []
-    emit.generate([str(mapped)], log=lines.append)
+    workflow.generate([str(mapped)], log=lines.append)
     assert len(lines) == 1 and "unchanged" in lines[0], lines
-    same = validate.run_data(str(mapped), str(tutorial / "log.csv"))
-    ref = validate.run_data(str(tutorial / "disturbance.toml"), str(tutorial / "log.csv"))
+    same = logs.run(str(mapped), str(tutorial / "log.csv"))
+    ref = logs.run(str(tutorial / "disturbance.toml"), str(tutorial / "log.csv"))
     assert np.allclose(same["signals"]["F"], ref["signals"]["F"], rtol=1e-12, atol=1e-9)
     mapped.write_text(text)

@@ -93,12 +93,12 @@ def test_a_missing_cross_tool_is_one_line_saying_how_to_install_it(tool, starter
 @pytest.fixture(scope="module")
 def project(tmp_path_factory):
     """A project made by ``uiogen new`` (linf_uio), generated and built once for the module."""
-    from codegen.emit import generate as emit
+    from codegen import workflow
     from codegen.extension.build import build_extension
     require(qemu.available() and m4cycles.available(), qemu.missing() or m4cycles.OBJDUMP)
     root = tmp_path_factory.mktemp("embedded")
     path = starter.write(root, families.get("linf_uio"), "obs")
-    emit.generate([str(path)], log=lambda *_: None)
+    workflow.generate([str(path)], log=lambda *_: None)
     build_extension(str(path))
     return path
 

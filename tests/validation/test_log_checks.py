@@ -23,7 +23,7 @@ from codegen.model import load_parameters
 from codegen.project import observer_file as observers
 from codegen.project.columns import model_unit
 from codegen.validation import log_checks as L
-from codegen.validation import run as validate
+from codegen.validation import logs
 from codegen.validation import stanford as S
 
 from conftest import require_shared
@@ -123,8 +123,8 @@ def test_a_consistent_log_passes_every_check(tmp_path, log):
 @pytest.mark.slow       # 4 s in the measured fast lane (pytest --durations, a loaded machine): full lane only
 def test_the_column_map_and_the_shared_format_agree(tmp_path):
     log = _write(tmp_path / "log.csv", _synthetic())
-    mapped = validate.run_data(observers.get(str(_observer(tmp_path)), project=ROOT), str(log))
-    shared = validate.run_data(NAME, str(log))
+    mapped = logs.run(observers.get(str(_observer(tmp_path)), project=ROOT), str(log))
+    shared = logs.run(NAME, str(log))
     assert np.array_equal(mapped["signals"]["beta"], shared["signals"]["beta"])         # the same C step, inputs
     assert [c["ratio"] for c in mapped["log_checks"]] == pytest.approx([c["ratio"] for c in shared["log_checks"]])
 
@@ -197,7 +197,7 @@ def test_a_steering_ratio_slip_in_the_shared_format(tmp_path, log):
     cols = {c: np.array(getattr(run, c)) for c in S.COLUMNS}
     for c in ("delta", "delta_fl", "delta_fr"):
         cols[c] = 1.5 * cols[c]
-    res = validate.run_data(NAME, str(_write(tmp_path / "slip.csv", cols)))
+    res = logs.run(NAME, str(_write(tmp_path / "slip.csv", cols)))
     assert len(res["warnings"]) == 1 and "column 'delta' (delta, the shared format's unit rad)" in res["warnings"][0]
     assert "steering ratio" in res["warnings"][0]
 

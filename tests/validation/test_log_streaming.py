@@ -17,7 +17,7 @@ import pytest
 
 from codegen.errors import DatasetError
 from codegen.validation import csvlog
-from codegen.validation import run as validate
+from codegen.validation import logs
 from codegen.validation import stanford as S
 from codegen.validation import streaming
 
@@ -76,8 +76,8 @@ def test_errors_name_the_same_row_whatever_the_chunking(tmp_path, block):
 @pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 def test_validation_does_not_depend_on_the_chunking(tmp_path):
     p = _log(tmp_path)
-    whole = validate.run_data("stanford_sideslip", str(p))
-    parts = validate.run_data("stanford_sideslip", str(p), block_bytes=SMALL)
+    whole = logs.run("stanford_sideslip", str(p))
+    parts = logs.run("stanford_sideslip", str(p), block_bytes=SMALL)
     for k in ("beta", "vy"):
         for stat, v in whole["observer"][k].items():
             got = parts["observer"][k][stat]
@@ -90,12 +90,12 @@ def test_validation_does_not_depend_on_the_chunking(tmp_path):
 @pytest.mark.slow       # runs a compiled extension (the fast lane has no build)
 def test_a_long_log_runs_without_the_baselines_and_keeps_every_kth_sample(tmp_path, monkeypatch):
     p = _log(tmp_path)
-    whole = validate.run_data("stanford_sideslip", str(p))
-    monkeypatch.setattr(validate, "BASELINE_MAX_SAMPLES", 1000)
+    whole = logs.run("stanford_sideslip", str(p))
+    monkeypatch.setattr(logs, "BASELINE_MAX_SAMPLES", 1000)
     monkeypatch.setattr(streaming, "KEEP_SAMPLES", 700)
-    long = validate.run_data("stanford_sideslip", str(p), block_bytes=SMALL)
+    long = logs.run("stanford_sideslip", str(p), block_bytes=SMALL)
     assert long["baselines"] == {} and "3000 samples, more than 1000" in long["baselines_skipped"]
-    assert "baselines not run" in validate.format_data_table(long)
+    assert "baselines not run" in logs.format_table(long)
     assert long["observer"]["beta"]["rms"] == pytest.approx(whole["observer"]["beta"]["rms"], rel=1e-9)
     stride = long["signals_stride"]
     assert stride == 8 and np.array_equal(long["signals"]["beta"], whole["signals"]["beta"][::stride])

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from codegen.validation import run as validate
+from codegen.validation import logs
 from codegen.errors import SampleError
 from codegen.validation import stanford
 
@@ -25,7 +25,7 @@ def _shared_log():
 
 
 def test_stanford_observer_beats_the_linear_kf():
-    r = validate.run_data("stanford_sideslip", "stanford")
+    r = logs.run("stanford_sideslip", "stanford")
     ours, kf = r["observer"]["beta"]["rms"], r["baselines"]["linear_kf"]["beta"]["rms"]
     assert r["status_flags"] == 0 and r["samples"] == 27500
     assert 0.6 < kf < 0.75                    # the source repository's KF, reproduced (~0.68 deg)
@@ -35,7 +35,7 @@ def test_stanford_observer_beats_the_linear_kf():
 
 def test_observer_without_the_logged_signals_is_refused():
     with pytest.raises(SampleError, match="stanford_sideslip"):
-        validate.run_data("lpv_linf_driver_torque", "stanford")
+        logs.run("lpv_linf_driver_torque", "stanford")
 
 
 def test_cli_json_is_the_run_the_library_makes():
@@ -48,7 +48,7 @@ def test_cli_json_is_the_run_the_library_makes():
     assert res["warnings"] == [] and {c["verdict"] for c in res["log_checks"]} == {"ok"}
     assert res["uninformative"] == []           # the sideslip estimate carries information
     # the same numbers as the run made in this process (the CLI formats, it does not compute)
-    ref = validate.run_data("stanford_sideslip", "stanford")
+    ref = logs.run("stanford_sideslip", "stanford")
     for key in ("observer", "baselines", "status_flags", "samples", "peaks", "splits"):
         assert res[key] == json.loads(json.dumps(ref[key])), key
     # the split counts the log's own samples on each side of the evaluation start
@@ -61,7 +61,7 @@ def test_cli_json_is_the_run_the_library_makes():
     assert res["status_flags"] == 0          # no sample of the log leaves the observer's declared boxes
     # each peak window holds a large sideslip of the log, and its error is the largest there
     for pk in res["peaks"]:
-        m = np.abs(t - pk["t"]) <= validate.PEAK_HALF_WIDTH
+        m = np.abs(t - pk["t"]) <= logs.PEAK_HALF_WIDTH
         assert abs(pk["truth_peak_deg"]) > 3.0
         assert pk["truth_peak_deg"] == pytest.approx(np.degrees(log.beta_true[m][np.argmax(np.abs(log.beta_true[m]))]))
         assert pk["observer"] == pytest.approx(np.degrees(np.abs(ref["signals"]["beta"] - log.beta_true)[m].max()))
@@ -83,9 +83,9 @@ def test_the_peers_run_on_two_processes_with_the_estimates_of_one(monkeypatch):
     full = stanford.load(stanford.STANFORD_PATH)
     run = stanford.StanfordRun(**{f.name: (v[:3000] if isinstance(v, np.ndarray) else v)
                                   for f in dataclasses.fields(full) for v in [getattr(full, f.name)]})
-    two = validate._baselines(config, run)
+    two = logs._baselines(config, run)
     monkeypatch.setattr("os.cpu_count", lambda: 1)
-    one = validate._baselines(config, run)
+    one = logs._baselines(config, run)
     assert set(two) == set(one) == {"linear_kf", "ekf", "ekf_nonlinear_tyre", "ukf_nonlinear_tyre"}
     for name in one:
         assert np.array_equal(two[name], one[name]), name

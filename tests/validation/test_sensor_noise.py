@@ -220,7 +220,7 @@ def test_the_header_says_how_the_run_was_measured(tmp_path, monkeypatch):
 def test_noise_free_is_for_the_excitation_scenario():
     """A family's own scenarios carry their paper's noise: --noise-free there is refused, not ignored."""
     from codegen import families
-    from codegen.families.capabilities import Scenarios
+    from codegen.contract.capabilities import Scenarios
     family = next(families.get(f) for f in families.names()
                   if families.get(f).example and isinstance(families.get(f), Scenarios))
     scenario = family.demo_scenarios[0]

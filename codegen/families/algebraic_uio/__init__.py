@@ -11,7 +11,7 @@ HOSMD); ``validation``: the paper's examples, scenarios as data in the observer 
 from __future__ import annotations
 
 from ...settings import Rule
-from ..base import Family
+from ...contract.family import Family
 
 
 class AlgebraicUIO(Family):
@@ -21,7 +21,7 @@ class AlgebraicUIO(Family):
     short_citation = "Ichalal and Mammar 2015"
     observer_keys = {"validation": Rule(dict, doc="scenarios [validation.NAME] (see the family's validation)")}
     example = "algebraic_uio_example2"
-    # capabilities (codegen.families.capabilities): Scenarios, DemoFigures, BenchFigures, Applicability
+    # capabilities (codegen.contract.capabilities): Scenarios, DemoFigures, BenchFigures, Applicability
     demo_scenarios = ("paper",)
     table_note = "the paper's examples, compiled C step"
 

@@ -34,7 +34,7 @@ from scipy.linalg import expm
 
 from ...certificate.artifact import artifact_head, significant, solver_certificate
 from ...certificate.certificate import Certificate, Recheck, Step
-from ..base import ObserverBuild, StepNotes
+from ...contract.family import ObserverBuild, StepNotes
 from ...certificate.contraction import ContractionMetric
 from . import representation as rdeg
 from . import design as alg
@@ -43,6 +43,7 @@ from ...emit.stepgen import solve_unpivoted
 from ...design.solver import FreshSolver
 from ...errors import InfeasibleLMIError, ModelDefinitionError, UiogenError
 from ...model import LPVModel, instantiate, load_parameters
+from ...representation.substitution import offer
 from ...representation.polytope import sector_weights_product
 
 
@@ -582,7 +583,7 @@ def build(config, solver, lpv: LPVModel | None = None) -> AlgebraicUIOBuild:
         settings = replace(settings, tol=solver.tol)
     t0 = time.perf_counter()
     if lpv is None:
-        lpv = instantiate(config.design_model(), load_parameters(config.parameter_path))
+        lpv = instantiate(config.design_model(), load_parameters(config.parameter_path), unknown_input_hint=offer)
     if any(s.derived is not None for s in lpv.definition.scheduling):
         derived = [str(s.symbol) for s in lpv.definition.scheduling if s.derived is not None]
         raise ModelDefinitionError(f"{config.source}: derived scheduling signal(s) {', '.join(derived)}: the algebraic "

@@ -11,7 +11,7 @@ Satory track on the CommonRoad plant, Table 1 of the paper.
 """
 from __future__ import annotations
 
-from ..base import Family
+from ...contract.family import Family
 
 
 class InterconnectedUIO(Family):
@@ -21,7 +21,7 @@ class InterconnectedUIO(Family):
     short_citation = "Sentouh et al. 2023"
     observer_keys = {}
     example = "interconnected_uio"
-    # capabilities (codegen.families.capabilities): Scenarios, DemoFigures, Applicability
+    # capabilities (codegen.contract.capabilities): Scenarios, DemoFigures, Applicability
     demo_scenarios = ("satory",)
     table_note = "the paper's Table 1 format"
 

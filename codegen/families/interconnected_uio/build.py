@@ -16,7 +16,7 @@ import sympy as sp
 
 from ...certificate.artifact import artifact_head, significant, solver_certificate
 from ...certificate.certificate import Certificate, Recheck, Step
-from ..base import ObserverBuild, StepNotes
+from ...contract.family import ObserverBuild, StepNotes
 from ...certificate.contraction import ContractionMetric
 from ...design.precision import rate_for_backward_euler, required_margin
 from . import representation as icm

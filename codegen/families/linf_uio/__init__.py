@@ -17,7 +17,7 @@ import numpy as np
 
 from ...errors import ConfigurationError, brief
 from ...settings import Rule, parse_table
-from ..base import Family
+from ...contract.family import Family
 
 UI_FILTER_KEYS = {"time_constant": Rule(float, gt=0, doc="T_f of the UI filter (47), s")}
 
@@ -31,7 +31,7 @@ class LinfUIO(Family):
                      "rate_bounds": Rule(str, choices=("exact", "at_expansion_point", "none")),
                      "ui_filter": Rule(dict)}
     example = "lpv_linf_driver_torque_sector"      # starters use the exact polytope (the paper's is an approximation)
-    # capabilities (codegen.families.capabilities): Scenarios, DemoFigures, Campaigns, Applicability, GainForms
+    # capabilities (codegen.contract.capabilities): Scenarios, DemoFigures, Campaigns, Applicability, GainForms
     demo_scenarios = ("track_varying_speed", "takeover_opposing_assist")
     table_note = "angles in degrees"
     campaign_plant = "steering_torque"

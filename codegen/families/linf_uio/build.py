@@ -18,10 +18,11 @@ from ...certificate.contraction import ContractionMetric
 from ...design.precision import required_margin
 from ...design import lock
 from ...model import LPVModel, instantiate, load_parameters
+from ...representation.substitution import offer
 from ...project.observer_file import ObserverConfig
 from ...errors import (CertificateError, ModelDefinitionError, RankConditionError, RepresentationError, SolverError, UILoopError,
                       UiogenError)
-from ..base import ObserverBuild, StepNotes
+from ...contract.family import ObserverBuild, StepNotes
 from . import design as linf_uio
 from . import discrete
 
@@ -220,7 +221,7 @@ def representation(config: ObserverConfig):
 
 
 def _representation(config: ObserverConfig):
-    lpv = instantiate(config.design_model(), load_parameters(config.parameter_path))
+    lpv = instantiate(config.design_model(), load_parameters(config.parameter_path), unknown_input_hint=offer)
     if config.polytope == "taylor_reduced":
         poly = polytope.taylor_reduced_polytope(lpv, config.rate_bounds)
         err = polytope.taylor_error(lpv, poly)

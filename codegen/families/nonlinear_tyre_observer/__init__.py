@@ -9,7 +9,7 @@ and one quadratic Lyapunov matrix certifies the fixed-gain error map at every ve
 """
 from __future__ import annotations
 
-from ..base import Family
+from ...contract.family import Family
 
 
 class NonlinearTyreObserver(Family):
@@ -19,7 +19,7 @@ class NonlinearTyreObserver(Family):
     short_citation = "nonlinear-tyre DMVT"
     observer_keys = {}
     bounds_settings = ("bounds_rel_tol",)
-    # capabilities (codegen.families.capabilities): DemoFigures, Applicability, GainForms, LogPeers,
+    # capabilities (codegen.contract.capabilities): DemoFigures, Applicability, GainForms, LogPeers,
     # Identification, NoiseBound
     example = "stanford_sideslip_nonlinear_tyre"
 

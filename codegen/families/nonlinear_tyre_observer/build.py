@@ -52,7 +52,7 @@ from ...model import load_parameters
 from ...settings import Rule, parse_settings, setting
 from ...design.precision import margin_field, precision_field
 from ...emit.stepgen import lambdify
-from ..base import ObserverBuild, StepNotes
+from ...contract.family import ObserverBuild, StepNotes
 from . import design as dsn
 from .representation import TyreRepresentation, represent
 

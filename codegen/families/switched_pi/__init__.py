@@ -12,7 +12,7 @@ LMIs (20), the H-infinity check and the exact ZOH of each mode; ``build``: the p
 from __future__ import annotations
 
 from ...settings import Rule
-from ..base import Family
+from ...contract.family import Family
 
 
 class SwitchedPI(Family):
@@ -22,7 +22,7 @@ class SwitchedPI(Family):
     short_citation = "Menhour et al. 2014"
     observer_keys = {"switching": Rule(dict)}
     example = "switched_pi_bank_angle"
-    # capabilities (codegen.families.capabilities): Scenarios, DemoFigures, Campaigns, Applicability
+    # capabilities (codegen.contract.capabilities): Scenarios, DemoFigures, Campaigns, Applicability
     demo_scenarios = ("banked_road_braking", "braking_on_bend")
     table_note = "angles in degrees"
     campaign_plant = "banked_road"

@@ -16,7 +16,7 @@ import casadi as ca
 
 from ...certificate.artifact import artifact_head, significant, solver_certificate
 from ...certificate.certificate import Bound, Certificate, Recheck, Step, unit_ratio
-from ..base import ObserverBuild, StepNotes
+from ...contract.family import ObserverBuild, StepNotes
 from ...certificate.contraction import ContractionMetric
 from . import representation as switched
 from . import design as switched_pi

@@ -38,6 +38,7 @@ import sympy as sp
 
 from ...errors import ModelDefinitionError, SchedulingBoundsError
 from ...model import ModelDefinition, ParameterSet, instantiate
+from ...representation.substitution import offer
 
 
 @dataclass(frozen=True)
@@ -273,7 +274,7 @@ def build(model: ModelDefinition, params: ParameterSet, raw_rule: dict, source: 
             # the scheduling boxes are irrelevant for fixed operating points; instantiate needs them
             boxed = replace(params, values=values, scheduling={**{str(s): _dummy_box(str(s)) for s in sched},
                                                                **params.scheduling})
-            lpvs[overrides] = instantiate(model, boxed)
+            lpvs[overrides] = instantiate(model, boxed, unknown_input_hint=offer)
         lpv = lpvs[overrides]
         lpv.require_no_ui_feedthrough("switched H-infinity PI observer", "Menhour et al. 2014, eq. (2): y = C x")
         lpv.require_no_derived_inputs("switched H-infinity PI observer", "Menhour et al. 2014: x' = A x + B u + F d")

@@ -10,7 +10,7 @@ step (16); ``build``: the pipeline; ``validation``: the paper's scenarios and Ta
 """
 from __future__ import annotations
 
-from ..base import Family
+from ...contract.family import Family
 
 
 class TSFuzzyUIO(Family):
@@ -21,7 +21,7 @@ class TSFuzzyUIO(Family):
     observer_keys = {}
     bounds_settings = ()       # its Jacobian bounds short of their tolerance are sound enclosures, never refused
     example = "ts_fuzzy_uio"
-    # capabilities (codegen.families.capabilities): Scenarios, DemoPlant, DemoFigures, BenchStudy, Applicability
+    # capabilities (codegen.contract.capabilities): Scenarios, DemoPlant, DemoFigures, BenchStudy, Applicability
     demo_scenarios = ("random_trajectory_accel", "circular_path_normal", "time_varying_grip_normal")
     table_note = "the paper's Table II format, then every figure in its unit"
 

@@ -16,7 +16,7 @@ from ...design.precision import required_margin
 from ...design import lock
 from ...model import cache, load_parameters
 from ...project.observer_file import ObserverConfig
-from ..base import ObserverBuild, StepNotes
+from ...contract.family import ObserverBuild, StepNotes
 from . import design as ts_fuzzy_uio
 from . import representation as ts_fuzzy
 

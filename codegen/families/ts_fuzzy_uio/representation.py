@@ -226,7 +226,7 @@ def split_consequents(model: ModelDefinition, subs: dict) -> dict:
     F = sp.Matrix(merge_float_noise(sp.Matrix(drop_zero_terms(model.dynamics, _signals(model))).subs(subs)))
     Dv = F.jacobian(sp.Matrix(d)) if d else sp.zeros(len(x), 0)
     if any(e.free_symbols for e in Dv):
-        from ...model.substitution import offer
+        from ...representation.substitution import offer
         nonlinear = [u for j, u in enumerate(d) if any(u in e.free_symbols for e in Dv[:, j])]
         raise NotAffineError(f"model {model.name!r}: the unknown inputs must enter with a constant matrix "
                              f"(D_v depends on {sorted(map(str, set().union(*(e.free_symbols for e in Dv))))}). The "

@@ -373,23 +373,23 @@ def scenario_inputs(config, obs, scenarios=None) -> dict:
     family whose scenarios need another plant) and, for an observer the demo validates on the
     real log (its real-data table), the shared log too: the float build is held to the data it is
     validated on, not to a synthetic run alone."""
-    from ...validation import demo, run as validate
+    from ...validation import demo, logs, run as validate
     out = {}
     todo = list(scenarios or validate.scenario_names(config))
     real_data = (demo.REAL_DATA_OBSERVER, *demo.REAL_DATA_OTHERS)
-    if scenarios is None and config.name in real_data and validate.SHARED_LOG not in todo:
-        todo.append(validate.SHARED_LOG)
+    if scenarios is None and config.name in real_data and logs.SHARED_LOG not in todo:
+        todo.append(logs.SHARED_LOG)
     from ...model import load_parameters
     own = load_parameters(config.parameter_path).meta.get("shared_log")       # the car's own shared log
-    if scenarios is None and own is not None and f"{own} log" in validate.SHARED_LOGS and f"{own} log" not in todo:
+    if scenarios is None and own is not None and f"{own} log" in logs.SHARED_LOGS and f"{own} log" not in todo:
         todo.append(f"{own} log")
     while todo:
         scenario = todo.pop(0)
         try:
-            out[scenario] = (validate.shared_log_inputs(obs.input_names, validate.SHARED_LOGS[scenario])
-                             if scenario in validate.SHARED_LOGS else validate.scenario_inputs(config, scenario))
+            out[scenario] = (logs.shared_log_inputs(obs.input_names, logs.SHARED_LOGS[scenario])
+                             if scenario in logs.SHARED_LOGS else validate.scenario_inputs(config, scenario))
         except ModelDefinitionError:
-            fallbacks = [validate.SHARED_LOG] if validate.reads_the_log(obs.input_names) else ["excitation"]
+            fallbacks = [logs.SHARED_LOG] if logs.reads_the_log(obs.input_names) else ["excitation"]
             if scenarios is not None or scenario in fallbacks:
                 raise
             if not out and not todo:

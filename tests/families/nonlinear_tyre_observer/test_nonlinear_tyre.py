@@ -293,9 +293,9 @@ def test_c_step_matches_reference_with_the_kinematic_fallback(built):
 def test_real_log_figures_on_the_identification_data():
     """On the shared half, all of it identification data now (no evaluation part is reported): the
     observer against its same-tyre peers, the flagged samples and the three sideslip peaks."""
-    from codegen.validation import run as validate
+    from codegen.validation import logs
     _run()
-    res = validate.run_data(NAME, "stanford")
+    res = logs.run(NAME, "stanford")
     base = res["baselines"]
     assert "splits" not in res                               # identification_t_end is the log's end
     assert res["observer"]["beta"]["rms"] == pytest.approx(0.2525, abs=0.002)
@@ -310,7 +310,7 @@ def test_real_log_figures_on_the_identification_data():
     assert peaks[110.0] == pytest.approx(0.93, abs=0.05)
     assert peaks[170.0] == pytest.approx(0.56, abs=0.05)
     assert peaks[207.0] == pytest.approx(1.10, abs=0.05)
-    text = validate.format_data_table(res)
+    text = logs.format_table(res)
     assert text.splitlines()[0].split()[:3] == ["estimator", "beta", "RMSE"]
 
 

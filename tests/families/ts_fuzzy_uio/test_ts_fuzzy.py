@@ -198,6 +198,7 @@ def test_seed004_targets_on_the_pacejka_plant(scenario):
     below the paper's, and so is the T_eng RMSD. The RMSDs of v_y (2x in scenario 2, 4x in 1) and of
     delta in scenario 2 (8x) are above the paper's: asserted at our figure, not the paper's."""
     from codegen.validation import run as validate
+    from codegen.validation import logs
     res = validate.run_scenario(NAME, scenario, "nominal")
     seed = ts_validation.PAPER_TABLE_II[scenario]
     obs = res["paper_format"]["rows"]        # Table II: SI units, delta in rad
@@ -216,6 +217,7 @@ def test_seed004_scenario3_on_the_pacejka_plant():
     grip law's minima, which the linear tyres (3) cannot follow) and are held to regression bounds;
     the same drive at the law's mean grip, constant, meets every target."""
     from codegen.validation import run as validate
+    from codegen.validation import logs
     cfg = observers.get(NAME)
     res = validate.run_scenario(NAME, "time_varying_grip_normal", "nominal")
     seed = ts_validation.PAPER_TABLE_II["time_varying_grip_normal"]
@@ -285,6 +287,7 @@ def test_commonroad_angle_steered_run():
     (19x) and delta (4.6x) miss it, the cause measured by the next test. Against the old truth
     (drive torque m R_w a_x) the T_eng MAE is 20.6 N m, 19.3 of it the steered-wheel projection."""
     from codegen.validation import run as validate
+    from codegen.validation import logs
     res = validate.run_scenario("ts_fuzzy_uio_bmw320i", "circular_path_normal", "commonroad")
     obs = res["paper_format"]["rows"]        # Table II: SI units, delta in rad
     seed = ts_validation.PAPER_TABLE_II["circular_path_normal"]
@@ -328,7 +331,8 @@ def test_commonroad_ablation_knobs_are_checked():
 @pytest.mark.slow          # the compiled observer
 def test_real_data_with_delta_as_unknown_input():
     from codegen.validation import run as validate
-    res = validate.run_data("ts_fuzzy_uio_stanford", "stanford")
+    from codegen.validation import logs
+    res = logs.run("ts_fuzzy_uio_stanford", "stanford")
     beta, delta = res["observer"]["beta"], res["observer"]["delta"]
     kf = res["baselines"]["linear_kf"]["beta"]
     assert beta["rms"] <= 1.02 * kf["rms"]          # the same linear tyre model as the KF

@@ -1,6 +1,6 @@
 """Optional capabilities of an observer family, each a small protocol.
 
-The required part of a family is :class:`~codegen.families.base.Family` (its paper, its keys and
+The required part of a family is :class:`~codegen.contract.family.Family` (its paper, its keys and
 ``build``). A family that can do more defines the members of a protocol below, and the toolchain
 asks for it explicitly, ``isinstance(family, Scenarios)``, or with :func:`require` where the
 command cannot go on without it (a typed :class:`~codegen.errors.UnsupportedError` naming the
@@ -99,15 +99,6 @@ class Campaigns(Protocol):
         """Standard deviation per measured signal of the family's validation runs."""
 
 
-def sensor_noise(family) -> dict:
-    """Standard deviation per measured signal of ``family``'s validation runs: its own
-    (:class:`Campaigns`), else the common one of the library's validations."""
-    if isinstance(family, Campaigns):
-        return family.sensor_noise()
-    from ..project.sensor_noise import SENSOR_NOISE
-    return dict(SENSOR_NOISE)
-
-
 @runtime_checkable
 class Applicability(Protocol):
     """The family's answer to ``uiogen analyze``."""
@@ -150,7 +141,7 @@ class Identification(Protocol):
 @runtime_checkable
 class RandomModels(Protocol):
     """Random small valid models of the family, for the acceptance of C == model on models nobody wrote
-    (:mod:`codegen.tools.random_models`): every registered family with this capability is drawn."""
+    (:mod:`codegen.acceptance.random_models`): every registered family with this capability is drawn."""
 
     def draw_random_model(self, rng):
         """A :class:`codegen.families.random_models.RandomModel` drawn from the numpy generator ``rng``."""

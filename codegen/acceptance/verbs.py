@@ -17,7 +17,7 @@ user would, through :func:`codegen.cli.main` with the arguments a shell would pa
                                                                 its parameters dispersed)
 
 A cell passes when the command exits 0 (for ``--float32`` also: exits 2 with a CertificateError
-that states the margin) and prints no traceback. ``python -m codegen.tools.verbs [--only F ...]
+that states the margin) and prints no traceback. ``python -m codegen.acceptance.verbs [--only F ...]
 [--out FILE]`` prints the table, or writes the record ``docs/data/families_and_verbs.json`` that
 ``uiogen docs`` renders into ``docs/families_and_verbs.md``; ``tests/product/test_families_and_verbs.py``
 runs every cell and writes it.
@@ -195,7 +195,7 @@ def _shown(cell: dict) -> str:
 
 def record(rows: dict) -> dict:
     """The record ``uiogen docs`` renders: the table, and every cell's outcome and note."""
-    return {"command": "python -m codegen.tools.verbs --out docs/data/families_and_verbs.json "
+    return {"command": "python -m codegen.acceptance.verbs --out docs/data/families_and_verbs.json "
                        "(tests/product/test_families_and_verbs.py)",
             "verbs": list(VERBS),
             "cells": {f: {v: {"outcome": c["outcome"], "note": c["note"]} for v, c in row.items()}
@@ -206,7 +206,7 @@ def record(rows: dict) -> dict:
 
 def write_record(rows: dict, path: Path | None = None) -> Path:
     """Write the record (only when it changed, so a re-run leaves the tree clean)."""
-    from .docs import DATA
+    from ..tools.docs import DATA
     path = Path(path or DATA / f"{RECORD}.json")
     text = json.dumps(record(rows), indent=1, ensure_ascii=False) + "\n"
     if not path.is_file() or path.read_text() != text:
@@ -215,7 +215,7 @@ def write_record(rows: dict, path: Path | None = None) -> Path:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m codegen.tools.verbs", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m codegen.acceptance.verbs", description=__doc__.split("\n")[0])
     p.add_argument("--only", nargs="+", metavar="FAMILY", help="these families only")
     p.add_argument("--out", help="write the record here (docs/data/families_and_verbs.json)")
     p.add_argument("--keep", help="run in this folder and keep it (default: a temporary one)")

@@ -1,10 +1,10 @@
 """The acceptance of C == model on random models: each registered family's draws (its capability
-:class:`~codegen.families.capabilities.RandomModels`, :mod:`codegen.families.random_models`) written into
+:class:`~codegen.contract.capabilities.RandomModels`, :mod:`codegen.families.random_models`) written into
 a folder and taken through the user's commands, ``uiogen design --update``, ``uiogen generate``, ``uiogen
 build`` (which installs the extension only when :func:`codegen.extension.conformance.check` passes), then
 :func:`~codegen.extension.conformance.check` once more on the installed extension.
 
-``python -m codegen.tools.random_models [--family F ...] [--draws N] [--first SEED] --dir DIR`` prints one
+``python -m codegen.acceptance.random_models [--family F ...] [--draws N] [--first SEED] --dir DIR`` prints one
 line per draw and the acceptance rate per family. A design the family refuses is an acceptable outcome
 only as a typed error (exit 2, one line, no traceback); :func:`acceptance` reports how many draws design.
 """
@@ -40,7 +40,7 @@ class Outcome:
 
 
 def _cli(argv: list) -> tuple:
-    """(exit code, stdout, stderr) of ``uiogen ARGV`` in this process (:func:`codegen.tools.verbs.run_cli`);
+    """(exit code, stdout, stderr) of ``uiogen ARGV`` in this process (:func:`codegen.acceptance.verbs.run_cli`);
     a traceback, which the console script would print, is the end of stderr."""
     from .verbs import run_cli
     r = run_cli(argv)
@@ -90,9 +90,9 @@ def acceptance(outcomes: list) -> dict:
 
 
 def main(argv=None) -> int:
-    """``python -m codegen.tools.random_models [--family F ...] [--draws N] [--first SEED] --dir DIR``:
+    """``python -m codegen.acceptance.random_models [--family F ...] [--draws N] [--first SEED] --dir DIR``:
     draw, design, build and check; one line per draw and the acceptance rate per family."""
-    ap = argparse.ArgumentParser(prog="python -m codegen.tools.random_models")
+    ap = argparse.ArgumentParser(prog="python -m codegen.acceptance.random_models")
     ap.add_argument("--family", action="append", choices=sorted(drawers()))
     ap.add_argument("--draws", type=int, default=10)
     ap.add_argument("--first", type=int, default=0, help="the first seed (draws first, first + 1, ...)")

@@ -31,7 +31,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelDefinitionError, NotAffineError
-from .floats import merge_float_noise
+from ..model.floats import merge_float_noise
 
 
 @dataclass(frozen=True)
@@ -203,7 +203,7 @@ def analyse(model, params, subs: dict, d, name: str) -> tuple:
     """(Substitution, None) for unknown input ``d`` as new unknown input ``name``, or (None, why not).
     ``subs``: the model's parameter values (``definition.parameter_substitution``, computed by the
     caller: the model layer's definitions import this module for :func:`offer`)."""
-    from ..representation.bounds import range_bound
+    from .bounds import range_bound
     carrier, why = find_carrier(model, d)
     if carrier is None:
         return None, why

@@ -5,7 +5,7 @@ The required part is what the pipeline needs: ``Family.build(config, solver)`` r
 :class:`ObserverBuild` with its step (``step_function``, ``reference_step``), its signals (names,
 counts, boxes) and its :class:`~codegen.certificate.certificate.Certificate`, plus the design data
 the lock records (``artifact``). Everything else a family may offer is an optional capability,
-declared by a small protocol of :mod:`codegen.families.capabilities` (validation scenarios, demo
+declared by a small protocol of :mod:`codegen.contract.capabilities` (validation scenarios, demo
 figures, bench figures, campaign plants, applicability, paper forms of check-gains, an
 identification) and discovered with ``isinstance``; text is rendered in one place,
 :mod:`codegen.certificate.text`. Nothing outside a family's own folder needs to know which family
@@ -150,7 +150,7 @@ class Family(abc.ABC):
     """An observer family: its paper, its observer-file keys and its pipeline.
 
     Register an instance with :func:`codegen.families.register`; an observer file selects it
-    with ``family = NAME``. Optional capabilities: :mod:`codegen.families.capabilities`.
+    with ``family = NAME``. Optional capabilities: :mod:`codegen.contract.capabilities`.
     """
 
     #: the observer file's ``family = "..."``
@@ -179,6 +179,6 @@ class Family(abc.ABC):
         problem answered by ``solver`` (:mod:`codegen.design.solver`: a fresh solve or a replay)."""
 
     def capabilities(self) -> tuple:
-        """The names of the optional capabilities this family has (:mod:`codegen.families.capabilities`)."""
+        """The names of the optional capabilities this family has (:mod:`codegen.contract.capabilities`)."""
         from .capabilities import of
         return of(self)

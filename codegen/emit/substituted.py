@@ -1,7 +1,7 @@
 """Any family's observer with unknown inputs recovered through their carriers' inverses.
 
 When an observer file substitutes an unknown input ``d`` by the value ``w`` of the one expression it
-enters through (``[substitute]``, :mod:`codegen.model.substitution`), the family designs and
+enters through (``[substitute]``, :mod:`codegen.representation.substitution`), the family designs and
 certifies an observer of ``w``. :class:`RecoveredInputs` wraps that family's build and appends
 ``d`` to the step's state and outputs, computed after the family's step as
 
@@ -21,9 +21,9 @@ import casadi as ca
 import numpy as np
 import sympy as sp
 
-from ..emit.stepgen import lambdify
+from .stepgen import lambdify
 from ..errors import ModelDefinitionError
-from .base import ObserverBuild
+from ..contract.family import ObserverBuild
 
 
 @dataclass(frozen=True)
