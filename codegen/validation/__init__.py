@@ -2,11 +2,13 @@
 
 Modules:
 
-* :mod:`codegen.validation.run`               ``uiogen validate``: a scenario or a data log through an observer
+* :mod:`codegen.validation.run`               ``uiogen validate --scenario``: a simulated run through an observer
+* :mod:`codegen.validation.logs`              ``uiogen validate --data``: a logged run, one path for every format
 * :mod:`codegen.validation.simulate`          the nominal plant (the observer's own model, integrated exactly)
 * :mod:`codegen.validation.demo`              ``uiogen demo``: every observer on its scenarios and the real log
 * :mod:`codegen.validation.metrics`           per-signal error metrics of the paper papers
-* :mod:`codegen.validation.stanford`          Stanford sideslip data set loader, KF and EKF baselines
+* :mod:`codegen.validation.stanford`          the shared logs' format: loader and checks
+* :mod:`codegen.validation.peers`             the estimators run beside an observer on a log (KF, EKF, UKF)
 * :mod:`codegen.validation.commonroad_plant`  CommonRoad multi-body plant driven by steering torques
 * :mod:`codegen.validation.scenarios`         named, seeded, reproducible input profiles
 
