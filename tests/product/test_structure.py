@@ -184,15 +184,16 @@ def test_the_c_hash_covers_the_design_the_emitters_and_the_templates(NAME, monke
 
 # ---- floors: a stage imports only what stands below it --------------------------------------------------
 
-#: The floors, from the ground up: the stages in pipeline order (the model, its representation, the LMI design, the
+#: The floors, from the ground up (below all: the errors, the typed settings, the plug-in registry of codegen.plugins):
+#: the stages in pipeline order (the model, its representation, the LMI design, the
 #: certificate), the contract a family and the toolchain agree on (codegen.contract), the project's files (observer
 #: and parameter files, what a command writes), C emission, the pipeline that runs a family's stages, the compiled
 #: extension; then what uses them: validation, analysis, the families themselves (each one folder, over the stages
 #: and the validation it runs), campaigns, export targets, the loops of `uiogen generate`, the maintainer tools and
 #: the command line. A package of codegen (or a top-level module) imports only what stands below it, at module level
 #: or inside a function; the family is handed down (config.observer_family), never imported from below.
-FLOORS = ("errors", "settings", "model", "representation", "design", "certificate", "contract", "project", "emit",
-          "pipeline", "extension", "validation", "analysis", "families", "commandline", "campaign", "targets",
+FLOORS = ("errors", "settings", "plugins", "model", "representation", "design", "certificate", "contract", "project",
+          "emit", "pipeline", "extension", "validation", "analysis", "families", "commandline", "campaign", "targets",
           "workflow", "tools", "cli", "acceptance")
 ABOVE = {f: FLOORS[i + 1:] for i, f in enumerate(FLOORS)}
 
