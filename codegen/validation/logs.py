@@ -239,11 +239,11 @@ def shared_log_inputs(input_names, log: str = "stanford") -> np.ndarray | None:
 class SharedLog:
     """A log in the shared format (:mod:`codegen.validation.stanford`: the columns, their SI units, the
     format's ranges and physics), read for an observer through :data:`DATA_COLUMNS`, chunk by chunk, and
-    checked against the physics of the observer's model (:mod:`log_checks`) as :class:`MappedLog` reads a
-    user's log. :meth:`chunks` yields ``(t, {input: values}, {}, {column: values})``: no output has a
+    checked against the physics of the observer's ``model`` (:mod:`log_checks`; None: by the format alone) as
+    :class:`MappedLog` reads a user's log. :meth:`chunks` yields ``(t, {input: values}, {}, {column: values})``: no output has a
     reference column of its own; the sideslip reference and the rest are among the columns."""
 
-    def __init__(self, config, path, input_names, sample_time: float, block_bytes: int = csvlog.BLOCK_BYTES):
+    def __init__(self, config, model, path, input_names, sample_time: float, block_bytes: int = csvlog.BLOCK_BYTES):
         from ..model import load_parameters
         from ..project.precision import input_noise
         from . import stanford
@@ -254,7 +254,6 @@ class SharedLog:
                               f"stanford_sideslip")
         self.path, self.input_names = stanford._resolve(path), list(input_names)
         self.sample_time, self.block_bytes = sample_time, block_bytes
-        model = _model_or_none(config)
         self.checks = None if model is None else log_checks.LogChecks(
             self.path, model, load_parameters(config.parameter_path), input_names,
             {n: log_checks.Column(DATA_COLUMNS[n], stanford.UNITS[DATA_COLUMNS[n]], model_unit(model, n),
@@ -289,7 +288,7 @@ class SignalStats:
     unit its model declares, the others summarised, and the signals kept for plots."""
 
     def __init__(self, cmap, output_names, units: dict):
-        self.names, self.units = list(output_names), units
+        self.names = list(output_names)
         self.compared = {n: streaming.ErrorStats(units[n], settle=SETTLE_TIME) for n in cmap.truth}
         self.summary = {n: streaming.Summary(units[n]) for n in output_names if n not in cmap.truth}
         self.kept = streaming.Decimated()
@@ -447,7 +446,7 @@ def run(config, path="stanford", block_bytes: int | None = None, batch_rows: int
         log = MappedLog(config, path, obs.input_names, obs.output_names, config.sample_time, block_bytes, batch_rows)
         stats = SignalStats(config.column_map, obs.output_names, units)
     else:
-        log = SharedLog(config, path, obs.input_names, obs.sample_time, block_bytes)
+        log = SharedLog(config, model, path, obs.input_names, obs.sample_time, block_bytes)
         stats = SideslipStats(config, obs.input_names, obs.output_names, log.path)
     written = None
     if out is not None:
