@@ -20,6 +20,6 @@ from ..contract.registry import get, names, register, unregister
 
 #: the families that ship with uiogen, imported on first use (each module defines ``FAMILY``)
 BUILTIN = ("linf_uio", "ts_fuzzy_uio", "switched_pi", "algebraic_uio", "interconnected_uio",
-           "nonlinear_tyre_observer")
+           "nonlinear_tyre_observer", "dmvt_observer")
 
 __all__ = ["Family", "ObserverBuild", "BUILTIN", "register", "unregister", "get", "names"]
