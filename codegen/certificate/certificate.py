@@ -24,7 +24,8 @@ from .artifact import significant
 NORMS = {
     "peak": "sup_t |error| <= value sup_t |input| (L-infinity, peak to peak)",
     "l2": "||error||_2 <= value ||input||_2 over any horizon (l2 / H-infinity gain), plus the initial error's decay",
-    "rms": "RMS error <= value when every input channel is at its stated level (from the l2 gain)",
+    "rms": "RMS error <= value when every input channel is at its stated level (the claim says how: an l2 gain, or "
+           "a contraction with white noise)",
 }
 
 

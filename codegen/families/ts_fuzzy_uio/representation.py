@@ -178,8 +178,9 @@ def _output_selection(model: ModelDefinition) -> tuple:
                 f"model {model.name!r}: output {name!r} = {expr} is not a state; the TS fuzzy UIO needs "
                 f"outputs that measure states directly (its premises are measured states). "
                 + (f"It is nonlinear in {', '.join(nonlinear)}, which no linear-output family takes (linf_uio "
-                   f"needs y = C(rho) x + Du(rho) u); the nonlinear-tyre observer takes a_y through axle tyre "
-                   f"laws of a single-track model; otherwise measure the state itself or drop the output"
+                   f"needs y = C(rho) x + Du(rho) u); the DMVT observer (family dmvt_observer) takes y = h(x) as it "
+                   f"stands, with a box of every state under [state_bounds] and without unknown inputs; otherwise "
+                   f"measure the state itself or drop the output"
                    if nonlinear else "The L-infinity UIO (family linf_uio) takes outputs y = C(rho) x + Du(rho) u"))
         measured.append(expr)
     return tuple(measured)

@@ -1,6 +1,7 @@
 """The TS family's refusal of an output that is not a state points where the output can go: an output linear in
 the states to the L-infinity UIO (y = C(rho) x + Du(rho) u), an output nonlinear in them (a tyre law of v_y in
-a_y) to no linear-output family (issue 42, also weak: the advice pointed to linf_uio, which cannot take it). What the
+a_y) to the DMVT observer, which takes y = h(x) (issue 42, also weak: the advice pointed to linf_uio, which cannot
+take it). What the
 output does with the measured states (scheduling signals) does not count."""
 import pytest
 import sympy as sp
@@ -24,6 +25,7 @@ def test_a_nonlinear_output_is_not_sent_to_the_linear_output_family():
     said = str(exc.value)
     assert "output 'a_y'" in said and "nonlinear in v_y," in said and "no linear-output family" in said
     assert "takes outputs y = C(rho) x" not in said
+    assert "family dmvt_observer) takes y = h(x)" in said
 
 
 @pytest.mark.parametrize("output", [v_y + 1.2 * r, v_y * sp.sin(r)])   # nonlinear in the measured r: a scheduling
