@@ -668,6 +668,71 @@ def draw_ts(rng) -> RandomModel:
                         f"{name}.toml": observer})
 
 
+# -- dmvt_observer ------------------------------------------------------------------------------------
+
+def draw_dmvt(rng) -> RandomModel:
+    """A single-track model with saturating (tanh) axle laws in lateral acceleration, observed from a_y
+    (a nonlinear output: both laws of v_y and r) and the yaw rate: the speed a measured scheduling signal,
+    the steering angle a known input, sometimes a third state (a roll angle driven by a_y, its decay of its
+    own, not observable: detectable), sometimes an exact constant beside a parameter. The slip box keeps
+    each law's slope above about a third of its cornering stiffness (the DMVT corners stay observable)."""
+    third = rng.random() < 0.5
+    names = ["v_y", "r"] + (["phi"] if third else [])
+    values = {}
+    for k in ("f", "r"):
+        values[f"A_{k}"] = _uniform(rng, 4.0, 7.0)              # m/s^2: the axle's grip, per unit of mass
+        values[f"c_{k}"] = values[f"A_{k}"] * _uniform(rng, 6.0, 10.0)   # m/s^2/rad: its cornering stiffness
+    values["l_f"] = _uniform(rng, 1.0, 1.5)
+    values["l_r"] = _uniform(rng, 1.2, 1.7)
+    values["k_z"] = _uniform(rng, 0.5, 1.0)                   # 1/m^2: m / I_z
+    lo = float(np.round(rng.uniform(10.0, 15.0), 1))
+    hi = float(np.round(rng.uniform(25.0, 40.0), 1))
+    law_f = "A_f * sp.tanh(c_f * (delta - (v_y + l_f * r) / v_x) / A_f)"
+    law_r = "A_r * sp.tanh(c_r * (l_r * r - v_y) / v_x / A_r)"
+    rows = [f"{law_f} + {law_r} - r * v_x", f"k_z * l_f * {law_f} - k_z * l_r * {law_r}"]
+    if third:
+        values["b_phi"] = _uniform(rng, 4.0, 10.0)            # 1/s
+        values["h_phi"] = _uniform(rng, 0.005, 0.02)          # s/m: roll per lateral acceleration
+        rows.append(f"-b_phi * phi + h_phi * ({law_f} + {law_r})")
+    side = _kinds_rng(rng, "dmvt_observer")
+    exact = _exact_constant(side, rows, values)
+    outputs = [("a_y", f"{law_f} + {law_r}"), ("r", "r")]
+    units = {"v_y": "m/s", "r": "rad/s", "phi": "rad", "delta": "rad", "v_x": "m/s", "a_y": "m/s^2",
+             "A_f": "m/s^2", "A_r": "m/s^2", "c_f": "m/s^2", "c_r": "m/s^2", "l_f": "m", "l_r": "m",
+             "k_z": "1/m^2", "b_phi": "1/s", "h_phi": "s/m"}
+    units = {k: v for k, v in units.items() if k in names or k in values or k in ("delta", "v_x", "a_y")}
+    symbols = [(n, "") for n in names] + [("delta", ""), ("v_x", "positive=True")]
+    symbols += [(k, "real=True") for k in values]
+    body = f"""
+    MODEL = ModelDefinition(
+        name="random_dmvt",
+        states=({", ".join(names)},),
+        known_inputs=(delta,),
+        unknown_inputs=(),
+        dynamics=sp.Matrix([{", ".join(rows)}]),
+        outputs=({"".join(f'("{y}", {e}), ' for y, e in outputs)}),
+        scheduling=(SchedulingSignal(v_x, "m/s"),),
+        parameters=({"".join(k + ", " for k in values)}),
+        units={units!r})
+    """
+    structure = {"states": len(names), "outputs": len(outputs), "known_inputs": 1, "unknown_inputs": 0,
+                 "saturating_tyre": True, "nonlinear_output": True, "detectable_state": third,
+                 "exact_constants": exact}
+    name = _name("dmvt", structure)
+    bounds = {"v_y": (-0.3, 0.3), "r": (-0.3, 0.3), "phi": (-0.1, 0.1)}
+    tables = (f"[scheduling.v_x]\nmin = {lo}\nmax = {hi}\n\n[state_bounds]\n"
+              + "".join(f"{n} = [{bounds[n][0]}, {bounds[n][1]}]\n" for n in names)
+              + "\n[inputs]\ndelta = { min = -0.02, max = 0.02, bandwidth = 0.5 }\n"
+              + f"v_x = {{ min = {lo + 2.0}, max = {hi - 2.0} }}\n")
+    noise = {"a_y": float(np.round(_uniform(rng, 0.02, 0.2), 3)), "r": float(np.round(_uniform(rng, 5e-4, 3e-3), 5))}
+    observer = ('family = "dmvt_observer"\nmodel = "model.py"\nparameters = "parameters.toml"\nsample_time = 0.01\n\n'
+                f'[design]\nnoise = {{ a_y = {noise["a_y"]}, r = {noise["r"]} }}\n')
+    model = _model_py(f"Random single-track model with tanh axle laws (dmvt_observer): {len(names)} states, a_y "
+                      f"(nonlinear in v_y and r) and r measured.", symbols, body)
+    return RandomModel("dmvt_observer", name, structure,
+                       {"model.py": model, "parameters.toml": _params_toml(values, tables), f"{name}.toml": observer})
+
+
 # -- interconnected_uio, nonlinear_tyre_observer: their built-in model, its parameters dispersed ------
 
 #: {family: (built-in observer file, {parameter: relative half-width of its dispersion}, parameters drawn

@@ -131,6 +131,7 @@ CHOSEN = [
     ("algebraic_uio", "relative degree 3", lambda s: s["relative_degree"] == 3),
     ("interconnected_uio", "dispersed car", lambda s: True),
     ("nonlinear_tyre_observer", "dispersed car", lambda s: True),
+    ("dmvt_observer", "nonlinear output and a detectable state", lambda s: s["detectable_state"]),
 ]
 
 
@@ -170,7 +171,7 @@ def test_a_drawn_ts_model_with_a_constant_term_conforms_and_estimates_its_unknow
 # draws per family of the long run: fewer where a draw takes longer (the interconnected UIO about 70 s
 # alone, ten minutes on a loaded 2-core machine; the algebraic chain about 90 s; the others 4-35 s)
 LONG_DRAWS = {"linf_uio": 6, "ts_fuzzy_uio": 6, "switched_pi": 6, "algebraic_uio": 3, "nonlinear_tyre_observer": 2,
-              "interconnected_uio": 1}
+              "interconnected_uio": 1, "dmvt_observer": 3}
 
 
 @pytest.mark.slow

@@ -24,7 +24,7 @@ class DMVTObserver(Family):
     observer_keys = {}
     bounds_settings = ("bounds_rel_tol", "bounds_max_boxes")
     example = "roll_sedan_tanh_dmvt"
-    # capabilities (codegen.contract.capabilities): Applicability
+    # capabilities (codegen.contract.capabilities): Applicability, RandomModels
 
     def applicability(self, subject, structure):
         from .applicability import assess
@@ -33,6 +33,11 @@ class DMVTObserver(Family):
     def build(self, config, solver):
         from .build import build
         return build(config, solver)
+
+    def draw_random_model(self, rng):
+        """A random small valid model of this family (:mod:`codegen.families.random_models`)."""
+        from ..random_models import draw_dmvt
+        return draw_dmvt(rng)
 
 
 FAMILY = DMVTObserver()
