@@ -301,7 +301,9 @@ def deviation_bound(metrics: list, state_names: list, J: np.ndarray, d: np.ndarr
         # an entry whose bound is 0 (both runs equal there) contributes nothing, whatever its slope
         # (a differentiator started at the sample itself has an unbounded slope at sigma = 0)
         live = x[k] > 0
-        x[k + 1] = G[k][:, live] @ x[k, live] + delta[k]
+        with np.errstate(invalid="ignore", over="ignore"):      # a run that diverges: inf, said below
+            x[k + 1] = G[k][:, live] @ x[k, live] + delta[k]
+        x[k + 1][np.isnan(x[k + 1])] = np.inf                     # inf times 0: no bound, never 0
         x[k + 1, fixed] = np.abs(measured[k + 1, free])
     bound = np.zeros((n + 1, nz))
     for a, (m, blk) in enumerate(zip(metrics, blocks)):
