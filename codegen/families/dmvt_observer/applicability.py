@@ -36,8 +36,12 @@ def assess(family, subject, structure):
                             "[scheduling.NAME])" if "lacks" in text else "see the condition")
     checked = [(f"every entry of the Jacobians of f and h bounded over the box of the states and the measured "
                 f"signals ({2 ** len(rep.free_entries)} corners; sound interval bounds)", "proof")]
+    from ...project.sensor_noise import declared as declared_noise
     outputs = [n for n, _ in model.outputs]
-    declared = subject.parameters.sensor_noise
+    try:
+        declared = declared_noise(model, subject.parameters)      # in the model's units
+    except UiogenError as exc:
+        return refuse(str(exc).split(": ", 1)[-1], "correct [sensor_noise] of the parameter file", checked)
     missing = [n for n in outputs if n not in declared]
     if missing:
         return Applicability(family.name, True, "states_only", checked=tuple(checked),
@@ -45,7 +49,7 @@ def assess(family, subject, structure):
                                     f"output's level ([sensor_noise] of the parameter file, or [design] noise); the "
                                     f"analysis proposes no settings without them",))
     observer = {"family": family.name, "sample_time": subject.sample_time,
-                "design": {"noise": {n: float(declared[n]["std"]) for n in outputs}}}
+                "design": {"noise": {n: declared[n] for n in outputs}}}
     why = {"sample_time": f"s, from {subject.sample_time_source}",
            "design.noise": f"the outputs' sensor noise from [sensor_noise] of {subject.parameter_path.name}: the gains "
                            f"minimise the certified RMS bound at these levels"}

@@ -32,7 +32,7 @@ import scipy.linalg
 
 from ...design import lmi
 from ...design.precision import margin_field, precision_field, required_margin
-from ...design.rates import round_down
+from ...design.rates import committable_rates, round_down
 from ...errors import CertificateError, SolverError
 from ...representation.canonical import decimal_round, solve
 from ...settings import Rule, setting
@@ -125,7 +125,7 @@ def search_rate(sc: Scaled, solver, tol: float, margin: float, floor: float = 0.
     """
     top = round_down((1.0 - 1e-9) / sc.sample_time, DIGITS)
     low = max(floor, RESOLUTION / sc.sample_time)
-    cands = [r for r in _candidates(top) if r >= low * (1 - 1e-12)]
+    cands = [r for r in committable_rates(top, DIGITS, RESOLUTION) if r >= low * (1 - 1e-12)]
     cache = {}
 
     def J(i):
@@ -154,11 +154,6 @@ def search_rate(sc: Scaled, solver, tol: float, margin: float, floor: float = 0.
                 f"narrow [state_bounds] (the box where an output's slope can reach 0), or measure another signal")
         best = 0
     return cands[best]
-
-
-def _candidates(top: float) -> list:
-    from ...design.rates import committable_rates
-    return committable_rates(top, DIGITS, RESOLUTION)
 
 
 @dataclass(frozen=True)
