@@ -37,6 +37,7 @@ from ...errors import ModelDefinitionError, SchedulingBoundsError
 from ...model import ModelDefinition, ParameterSet, parameter_substitution
 from ...model.floats import drop_zero_terms, merge_float_noise
 from ...representation.bounds import RangeBound, derivative, range_bound
+from ...representation.derived import derived_in_states
 
 #: corners of the Jacobian box beyond which the design is refused (each corner is one LMI block of
 #: twice the state's size, and the search for the rate solves about ten problems: the sedan's 256
@@ -152,20 +153,6 @@ def _box_of(name: str, params: ParameterSet, kind: str) -> tuple | None:
     return None
 
 
-def _derived_in_states(model: ModelDefinition) -> ModelDefinition:
-    """The model with every scheduling signal derived from the outputs replaced by its expression in
-    the states (y_NAME is the output's expression): it is then part of f and h, which the DMVT bounds."""
-    derived = [g for g in model.scheduling if g.derived is not None]
-    if not derived:
-        return model
-    import dataclasses
-    outputs = {sp.Symbol(f"y_{n}"): sp.sympify(e) for n, e in model.outputs}
-    on_states = {g.symbol: sp.sympify(g.derived).subs(outputs) for g in derived}
-    return dataclasses.replace(model, dynamics=sp.Matrix(model.dynamics).subs(on_states),
-                               outputs=tuple((n, sp.sympify(e).subs(on_states)) for n, e in model.outputs),
-                               scheduling=tuple(g for g in model.scheduling if g.derived is None))
-
-
 def build(model: ModelDefinition, params: ParameterSet, rel_tol: float = 1e-3, max_boxes: int = 20000,
           max_corners: int = MAX_CORNERS) -> DMVTModel:
     """The DMVT form of ``model`` with the values of ``params``.
@@ -187,7 +174,7 @@ def build(model: ModelDefinition, params: ParameterSet, rel_tol: float = 1e-3, m
             f"(linf_uio, ts_fuzzy_uio, algebraic_uio)")
     if not model.outputs:
         raise ModelDefinitionError(f"model {model.name!r}: no outputs; the observer needs a measured signal")
-    model = _derived_in_states(model)
+    model = derived_in_states(model)
     subs = parameter_substitution(model, params)
     x = tuple(model.states)
     w = (*model.known_inputs, *(g.symbol for g in model.scheduling))

@@ -29,6 +29,7 @@ import sympy as sp
 
 from ...representation import canonical
 from ...representation.bounds import RangeBound, derivative, range_bound
+from ...representation.derived import derived_in_states
 from ...emit.stepgen import lambdify
 from ...errors import ModelDefinitionError, NotAffineError, SchedulingBoundsError
 from ...model import ModelDefinition, ParameterSet, parameter_substitution
@@ -204,14 +205,7 @@ def measured_scheduling(model: ModelDefinition) -> ModelDefinition:
             f"UIO's premises are measured states and known inputs: make each a state with an output, a known input, "
             f"or derived from the measured outputs (SchedulingSignal(..., derived=y_NAME)). The L-infinity UIO "
             f"(family linf_uio) takes scheduling inputs")
-    if not model.scheduling:
-        return model
-    import dataclasses
-    outputs = {sp.Symbol(f"y_{n}"): sp.sympify(e) for n, e in model.outputs}
-    on_states = {g.symbol: sp.sympify(g.derived).subs(outputs) for g in model.scheduling}
-    return dataclasses.replace(model, dynamics=sp.Matrix(model.dynamics).subs(on_states),
-                               outputs=tuple((n, sp.sympify(e).subs(on_states)) for n, e in model.outputs),
-                               scheduling=())
+    return derived_in_states(model)
 
 
 def split_consequents(model: ModelDefinition, subs: dict) -> dict:

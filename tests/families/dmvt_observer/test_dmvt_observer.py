@@ -153,18 +153,13 @@ def test_too_many_corners_are_refused_naming_the_entries(tmp_path):
 
 
 def test_the_noise_levels_name_every_output(tmp_path):
-    from codegen.families.dmvt_observer.build import noise_levels
+    from codegen.families.dmvt_observer.build import noise_levels, parse
     config = observers.get(NAME)
     model = config.load_model()
     with pytest.raises(ConfigurationError, match=r"\[design\] noise lacks a_y: .*a_y = SIGMA \(m/s\^2\)"):
-        noise_levels(config, dataclasses.replace(FAMILY_settings(config), noise={"r": 1e-3, "phi_dot": 1e-3}), model)
+        noise_levels(config, dataclasses.replace(parse(config), noise={"r": 1e-3, "phi_dot": 1e-3}), model)
     with pytest.raises(ConfigurationError, match="a_x is no output of model 'roll_sedan_tanh'; its outputs: r, "):
-        noise_levels(config, dataclasses.replace(FAMILY_settings(config), noise={"a_x": 1.0}), model)
-
-
-def FAMILY_settings(config):
-    from codegen.families.dmvt_observer.build import parse
-    return parse(config)
+        noise_levels(config, dataclasses.replace(parse(config), noise={"a_x": 1.0}), model)
 
 
 def test_an_unobservable_state_is_refused_before_any_gain(tmp_path):
